@@ -1,0 +1,59 @@
+# Rokeby — two commands on a fresh machine: `make demo` and `make test`.
+# Both bootstrap idempotently: .venv with the pinned packages, then rokeby_native built in release
+# mode and installed into .venv. A second run skips what is up to date.
+
+SHELL   := /bin/bash
+PYTHON  ?= python3
+VENV    := .venv
+PY      := $(VENV)/bin/python
+PIP     := $(PY) -m pip
+SHARED  ?= $(abspath ../shared)
+export ROKEBY_SHARED := $(SHARED)
+
+RUST_SRC := Cargo.toml pyproject.toml $(wildcard rust/*/Cargo.toml) $(shell find rust -name '*.rs' 2>/dev/null)
+
+.PHONY: all demo test bench cargo-test pytest native venv clean help
+
+all: native
+
+help:
+	@echo "make demo   build everything and run the demonstration"
+	@echo "make test   cargo tests + pytest (bpy in background mode)"
+	@echo "make bench  benchmarks, printed next to the reference numbers"
+
+# --- bootstrap -------------------------------------------------------------------------------
+$(VENV)/.deps: requirements.txt
+	@test -x $(PY) || $(PYTHON) -m venv $(VENV)
+	$(PIP) install -q --upgrade pip
+	$(PIP) install -q -r requirements.txt
+	@# The add-on package `rokeby` (addon/rokeby) is importable from the venv, for scripts and tests.
+	@echo "$(CURDIR)/addon" > "$$($(PY) -c 'import sysconfig; print(sysconfig.get_paths()["purelib"])')/rokeby_addon.pth"
+	@touch $@
+
+venv: $(VENV)/.deps
+
+$(VENV)/.native: $(VENV)/.deps $(RUST_SRC)
+	@rm -f target/wheels/rokeby_native-*.whl
+	$(VENV)/bin/maturin build --release --quiet -i $(PY) -o target/wheels
+	$(PIP) install -q --force-reinstall --no-deps target/wheels/rokeby_native-*.whl
+	@touch $@
+
+native: $(VENV)/.native
+
+# --- the two commands ------------------------------------------------------------------------
+demo: native
+	$(PY) -m rokeby.demo
+
+test: cargo-test pytest
+
+cargo-test:
+	cargo test -p rokeby-core --quiet
+
+pytest: native
+	$(PY) -m pytest -q
+
+bench: native
+	$(PY) bench/run.py
+
+clean:
+	rm -rf $(VENV) target dist out

@@ -1,0 +1,14 @@
+//! rokeby-core: the numerics of Rokeby, free of Python.
+//!
+//! * [`polar`]  — the rotational factor of the polar decomposition (`ortho` of Ritschel et al. 2009,
+//!   eq. 5), exact (Jacobi SVD, f64) and fast (warm-started iteration with an exactness check).
+//! * [`region`] — regions of interest a(q) with smooth-step borders (paper §4 "Regions", eq. 7).
+//! * [`field`]  — the Moving Least Squares rotation field R(q) = ortho(Σ wₙ eₙ rₙᵀ), wₙ = 1/d²
+//!   (eqs. 2–7), evaluated per point (mesh vertices) or per pixel (a G-buffer), in parallel.
+
+pub mod error;
+pub mod field;
+pub mod polar;
+pub mod region;
+
+pub use error::{Result, RokebyError};

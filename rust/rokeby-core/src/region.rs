@@ -1,0 +1,114 @@
+//! Regions of interest (Ritschel et al. 2009, §4 "Regions" and eq. 7).
+//!
+//! A region gives every surface point q an influence a(q) ∈ [0, 1]: 1 in its core, falling to 0
+//! across a border of user-set width with a smooth step, 0 outside. Euclidean regions are computed
+//! here from a centre and a radius; geodesic and free-form regions arrive as per-point values
+//! (computed from geodesic distances or painted as a vertex group), together with their value at
+//! each constraint, which decides which constraints are *inside* the region (a(pₙ) > 0).
+
+use crate::error::{Result, RokebyError};
+use glam::DVec3;
+
+/// Hermite smooth step: 0 for t ≤ 0, 1 for t ≥ 1, 3t² − 2t³ between (C¹ at both ends).
+#[inline]
+pub fn smooth_step(t: f64) -> f64 {
+    let t = t.clamp(0.0, 1.0);
+    t * t * (3.0 - 2.0 * t)
+}
+
+/// Influence at distance `d` from the centre of a region of outer `radius` whose border band,
+/// `border` wide, lies inside the radius: a = 1 for d ≤ radius − border, 0 for d ≥ radius.
+/// A border of 0 is a hard edge; a border larger than the radius is clamped to the radius.
+#[inline]
+pub fn falloff(d: f64, radius: f64, border: f64) -> f64 {
+    let border = border.min(radius);
+    if d >= radius {
+        return 0.0;
+    }
+    let inner = radius - border;
+    if d <= inner {
+        return 1.0;
+    }
+    1.0 - smooth_step((d - inner) / border)
+}
+
+/// A region as the field sees it.
+#[derive(Debug, Clone)]
+pub enum Region {
+    /// Centre, outer radius and border width in scene units (may span several objects).
+    Euclidean { center: DVec3, radius: f64, border: f64 },
+    /// a(q) given per evaluated point (geodesic or free-form regions), and a(pₙ) per constraint.
+    PerPoint { values: Vec<f32>, at_constraints: Vec<f32> },
+}
+
+impl Region {
+    pub fn euclidean(center: [f64; 3], radius: f64, border: f64, name: &str) -> Result<Self> {
+        let c = DVec3::from_array(center);
+        if !c.is_finite() {
+            return Err(RokebyError::invalid(name, "center must be finite"));
+        }
+        if !(radius.is_finite() && radius > 0.0) {
+            return Err(RokebyError::invalid(name, format!("radius must be finite and > 0, got {radius}")));
+        }
+        if !(border.is_finite() && border >= 0.0) {
+            return Err(RokebyError::invalid(name, format!("border must be finite and >= 0, got {border}")));
+        }
+        Ok(Region::Euclidean { center: c, radius, border })
+    }
+
+    /// `n_points`/`n_constraints` are the sizes the arrays must have.
+    pub fn per_point(values: Vec<f32>, at_constraints: Vec<f32>, n_points: usize, n_constraints: usize, name: &str) -> Result<Self> {
+        if values.len() != n_points {
+            return Err(RokebyError::invalid(
+                name,
+                format!("values has {} entries but there are {} points", values.len(), n_points),
+            ));
+        }
+        if at_constraints.len() != n_constraints {
+            return Err(RokebyError::invalid(
+                name,
+                format!("at_constraints has {} entries but there are {} constraints", at_constraints.len(), n_constraints),
+            ));
+        }
+        for (what, arr) in [("values", &values), ("at_constraints", &at_constraints)] {
+            if let Some((i, v)) = arr.iter().enumerate().find(|(_, v)| !(v.is_finite() && (0.0..=1.0).contains(*v))) {
+                return Err(RokebyError::invalid(name, format!("{what}[{i}] = {v} is not in [0, 1]")));
+            }
+        }
+        Ok(Region::PerPoint { values, at_constraints })
+    }
+
+    /// a(q) at evaluated point `index` with position `q`.
+    #[inline]
+    pub fn at_point(&self, index: usize, q: DVec3) -> f64 {
+        match self {
+            Region::Euclidean { center, radius, border } => falloff(q.distance(*center), *radius, *border),
+            Region::PerPoint { values, .. } => values[index] as f64,
+        }
+    }
+
+    /// a(pₙ) for constraint `k` at `p`.
+    pub fn at_constraint(&self, k: usize, p: DVec3) -> f64 {
+        match self {
+            Region::Euclidean { center, radius, border } => falloff(p.distance(*center), *radius, *border),
+            Region::PerPoint { at_constraints, .. } => at_constraints[k] as f64,
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn falloff_is_smooth_and_bounded() {
+        assert_eq!(falloff(0.0, 1.0, 0.2), 1.0);
+        assert_eq!(falloff(0.8, 1.0, 0.2), 1.0);
+        assert!((falloff(0.9, 1.0, 0.2) - 0.5).abs() < 1e-12);
+        assert_eq!(falloff(1.0, 1.0, 0.2), 0.0);
+        assert_eq!(falloff(0.99, 1.0, 0.0), 1.0);
+        assert_eq!(falloff(1.0, 1.0, 0.0), 0.0);
+        // border wider than the radius is clamped: falls from the centre.
+        assert!(falloff(0.5, 1.0, 5.0) > 0.0 && falloff(0.5, 1.0, 5.0) < 1.0);
+    }
+}

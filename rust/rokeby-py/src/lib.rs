@@ -1,0 +1,345 @@
+//! `rokeby_native`: the Python face of rokeby-core.
+//!
+//! This crate only converts: numpy arrays in (float32 or float64, any layout; float64 is stored
+//! as float32 like Blender's mesh data), validated shapes with errors that name the argument,
+//! the GIL released around the work, panics caught, core errors mapped to `ValueError`.
+
+use numpy::ndarray::{ArrayD, IxDyn};
+use numpy::{IntoPyArray, PyArrayDyn, PyArrayMethods, PyReadonlyArrayDyn, PyUntypedArray, PyUntypedArrayMethods};
+use pyo3::exceptions::{PyRuntimeError, PyTypeError, PyValueError};
+use pyo3::prelude::*;
+use pyo3::types::{PyDict, PyList, PyTuple};
+use rokeby_core::field::{Distances, Field};
+use rokeby_core::polar::{self, PolarMethod};
+use rokeby_core::region::Region;
+use rokeby_core::RokebyError;
+use std::panic::{catch_unwind, AssertUnwindSafe};
+
+/// A float array as float32: borrowed when it already is contiguous float32, else converted.
+enum F32Array<'py> {
+    Borrowed(PyReadonlyArrayDyn<'py, f32>),
+    Owned(Vec<f32>, Vec<usize>),
+}
+
+impl F32Array<'_> {
+    fn slice(&self) -> &[f32] {
+        match self {
+            F32Array::Borrowed(a) => a.as_slice().expect("checked contiguous"),
+            F32Array::Owned(v, _) => v,
+        }
+    }
+    fn shape(&self) -> Vec<usize> {
+        match self {
+            F32Array::Borrowed(a) => a.shape().to_vec(),
+            F32Array::Owned(_, s) => s.clone(),
+        }
+    }
+}
+
+fn shape_str(s: &[usize]) -> String {
+    let parts: Vec<String> = s.iter().map(|x| x.to_string()).collect();
+    if parts.len() == 1 {
+        format!("({},)", parts[0])
+    } else {
+        format!("({})", parts.join(", "))
+    }
+}
+
+/// Accepts a numpy array (or anything numpy.asarray takes) of float32/float64.
+fn f32_array<'py>(obj: &Bound<'py, PyAny>, name: &str) -> PyResult<F32Array<'py>> {
+    let py = obj.py();
+    let arr: Bound<'py, PyAny> = if obj.cast::<PyUntypedArray>().is_ok() {
+        obj.clone()
+    } else {
+        let np = py.import("numpy")?;
+        np.call_method1("asarray", (obj,)).map_err(|e| PyTypeError::new_err(format!("{name}: cannot be read as an array ({e})")))?
+    };
+    if let Ok(a) = arr.cast::<PyArrayDyn<f32>>() {
+        let ro = a.readonly();
+        if ro.as_slice().is_ok() {
+            return Ok(F32Array::Borrowed(ro));
+        }
+        let shape = ro.shape().to_vec();
+        return Ok(F32Array::Owned(ro.as_array().iter().copied().collect(), shape));
+    }
+    if let Ok(a) = arr.cast::<PyArrayDyn<f64>>() {
+        let ro = a.readonly();
+        let shape = ro.shape().to_vec();
+        return Ok(F32Array::Owned(ro.as_array().iter().map(|&x| x as f32).collect(), shape));
+    }
+    let dtype = match arr.cast::<PyUntypedArray>() {
+        Ok(u) => u.dtype().str()?.to_string(),
+        Err(_) => arr.get_type().name()?.to_string(),
+    };
+    Err(PyTypeError::new_err(format!("{name}: must be a float32 or float64 array, got dtype {dtype}")))
+}
+
+fn core_err(e: RokebyError) -> PyErr {
+    PyValueError::new_err(e.to_string())
+}
+
+/// Runs `f` without the GIL; a panic (a bug) becomes RuntimeError instead of crossing into Python.
+fn run_detached<T: Send, F: FnOnce() -> Result<T, RokebyError> + Send>(py: Python<'_>, f: F) -> PyResult<T> {
+    let res = py.detach(|| catch_unwind(AssertUnwindSafe(f)));
+    match res {
+        Ok(Ok(v)) => Ok(v),
+        Ok(Err(e)) => Err(core_err(e)),
+        Err(p) => {
+            let msg = p
+                .downcast_ref::<&str>()
+                .map(|s| s.to_string())
+                .or_else(|| p.downcast_ref::<String>().cloned())
+                .unwrap_or_else(|| "unknown".into());
+            Err(PyRuntimeError::new_err(format!("rokeby_native internal error (please report): {msg}")))
+        }
+    }
+}
+
+fn parse_polar(name: &str) -> PyResult<PolarMethod> {
+    PolarMethod::parse(name).ok_or_else(|| PyValueError::new_err(format!("polar: unknown method {name:?} (expected 'exact'/'svd' or 'fast'/'iterative')")))
+}
+
+fn parse_vec3(obj: &Bound<'_, PyAny>, name: &str) -> PyResult<[f64; 3]> {
+    let a = f32_array(obj, name)?;
+    if a.shape() != [3] {
+        return Err(PyValueError::new_err(format!("{name}: expected shape (3,), got {}", shape_str(&a.shape()))));
+    }
+    let s = a.slice();
+    Ok([s[0] as f64, s[1] as f64, s[2] as f64])
+}
+
+fn parse_constraints(obj: &Bound<'_, PyAny>) -> PyResult<Vec<f32>> {
+    let a = f32_array(obj, "constraints")?;
+    let shape = a.shape();
+    if shape.len() != 2 || shape[1] != 9 {
+        return Err(PyValueError::new_err(format!(
+            "constraints: expected shape (K, 9) with rows [p, r, e], got {}",
+            shape_str(&shape)
+        )));
+    }
+    Ok(a.slice().to_vec())
+}
+
+fn dict_get<'py>(d: &Bound<'py, PyDict>, key: &str, name: &str) -> PyResult<Bound<'py, PyAny>> {
+    d.get_item(key)?.ok_or_else(|| PyValueError::new_err(format!("{name}: missing key {key:?}")))
+}
+
+fn dict_f64(d: &Bound<'_, PyDict>, key: &str, name: &str, default: Option<f64>) -> PyResult<f64> {
+    match d.get_item(key)? {
+        Some(v) => v.extract::<f64>().map_err(|_| PyTypeError::new_err(format!("{name}: {key} must be a number"))),
+        None => default.ok_or_else(|| PyValueError::new_err(format!("{name}: missing key {key:?}"))),
+    }
+}
+
+/// regions: a list of dicts, {"kind": "euclidean", "center", "radius", "border"} or
+/// {"kind": "weights", "values" (one per point), "at_constraints" (one per constraint)}.
+fn parse_regions(obj: Option<&Bound<'_, PyAny>>, n_points: usize, n_constraints: usize) -> PyResult<Vec<Region>> {
+    let Some(obj) = obj else { return Ok(Vec::new()) };
+    if obj.is_none() {
+        return Ok(Vec::new());
+    }
+    let items: Vec<Bound<'_, PyAny>> = if let Ok(l) = obj.cast::<PyList>() {
+        l.iter().collect()
+    } else if let Ok(t) = obj.cast::<PyTuple>() {
+        t.iter().collect()
+    } else {
+        return Err(PyTypeError::new_err("regions: must be a list of dicts"));
+    };
+    let mut out = Vec::with_capacity(items.len());
+    for (j, item) in items.iter().enumerate() {
+        let name = format!("regions[{j}]");
+        let d = item.cast::<PyDict>().map_err(|_| PyTypeError::new_err(format!("{name}: must be a dict")))?;
+        let kind: String = dict_get(d, "kind", &name)?.extract().map_err(|_| PyTypeError::new_err(format!("{name}: kind must be a string")))?;
+        match kind.as_str() {
+            "euclidean" => {
+                let center = parse_vec3(&dict_get(d, "center", &name)?, &format!("{name}.center"))?;
+                let radius = dict_f64(d, "radius", &name, None)?;
+                let border = dict_f64(d, "border", &name, Some(0.0))?;
+                out.push(Region::euclidean(center, radius, border, &name).map_err(core_err)?);
+            }
+            "weights" => {
+                let values = f32_array(&dict_get(d, "values", &name)?, &format!("{name}.values"))?;
+                let at_c = f32_array(&dict_get(d, "at_constraints", &name)?, &format!("{name}.at_constraints"))?;
+                out.push(
+                    Region::per_point(values.slice().to_vec(), at_c.slice().to_vec(), n_points, n_constraints, &name).map_err(core_err)?,
+                );
+            }
+            other => {
+                return Err(PyValueError::new_err(format!("{name}: unknown kind {other:?} (expected 'euclidean' or 'weights')")));
+            }
+        }
+    }
+    Ok(out)
+}
+
+/// distances: (K, *lead) where lead is the shape of the points without the last axis.
+fn parse_distances<'py>(obj: Option<&Bound<'py, PyAny>>, k: usize, lead: &[usize]) -> PyResult<Option<F32Array<'py>>> {
+    let Some(obj) = obj else { return Ok(None) };
+    if obj.is_none() {
+        return Ok(None);
+    }
+    let a = f32_array(obj, "distances")?;
+    let mut want = vec![k];
+    want.extend_from_slice(lead);
+    if a.shape() != want {
+        return Err(PyValueError::new_err(format!(
+            "distances: expected shape {} (constraints × points), got {}",
+            shape_str(&want),
+            shape_str(&a.shape())
+        )));
+    }
+    Ok(Some(a))
+}
+
+/// rotation_field(points, constraints, *, distances=None, regions=None, normals=None, eye=None,
+/// polar="exact") -> (N, 4) float32 unit quaternions (x, y, z, w), w >= 0.
+///
+/// The MLS rotation field R(q) = ortho(Σ wₙ eₙ rₙᵀ), wₙ = 1/d(pₙ, q)² (Ritschel et al. 2009,
+/// eq. 5) at every point. constraints: (K, 9) rows [p, r, e]; K = 0 gives identities.
+/// distances: optional (K, N) precomputed (e.g. geodesic) distances, +inf = unreachable.
+/// regions: list of dicts (see README). normals + eye: make eq. 7 blend towards r rᵀ exactly.
+#[pyfunction]
+#[pyo3(signature = (points, constraints, *, distances=None, regions=None, normals=None, eye=None, polar="exact"))]
+#[allow(clippy::too_many_arguments)]
+fn rotation_field<'py>(
+    py: Python<'py>,
+    points: &Bound<'py, PyAny>,
+    constraints: &Bound<'py, PyAny>,
+    distances: Option<&Bound<'py, PyAny>>,
+    regions: Option<&Bound<'py, PyAny>>,
+    normals: Option<&Bound<'py, PyAny>>,
+    eye: Option<&Bound<'py, PyAny>>,
+    polar: &str,
+) -> PyResult<Bound<'py, PyArrayDyn<f32>>> {
+    let method = parse_polar(polar)?;
+    let pts = f32_array(points, "points")?;
+    let shape = pts.shape();
+    if shape.len() != 2 || shape[1] != 3 {
+        return Err(PyValueError::new_err(format!("points: expected shape (N, 3), got {}", shape_str(&shape))));
+    }
+    let n = shape[0];
+    if n == 0 {
+        return Err(PyValueError::new_err("points: is empty (N = 0)"));
+    }
+    let rows = parse_constraints(constraints)?;
+    let k = rows.len() / 9;
+    let dist = parse_distances(distances, k, &shape[..1])?;
+    let regs = parse_regions(regions, n, k)?;
+    let nrm = match (normals.filter(|o| !o.is_none()), eye.filter(|o| !o.is_none())) {
+        (Some(nm), Some(ey)) => {
+            let a = f32_array(nm, "normals")?;
+            if a.shape() != shape {
+                return Err(PyValueError::new_err(format!("normals: expected shape {}, got {}", shape_str(&shape), shape_str(&a.shape()))));
+            }
+            Some((a, parse_vec3(ey, "eye")?))
+        }
+        (None, None) => None,
+        (Some(_), None) => return Err(PyValueError::new_err("eye: required when normals are given")),
+        (None, Some(_)) => return Err(PyValueError::new_err("normals: required when eye is given")),
+    };
+    let field = Field::new(&rows, regs).map_err(core_err)?;
+    let p = pts.slice();
+    let d = match &dist {
+        Some(a) => Distances::Given(a.slice()),
+        None => Distances::Euclidean,
+    };
+    let view = nrm.as_ref().map(|(a, e)| (a.slice(), *e));
+    let out = run_detached(py, || field.rotation_field(p, d, view, method))?;
+    let arr = ArrayD::from_shape_vec(IxDyn(&[n, 4]), out).map_err(|e| PyRuntimeError::new_err(e.to_string()))?;
+    Ok(arr.into_pyarray(py))
+}
+
+/// edited_directions(positions, normals, eye, constraints, *, distances=None, regions=None,
+/// polar="fast") -> (..., 3) float32 unit vectors.
+///
+/// The per-pixel path (paper §6.1): r(q) = reflect(q − eye, n) and e(q) = R_a(q) r(q) for a
+/// G-buffer of positions and normals of any leading shape, e.g. (H, W, 3) (rows of W pixels are
+/// the unit of parallel work). K = 0 returns the unedited reflections r(q).
+#[pyfunction]
+#[pyo3(signature = (positions, normals, eye, constraints, *, distances=None, regions=None, polar="fast"))]
+#[allow(clippy::too_many_arguments)]
+fn edited_directions<'py>(
+    py: Python<'py>,
+    positions: &Bound<'py, PyAny>,
+    normals: &Bound<'py, PyAny>,
+    eye: &Bound<'py, PyAny>,
+    constraints: &Bound<'py, PyAny>,
+    distances: Option<&Bound<'py, PyAny>>,
+    regions: Option<&Bound<'py, PyAny>>,
+    polar: &str,
+) -> PyResult<Bound<'py, PyArrayDyn<f32>>> {
+    let method = parse_polar(polar)?;
+    let pos = f32_array(positions, "positions")?;
+    let shape = pos.shape();
+    if shape.is_empty() || shape[shape.len() - 1] != 3 {
+        return Err(PyValueError::new_err(format!("positions: expected shape (..., 3), got {}", shape_str(&shape))));
+    }
+    let lead = &shape[..shape.len() - 1];
+    let n: usize = lead.iter().product();
+    if n == 0 {
+        return Err(PyValueError::new_err(format!("positions: is empty (shape {})", shape_str(&shape))));
+    }
+    let nrm = f32_array(normals, "normals")?;
+    if nrm.shape() != shape {
+        return Err(PyValueError::new_err(format!("normals: expected shape {} like positions, got {}", shape_str(&shape), shape_str(&nrm.shape()))));
+    }
+    let eye = parse_vec3(eye, "eye")?;
+    let rows = parse_constraints(constraints)?;
+    let k = rows.len() / 9;
+    let dist = parse_distances(distances, k, lead)?;
+    let regs = parse_regions(regions, n, k)?;
+    let field = Field::new(&rows, regs).map_err(core_err)?;
+    let row_len = if lead.len() >= 2 { lead[lead.len() - 1] } else { 4096 };
+    let (p, nm) = (pos.slice(), nrm.slice());
+    let d = match &dist {
+        Some(a) => Distances::Given(a.slice()),
+        None => Distances::Euclidean,
+    };
+    let out = run_detached(py, || field.edited_directions(p, nm, eye, d, method, row_len))?;
+    let arr = ArrayD::from_shape_vec(IxDyn(&shape), out).map_err(|e| PyRuntimeError::new_err(e.to_string()))?;
+    Ok(arr.into_pyarray(py))
+}
+
+/// ortho(matrices, method="exact") -> (..., 4) float32 quaternions (x, y, z, w), w >= 0.
+/// The rotational factor of the polar decomposition of each 3×3 matrix (eq. 5's "ortho"), exposed
+/// for tests and benchmarks of the polar methods.
+#[pyfunction]
+#[pyo3(signature = (matrices, method="exact"))]
+fn ortho<'py>(py: Python<'py>, matrices: &Bound<'py, PyAny>, method: &str) -> PyResult<Bound<'py, PyArrayDyn<f32>>> {
+    let method = parse_polar(method)?;
+    let m = f32_array(matrices, "matrices")?;
+    let shape = m.shape();
+    if shape.len() < 2 || shape[shape.len() - 1] != 3 || shape[shape.len() - 2] != 3 {
+        return Err(PyValueError::new_err(format!("matrices: expected shape (..., 3, 3), got {}", shape_str(&shape))));
+    }
+    let s = m.slice();
+    if let Some(i) = s.iter().position(|x| !x.is_finite()) {
+        return Err(PyValueError::new_err(format!("matrices: matrix {} has a non-finite entry", i / 9)));
+    }
+    let out = run_detached(py, || {
+        let mut warm = glam::DQuat::IDENTITY;
+        let mut out = Vec::with_capacity(s.len() / 9 * 4);
+        for c in s.chunks_exact(9) {
+            // Row-major numpy (i, j) → column-major glam.
+            let mat = glam::DMat3::from_cols_array(&[
+                c[0] as f64, c[3] as f64, c[6] as f64, c[1] as f64, c[4] as f64, c[7] as f64, c[2] as f64, c[5] as f64, c[8] as f64,
+            ]);
+            let q = polar::canonical(polar::ortho(&mat, None, method, &mut warm));
+            out.extend_from_slice(&[q.x as f32, q.y as f32, q.z as f32, q.w as f32]);
+        }
+        Ok(out)
+    })?;
+    let mut oshape = shape[..shape.len() - 2].to_vec();
+    oshape.push(4);
+    let arr = ArrayD::from_shape_vec(IxDyn(&oshape), out).map_err(|e| PyRuntimeError::new_err(e.to_string()))?;
+    Ok(arr.into_pyarray(py))
+}
+
+#[pymodule]
+fn rokeby_native(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    m.add("__version__", env!("CARGO_PKG_VERSION"))?;
+    m.add_function(wrap_pyfunction!(rotation_field, m)?)?;
+    m.add_function(wrap_pyfunction!(edited_directions, m)?)?;
+    m.add_function(wrap_pyfunction!(ortho, m)?)?;
+    Ok(())
+}
