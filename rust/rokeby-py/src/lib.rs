@@ -54,9 +54,14 @@ fn f32_array<'py>(obj: &Bound<'py, PyAny>, name: &str) -> PyResult<F32Array<'py>
         let np = py.import("numpy")?;
         np.call_method1("asarray", (obj,)).map_err(|e| PyTypeError::new_err(format!("{name}: cannot be read as an array ({e})")))?
     };
+    // Integers are exact coordinates (`center=[0, 0, 1]`); bool, complex and objects are not.
+    let kind: String = arr.getattr("dtype").and_then(|d| d.getattr("kind")).and_then(|k| k.extract()).unwrap_or_default();
+    let arr = if kind == "i" || kind == "u" { arr.call_method1("astype", ("float64",))? } else { arr };
     if let Ok(a) = arr.cast::<PyArrayDyn<f32>>() {
         let ro = a.readonly();
-        if ro.as_slice().is_ok() {
+        // Borrow only C-ordered data: `as_slice` also accepts Fortran order, whose flat layout
+        // is not the logical row-major order the core reads.
+        if ro.is_c_contiguous() && ro.as_slice().is_ok() {
             return Ok(F32Array::Borrowed(ro));
         }
         let shape = ro.shape().to_vec();
@@ -71,7 +76,7 @@ fn f32_array<'py>(obj: &Bound<'py, PyAny>, name: &str) -> PyResult<F32Array<'py>
         Ok(u) => u.dtype().str()?.to_string(),
         Err(_) => arr.get_type().name()?.to_string(),
     };
-    Err(PyTypeError::new_err(format!("{name}: must be a float32 or float64 array, got dtype {dtype}")))
+    Err(PyTypeError::new_err(format!("{name}: must be an array of floats (float32 or float64; integers are converted), got dtype {dtype}")))
 }
 
 fn core_err(e: RokebyError) -> PyErr {

@@ -1,0 +1,26 @@
+"""Rokeby — art-directed reflections for Blender.
+
+Break the laws of optics on purpose: drag where a reflection lands on a surface and keep the
+result smooth, animated and renderable (Ritschel et al. 2009, "Interactive Reflection Editing").
+
+This package is a Blender extension (see blender_manifest.toml) and a plain Python package:
+``rokeby.api`` works in background scripts, and its maths helpers work without Blender at all
+(``bpy`` is imported only where Blender data is touched). Registering touches no ``gpu``
+function, so the add-on loads in background mode (render farms, ``bpy`` as a module).
+"""
+
+from __future__ import annotations
+
+__all__ = ["register", "unregister"]
+
+
+def register():
+    from . import ui
+
+    ui.register()
+
+
+def unregister():
+    from . import ui
+
+    ui.unregister()

@@ -1,0 +1,46 @@
+"""Minimal Wavefront OBJ reader (vertices and faces, polygons fan-triangulated) in numpy.
+
+For scripts, tests and benchmarks that run without Blender's importer. Texture and normal indices
+(``f 1/2/3``) and negative (relative) indices are understood; everything else is ignored.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+
+def load_obj(path) -> tuple[np.ndarray, np.ndarray]:
+    """Return (vertices (V, 3) float32, triangles (F, 3) int32)."""
+    verts: list[list[float]] = []
+    tris: list[tuple[int, int, int]] = []
+    with open(path, "r", encoding="utf-8", errors="replace") as fh:
+        for lineno, line in enumerate(fh, 1):
+            if line.startswith("v "):
+                parts = line.split()
+                verts.append([float(parts[1]), float(parts[2]), float(parts[3])])
+            elif line.startswith("f "):
+                idx = []
+                for tok in line.split()[1:]:
+                    i = int(tok.split("/")[0])
+                    idx.append(i - 1 if i > 0 else len(verts) + i)
+                if len(idx) < 3:
+                    raise ValueError(f"{path}:{lineno}: face with fewer than 3 vertices")
+                for k in range(1, len(idx) - 1):
+                    tris.append((idx[0], idx[k], idx[k + 1]))
+    v = np.asarray(verts, dtype=np.float32).reshape(-1, 3)
+    f = np.asarray(tris, dtype=np.int32).reshape(-1, 3)
+    if f.size and (f.min() < 0 or f.max() >= len(v)):
+        raise ValueError(f"{path}: face index out of range")
+    return v, f
+
+
+def vertex_normals(verts: np.ndarray, tris: np.ndarray) -> np.ndarray:
+    """Area-weighted vertex normals (unit; zero-area neighbourhoods get +Z)."""
+    v = verts.astype(np.float64)
+    fn = np.cross(v[tris[:, 1]] - v[tris[:, 0]], v[tris[:, 2]] - v[tris[:, 0]])
+    n = np.zeros_like(v)
+    for k in range(3):
+        np.add.at(n, tris[:, k], fn)
+    length = np.linalg.norm(n, axis=1, keepdims=True)
+    out = np.where(length > 1e-30, n / np.maximum(length, 1e-30), np.array([0.0, 0.0, 1.0]))
+    return out.astype(np.float32)

@@ -1,0 +1,58 @@
+"""A float64 numpy reference of Ritschel et al. 2009, eqs. 3, 5, 6 and 7, written independently of
+the Rust core (SVD-based polar decomposition), for well-conditioned configurations."""
+
+import numpy as np
+
+
+def ortho(m: np.ndarray) -> np.ndarray:
+    """Closest rotation to each 3×3 matrix (..., 3, 3)."""
+    u, _, vt = np.linalg.svd(m)
+    d = np.sign(np.linalg.det(u @ vt))
+    u = u.copy()
+    u[..., :, 2] *= d[..., None]
+    return u @ vt
+
+
+def field_matrices(points, constraints, distances=None) -> np.ndarray:
+    p, r, e = constraints[:, 0:3], constraints[:, 3:6], constraints[:, 6:9]
+    r = r / np.linalg.norm(r, axis=1, keepdims=True)
+    e = e / np.linalg.norm(e, axis=1, keepdims=True)
+    pts = np.asarray(points, np.float64)
+    if distances is None:
+        d2 = np.sum((pts[:, None, :] - p[None, :, :]) ** 2, axis=-1)  # (N, K)
+    else:
+        d2 = np.asarray(distances, np.float64).T ** 2
+    w = 1.0 / d2
+    m = np.einsum("nk,ki,kj->nij", w, e, r)
+    return ortho(m)
+
+
+def region_blend(rot, a, x):
+    """Eq. 7: ortho(a R + (1 - a) X) per point."""
+    return ortho(a[:, None, None] * rot + (1.0 - a)[:, None, None] * x)
+
+
+def quat_to_matrix(q: np.ndarray) -> np.ndarray:
+    x, y, z, w = (q[..., i].astype(np.float64) for i in range(4))
+    return np.stack(
+        [
+            np.stack([1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)], -1),
+            np.stack([2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)], -1),
+            np.stack([2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)], -1),
+        ],
+        -2,
+    )
+
+
+def rot_angle(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Angle of the rotation taking matrices a to b (..., 3, 3), accurate for small angles."""
+    d = np.swapaxes(a, -1, -2) @ b
+    axial = np.stack([d[..., 2, 1] - d[..., 1, 2], d[..., 0, 2] - d[..., 2, 0], d[..., 1, 0] - d[..., 0, 1]], -1)
+    tr = d[..., 0, 0] + d[..., 1, 1] + d[..., 2, 2]
+    return np.arctan2(0.5 * np.linalg.norm(axial, axis=-1), 0.5 * (tr - 1.0))
+
+
+def dir_angle(a, b):
+    a = np.asarray(a, np.float64)
+    b = np.asarray(b, np.float64)
+    return np.arctan2(np.linalg.norm(np.cross(a, b), axis=-1), np.sum(a * b, axis=-1))
