@@ -65,6 +65,8 @@ struct Group {
 /// parts computed once. Evaluate it per point or per pixel.
 pub struct Field {
     constraints: Vec<Constraint>,
+    /// eₙ rₙᵀ, the rank-1 term of eq. 5, formed once.
+    er: Vec<DMat3>,
     regions: Vec<Region>,
     groups: Vec<Group>,
 }
@@ -137,7 +139,8 @@ impl Field {
                 g.constant = Some(polar::canonical(min_rotation(c.r, c.e)));
             }
         }
-        Ok(Field { constraints, regions, groups })
+        let er = constraints.iter().map(|c| outer(c.e, c.r)).collect();
+        Ok(Field { constraints, er, regions, groups })
     }
 
     pub fn num_constraints(&self) -> usize {
@@ -179,11 +182,10 @@ impl Field {
             let mut b = DMat3::ZERO;
             let bmin = d2.iter().copied().filter(|&x| x > 0.0).fold(f64::INFINITY, f64::min);
             for (&x, &n) in d2.iter().zip(&g.members) {
-                let c = &self.constraints[n];
                 if x == 0.0 {
-                    m0 += outer(c.e, c.r);
+                    m0 += self.er[n];
                 } else if x.is_finite() {
-                    b += outer(c.e, c.r) * (bmin / x);
+                    b += self.er[n] * (bmin / x);
                 }
             }
             let q = polar::ortho_tiebreak(&m0, Some(&b));
@@ -198,8 +200,7 @@ impl Field {
         let mut taken = false;
         for (&x, &n) in d2.iter().zip(&g.members) {
             if x.is_finite() {
-                let c = &self.constraints[n];
-                let term = outer(c.e, c.r) * (dmin2 / x);
+                let term = self.er[n] * (dmin2 / x);
                 if !taken && x == dmin2 {
                     nearest = term;
                     taken = true;

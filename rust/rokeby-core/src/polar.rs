@@ -12,10 +12,11 @@
 //! * rank 0 (M ≈ 0): the identity.
 //!
 //! Two methods are offered because users trade speed for accuracy ([`PolarMethod`]):
-//! [`ortho_svd`] is a one-sided Jacobi SVD in f64 (exact to rounding); [`ortho_iterative`] is the
-//! rotation-extraction iteration of Müller, Bender, Chentanez and Macklin (2016), warm-started from
-//! a neighbouring pixel, whose result is accepted only after a second-order optimality test and
-//! otherwise recomputed with the SVD, so it never returns a non-optimal rotation.
+//! [`ortho_svd`] is a one-sided Jacobi SVD in f64 (exact to rounding); [`ortho_iterative`] is
+//! Newton's method on SO(3) (with the step of Müller, Bender, Chentanez and Macklin 2016 where the
+//! Hessian is indefinite), warm-started from a neighbouring pixel, whose result is accepted only
+//! after a second-order optimality test and otherwise recomputed with the SVD, so it never returns
+//! a non-optimal rotation.
 
 use glam::{DMat3, DQuat, DVec3};
 
@@ -24,8 +25,8 @@ use glam::{DMat3, DQuat, DVec3};
 pub enum PolarMethod {
     /// One-sided Jacobi SVD in f64, with explicit rank handling. Reference accuracy.
     Svd,
-    /// Müller et al. (2016) iteration, warm-started, verified, SVD fallback. Faster on coherent
-    /// inputs (neighbouring pixels); same optimum up to ~1e-9 rad.
+    /// Newton's method on SO(3), warm-started from the previous pixel, verified optimal, with the
+    /// SVD as fallback. Faster on coherent inputs (neighbouring pixels); same optimum.
     Iterative,
 }
 
@@ -194,60 +195,61 @@ pub fn canonical(q: DQuat) -> DQuat {
     }
 }
 
-/// Müller et al. 2016, "A robust method to extract the rotational part of deformations":
-/// ascend tr(Rᵀ M) from `init`. Returns `None` if it did not converge in `max_iter` steps or if the
-/// result fails the second-order test (then it is a saddle or minimum and the caller falls back).
+/// S = Rᵀ M split into what Newton's method on SO(3) needs. For R' = R exp([ω]):
+/// tr(R'ᵀ M) ≈ tr(S) + ω·g − ½ ωᵀ H ω with g = vee(S − Sᵀ) and H = tr(S)·I − sym(S).
+#[inline]
+fn newton_terms(r: &DMat3, m: &DMat3) -> (DVec3, DMat3, f64) {
+    let s = r.transpose() * *m;
+    // S_ij = s.col(j)[i]
+    let g = DVec3::new(s.y_axis.z - s.z_axis.y, s.z_axis.x - s.x_axis.z, s.x_axis.y - s.y_axis.x);
+    let tr = s.x_axis.x + s.y_axis.y + s.z_axis.z;
+    let h = DMat3::from_diagonal(DVec3::splat(tr)) - (s + s.transpose()) * 0.5;
+    (g, h, tr)
+}
+
+/// Leading principal minors of a symmetric 3×3 matrix, all > tol (positive definite).
+#[inline]
+fn positive_definite(h: &DMat3, tol: f64) -> bool {
+    let m1 = h.x_axis.x;
+    let m2 = m1 * h.y_axis.y - h.y_axis.x * h.x_axis.y;
+    m1 > tol && m2 > tol * tol && h.determinant() > tol * tol * tol
+}
+
+/// Iterative `ortho`: Newton's method on SO(3) for max tr(Rᵀ M) from `init` (a neighbouring
+/// pixel's rotation), quadratically convergent; where H is not positive definite (far from the
+/// maximum) it takes the step of Müller, Bender, Chentanez and Macklin (2016),
+/// ω = g / |tr S|. Returns `None` if it did not converge in `max_iter` steps or if the result
+/// fails the second-order test H ⪰ 0 (a saddle or minimum): the caller then uses the SVD, so
+/// this never returns a non-optimal rotation.
 pub fn ortho_iterative(m: &DMat3, init: DQuat, max_iter: usize) -> Option<DQuat> {
-    let scale = m.x_axis.length_squared() + m.y_axis.length_squared() + m.z_axis.length_squared();
+    let scale = (m.x_axis.length_squared() + m.y_axis.length_squared() + m.z_axis.length_squared()).sqrt();
     if !(scale > 1e-300) || !scale.is_finite() {
         return None;
     }
-    let scale = scale.sqrt();
     let mut q = init;
-    let mut converged = false;
     for _ in 0..max_iter {
-        let r = DMat3::from_quat(q);
-        let omega = r.x_axis.cross(m.x_axis) + r.y_axis.cross(m.y_axis) + r.z_axis.cross(m.z_axis);
-        let denom = (r.x_axis.dot(m.x_axis) + r.y_axis.dot(m.y_axis) + r.z_axis.dot(m.z_axis)).abs()
-            + 1e-12 * scale;
-        let omega = omega / denom;
+        let (g, h, tr) = newton_terms(&DMat3::from_quat(q), m);
+        if g.length() <= 1e-13 * scale {
+            // Stationary: a maximum iff H ⪰ 0 (every rotation axis k: second derivative −kᵀHk).
+            let tol = -1e-9 * scale;
+            let ok = h.x_axis.x >= tol && h.y_axis.y >= tol && h.z_axis.z >= tol && h.determinant() >= tol * scale * scale;
+            return ok.then(|| canonical(q));
+        }
+        let omega = if positive_definite(&h, 1e-6 * scale) {
+            h.inverse() * g
+        } else {
+            g / (tr.abs() + 1e-12 * scale)
+        };
         let w = omega.length();
-        if w < 1e-12 {
-            converged = true;
-            break;
+        // Limit a step to a quarter turn: Newton from far away may overshoot.
+        let step = if w > std::f64::consts::FRAC_PI_2 { omega * (std::f64::consts::FRAC_PI_2 / w) } else { omega };
+        let w = step.length();
+        if w < 1e-300 {
+            return None;
         }
-        q = (DQuat::from_axis_angle(omega / w, w) * q).normalize();
-        if w < 1e-9 {
-            converged = true;
-            break;
-        }
+        q = (q * DQuat::from_axis_angle(step / w, w)).normalize();
     }
-    if !converged {
-        return None;
-    }
-    // Stationary point of tr(RᵀM) ⇔ S = RᵀM symmetric. It is a maximum iff T = tr(S)·I − S ⪰ 0
-    // (second derivative along every rotation axis k is −kᵀTk).
-    let s = DMat3::from_quat(q).transpose() * *m;
-    let tol = 1e-9 * scale;
-    let asym = (s.y_axis.x - s.x_axis.y).abs() + (s.z_axis.x - s.x_axis.z).abs() + (s.z_axis.y - s.y_axis.z).abs();
-    if asym > 1e-6 * scale {
-        return None;
-    }
-    let tr = s.x_axis.x + s.y_axis.y + s.z_axis.z;
-    let t = DMat3::from_diagonal(DVec3::splat(tr)) - (s + s.transpose()) * 0.5;
-    let m00 = t.x_axis.x;
-    let m11 = t.y_axis.y;
-    let m22 = t.z_axis.z;
-    let minor01 = m00 * m11 - t.y_axis.x * t.x_axis.y;
-    let minor02 = m00 * m22 - t.z_axis.x * t.x_axis.z;
-    let minor12 = m11 * m22 - t.z_axis.y * t.y_axis.z;
-    let det = t.determinant();
-    let tol2 = tol * scale;
-    let tol3 = tol2 * scale;
-    if m00 < -tol || m11 < -tol || m22 < -tol || minor01 < -tol2 || minor02 < -tol2 || minor12 < -tol2 || det < -tol3 {
-        return None;
-    }
-    Some(canonical(q))
+    None
 }
 
 /// `ortho` with the chosen method; `warm` is the previous result (a neighbouring pixel) and is
@@ -256,7 +258,7 @@ pub fn ortho_iterative(m: &DMat3, init: DQuat, max_iter: usize) -> Option<DQuat>
 pub fn ortho(m: &DMat3, tiebreak: Option<&DMat3>, method: PolarMethod, warm: &mut DQuat) -> DQuat {
     let q = match method {
         PolarMethod::Svd => ortho_tiebreak(m, tiebreak),
-        PolarMethod::Iterative => match ortho_iterative(m, *warm, 24) {
+        PolarMethod::Iterative => match ortho_iterative(m, *warm, 8) {
             Some(q) if !near_rank1(m, &q) => q,
             _ => ortho_tiebreak(m, tiebreak),
         },
