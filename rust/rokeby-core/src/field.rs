@@ -10,9 +10,9 @@
 //! ```
 //!
 //! Implementation notes (each is a documented choice, tested in `tests/field_props.rs`):
-//! * Weights are normalised by the smallest squared distance, wₙ = d²_min / d²ₙ ∈ (0, 1], which
-//!   leaves eq. 5 unchanged (ortho is scale-invariant) and makes the field identical for scenes
-//!   scaled by 1e-6 or 1e6 — no overflow, no underflow.
+//! * Weights wₙ = 1/d²ₙ are accumulated in f64, whose range holds them for every distance float32
+//!   coordinates produce; ortho is scale-invariant, so the field is the same for scenes scaled by
+//!   1e-6 or 1e6 (tested), with no normalisation pass.
 //! * Interpolation: where q coincides with constraints (d = 0) only those act, with equal weights
 //!   (coincident constraints are averaged). When they leave the twist about eₙ free (rank 1), the
 //!   other constraints choose it, which is the limit of the field as q → pₙ, so R is continuous.
@@ -153,23 +153,32 @@ impl Field {
     }
 
     /// Eq. 5 for one group (all constraints of one region) at point `idx` / position `q`.
+    ///
+    /// One pass accumulates M = Σ wₙ eₙrₙᵀ with wₙ = 1/d²ₙ in f64: ortho is scale-invariant and
+    /// f64's range holds 1/d² for any distance that float32 coordinates can produce (down to
+    /// ~1e-90), so no normalisation pass is needed. A zero distance (q on a constraint) switches
+    /// to the interpolation branch.
+    #[allow(clippy::too_many_arguments)]
     fn solve_group(&self, gi: usize, idx: usize, n_points: usize, q: DVec3, dist: Distances, polar: PolarMethod, s: &mut Scratch) -> DQuat {
         let g = &self.groups[gi];
         if let Some(c) = g.constant {
             return c;
         }
         let d2 = &mut s.d2[..g.members.len()];
+        let mut m = DMat3::ZERO;
         let mut dmin2 = f64::INFINITY;
         for (slot, &n) in d2.iter_mut().zip(&g.members) {
-            let v = match dist {
+            let x = match dist {
                 Distances::Euclidean => (q - self.constraints[n].p).length_squared(),
                 Distances::Given(d) => {
                     let x = d[n * n_points + idx] as f64;
                     x * x
                 }
             };
-            *slot = v;
-            dmin2 = dmin2.min(v);
+            *slot = x;
+            dmin2 = dmin2.min(x);
+            // x = 0 gives +inf here; that M is discarded by the interpolation branch below.
+            m += self.er[n] * x.recip();
         }
         if dmin2 == f64::INFINITY {
             // No constraint of this region can reach q (another connected component).
@@ -177,39 +186,36 @@ impl Field {
         }
         if dmin2 == 0.0 {
             // q is on constraint(s): interpolation. Equal weights among the coincident ones; the
-            // others, weighted among themselves, only break a rank-1 tie (the limit q → pₙ).
+            // others only break a rank-1 tie (the limit q → pₙ), so R is continuous there.
             let mut m0 = DMat3::ZERO;
             let mut b = DMat3::ZERO;
-            let bmin = d2.iter().copied().filter(|&x| x > 0.0).fold(f64::INFINITY, f64::min);
             for (&x, &n) in d2.iter().zip(&g.members) {
                 if x == 0.0 {
                     m0 += self.er[n];
                 } else if x.is_finite() {
-                    b += self.er[n] * (bmin / x);
+                    b += self.er[n] * x.recip();
                 }
             }
             let q = polar::ortho_tiebreak(&m0, Some(&b));
             s.warm[gi] = q;
             return q;
         }
-        // The nearest constraint's term and the rest are summed apart: where the nearest dominates
-        // (M numerically rank 1), the rest decides the twist about eₙ — the same limit the rank-2
-        // solution tends to, so the field has no seam at the rank threshold.
-        let mut nearest = DMat3::ZERO;
-        let mut rest = DMat3::ZERO;
-        let mut taken = false;
-        for (&x, &n) in d2.iter().zip(&g.members) {
-            if x.is_finite() {
-                let term = self.er[n] * (dmin2 / x);
-                if !taken && x == dmin2 {
-                    nearest = term;
-                    taken = true;
-                } else {
-                    rest += term;
+        // Where the nearest constraint dominates (M numerically rank 1), the others decide the
+        // twist about eₙ — the limit the rank-2 solution tends to, so the field has no seam at
+        // the rank threshold. Summed apart (not M minus the nearest term, which cancels).
+        let tiebreak = || {
+            let mut rest = DMat3::ZERO;
+            let mut skipped = false;
+            for (&x, &n) in d2.iter().zip(&g.members) {
+                if !skipped && x == dmin2 {
+                    skipped = true;
+                } else if x.is_finite() {
+                    rest += self.er[n] * x.recip();
                 }
             }
-        }
-        polar::ortho(&(nearest + rest), Some(&rest), polar, &mut s.warm[gi])
+            Some(rest)
+        };
+        polar::ortho(&m, tiebreak, polar, &mut s.warm[gi])
     }
 
     /// R(q) (or R_a(q) inside regions) at one point. `r_view` is r(q) when the view is known.
@@ -249,7 +255,7 @@ impl Field {
                 None => DMat3::IDENTITY,
             } * rest;
         }
-        polar::ortho(&acc, None, polar, &mut s.blend_warm)
+        polar::ortho(&acc, || None, polar, &mut s.blend_warm)
     }
 
     fn check_distances(&self, dist: Distances, n_points: usize) -> Result<()> {
@@ -368,26 +374,36 @@ fn vec3_at(a: &[f32], i: usize) -> DVec3 {
     DVec3::new(a[3 * i] as f64, a[3 * i + 1] as f64, a[3 * i + 2] as f64)
 }
 
+/// Rows per parallel validation task.
+const CHECK_ROWS: usize = 8192;
+
+/// The first row (in order, whatever the thread count) for which `bad` holds.
+fn first_bad_row(a: &[f32], bad: impl Fn(&[f32]) -> bool + Sync) -> Option<usize> {
+    a.par_chunks(3 * CHECK_ROWS)
+        .enumerate()
+        .find_map_first(|(ci, chunk)| chunk.chunks_exact(3).position(&bad).map(|j| ci * CHECK_ROWS + j))
+}
+
 fn check_finite(a: &[f32], arg: &str) -> Result<()> {
     if a.is_empty() {
         return Err(RokebyError::invalid(arg, "is empty"));
     }
-    if let Some(i) = a.iter().position(|x| !x.is_finite()) {
-        return Err(RokebyError::invalid(arg, format!("row {} has a non-finite value ({})", i / 3, a[i])));
+    if let Some(i) = first_bad_row(a, |r| !(r[0].is_finite() && r[1].is_finite() && r[2].is_finite())) {
+        return Err(RokebyError::invalid(arg, format!("row {i} has a non-finite value ({:?})", &a[3 * i..3 * i + 3])));
     }
     Ok(())
 }
 
 fn check_nonzero_dirs(a: &[f32], arg: &str) -> Result<()> {
     check_finite(a, arg)?;
-    if let Some(i) = (0..a.len() / 3).find(|&i| !(vec3_at(a, i).length_squared() > 1e-40)) {
+    if let Some(i) = first_bad_row(a, |r| !(DVec3::new(r[0] as f64, r[1] as f64, r[2] as f64).length_squared() > 1e-40)) {
         return Err(RokebyError::invalid(arg, format!("row {i} has zero length")));
     }
     Ok(())
 }
 
 fn check_eye(points: &[f32], eye: DVec3) -> Result<()> {
-    if let Some(i) = (0..points.len() / 3).find(|&i| vec3_at(points, i) == eye) {
+    if let Some(i) = first_bad_row(points, |r| DVec3::new(r[0] as f64, r[1] as f64, r[2] as f64) == eye) {
         return Err(RokebyError::invalid("eye", format!("coincides with point {i}: no view direction there")));
     }
     Ok(())
@@ -396,7 +412,7 @@ fn check_eye(points: &[f32], eye: DVec3) -> Result<()> {
 /// The kernel never produces a non-finite value by construction; this is the last guard so that a
 /// bug becomes an error message, not NaN in Blender data.
 fn check_output(out: &[f32]) -> Result<()> {
-    if let Some(i) = out.iter().position(|x| !x.is_finite()) {
+    if let Some(i) = out.par_iter().position_first(|x| !x.is_finite()) {
         return Err(RokebyError::invalid("internal", format!("non-finite result at flat index {i}; please report this input")));
     }
     Ok(())

@@ -197,14 +197,23 @@ pub fn canonical(q: DQuat) -> DQuat {
 
 /// S = Rᵀ M split into what Newton's method on SO(3) needs. For R' = R exp([ω]):
 /// tr(R'ᵀ M) ≈ tr(S) + ω·g − ½ ωᵀ H ω with g = vee(S − Sᵀ) and H = tr(S)·I − sym(S).
+struct NewtonTerms {
+    g: DVec3,
+    h: DMat3,
+    tr: f64,
+    /// ‖S‖²_F, for the rank test.
+    fro2: f64,
+}
+
 #[inline]
-fn newton_terms(r: &DMat3, m: &DMat3) -> (DVec3, DMat3, f64) {
-    let s = r.transpose() * *m;
+fn newton_terms(q: DQuat, m: &DMat3) -> NewtonTerms {
+    let s = DMat3::from_quat(q).transpose() * *m;
     // S_ij = s.col(j)[i]
     let g = DVec3::new(s.y_axis.z - s.z_axis.y, s.z_axis.x - s.x_axis.z, s.x_axis.y - s.y_axis.x);
     let tr = s.x_axis.x + s.y_axis.y + s.z_axis.z;
     let h = DMat3::from_diagonal(DVec3::splat(tr)) - (s + s.transpose()) * 0.5;
-    (g, h, tr)
+    let fro2 = s.x_axis.length_squared() + s.y_axis.length_squared() + s.z_axis.length_squared();
+    NewtonTerms { g, h, tr, fro2 }
 }
 
 /// Leading principal minors of a symmetric 3×3 matrix, all > tol (positive definite).
@@ -215,66 +224,71 @@ fn positive_definite(h: &DMat3, tol: f64) -> bool {
     m1 > tol && m2 > tol * tol && h.determinant() > tol * tol * tol
 }
 
+/// What the iterative method concluded.
+pub enum Iterated {
+    /// A verified maximum of tr(Rᵀ M).
+    Optimal(DQuat),
+    /// Converged, but M is numerically rank 1 there: the twist about the edited ray is free and
+    /// must be chosen by rule (the SVD path with its tie-break).
+    RankOne,
+    /// No verified maximum within the step budget.
+    Failed,
+}
+
 /// Iterative `ortho`: Newton's method on SO(3) for max tr(Rᵀ M) from `init` (a neighbouring
-/// pixel's rotation), quadratically convergent; where H is not positive definite (far from the
-/// maximum) it takes the step of Müller, Bender, Chentanez and Macklin (2016),
-/// ω = g / |tr S|. Returns `None` if it did not converge in `max_iter` steps or if the result
-/// fails the second-order test H ⪰ 0 (a saddle or minimum): the caller then uses the SVD, so
-/// this never returns a non-optimal rotation.
-pub fn ortho_iterative(m: &DMat3, init: DQuat, max_iter: usize) -> Option<DQuat> {
+/// pixel's rotation), quadratically convergent. Steps use the quaternion (ω/2, 1)/‖·‖, a rotation
+/// that agrees with exp(ω) to second order (so convergence stays quadratic) and needs no sin/cos.
+/// Where H is not positive definite (far from the maximum) it takes the step of Müller, Bender,
+/// Chentanez and Macklin (2016), ω = g / |tr S|, at most a quarter turn. A result is accepted only
+/// when the last step was a Newton step with H positive definite — a strict local maximum, which
+/// for tr(Rᵀ M) on SO(3) is the global one — so the caller's SVD fallback handles the rest.
+pub fn ortho_iterative(m: &DMat3, init: DQuat, max_iter: usize) -> Iterated {
     let scale = (m.x_axis.length_squared() + m.y_axis.length_squared() + m.z_axis.length_squared()).sqrt();
     if !(scale > 1e-300) || !scale.is_finite() {
-        return None;
+        return Iterated::Failed;
     }
     let mut q = init;
     for _ in 0..max_iter {
-        let (g, h, tr) = newton_terms(&DMat3::from_quat(q), m);
-        if g.length() <= 1e-13 * scale {
-            // Stationary: a maximum iff H ⪰ 0 (every rotation axis k: second derivative −kᵀHk).
-            let tol = -1e-9 * scale;
-            let ok = h.x_axis.x >= tol && h.y_axis.y >= tol && h.z_axis.z >= tol && h.determinant() >= tol * scale * scale;
-            return ok.then(|| canonical(q));
+        let t = newton_terms(q, m);
+        // Rank test at (near) the solution: S has eigenvalues (σ₁, σ₂, ±σ₃), so
+        // tr(S)² − ‖S‖²_F = 2(σ₁σ₂ ± …) vanishes relative to σ₁² exactly when σ₂ ≈ 0.
+        let newton = positive_definite(&t.h, 1e-6 * scale);
+        let omega = if newton { t.h.inverse() * t.g } else { t.g / (t.tr.abs() + 1e-12 * scale) };
+        let w2 = omega.length_squared();
+        // A Newton step below 1e-6 rad leaves an error of order 1e-12 rad after it is taken.
+        if newton && w2 < 1e-12 {
+            if t.tr * t.tr - t.fro2 < 1e-6 * t.fro2 {
+                return Iterated::RankOne;
+            }
+            let half = omega * 0.5;
+            return Iterated::Optimal(canonical((q * DQuat::from_xyzw(half.x, half.y, half.z, 1.0)).normalize()));
         }
-        let omega = if positive_definite(&h, 1e-6 * scale) {
-            h.inverse() * g
-        } else {
-            g / (tr.abs() + 1e-12 * scale)
-        };
-        let w = omega.length();
-        // Limit a step to a quarter turn: Newton from far away may overshoot.
-        let step = if w > std::f64::consts::FRAC_PI_2 { omega * (std::f64::consts::FRAC_PI_2 / w) } else { omega };
-        let w = step.length();
-        if w < 1e-300 {
-            return None;
+        if !newton && w2 < 1e-24 {
+            // Stationary but not a strict maximum: a saddle, or a rank-deficient optimum.
+            return Iterated::RankOne;
         }
-        q = (q * DQuat::from_axis_angle(step / w, w)).normalize();
+        let max_step = std::f64::consts::FRAC_PI_2;
+        let omega = if w2 > max_step * max_step { omega * (max_step / w2.sqrt()) } else { omega };
+        let half = omega * 0.5;
+        q = (q * DQuat::from_xyzw(half.x, half.y, half.z, 1.0)).normalize();
     }
-    None
+    Iterated::Failed
 }
 
 /// `ortho` with the chosen method; `warm` is the previous result (a neighbouring pixel) and is
 /// updated. The iterative method falls back to the SVD when its result is not verified optimal
 /// or when M is rank-deficient (where the answer is chosen by rule, not by optimisation).
-pub fn ortho(m: &DMat3, tiebreak: Option<&DMat3>, method: PolarMethod, warm: &mut DQuat) -> DQuat {
+/// `tiebreak` is only formed when the rank-1 rule needs it.
+pub fn ortho(m: &DMat3, tiebreak: impl FnOnce() -> Option<DMat3>, method: PolarMethod, warm: &mut DQuat) -> DQuat {
     let q = match method {
-        PolarMethod::Svd => ortho_tiebreak(m, tiebreak),
-        PolarMethod::Iterative => match ortho_iterative(m, *warm, 8) {
-            Some(q) if !near_rank1(m, &q) => q,
-            _ => ortho_tiebreak(m, tiebreak),
+        PolarMethod::Svd => ortho_tiebreak(m, tiebreak().as_ref()),
+        PolarMethod::Iterative => match ortho_iterative(m, *warm, 10) {
+            Iterated::Optimal(q) => q,
+            Iterated::RankOne | Iterated::Failed => ortho_tiebreak(m, tiebreak().as_ref()),
         },
     };
     *warm = q;
     q
-}
-
-/// Cheap rank-1 test at the solution: S = RᵀM is symmetric with eigenvalues (σ₁, σ₂, ±σ₃), so
-/// tr(S)² − ‖S‖²_F = 2(σ₁σ₂ ± …) vanishes (relative to σ₁²) exactly when σ₂ ≈ 0.
-fn near_rank1(m: &DMat3, q: &DQuat) -> bool {
-    let s = DMat3::from_quat(*q).transpose() * *m;
-    let tr = s.x_axis.x + s.y_axis.y + s.z_axis.z;
-    let fro2 = s.x_axis.length_squared() + s.y_axis.length_squared() + s.z_axis.length_squared();
-    // For rank ≥ 2 with σ₂ ≥ 1e-5 σ₁ this exceeds ~1e-5 σ₁²; only near-rank-1 inputs go to the SVD.
-    (tr * tr - fro2) < 1e-6 * fro2
 }
 
 #[cfg(test)]
@@ -330,7 +344,7 @@ mod tests {
         let m = DMat3::from_quat(r) * s;
         let a = ortho_svd(&m);
         let mut warm = DQuat::IDENTITY;
-        let b = ortho(&m, None, PolarMethod::Iterative, &mut warm);
+        let b = ortho(&m, || None, PolarMethod::Iterative, &mut warm);
         assert!(a.dot(b).abs() > 1.0 - 1e-12, "{a:?} vs {b:?}");
     }
 

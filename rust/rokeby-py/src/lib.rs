@@ -329,7 +329,7 @@ fn ortho<'py>(py: Python<'py>, matrices: &Bound<'py, PyAny>, method: &str) -> Py
             let mat = glam::DMat3::from_cols_array(&[
                 c[0] as f64, c[3] as f64, c[6] as f64, c[1] as f64, c[4] as f64, c[7] as f64, c[2] as f64, c[5] as f64, c[8] as f64,
             ]);
-            let q = polar::canonical(polar::ortho(&mat, None, method, &mut warm));
+            let q = polar::canonical(polar::ortho(&mat, || None, method, &mut warm));
             out.extend_from_slice(&[q.x as f32, q.y as f32, q.z as f32, q.w as f32]);
         }
         Ok(out)
