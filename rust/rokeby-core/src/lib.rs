@@ -8,6 +8,7 @@
 
 pub mod error;
 pub mod field;
+pub mod geodesic;
 pub mod polar;
 pub mod region;
 

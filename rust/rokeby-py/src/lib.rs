@@ -10,6 +10,8 @@ use pyo3::exceptions::{PyRuntimeError, PyTypeError, PyValueError};
 use pyo3::prelude::*;
 use pyo3::types::{PyDict, PyList, PyTuple};
 use rokeby_core::field::{Distances, Field};
+use rokeby_core::geodesic::{self, GeodesicSolver as CoreSolver, Mesh, Method, Source, SurfacePoint};
+use std::sync::Arc;
 use rokeby_core::polar::{self, PolarMethod};
 use rokeby_core::region::Region;
 use rokeby_core::RokebyError;
@@ -340,11 +342,226 @@ fn ortho<'py>(py: Python<'py>, matrices: &Bound<'py, PyAny>, method: &str) -> Py
     Ok(arr.into_pyarray(py))
 }
 
+/// An integer array (faces, indices) as i64; floats are refused (an index must be exact).
+fn i64_array(obj: &Bound<'_, PyAny>, name: &str) -> PyResult<(Vec<i64>, Vec<usize>)> {
+    let py = obj.py();
+    let arr: Bound<'_, PyAny> = if obj.cast::<PyUntypedArray>().is_ok() {
+        obj.clone()
+    } else {
+        py.import("numpy")?.call_method1("asarray", (obj,)).map_err(|e| PyTypeError::new_err(format!("{name}: cannot be read as an array ({e})")))?
+    };
+    let kind: String = arr.getattr("dtype").and_then(|d| d.getattr("kind")).and_then(|k| k.extract()).unwrap_or_default();
+    if kind != "i" && kind != "u" {
+        let dtype = arr.getattr("dtype").map(|d| d.to_string()).unwrap_or_else(|_| "?".into());
+        return Err(PyTypeError::new_err(format!("{name}: must be an array of integers, got dtype {dtype}")));
+    }
+    let arr = arr.call_method1("astype", ("int64",))?;
+    let a = arr.cast::<PyArrayDyn<i64>>().map_err(|_| PyTypeError::new_err(format!("{name}: must be an integer array")))?;
+    let ro = a.readonly();
+    Ok((ro.as_array().iter().copied().collect(), ro.shape().to_vec()))
+}
+
+fn parse_mesh(vertices: &Bound<'_, PyAny>, faces: &Bound<'_, PyAny>) -> PyResult<Mesh> {
+    let v = f32_array(vertices, "vertices")?;
+    let vs = v.shape();
+    if vs.len() != 2 || vs[1] != 3 {
+        return Err(PyValueError::new_err(format!("vertices: expected shape (V, 3), got {}", shape_str(&vs))));
+    }
+    let (f, fs) = i64_array(faces, "faces")?;
+    if fs.len() != 2 || fs[1] != 3 {
+        return Err(PyValueError::new_err(format!("faces: expected shape (F, 3) of vertex indices, got {}", shape_str(&fs))));
+    }
+    Mesh::new(v.slice(), &f).map_err(core_err)
+}
+
+fn parse_point(item: &Bound<'_, PyAny>) -> Option<SurfacePoint> {
+    let t: (i64, Vec<f64>) = item.extract().ok()?;
+    if t.1.len() != 3 || t.0 < 0 {
+        return None;
+    }
+    Some(SurfacePoint { face: t.0 as usize, bary: [t.1[0], t.1[1], t.1[2]] })
+}
+
+fn parse_one_source(item: &Bound<'_, PyAny>, k: usize) -> PyResult<Source> {
+    if let Ok(v) = item.extract::<i64>() {
+        if v < 0 {
+            return Err(PyValueError::new_err(format!("sources: source {k}: vertex index {v} is negative")));
+        }
+        return Ok(Source::Vertex(v as usize));
+    }
+    if let Some(p) = parse_point(item) {
+        return Ok(Source::Point(p));
+    }
+    Err(PyTypeError::new_err(format!(
+        "sources: source {k} must be a vertex index or (face, (b0, b1, b2)), got {}",
+        item.repr().map(|r| r.to_string()).unwrap_or_default()
+    )))
+}
+
+/// sources: vertex indices (an int array or list: one distance field each), or a list whose items
+/// are a vertex index, a surface point (face, (b0, b1, b2)), or a list of those (one field, the
+/// distance to the nearest of the set).
+fn parse_sources(obj: &Bound<'_, PyAny>) -> PyResult<Vec<Vec<Source>>> {
+    if obj.cast::<PyUntypedArray>().is_ok() {
+        let (idx, shape) = i64_array(obj, "sources")?;
+        if shape.len() > 1 {
+            return Err(PyValueError::new_err(format!("sources: an index array must be 1-D, got {}", shape_str(&shape))));
+        }
+        return idx
+            .into_iter()
+            .enumerate()
+            .map(|(k, v)| if v < 0 { Err(PyValueError::new_err(format!("sources: source {k}: vertex index {v} is negative"))) } else { Ok(vec![Source::Vertex(v as usize)]) })
+            .collect();
+    }
+    if obj.extract::<i64>().is_ok() || parse_point(obj).is_some() {
+        return Ok(vec![vec![parse_one_source(obj, 0)?]]);
+    }
+    let items: Vec<Bound<'_, PyAny>> = obj.try_iter().map_err(|_| PyTypeError::new_err("sources: must be a list of sources"))?.collect::<PyResult<_>>()?;
+    if items.is_empty() {
+        return Err(PyValueError::new_err("sources: is empty"));
+    }
+    let mut sets = Vec::with_capacity(items.len());
+    for (k, item) in items.iter().enumerate() {
+        if item.extract::<i64>().is_ok() || parse_point(item).is_some() {
+            sets.push(vec![parse_one_source(item, k)?]);
+        } else if let Ok(inner) = item.try_iter() {
+            let members: Vec<Bound<'_, PyAny>> = inner.collect::<PyResult<_>>()?;
+            let set = members.iter().map(|m| parse_one_source(m, k)).collect::<PyResult<Vec<_>>>()?;
+            sets.push(set);
+        } else {
+            return Err(PyTypeError::new_err(format!("sources: source {k} must be a vertex index, (face, (b0, b1, b2)) or a list of those")));
+        }
+    }
+    Ok(sets)
+}
+
+fn parse_method(name: &str) -> PyResult<Method> {
+    Method::parse(name).ok_or_else(|| PyValueError::new_err(format!("method: unknown method {name:?} (expected 'heat' or 'dijkstra')")))
+}
+
+fn distances_array<'py>(py: Python<'py>, solver: &CoreSolver, sets: Vec<Vec<Source>>, method: Method) -> PyResult<Bound<'py, PyArrayDyn<f32>>> {
+    let nv = solver.mesh().vertices.len();
+    let ns = sets.len();
+    let out = run_detached(py, || solver.distances(&sets, method))?;
+    let arr = ArrayD::from_shape_vec(IxDyn(&[ns, nv]), out).map_err(|e| PyRuntimeError::new_err(e.to_string()))?;
+    Ok(arr.into_pyarray(py))
+}
+
+/// geodesic_distances(vertices, faces, sources, *, method="heat") -> (S, V) float32.
+///
+/// Distances over the surface from each source (or source set) to every vertex. +inf where no
+/// source can reach (other connected components). For repeated queries on one mesh use
+/// GeodesicSolver, which keeps the heat method's factorisation.
+#[pyfunction]
+#[pyo3(signature = (vertices, faces, sources, *, method="heat"))]
+fn geodesic_distances<'py>(py: Python<'py>, vertices: &Bound<'py, PyAny>, faces: &Bound<'py, PyAny>, sources: &Bound<'py, PyAny>, method: &str) -> PyResult<Bound<'py, PyArrayDyn<f32>>> {
+    let method = parse_method(method)?;
+    let mesh = parse_mesh(vertices, faces)?;
+    let sets = parse_sources(sources)?;
+    let solver = run_detached(py, || Ok(CoreSolver::new(mesh)))?;
+    distances_array(py, &solver, sets, method)
+}
+
+/// GeodesicSolver(vertices, faces): geodesic distances on one mesh, keeping what does not change
+/// between queries — the edge graph, the connected components and the heat method's two sparse
+/// Cholesky factorisations (made on the first heat query). A moved handle costs one solve.
+/// The mesh is fixed for a solver: make a new one when vertices or faces change.
+#[pyclass(frozen, name = "GeodesicSolver", module = "rokeby_native")]
+struct PyGeodesicSolver {
+    inner: Arc<CoreSolver>,
+}
+
+#[pymethods]
+impl PyGeodesicSolver {
+    #[new]
+    fn new(py: Python<'_>, vertices: &Bound<'_, PyAny>, faces: &Bound<'_, PyAny>) -> PyResult<Self> {
+        let mesh = parse_mesh(vertices, faces)?;
+        let inner = run_detached(py, || Ok(CoreSolver::new(mesh)))?;
+        Ok(PyGeodesicSolver { inner: Arc::new(inner) })
+    }
+
+    /// distances(sources, method="heat") -> (S, V) float32
+    #[pyo3(signature = (sources, method="heat"))]
+    fn distances<'py>(&self, py: Python<'py>, sources: &Bound<'py, PyAny>, method: &str) -> PyResult<Bound<'py, PyArrayDyn<f32>>> {
+        let method = parse_method(method)?;
+        let sets = parse_sources(sources)?;
+        distances_array(py, &self.inner, sets, method)
+    }
+
+    /// Whether the heat method's factorisation has been computed (and is being reused).
+    #[getter]
+    fn factored(&self) -> bool {
+        self.inner.is_factored()
+    }
+
+    #[getter]
+    fn num_vertices(&self) -> usize {
+        self.inner.mesh().vertices.len()
+    }
+
+    #[getter]
+    fn num_faces(&self) -> usize {
+        self.inner.mesh().faces.len()
+    }
+}
+
+/// interpolate(values, faces, face_index, bary) -> (S, P) float32
+///
+/// Per-vertex values (S, V) (e.g. distance fields) at surface points given by face indices (P,)
+/// and barycentric coordinates (P, 3), by linear interpolation (paper §6.2).
+#[pyfunction]
+fn interpolate<'py>(py: Python<'py>, values: &Bound<'py, PyAny>, faces: &Bound<'py, PyAny>, face_index: &Bound<'py, PyAny>, bary: &Bound<'py, PyAny>) -> PyResult<Bound<'py, PyArrayDyn<f32>>> {
+    let vals = f32_array(values, "values")?;
+    let vshape = vals.shape();
+    let (rows, nv) = match vshape.len() {
+        1 => (1, vshape[0]),
+        2 => (vshape[0], vshape[1]),
+        _ => return Err(PyValueError::new_err(format!("values: expected shape (V,) or (S, V), got {}", shape_str(&vshape)))),
+    };
+    if vals.slice().iter().any(|x| x.is_nan()) {
+        return Err(PyValueError::new_err("values: contains NaN"));
+    }
+    let (f, fs) = i64_array(faces, "faces")?;
+    if fs.len() != 2 || fs[1] != 3 {
+        return Err(PyValueError::new_err(format!("faces: expected shape (F, 3), got {}", shape_str(&fs))));
+    }
+    if let Some(i) = f.iter().position(|&x| x < 0 || x as u64 >= nv as u64) {
+        return Err(PyValueError::new_err(format!("faces: face {} refers to vertex {} but values has {} vertices", i / 3, f[i], nv)));
+    }
+    let (fi, fis) = i64_array(face_index, "face_index")?;
+    if fis.len() != 1 {
+        return Err(PyValueError::new_err(format!("face_index: expected shape (P,), got {}", shape_str(&fis))));
+    }
+    let b = f32_array(bary, "bary")?;
+    if b.shape() != [fi.len(), 3] {
+        return Err(PyValueError::new_err(format!("bary: expected shape ({}, 3), got {}", fi.len(), shape_str(&b.shape()))));
+    }
+    let nf = fs[0];
+    let faces3: Vec<[usize; 3]> = f.chunks_exact(3).map(|c| [c[0] as usize, c[1] as usize, c[2] as usize]).collect();
+    let mut pts = Vec::with_capacity(fi.len());
+    for (k, (&face, bc)) in fi.iter().zip(b.slice().chunks_exact(3)).enumerate() {
+        if face < 0 || face as usize >= nf {
+            return Err(PyValueError::new_err(format!("face_index: entry {k} = {face} is out of range (0..{})", nf.saturating_sub(1))));
+        }
+        if bc.iter().any(|x| !x.is_finite()) {
+            return Err(PyValueError::new_err(format!("bary: row {k} is not finite")));
+        }
+        pts.push(SurfacePoint { face: face as usize, bary: [bc[0] as f64, bc[1] as f64, bc[2] as f64] });
+    }
+    let v = vals.slice();
+    let out = run_detached(py, || Ok(geodesic::interpolate(v, nv, &faces3, &pts)))?;
+    let arr = ArrayD::from_shape_vec(IxDyn(&[rows, pts.len()]), out).map_err(|e| PyRuntimeError::new_err(e.to_string()))?;
+    Ok(arr.into_pyarray(py))
+}
+
 #[pymodule]
 fn rokeby_native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
     m.add_function(wrap_pyfunction!(rotation_field, m)?)?;
     m.add_function(wrap_pyfunction!(edited_directions, m)?)?;
     m.add_function(wrap_pyfunction!(ortho, m)?)?;
+    m.add_function(wrap_pyfunction!(geodesic_distances, m)?)?;
+    m.add_function(wrap_pyfunction!(interpolate, m)?)?;
+    m.add_class::<PyGeodesicSolver>()?;
     Ok(())
 }

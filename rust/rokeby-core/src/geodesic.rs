@@ -1,0 +1,493 @@
+//! Geodesic distances on triangle meshes (Ritschel et al. 2009, §6.2, and what scanned meshes need).
+//!
+//! * [`Method::Dijkstra`]: shortest paths along mesh edges, multi-source — the paper's baseline.
+//!   Fast; always over-estimates (edge paths zig-zag), however fine the mesh.
+//! * [`Method::Heat`]: the heat method (Crane, Weischedel, Wardetzky 2013/2017): one short heat
+//!   flow (A + tL) u = δ, the normalised gradient X = −∇u/|∇u|, then the Poisson problem L φ = ∇·X.
+//!   Paths cross faces, so it converges to the true geodesic distance as the mesh is refined. Both
+//!   sparse matrices are factored once per mesh (faer's sparse Cholesky) and reused by every query:
+//!   moving a handle costs two triangular solves, not a factorisation.
+//!
+//! Sources are vertices or surface points (a face and barycentric coordinates), several per
+//! distance field (the distance to the nearest). Inside the source's own triangle the distance is
+//! the exact straight-line one, and so are the values on the 1-ring of a vertex source, where the
+//! heat method is least accurate. Vertices that no source can reach (another connected component,
+//! unreferenced vertices) get +inf.
+
+use crate::error::{Result, RokebyError};
+use faer::linalg::solvers::Solve;
+use faer::sparse::linalg::solvers::Llt;
+use faer::sparse::{SparseColMat, Triplet};
+use faer::{Mat, Side};
+use glam::DVec3;
+use rayon::prelude::*;
+use std::cmp::Ordering;
+use std::collections::BinaryHeap;
+use std::sync::OnceLock;
+
+/// A place on the surface: a face and barycentric coordinates (normalised to sum 1).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct SurfacePoint {
+    pub face: usize,
+    pub bary: [f64; 3],
+}
+
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Source {
+    Vertex(usize),
+    Point(SurfacePoint),
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Method {
+    Dijkstra,
+    Heat,
+}
+
+impl Method {
+    pub fn parse(name: &str) -> Option<Self> {
+        match name {
+            "dijkstra" => Some(Method::Dijkstra),
+            "heat" => Some(Method::Heat),
+            _ => None,
+        }
+    }
+}
+
+/// A validated triangle mesh in f64.
+#[derive(Debug, Clone)]
+pub struct Mesh {
+    pub vertices: Vec<DVec3>,
+    pub faces: Vec<[usize; 3]>,
+}
+
+impl Mesh {
+    /// `vertices` (V×3 flattened), `faces` (F×3 flattened, any integer type converted to i64).
+    pub fn new(vertices: &[f32], faces: &[i64]) -> Result<Self> {
+        if vertices.len() % 3 != 0 || faces.len() % 3 != 0 {
+            return Err(RokebyError::invalid("vertices", "vertices and faces must have 3 columns"));
+        }
+        if vertices.is_empty() {
+            return Err(RokebyError::invalid("vertices", "the mesh has no vertices"));
+        }
+        if faces.is_empty() {
+            return Err(RokebyError::invalid("faces", "the mesh has no faces"));
+        }
+        if let Some(i) = vertices.iter().position(|x| !x.is_finite()) {
+            return Err(RokebyError::invalid("vertices", format!("vertex {} is not finite", i / 3)));
+        }
+        let nv = vertices.len() / 3;
+        if let Some(i) = faces.iter().position(|&x| x < 0 || x as u64 >= nv as u64) {
+            return Err(RokebyError::invalid(
+                "faces",
+                format!("face {} refers to vertex {} but the mesh has vertices 0..{}", i / 3, faces[i], nv - 1),
+            ));
+        }
+        let v = vertices.chunks_exact(3).map(|c| DVec3::new(c[0] as f64, c[1] as f64, c[2] as f64)).collect();
+        let f = faces.chunks_exact(3).map(|c| [c[0] as usize, c[1] as usize, c[2] as usize]).collect();
+        Ok(Mesh { vertices: v, faces: f })
+    }
+
+    pub fn point(&self, p: &SurfacePoint) -> DVec3 {
+        let [a, b, c] = self.faces[p.face];
+        self.vertices[a] * p.bary[0] + self.vertices[b] * p.bary[1] + self.vertices[c] * p.bary[2]
+    }
+}
+
+/// Edge graph in compressed rows: neighbours and edge lengths of each vertex (unique edges).
+struct Graph {
+    start: Vec<usize>,
+    nbr: Vec<usize>,
+    len: Vec<f64>,
+}
+
+impl Graph {
+    fn new(mesh: &Mesh) -> Self {
+        let nv = mesh.vertices.len();
+        let mut edges: Vec<(usize, usize)> = Vec::with_capacity(mesh.faces.len() * 6);
+        for f in &mesh.faces {
+            for k in 0..3 {
+                let (a, b) = (f[k], f[(k + 1) % 3]);
+                if a != b {
+                    edges.push((a, b));
+                    edges.push((b, a));
+                }
+            }
+        }
+        edges.par_sort_unstable();
+        edges.dedup();
+        let mut start = vec![0usize; nv + 1];
+        for &(a, _) in &edges {
+            start[a + 1] += 1;
+        }
+        for i in 0..nv {
+            start[i + 1] += start[i];
+        }
+        let nbr: Vec<usize> = edges.iter().map(|e| e.1).collect();
+        let len = edges.iter().map(|&(a, b)| mesh.vertices[a].distance(mesh.vertices[b])).collect();
+        Graph { start, nbr, len }
+    }
+
+    fn neighbours(&self, v: usize) -> impl Iterator<Item = (usize, f64)> + '_ {
+        (self.start[v]..self.start[v + 1]).map(move |k| (self.nbr[k], self.len[k]))
+    }
+}
+
+#[derive(PartialEq)]
+struct HeapItem(f64, usize);
+impl Eq for HeapItem {}
+impl PartialOrd for HeapItem {
+    fn partial_cmp(&self, other: &Self) -> Option<Ordering> {
+        Some(self.cmp(other))
+    }
+}
+impl Ord for HeapItem {
+    fn cmp(&self, other: &Self) -> Ordering {
+        // Min-heap on distance.
+        other.0.total_cmp(&self.0).then_with(|| other.1.cmp(&self.1))
+    }
+}
+
+/// The factorisations of the heat method for one mesh, computed once.
+struct Heat {
+    heat: Llt<usize, f64>,
+    poisson: Llt<usize, f64>,
+    /// Per face: cotangent of the angle at each corner (0 for faces without area).
+    cot: Vec<[f64; 3]>,
+    /// Per face: 1/(2·area) times the unit normal (zero for faces without area).
+    n_over_2a: Vec<DVec3>,
+}
+
+/// Keeps what does not change while handles move: the edge graph, the connected components and
+/// (built on first use) the heat method's two Cholesky factorisations.
+pub struct GeodesicSolver {
+    mesh: Mesh,
+    graph: Graph,
+    component: Vec<usize>,
+    heat: OnceLock<std::result::Result<Heat, RokebyError>>,
+    mean_edge: f64,
+}
+
+/// Sum duplicate (row, col) entries: the assembly adds each triangle's contribution.
+fn assemble(n: usize, mut t: Vec<(usize, usize, f64)>) -> Result<SparseColMat<usize, f64>> {
+    t.sort_unstable_by(|a, b| (a.1, a.0).cmp(&(b.1, b.0)));
+    let mut merged: Vec<Triplet<usize, usize, f64>> = Vec::with_capacity(t.len());
+    for (r, c, v) in t {
+        match merged.last_mut() {
+            Some(last) if last.row == r && last.col == c => last.val += v,
+            _ => merged.push(Triplet::new(r, c, v)),
+        }
+    }
+    SparseColMat::try_new_from_triplets(n, n, &merged).map_err(|e| RokebyError::invalid("mesh", format!("sparse assembly failed: {e:?}")))
+}
+
+impl GeodesicSolver {
+    pub fn new(mesh: Mesh) -> Self {
+        let graph = Graph::new(&mesh);
+        let nv = mesh.vertices.len();
+        // Connected components by breadth-first search over the edge graph.
+        let mut component = vec![usize::MAX; nv];
+        let mut next = 0;
+        let mut stack = Vec::new();
+        for s in 0..nv {
+            if component[s] != usize::MAX {
+                continue;
+            }
+            component[s] = next;
+            stack.push(s);
+            while let Some(v) = stack.pop() {
+                for (w, _) in graph.neighbours(v) {
+                    if component[w] == usize::MAX {
+                        component[w] = next;
+                        stack.push(w);
+                    }
+                }
+            }
+            next += 1;
+        }
+        let mean_edge = if graph.len.is_empty() { 0.0 } else { graph.len.iter().sum::<f64>() / graph.len.len() as f64 };
+        GeodesicSolver { mesh, graph, component, heat: OnceLock::new(), mean_edge }
+    }
+
+    pub fn mesh(&self) -> &Mesh {
+        &self.mesh
+    }
+
+    /// Whether the heat method's factorisations exist already (for callers that report reuse).
+    pub fn is_factored(&self) -> bool {
+        matches!(self.heat.get(), Some(Ok(_)))
+    }
+
+    /// Checks sources against the mesh and normalises barycentric coordinates.
+    pub fn check_sources(&self, sets: &[Vec<Source>]) -> Result<Vec<Vec<Source>>> {
+        let nv = self.mesh.vertices.len();
+        let nf = self.mesh.faces.len();
+        let mut out = Vec::with_capacity(sets.len());
+        for (s, set) in sets.iter().enumerate() {
+            if set.is_empty() {
+                return Err(RokebyError::invalid("sources", format!("source set {s} is empty")));
+            }
+            let mut fixed = Vec::with_capacity(set.len());
+            for src in set {
+                fixed.push(match *src {
+                    Source::Vertex(v) if v < nv => Source::Vertex(v),
+                    Source::Vertex(v) => {
+                        return Err(RokebyError::invalid("sources", format!("source {s}: vertex {v} is out of range (0..{})", nv - 1)))
+                    }
+                    Source::Point(p) => {
+                        if p.face >= nf {
+                            return Err(RokebyError::invalid("sources", format!("source {s}: face {} is out of range (0..{})", p.face, nf - 1)));
+                        }
+                        let sum: f64 = p.bary.iter().sum();
+                        if p.bary.iter().any(|b| !b.is_finite() || *b < -1e-6) || !(sum > 1e-12) {
+                            return Err(RokebyError::invalid(
+                                "sources",
+                                format!("source {s}: barycentric coordinates {:?} must be finite, >= 0 and not all 0", p.bary),
+                            ));
+                        }
+                        let b = p.bary.map(|b| b.max(0.0) / sum);
+                        Source::Point(SurfacePoint { face: p.face, bary: b })
+                    }
+                });
+            }
+            out.push(fixed);
+        }
+        Ok(out)
+    }
+
+    /// Distance fields, one per source set (row-major S×V), by the chosen method.
+    pub fn distances(&self, sets: &[Vec<Source>], method: Method) -> Result<Vec<f32>> {
+        let sets = self.check_sources(sets)?;
+        let rows: Vec<Vec<f64>> = match method {
+            Method::Dijkstra => sets.par_iter().map(|s| self.dijkstra(s)).collect(),
+            Method::Heat => self.heat_method(&sets)?,
+        };
+        Ok(rows.into_iter().flat_map(|r| r.into_iter().map(|x| x as f32)).collect())
+    }
+
+    /// Exact distances from the sources to the vertices of their own triangles (and the 1-ring of
+    /// vertex sources): the seeds of Dijkstra and the fix-up of the heat method near sources.
+    fn seeds(&self, set: &[Source]) -> Vec<(usize, f64)> {
+        let mut seeds = Vec::new();
+        for src in set {
+            match *src {
+                Source::Vertex(v) => {
+                    seeds.push((v, 0.0));
+                }
+                Source::Point(p) => {
+                    let x = self.mesh.point(&p);
+                    for &v in &self.mesh.faces[p.face] {
+                        seeds.push((v, x.distance(self.mesh.vertices[v])));
+                    }
+                }
+            }
+        }
+        seeds
+    }
+
+    /// Multi-source Dijkstra along edges.
+    pub fn dijkstra(&self, set: &[Source]) -> Vec<f64> {
+        let nv = self.mesh.vertices.len();
+        let mut dist = vec![f64::INFINITY; nv];
+        let mut heap = BinaryHeap::new();
+        for (v, d) in self.seeds(set) {
+            if d < dist[v] {
+                dist[v] = d;
+                heap.push(HeapItem(d, v));
+            }
+        }
+        while let Some(HeapItem(d, v)) = heap.pop() {
+            if d > dist[v] {
+                continue;
+            }
+            for (w, l) in self.graph.neighbours(v) {
+                let nd = d + l;
+                if nd < dist[w] {
+                    dist[w] = nd;
+                    heap.push(HeapItem(nd, w));
+                }
+            }
+        }
+        dist
+    }
+
+    fn heat_factors(&self) -> Result<&Heat> {
+        self.heat.get_or_init(|| self.build_heat()).as_ref().map_err(|e| e.clone())
+    }
+
+    /// Cotangent Laplacian L (positive semi-definite: the P1 stiffness matrix, which stays PSD on
+    /// obtuse triangles), lumped mass A, and the factorisations of A + tL (t = h², h the mean edge
+    /// length) and L + εA (ε regularises the constant null space of every component).
+    fn build_heat(&self) -> Result<Heat> {
+        let nv = self.mesh.vertices.len();
+        let nf = self.mesh.faces.len();
+        let mut cot = vec![[0.0; 3]; nf];
+        let mut n_over_2a = vec![DVec3::ZERO; nf];
+        let mut mass = vec![0.0f64; nv];
+        let mut lap: Vec<(usize, usize, f64)> = Vec::with_capacity(nf * 9);
+        let h = self.mean_edge.max(1e-300);
+        let mut total_area = 0.0;
+        for (fi, f) in self.mesh.faces.iter().enumerate() {
+            let p = [self.mesh.vertices[f[0]], self.mesh.vertices[f[1]], self.mesh.vertices[f[2]]];
+            let cross = (p[1] - p[0]).cross(p[2] - p[0]);
+            let area2 = cross.length();
+            let longest2 = (p[1] - p[0]).length_squared().max((p[2] - p[1]).length_squared()).max((p[0] - p[2]).length_squared());
+            // Faces without area (repeated vertices, collinear corners) have no stiffness: skip.
+            if !(area2 > 1e-12 * longest2) || f[0] == f[1] || f[1] == f[2] || f[0] == f[2] {
+                continue;
+            }
+            total_area += 0.5 * area2;
+            n_over_2a[fi] = cross / (area2 * area2);
+            for k in 0..3 {
+                let (i, j, l) = (k, (k + 1) % 3, (k + 2) % 3);
+                // cot of the angle at corner i: (pj − pi)·(pl − pi) / |(pj − pi)×(pl − pi)|
+                let c = (p[j] - p[i]).dot(p[l] - p[i]) / area2;
+                cot[fi][i] = c;
+                mass[f[i]] += area2 / 6.0;
+            }
+            // The edge opposite corner i (between j and l) gets weight ½ cot θᵢ.
+            for k in 0..3 {
+                let (j, l) = (f[(k + 1) % 3], f[(k + 2) % 3]);
+                let w = 0.5 * cot[fi][k];
+                lap.push((j, l, -w));
+                lap.push((l, j, -w));
+                lap.push((j, j, w));
+                lap.push((l, l, w));
+            }
+        }
+        let mean_mass = (total_area / nv as f64).max(1e-300);
+        // Vertices without area (isolated, unreferenced, only on degenerate faces) get a tiny mass
+        // so that both systems stay positive definite; no source reaches them through heat anyway.
+        for m in &mut mass {
+            if !(*m > 1e-12 * mean_mass) {
+                *m = 1e-12 * mean_mass;
+            }
+        }
+        let t = h * h;
+        let eps = 1e-8;
+        let mut heat_t: Vec<(usize, usize, f64)> = lap.iter().map(|&(r, c, v)| (r, c, t * v)).collect();
+        let mut pois_t = lap;
+        for (i, &m) in mass.iter().enumerate() {
+            heat_t.push((i, i, m));
+            // ε A with A scaled to the Laplacian's units (1/h²).
+            pois_t.push((i, i, eps * m / t));
+        }
+        let heat_m = assemble(nv, heat_t)?;
+        let pois_m = assemble(nv, pois_t)?;
+        let heat = heat_m.sp_cholesky(Side::Lower).map_err(|e| RokebyError::invalid("mesh", format!("heat system is not positive definite ({e:?})")))?;
+        let poisson = pois_m.sp_cholesky(Side::Lower).map_err(|e| RokebyError::invalid("mesh", format!("Poisson system is not positive definite ({e:?})")))?;
+        Ok(Heat { heat, poisson, cot, n_over_2a })
+    }
+
+    fn heat_method(&self, sets: &[Vec<Source>]) -> Result<Vec<Vec<f64>>> {
+        let hm = self.heat_factors()?;
+        let nv = self.mesh.vertices.len();
+        let ns = sets.len();
+        // 1. Heat flow from all source sets at once (one column each).
+        let mut u = Mat::<f64>::zeros(nv, ns);
+        for (s, set) in sets.iter().enumerate() {
+            for src in set {
+                match *src {
+                    Source::Vertex(v) => u[(v, s)] += 1.0,
+                    Source::Point(p) => {
+                        for (k, &v) in self.mesh.faces[p.face].iter().enumerate() {
+                            u[(v, s)] += p.bary[k];
+                        }
+                    }
+                }
+            }
+        }
+        hm.heat.solve_in_place(u.as_mut());
+        // 2.–3. Normalised gradient per face and its integrated divergence per vertex.
+        let cols: Vec<Vec<f64>> = (0..ns)
+            .into_par_iter()
+            .map(|s| {
+                let mut div = vec![0.0f64; nv];
+                for (fi, f) in self.mesh.faces.iter().enumerate() {
+                    let n2a = hm.n_over_2a[fi];
+                    if n2a == DVec3::ZERO {
+                        continue;
+                    }
+                    let p = [self.mesh.vertices[f[0]], self.mesh.vertices[f[1]], self.mesh.vertices[f[2]]];
+                    let mut g = DVec3::ZERO;
+                    for k in 0..3 {
+                        let e = p[(k + 2) % 3] - p[(k + 1) % 3]; // edge opposite corner k, counter-clockwise
+                        g += n2a.cross(e) * u[(f[k], s)];
+                    }
+                    let gl = g.length();
+                    if !(gl > 0.0) {
+                        continue;
+                    }
+                    let x = -g / gl;
+                    for k in 0..3 {
+                        let (j, l) = ((k + 1) % 3, (k + 2) % 3);
+                        let e1 = p[j] - p[k];
+                        let e2 = p[l] - p[k];
+                        div[f[k]] += 0.5 * (hm.cot[fi][l] * e1.dot(x) + hm.cot[fi][j] * e2.dot(x));
+                    }
+                }
+                div
+            })
+            .collect();
+        // 4. Poisson problem L φ = −div (L positive semi-definite), all columns at once.
+        let mut phi = Mat::<f64>::zeros(nv, ns);
+        for (s, col) in cols.iter().enumerate() {
+            for (i, &d) in col.iter().enumerate() {
+                phi[(i, s)] = -d;
+            }
+        }
+        hm.poisson.solve_in_place(phi.as_mut());
+        // 5. Shift each component to 0 at its sources; exact values near sources; +inf elsewhere.
+        let rows = (0..ns)
+            .into_par_iter()
+            .map(|s| {
+                let set = &sets[s];
+                let mut row: Vec<f64> = (0..nv).map(|i| phi[(i, s)]).collect();
+                let mut shift: std::collections::HashMap<usize, f64> = std::collections::HashMap::new();
+                for src in set {
+                    let (c, val) = match *src {
+                        Source::Vertex(v) => (self.component[v], row[v]),
+                        Source::Point(p) => {
+                            let f = self.mesh.faces[p.face];
+                            (self.component[f[0]], (0..3).map(|k| p.bary[k] * row[f[k]]).sum())
+                        }
+                    };
+                    let e = shift.entry(c).or_insert(f64::INFINITY);
+                    *e = e.min(val);
+                }
+                for (i, x) in row.iter_mut().enumerate() {
+                    *x = match shift.get(&self.component[i]) {
+                        Some(sh) => (*x - sh).max(0.0),
+                        None => f64::INFINITY,
+                    };
+                }
+                for (v, d) in self.seeds(set) {
+                    row[v] = d;
+                    if let Some(Source::Vertex(src)) = set.iter().find(|s| matches!(s, Source::Vertex(x) if *x == v)) {
+                        for (w, l) in self.graph.neighbours(*src) {
+                            row[w] = row[w].min(l);
+                        }
+                    }
+                }
+                row
+            })
+            .collect();
+        Ok(rows)
+    }
+}
+
+/// Values at surface points by barycentric interpolation of per-vertex values (paper §6.2: the
+/// per-vertex distance field drawn with smooth shading).
+pub fn interpolate(values: &[f32], n_vertices: usize, faces: &[[usize; 3]], points: &[SurfacePoint]) -> Vec<f32> {
+    let rows = values.len() / n_vertices.max(1);
+    let mut out = Vec::with_capacity(rows * points.len());
+    for r in 0..rows {
+        let row = &values[r * n_vertices..(r + 1) * n_vertices];
+        for p in points {
+            let f = faces[p.face];
+            let v: f64 = (0..3).map(|k| p.bary[k] * row[f[k]] as f64).sum();
+            out.push(v as f32);
+        }
+    }
+    out
+}
