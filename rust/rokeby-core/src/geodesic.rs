@@ -4,7 +4,8 @@
 //!   Fast; always over-estimates (edge paths zig-zag), however fine the mesh.
 //! * [`Method::Heat`]: the heat method (Crane, Weischedel, Wardetzky 2013/2017): one short heat
 //!   flow (A + tL) u = δ, the normalised gradient X = −∇u/|∇u|, then the Poisson problem L φ = ∇·X.
-//!   Paths cross faces, so it converges to the true geodesic distance as the mesh is refined. Both
+//!   It runs on the intrinsic Delaunay triangulation of the mesh ([`crate::intrinsic`]), which
+//!   keeps it accurate on scanned meshes with obtuse slivers. Paths cross faces, so it converges to the true geodesic distance as the mesh is refined. Both
 //!   sparse matrices are factored once per mesh (faer's sparse Cholesky) and reused by every query:
 //!   moving a handle costs two triangular solves, not a factorisation.
 //!
@@ -148,14 +149,25 @@ impl Ord for HeapItem {
     }
 }
 
-/// The factorisations of the heat method for one mesh, computed once.
+/// The heat method's data for one mesh, computed once: the intrinsic Delaunay triangulation
+/// (faces laid out in 2D), and the factorisations of both linear systems.
 struct Heat {
     heat: Llt<usize, f64>,
+    /// The heat flow with u = 0 on the boundary (meshes with boundary only): the final heat is the
+    /// average of the Neumann and Dirichlet flows (Crane et al. 2013, §3.3), which removes most of
+    /// the error the Neumann condition alone leaves near boundaries.
+    heat_dirichlet: Option<Llt<usize, f64>>,
     poisson: Llt<usize, f64>,
-    /// Per face: cotangent of the angle at each corner (0 for faces without area).
-    cot: Vec<[f64; 3]>,
-    /// Per face: 1/(2·area) times the unit normal (zero for faces without area).
-    n_over_2a: Vec<DVec3>,
+    /// Intrinsic faces with positive area: vertices, 2D layout, cotangent at each corner, 1/(2·area).
+    faces: Vec<HeatFace>,
+    flips: usize,
+}
+
+struct HeatFace {
+    v: [usize; 3],
+    p: [glam::DVec2; 3],
+    cot: [f64; 3],
+    inv_2a: f64,
 }
 
 /// Keeps what does not change while handles move: the edge graph, the connected components and
@@ -315,45 +327,43 @@ impl GeodesicSolver {
         self.heat.get_or_init(|| self.build_heat()).as_ref().map_err(|e| e.clone())
     }
 
-    /// Cotangent Laplacian L (positive semi-definite: the P1 stiffness matrix, which stays PSD on
-    /// obtuse triangles), lumped mass A, and the factorisations of A + tL (t = h², h the mean edge
-    /// length) and L + εA (ε regularises the constant null space of every component).
+    /// Cotangent Laplacian L of the intrinsic Delaunay triangulation (positive semi-definite, and
+    /// with no negative weights on manifold parts), lumped mass A, and the factorisations of
+    /// A + tL (t = h², h the mean edge length) and L + εA (ε regularises the constant null space of
+    /// every component).
     fn build_heat(&self) -> Result<Heat> {
         let nv = self.mesh.vertices.len();
-        let nf = self.mesh.faces.len();
-        let mut cot = vec![[0.0; 3]; nf];
-        let mut n_over_2a = vec![DVec3::ZERO; nf];
+        let lengths: Vec<[f64; 3]> = self
+            .mesh
+            .faces
+            .iter()
+            .map(|f| [0, 1, 2].map(|k| self.mesh.vertices[f[k]].distance(self.mesh.vertices[f[(k + 1) % 3]])))
+            .collect();
+        let tri = crate::intrinsic::Intrinsic::delaunay(&self.mesh.faces, lengths);
+        let mut faces = Vec::with_capacity(tri.faces.len());
         let mut mass = vec![0.0f64; nv];
-        let mut lap: Vec<(usize, usize, f64)> = Vec::with_capacity(nf * 9);
-        let h = self.mean_edge.max(1e-300);
+        let mut lap: Vec<(usize, usize, f64)> = Vec::with_capacity(tri.faces.len() * 12);
         let mut total_area = 0.0;
-        for (fi, f) in self.mesh.faces.iter().enumerate() {
-            let p = [self.mesh.vertices[f[0]], self.mesh.vertices[f[1]], self.mesh.vertices[f[2]]];
-            let cross = (p[1] - p[0]).cross(p[2] - p[0]);
-            let area2 = cross.length();
-            let longest2 = (p[1] - p[0]).length_squared().max((p[2] - p[1]).length_squared()).max((p[0] - p[2]).length_squared());
+        for (f, l) in tri.faces.iter().zip(&tri.lengths) {
+            let area = crate::intrinsic::area_from_lengths(l[0], l[1], l[2]);
+            let longest = l.iter().fold(0.0f64, |m, x| m.max(*x));
             // Faces without area (repeated vertices, collinear corners) have no stiffness: skip.
-            if !(area2 > 1e-12 * longest2) || f[0] == f[1] || f[1] == f[2] || f[0] == f[2] {
+            if !(area > 1e-12 * longest * longest) || f[0] == f[1] || f[1] == f[2] || f[0] == f[2] {
                 continue;
             }
-            total_area += 0.5 * area2;
-            n_over_2a[fi] = cross / (area2 * area2);
+            total_area += area;
+            // l[k] is the edge from corner k to k+1, so the edge opposite corner k is l[(k+1)%3].
+            let cot = [0, 1, 2].map(|k| crate::intrinsic::cot_opposite(l[(k + 1) % 3], l[k], l[(k + 2) % 3], area));
             for k in 0..3 {
-                let (i, j, l) = (k, (k + 1) % 3, (k + 2) % 3);
-                // cot of the angle at corner i: (pj − pi)·(pl − pi) / |(pj − pi)×(pl − pi)|
-                let c = (p[j] - p[i]).dot(p[l] - p[i]) / area2;
-                cot[fi][i] = c;
-                mass[f[i]] += area2 / 6.0;
-            }
-            // The edge opposite corner i (between j and l) gets weight ½ cot θᵢ.
-            for k in 0..3 {
-                let (j, l) = (f[(k + 1) % 3], f[(k + 2) % 3]);
-                let w = 0.5 * cot[fi][k];
-                lap.push((j, l, -w));
-                lap.push((l, j, -w));
+                mass[f[k]] += area / 3.0;
+                let (j, m) = (f[(k + 1) % 3], f[(k + 2) % 3]);
+                let w = 0.5 * cot[k];
+                lap.push((j, m, -w));
+                lap.push((m, j, -w));
                 lap.push((j, j, w));
-                lap.push((l, l, w));
+                lap.push((m, m, w));
             }
+            faces.push(HeatFace { v: *f, p: crate::intrinsic::layout(*l), cot, inv_2a: 0.5 / area });
         }
         let mean_mass = (total_area / nv as f64).max(1e-300);
         // Vertices without area (isolated, unreferenced, only on degenerate faces) get a tiny mass
@@ -363,6 +373,7 @@ impl GeodesicSolver {
                 *m = 1e-12 * mean_mass;
             }
         }
+        let h = self.mean_edge.max(1e-300);
         let t = h * h;
         let eps = 1e-8;
         let mut heat_t: Vec<(usize, usize, f64)> = lap.iter().map(|&(r, c, v)| (r, c, t * v)).collect();
@@ -372,11 +383,48 @@ impl GeodesicSolver {
             // ε A with A scaled to the Laplacian's units (1/h²).
             pois_t.push((i, i, eps * m / t));
         }
+        // Boundary vertices: on an edge with exactly one face.
+        let mut edge_faces: Vec<(usize, usize)> = self
+            .mesh
+            .faces
+            .iter()
+            .flat_map(|f| (0..3).map(move |k| (f[k].min(f[(k + 1) % 3]), f[k].max(f[(k + 1) % 3]))))
+            .filter(|(a, b)| a != b)
+            .collect();
+        edge_faces.par_sort_unstable();
+        let mut boundary = vec![false; nv];
+        let mut i = 0;
+        while i < edge_faces.len() {
+            let mut j = i + 1;
+            while j < edge_faces.len() && edge_faces[j] == edge_faces[i] {
+                j += 1;
+            }
+            if j - i == 1 {
+                boundary[edge_faces[i].0] = true;
+                boundary[edge_faces[i].1] = true;
+            }
+            i = j;
+        }
+        let heat_dirichlet = if boundary.iter().any(|&b| b) {
+            // u = 0 on the boundary by a penalty 1e8 times the largest diagonal entry.
+            let big = 1e8 * mass.iter().fold(0.0f64, |m, x| m.max(*x)).max(1e-300);
+            let mut d = heat_t.clone();
+            d.extend(boundary.iter().enumerate().filter(|(_, &b)| b).map(|(i, _)| (i, i, big)));
+            let m = assemble(nv, d)?;
+            Some(m.sp_cholesky(Side::Lower).map_err(|e| RokebyError::invalid("mesh", format!("heat system is not positive definite ({e:?})")))?)
+        } else {
+            None
+        };
         let heat_m = assemble(nv, heat_t)?;
         let pois_m = assemble(nv, pois_t)?;
         let heat = heat_m.sp_cholesky(Side::Lower).map_err(|e| RokebyError::invalid("mesh", format!("heat system is not positive definite ({e:?})")))?;
         let poisson = pois_m.sp_cholesky(Side::Lower).map_err(|e| RokebyError::invalid("mesh", format!("Poisson system is not positive definite ({e:?})")))?;
-        Ok(Heat { heat, poisson, cot, n_over_2a })
+        Ok(Heat { heat, heat_dirichlet, poisson, faces, flips: tri.flips })
+    }
+
+    /// Edge flips the intrinsic Delaunay triangulation needed (None before the first heat query).
+    pub fn intrinsic_flips(&self) -> Option<usize> {
+        self.heat.get().and_then(|h| h.as_ref().ok()).map(|h| h.flips)
     }
 
     fn heat_method(&self, sets: &[Vec<Source>]) -> Result<Vec<Vec<f64>>> {
@@ -397,23 +445,28 @@ impl GeodesicSolver {
                 }
             }
         }
-        hm.heat.solve_in_place(u.as_mut());
+        if let Some(hd) = &hm.heat_dirichlet {
+            let mut ud = u.clone();
+            hd.solve_in_place(ud.as_mut());
+            hm.heat.solve_in_place(u.as_mut());
+            u = (&u + &ud) * faer::Scale(0.5);
+        } else {
+            hm.heat.solve_in_place(u.as_mut());
+        }
         // 2.–3. Normalised gradient per face and its integrated divergence per vertex.
         let cols: Vec<Vec<f64>> = (0..ns)
             .into_par_iter()
             .map(|s| {
                 let mut div = vec![0.0f64; nv];
-                for (fi, f) in self.mesh.faces.iter().enumerate() {
-                    let n2a = hm.n_over_2a[fi];
-                    if n2a == DVec3::ZERO {
-                        continue;
-                    }
-                    let p = [self.mesh.vertices[f[0]], self.mesh.vertices[f[1]], self.mesh.vertices[f[2]]];
-                    let mut g = DVec3::ZERO;
+                for hf in &hm.faces {
+                    let p = hf.p;
+                    let mut g = glam::DVec2::ZERO;
                     for k in 0..3 {
-                        let e = p[(k + 2) % 3] - p[(k + 1) % 3]; // edge opposite corner k, counter-clockwise
-                        g += n2a.cross(e) * u[(f[k], s)];
+                        // Edge opposite corner k, counter-clockwise, turned by +90° (N × e).
+                        let e = p[(k + 2) % 3] - p[(k + 1) % 3];
+                        g += glam::DVec2::new(-e.y, e.x) * u[(hf.v[k], s)];
                     }
+                    let g = g * hf.inv_2a;
                     let gl = g.length();
                     if !(gl > 0.0) {
                         continue;
@@ -423,7 +476,7 @@ impl GeodesicSolver {
                         let (j, l) = ((k + 1) % 3, (k + 2) % 3);
                         let e1 = p[j] - p[k];
                         let e2 = p[l] - p[k];
-                        div[f[k]] += 0.5 * (hm.cot[fi][l] * e1.dot(x) + hm.cot[fi][j] * e2.dot(x));
+                        div[hf.v[k]] += 0.5 * (hf.cot[l] * e1.dot(x) + hf.cot[j] * e2.dot(x));
                     }
                 }
                 div

@@ -9,6 +9,7 @@
 pub mod error;
 pub mod field;
 pub mod geodesic;
+pub mod intrinsic;
 pub mod polar;
 pub mod region;
 
