@@ -113,3 +113,45 @@ def test_bad_input(call, exc, words):
     with pytest.raises(exc) as info:
         call(v, f)
     assert words in str(info.value)
+
+
+def test_geodesic_region_on_a_plane_and_other_components():
+    v, f = flat_grid(41)
+    # A second, separate copy of the grid far away: another connected component.
+    v2 = np.vstack([v, v + [10.0, 0.0, 0.0]]).astype(np.float32)
+    f2 = np.vstack([f, f + len(v)])
+    s = rn.GeodesicSolver(v2, f2)
+    centre = 20 * 41 + 20
+    a = s.geodesic_region(centre, 0.3, 0.1)
+    r = np.linalg.norm(v - v[centre], axis=1)
+    assert np.all(a[len(v):] == 0), "zero on the other component"
+    assert np.all(a[: len(v)][r < 0.18] == 1.0)
+    assert np.all(a[: len(v)][r > 0.32] == 0.0)
+    band = (r > 0.21) & (r < 0.29)
+    assert np.all((a[: len(v)][band] > 0) & (a[: len(v)][band] < 1))
+    # Usable as a region of the field, with a(pₙ) by interpolation at the constraint's point.
+    c = np.array([[v[centre][0], v[centre][1], 0, 0, 0.6, 0.8, 0.3, 0.6, 0.74]], np.float32)
+    q = rn.rotation_field(v2, c, regions=[{"kind": "weights", "values": a, "at_constraints": [a[centre]]}])
+    from rokeby import api
+
+    assert np.all(api.quat_angle(q[len(v):]) < 1e-7)
+    assert api.quat_angle(q[centre]) > 0.1
+
+
+def test_freeform_region_fades_inside_the_painted_area():
+    v, f = flat_grid(41)
+    s = rn.GeodesicSolver(v, f)
+    w = ((v[:, 0] > 0.25) & (v[:, 0] < 0.75) & (v[:, 1] > 0.25) & (v[:, 1] < 0.75)).astype(np.float32)
+    a = s.freeform_region(w, border=0.1)
+    assert np.all(a[w == 0] == 0)
+    centre = (np.abs(v[:, 0] - 0.5) < 0.1) & (np.abs(v[:, 1] - 0.5) < 0.1)
+    assert np.all(a[centre] == 1.0)
+    edge = (w > 0) & ((np.abs(v[:, 0] - 0.5) > 0.2) | (np.abs(v[:, 1] - 0.5) > 0.2))
+    assert np.all(a[edge] < 1) and np.all(a[edge] > 0)
+    np.testing.assert_array_equal(s.freeform_region(w, border=0.0), w)
+    with pytest.raises(ValueError, match="weights: weights\\[0\\] = 2 is not in"):
+        s.freeform_region(np.full(len(v), 2.0, np.float32), border=0.1)
+    with pytest.raises(ValueError, match="weights: expected shape"):
+        s.freeform_region(np.ones(3), border=0.1)
+    with pytest.raises(ValueError, match="radius: must be finite and > 0"):
+        s.geodesic_region(0, -1.0)

@@ -112,3 +112,50 @@ mod tests {
         assert!(falloff(0.5, 1.0, 5.0) > 0.0 && falloff(0.5, 1.0, 5.0) < 1.0);
     }
 }
+
+/// Geodesic region (paper §4): a(q) from geodesic distances to the region's surface centre, with
+/// the same border convention as Euclidean regions. Unreachable points (+inf: other connected
+/// components) get 0.
+pub fn geodesic_weights(distances: &[f32], radius: f64, border: f64) -> Result<Vec<f32>> {
+    check_radius_border(radius, border)?;
+    Ok(distances.iter().map(|&d| if d.is_finite() { falloff(d as f64, radius, border) as f32 } else { 0.0 }).collect())
+}
+
+/// Free-form region (paper §4, a vertex group in Blender): painted weights w ∈ [0, 1], with a
+/// smooth border of `border` width inside the painted area: a(q) = w(q) · smoothstep(d(q)/border),
+/// d(q) being the geodesic distance from q to the nearest unpainted vertex (+inf when every vertex
+/// is painted). Unpainted vertices get 0; a border of 0 gives a = w.
+pub fn freeform_weights(weights: &[f32], distance_to_outside: &[f32], border: f64) -> Result<Vec<f32>> {
+    if !(border.is_finite() && border >= 0.0) {
+        return Err(RokebyError::invalid("border", format!("must be finite and >= 0, got {border}")));
+    }
+    if weights.len() != distance_to_outside.len() {
+        return Err(RokebyError::invalid("weights", "must have one entry per vertex"));
+    }
+    if let Some((i, w)) = weights.iter().enumerate().find(|(_, w)| !(w.is_finite() && (0.0..=1.0).contains(*w))) {
+        return Err(RokebyError::invalid("weights", format!("weights[{i}] = {w} is not in [0, 1]")));
+    }
+    Ok(weights
+        .iter()
+        .zip(distance_to_outside)
+        .map(|(&w, &d)| {
+            if w <= 0.0 {
+                0.0
+            } else if border == 0.0 || d.is_infinite() {
+                w
+            } else {
+                (w as f64 * smooth_step(d as f64 / border)) as f32
+            }
+        })
+        .collect())
+}
+
+fn check_radius_border(radius: f64, border: f64) -> Result<()> {
+    if !(radius.is_finite() && radius > 0.0) {
+        return Err(RokebyError::invalid("radius", format!("must be finite and > 0, got {radius}")));
+    }
+    if !(border.is_finite() && border >= 0.0) {
+        return Err(RokebyError::invalid("border", format!("must be finite and >= 0, got {border}")));
+    }
+    Ok(())
+}

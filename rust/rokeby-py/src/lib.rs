@@ -488,10 +488,56 @@ impl PyGeodesicSolver {
         distances_array(py, &self.inner, sets, method)
     }
 
+    /// geodesic_region(centre, radius, border=0.0, method="heat") -> (V,) float32 a(q)
+    ///
+    /// A geodesic region of interest: 1 within `radius - border` of the surface `centre` (a vertex
+    /// index or (face, (b0, b1, b2))) measured over the surface, a smooth step to 0 at `radius`,
+    /// and 0 on other connected components. Pass it to rotation_field as a "weights" region.
+    #[pyo3(signature = (centre, radius, border=0.0, method="heat"))]
+    fn geodesic_region<'py>(&self, py: Python<'py>, centre: &Bound<'py, PyAny>, radius: f64, border: f64, method: &str) -> PyResult<Bound<'py, PyArrayDyn<f32>>> {
+        let method = parse_method(method)?;
+        let src = parse_one_source(centre, 0)?;
+        let solver = self.inner.clone();
+        let a = run_detached(py, move || {
+            let d = solver.distances(&[vec![src]], method)?;
+            rokeby_core::region::geodesic_weights(&d, radius, border)
+        })?;
+        Ok(numpy::PyArray1::from_vec(py, a).to_dyn().clone())
+    }
+
+    /// freeform_region(weights, border=0.0, method="heat") -> (V,) float32 a(q)
+    ///
+    /// A free-form region from painted per-vertex weights in [0, 1] (a vertex group): unpainted
+    /// vertices get 0; inside, the weight fades in over `border` (geodesic distance from the nearest
+    /// unpainted vertex).
+    #[pyo3(signature = (weights, border=0.0, method="heat"))]
+    fn freeform_region<'py>(&self, py: Python<'py>, weights: &Bound<'py, PyAny>, border: f64, method: &str) -> PyResult<Bound<'py, PyArrayDyn<f32>>> {
+        let method = parse_method(method)?;
+        let w = f32_array(weights, "weights")?;
+        let nv = self.inner.mesh().vertices.len();
+        if w.shape() != [nv] {
+            return Err(PyValueError::new_err(format!("weights: expected shape ({nv},), one per vertex, got {}", shape_str(&w.shape()))));
+        }
+        let w = w.slice().to_vec();
+        let solver = self.inner.clone();
+        let a = run_detached(py, move || {
+            let outside: Vec<Source> = w.iter().enumerate().filter(|(_, &x)| !(x > 0.0)).map(|(i, _)| Source::Vertex(i)).collect();
+            let d = if outside.is_empty() || border == 0.0 { vec![f32::INFINITY; w.len()] } else { solver.distances(&[outside], method)? };
+            rokeby_core::region::freeform_weights(&w, &d, border)
+        })?;
+        Ok(numpy::PyArray1::from_vec(py, a).to_dyn().clone())
+    }
+
     /// Whether the heat method's factorisation has been computed (and is being reused).
     #[getter]
     fn factored(&self) -> bool {
         self.inner.is_factored()
+    }
+
+    /// Edge flips made by the intrinsic Delaunay triangulation (None before the first heat query).
+    #[getter]
+    fn intrinsic_flips(&self) -> Option<usize> {
+        self.inner.intrinsic_flips()
     }
 
     #[getter]
