@@ -78,6 +78,9 @@ impl Mesh {
             return Err(RokebyError::invalid("vertices", format!("vertex {} is not finite", i / 3)));
         }
         let nv = vertices.len() / 3;
+        if nv >= u32::MAX as usize {
+            return Err(RokebyError::invalid("vertices", format!("{nv} vertices is more than this solver supports (2^32 - 1)")));
+        }
         if let Some(i) = faces.iter().position(|&x| x < 0 || x as u64 >= nv as u64) {
             return Err(RokebyError::invalid(
                 "faces",
@@ -98,8 +101,10 @@ impl Mesh {
 /// Edge graph in compressed rows: neighbours and edge lengths of each vertex (unique edges).
 struct Graph {
     start: Vec<usize>,
-    nbr: Vec<usize>,
-    len: Vec<f64>,
+    /// Compact (u32 indices) so that Dijkstra's inner loop streams half the memory.
+    nbr: Vec<u32>,
+    /// Edge lengths stored as f32 (relative rounding 6e-8), summed along paths in f64.
+    len: Vec<f32>,
 }
 
 impl Graph {
@@ -124,18 +129,21 @@ impl Graph {
         for i in 0..nv {
             start[i + 1] += start[i];
         }
-        let nbr: Vec<usize> = edges.iter().map(|e| e.1).collect();
-        let len = edges.iter().map(|&(a, b)| mesh.vertices[a].distance(mesh.vertices[b])).collect();
+        let nbr: Vec<u32> = edges.iter().map(|e| e.1 as u32).collect();
+        let len = edges.iter().map(|&(a, b)| mesh.vertices[a].distance(mesh.vertices[b]) as f32).collect();
         Graph { start, nbr, len }
     }
 
     fn neighbours(&self, v: usize) -> impl Iterator<Item = (usize, f64)> + '_ {
-        (self.start[v]..self.start[v + 1]).map(move |k| (self.nbr[k], self.len[k]))
+        (self.start[v]..self.start[v + 1]).map(move |k| (self.nbr[k] as usize, self.len[k] as f64))
     }
 }
 
+/// A heap entry: an f32 key (8-byte entries keep the heap in cache) and the vertex. The exact f64
+/// distance lives in the distance array; a key rounded a little low or high can only make a vertex
+/// be settled again later (label correcting), never give a wrong distance.
 #[derive(PartialEq)]
-struct HeapItem(f64, usize);
+struct HeapItem(f32, u32);
 impl Eq for HeapItem {}
 impl PartialOrd for HeapItem {
     fn partial_cmp(&self, other: &Self) -> Option<Ordering> {
@@ -217,7 +225,7 @@ impl GeodesicSolver {
             }
             next += 1;
         }
-        let mean_edge = if graph.len.is_empty() { 0.0 } else { graph.len.iter().sum::<f64>() / graph.len.len() as f64 };
+        let mean_edge = if graph.len.is_empty() { 0.0 } else { graph.len.iter().map(|&x| x as f64).sum::<f64>() / graph.len.len() as f64 };
         GeodesicSolver { mesh, graph, component, heat: OnceLock::new(), mean_edge }
     }
 
@@ -305,18 +313,20 @@ impl GeodesicSolver {
         for (v, d) in self.seeds(set) {
             if d < dist[v] {
                 dist[v] = d;
-                heap.push(HeapItem(d, v));
+                heap.push(HeapItem(d as f32, v as u32));
             }
         }
-        while let Some(HeapItem(d, v)) = heap.pop() {
-            if d > dist[v] {
-                continue;
+        while let Some(HeapItem(key, v)) = heap.pop() {
+            let v = v as usize;
+            let d = dist[v];
+            if key > d as f32 {
+                continue; // stale entry
             }
             for (w, l) in self.graph.neighbours(v) {
                 let nd = d + l;
                 if nd < dist[w] {
                     dist[w] = nd;
-                    heap.push(HeapItem(nd, w));
+                    heap.push(HeapItem(nd as f32, w as u32));
                 }
             }
         }
