@@ -182,6 +182,9 @@ struct HeatFace {
 /// (built on first use) the heat method's two Cholesky factorisations.
 pub struct GeodesicSolver {
     mesh: Mesh,
+    /// Average the Neumann and Dirichlet heat flows on meshes with boundary (more accurate near
+    /// boundaries; one more factorisation's time and memory).
+    average_boundary: bool,
     graph: Graph,
     component: Vec<usize>,
     heat: OnceLock<std::result::Result<Heat, RokebyError>>,
@@ -203,6 +206,12 @@ fn assemble(n: usize, mut t: Vec<(usize, usize, f64)>) -> Result<SparseColMat<us
 
 impl GeodesicSolver {
     pub fn new(mesh: Mesh) -> Self {
+        Self::with_boundary_averaging(mesh, true)
+    }
+
+    /// `average_boundary = false` keeps only the Neumann heat flow: a third less memory and
+    /// factorisation time on meshes with boundary, somewhat less accurate near the boundary.
+    pub fn with_boundary_averaging(mesh: Mesh, average_boundary: bool) -> Self {
         let graph = Graph::new(&mesh);
         let nv = mesh.vertices.len();
         // Connected components by breadth-first search over the edge graph.
@@ -226,7 +235,7 @@ impl GeodesicSolver {
             next += 1;
         }
         let mean_edge = if graph.len.is_empty() { 0.0 } else { graph.len.iter().map(|&x| x as f64).sum::<f64>() / graph.len.len() as f64 };
-        GeodesicSolver { mesh, graph, component, heat: OnceLock::new(), mean_edge }
+        GeodesicSolver { mesh, average_boundary, graph, component, heat: OnceLock::new(), mean_edge }
     }
 
     pub fn mesh(&self) -> &Mesh {
@@ -415,7 +424,7 @@ impl GeodesicSolver {
             }
             i = j;
         }
-        let heat_dirichlet = if boundary.iter().any(|&b| b) {
+        let heat_dirichlet = if self.average_boundary && boundary.iter().any(|&b| b) {
             // u = 0 on the boundary by a penalty 1e8 times the largest diagonal entry.
             let big = 1e8 * mass.iter().fold(0.0f64, |m, x| m.max(*x)).max(1e-300);
             let mut d = heat_t.clone();

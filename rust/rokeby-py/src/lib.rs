@@ -466,6 +466,8 @@ fn geodesic_distances<'py>(py: Python<'py>, vertices: &Bound<'py, PyAny>, faces:
 /// between queries — the edge graph, the connected components and the heat method's two sparse
 /// Cholesky factorisations (made on the first heat query). A moved handle costs one solve.
 /// The mesh is fixed for a solver: make a new one when vertices or faces change.
+/// boundary="average" (default) averages the Neumann and Dirichlet heat flows on meshes with
+/// boundary (Crane et al. 2013 §3.3, more accurate there); "neumann" saves one factorisation.
 #[pyclass(frozen, name = "GeodesicSolver", module = "rokeby_native")]
 struct PyGeodesicSolver {
     inner: Arc<CoreSolver>,
@@ -474,9 +476,15 @@ struct PyGeodesicSolver {
 #[pymethods]
 impl PyGeodesicSolver {
     #[new]
-    fn new(py: Python<'_>, vertices: &Bound<'_, PyAny>, faces: &Bound<'_, PyAny>) -> PyResult<Self> {
+    #[pyo3(signature = (vertices, faces, *, boundary="average"))]
+    fn new(py: Python<'_>, vertices: &Bound<'_, PyAny>, faces: &Bound<'_, PyAny>, boundary: &str) -> PyResult<Self> {
+        let average = match boundary {
+            "average" => true,
+            "neumann" => false,
+            other => return Err(PyValueError::new_err(format!("boundary: unknown condition {other:?} (expected 'average' or 'neumann')"))),
+        };
         let mesh = parse_mesh(vertices, faces)?;
-        let inner = run_detached(py, || Ok(CoreSolver::new(mesh)))?;
+        let inner = run_detached(py, move || Ok(CoreSolver::with_boundary_averaging(mesh, average)))?;
         Ok(PyGeodesicSolver { inner: Arc::new(inner) })
     }
 
