@@ -178,6 +178,14 @@ struct HeatFace {
     inv_2a: f64,
 }
 
+/// Near-field radii, in mean edge lengths: within NEAR_R1 of a source the heat method's direction
+/// field is replaced by the gradient of the chord distance to the source (third-order accurate on
+/// a smooth surface, where the heat gradient is least resolved), blended back by NEAR_R2.
+/// Measured against exact geodesics (docs/benchmarks.md): spot's largest error 16.6 % → 11.2 %,
+/// bunny's mean 0.92 % → 0.89 %; larger radii start to hurt on curved parts.
+const NEAR_R1: f64 = 3.0;
+const NEAR_R2: f64 = 6.0;
+
 /// Keeps what does not change while handles move: the edge graph, the connected components and
 /// (built on first use) the heat method's two Cholesky factorisations.
 pub struct GeodesicSolver {
@@ -477,6 +485,17 @@ impl GeodesicSolver {
             .into_par_iter()
             .map(|s| {
                 let mut div = vec![0.0f64; nv];
+                // Near-field: within r1 of a source the direction field is the gradient of the
+                // chord distance to the nearest source point; blended into the heat gradient up to r2.
+                let src_pts: Vec<DVec3> = sets[s]
+                    .iter()
+                    .map(|src| match *src {
+                        Source::Vertex(v) => self.mesh.vertices[v],
+                        Source::Point(p) => self.mesh.point(&p),
+                    })
+                    .collect();
+                let chord = |v: usize| src_pts.iter().map(|p| p.distance(self.mesh.vertices[v])).fold(f64::INFINITY, f64::min);
+                let (r1, r2) = (NEAR_R1 * self.mean_edge, NEAR_R2 * self.mean_edge);
                 for hf in &hm.faces {
                     let p = hf.p;
                     let mut g = glam::DVec2::ZERO;
@@ -487,10 +506,25 @@ impl GeodesicSolver {
                     }
                     let g = g * hf.inv_2a;
                     let gl = g.length();
-                    if !(gl > 0.0) {
+                    let cd = [chord(hf.v[0]), chord(hf.v[1]), chord(hf.v[2])];
+                    let rmin = cd[0].min(cd[1]).min(cd[2]);
+                    let w_near = if rmin < r2 && r2 > 0.0 { 1.0 - crate::region::smooth_step((rmin - r1) / (r2 - r1)) } else { 0.0 };
+                    let mut x = if gl > 0.0 { -g / gl } else { glam::DVec2::ZERO };
+                    if w_near > 0.0 {
+                        let mut gc = glam::DVec2::ZERO;
+                        for k in 0..3 {
+                            let e = p[(k + 2) % 3] - p[(k + 1) % 3];
+                            gc += glam::DVec2::new(-e.y, e.x) * cd[k];
+                        }
+                        let gcl = gc.length();
+                        if gcl > 0.0 {
+                            // X points away from the source: the gradient of distance (heat's −∇u).
+                            x = (x * (1.0 - w_near) + gc / gcl * w_near).normalize_or_zero();
+                        }
+                    }
+                    if x == glam::DVec2::ZERO {
                         continue;
                     }
-                    let x = -g / gl;
                     for k in 0..3 {
                         let (j, l) = ((k + 1) % 3, (k + 2) % 3);
                         let e1 = p[j] - p[k];
