@@ -214,3 +214,30 @@ fn bad_input_is_an_error() {
     let nan = SurfacePoint { face: 0, bary: [f64::NAN, 0.0, 0.0] };
     assert!(s.distances(&[vec![Source::Point(nan)]], Method::Heat).is_err());
 }
+
+#[test]
+fn long_strip_far_end_is_right() {
+    // 1500 edge lengths long: one heat flow from the source decays below any usable value long
+    // before the far end; the fronts must carry the direction all the way.
+    let (nx, ny) = (1501usize, 4usize);
+    let mut v = Vec::new();
+    for j in 0..ny {
+        for i in 0..nx {
+            v.extend_from_slice(&[i as f32, j as f32, 0.0]);
+        }
+    }
+    let mut f = Vec::new();
+    for j in 0..ny - 1 {
+        for i in 0..nx - 1 {
+            let a = (j * nx + i) as i64;
+            let (b, c, d) = (a + 1, a + nx as i64, a + nx as i64 + 1);
+            f.extend_from_slice(&[a, b, d, a, d, c]);
+        }
+    }
+    let s = solver(&v, &f);
+    let d = s.distances(&[vec![Source::Vertex(0)]], Method::Heat).unwrap();
+    for i in [100usize, 500, 1000, 1500] {
+        let got = d[i] as f64;
+        assert!((got - i as f64).abs() / (i as f64) < 0.02, "at {i}: {got}");
+    }
+}
