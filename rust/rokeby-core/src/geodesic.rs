@@ -501,7 +501,8 @@ impl GeodesicSolver {
         let mut resolved = vec![false; nv];
         let mut levels: Vec<Vec<f64>> = Vec::new();
         let mut current = u0;
-        for level in 0..16u8 {
+        // Each front reaches about ln(1e30) ≈ 69 √t (edge lengths) further: 250 cover ~17,000.
+        for level in 0..250u8 {
             let peak = current.iter().fold(0.0f64, |m, &x| m.max(x));
             if !(peak > 0.0) {
                 break;
