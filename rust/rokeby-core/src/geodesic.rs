@@ -177,7 +177,6 @@ struct HeatFace {
     l01: f64,
     p2: glam::DVec2,
     cot: [f64; 3],
-    inv_2a: f64,
 }
 
 impl HeatFace {
@@ -198,11 +197,6 @@ impl HeatFace {
 /// bunny's mean 0.92 % → 0.89 %; larger radii start to hurt on curved parts.
 const NEAR_R1: f64 = 3.0;
 const NEAR_R2: f64 = 6.0;
-
-struct HeatFields {
-    levels: Vec<Vec<f64>>,
-    face_level: Vec<Option<u8>>,
-}
 
 /// Keeps what does not change while handles move: the edge graph, the connected components and
 /// (built on first use) the heat method's two Cholesky factorisations.
@@ -410,7 +404,7 @@ impl GeodesicSolver {
                 ldiag[m] += w;
             }
             let p = crate::intrinsic::layout(*l);
-            faces.push(HeatFace { v: f.map(|x| x as u32), l01: p[1].x, p2: p[2], cot, inv_2a: 0.5 / area });
+            faces.push(HeatFace { v: f.map(|x| x as u32), l01: p[1].x, p2: p[2], cot });
         }
         drop(tri);
         edges.par_sort_unstable_by(|a, b| (a.0, a.1).cmp(&(b.0, b.1)));
@@ -485,24 +479,25 @@ impl GeodesicSolver {
         self.heat.get().and_then(|h| h.as_ref().ok()).map(|h| h.flips)
     }
 
-    /// The heat solutions that give each face its direction. A single heat step decays like
-    /// e^(−d/√t), so some tens of edge lengths from the source u is too small to carry a reliable
-    /// direction (and further out it underflows even in f64). Where that happens, a further heat flow is started from the front — the resolved
-    /// vertices next to unresolved ones, a level set of distance — with the same factorisation:
-    /// outside the front, distance from the front and distance from the source share their gradient.
-    /// `face_level[f]` says which solution (0 = from the sources) gives face f its direction.
-    fn heat_fields(&self, hm: &Heat, u0: Vec<f64>) -> HeatFields {
+    /// The normalised heat gradient direction X = −∇u/|∇u| of every face (in its 2D layout; zero
+    /// where no heat reaches). A single heat step decays like e^(−d/√t), so some tens of edge
+    /// lengths from the source u is too small to carry a reliable direction (and further out it
+    /// underflows even in f64). Where that happens, a further heat flow is started from the front —
+    /// the resolved vertices next to unresolved ones, a level set of distance — with the same
+    /// factorisation: outside the front, distance from the front and distance from the source share
+    /// their gradient. Only the directions are kept, not the heat values of each front.
+    fn heat_directions(&self, hm: &Heat, u0: Vec<f64>) -> Vec<glam::DVec2> {
         let nv = self.mesh.vertices.len();
         // Heat values more than 30 orders of magnitude below the peak lose their direction (measured:
         // with 1e-250 the far half of a 1.6M-triangle mesh came out 30 % short; with 1e-30 the mean
         // error there is 1.9 %). Each front costs one more triangular solve.
         const RESOLVED: f64 = 1e-30;
-        let mut face_level: Vec<Option<u8>> = vec![None; hm.faces.len()];
+        let mut dir = vec![glam::DVec2::ZERO; hm.faces.len()];
+        let mut assigned = vec![false; hm.faces.len()];
         let mut resolved = vec![false; nv];
-        let mut levels: Vec<Vec<f64>> = Vec::new();
         let mut current = u0;
         // Each front reaches about ln(1e30) ≈ 69 √t (edge lengths) further: 250 cover ~17,000.
-        for level in 0..250u8 {
+        for _level in 0..250 {
             let peak = current.iter().fold(0.0f64, |m, &x| m.max(x));
             if !(peak > 0.0) {
                 break;
@@ -510,27 +505,38 @@ impl GeodesicSolver {
             let ok: Vec<bool> = current.iter().map(|&x| x > RESOLVED * peak).collect();
             let mut progressed = false;
             for (fi, hf) in hm.faces.iter().enumerate() {
-                if face_level[fi].is_none() && (0..3).all(|k| ok[hf.vertex(k)]) {
-                    face_level[fi] = Some(level);
-                    progressed = true;
+                if assigned[fi] || !(0..3).all(|k| ok[hf.vertex(k)]) {
+                    continue;
+                }
+                assigned[fi] = true;
+                progressed = true;
+                let p = hf.layout();
+                let mut g = glam::DVec2::ZERO;
+                for k in 0..3 {
+                    // Edge opposite corner k, counter-clockwise, turned by +90° (N × e).
+                    let e = p[(k + 2) % 3] - p[(k + 1) % 3];
+                    g += glam::DVec2::new(-e.y, e.x) * current[hf.vertex(k)];
+                }
+                let gl = g.length();
+                if gl > 0.0 {
+                    dir[fi] = -g / gl;
                 }
             }
             for i in 0..nv {
                 resolved[i] |= ok[i];
             }
-            levels.push(current);
             if !progressed {
                 break;
             }
             // The front: resolved vertices of faces that still have an unresolved vertex.
-            let mut front = vec![0.0f64; nv];
+            let mut next = Mat::<f64>::zeros(nv, 1);
             let mut any = false;
             for hf in &hm.faces {
                 let r = [0, 1, 2].map(|k| resolved[hf.vertex(k)]);
                 if r.iter().any(|&x| x) && !r.iter().all(|&x| x) {
                     for k in 0..3 {
                         if r[k] {
-                            front[hf.vertex(k)] = 1.0;
+                            next[(hf.vertex(k), 0)] = 1.0;
                             any = true;
                         }
                     }
@@ -539,14 +545,10 @@ impl GeodesicSolver {
             if !any {
                 break;
             }
-            let mut next = Mat::<f64>::zeros(nv, 1);
-            for (i, &x) in front.iter().enumerate() {
-                next[(i, 0)] = x;
-            }
             hm.heat.solve_in_place(next.as_mut());
             current = (0..nv).map(|i| next[(i, 0)]).collect();
         }
-        HeatFields { levels, face_level }
+        dir
     }
 
     fn heat_method(&self, sets: &[Vec<Source>]) -> Result<Vec<Vec<f64>>> {
@@ -580,7 +582,7 @@ impl GeodesicSolver {
             .into_par_iter()
             .map(|s| {
                 let mut div = vec![0.0f64; nv];
-                let field = self.heat_fields(hm, (0..nv).map(|i| u[(i, s)]).collect());
+                let dirs = self.heat_directions(hm, (0..nv).map(|i| u[(i, s)]).collect());
                 // Near-field: within r1 of a source the direction field is the gradient of the
                 // chord distance to the nearest source point; blended into the heat gradient up to r2.
                 let src_pts: Vec<DVec3> = sets[s]
@@ -594,21 +596,10 @@ impl GeodesicSolver {
                 let (r1, r2) = (NEAR_R1 * self.mean_edge, NEAR_R2 * self.mean_edge);
                 for (fi, hf) in hm.faces.iter().enumerate() {
                     let p = hf.layout();
-                    let mut g = glam::DVec2::ZERO;
-                    if let Some(level) = field.face_level[fi] {
-                        let uu = &field.levels[level as usize];
-                        for k in 0..3 {
-                            // Edge opposite corner k, counter-clockwise, turned by +90° (N × e).
-                            let e = p[(k + 2) % 3] - p[(k + 1) % 3];
-                            g += glam::DVec2::new(-e.y, e.x) * uu[hf.vertex(k)];
-                        }
-                    }
-                    let g = g * hf.inv_2a;
-                    let gl = g.length();
                     let cd = [chord(hf.vertex(0)), chord(hf.vertex(1)), chord(hf.vertex(2))];
                     let rmin = cd[0].min(cd[1]).min(cd[2]);
                     let w_near = if rmin < r2 && r2 > 0.0 { 1.0 - crate::region::smooth_step((rmin - r1) / (r2 - r1)) } else { 0.0 };
-                    let mut x = if gl > 0.0 { -g / gl } else { glam::DVec2::ZERO };
+                    let mut x = dirs[fi];
                     if w_near > 0.0 {
                         let mut gc = glam::DVec2::ZERO;
                         for k in 0..3 {
