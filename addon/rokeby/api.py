@@ -7,6 +7,8 @@ Python with numpy and rokeby_native.
 
 from __future__ import annotations
 
+import hashlib
+from collections import OrderedDict
 from dataclasses import dataclass
 
 import numpy as np
@@ -23,6 +25,8 @@ __all__ = [
     "edited_directions",
     "rotate",
     "quat_angle",
+    "geodesic_solver",
+    "geodesic_distances",
 ]
 
 
@@ -153,3 +157,37 @@ def quat_angle(quats: np.ndarray) -> np.ndarray:
     """Rotation angle in radians of each quaternion (..., 4), accurate for small angles."""
     q = np.asarray(quats, dtype=np.float64)
     return 2.0 * np.arctan2(np.linalg.norm(q[..., :3], axis=-1), np.abs(q[..., 3]))
+
+
+# GeodesicSolvers by mesh: the factorisation is the expensive part and is reused for every handle
+# move; a change of topology (faces) or of positions (which change the Laplacian) makes a new one.
+_SOLVER_CACHE: "OrderedDict[tuple, object]" = OrderedDict()
+_SOLVER_CACHE_SIZE = 8
+
+
+def _digest(a: np.ndarray) -> str:
+    a = np.ascontiguousarray(a)
+    return hashlib.blake2b(a.tobytes(), digest_size=16).hexdigest() + str(a.shape) + str(a.dtype)
+
+
+def geodesic_solver(vertices, faces, *, boundary: str = "average"):
+    """A ``rokeby_native.GeodesicSolver`` for this mesh, reused while neither its faces (topology)
+    nor its vertex positions change; otherwise a new one (keeps the 8 most recent meshes)."""
+    v = np.asarray(vertices, dtype=np.float32)
+    f = np.asarray(faces)
+    key = (_digest(f), _digest(v), boundary)
+    solver = _SOLVER_CACHE.get(key)
+    if solver is None:
+        solver = native.module().GeodesicSolver(v, f, boundary=boundary)
+        _SOLVER_CACHE[key] = solver
+        while len(_SOLVER_CACHE) > _SOLVER_CACHE_SIZE:
+            _SOLVER_CACHE.popitem(last=False)
+    else:
+        _SOLVER_CACHE.move_to_end(key)
+    return solver
+
+
+def geodesic_distances(vertices, faces, sources, *, method: str = "heat", boundary: str = "average") -> np.ndarray:
+    """Geodesic distances (S, V) through the cached solver of this mesh; see
+    ``rokeby_native.GeodesicSolver.distances`` for the forms ``sources`` may take."""
+    return geodesic_solver(vertices, faces, boundary=boundary).distances(sources, method=method)
