@@ -52,8 +52,17 @@ cargo-test:
 pytest: native
 	$(PY) -m pytest -q
 
-bench: native
-	$(PY) bench/run.py
+# Peers of the benchmark (exact MMP geodesics, potpourri3d, libigl, matplotlib) live in their
+# own environment: they need numpy >= 2, bpy 4.5 needs numpy < 2.
+PEERS := .venv-peers
+$(PEERS)/.deps: requirements-peers.txt
+	@test -x $(PEERS)/bin/python || $(PYTHON) -m venv $(PEERS)
+	$(PEERS)/bin/python -m pip install -q --upgrade pip
+	$(PEERS)/bin/python -m pip install -q -r requirements-peers.txt
+	@touch $@
+
+bench: native $(PEERS)/.deps
+	$(PY) bench/run.py --peers $(PEERS)/bin/python
 
 clean:
-	rm -rf $(VENV) target dist out
+	rm -rf $(VENV) $(PEERS) target dist out

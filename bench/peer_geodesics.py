@@ -103,7 +103,7 @@ def plot(json_path, png_path):
     ax.set_yscale("log")
     ax.set_xlabel("time per query after precomputation (ms, log)")
     ax.set_ylabel("mean relative error vs exact (%, log)")
-    ax.set_title("Geodesic distance: speed against accuracy (one source)")
+    ax.set_title("Geodesic distance: speed against accuracy (mean over three sources)")
     ax.grid(True, which="both", alpha=0.3)
     ax.legend(fontsize=7, ncol=2)
     fig.tight_layout()
