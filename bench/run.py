@@ -27,7 +27,7 @@ sys.path.insert(0, str(ROOT / "tests"))
 
 import rokeby_native as rn  # noqa: E402
 
-from reference import field_matrices, ortho as ortho_ref, quat_to_matrix, rot_angle  # noqa: E402
+from reference import field_matrices, ortho as ortho_ref, quat_to_matrix, random_constraints, rot_angle  # noqa: E402
 from rokeby.meshio import load_obj, subdivide_midpoint  # noqa: E402
 
 SHARED = Path(os.environ.get("ROKEBY_SHARED", ROOT.parent / "shared"))
@@ -45,16 +45,7 @@ def timeit(fn, repeat=5):
 
 
 def constraints(rng, k, spread, centre=None, max_edit=0.7):
-    p = rng.uniform(-spread, spread, (k, 3))
-    if centre is not None:
-        p = centre[rng.choice(len(centre), k, replace=False)]
-    r = rng.normal(size=(k, 3))
-    r /= np.linalg.norm(r, axis=1, keepdims=True)
-    axis = np.cross(r, rng.normal(size=(k, 3)))
-    axis /= np.linalg.norm(axis, axis=1, keepdims=True)
-    ang = rng.uniform(0.1, max_edit, k)
-    e = r * np.cos(ang)[:, None] + np.cross(axis, r) * np.sin(ang)[:, None]
-    return np.hstack([p, r, e]).astype(np.float32)
+    return random_constraints(rng, k, spread=spread, max_edit=max_edit, min_edit=0.1, at=centre)
 
 
 def full_frame_gbuffer(w, h):

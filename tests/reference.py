@@ -4,6 +4,21 @@ the Rust core (SVD-based polar decomposition), for well-conditioned configuratio
 import numpy as np
 
 
+def random_constraints(rng, k, spread=1.0, max_edit=1.0, min_edit=0.05, at=None):
+    """K constraints [p, r, e] with random directions and edits of `min_edit`..`max_edit` radians;
+    points uniform in a cube of half-size `spread`, or drawn from the points `at` (e.g. vertices)."""
+    p = rng.uniform(-spread, spread, (k, 3))
+    if at is not None:
+        p = at[rng.choice(len(at), k, replace=False)]
+    r = rng.normal(size=(k, 3))
+    r /= np.linalg.norm(r, axis=1, keepdims=True)
+    axis = np.cross(r, rng.normal(size=(k, 3)))
+    axis /= np.linalg.norm(axis, axis=1, keepdims=True)
+    ang = rng.uniform(min_edit, max_edit, k)
+    e = r * np.cos(ang)[:, None] + np.cross(axis, r) * np.sin(ang)[:, None]
+    return np.hstack([p, r, e]).astype(np.float32)
+
+
 def ortho(m: np.ndarray) -> np.ndarray:
     """Closest rotation to each 3×3 matrix (..., 3, 3)."""
     u, _, vt = np.linalg.svd(m)

@@ -8,20 +8,13 @@ from hypothesis import given
 from hypothesis import strategies as st
 from hypothesis.extra.numpy import arrays
 
-from reference import dir_angle, field_matrices, quat_to_matrix, region_blend, rot_angle
+from reference import dir_angle, field_matrices, quat_to_matrix, random_constraints, region_blend, rot_angle
 from rokeby import api
 
 
 def realistic_constraints(rng, k, spread=1.0, max_edit=1.0):
     """K constraints at separated points with edits of up to `max_edit` radians."""
-    p = rng.uniform(-spread, spread, (k, 3))
-    r = rng.normal(size=(k, 3))
-    r /= np.linalg.norm(r, axis=1, keepdims=True)
-    axis = np.cross(r, rng.normal(size=(k, 3)))
-    axis /= np.linalg.norm(axis, axis=1, keepdims=True)
-    ang = rng.uniform(0.05, max_edit, k)
-    e = r * np.cos(ang)[:, None] + np.cross(axis, r) * np.sin(ang)[:, None]
-    return np.hstack([p, r, e]).astype(np.float32)
+    return random_constraints(rng, k, spread=spread, max_edit=max_edit)
 
 
 @pytest.mark.parametrize("k", [1, 2, 4, 8, 32])
