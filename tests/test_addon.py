@@ -24,11 +24,19 @@ def _snapshot():
 
 
 def test_register_and_unregister_leave_nothing_behind():
+    rokeby.unregister()  # in case another test registered it
     before = _snapshot()
+    handlers_before = {name: list(getattr(bpy.app.handlers, name)) for name in before[1]}
     rokeby.register()
-    assert hasattr(bpy.types, "ROKEBY_PT_main")
+    assert hasattr(bpy.types, "ROKEBY_PT_main") and hasattr(bpy.types.Object, "rokeby")
+    assert hasattr(bpy.types, "ROKEBY_OT_constraint_add") or "ROKEBY_OT_constraint_add" in dir(bpy.types)
+    assert bpy.ops.rokeby.constraint_add.idname() == "ROKEBY_OT_constraint_add"
+    assert _snapshot() != before  # handlers were added
     rokeby.unregister()
     assert _snapshot() == before
+    assert not hasattr(bpy.types.Object, "rokeby")
+    assert {name: list(getattr(bpy.app.handlers, name)) for name in before[1]} == handlers_before
+    assert not hasattr(bpy.types, "RokebyMirror")
     # and it can be enabled again after being disabled
     rokeby.register()
     rokeby.unregister()

@@ -11,16 +11,40 @@ function, so the add-on loads in background mode (render farms, ``bpy`` as a mod
 
 from __future__ import annotations
 
-__all__ = ["register", "unregister"]
+__all__ = ["register", "unregister", "is_registered"]
+
+_registered = False
+
+
+def is_registered() -> bool:
+    return _registered
+
+
+def _modules():
+    from . import handlers, operators, props, ui
+
+    return (props, operators, ui, handlers)
 
 
 def register():
-    from . import ui
-
-    ui.register()
+    """Register the add-on (idempotent: a second call does nothing)."""
+    global _registered
+    if _registered:
+        return
+    done = []
+    try:
+        for module in _modules():
+            module.register()
+            done.append(module)
+    except Exception:
+        for module in reversed(done):
+            module.unregister()
+        raise
+    _registered = True
 
 
 def unregister():
-    from . import ui
-
-    ui.unregister()
+    global _registered
+    for module in reversed(_modules()):
+        module.unregister()
+    _registered = False

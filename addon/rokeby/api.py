@@ -27,6 +27,26 @@ __all__ = [
     "quat_angle",
     "geodesic_solver",
     "geodesic_distances",
+    # scene model (Blender)
+    "add_mirror",
+    "remove_mirror",
+    "add_constraint",
+    "remove_constraint",
+    "add_region",
+    "remove_region",
+    "evaluate",
+    "freeze",
+    "edited_materials",
+    "set_edited_materials",
+    "constraint_view",
+    "edited_reflections",
+    "report",
+    "field",
+    "stored_field",
+    "stats",
+    "reset_stats",
+    "RokebyError",
+    "MirrorReport",
 ]
 
 
@@ -191,3 +211,493 @@ def geodesic_distances(vertices, faces, sources, *, method: str = "heat", bounda
     """Geodesic distances (S, V) through the cached solver of this mesh; see
     ``rokeby_native.GeodesicSolver.distances`` for the forms ``sources`` may take."""
     return geodesic_solver(vertices, faces, boundary=boundary).distances(sources, method=method)
+
+
+# --- the scene model: mirrors, constraints and regions as Blender data ---------------------------
+# Everything below needs Blender. The operators in rokeby.operators are thin wrappers of these
+# functions, and background scripts (render farms, pipelines) call them directly.
+
+from .evaluate import ATTRIBUTE, MirrorReport, RokebyError  # noqa: E402
+
+HANDLE_COLLECTION = "Rokeby Handles"
+
+
+def _scene(scene):
+    import bpy  # noqa: PLC0415
+
+    return scene if scene is not None else bpy.context.scene
+
+
+def _view_layer(scene):
+    import bpy  # noqa: PLC0415
+
+    if scene == bpy.context.scene and bpy.context.view_layer is not None:
+        return bpy.context.view_layer
+    return scene.view_layers[0]
+
+
+def _depsgraph(scene):
+    vl = _view_layer(scene)
+    vl.update()
+    return vl.depsgraph
+
+
+def _check_mirror(obj):
+    if obj is None:
+        raise RokebyError("mirror: is None")
+    try:
+        name, kind = obj.name, obj.type
+    except ReferenceError:
+        raise RokebyError("mirror: the object was deleted") from None
+    if kind != "MESH":
+        raise RokebyError(f"mirror: '{name}' is a {kind.lower()}, not a mesh")
+    if len(obj.data.polygons) == 0:
+        raise RokebyError(f"mirror: '{name}' has no faces")
+    if obj.library is not None or obj.data.library is not None:
+        raise RokebyError(f"mirror: '{name}' is linked from a library; make it local (or a library override with local mesh data)")
+    return obj
+
+
+def _require_mirror(obj):
+    _check_mirror(obj)
+    if not obj.rokeby.is_mirror:
+        raise RokebyError(f"mirror: '{obj.name}' is not a Rokeby mirror (use add_mirror first)")
+    return obj
+
+
+def add_mirror(obj, *, metric: str = "EUCLIDEAN", geodesic_method: str = "HEAT", polar: str = "FAST"):
+    """Make the mesh object ``obj`` a Rokeby mirror (its reflections become editable)."""
+    _check_mirror(obj)
+    s = obj.rokeby
+    for prop, value in (("metric", metric), ("geodesic_method", geodesic_method), ("polar", polar)):
+        allowed = [item.identifier for item in s.bl_rna.properties[prop].enum_items]
+        if value not in allowed:
+            raise RokebyError(f"{prop}: '{value}' is not one of {allowed}")
+    s.metric, s.geodesic_method, s.polar = metric, geodesic_method, polar
+    s.is_mirror = True
+    s.enabled = True
+    return obj
+
+
+def _handle_collection(scene):
+    import bpy  # noqa: PLC0415
+
+    coll = bpy.data.collections.get(HANDLE_COLLECTION)
+    if coll is None or coll.library is not None:
+        coll = bpy.data.collections.new(HANDLE_COLLECTION)
+    if scene.collection.children.get(coll.name) is None and coll not in scene.collection.children_recursive:
+        scene.collection.children.link(coll)
+    return coll
+
+
+def _new_empty(scene, name, location, display, size, color):
+    import bpy  # noqa: PLC0415
+
+    ob = bpy.data.objects.new(name, None)
+    ob.empty_display_type = display
+    ob.empty_display_size = size
+    ob.location = [float(x) for x in location]
+    ob.color = color
+    ob.show_name = False
+    _handle_collection(scene).objects.link(ob)
+    return ob
+
+
+def _remove_objects(objs):
+    import bpy  # noqa: PLC0415
+
+    for ob in objs:
+        try:
+            bpy.data.objects.remove(ob, do_unlink=True)
+        except (ReferenceError, RuntimeError):
+            pass
+
+
+def _view_from_eye(eye, target):
+    from mathutils import Vector  # noqa: PLC0415
+
+    d = Vector(target) - Vector(eye)
+    rot = d.to_track_quat("-Z", "Y")
+    return {"location": tuple(target), "rotation": tuple(rot), "distance": float(d.length), "perspective": "PERSP"}
+
+
+def _surface_of(mirror, scene, point):
+    from . import evaluate as ev  # noqa: PLC0415
+
+    dg = _depsgraph(scene)
+    m = ev._finite_matrix(mirror.evaluated_get(dg).matrix_world, f"mirror '{mirror.name}'")
+    geo = ev.read_geometry(mirror, dg, m)
+    return ev.project_to_surface(mirror, dg, geo, _vec3(point, "surface_point"), m), geo, dg
+
+
+def add_constraint(mirror, surface_point, reflected_point=None, *, eye=None, view=None, name: str = "", scene=None):
+    """Add a reflection constraint to ``mirror`` and return its index.
+
+    ``surface_point`` (world space) is projected onto the mirror: the red handle goes there, kept
+    on the surface by a Shrinkwrap constraint. The green handle goes to ``reflected_point``; when
+    it is None, to where the physically reflected ray from ``eye`` hits the scene (or, when it hits
+    nothing, as far along that ray as the eye is from the mirror), so that a fresh constraint
+    changes nothing until a handle moves. ``eye`` is the generating eye point (default: the scene
+    camera); ``view`` optionally gives the generating 3D view as a dict with location, rotation
+    (w, x, y, z), distance and perspective ('PERSP' | 'ORTHO'), used by "return to view".
+    """
+    scene = _scene(scene)
+    _require_mirror(mirror)
+    if eye is None:
+        if scene.camera is None:
+            raise RokebyError("eye: not given and the scene has no camera")
+        eye = tuple(scene.camera.matrix_world.translation)
+    eye = _vec3(eye, "eye")
+    sp, geo, dg = _surface_of(mirror, scene, surface_point)
+    p = sp.point
+    incident = p - eye
+    if not np.linalg.norm(incident) > 1e-12 * max(geo.size, 1e-30):
+        raise RokebyError("eye: lies on the surface point")
+    r = reflect(incident / np.linalg.norm(incident), sp.normal)
+    r /= np.linalg.norm(r)
+    if reflected_point is None:
+        size = max(geo.size, 1e-6)
+        origin = p + sp.normal * (1e-4 * size) * (1.0 if r @ sp.normal >= 0 else -1.0)
+        hit, loc, _n, _i, _ob, _m = scene.ray_cast(dg, origin.tolist(), r.tolist())
+        if hit:
+            green = np.array(loc, dtype=np.float64)
+        else:
+            green = p + r * max(float(np.linalg.norm(incident)), size)
+    else:
+        green = _vec3(reflected_point, "reflected_point")
+    if not np.linalg.norm(green - p) > 1e-9 * max(geo.size, 1e-30):
+        raise RokebyError("reflected_point: coincides with the surface point")
+    view = dict(view) if view is not None else _view_from_eye(eye, p)
+    k = len(mirror.rokeby.constraints) + 1
+    label = name or f"Constraint {k}"
+    size = 0.02 * max(geo.size, 1e-6)
+    created = []
+    try:
+        red = _new_empty(scene, f"{mirror.name} {label} surface", p, "SPHERE", size, (1.0, 0.1, 0.1, 1.0))
+        created.append(red)
+        shrink = red.constraints.new("SHRINKWRAP")
+        shrink.name = "Rokeby: stay on mirror"
+        shrink.target = mirror
+        shrink.shrinkwrap_type = "NEAREST_SURFACE"
+        green_ob = _new_empty(scene, f"{mirror.name} {label} reflected", green, "SPHERE", size, (0.1, 1.0, 0.1, 1.0))
+        created.append(green_ob)
+        item = mirror.rokeby.constraints.add()
+        item.name = label
+        item.surface_handle = red
+        item.target_handle = green_ob
+        item.eye = eye.tolist()
+        item.view_location = [float(x) for x in view["location"]]
+        item.view_rotation = [float(x) for x in view["rotation"]]
+        item.view_distance = float(view["distance"])
+        item.view_perspective = view.get("perspective", "PERSP")
+        mirror.rokeby.active_constraint = len(mirror.rokeby.constraints) - 1
+    except Exception:
+        _remove_objects(created)
+        raise
+    return len(mirror.rokeby.constraints) - 1
+
+
+def _handle_users(scene, ob, skip=None):
+    n = 0
+    for m in scene.objects:
+        if not m.rokeby.is_mirror:
+            continue
+        for c in m.rokeby.constraints:
+            if c != skip and ob in (c.surface_handle, c.target_handle):
+                n += 1
+        for rg in m.rokeby.regions:
+            if rg != skip and rg.center == ob:
+                n += 1
+    return n
+
+
+def _index(collection, index, what):
+    if not isinstance(index, (int, np.integer)) or not 0 <= int(index) < len(collection):
+        raise RokebyError(f"{what}: index {index!r} is out of range (there are {len(collection)})")
+    return int(index)
+
+
+def remove_constraint(mirror, index: int, *, delete_handles: bool = True, scene=None):
+    """Remove constraint ``index``; its handles are deleted unless another item uses them."""
+    scene = _scene(scene)
+    _require_mirror(mirror)
+    i = _index(mirror.rokeby.constraints, index, "constraint")
+    c = mirror.rokeby.constraints[i]
+    handles = [h for h in (c.surface_handle, c.target_handle) if h is not None]
+    doomed = [h for h in handles if _handle_users(scene, h, skip=c) == 0] if delete_handles else []
+    mirror.rokeby.constraints.remove(i)
+    mirror.rokeby.active_constraint = min(mirror.rokeby.active_constraint, max(len(mirror.rokeby.constraints) - 1, 0))
+    _remove_objects(doomed)
+
+
+def _vertex_group_reader():
+    """The Geometry Nodes group that copies a vertex group into a float point attribute, so the
+    evaluator reads painted weights with foreach_get instead of a loop over vertices."""
+    import bpy  # noqa: PLC0415
+
+    ng = bpy.data.node_groups.get(evaluate_module().VG_NODE_GROUP)
+    if ng is not None and ng.bl_idname == "GeometryNodeTree" and ng.library is None:
+        return ng
+    ng = bpy.data.node_groups.new(evaluate_module().VG_NODE_GROUP, "GeometryNodeTree")
+    ng.interface.new_socket("Geometry", in_out="INPUT", socket_type="NodeSocketGeometry")
+    ng.interface.new_socket("Vertex Group", in_out="INPUT", socket_type="NodeSocketString")
+    ng.interface.new_socket("Attribute", in_out="INPUT", socket_type="NodeSocketString")
+    ng.interface.new_socket("Geometry", in_out="OUTPUT", socket_type="NodeSocketGeometry")
+    gi = ng.nodes.new("NodeGroupInput")
+    go = ng.nodes.new("NodeGroupOutput")
+    named = ng.nodes.new("GeometryNodeInputNamedAttribute")
+    named.data_type = "FLOAT"
+    store = ng.nodes.new("GeometryNodeStoreNamedAttribute")
+    store.data_type = "FLOAT"
+    store.domain = "POINT"
+    ng.links.new(gi.outputs["Geometry"], store.inputs["Geometry"])
+    ng.links.new(gi.outputs["Vertex Group"], named.inputs["Name"])
+    ng.links.new(gi.outputs["Attribute"], store.inputs["Name"])
+    ng.links.new(named.outputs["Attribute"], store.inputs["Value"])
+    ng.links.new(store.outputs["Geometry"], go.inputs["Geometry"])
+    return ng
+
+
+def evaluate_module():
+    from . import evaluate as ev  # noqa: PLC0415
+
+    return ev
+
+
+def _ensure_reader(mirror, group):
+    ev = evaluate_module()
+    name = ev.VG_MODIFIER_PREFIX + group
+    mod = mirror.modifiers.get(name)
+    if mod is None:
+        mod = mirror.modifiers.new(name, "NODES")
+        mod.node_group = _vertex_group_reader()
+        mod.show_in_editmode = False
+    ids = {item.name: item.identifier for item in mod.node_group.interface.items_tree if getattr(item, "in_out", "") == "INPUT"}
+    mod[ids["Vertex Group"]] = group
+    mod[ids["Attribute"]] = ev.REGION_ATTRIBUTE_PREFIX + group
+    return mod
+
+
+def _drop_unused_readers(mirror):
+    ev = evaluate_module()
+    used = {rg.vertex_group for rg in mirror.rokeby.regions if rg.kind == "FREEFORM"}
+    for mod in list(mirror.modifiers):
+        if mod.name.startswith(ev.VG_MODIFIER_PREFIX) and mod.name[len(ev.VG_MODIFIER_PREFIX):] not in used:
+            mirror.modifiers.remove(mod)
+
+
+def add_region(mirror, kind: str = "EUCLIDEAN", *, center=None, radius: float = 1.0, border: float = 0.25, vertex_group: str = "", name: str = "", scene=None):
+    """Add a region of interest to ``mirror`` and return its index.
+
+    kind 'EUCLIDEAN': a sphere around ``center`` (a point, or an existing empty, which several
+    mirrors may share); 'GEODESIC': a disc over the surface around the surface point nearest
+    ``center`` (its empty is kept on the surface); 'FREEFORM': the painted ``vertex_group`` of the
+    mirror. ``radius`` and ``border`` are in world units; the border is the smooth step inside the
+    radius.
+    """
+    import bpy  # noqa: PLC0415
+
+    scene = _scene(scene)
+    _require_mirror(mirror)
+    if kind not in ("EUCLIDEAN", "GEODESIC", "FREEFORM"):
+        raise RokebyError(f"kind: '{kind}' is not one of EUCLIDEAN, GEODESIC, FREEFORM")
+    for what, x in (("radius", radius), ("border", border)):
+        if not (np.isfinite(x) and x >= 0):
+            raise RokebyError(f"{what}: must be finite and >= 0, got {x}")
+    created = []
+    k = len(mirror.rokeby.regions) + 1
+    label = name or f"Region {k}"
+    try:
+        centre_ob = None
+        if kind == "FREEFORM":
+            if not vertex_group or mirror.vertex_groups.get(vertex_group) is None:
+                raise RokebyError(f"vertex_group: mirror '{mirror.name}' has no vertex group '{vertex_group}'")
+        elif isinstance(center, bpy.types.Object):
+            centre_ob = center
+        else:
+            if center is None:
+                center = tuple(scene.cursor.location)
+            point = _vec3(center, "center")
+            if kind == "GEODESIC":
+                point = _surface_of(mirror, scene, point)[0].point
+            display = "SPHERE" if kind == "EUCLIDEAN" else "CIRCLE"
+            centre_ob = _new_empty(scene, f"{mirror.name} {label} centre", point, display, max(radius, 1e-6), (0.3, 0.6, 1.0, 1.0))
+            created.append(centre_ob)
+            if kind == "GEODESIC":
+                shrink = centre_ob.constraints.new("SHRINKWRAP")
+                shrink.name = "Rokeby: stay on mirror"
+                shrink.target = mirror
+                shrink.shrinkwrap_type = "NEAREST_SURFACE"
+        if kind == "FREEFORM":
+            _ensure_reader(mirror, vertex_group)
+        item = mirror.rokeby.regions.add()
+        item.name = label
+        item.kind = kind
+        item.radius = float(radius)
+        item.border = float(border)
+        item.vertex_group = vertex_group
+        item.center = centre_ob
+        mirror.rokeby.active_region = len(mirror.rokeby.regions) - 1
+    except Exception:
+        _remove_objects(created)
+        raise
+    evaluate_module().mark_dirty(mirror)
+    return len(mirror.rokeby.regions) - 1
+
+
+def remove_region(mirror, index: int, *, delete_center: bool = True, scene=None):
+    """Remove region ``index`` (and its centre empty when nothing else uses it)."""
+    scene = _scene(scene)
+    _require_mirror(mirror)
+    i = _index(mirror.rokeby.regions, index, "region")
+    rg = mirror.rokeby.regions[i]
+    doomed = [rg.center] if (delete_center and rg.center is not None and _handle_users(scene, rg.center, skip=rg) == 0) else []
+    mirror.rokeby.regions.remove(i)
+    mirror.rokeby.active_region = min(mirror.rokeby.active_region, max(len(mirror.rokeby.regions) - 1, 0))
+    _drop_unused_readers(mirror)
+    _remove_objects(doomed)
+    evaluate_module().mark_dirty(mirror)
+
+
+def remove_mirror(mirror, *, scene=None):
+    """Stop editing ``mirror``: its constraints, regions, handles and field attribute go."""
+    scene = _scene(scene)
+    _require_mirror(mirror)
+    while len(mirror.rokeby.constraints):
+        remove_constraint(mirror, len(mirror.rokeby.constraints) - 1, scene=scene)
+    while len(mirror.rokeby.regions):
+        remove_region(mirror, len(mirror.rokeby.regions) - 1, scene=scene)
+    attr = mirror.data.attributes.get(ATTRIBUTE)
+    if attr is not None:
+        mirror.data.attributes.remove(attr)
+    mirror.rokeby.is_mirror = False
+
+
+def evaluate(scene=None, frame=None, *, force: bool = False) -> "dict[str, MirrorReport]":
+    """Bring every mirror of ``scene`` up to date (at ``frame`` when given, which may be
+    fractional) and return a report per mirror. Only mirrors whose inputs changed are recomputed,
+    unless ``force``. Never raises for a bad mirror: its report says what is wrong."""
+    from . import handlers  # noqa: PLC0415
+
+    scene = _scene(scene)
+    with handlers.suspended():
+        if frame is not None:
+            f = float(frame)
+            if not np.isfinite(f):
+                raise RokebyError(f"frame: must be finite, got {frame}")
+            whole = int(np.floor(f))
+            scene.frame_set(whole, subframe=f - whole)
+        dg = _depsgraph(scene)
+        return evaluate_module().evaluate_scene(scene, dg, force=force, all_geometry=frame is not None)
+
+
+def report(mirror) -> "MirrorReport | None":
+    """The last evaluation report of ``mirror`` (None before its first evaluation)."""
+    return evaluate_module().report_of(mirror)
+
+
+def field(mirror) -> "np.ndarray | None":
+    """The last computed rotation field of ``mirror``: (V, 4) quaternions (x, y, z, w)."""
+    return evaluate_module().rotations_of(mirror)
+
+
+def stored_field(mirror) -> "np.ndarray | None":
+    """The rotation vectors (V, 3) stored in the mirror's mesh attribute (what renderers read)."""
+    return evaluate_module().read_attribute(mirror)
+
+
+def stats() -> dict:
+    """How often mirrors were checked, recomputed or skipped (nothing had changed)."""
+    return evaluate_module().stats()
+
+
+def reset_stats():
+    evaluate_module().reset_stats()
+
+
+def edited_materials(mirror) -> list:
+    """The materials whose reflections are edited: every material of the mirror unless a
+    subset was chosen with ``set_edited_materials``."""
+    _require_mirror(mirror)
+    s = mirror.rokeby
+    if s.all_materials:
+        return [slot.material for slot in mirror.material_slots if slot.material is not None]
+    return [item.material for item in s.materials if item.material is not None]
+
+
+def set_edited_materials(mirror, materials=None):
+    """Edit the reflections of ``materials`` only (None: all of the mirror's materials)."""
+    _require_mirror(mirror)
+    s = mirror.rokeby
+    if materials is None:
+        s.all_materials = True
+        s.materials.clear()
+        return
+    own = {slot.material for slot in mirror.material_slots if slot.material is not None}
+    chosen = []
+    for mat in materials:
+        if mat not in own:
+            raise RokebyError(f"materials: '{getattr(mat, 'name', mat)}' is not a material of mirror '{mirror.name}'")
+        if mat not in chosen:
+            chosen.append(mat)
+    s.materials.clear()
+    for mat in chosen:
+        s.materials.add().material = mat
+    s.all_materials = False
+
+
+def freeze(mirror, frozen: bool = True, *, eye=None):
+    """Freeze (or unfreeze) ``mirror``: while frozen, reflected directions are evaluated from a
+    fixed eye — ``eye`` if given, else the active constraint's generating eye — instead of
+    following the camera."""
+    _require_mirror(mirror)
+    s = mirror.rokeby
+    if frozen:
+        if eye is None:
+            if not len(s.constraints):
+                raise RokebyError("eye: not given and the mirror has no constraint to take a generating eye from")
+            eye = tuple(s.constraints[min(s.active_constraint, len(s.constraints) - 1)].eye)
+        s.freeze_eye = _vec3(eye, "eye").tolist()
+    s.freeze = bool(frozen)
+
+
+def constraint_view(mirror, index: "int | None" = None) -> dict:
+    """The generating view of a constraint (default: the active one): location, rotation
+    (w, x, y, z), distance, perspective and eye, as stored when it was made."""
+    _require_mirror(mirror)
+    s = mirror.rokeby
+    i = _index(s.constraints, s.active_constraint if index is None else index, "constraint")
+    c = s.constraints[i]
+    return {
+        "location": tuple(c.view_location),
+        "rotation": tuple(c.view_rotation),
+        "distance": float(c.view_distance),
+        "perspective": c.view_perspective,
+        "eye": tuple(c.eye),
+    }
+
+
+def edited_reflections(mirror, eye=None, *, scene=None) -> np.ndarray:
+    """Edited reflection directions e(q) = R(q) r(q) at the mirror's vertices (world space), with
+    r(q) reflected from the frozen eye when the mirror is frozen, else from ``eye`` (default: the
+    scene camera). This is what a renderer shows at each vertex."""
+    scene = _scene(scene)
+    _require_mirror(mirror)
+    s = mirror.rokeby
+    if s.freeze:
+        eye = tuple(s.freeze_eye)
+    elif eye is None:
+        if scene.camera is None:
+            raise RokebyError("eye: not given and the scene has no camera")
+        eye = tuple(scene.camera.matrix_world.translation)
+    eye = _vec3(eye, "eye")
+    evaluate(scene)
+    st = evaluate_module()._STATE.get(mirror.session_uid)
+    if st is None or st.geometry is None or st.rotations is None:
+        rep = report(mirror)
+        raise RokebyError(f"mirror '{mirror.name}' has no field: {rep.summary() if rep else 'not evaluated'}")
+    geo = st.geometry
+    incident = geo.vertices.astype(np.float64) - eye
+    incident /= np.maximum(np.linalg.norm(incident, axis=1, keepdims=True), 1e-300)
+    r = reflect(incident, geo.normals.astype(np.float64))
+    return rotate(st.rotations, r).astype(np.float32)

@@ -1,10 +1,47 @@
-"""Sidebar UI (3D View ▸ Rokeby). Registered by ``rokeby.register``; no ``gpu`` use here."""
+"""Sidebar UI (3D View ▸ Rokeby): mirrors, their constraints and regions, settings and status.
+Registered by ``rokeby.register``; no ``gpu`` use here."""
 
 from __future__ import annotations
 
 import bpy
 
-from . import native
+from . import evaluate, native
+
+_STATUS_ICON = {"OK": "CHECKMARK", "WARNING": "ERROR", "ERROR": "CANCEL", "DISABLED": "HIDE_ON"}
+
+
+def _active_mirror(context):
+    ob = context.active_object
+    if ob is None:
+        return None
+    if ob.rokeby.is_mirror:
+        return ob
+    for m in context.scene.objects:
+        if m.rokeby.is_mirror:
+            if any(ob in (c.surface_handle, c.target_handle) for c in m.rokeby.constraints):
+                return m
+            if any(ob == rg.center for rg in m.rokeby.regions):
+                return m
+    return None
+
+
+class ROKEBY_UL_constraints(bpy.types.UIList):
+    def draw_item(self, context, layout, data, item, icon, active_data, active_propname, index):
+        row = layout.row(align=True)
+        broken = item.surface_handle is None or item.target_handle is None
+        row.alert = broken
+        row.prop(item, "enabled", text="")
+        row.prop(item, "name", text="", emboss=False, icon="ERROR" if broken else "CON_TRACKTO")
+        op = row.operator("rokeby.constraint_select", text="", icon="RESTRICT_SELECT_OFF", emboss=False)
+        op.mirror, op.index = data.id_data.name, index
+
+
+class ROKEBY_UL_regions(bpy.types.UIList):
+    def draw_item(self, context, layout, data, item, icon, active_data, active_propname, index):
+        row = layout.row(align=True)
+        row.prop(item, "enabled", text="")
+        icons = {"EUCLIDEAN": "SPHERE", "GEODESIC": "MESH_CIRCLE", "FREEFORM": "GROUP_VERTEX"}
+        row.prop(item, "name", text="", emboss=False, icon=icons[item.kind])
 
 
 class ROKEBY_PT_main(bpy.types.Panel):
@@ -16,16 +53,98 @@ class ROKEBY_PT_main(bpy.types.Panel):
 
     def draw(self, context):
         layout = self.layout
-        if native.available():
-            layout.label(text=f"Native core {native.version()}", icon="CHECKMARK")
-        else:
+        if not native.available():
             col = layout.column()
             col.alert = True
             col.label(text="Native core missing", icon="ERROR")
             col.label(text="Run `make` in the Rokeby checkout")
+            return
+        mirrors = [ob for ob in context.scene.objects if ob.rokeby.is_mirror]
+        box = layout.box()
+        box.label(text=f"Mirrors ({len(mirrors)})", icon="MOD_MIRROR")
+        for m in mirrors:
+            rep = evaluate.report_of(m)
+            row = box.row(align=True)
+            row.label(text=m.name, icon=_STATUS_ICON.get(rep.status, "QUESTION") if rep else "TIME")
+            row.prop(m.rokeby, "enabled", text="")
+        mirror = _active_mirror(context)
+        ob = context.active_object
+        if mirror is None:
+            if ob is not None and ob.type == "MESH":
+                layout.operator("rokeby.mirror_add", icon="ADD")
+            else:
+                layout.label(text="Select a mesh to make it a mirror")
+            layout.operator("rokeby.update", icon="FILE_REFRESH")
+            return
+        s = mirror.rokeby
+        layout.label(text=f"Mirror: {mirror.name}", icon="OBJECT_DATA")
+        rep = evaluate.report_of(mirror)
+        if rep is not None:
+            col = layout.column(align=True)
+            col.alert = rep.status == "ERROR"
+            col.label(text=f"{rep.status.title()}: {rep.constraints_used} constraint(s), {rep.vertices:,} vertices", icon=_STATUS_ICON[rep.status])
+            for msg in rep.messages[:6]:
+                col.label(text=msg)
+            if rep.recomputed or rep.python_ms:
+                col.label(text=f"last update {rep.python_ms + rep.native_ms:.1f} ms (Python {rep.python_ms:.1f}, Rust {rep.native_ms:.1f})")
+        col = layout.column()
+        col.prop(s, "enabled")
+        col.prop(s, "metric")
+        if s.metric == "GEODESIC":
+            col.prop(s, "geodesic_method")
+        col.prop(s, "polar")
+        row = layout.row(align=True)
+        row.prop(s, "freeze", toggle=True, icon="FREEZE")
+        row.operator("rokeby.return_to_view", icon="HIDE_OFF")
+
+        layout.label(text="Constraints")
+        row = layout.row()
+        row.template_list("ROKEBY_UL_constraints", "", s, "constraints", s, "active_constraint", rows=3)
+        col = row.column(align=True)
+        op = col.operator("rokeby.constraint_add", icon="ADD", text="")
+        op.mirror = mirror.name
+        op = col.operator("rokeby.constraint_remove", icon="REMOVE", text="")
+        op.mirror = mirror.name
+        if len(s.constraints) and s.active_constraint < len(s.constraints):
+            c = s.constraints[s.active_constraint]
+            sub = layout.column(align=True)
+            sub.prop(c, "surface_handle", text="Red")
+            sub.prop(c, "target_handle", text="Green")
+            sub.prop(c, "eye")
+
+        layout.label(text="Regions")
+        row = layout.row()
+        row.template_list("ROKEBY_UL_regions", "", s, "regions", s, "active_region", rows=2)
+        col = row.column(align=True)
+        op = col.operator_menu_enum("rokeby.region_add", "kind", icon="ADD", text="")
+        op = col.operator("rokeby.region_remove", icon="REMOVE", text="")
+        op.mirror = mirror.name
+        if len(s.regions) and s.active_region < len(s.regions):
+            rg = s.regions[s.active_region]
+            sub = layout.column(align=True)
+            sub.prop(rg, "kind")
+            if rg.kind == "FREEFORM":
+                sub.prop_search(rg, "vertex_group", mirror, "vertex_groups")
+            else:
+                sub.prop(rg, "center")
+                sub.prop(rg, "radius")
+            sub.prop(rg, "border")
+
+        layout.label(text="Edited materials")
+        layout.prop(s, "all_materials")
+        if not s.all_materials:
+            edited = {item.material for item in s.materials}
+            for slot in mirror.material_slots:
+                if slot.material is None:
+                    continue
+                on = slot.material in edited
+                op = layout.operator("rokeby.material_toggle", text=slot.material.name, icon="CHECKBOX_HLT" if on else "CHECKBOX_DEHLT", depress=on)
+                op.mirror, op.material = mirror.name, slot.material.name
+        layout.operator("rokeby.update", icon="FILE_REFRESH")
+        layout.operator("rokeby.mirror_remove", icon="TRASH")
 
 
-_classes = (ROKEBY_PT_main,)
+_classes = (ROKEBY_UL_constraints, ROKEBY_UL_regions, ROKEBY_PT_main)
 
 
 def register():

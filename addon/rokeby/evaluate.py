@@ -1,0 +1,596 @@
+"""Evaluation of Rokeby mirrors: scene → arrays → rokeby_native → one mesh attribute.
+
+For each mirror the evaluator gathers, as numpy arrays, the evaluated mesh in world space, one
+constraint row [p, r, e] per constraint (p: the red handle projected onto the surface, r: the
+physical reflection of the ray from the constraint's generating eye, e: towards the green handle),
+and the region weights. It then computes the rotation field R(q) (paper eq. 5 and 7) per vertex
+and writes it as the rotation vector (axis × angle) point attribute ``rokeby_rotation`` of the
+mirror's mesh with a single ``foreach_set``.
+
+Dirty tracking: the inputs of a mirror are condensed into a fingerprint (handle positions, view
+eyes, region settings, the mirror's transform and, when Blender reports that its geometry changed
+or the frame changed, its evaluated vertex positions). When the fingerprint is unchanged nothing is
+recomputed; ``stats()`` counts both cases. Geodesic distances are cached per constraint surface
+point, and the geodesic solver (with its factorisation) per mesh, so a handle move costs one solve
+for the handle that moved.
+
+Nothing here raises into Blender's handlers: a mirror that cannot be evaluated gets an ERROR
+report (shown in the sidebar) and keeps its previous attribute values; every other mirror still
+evaluates. Values are checked to be finite before they are written.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from . import native
+
+ATTRIBUTE = "rokeby_rotation"
+REGION_ATTRIBUTE_PREFIX = "rokeby_vg_"
+VG_NODE_GROUP = "Rokeby Vertex Group Reader"
+VG_MODIFIER_PREFIX = "Rokeby region: "
+# A red handle farther than this fraction of the mirror's size from its surface is reported.
+OFF_SURFACE_TOLERANCE = 1e-3
+
+
+class RokebyError(ValueError):
+    """A clear, user-facing problem with a mirror, constraint or region."""
+
+
+@dataclass
+class MirrorReport:
+    """What the last evaluation of one mirror did: shown in the sidebar, returned by the API."""
+
+    mirror: str
+    status: str = "OK"  # OK | WARNING | ERROR | DISABLED
+    messages: list = field(default_factory=list)
+    recomputed: bool = False
+    constraints_used: int = 0
+    vertices: int = 0
+    field_mesh: str = "evaluated"  # evaluated | base
+    python_ms: float = 0.0
+    native_ms: float = 0.0
+
+    def warn(self, text: str):
+        self.messages.append(text)
+        if self.status == "OK":
+            self.status = "WARNING"
+
+    def summary(self) -> str:
+        head = {"OK": "ok", "WARNING": "warning", "ERROR": "error", "DISABLED": "disabled"}[self.status]
+        return f"{self.mirror}: {head}" + (": " + "; ".join(self.messages) if self.messages else "")
+
+
+class _Geometry:
+    """The field mesh of a mirror in world space, with what the projections need."""
+
+    def __init__(self, vertices, normals, triangles, tri_poly, source):
+        self.vertices = vertices
+        self.normals = normals
+        self.triangles = triangles
+        self.tri_poly = tri_poly  # polygon of each loop triangle (sorted), for closest-point lookups
+        self.source = source  # "evaluated" or "base"
+        self.size = float(np.linalg.norm(vertices.max(0) - vertices.min(0))) if len(vertices) else 0.0
+        self.region_weights: dict[str, np.ndarray] = {}
+        self.bvh = None
+
+    def same_positions(self, other: "_Geometry | None") -> bool:
+        return (
+            other is not None
+            and other.source == self.source
+            and other.vertices.shape == self.vertices.shape
+            and other.triangles.shape == self.triangles.shape
+            and np.array_equal(other.vertices, self.vertices)
+            and np.array_equal(other.triangles, self.triangles)
+            and other.region_weights.keys() == self.region_weights.keys()
+            and all(np.array_equal(other.region_weights[k], v) for k, v in self.region_weights.items())
+        )
+
+
+class _State:
+    """Runtime state of one mirror (not saved: rebuilt after a reload)."""
+
+    def __init__(self):
+        self.fingerprint: bytes | None = None
+        self.geometry: _Geometry | None = None
+        self.geometry_version = 0
+        self.distance_cache: dict = {}
+        self.report: MirrorReport | None = None
+        self.rotations: np.ndarray | None = None
+
+
+_STATE: dict[int, _State] = {}
+_DIRTY: set[int] = set()
+_STATS = {"checks": 0, "recomputations": 0, "skipped": 0, "errors": 0}
+
+
+def stats() -> dict:
+    """Counters since the last reset: checks (mirror evaluations asked for), recomputations
+    (fields actually computed and written), skipped (nothing had changed), errors."""
+    return dict(_STATS)
+
+
+def reset_stats():
+    for k in _STATS:
+        _STATS[k] = 0
+
+
+def reset():
+    """Forget all runtime state (after loading a file); the next update recomputes everything."""
+    _STATE.clear()
+    _DIRTY.clear()
+
+
+def mark_dirty(obj):
+    """Ask for a re-read of this mirror's geometry at the next update (property callbacks)."""
+    try:
+        _DIRTY.add(obj.session_uid)
+    except (AttributeError, ReferenceError):
+        pass
+
+
+def report_of(obj) -> MirrorReport | None:
+    st = _STATE.get(obj.session_uid)
+    return st.report if st else None
+
+
+def rotations_of(obj) -> np.ndarray | None:
+    """The last computed field of a mirror as (V, 4) quaternions (x, y, z, w)."""
+    st = _STATE.get(obj.session_uid)
+    return st.rotations if st else None
+
+
+class _NativeTimer:
+    def __init__(self):
+        self.seconds = 0.0
+
+    def __call__(self, fn, *args, **kwargs):
+        t0 = time.perf_counter()
+        try:
+            return fn(*args, **kwargs)
+        finally:
+            self.seconds += time.perf_counter() - t0
+
+
+# --- reading the scene ---------------------------------------------------------------------------
+
+
+def _finite_matrix(m, what: str) -> np.ndarray:
+    a = np.array(m, dtype=np.float64)
+    if not np.all(np.isfinite(a)):
+        raise RokebyError(f"{what} has a non-finite transform (NaN or inf)")
+    return a
+
+
+def object_in_scene(obj, scene) -> bool:
+    if obj is None:
+        return False
+    try:
+        return scene.objects.get(obj.name) == obj
+    except ReferenceError:
+        return False
+
+
+def read_geometry(obj, depsgraph, mirror_matrix: np.ndarray, freeform_groups=()) -> _Geometry:
+    """The mirror's mesh in world space: the evaluated mesh (modifiers, shape keys, armatures) when
+    it has as many vertices as the object's own mesh, which carries the attribute; otherwise the
+    base mesh (a modifier such as Subdivision changes the vertex count and then interpolates the
+    attribute itself)."""
+    ob_eval = obj.evaluated_get(depsgraph)
+    me = ob_eval.data
+    source = "evaluated"
+    if len(me.vertices) != len(obj.data.vertices):
+        me = obj.data
+        source = "base"
+    nv = len(me.vertices)
+    if nv == 0 or len(me.polygons) == 0:
+        raise RokebyError(f"mirror '{obj.name}' has no faces")
+    co = np.empty(nv * 3, dtype=np.float32)
+    me.vertices.foreach_get("co", co)
+    nrm = np.empty(nv * 3, dtype=np.float32)
+    me.vertex_normals.foreach_get("vector", nrm)
+    nt = len(me.loop_triangles)
+    if nt == 0:
+        me.calc_loop_triangles()
+        nt = len(me.loop_triangles)
+    tri = np.empty(nt * 3, dtype=np.int32)
+    me.loop_triangles.foreach_get("vertices", tri)
+    tri_poly = np.empty(nt, dtype=np.int32)
+    me.loop_triangle_polygons.foreach_get("value", tri_poly)
+    m = mirror_matrix
+    lin = m[:3, :3]
+    if abs(np.linalg.det(lin)) < 1e-30:
+        raise RokebyError(f"mirror '{obj.name}' has a singular transform (zero scale)")
+    v = co.reshape(-1, 3).astype(np.float64) @ lin.T + m[:3, 3]
+    n = nrm.reshape(-1, 3).astype(np.float64) @ np.linalg.inv(lin)
+    n /= np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-30)
+    if not (np.all(np.isfinite(v)) and np.all(np.isfinite(n))):
+        raise RokebyError(f"mirror '{obj.name}' has non-finite vertex positions")
+    geo = _Geometry(v.astype(np.float32), n.astype(np.float32), tri.reshape(-1, 3), tri_poly, source)
+    for group in freeform_groups:
+        geo.region_weights[group] = _vertex_group_weights(obj, me, group, source)
+    return geo
+
+
+def _vertex_group_weights(obj, me, group: str, source: str) -> np.ndarray:
+    """Per-vertex weights of a vertex group, read without a Python loop: the reader modifier
+    (a Geometry Nodes 'Store Named Attribute') copies the group into a float point attribute of
+    the evaluated mesh."""
+    if obj.vertex_groups.get(group) is None:
+        raise RokebyError(f"free-form region: mirror '{obj.name}' has no vertex group '{group}'")
+    if source != "evaluated":
+        raise RokebyError(f"free-form region '{group}': the mirror's modifiers change its vertex count; apply them or use a geodesic region")
+    attr = me.attributes.get(REGION_ATTRIBUTE_PREFIX + group)
+    if attr is None or attr.domain != "POINT" or attr.data_type != "FLOAT":
+        raise RokebyError(f"free-form region '{group}': its reader modifier '{VG_MODIFIER_PREFIX}{group}' is missing or disabled")
+    w = np.empty(len(me.vertices), dtype=np.float32)
+    attr.data.foreach_get("value", w)
+    return np.clip(np.nan_to_num(w, nan=0.0), 0.0, 1.0)
+
+
+def _bvh(geo: _Geometry):
+    if geo.bvh is None:
+        from mathutils.bvhtree import BVHTree  # noqa: PLC0415
+
+        geo.bvh = BVHTree.FromPolygons(geo.vertices.tolist(), geo.triangles.tolist(), all_triangles=True)
+    return geo.bvh
+
+
+def _barycentric(p, a, b, c) -> np.ndarray:
+    v0, v1, v2 = b - a, c - a, p - a
+    d00, d01, d11 = v0 @ v0, v0 @ v1, v1 @ v1
+    d20, d21 = v2 @ v0, v2 @ v1
+    den = d00 * d11 - d01 * d01
+    if abs(den) < 1e-300:
+        return np.array([1.0, 0.0, 0.0])
+    v = (d11 * d20 - d01 * d21) / den
+    w = (d00 * d21 - d01 * d20) / den
+    bary = np.clip(np.array([1.0 - v - w, v, w]), 0.0, 1.0)
+    return bary / bary.sum()
+
+
+@dataclass
+class SurfacePoint:
+    point: np.ndarray  # world position on the surface
+    normal: np.ndarray  # smooth (interpolated) unit normal there
+    triangle: int
+    bary: np.ndarray
+    offset: float  # distance of the queried point from the surface
+
+
+def project_to_surface(obj, depsgraph, geo: _Geometry, world_point, mirror_matrix) -> SurfacePoint:
+    """The surface point of the mirror nearest ``world_point``: triangle, barycentric coordinates
+    and the interpolated vertex normal (the normal the renderers shade with)."""
+    x = np.asarray(world_point, dtype=np.float64)
+    if geo.source == "evaluated":
+        ob_eval = obj.evaluated_get(depsgraph)
+        inv = np.linalg.inv(mirror_matrix)
+        local = inv[:3, :3] @ x + inv[:3, 3]
+        ok, _loc, _n, poly = ob_eval.closest_point_on_mesh(local.tolist())
+        if not ok:
+            raise RokebyError(f"mirror '{obj.name}': no surface point found")
+        lo = int(np.searchsorted(geo.tri_poly, poly, side="left"))
+        hi = int(np.searchsorted(geo.tri_poly, poly, side="right"))
+        candidates = range(lo, max(hi, lo + 1))
+    else:
+        loc, _n, tri_index, _d = _bvh(geo).find_nearest(x.tolist())
+        if tri_index is None:
+            raise RokebyError(f"mirror '{obj.name}': no surface point found")
+        candidates = [tri_index]
+    best = None
+    for t in candidates:
+        ia, ib, ic = geo.triangles[t]
+        a, b, c = (geo.vertices[i].astype(np.float64) for i in (ia, ib, ic))
+        bary = _barycentric(x, a, b, c)
+        p = bary[0] * a + bary[1] * b + bary[2] * c
+        d = float(np.linalg.norm(p - x))
+        if best is None or d < best[0]:
+            best = (d, t, bary, p)
+    d, t, bary, p = best
+    n = bary @ geo.normals[geo.triangles[t]].astype(np.float64)
+    nn = np.linalg.norm(n)
+    if not nn > 1e-20:  # opposite normals cancel (a sliver fold): use the face normal
+        ia, ib, ic = geo.triangles[t]
+        n = np.cross(geo.vertices[ib] - geo.vertices[ia], geo.vertices[ic] - geo.vertices[ia]).astype(np.float64)
+        nn = max(np.linalg.norm(n), 1e-300)
+    return SurfacePoint(p, n / nn, int(t), bary, d)
+
+
+def reflect(incident, normal):
+    return incident - 2.0 * (incident @ normal) * normal
+
+
+# --- one mirror ----------------------------------------------------------------------------------
+
+
+def _constraint_inputs(obj, scene, depsgraph, geo, mirror_matrix, report):
+    """Constraint rows [p, r, e] and their surface points; bad constraints are reported and skipped."""
+    rows, points = [], []
+    for k, c in enumerate(obj.rokeby.constraints):
+        label = f"constraint {k + 1} ('{c.name}')" if c.name else f"constraint {k + 1}"
+        if not c.enabled:
+            continue
+        try:
+            red, green = c.surface_handle, c.target_handle
+            if not object_in_scene(red, scene):
+                raise RokebyError(f"{label}: its red (surface) handle was deleted")
+            if not object_in_scene(green, scene):
+                raise RokebyError(f"{label}: its green (reflected) handle was deleted")
+            red_m = _finite_matrix(red.evaluated_get(depsgraph).matrix_world, f"{label}: red handle '{red.name}'")
+            green_m = _finite_matrix(green.evaluated_get(depsgraph).matrix_world, f"{label}: green handle '{green.name}'")
+            eye = np.array(c.eye, dtype=np.float64)
+            if not np.all(np.isfinite(eye)):
+                raise RokebyError(f"{label}: its generating eye is not finite")
+            sp = project_to_surface(obj, depsgraph, geo, red_m[:3, 3], mirror_matrix)
+            if sp.offset > OFF_SURFACE_TOLERANCE * max(geo.size, 1e-12):
+                parent = red.parent
+                why = f" (it is parented to '{parent.name}')" if parent is not None and parent != obj else ""
+                report.warn(f"{label}: red handle '{red.name}' is {sp.offset:.3g} off the surface{why}; the nearest surface point is used")
+            view = sp.point - eye
+            if not np.linalg.norm(view) > 1e-12 * max(geo.size, 1e-30):
+                raise RokebyError(f"{label}: the generating eye lies on the surface point")
+            r = reflect(view / np.linalg.norm(view), sp.normal)
+            to_green = green_m[:3, 3] - sp.point
+            if not np.linalg.norm(to_green) > 1e-9 * max(geo.size, 1e-30):
+                raise RokebyError(f"{label}: the green handle sits on the surface point, so it gives no direction")
+            e = to_green / np.linalg.norm(to_green)
+            rows.append(np.concatenate([sp.point, r / np.linalg.norm(r), e]))
+            points.append(sp)
+        except RokebyError as exc:
+            report.warn(str(exc))
+    return (np.array(rows, dtype=np.float32).reshape(-1, 9), points)
+
+
+def _region_inputs(obj, scene, depsgraph, geo, mirror_matrix, report):
+    """Region specs as plain tuples (for the fingerprint) — the weights are made later."""
+    specs = []
+    for k, rg in enumerate(obj.rokeby.regions):
+        label = f"region {k + 1} ('{rg.name}')" if rg.name else f"region {k + 1}"
+        if not rg.enabled:
+            continue
+        try:
+            radius, border = float(rg.radius), float(rg.border)
+            if not (np.isfinite(radius) and np.isfinite(border) and radius >= 0 and border >= 0):
+                raise RokebyError(f"{label}: radius and border must be finite and >= 0")
+            if rg.kind == "FREEFORM":
+                if not rg.vertex_group:
+                    raise RokebyError(f"{label}: no vertex group chosen")
+                if rg.vertex_group not in geo.region_weights:
+                    raise RokebyError(f"{label}: vertex group '{rg.vertex_group}' could not be read")
+                specs.append(("FREEFORM", rg.vertex_group, border))
+                continue
+            if not object_in_scene(rg.center, scene):
+                raise RokebyError(f"{label}: its centre empty was deleted")
+            cm = _finite_matrix(rg.center.evaluated_get(depsgraph).matrix_world, f"{label}: centre '{rg.center.name}'")
+            if rg.kind == "EUCLIDEAN":
+                specs.append(("EUCLIDEAN", tuple(cm[:3, 3]), radius, border))
+            else:
+                sp = project_to_surface(obj, depsgraph, geo, cm[:3, 3], mirror_matrix)
+                specs.append(("GEODESIC", sp.triangle, tuple(sp.bary), radius, border))
+        except RokebyError as exc:
+            report.warn(str(exc))
+    return specs
+
+
+def _fingerprint(obj, geo_version, mirror_matrix, rows, regions) -> bytes:
+    s = obj.rokeby
+    h = hashlib.blake2b(digest_size=20)
+    h.update(repr((s.enabled, s.metric, s.geodesic_method, s.polar, geo_version, regions)).encode())
+    h.update(np.ascontiguousarray(mirror_matrix).tobytes())
+    h.update(np.ascontiguousarray(rows).tobytes())
+    return h.digest()
+
+
+def _solver(state: _State, geo: _Geometry, timer):
+    from . import api  # noqa: PLC0415 - the solver cache lives in the API
+
+    return timer(api.geodesic_solver, geo.vertices, geo.triangles)
+
+
+def _geodesic_distances(state: _State, geo: _Geometry, points, method: str, timer) -> np.ndarray:
+    """(K, V) distances from each constraint's surface point, cached per point: only a moved
+    handle costs a solve."""
+    solver = _solver(state, geo, timer)
+    out = np.empty((len(points), len(geo.vertices)), dtype=np.float32)
+    missing = []
+    for k, sp in enumerate(points):
+        key = (method, sp.triangle, sp.bary.tobytes())
+        d = state.distance_cache.get(key)
+        if d is None:
+            missing.append((k, key, sp))
+        else:
+            out[k] = d
+    if missing:
+        sources = [(sp.triangle, tuple(float(b) for b in sp.bary)) for _, _, sp in missing]
+        solved = timer(solver.distances, sources, method=method)
+        for (k, key, _), d in zip(missing, solved):
+            out[k] = d
+            state.distance_cache[key] = d
+    # Bound the cache: keep what the current constraints use.
+    used = {(method, sp.triangle, sp.bary.tobytes()) for sp in points}
+    if len(state.distance_cache) > 4 * max(len(points), 8):
+        state.distance_cache = {k: v for k, v in state.distance_cache.items() if k in used}
+    return out
+
+
+def _regions_for_native(state, geo, specs, points, method, timer):
+    regions = []
+    face_index = np.array([sp.triangle for sp in points], dtype=np.int64)
+    bary = np.array([sp.bary for sp in points], dtype=np.float64).reshape(-1, 3)
+
+    def at_constraints(values):
+        if len(points) == 0:
+            return np.zeros(0, dtype=np.float32)
+        return timer(native.module().interpolate, values, geo.triangles, face_index, bary)[0]
+
+    for spec in specs:
+        if spec[0] == "EUCLIDEAN":
+            _, centre, radius, border = spec
+            regions.append({"kind": "euclidean", "center": list(centre), "radius": radius, "border": border})
+            continue
+        solver = _solver(state, geo, timer)
+        if spec[0] == "GEODESIC":
+            _, tri, b, radius, border = spec
+            values = timer(solver.geodesic_region, (tri, b), radius, border, method)
+        else:
+            _, group, border = spec
+            values = timer(solver.freeform_region, geo.region_weights[group], border, method)
+        regions.append({"kind": "weights", "values": values, "at_constraints": at_constraints(values)})
+    return regions
+
+
+def rotation_vectors(quats: np.ndarray) -> np.ndarray:
+    """(N, 4) unit quaternions (x, y, z, w), w >= 0 → (N, 3) rotation vectors axis × angle."""
+    q = np.asarray(quats, dtype=np.float64)
+    u, w = q[:, :3], np.clip(q[:, 3], -1.0, 1.0)
+    s = np.linalg.norm(u, axis=1)
+    angle = 2.0 * np.arctan2(s, w)
+    scale = np.where(s > 1e-12, angle / np.maximum(s, 1e-300), 2.0 / np.maximum(w, 1e-300))
+    return (u * scale[:, None]).astype(np.float32)
+
+
+def write_attribute(obj, values: np.ndarray):
+    """Write (V, 3) rotation vectors to the mirror mesh's point attribute in one foreach_set."""
+    me = obj.data
+    if me.library is not None or not getattr(me, "is_editable", True):
+        where = f" from library '{me.library.filepath}'" if me.library is not None else ""
+        raise RokebyError(f"mesh '{me.name}' is linked{where} and cannot store the field: make it local or a library override")
+    if not np.all(np.isfinite(values)):
+        raise RokebyError("the computed field is not finite (not written)")
+    if len(values) != len(me.vertices):
+        raise RokebyError(f"field has {len(values)} values, mesh '{me.name}' has {len(me.vertices)} vertices")
+    attr = me.attributes.get(ATTRIBUTE)
+    if attr is not None and (attr.domain != "POINT" or attr.data_type != "FLOAT_VECTOR"):
+        me.attributes.remove(attr)
+        attr = None
+    if attr is None:
+        attr = me.attributes.new(ATTRIBUTE, "FLOAT_VECTOR", "POINT")
+    attr.data.foreach_set("vector", np.ascontiguousarray(values, dtype=np.float32).ravel())
+    me.update()
+
+
+def read_attribute(obj) -> np.ndarray | None:
+    """The stored rotation vectors (V, 3) of a mirror, or None."""
+    me = obj.data
+    attr = me.attributes.get(ATTRIBUTE) if me is not None else None
+    if attr is None:
+        return None
+    out = np.empty(len(me.vertices) * 3, dtype=np.float32)
+    attr.data.foreach_get("vector", out)
+    return out.reshape(-1, 3)
+
+
+def evaluate_mirror(obj, scene, depsgraph, *, force=False, reread_geometry=False) -> MirrorReport:
+    """Evaluate one mirror if its inputs changed (or ``force``); never raises."""
+    t0 = time.perf_counter()
+    timer = _NativeTimer()
+    _STATS["checks"] += 1
+    name = getattr(obj, "name", "?")
+    report = MirrorReport(name)
+    uid = obj.session_uid
+    state = _STATE.setdefault(uid, _State())
+    try:
+        if obj.type != "MESH":
+            raise RokebyError(f"mirror '{name}' is a {obj.type.lower()}, not a mesh")
+        settings = obj.rokeby
+        if obj.mode == "EDIT":
+            # Edit Mode writes its own mesh back on exit; the field follows when it does.
+            report.warn("paused while the mirror is in Edit Mode")
+            _DIRTY.add(uid)
+            state.report = report
+            return report
+        mirror_matrix = _finite_matrix(obj.evaluated_get(depsgraph).matrix_world, f"mirror '{name}'")
+        groups = sorted({rg.vertex_group for rg in settings.regions if rg.enabled and rg.kind == "FREEFORM" and rg.vertex_group})
+        geo = state.geometry
+        if geo is None or reread_geometry or force or uid in _DIRTY or not np.array_equal(getattr(geo, "matrix", None), mirror_matrix):
+            _DIRTY.discard(uid)
+            try:
+                new = read_geometry(obj, depsgraph, mirror_matrix, groups)
+            except RokebyError:
+                state.geometry = None
+                raise
+            new.matrix = mirror_matrix
+            if not new.same_positions(geo):
+                state.geometry_version += 1
+                state.distance_cache.clear()
+            else:
+                new.bvh = geo.bvh
+            state.geometry = geo = new
+        report.vertices = len(geo.vertices)
+        report.field_mesh = geo.source
+        if geo.source == "base":
+            report.warn("the modifiers change the vertex count: the field is computed on the base mesh and interpolated by the modifiers")
+        if not settings.enabled:
+            rows, points, specs = np.zeros((0, 9), np.float32), [], []
+        else:
+            rows, points = _constraint_inputs(obj, scene, depsgraph, geo, mirror_matrix, report)
+            specs = _region_inputs(obj, scene, depsgraph, geo, mirror_matrix, report)
+        fp = _fingerprint(obj, state.geometry_version, mirror_matrix, rows, specs)
+        if fp == state.fingerprint and not force and state.report is not None and state.report.status != "ERROR":
+            _STATS["skipped"] += 1
+            kept = state.report
+            kept.recomputed = False
+            return kept
+        report.constraints_used = len(rows)
+        method = "heat" if settings.geodesic_method == "HEAT" else "dijkstra"
+        polar = "exact" if settings.polar == "EXACT" else "fast"
+        kwargs = {"polar": polar}
+        if len(rows) and settings.metric == "GEODESIC":
+            kwargs["distances"] = _geodesic_distances(state, geo, points, method, timer)
+            if np.all(np.isinf(kwargs["distances"])):
+                report.warn("no constraint reaches this mesh over its surface")
+        if specs:
+            kwargs["regions"] = _regions_for_native(state, geo, specs, points, method, timer)
+        q = timer(native.rotation_field, geo.vertices, rows, **kwargs)
+        rv = rotation_vectors(q)
+        write_attribute(obj, rv)
+        state.rotations = q
+        state.fingerprint = fp
+        report.recomputed = True
+        if not settings.enabled:
+            report.status = "DISABLED"
+        _STATS["recomputations"] += 1
+    except RokebyError as exc:
+        report.status = "ERROR"
+        report.messages.append(str(exc))
+        state.fingerprint = None
+        _STATS["errors"] += 1
+    except native.NativeUnavailable as exc:
+        report.status = "ERROR"
+        report.messages.append(str(exc))
+        _STATS["errors"] += 1
+    except (ValueError, TypeError, RuntimeError, ReferenceError) as exc:
+        report.status = "ERROR"
+        report.messages.append(f"{type(exc).__name__}: {exc}")
+        state.fingerprint = None
+        _STATS["errors"] += 1
+    report.native_ms = timer.seconds * 1e3
+    report.python_ms = (time.perf_counter() - t0) * 1e3 - report.native_ms
+    state.report = report
+    return report
+
+
+def mirrors_of(scene) -> list:
+    return [ob for ob in scene.objects if ob.rokeby.is_mirror]
+
+
+def evaluate_scene(scene, depsgraph, *, force=False, geometry_changed=None, all_geometry=False) -> dict:
+    """Evaluate every mirror of ``scene``; ``geometry_changed``: original IDs Blender reported
+    with new geometry (their meshes are re-read), ``all_geometry``: re-read every mirror's mesh
+    (a frame change can deform any of them)."""
+    out = {}
+    changed = geometry_changed or set()
+    for ob in mirrors_of(scene):
+        reread = all_geometry or ob in changed or (ob.type == "MESH" and ob.data in changed)
+        out[ob.name] = evaluate_mirror(ob, scene, depsgraph, force=force, reread_geometry=reread)
+    # Forget objects that no longer exist.
+    import bpy  # noqa: PLC0415
+
+    live = {ob.session_uid for ob in bpy.data.objects}
+    for uid in [u for u in _STATE if u not in live]:
+        del _STATE[uid]
+    return out

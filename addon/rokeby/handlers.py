@@ -1,0 +1,104 @@
+"""Live updates: Blender's depsgraph and frame-change handlers keep every mirror's field current.
+
+- ``depsgraph_update_post``: after any edit (a handle dragged, a property changed, a mesh edited);
+  meshes are re-read only for objects Blender reports with new geometry.
+- ``frame_change_post``: on every frame change (playback, scrubbing, final renders); every mirror's
+  mesh is re-read because animation can deform it.
+- ``load_post`` / ``undo_post`` / ``redo_post``: runtime state is rebuilt from the file's data.
+
+The evaluator's dirty tracking decides what to recompute. A re-entrance guard makes the handlers
+ignore the updates that writing the field itself causes while it runs; ``suspended()`` lets the
+API drive evaluation itself (for example around ``frame_set``).
+"""
+
+from __future__ import annotations
+
+import contextlib
+
+import bpy
+from bpy.app.handlers import persistent
+
+from . import evaluate
+
+_busy = False
+_suspend = 0
+
+
+@contextlib.contextmanager
+def suspended():
+    global _suspend
+    _suspend += 1
+    try:
+        yield
+    finally:
+        _suspend -= 1
+
+
+def _run(scene, depsgraph, **kwargs):
+    global _busy
+    if _busy or _suspend or scene is None:
+        return
+    _busy = True
+    try:
+        reports = evaluate.evaluate_scene(scene, depsgraph, **kwargs)
+        if any(r.recomputed for r in reports.values()):
+            _redraw()
+    except Exception as exc:  # noqa: BLE001 - a handler must never take Blender down
+        print(f"Rokeby: update failed: {type(exc).__name__}: {exc}")
+    finally:
+        _busy = False
+
+
+def _redraw():
+    wm = getattr(bpy.context, "window_manager", None)
+    if wm is None:
+        return
+    for window in wm.windows:
+        for area in window.screen.areas:
+            if area.type == "VIEW_3D":
+                area.tag_redraw()
+
+
+@persistent
+def on_depsgraph_update(scene, depsgraph):
+    if _busy or _suspend:
+        return
+    changed = set()
+    for update in depsgraph.updates:
+        if update.is_updated_geometry:
+            changed.add(update.id.original)
+    _run(scene, depsgraph, geometry_changed=changed)
+
+
+@persistent
+def on_frame_change(scene, depsgraph):
+    _run(scene, depsgraph, all_geometry=True)
+
+
+@persistent
+def on_reset(*_args):
+    evaluate.reset()
+
+
+_HANDLERS = (
+    ("depsgraph_update_post", on_depsgraph_update),
+    ("frame_change_post", on_frame_change),
+    ("load_post", on_reset),
+    ("undo_post", on_reset),
+    ("redo_post", on_reset),
+)
+
+
+def register():
+    for name, fn in _HANDLERS:
+        lst = getattr(bpy.app.handlers, name)
+        if fn not in lst:
+            lst.append(fn)
+
+
+def unregister():
+    for name, fn in _HANDLERS:
+        lst = getattr(bpy.app.handlers, name)
+        while fn in lst:
+            lst.remove(fn)
+    evaluate.reset()

@@ -1,0 +1,400 @@
+"""Operators: thin, undoable wrappers of ``rokeby.api``. No ``gpu`` use here.
+
+Every operator reports problems in Blender's status bar/info log (``self.report``) and cancels
+without changing the scene when the API refuses (the API validates before it creates anything).
+"""
+
+from __future__ import annotations
+
+import bpy
+import numpy as np
+from bpy.props import BoolProperty, EnumProperty, FloatProperty, FloatVectorProperty, IntProperty, StringProperty
+
+from . import api
+from .evaluate import RokebyError
+from .props import REGION_KINDS
+
+UNDO = {"REGISTER", "UNDO"}
+
+
+def _mirror(context, name: str = ""):
+    if name:
+        ob = bpy.data.objects.get(name)
+        if ob is None:
+            raise RokebyError(f"mirror: no object named '{name}'")
+        return ob
+    ob = context.active_object
+    if ob is None:
+        raise RokebyError("no active object: select a mirror")
+    if not ob.rokeby.is_mirror:
+        # A selected handle also selects its mirror.
+        for m in context.scene.objects:
+            if m.rokeby.is_mirror and any(ob in (c.surface_handle, c.target_handle) for c in m.rokeby.constraints):
+                return m
+    return ob
+
+
+class _Op:
+    def fail(self, exc):
+        self.report({"ERROR"}, str(exc))
+        return {"CANCELLED"}
+
+
+class ROKEBY_OT_mirror_add(_Op, bpy.types.Operator):
+    """Make the active mesh a Rokeby mirror whose reflections can be edited"""
+
+    bl_idname = "rokeby.mirror_add"
+    bl_label = "Add Mirror"
+    bl_options = UNDO
+
+    mirror: StringProperty(name="Mirror", description="Object name (default: the active object)")
+
+    def execute(self, context):
+        try:
+            api.add_mirror(_mirror(context, self.mirror))
+        except RokebyError as exc:
+            return self.fail(exc)
+        return {"FINISHED"}
+
+
+class ROKEBY_OT_mirror_remove(_Op, bpy.types.Operator):
+    """Stop editing this mirror: remove its constraints, regions, handles and field"""
+
+    bl_idname = "rokeby.mirror_remove"
+    bl_label = "Remove Mirror"
+    bl_options = UNDO
+
+    mirror: StringProperty(name="Mirror")
+
+    def execute(self, context):
+        try:
+            api.remove_mirror(_mirror(context, self.mirror), scene=context.scene)
+        except RokebyError as exc:
+            return self.fail(exc)
+        return {"FINISHED"}
+
+
+def _view_of(context):
+    """Eye and view dict of the 3D view the operator runs in (None outside a 3D view)."""
+    rv3d = getattr(context, "region_data", None)
+    if rv3d is None or not hasattr(rv3d, "view_matrix"):
+        return None, None
+    inv = rv3d.view_matrix.inverted()
+    eye = np.array(inv.translation)
+    if not rv3d.is_perspective:
+        # An orthographic view has no eye point: use a point far back along the view direction.
+        eye = np.array(rv3d.view_location) + np.array(inv.to_3x3().col[2]) * max(rv3d.view_distance, 1.0) * 10.0
+    view = {
+        "location": tuple(rv3d.view_location),
+        "rotation": tuple(rv3d.view_rotation),
+        "distance": float(rv3d.view_distance),
+        "perspective": "PERSP" if rv3d.is_perspective else "ORTHO",
+    }
+    return eye, view
+
+
+class ROKEBY_OT_constraint_add(_Op, bpy.types.Operator):
+    """Click on a mirror: the red handle goes where you click, the green handle where the reflected ray lands, so nothing changes until you move one"""
+
+    bl_idname = "rokeby.constraint_add"
+    bl_label = "Add Reflection Constraint"
+    bl_options = UNDO
+
+    mirror: StringProperty(name="Mirror", description="Object name (default: the mirror under the click, or the active one)")
+    surface_point: FloatVectorProperty(name="Surface point", size=3, subtype="TRANSLATION")
+    eye: FloatVectorProperty(name="Eye", size=3, subtype="TRANSLATION", description="Generating eye (default: the view's, else the scene camera)")
+    use_eye: BoolProperty(name="Use eye", default=False, options={"HIDDEN"})
+    reflected_point: FloatVectorProperty(name="Reflected point", size=3, subtype="TRANSLATION")
+    use_reflected_point: BoolProperty(name="Set reflected point", default=False, description="Place the green handle here instead of on the physical reflection")
+
+    def execute(self, context):
+        try:
+            mirror = _mirror(context, self.mirror)
+            eye, view = _view_of(context)
+            if self.use_eye:
+                eye, view = np.array(self.eye), None
+            api.add_constraint(
+                mirror,
+                tuple(self.surface_point),
+                tuple(self.reflected_point) if self.use_reflected_point else None,
+                eye=None if eye is None else tuple(eye),
+                view=view,
+                scene=context.scene,
+            )
+        except RokebyError as exc:
+            return self.fail(exc)
+        return {"FINISHED"}
+
+    def invoke(self, context, event):
+        if context.area is None or context.area.type != "VIEW_3D":
+            return self.execute(context)
+        context.window_manager.modal_handler_add(self)
+        context.area.header_text_set("Rokeby: click on a mirror to add a constraint (Esc/right-click: cancel)")
+        return {"RUNNING_MODAL"}
+
+    def modal(self, context, event):
+        if event.type in {"ESC", "RIGHTMOUSE"}:
+            context.area.header_text_set(None)
+            return {"CANCELLED"}
+        if event.type == "LEFTMOUSE" and event.value == "PRESS":
+            context.area.header_text_set(None)
+            region, rv3d = context.region, context.region_data
+            if region is None or rv3d is None or region.type != "WINDOW":
+                return {"CANCELLED"}
+            from bpy_extras import view3d_utils  # noqa: PLC0415
+
+            coord = (event.mouse_region_x, event.mouse_region_y)
+            origin = view3d_utils.region_2d_to_origin_3d(region, rv3d, coord)
+            direction = view3d_utils.region_2d_to_vector_3d(region, rv3d, coord)
+            dg = context.evaluated_depsgraph_get()
+            hit, loc, _n, _i, ob, _m = context.scene.ray_cast(dg, origin, direction)
+            if not hit:
+                self.report({"WARNING"}, "Rokeby: the click hit nothing; click on a mirror")
+                return {"CANCELLED"}
+            ob = ob.original
+            if not ob.rokeby.is_mirror:
+                self.report({"WARNING"}, f"Rokeby: '{ob.name}' is not a mirror (Add Mirror first)")
+                return {"CANCELLED"}
+            self.mirror = ob.name
+            self.surface_point = loc
+            return self.execute(context)
+        return {"RUNNING_MODAL"}
+
+
+class ROKEBY_OT_constraint_remove(_Op, bpy.types.Operator):
+    """Remove the constraint and its handles"""
+
+    bl_idname = "rokeby.constraint_remove"
+    bl_label = "Remove Constraint"
+    bl_options = UNDO
+
+    mirror: StringProperty(name="Mirror")
+    index: IntProperty(name="Index", default=-1, description="Constraint index (default: the active one)")
+
+    def execute(self, context):
+        try:
+            m = _mirror(context, self.mirror)
+            api.remove_constraint(m, self.index if self.index >= 0 else m.rokeby.active_constraint, scene=context.scene)
+        except RokebyError as exc:
+            return self.fail(exc)
+        return {"FINISHED"}
+
+
+class ROKEBY_OT_constraint_select(_Op, bpy.types.Operator):
+    """Select the constraint's handles (the green one active, ready to move)"""
+
+    bl_idname = "rokeby.constraint_select"
+    bl_label = "Select Handles"
+    bl_options = UNDO
+
+    mirror: StringProperty(name="Mirror")
+    index: IntProperty(name="Index", default=-1)
+
+    def execute(self, context):
+        try:
+            m = _mirror(context, self.mirror)
+            s = m.rokeby
+            i = api._index(s.constraints, self.index if self.index >= 0 else s.active_constraint, "constraint")
+            c = s.constraints[i]
+            handles = [h for h in (c.surface_handle, c.target_handle) if h is not None and context.view_layer.objects.get(h.name) == h]
+            if not handles:
+                raise RokebyError("the constraint's handles were deleted")
+            for ob in context.view_layer.objects:
+                ob.select_set(False)
+            for h in handles:
+                h.select_set(True)
+            context.view_layer.objects.active = handles[-1]
+            s.active_constraint = i
+        except RokebyError as exc:
+            return self.fail(exc)
+        return {"FINISHED"}
+
+
+class ROKEBY_OT_region_add(_Op, bpy.types.Operator):
+    """Add a region of interest: only constraints inside it act there, with a smooth border"""
+
+    bl_idname = "rokeby.region_add"
+    bl_label = "Add Region"
+    bl_options = UNDO
+
+    mirror: StringProperty(name="Mirror")
+    kind: EnumProperty(name="Kind", items=REGION_KINDS, default="EUCLIDEAN")
+    radius: FloatProperty(name="Radius", default=1.0, min=0.0, subtype="DISTANCE")
+    border: FloatProperty(name="Border", default=0.25, min=0.0, subtype="DISTANCE")
+    vertex_group: StringProperty(name="Vertex group", description="Free-form: the painted vertex group (default: the active one)")
+    center: FloatVectorProperty(name="Centre", size=3, subtype="TRANSLATION")
+    use_center: BoolProperty(name="Use centre", default=False, description="Centre here (default: the 3D cursor)")
+
+    def execute(self, context):
+        try:
+            m = _mirror(context, self.mirror)
+            group = self.vertex_group
+            if self.kind == "FREEFORM" and not group and m.vertex_groups.active is not None:
+                group = m.vertex_groups.active.name
+            centre = tuple(self.center) if self.use_center else tuple(context.scene.cursor.location)
+            api.add_region(m, self.kind, center=centre, radius=self.radius, border=self.border, vertex_group=group, scene=context.scene)
+        except RokebyError as exc:
+            return self.fail(exc)
+        return {"FINISHED"}
+
+
+class ROKEBY_OT_region_remove(_Op, bpy.types.Operator):
+    """Remove the region (and its centre empty)"""
+
+    bl_idname = "rokeby.region_remove"
+    bl_label = "Remove Region"
+    bl_options = UNDO
+
+    mirror: StringProperty(name="Mirror")
+    index: IntProperty(name="Index", default=-1)
+
+    def execute(self, context):
+        try:
+            m = _mirror(context, self.mirror)
+            api.remove_region(m, self.index if self.index >= 0 else m.rokeby.active_region, scene=context.scene)
+        except RokebyError as exc:
+            return self.fail(exc)
+        return {"FINISHED"}
+
+
+class ROKEBY_OT_return_to_view(_Op, bpy.types.Operator):
+    """Jump the 3D view back to the view the active constraint was made from"""
+
+    bl_idname = "rokeby.return_to_view"
+    bl_label = "Return to View"
+    bl_options = {"REGISTER"}
+
+    mirror: StringProperty(name="Mirror")
+    index: IntProperty(name="Index", default=-1)
+
+    @classmethod
+    def poll(cls, context):
+        return getattr(context, "region_data", None) is not None and hasattr(context.region_data, "view_rotation")
+
+    def execute(self, context):
+        try:
+            m = _mirror(context, self.mirror)
+            v = api.constraint_view(m, self.index if self.index >= 0 else None)
+        except RokebyError as exc:
+            return self.fail(exc)
+        rv3d = context.region_data
+        rv3d.view_perspective = v["perspective"]
+        rv3d.view_location = v["location"]
+        rv3d.view_rotation = v["rotation"]
+        rv3d.view_distance = v["distance"]
+        return {"FINISHED"}
+
+
+class ROKEBY_OT_freeze(_Op, bpy.types.Operator):
+    """Freeze reflections: they stop following the camera (evaluated from the active constraint's generating eye) until unfrozen"""
+
+    bl_idname = "rokeby.freeze"
+    bl_label = "Freeze Reflections"
+    bl_options = UNDO
+
+    mirror: StringProperty(name="Mirror")
+    action: EnumProperty(name="Action", items=[("TOGGLE", "Toggle", ""), ("FREEZE", "Freeze", ""), ("UNFREEZE", "Unfreeze", "")], default="TOGGLE")
+
+    def execute(self, context):
+        try:
+            m = _mirror(context, self.mirror)
+            api._require_mirror(m)
+            frozen = {"TOGGLE": not m.rokeby.freeze, "FREEZE": True, "UNFREEZE": False}[self.action]
+            eye = None
+            if frozen and not len(m.rokeby.constraints):
+                eye, _view = _view_of(context)
+                if eye is None and context.scene.camera is not None:
+                    eye = np.array(context.scene.camera.matrix_world.translation)
+            api.freeze(m, frozen, eye=None if eye is None else tuple(eye))
+        except RokebyError as exc:
+            return self.fail(exc)
+        return {"FINISHED"}
+
+
+class ROKEBY_OT_material_toggle(_Op, bpy.types.Operator):
+    """Edit or stop editing the reflections of this material of the mirror"""
+
+    bl_idname = "rokeby.material_toggle"
+    bl_label = "Toggle Edited Material"
+    bl_options = UNDO
+
+    mirror: StringProperty(name="Mirror")
+    material: StringProperty(name="Material")
+
+    def execute(self, context):
+        try:
+            m = _mirror(context, self.mirror)
+            edited = api.edited_materials(m)
+            mat = bpy.data.materials.get(self.material)
+            if mat is None:
+                raise RokebyError(f"material: no material named '{self.material}'")
+            edited = [x for x in edited if x != mat] if mat in edited else edited + [mat]
+            api.set_edited_materials(m, edited)
+        except RokebyError as exc:
+            return self.fail(exc)
+        return {"FINISHED"}
+
+
+class ROKEBY_OT_update(_Op, bpy.types.Operator):
+    """Recompute every mirror's field now"""
+
+    bl_idname = "rokeby.update"
+    bl_label = "Update Fields"
+    bl_options = {"REGISTER"}
+
+    force: BoolProperty(name="Force", default=True, description="Recompute even if nothing changed")
+
+    def execute(self, context):
+        reports = api.evaluate(context.scene, force=self.force)
+        bad = [r for r in reports.values() if r.status == "ERROR"]
+        if bad:
+            self.report({"WARNING"}, "; ".join(r.summary() for r in bad))
+        else:
+            self.report({"INFO"}, f"Rokeby: {len(reports)} mirror(s) up to date")
+        return {"FINISHED"}
+
+
+classes = (
+    ROKEBY_OT_mirror_add,
+    ROKEBY_OT_mirror_remove,
+    ROKEBY_OT_constraint_add,
+    ROKEBY_OT_constraint_remove,
+    ROKEBY_OT_constraint_select,
+    ROKEBY_OT_region_add,
+    ROKEBY_OT_region_remove,
+    ROKEBY_OT_return_to_view,
+    ROKEBY_OT_freeze,
+    ROKEBY_OT_material_toggle,
+    ROKEBY_OT_update,
+)
+
+# Shortcuts in the 3D View (addon keymap: shown and editable in Preferences > Keymap).
+KEYMAP = (
+    ("rokeby.return_to_view", "V", {"shift": True, "alt": True}),
+    ("rokeby.freeze", "F", {"shift": True, "alt": True}),
+    ("rokeby.constraint_add", "C", {"shift": True, "alt": True}),
+)
+_keymaps = []
+
+
+def register():
+    for cls in classes:
+        bpy.utils.register_class(cls)
+    kc = bpy.context.window_manager.keyconfigs.addon if bpy.context.window_manager else None
+    if kc is not None:
+        km = kc.keymaps.new(name="3D View", space_type="VIEW_3D")
+        for idname, key, mods in KEYMAP:
+            kmi = km.keymap_items.new(idname, key, "PRESS", **mods)
+            _keymaps.append((km, kmi))
+
+
+def unregister():
+    for km, kmi in _keymaps:
+        try:
+            km.keymap_items.remove(kmi)
+        except (ReferenceError, RuntimeError):
+            pass
+    _keymaps.clear()
+    for cls in reversed(classes):
+        if getattr(cls, "is_registered", False):
+            bpy.utils.unregister_class(cls)
