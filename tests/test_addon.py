@@ -140,3 +140,24 @@ def test_constraint_row_rejects_degenerate_handles(args, words):
     with pytest.raises(ValueError) as info:
         api.constraint_row(**args)
     assert words in str(info.value)
+
+
+def test_background_script_exits_promptly():
+    """bpy as a module hangs at interpreter exit if classes with Python update callbacks are
+    still registered; the add-on unregisters itself at exit so render-farm jobs return."""
+    script = textwrap.dedent(
+        """
+        import bpy, rokeby
+        from rokeby import api
+        bpy.ops.wm.read_factory_settings(use_empty=True)
+        rokeby.register()
+        bpy.ops.mesh.primitive_uv_sphere_add()
+        m = bpy.context.object
+        api.add_mirror(m)
+        api.add_constraint(m, (0, -1, 0), eye=(0, -4, 0))
+        print("STATUS", api.evaluate()[m.name].status)
+        """
+    )
+    out = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, timeout=60)
+    assert out.returncode == 0, out.stderr
+    assert "STATUS OK" in out.stdout

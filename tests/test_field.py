@@ -298,3 +298,20 @@ def test_gil_is_released_during_the_work(rng):
     # With the GIL held, this loop could not run at all while the call was in progress (a few
     # thousand ticks at most around it); released, it spins freely for the whole call.
     assert ticks_during[0] > 100_000, ticks_during
+
+
+def test_rotation_vector_output_matches_the_quaternions(rng):
+    from rokeby import evaluate
+
+    pts = rng.normal(size=(500, 3)).astype(np.float32)
+    c = random_constraints(rng, 6)
+    c[0, 6:9] = -c[0, 3:6]  # a half turn at one constraint
+    pts[:2] = c[:2, :3]
+    q = rn.rotation_field(pts, c, polar="exact")
+    v = rn.rotation_field(pts, c, polar="exact", output="rotation_vector")
+    assert v.shape == (500, 3) and np.all(np.isfinite(v))
+    np.testing.assert_allclose(np.linalg.norm(v, axis=1), 2 * np.arctan2(np.linalg.norm(q[:, :3], axis=1), q[:, 3]), atol=2e-6)
+    np.testing.assert_allclose(evaluate.quaternions(v), q, atol=2e-6)
+    assert np.linalg.norm(v, axis=1).max() <= np.pi + 1e-6
+    with pytest.raises(ValueError, match="output: expected"):
+        rn.rotation_field(pts, c, output="euler")

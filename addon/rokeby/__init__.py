@@ -41,6 +41,26 @@ def register():
             module.unregister()
         raise
     _registered = True
+    global _atexit_hooked
+    if not _atexit_hooked:
+        # With bpy as a Python module, classes whose properties have Python update callbacks
+        # must be unregistered before the interpreter shuts down, or the process hangs at exit
+        # (background scripts and render-farm jobs would never return).
+        import atexit
+
+        atexit.register(_unregister_at_exit)
+        _atexit_hooked = True
+
+
+_atexit_hooked = False
+
+
+def _unregister_at_exit():
+    if _registered:
+        try:
+            unregister()
+        except Exception:  # noqa: BLE001 - shutting down
+            pass
 
 
 def unregister():

@@ -693,11 +693,12 @@ def edited_reflections(mirror, eye=None, *, scene=None) -> np.ndarray:
     eye = _vec3(eye, "eye")
     evaluate(scene)
     st = evaluate_module()._STATE.get(mirror.session_uid)
-    if st is None or st.geometry is None or st.rotations is None:
+    quats = evaluate_module().rotations_of(mirror)
+    if st is None or st.geometry is None or quats is None:
         rep = report(mirror)
         raise RokebyError(f"mirror '{mirror.name}' has no field: {rep.summary() if rep else 'not evaluated'}")
     geo = st.geometry
     incident = geo.vertices.astype(np.float64) - eye
     incident /= np.maximum(np.linalg.norm(incident, axis=1, keepdims=True), 1e-300)
     r = reflect(incident, geo.normals.astype(np.float64))
-    return rotate(st.rotations, r).astype(np.float32)
+    return rotate(quats, r).astype(np.float32)

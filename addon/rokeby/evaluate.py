@@ -77,6 +77,16 @@ class _Geometry:
         self.size = float(np.linalg.norm(vertices.max(0) - vertices.min(0))) if len(vertices) else 0.0
         self.region_weights: dict[str, np.ndarray] = {}
         self.bvh = None
+        self._poly_start = None
+
+    def triangles_of_polygon(self, poly: int) -> range:
+        if self._poly_start is None:
+            # loop triangles are stored polygon by polygon: one searchsorted for all polygons
+            n_poly = int(self.tri_poly[-1]) + 1 if len(self.tri_poly) else 0
+            self._poly_start = np.searchsorted(self.tri_poly, np.arange(n_poly + 1))
+        if not 0 <= poly < len(self._poly_start) - 1:
+            return range(0)
+        return range(int(self._poly_start[poly]), int(self._poly_start[poly + 1]))
 
     def same_positions(self, other: "_Geometry | None") -> bool:
         return (
@@ -141,7 +151,16 @@ def report_of(obj) -> MirrorReport | None:
 def rotations_of(obj) -> np.ndarray | None:
     """The last computed field of a mirror as (V, 4) quaternions (x, y, z, w)."""
     st = _STATE.get(obj.session_uid)
-    return st.rotations if st else None
+    return quaternions(st.rotations) if st is not None and st.rotations is not None else None
+
+
+def quaternions(rotvec: np.ndarray) -> np.ndarray:
+    """(N, 3) rotation vectors → (N, 4) unit quaternions (x, y, z, w), w >= 0."""
+    v = np.asarray(rotvec, dtype=np.float64)
+    angle = np.linalg.norm(v, axis=1)
+    half = 0.5 * angle
+    scale = np.where(angle > 1e-12, np.sin(half) / np.maximum(angle, 1e-300), 0.5)
+    return np.concatenate([v * scale[:, None], np.cos(half)[:, None]], axis=1).astype(np.float32)
 
 
 class _NativeTimer:
@@ -273,9 +292,9 @@ def project_to_surface(obj, depsgraph, geo: _Geometry, world_point, mirror_matri
         ok, _loc, _n, poly = ob_eval.closest_point_on_mesh(local.tolist())
         if not ok:
             raise RokebyError(f"mirror '{obj.name}': no surface point found")
-        lo = int(np.searchsorted(geo.tri_poly, poly, side="left"))
-        hi = int(np.searchsorted(geo.tri_poly, poly, side="right"))
-        candidates = range(lo, max(hi, lo + 1))
+        candidates = geo.triangles_of_polygon(poly)
+        if len(candidates) == 0:
+            raise RokebyError(f"mirror '{obj.name}': the surface point's polygon {poly} has no triangles")
     else:
         loc, _n, tri_index, _d = _bvh(geo).find_nearest(x.tolist())
         if tri_index is None:
@@ -518,7 +537,7 @@ def evaluate_mirror(obj, scene, depsgraph, *, force=False, reread_geometry=False
                 state.geometry_version += 1
                 state.distance_cache.clear()
             else:
-                new.bvh = geo.bvh
+                new.bvh, new._poly_start = geo.bvh, geo._poly_start
             state.geometry = geo = new
         report.vertices = len(geo.vertices)
         report.field_mesh = geo.source
@@ -545,10 +564,9 @@ def evaluate_mirror(obj, scene, depsgraph, *, force=False, reread_geometry=False
                 report.warn("no constraint reaches this mesh over its surface")
         if specs:
             kwargs["regions"] = _regions_for_native(state, geo, specs, points, method, timer)
-        q = timer(native.rotation_field, geo.vertices, rows, **kwargs)
-        rv = rotation_vectors(q)
+        rv = timer(native.rotation_field, geo.vertices, rows, output="rotation_vector", **kwargs)
         write_attribute(obj, rv)
-        state.rotations = q
+        state.rotations = rv
         state.fingerprint = fp
         report.recomputed = True
         if not settings.enabled:

@@ -94,6 +94,15 @@ fn unit(v: DVec3, arg: &str, what: &str) -> Result<DVec3> {
 }
 
 /// The original reflected direction r(q) = reflect(i, n), i = (q − eye)/|q − eye| (eq. 6's r(q)).
+/// The form in which the per-point field is returned.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum FieldOutput {
+    /// Unit quaternions (x, y, z, w), w ≥ 0.
+    Quaternion,
+    /// Rotation vectors axis × angle, angle in [0, π].
+    RotationVector,
+}
+
 pub fn reflect_dir(q: DVec3, n: DVec3, eye: DVec3) -> Option<DVec3> {
     let i = (q - eye).try_normalize()?;
     let n = n.try_normalize()?;
@@ -295,6 +304,12 @@ impl Field {
     /// w ≥ 0, flattened N×4. `view`: optional per-point normals and an eye, so that eq. 7 blends
     /// towards r rᵀ exactly; without it the view-independent form (towards I) is used.
     pub fn rotation_field(&self, points: &[f32], dist: Distances, view: Option<(&[f32], [f64; 3])>, polar: PolarMethod) -> Result<Vec<f32>> {
+        self.rotation_field_as(points, dist, view, polar, FieldOutput::Quaternion)
+    }
+
+    /// `rotation_field` with the output form chosen: quaternions (N×4) or rotation vectors
+    /// axis × angle (N×3, what the add-on writes as a mesh attribute), converted in the same pass.
+    pub fn rotation_field_as(&self, points: &[f32], dist: Distances, view: Option<(&[f32], [f64; 3])>, polar: PolarMethod, output: FieldOutput) -> Result<Vec<f32>> {
         let n = points.len() / 3;
         check_finite(points, "points")?;
         self.check_distances(dist, n)?;
@@ -314,17 +329,27 @@ impl Field {
             }
             None => None,
         };
-        let mut out = vec![0f32; n * 4];
+        let width = match output {
+            FieldOutput::Quaternion => 4,
+            FieldOutput::RotationVector => 3,
+        };
+        let mut out = vec![0f32; n * width];
         const CHUNK: usize = 2048;
-        out.par_chunks_mut(CHUNK * 4).enumerate().for_each(|(ci, chunk)| {
+        out.par_chunks_mut(CHUNK * width).enumerate().for_each(|(ci, chunk)| {
             let mut s = self.scratch();
             let base = ci * CHUNK;
-            for (j, o) in chunk.chunks_exact_mut(4).enumerate() {
+            for (j, o) in chunk.chunks_exact_mut(width).enumerate() {
                 let i = base + j;
                 let q = vec3_at(points, i);
                 let r_view = eye.and_then(|(normals, eye)| reflect_dir(q, vec3_at(normals, i), eye));
                 let rot = polar::canonical(self.rotation_at(i, n, q, r_view, dist, polar, &mut s));
-                o.copy_from_slice(&[rot.x as f32, rot.y as f32, rot.z as f32, rot.w as f32]);
+                match output {
+                    FieldOutput::Quaternion => o.copy_from_slice(&[rot.x as f32, rot.y as f32, rot.z as f32, rot.w as f32]),
+                    FieldOutput::RotationVector => {
+                        let v = polar::rotation_vector(rot);
+                        o.copy_from_slice(&[v.x as f32, v.y as f32, v.z as f32]);
+                    }
+                }
             }
         });
         check_output(&out)?;

@@ -357,3 +357,44 @@ mod tests {
         assert!(q.dot(DQuat::from_rotation_x(0.7)).abs() > 1.0 - 1e-12);
     }
 }
+
+/// The rotation vector (axis × angle, angle in [0, π]) of a unit quaternion: the compact form in
+/// which the add-on stores the field as a mesh attribute. Accurate for small angles
+/// (2·atan2(|u|, w) rather than acos), exact at the identity.
+pub fn rotation_vector(q: DQuat) -> DVec3 {
+    let q = canonical(q);
+    let u = DVec3::new(q.x, q.y, q.z);
+    let s = u.length();
+    if s < 1e-12 {
+        // sin(θ/2) ≈ θ/2: u · 2/w
+        return u * (2.0 / q.w.max(1e-300));
+    }
+    u * (2.0 * s.atan2(q.w) / s)
+}
+
+#[cfg(test)]
+mod rotation_vector_tests {
+    use super::*;
+
+    #[test]
+    fn rotation_vector_round_trips_small_large_and_half_turns() {
+        for &(axis, angle) in &[
+            (DVec3::Z, 0.0),
+            (DVec3::new(1.0, 2.0, -0.5).normalize(), 1e-9),
+            (DVec3::new(1.0, 2.0, -0.5).normalize(), 0.7),
+            (DVec3::X, 3.0),
+            (DVec3::new(0.0, 1.0, 1.0).normalize(), std::f64::consts::PI),
+        ] {
+            let v = rotation_vector(DQuat::from_axis_angle(axis, angle));
+            assert!((v.length() - angle).abs() < 1e-12, "angle {angle}: |v| = {}", v.length());
+            if angle > 0.0 {
+                assert!((v.normalize() - axis).length() < 1e-9 || (angle - std::f64::consts::PI).abs() < 1e-12);
+            }
+            let back = if v.length() > 0.0 { DQuat::from_axis_angle(v.normalize(), v.length()) } else { DQuat::IDENTITY };
+            assert!(back.dot(DQuat::from_axis_angle(axis, angle)).abs() > 1.0 - 1e-12);
+        }
+        // The double cover: q and -q give the same rotation vector.
+        let q = DQuat::from_axis_angle(DVec3::Y, 0.4);
+        assert!((rotation_vector(q) - rotation_vector(-q)).length() < 1e-15);
+    }
+}

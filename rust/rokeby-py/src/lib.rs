@@ -9,7 +9,7 @@ use numpy::{IntoPyArray, PyArrayDyn, PyArrayMethods, PyReadonlyArrayDyn, PyUntyp
 use pyo3::exceptions::{PyRuntimeError, PyTypeError, PyValueError};
 use pyo3::prelude::*;
 use pyo3::types::{PyDict, PyList, PyTuple};
-use rokeby_core::field::{Distances, Field};
+use rokeby_core::field::{Distances, Field, FieldOutput};
 use rokeby_core::geodesic::{self, GeodesicSolver as CoreSolver, Mesh, Method, Source, SurfacePoint};
 use std::sync::Arc;
 use rokeby_core::polar::{self, PolarMethod};
@@ -205,8 +205,9 @@ fn parse_distances<'py>(obj: Option<&Bound<'py, PyAny>>, k: usize, lead: &[usize
 /// eq. 5) at every point. constraints: (K, 9) rows [p, r, e]; K = 0 gives identities.
 /// distances: optional (K, N) precomputed (e.g. geodesic) distances, +inf = unreachable.
 /// regions: list of dicts (see README). normals + eye: make eq. 7 blend towards r rᵀ exactly.
+/// output="quaternion" (N, 4) or "rotation_vector" (N, 3): axis × angle, angle in [0, π].
 #[pyfunction]
-#[pyo3(signature = (points, constraints, *, distances=None, regions=None, normals=None, eye=None, polar="exact"))]
+#[pyo3(signature = (points, constraints, *, distances=None, regions=None, normals=None, eye=None, polar="exact", output="quaternion"))]
 #[allow(clippy::too_many_arguments)]
 fn rotation_field<'py>(
     py: Python<'py>,
@@ -217,8 +218,14 @@ fn rotation_field<'py>(
     normals: Option<&Bound<'py, PyAny>>,
     eye: Option<&Bound<'py, PyAny>>,
     polar: &str,
+    output: &str,
 ) -> PyResult<Bound<'py, PyArrayDyn<f32>>> {
     let method = parse_polar(polar)?;
+    let (output, width) = match output {
+        "quaternion" => (FieldOutput::Quaternion, 4),
+        "rotation_vector" => (FieldOutput::RotationVector, 3),
+        other => return Err(PyValueError::new_err(format!("output: expected \"quaternion\" or \"rotation_vector\", got {other:?}"))),
+    };
     let pts = f32_array(points, "points")?;
     let shape = pts.shape();
     if shape.len() != 2 || shape[1] != 3 {
@@ -251,8 +258,8 @@ fn rotation_field<'py>(
         None => Distances::Euclidean,
     };
     let view = nrm.as_ref().map(|(a, e)| (a.slice(), *e));
-    let out = run_detached(py, || field.rotation_field(p, d, view, method))?;
-    let arr = ArrayD::from_shape_vec(IxDyn(&[n, 4]), out).map_err(|e| PyRuntimeError::new_err(e.to_string()))?;
+    let out = run_detached(py, || field.rotation_field_as(p, d, view, method, output))?;
+    let arr = ArrayD::from_shape_vec(IxDyn(&[n, width]), out).map_err(|e| PyRuntimeError::new_err(e.to_string()))?;
     Ok(arr.into_pyarray(py))
 }
 
