@@ -363,3 +363,78 @@ def test_settings_are_animatable():
     api.evaluate(frame=10)
     large = np.count_nonzero(np.abs(api.stored_field(mirror)).max(1) > 1e-6)
     assert np.isclose(rg.radius, 3.0) and large > 2 * small > 0
+
+
+class _Layout:
+    """Stands in for bpy.types.UILayout in background mode (no window to draw in): records the
+    calls and checks that every property and operator the panel names exists."""
+
+    def __init__(self, log):
+        self.log = log
+        self.alert = False
+
+    def _sub(self, *a, **k):
+        return _Layout(self.log)
+
+    row = column = box = _sub
+
+    def label(self, text="", icon="NONE"):
+        self.log.append(("label", text))
+
+    def prop(self, data, name, **k):
+        assert name in data.bl_rna.properties, f"{type(data).__name__} has no property {name!r}"
+        self.log.append(("prop", name))
+
+    def prop_search(self, data, name, search_data, search_name, **k):
+        assert name in data.bl_rna.properties and search_name in search_data.bl_rna.properties
+        self.log.append(("prop_search", name))
+
+    def template_list(self, list_type, list_id, data, name, active_data, active_name, **k):
+        assert hasattr(bpy.types, list_type)
+        assert name in data.bl_rna.properties and active_name in active_data.bl_rna.properties
+        self.log.append(("list", name))
+
+    def operator(self, idname, **k):
+        mod, op = idname.split(".")
+        assert hasattr(getattr(bpy.ops, mod), op), idname
+        self.log.append(("operator", idname))
+        return _OpProps(idname)
+
+    def operator_menu_enum(self, idname, prop, **k):
+        return self.operator(idname)
+
+
+class _OpProps:
+    def __init__(self, idname):
+        mod, op = idname.split(".")
+        self.rna = getattr(getattr(bpy.ops, mod), op).get_rna_type()
+
+    def __setattr__(self, key, value):
+        if key != "rna":
+            assert key in self.rna.properties, f"{self.rna.identifier} has no property {key!r}"
+        object.__setattr__(self, key, value)
+
+
+def test_sidebar_panel_draws_every_state():
+    from rokeby.ui import ROKEBY_PT_main
+
+    mirror, _ = make_fixtures.keyframed_spot(SHARED)
+    mirror.rokeby.metric = "GEODESIC"
+    mirror.rokeby.all_materials = False
+    mirror.data.materials.append(bpy.data.materials.new("Chrome"))
+    api.evaluate(frame=1)
+    bpy.data.objects.remove(mirror.rokeby.constraints[0].target_handle)
+    api.evaluate()
+    ctx_states = []
+    for active in (mirror, mirror.rokeby.constraints[1].surface_handle, bpy.data.objects["Floor"], None):
+        bpy.context.view_layer.objects.active = active
+        log = []
+        panel = type("P", (), {"layout": _Layout(log)})()
+        ROKEBY_PT_main.draw(panel, bpy.context)
+        ctx_states.append(log)
+    texts = [t for kind, t in ctx_states[0] if kind == "label"]
+    assert any("Mirror: Spot" in t for t in texts)
+    assert any("green (reflected) handle was deleted" in t for t in texts)  # errors shown in the UI
+    assert ("prop", "geodesic_method") in ctx_states[0] and ("list", "constraints") in ctx_states[0]
+    assert ctx_states[1] == ctx_states[0]  # a selected handle shows its mirror
+    assert ("operator", "rokeby.mirror_add") in ctx_states[2]
