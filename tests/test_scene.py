@@ -438,3 +438,30 @@ def test_sidebar_panel_draws_every_state():
     assert ("prop", "geodesic_method") in ctx_states[0] and ("list", "constraints") in ctx_states[0]
     assert ctx_states[1] == ctx_states[0]  # a selected handle shows its mirror
     assert ("operator", "rokeby.mirror_add") in ctx_states[2]
+
+
+def test_vertex_parented_handle_follows_a_deforming_mirror():
+    mirror, eye = make_fixtures.plane_mirror()
+    mirror.shape_key_add(name="Basis")
+    lift = mirror.shape_key_add(name="Lift")
+    co = np.empty(len(mirror.data.vertices) * 3, np.float32)
+    mirror.data.vertices.foreach_get("co", co)
+    co = co.reshape(-1, 3)
+    co[:, 2] = 0.3 * co[:, 0]  # tilt the plane
+    lift.data.foreach_set("co", co.ravel())
+    lift.value = 0.0
+    lift.keyframe_insert("value", frame=1)
+    lift.value = 1.0
+    lift.keyframe_insert("value", frame=20)
+    api.add_constraint(mirror, (1.0, 0.0, 0.0), (1.0, 1.0, 2.0), eye=eye)
+    red = mirror.rokeby.constraints[0].surface_handle
+    red.constraints.clear()
+    vi = int(np.argmin(np.linalg.norm(co[:, :2] - [1.0, 0.0], axis=1)))
+    red.parent = mirror
+    red.parent_type = "VERTEX"
+    red.parent_vertices[0] = vi
+    red.location = (0.0, 0.0, 0.0)
+    red.matrix_parent_inverse.identity()
+    reports = [api.evaluate(frame=f)["Plane"] for f in (1, 20)]
+    assert all(r.status == "OK" for r in reports), [r.summary() for r in reports]
+    np.testing.assert_allclose(np.array(red.matrix_world.translation), co[vi], atol=1e-5)
