@@ -30,6 +30,7 @@ __all__ = [
     # scene model (Blender)
     "add_mirror",
     "remove_mirror",
+    "mirror_of",
     "add_constraint",
     "remove_constraint",
     "add_region",
@@ -263,6 +264,21 @@ def _require_mirror(obj):
     if not obj.rokeby.is_mirror:
         raise RokebyError(f"mirror: '{obj.name}' is not a Rokeby mirror (use add_mirror first)")
     return obj
+
+
+def mirror_of(obj, scene=None):
+    """The mirror ``obj`` belongs to: itself if it is a mirror, else the mirror whose constraint
+    handle or region centre it is (None when it is neither)."""
+    if obj is None:
+        return None
+    if obj.rokeby.is_mirror:
+        return obj
+    for m in _scene(scene).objects:
+        if not m.rokeby.is_mirror:
+            continue
+        if any(obj in (c.surface_handle, c.target_handle) for c in m.rokeby.constraints) or any(obj == rg.center for rg in m.rokeby.regions):
+            return m
+    return None
 
 
 def add_mirror(obj, *, metric: str = "EUCLIDEAN", geodesic_method: str = "HEAT", polar: str = "FAST"):

@@ -26,12 +26,8 @@ def _mirror(context, name: str = ""):
     ob = context.active_object
     if ob is None:
         raise RokebyError("no active object: select a mirror")
-    if not ob.rokeby.is_mirror:
-        # A selected handle also selects its mirror.
-        for m in context.scene.objects:
-            if m.rokeby.is_mirror and any(ob in (c.surface_handle, c.target_handle) for c in m.rokeby.constraints):
-                return m
-    return ob
+    # A selected handle or region centre stands for its mirror.
+    return api.mirror_of(ob, context.scene) or ob
 
 
 class _Op:

@@ -5,24 +5,13 @@ from __future__ import annotations
 
 import bpy
 
-from . import evaluate, native
+from . import api, evaluate, native
 
 _STATUS_ICON = {"OK": "CHECKMARK", "WARNING": "ERROR", "ERROR": "CANCEL", "DISABLED": "HIDE_ON"}
 
 
 def _active_mirror(context):
-    ob = context.active_object
-    if ob is None:
-        return None
-    if ob.rokeby.is_mirror:
-        return ob
-    for m in context.scene.objects:
-        if m.rokeby.is_mirror:
-            if any(ob in (c.surface_handle, c.target_handle) for c in m.rokeby.constraints):
-                return m
-            if any(ob == rg.center for rg in m.rokeby.regions):
-                return m
-    return None
+    return api.mirror_of(context.active_object, context.scene)
 
 
 class ROKEBY_UL_constraints(bpy.types.UIList):
