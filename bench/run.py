@@ -260,8 +260,19 @@ def main():
     emit()
     (ROOT / "docs").mkdir(exist_ok=True)
     if args.only == "addon":
+        start = len(out)
         addon_section(emit)
-        (ROOT / "docs" / "benchmarks.md").write_text("\n".join(out) + "\n")
+        doc = ROOT / "docs" / "benchmarks.md"
+        old = doc.read_text() if doc.exists() else ""
+        marker = "## Add-on: "
+        if marker in old:
+            # Refresh that section of the full report in place.
+            head, _, tail = old.partition(marker)
+            rest = tail.split("\n## ", 1)
+            after = "\n## " + rest[1] if len(rest) == 2 else ""
+            doc.write_text(head + "\n".join(out[start:]).rstrip("\n") + "\n" + after)
+        else:
+            doc.write_text("\n".join(out) + "\n")
         return
     if args.only != "field":
         geodesic_section(emit, args.peers)

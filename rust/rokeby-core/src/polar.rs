@@ -255,8 +255,9 @@ pub fn ortho_iterative(m: &DMat3, init: DQuat, max_iter: usize) -> Iterated {
         let newton = positive_definite(&t.h, 1e-6 * scale);
         let omega = if newton { t.h.inverse() * t.g } else { t.g / (t.tr.abs() + 1e-12 * scale) };
         let w2 = omega.length_squared();
-        // A Newton step below 1e-6 rad leaves an error of order 1e-12 rad after it is taken.
-        if newton && w2 < 1e-12 {
+        // Quadratic convergence: a Newton step below 1e-4 rad leaves an error of order 1e-8 rad
+        // after it is taken, under the float32 resolution of the output (6e-8).
+        if newton && w2 < 1e-8 {
             if t.tr * t.tr - t.fro2 < 1e-6 * t.fro2 {
                 return Iterated::RankOne;
             }
