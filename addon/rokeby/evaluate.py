@@ -108,7 +108,10 @@ class _State:
         self.fingerprint: bytes | None = None
         self.geometry: _Geometry | None = None
         self.geometry_version = 0
+        self.solver = None
+        self.solver_version = -1
         self.distance_cache: dict = {}
+        self.region_cache: dict = {}
         self.report: MirrorReport | None = None
         self.rotations: np.ndarray | None = None
 
@@ -405,15 +408,17 @@ def _fingerprint(obj, geo_version, mirror_matrix, rows, regions) -> bytes:
 
 
 def _solver(state: _State, geo: _Geometry, timer):
-    from . import api  # noqa: PLC0415 - the solver cache lives in the API
-
-    return timer(api.geodesic_solver, geo.vertices, geo.triangles)
+    """The mirror's GeodesicSolver, kept while its geometry version is unchanged (no hashing of
+    the mesh per handle move); its factorisation is made on the first heat query."""
+    if state.solver is None or state.solver_version != state.geometry_version:
+        state.solver = timer(native.module().GeodesicSolver, geo.vertices, geo.triangles)
+        state.solver_version = state.geometry_version
+    return state.solver
 
 
 def _geodesic_distances(state: _State, geo: _Geometry, points, method: str, timer) -> np.ndarray:
     """(K, V) distances from each constraint's surface point, cached per point: only a moved
     handle costs a solve."""
-    solver = _solver(state, geo, timer)
     out = np.empty((len(points), len(geo.vertices)), dtype=np.float32)
     missing = []
     for k, sp in enumerate(points):
@@ -425,7 +430,7 @@ def _geodesic_distances(state: _State, geo: _Geometry, points, method: str, time
             out[k] = d
     if missing:
         sources = [(sp.triangle, tuple(float(b) for b in sp.bary)) for _, _, sp in missing]
-        solved = timer(solver.distances, sources, method=method)
+        solved = timer(_solver(state, geo, timer).distances, sources, method=method)
         for (k, key, _), d in zip(missing, solved):
             out[k] = d
             state.distance_cache[key] = d
@@ -451,14 +456,21 @@ def _regions_for_native(state, geo, specs, points, method, timer):
             _, centre, radius, border = spec
             regions.append({"kind": "euclidean", "center": list(centre), "radius": radius, "border": border})
             continue
-        solver = _solver(state, geo, timer)
-        if spec[0] == "GEODESIC":
-            _, tri, b, radius, border = spec
-            values = timer(solver.geodesic_region, (tri, b), radius, border, method)
-        else:
-            _, group, border = spec
-            values = timer(solver.freeform_region, geo.region_weights[group], border, method)
+        key = (spec, method)
+        values = state.region_cache.get(key)
+        if values is None:  # region weights are kept until the region or the mesh changes
+            solver = _solver(state, geo, timer)
+            if spec[0] == "GEODESIC":
+                _, tri, b, radius, border = spec
+                values = timer(solver.geodesic_region, (tri, b), radius, border, method)
+            else:
+                _, group, border = spec
+                values = timer(solver.freeform_region, geo.region_weights[group], border, method)
+            state.region_cache[key] = values
         regions.append({"kind": "weights", "values": values, "at_constraints": at_constraints(values)})
+    used = {(spec, method) for spec in specs}
+    for k in [k for k in state.region_cache if k not in used]:
+        del state.region_cache[k]
     return regions
 
 
@@ -536,6 +548,7 @@ def evaluate_mirror(obj, scene, depsgraph, *, force=False, reread_geometry=False
             if not new.same_positions(geo):
                 state.geometry_version += 1
                 state.distance_cache.clear()
+                state.region_cache.clear()
             else:
                 new.bvh, new._poly_start = geo.bvh, geo._poly_start
             state.geometry = geo = new
