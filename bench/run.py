@@ -237,6 +237,8 @@ def addon_section(emit):
         dist = "Euclidean" if r["metric"] == "EUCLIDEAN" else f"geodesic, {r['method'].lower()}"
         emit(f"| {r['mesh']} | {r['vertices']:,} | {dist} | {r['polar'].lower()} | {r['python_ms']:.1f} | {r['rust_ms']:.1f} | {r['python_ms'] + r['rust_ms']:.1f} | {r['update_ms']:.1f} | 16 |")
     emit()
+    emit("On this shared 2-core machine the same configuration varies by up to about 40% between runs.")
+    emit()
     emit("Geodesic distances are cached per constraint, so a green-handle move costs no solve; moving a red")
     emit("handle costs one solve (heat or Dijkstra) for that constraint only.")
     emit()
