@@ -38,6 +38,8 @@ __all__ = [
     "evaluate",
     "freeze",
     "edited_materials",
+    "install_render_nodes",
+    "remove_render_nodes",
     "set_edited_materials",
     "constraint_view",
     "edited_reflections",
@@ -660,6 +662,25 @@ def set_edited_materials(mirror, materials=None):
     for mat in chosen:
         s.materials.add().material = mat
     s.all_materials = False
+
+
+def install_render_nodes(mirror) -> int:
+    """Make final renders (Cycles; EEVEE uses the same nodes) show the edit: the node group
+    "Rokeby Edited Normal" feeds the edited normal to the specular BSDFs of every edited material
+    (see rokeby.shading). Returns how many BSDF inputs were rewired."""
+    from . import shading  # noqa: PLC0415
+
+    _require_mirror(mirror)
+    return sum(shading.install(mat) for mat in edited_materials(mirror))
+
+
+def remove_render_nodes(mirror) -> int:
+    """Take the node group out of the mirror's materials again; returns how many it left."""
+    from . import shading  # noqa: PLC0415
+
+    _require_mirror(mirror)
+    mats = {slot.material for slot in mirror.material_slots if slot.material is not None}
+    return sum(bool(shading.uninstall(mat)) for mat in mats)
 
 
 def freeze(mirror, frozen: bool = True, *, eye=None):

@@ -331,6 +331,30 @@ class ROKEBY_OT_material_toggle(_Op, bpy.types.Operator):
         return {"FINISHED"}
 
 
+class ROKEBY_OT_render_nodes(_Op, bpy.types.Operator):
+    """Insert (or remove) the node group that makes Cycles and EEVEE renders show the edited reflections"""
+
+    bl_idname = "rokeby.render_nodes"
+    bl_label = "Render Edits"
+    bl_options = UNDO
+
+    mirror: StringProperty(name="Mirror")
+    action: EnumProperty(name="Action", items=[("INSTALL", "Install", ""), ("REMOVE", "Remove", "")], default="INSTALL")
+
+    def execute(self, context):
+        try:
+            m = _mirror(context, self.mirror)
+            if self.action == "INSTALL":
+                n = api.install_render_nodes(m)
+                if n == 0:
+                    self.report({"WARNING"}, f"Rokeby: no Glossy or Principled BSDF in the edited materials of '{m.name}'")
+            else:
+                api.remove_render_nodes(m)
+        except RokebyError as exc:
+            return self.fail(exc)
+        return {"FINISHED"}
+
+
 class ROKEBY_OT_update(_Op, bpy.types.Operator):
     """Recompute every mirror's field now"""
 
@@ -361,6 +385,7 @@ classes = (
     ROKEBY_OT_return_to_view,
     ROKEBY_OT_freeze,
     ROKEBY_OT_material_toggle,
+    ROKEBY_OT_render_nodes,
     ROKEBY_OT_update,
 )
 

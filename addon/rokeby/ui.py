@@ -129,6 +129,11 @@ class ROKEBY_PT_main(bpy.types.Panel):
                 on = slot.material in edited
                 op = layout.operator("rokeby.material_toggle", text=slot.material.name, icon="CHECKBOX_HLT" if on else "CHECKBOX_DEHLT", depress=on)
                 op.mirror, op.material = mirror.name, slot.material.name
+        row = layout.row(align=True)
+        op = row.operator("rokeby.render_nodes", text="Render Edits", icon="NODE_MATERIAL")
+        op.mirror, op.action = mirror.name, "INSTALL"
+        op = row.operator("rokeby.render_nodes", text="", icon="X")
+        op.mirror, op.action = mirror.name, "REMOVE"
         layout.operator("rokeby.update", icon="FILE_REFRESH")
         layout.operator("rokeby.mirror_remove", icon="TRASH")
 

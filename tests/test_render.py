@@ -1,0 +1,124 @@
+"""Final renders show the edit: Cycles pixels of a chrome ball under a real HDR (bpy's forest.exr)."""
+
+import os
+
+import numpy as np
+import pytest
+
+bpy = pytest.importorskip("bpy")
+
+import rokeby  # noqa: E402
+from rokeby import api, evaluate  # noqa: E402
+
+SIZE = 48
+
+
+@pytest.fixture
+def chrome_ball():
+    bpy.ops.wm.read_factory_settings(use_empty=True)
+    rokeby.register()
+    evaluate.reset()
+    sc = bpy.context.scene
+    sc.render.engine = "CYCLES"
+    sc.cycles.device = "CPU"
+    sc.cycles.samples = 8
+    sc.cycles.use_denoising = False
+    sc.cycles.seed = 1
+    sc.render.resolution_x = sc.render.resolution_y = SIZE
+    sc.render.resolution_percentage = 100
+    world = bpy.data.worlds.new("Forest")
+    sc.world = world
+    world.use_nodes = True
+    env = world.node_tree.nodes.new("ShaderNodeTexEnvironment")
+    env.image = bpy.data.images.load(os.path.join(bpy.utils.system_resource("DATAFILES"), "studiolights", "world", "forest.exr"))
+    world.node_tree.links.new(env.outputs["Color"], world.node_tree.nodes["Background"].inputs["Color"])
+    bpy.ops.mesh.primitive_uv_sphere_add(segments=64, ring_count=32)
+    bpy.ops.object.shade_smooth()
+    ball = bpy.context.object
+    ball.name = "Ball"
+    mat = bpy.data.materials.new("Chrome")
+    mat.use_nodes = True
+    bsdf = mat.node_tree.nodes["Principled BSDF"]
+    bsdf.inputs["Metallic"].default_value = 1.0
+    bsdf.inputs["Roughness"].default_value = 0.0
+    ball.data.materials.append(mat)
+    cam = bpy.data.objects.new("Camera", bpy.data.cameras.new("Camera"))
+    sc.collection.objects.link(cam)
+    sc.camera = cam
+    cam.location = (0.0, -4.0, 0.0)
+    cam.rotation_euler = (np.pi / 2, 0.0, 0.0)
+    return ball, mat
+
+
+def _render(tmp_path, name):
+    sc = bpy.context.scene
+    sc.render.filepath = str(tmp_path / f"{name}.png")
+    bpy.ops.render.render(write_still=True)
+    img = bpy.data.images.load(sc.render.filepath)
+    try:
+        return np.array(img.pixels[:], dtype=np.float32).reshape(SIZE, SIZE, 4)[..., :3]
+    finally:
+        bpy.data.images.remove(img)
+
+
+def test_cycles_render_shows_the_edit_and_nothing_else(chrome_ball, tmp_path):
+    ball, mat = chrome_ball
+    plain = _render(tmp_path, "plain")
+    api.add_mirror(ball)
+    api.add_constraint(ball, (0.0, -1.0, 0.0), eye=(0.0, -4.0, 0.0))
+    api.evaluate()
+    assert api.install_render_nodes(ball) == 1
+    fresh = _render(tmp_path, "fresh")
+    # A fresh constraint is the identity: n' = normalize(reflect(-V, N) + V) = N.
+    diff = np.abs(fresh - plain).max(-1)
+    assert diff.mean() < 2e-3 and np.percentile(diff, 99.5) < 0.02
+    green = ball.rokeby.constraints[0].target_handle
+    green.location.z += 3.0
+    api.add_region(ball, "EUCLIDEAN", center=(0.0, -1.0, 0.0), radius=0.6, border=0.2)
+    api.evaluate()
+    edited = _render(tmp_path, "edited")
+    changed = np.abs(edited - fresh).max(-1) > 0.05
+    assert changed.mean() > 0.02  # the edit is visible
+    # Pixels whose surface point is outside the region are unchanged: on this orthographic-ish
+    # view the region projects to a disc around the image centre (radius 0.6 of the unit ball).
+    ys, xs = np.mgrid[0:SIZE, 0:SIZE]
+    # half-width of the view at distance 4 with the default 50 mm lens (36 mm sensor): 4 * 18 / 50
+    half = 4.0 * 18.0 / 50.0
+    px = (xs + 0.5) / SIZE * 2 - 1
+    py = 1 - (ys + 0.5) / SIZE * 2
+    far = np.hypot(px, py) * half > 0.75  # well outside the region's projection
+    assert changed[far].mean() < 0.005  # noise allowance: 8 samples
+    assert changed[~far].mean() > 0.1
+    # Removing the nodes restores the plain render.
+    assert api.remove_render_nodes(ball) == 1
+    assert not [n for n in mat.node_tree.nodes if n.bl_idname == "ShaderNodeGroup"]
+    again = _render(tmp_path, "again")
+    np.testing.assert_allclose(again, plain, atol=1e-6)
+
+
+def test_render_nodes_operator_and_refusals(chrome_ball):
+    ball, mat = chrome_ball
+    with pytest.raises(RuntimeError, match="not a Rokeby mirror"):
+        bpy.ops.rokeby.render_nodes(mirror="Ball")
+    api.add_mirror(ball)
+    assert bpy.ops.rokeby.render_nodes(mirror="Ball") == {"FINISHED"}
+    assert bpy.ops.rokeby.render_nodes(mirror="Ball") == {"FINISHED"}  # idempotent: one group
+    groups = [n for n in mat.node_tree.nodes if n.bl_idname == "ShaderNodeGroup"]
+    assert len(groups) == 1 and groups[0].node_tree.name == "Rokeby Edited Normal"
+    assert bpy.ops.rokeby.render_nodes(mirror="Ball", action="REMOVE") == {"FINISHED"}
+    assert not [n for n in mat.node_tree.nodes if n.bl_idname == "ShaderNodeGroup"]
+
+
+def test_bump_map_passes_through_and_is_restored(chrome_ball):
+    ball, mat = chrome_ball
+    tree = mat.node_tree
+    bump = tree.nodes.new("ShaderNodeBump")
+    bsdf = tree.nodes["Principled BSDF"]
+    tree.links.new(bump.outputs["Normal"], bsdf.inputs["Normal"])
+    api.add_mirror(ball)
+    assert api.install_render_nodes(ball) == 1
+    group = next(n for n in tree.nodes if n.bl_idname == "ShaderNodeGroup")
+    assert group.inputs["Normal"].links[0].from_node == bump
+    assert bsdf.inputs["Normal"].links[0].from_node == group
+    api.remove_render_nodes(ball)
+    assert bsdf.inputs["Normal"].links[0].from_node == bump
