@@ -122,3 +122,21 @@ def test_bump_map_passes_through_and_is_restored(chrome_ball):
     assert bsdf.inputs["Normal"].links[0].from_node == group
     api.remove_render_nodes(ball)
     assert bsdf.inputs["Normal"].links[0].from_node == bump
+
+
+def test_freeze_in_renders(chrome_ball, tmp_path):
+    ball, _ = chrome_ball
+    api.add_mirror(ball)
+    api.add_constraint(ball, (0.0, -1.0, 0.0), (0.0, -2.0, 3.0), eye=(0.0, -4.0, 0.0))
+    api.evaluate()
+    api.install_render_nodes(ball)
+    live = _render(tmp_path, "live")
+    api.freeze(ball, True, eye=(0.0, -4.0, 0.0))  # frozen where the camera is: same picture
+    same = _render(tmp_path, "frozen_here")
+    diff = np.abs(same - live).max(-1)
+    assert diff.mean() < 2e-3 and np.percentile(diff, 99.5) < 0.02
+    api.freeze(ball, True, eye=(2.5, -3.0, 1.0))  # frozen elsewhere: reflections no longer follow this camera
+    moved = _render(tmp_path, "frozen_there")
+    assert (np.abs(moved - live).max(-1) > 0.05).mean() > 0.05
+    api.freeze(ball, False)
+    np.testing.assert_allclose(_render(tmp_path, "unfrozen"), live, atol=1e-6)

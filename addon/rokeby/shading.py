@@ -5,7 +5,8 @@ For a shading point with normal N seen along V (towards the viewer), the physica
 r = reflect(−V, N). The field stores R(q) as the rotation vector ``rokeby_rotation`` (axis × angle),
 so the edited reflection is e = R r and the normal that reflects V into e is n' = normalize(e + V)
 (paper §6: only the specular part is edited). With the identity field n' = N exactly, so an
-unedited mirror renders as before.
+unedited mirror renders as before. When the mirror is frozen, r is reflected from the frozen eye
+(``rokeby.freeze_eye``) instead of the camera, so the reflection stays put as the camera moves.
 
 Wiring (``install``): every edited material's Glossy BSDF and, for Principled BSDFs, the Normal
 input get n'. A Principled BSDF also shades its diffuse lobe with that input, so this is exact for
@@ -60,7 +61,21 @@ def node_group():
     normal = pick.outputs[1]
     angle = math("LENGTH", attr.outputs["Vector"])
     axis = math("NORMALIZE", attr.outputs["Vector"])
-    minus_v = math("SCALE", geo.outputs["Incoming"])
+    # Freeze: the reflection is evaluated from the mirror's frozen eye instead of the camera,
+    # V_f = normalize(eye - P); the object properties are read through their RNA paths.
+    frozen = n.new("ShaderNodeAttribute")
+    frozen.attribute_type = "OBJECT"
+    frozen.attribute_name = "rokeby.freeze"
+    eye = n.new("ShaderNodeAttribute")
+    eye.attribute_type = "OBJECT"
+    eye.attribute_name = "rokeby.freeze_eye"
+    to_eye = math("NORMALIZE", math("SUBTRACT", eye.outputs["Vector"], geo.outputs["Position"]).outputs["Vector"])
+    view = n.new("ShaderNodeMix")
+    view.data_type = "VECTOR"
+    ng.links.new(frozen.outputs["Fac"], view.inputs["Factor"])
+    ng.links.new(geo.outputs["Incoming"], view.inputs[4])
+    ng.links.new(to_eye.outputs["Vector"], view.inputs[5])
+    minus_v = math("SCALE", view.outputs[1])
     minus_v.inputs["Scale"].default_value = -1.0
     r = math("REFLECT", minus_v.outputs["Vector"], normal)
     rot = n.new("ShaderNodeVectorRotate")
@@ -68,6 +83,7 @@ def node_group():
     ng.links.new(r.outputs["Vector"], rot.inputs["Vector"])
     ng.links.new(axis.outputs["Vector"], rot.inputs["Axis"])
     ng.links.new(angle.outputs["Value"], rot.inputs["Angle"])
+    # n' reflects the actual view ray into e (also when e was evaluated from the frozen eye).
     half = math("ADD", rot.outputs["Vector"], geo.outputs["Incoming"])
     edited = math("NORMALIZE", half.outputs["Vector"])
     ng.links.new(edited.outputs["Vector"], out.inputs["Edited Normal"])
