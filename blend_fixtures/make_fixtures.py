@@ -8,8 +8,8 @@ tests call the builders directly and save into a temporary folder.
 - ``keyframed_spot``: Keenan Crane's spot (a real mesh from ../shared/meshes) as the mirror, a
   camera, two reflection constraints whose green handles are keyframed at frames 1 and 20, a
   Euclidean region, and a floor the physical reflections hit.
-- ``plane_mirror``: a flat subdivided plane (normal exactly +Z) with one constraint, where the
-  expected field can be computed independently of Blender.
+- ``plane_mirror``: a flat subdivided plane (normal exactly +Z), where the expected field can be
+  computed independently of Blender; ``animate_shape_key`` makes it deform over time.
 """
 
 from __future__ import annotations
@@ -89,6 +89,25 @@ def plane_mirror():
     api.add_mirror(mirror)
     eye = (0.3, -3.0, 2.0)
     return mirror, eye
+
+
+def animate_shape_key(mirror, name: str, height, frames=(1, 20)):
+    """Give ``mirror`` a shape key whose z = height(x, y) (numpy, on the base positions), keyed
+    from 0 at frames[0] to 1 at frames[1]; returns the shape key's (V, 3) positions."""
+    import numpy as np
+
+    if mirror.data.shape_keys is None:
+        mirror.shape_key_add(name="Basis")
+    key = mirror.shape_key_add(name=name)
+    co = np.empty(len(mirror.data.vertices) * 3, np.float32)
+    mirror.data.vertices.foreach_get("co", co)
+    co = co.reshape(-1, 3)
+    co[:, 2] = height(co[:, 0], co[:, 1])
+    key.data.foreach_set("co", co.ravel())
+    for value, frame in zip((0.0, 1.0), frames):
+        key.value = value
+        key.keyframe_insert("value", frame=frame)
+    return co
 
 
 def main(argv=None) -> int:

@@ -71,3 +71,13 @@ def dir_angle(a, b):
     a = np.asarray(a, np.float64)
     b = np.asarray(b, np.float64)
     return np.arctan2(np.linalg.norm(np.cross(a, b), axis=-1), np.sum(a * b, axis=-1))
+
+
+def rotation_vectors(quats: np.ndarray) -> np.ndarray:
+    """(N, 4) unit quaternions (x, y, z, w), w >= 0 → (N, 3) rotation vectors axis × angle."""
+    q = np.asarray(quats, dtype=np.float64)
+    u, w = q[:, :3], np.clip(q[:, 3], -1.0, 1.0)
+    s = np.linalg.norm(u, axis=1)
+    angle = 2.0 * np.arctan2(s, w)
+    scale = np.where(s > 1e-12, angle / np.maximum(s, 1e-300), 2.0 / np.maximum(w, 1e-300))
+    return (u * scale[:, None]).astype(np.float32)

@@ -12,6 +12,7 @@ import rokeby  # noqa: E402
 from rokeby import api, evaluate  # noqa: E402
 
 from conftest import ROOT, SHARED  # noqa: E402
+from reference import rotation_vectors  # noqa: E402
 
 sys.path.insert(0, str(ROOT / "blend_fixtures"))
 import make_fixtures  # noqa: E402
@@ -59,7 +60,7 @@ def test_fresh_constraint_changes_nothing_and_moving_its_handle_matches_native()
     got = api.stored_field(mirror)
     rows = _rows_from_handles(mirror, np.array(eye), normal=(0, 0, 1))
     q = rokeby_native.rotation_field(_world_vertices(mirror), rows, polar="fast")
-    np.testing.assert_allclose(got, evaluate.rotation_vectors(q), atol=2e-5)
+    np.testing.assert_allclose(got, rotation_vectors(q), atol=2e-5)
     assert np.abs(got).max() > 0.1
     # At the red handle the edited reflection hits the green handle (the constraint holds).
     qp = rokeby_native.rotation_field(rows[:, :3], rows)
@@ -229,17 +230,7 @@ def test_linked_library_mirror_is_refused(tmp_path):
 
 def test_deforming_mirror_uses_the_evaluated_mesh():
     mirror, eye = make_fixtures.plane_mirror()
-    mirror.shape_key_add(name="Basis")
-    bump = mirror.shape_key_add(name="Bump")
-    co = np.empty(len(mirror.data.vertices) * 3, np.float32)
-    mirror.data.vertices.foreach_get("co", co)
-    co = co.reshape(-1, 3)
-    co[:, 2] = 0.4 * np.exp(-(co[:, 0] ** 2 + co[:, 1] ** 2))
-    bump.data.foreach_set("co", co.ravel())
-    bump.value = 0.0
-    bump.keyframe_insert("value", frame=1)
-    bump.value = 1.0
-    bump.keyframe_insert("value", frame=20)
+    make_fixtures.animate_shape_key(mirror, "Bump", lambda x, y: 0.4 * np.exp(-(x**2 + y**2)))
     api.add_constraint(mirror, (0.5, 0.0, 0.0), (0.5, 1.0, 2.0), eye=eye)
     api.evaluate(frame=1)
     a1 = api.stored_field(mirror).copy()
@@ -442,17 +433,7 @@ def test_sidebar_panel_draws_every_state():
 
 def test_vertex_parented_handle_follows_a_deforming_mirror():
     mirror, eye = make_fixtures.plane_mirror()
-    mirror.shape_key_add(name="Basis")
-    lift = mirror.shape_key_add(name="Lift")
-    co = np.empty(len(mirror.data.vertices) * 3, np.float32)
-    mirror.data.vertices.foreach_get("co", co)
-    co = co.reshape(-1, 3)
-    co[:, 2] = 0.3 * co[:, 0]  # tilt the plane
-    lift.data.foreach_set("co", co.ravel())
-    lift.value = 0.0
-    lift.keyframe_insert("value", frame=1)
-    lift.value = 1.0
-    lift.keyframe_insert("value", frame=20)
+    co = make_fixtures.animate_shape_key(mirror, "Lift", lambda x, y: 0.3 * x)  # tilt the plane
     api.add_constraint(mirror, (1.0, 0.0, 0.0), (1.0, 1.0, 2.0), eye=eye)
     red = mirror.rokeby.constraints[0].surface_handle
     red.constraints.clear()

@@ -138,20 +138,12 @@ def mesh_arrays(obj, depsgraph=None, *, world: bool = True) -> MeshArrays:
         me.loop_triangles.foreach_get("vertices", tri)
     finally:
         ob_eval.to_mesh_clear()
-    co = co.reshape(-1, 3)
-    nrm = nrm.reshape(-1, 3)
     if world:
-        m = np.array(obj.matrix_world, dtype=np.float64)
-        co = (co @ m[:3, :3].T + m[:3, 3]).astype(np.float32)
-        try:
-            nm = np.linalg.inv(m[:3, :3]).T
-        except np.linalg.LinAlgError:
-            raise ValueError(f"obj: '{obj.name}' has a singular transform (zero scale)") from None
-        nrm = nrm.astype(np.float64) @ nm.T
-        nrm /= np.maximum(np.linalg.norm(nrm, axis=1, keepdims=True), 1e-30)
-        nrm = nrm.astype(np.float32)
-    if not (np.all(np.isfinite(co)) and np.all(np.isfinite(nrm))):
-        raise ValueError(f"obj: '{obj.name}' has non-finite vertex positions or transform")
+        co, nrm = _ev.to_world(co, nrm, np.array(obj.matrix_world, dtype=np.float64), f"obj: '{obj.name}'")
+    else:
+        co, nrm = co.reshape(-1, 3), nrm.reshape(-1, 3)
+        if not (np.all(np.isfinite(co)) and np.all(np.isfinite(nrm))):
+            raise ValueError(f"obj: '{obj.name}' has non-finite vertex positions")
     return MeshArrays(co, nrm, tri.reshape(-1, 3))
 
 
@@ -220,6 +212,7 @@ def geodesic_distances(vertices, faces, sources, *, method: str = "heat", bounda
 # Everything below needs Blender. The operators in rokeby.operators are thin wrappers of these
 # functions, and background scripts (render farms, pipelines) call them directly.
 
+from . import evaluate as _ev  # noqa: E402 - aliased: api.evaluate is a function
 from .evaluate import ATTRIBUTE, MirrorReport, RokebyError  # noqa: E402
 
 HANDLE_COLLECTION = "Rokeby Handles"
@@ -340,12 +333,10 @@ def _view_from_eye(eye, target):
 
 
 def _surface_of(mirror, scene, point):
-    from . import evaluate as ev  # noqa: PLC0415
-
     dg = _depsgraph(scene)
-    m = ev._finite_matrix(mirror.evaluated_get(dg).matrix_world, f"mirror '{mirror.name}'")
-    geo = ev.read_geometry(mirror, dg, m)
-    return ev.project_to_surface(mirror, dg, geo, _vec3(point, "surface_point"), m), geo, dg
+    m = _ev._finite_matrix(mirror.evaluated_get(dg).matrix_world, f"mirror '{mirror.name}'")
+    geo = _ev.read_geometry(mirror, dg, m)
+    return _ev.project_to_surface(mirror, dg, geo, _vec3(point, "surface_point"), m), geo, dg
 
 
 def add_constraint(mirror, surface_point, reflected_point=None, *, eye=None, view=None, name: str = "", scene=None):
@@ -453,10 +444,10 @@ def _vertex_group_reader():
     evaluator reads painted weights with foreach_get instead of a loop over vertices."""
     import bpy  # noqa: PLC0415
 
-    ng = bpy.data.node_groups.get(evaluate_module().VG_NODE_GROUP)
+    ng = bpy.data.node_groups.get(_ev.VG_NODE_GROUP)
     if ng is not None and ng.bl_idname == "GeometryNodeTree" and ng.library is None:
         return ng
-    ng = bpy.data.node_groups.new(evaluate_module().VG_NODE_GROUP, "GeometryNodeTree")
+    ng = bpy.data.node_groups.new(_ev.VG_NODE_GROUP, "GeometryNodeTree")
     ng.interface.new_socket("Geometry", in_out="INPUT", socket_type="NodeSocketGeometry")
     ng.interface.new_socket("Vertex Group", in_out="INPUT", socket_type="NodeSocketString")
     ng.interface.new_socket("Attribute", in_out="INPUT", socket_type="NodeSocketString")
@@ -476,15 +467,8 @@ def _vertex_group_reader():
     return ng
 
 
-def evaluate_module():
-    from . import evaluate as ev  # noqa: PLC0415
-
-    return ev
-
-
 def _ensure_reader(mirror, group):
-    ev = evaluate_module()
-    name = ev.VG_MODIFIER_PREFIX + group
+    name = _ev.VG_MODIFIER_PREFIX + group
     mod = mirror.modifiers.get(name)
     if mod is None:
         mod = mirror.modifiers.new(name, "NODES")
@@ -492,15 +476,14 @@ def _ensure_reader(mirror, group):
         mod.show_in_editmode = False
     ids = {item.name: item.identifier for item in mod.node_group.interface.items_tree if getattr(item, "in_out", "") == "INPUT"}
     mod[ids["Vertex Group"]] = group
-    mod[ids["Attribute"]] = ev.REGION_ATTRIBUTE_PREFIX + group
+    mod[ids["Attribute"]] = _ev.REGION_ATTRIBUTE_PREFIX + group
     return mod
 
 
 def _drop_unused_readers(mirror):
-    ev = evaluate_module()
     used = {rg.vertex_group for rg in mirror.rokeby.regions if rg.kind == "FREEFORM"}
     for mod in list(mirror.modifiers):
-        if mod.name.startswith(ev.VG_MODIFIER_PREFIX) and mod.name[len(ev.VG_MODIFIER_PREFIX):] not in used:
+        if mod.name.startswith(_ev.VG_MODIFIER_PREFIX) and mod.name[len(_ev.VG_MODIFIER_PREFIX):] not in used:
             mirror.modifiers.remove(mod)
 
 
@@ -559,7 +542,7 @@ def add_region(mirror, kind: str = "EUCLIDEAN", *, center=None, radius: float = 
     except Exception:
         _remove_objects(created)
         raise
-    evaluate_module().mark_dirty(mirror)
+    _ev.mark_dirty(mirror)
     return len(mirror.rokeby.regions) - 1
 
 
@@ -574,7 +557,7 @@ def remove_region(mirror, index: int, *, delete_center: bool = True, scene=None)
     mirror.rokeby.active_region = min(mirror.rokeby.active_region, max(len(mirror.rokeby.regions) - 1, 0))
     _drop_unused_readers(mirror)
     _remove_objects(doomed)
-    evaluate_module().mark_dirty(mirror)
+    _ev.mark_dirty(mirror)
 
 
 def remove_mirror(mirror, *, scene=None):
@@ -606,31 +589,31 @@ def evaluate(scene=None, frame=None, *, force: bool = False) -> "dict[str, Mirro
             whole = int(np.floor(f))
             scene.frame_set(whole, subframe=f - whole)
         dg = _depsgraph(scene)
-        return evaluate_module().evaluate_scene(scene, dg, force=force, all_geometry=frame is not None)
+        return _ev.evaluate_scene(scene, dg, force=force, all_geometry=frame is not None)
 
 
 def report(mirror) -> "MirrorReport | None":
     """The last evaluation report of ``mirror`` (None before its first evaluation)."""
-    return evaluate_module().report_of(mirror)
+    return _ev.report_of(mirror)
 
 
 def field(mirror) -> "np.ndarray | None":
     """The last computed rotation field of ``mirror``: (V, 4) quaternions (x, y, z, w)."""
-    return evaluate_module().rotations_of(mirror)
+    return _ev.rotations_of(mirror)
 
 
 def stored_field(mirror) -> "np.ndarray | None":
     """The rotation vectors (V, 3) stored in the mirror's mesh attribute (what renderers read)."""
-    return evaluate_module().read_attribute(mirror)
+    return _ev.read_attribute(mirror)
 
 
 def stats() -> dict:
     """How often mirrors were checked, recomputed or skipped (nothing had changed)."""
-    return evaluate_module().stats()
+    return _ev.stats()
 
 
 def reset_stats():
-    evaluate_module().reset_stats()
+    _ev.reset_stats()
 
 
 def edited_materials(mirror) -> list:
@@ -729,8 +712,8 @@ def edited_reflections(mirror, eye=None, *, scene=None) -> np.ndarray:
         eye = tuple(scene.camera.matrix_world.translation)
     eye = _vec3(eye, "eye")
     evaluate(scene)
-    st = evaluate_module()._STATE.get(mirror.session_uid)
-    quats = evaluate_module().rotations_of(mirror)
+    st = _ev._STATE.get(mirror.session_uid)
+    quats = _ev.rotations_of(mirror)
     if st is None or st.geometry is None or quats is None:
         rep = report(mirror)
         raise RokebyError(f"mirror '{mirror.name}' has no field: {rep.summary() if rep else 'not evaluated'}")

@@ -197,6 +197,22 @@ def object_in_scene(obj, scene) -> bool:
         return False
 
 
+def to_world(co, nrm, matrix, what: str):
+    """Object-space positions and normals (flat or (V, 3)) to world space as float32 (V, 3):
+    positions by ``matrix``, normals by its inverse transpose, renormalised. A singular or
+    non-finite result is refused, naming ``what``."""
+    m = np.asarray(matrix, dtype=np.float64)
+    lin = m[:3, :3]
+    if not abs(np.linalg.det(lin)) > 1e-30:
+        raise RokebyError(f"{what} has a singular transform (zero scale)")
+    v = np.asarray(co, dtype=np.float64).reshape(-1, 3) @ lin.T + m[:3, 3]
+    n = np.asarray(nrm, dtype=np.float64).reshape(-1, 3) @ np.linalg.inv(lin)
+    n /= np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-30)
+    if not (np.all(np.isfinite(v)) and np.all(np.isfinite(n))):
+        raise RokebyError(f"{what} has non-finite vertex positions or transform")
+    return v.astype(np.float32), n.astype(np.float32)
+
+
 def read_geometry(obj, depsgraph, mirror_matrix: np.ndarray, freeform_groups=()) -> _Geometry:
     """The mirror's mesh in world space: the evaluated mesh (modifiers, shape keys, armatures) when
     it has as many vertices as the object's own mesh, which carries the attribute; otherwise the
@@ -223,16 +239,8 @@ def read_geometry(obj, depsgraph, mirror_matrix: np.ndarray, freeform_groups=())
     me.loop_triangles.foreach_get("vertices", tri)
     tri_poly = np.empty(nt, dtype=np.int32)
     me.loop_triangle_polygons.foreach_get("value", tri_poly)
-    m = mirror_matrix
-    lin = m[:3, :3]
-    if abs(np.linalg.det(lin)) < 1e-30:
-        raise RokebyError(f"mirror '{obj.name}' has a singular transform (zero scale)")
-    v = co.reshape(-1, 3).astype(np.float64) @ lin.T + m[:3, 3]
-    n = nrm.reshape(-1, 3).astype(np.float64) @ np.linalg.inv(lin)
-    n /= np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-30)
-    if not (np.all(np.isfinite(v)) and np.all(np.isfinite(n))):
-        raise RokebyError(f"mirror '{obj.name}' has non-finite vertex positions")
-    geo = _Geometry(v.astype(np.float32), n.astype(np.float32), tri.reshape(-1, 3), tri_poly, source)
+    v, n = to_world(co, nrm, mirror_matrix, f"mirror '{obj.name}'")
+    geo = _Geometry(v, n, tri.reshape(-1, 3), tri_poly, source)
     for group in freeform_groups:
         geo.region_weights[group] = _vertex_group_weights(obj, me, group, source)
     return geo
@@ -472,16 +480,6 @@ def _regions_for_native(state, geo, specs, points, method, timer):
     for k in [k for k in state.region_cache if k not in used]:
         del state.region_cache[k]
     return regions
-
-
-def rotation_vectors(quats: np.ndarray) -> np.ndarray:
-    """(N, 4) unit quaternions (x, y, z, w), w >= 0 → (N, 3) rotation vectors axis × angle."""
-    q = np.asarray(quats, dtype=np.float64)
-    u, w = q[:, :3], np.clip(q[:, 3], -1.0, 1.0)
-    s = np.linalg.norm(u, axis=1)
-    angle = 2.0 * np.arctan2(s, w)
-    scale = np.where(s > 1e-12, angle / np.maximum(s, 1e-300), 2.0 / np.maximum(w, 1e-300))
-    return (u * scale[:, None]).astype(np.float32)
 
 
 def write_attribute(obj, values: np.ndarray):

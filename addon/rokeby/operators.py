@@ -31,9 +31,20 @@ def _mirror(context, name: str = ""):
 
 
 class _Op:
-    def fail(self, exc):
-        self.report({"ERROR"}, str(exc))
-        return {"CANCELLED"}
+    """An operator on one mirror (its ``mirror`` property, else the active object's mirror):
+    ``run`` does the work; a refusal from the API is reported and cancels, changing nothing."""
+
+    def execute(self, context):
+        try:
+            self.run(context, _mirror(context, self.mirror))
+        except RokebyError as exc:
+            self.report({"ERROR"}, str(exc))
+            return {"CANCELLED"}
+        return {"FINISHED"}
+
+    def index_or(self, active: int):
+        """The ``index`` property, or ``active`` when it is left at -1."""
+        return self.index if self.index >= 0 else active
 
 
 class ROKEBY_OT_mirror_add(_Op, bpy.types.Operator):
@@ -45,12 +56,8 @@ class ROKEBY_OT_mirror_add(_Op, bpy.types.Operator):
 
     mirror: StringProperty(name="Mirror", description="Object name (default: the active object)")
 
-    def execute(self, context):
-        try:
-            api.add_mirror(_mirror(context, self.mirror))
-        except RokebyError as exc:
-            return self.fail(exc)
-        return {"FINISHED"}
+    def run(self, context, mirror):
+        api.add_mirror(mirror)
 
 
 class ROKEBY_OT_mirror_remove(_Op, bpy.types.Operator):
@@ -62,12 +69,8 @@ class ROKEBY_OT_mirror_remove(_Op, bpy.types.Operator):
 
     mirror: StringProperty(name="Mirror")
 
-    def execute(self, context):
-        try:
-            api.remove_mirror(_mirror(context, self.mirror), scene=context.scene)
-        except RokebyError as exc:
-            return self.fail(exc)
-        return {"FINISHED"}
+    def run(self, context, mirror):
+        api.remove_mirror(mirror, scene=context.scene)
 
 
 def _view_of(context):
@@ -103,23 +106,18 @@ class ROKEBY_OT_constraint_add(_Op, bpy.types.Operator):
     reflected_point: FloatVectorProperty(name="Reflected point", size=3, subtype="TRANSLATION")
     use_reflected_point: BoolProperty(name="Set reflected point", default=False, description="Place the green handle here instead of on the physical reflection")
 
-    def execute(self, context):
-        try:
-            mirror = _mirror(context, self.mirror)
-            eye, view = _view_of(context)
-            if self.use_eye:
-                eye, view = np.array(self.eye), None
-            api.add_constraint(
-                mirror,
-                tuple(self.surface_point),
-                tuple(self.reflected_point) if self.use_reflected_point else None,
-                eye=None if eye is None else tuple(eye),
-                view=view,
-                scene=context.scene,
-            )
-        except RokebyError as exc:
-            return self.fail(exc)
-        return {"FINISHED"}
+    def run(self, context, mirror):
+        eye, view = _view_of(context)
+        if self.use_eye:
+            eye, view = np.array(self.eye), None
+        api.add_constraint(
+            mirror,
+            tuple(self.surface_point),
+            tuple(self.reflected_point) if self.use_reflected_point else None,
+            eye=None if eye is None else tuple(eye),
+            view=view,
+            scene=context.scene,
+        )
 
     def invoke(self, context, event):
         if context.area is None or context.area.type != "VIEW_3D":
@@ -167,13 +165,8 @@ class ROKEBY_OT_constraint_remove(_Op, bpy.types.Operator):
     mirror: StringProperty(name="Mirror")
     index: IntProperty(name="Index", default=-1, description="Constraint index (default: the active one)")
 
-    def execute(self, context):
-        try:
-            m = _mirror(context, self.mirror)
-            api.remove_constraint(m, self.index if self.index >= 0 else m.rokeby.active_constraint, scene=context.scene)
-        except RokebyError as exc:
-            return self.fail(exc)
-        return {"FINISHED"}
+    def run(self, context, mirror):
+        api.remove_constraint(mirror, self.index_or(mirror.rokeby.active_constraint), scene=context.scene)
 
 
 class ROKEBY_OT_constraint_select(_Op, bpy.types.Operator):
@@ -186,24 +179,19 @@ class ROKEBY_OT_constraint_select(_Op, bpy.types.Operator):
     mirror: StringProperty(name="Mirror")
     index: IntProperty(name="Index", default=-1)
 
-    def execute(self, context):
-        try:
-            m = _mirror(context, self.mirror)
-            s = m.rokeby
-            i = api._index(s.constraints, self.index if self.index >= 0 else s.active_constraint, "constraint")
-            c = s.constraints[i]
-            handles = [h for h in (c.surface_handle, c.target_handle) if h is not None and context.view_layer.objects.get(h.name) == h]
-            if not handles:
-                raise RokebyError("the constraint's handles were deleted")
-            for ob in context.view_layer.objects:
-                ob.select_set(False)
-            for h in handles:
-                h.select_set(True)
-            context.view_layer.objects.active = handles[-1]
-            s.active_constraint = i
-        except RokebyError as exc:
-            return self.fail(exc)
-        return {"FINISHED"}
+    def run(self, context, mirror):
+        s = mirror.rokeby
+        i = api._index(s.constraints, self.index_or(s.active_constraint), "constraint")
+        c = s.constraints[i]
+        handles = [h for h in (c.surface_handle, c.target_handle) if h is not None and context.view_layer.objects.get(h.name) == h]
+        if not handles:
+            raise RokebyError("the constraint's handles were deleted")
+        for ob in context.view_layer.objects:
+            ob.select_set(False)
+        for h in handles:
+            h.select_set(True)
+        context.view_layer.objects.active = handles[-1]
+        s.active_constraint = i
 
 
 class ROKEBY_OT_region_add(_Op, bpy.types.Operator):
@@ -221,17 +209,12 @@ class ROKEBY_OT_region_add(_Op, bpy.types.Operator):
     center: FloatVectorProperty(name="Centre", size=3, subtype="TRANSLATION")
     use_center: BoolProperty(name="Use centre", default=False, description="Centre here (default: the 3D cursor)")
 
-    def execute(self, context):
-        try:
-            m = _mirror(context, self.mirror)
-            group = self.vertex_group
-            if self.kind == "FREEFORM" and not group and m.vertex_groups.active is not None:
-                group = m.vertex_groups.active.name
-            centre = tuple(self.center) if self.use_center else tuple(context.scene.cursor.location)
-            api.add_region(m, self.kind, center=centre, radius=self.radius, border=self.border, vertex_group=group, scene=context.scene)
-        except RokebyError as exc:
-            return self.fail(exc)
-        return {"FINISHED"}
+    def run(self, context, mirror):
+        group = self.vertex_group
+        if self.kind == "FREEFORM" and not group and mirror.vertex_groups.active is not None:
+            group = mirror.vertex_groups.active.name
+        centre = tuple(self.center) if self.use_center else tuple(context.scene.cursor.location)
+        api.add_region(mirror, self.kind, center=centre, radius=self.radius, border=self.border, vertex_group=group, scene=context.scene)
 
 
 class ROKEBY_OT_region_remove(_Op, bpy.types.Operator):
@@ -244,13 +227,8 @@ class ROKEBY_OT_region_remove(_Op, bpy.types.Operator):
     mirror: StringProperty(name="Mirror")
     index: IntProperty(name="Index", default=-1)
 
-    def execute(self, context):
-        try:
-            m = _mirror(context, self.mirror)
-            api.remove_region(m, self.index if self.index >= 0 else m.rokeby.active_region, scene=context.scene)
-        except RokebyError as exc:
-            return self.fail(exc)
-        return {"FINISHED"}
+    def run(self, context, mirror):
+        api.remove_region(mirror, self.index_or(mirror.rokeby.active_region), scene=context.scene)
 
 
 class ROKEBY_OT_return_to_view(_Op, bpy.types.Operator):
@@ -267,18 +245,13 @@ class ROKEBY_OT_return_to_view(_Op, bpy.types.Operator):
     def poll(cls, context):
         return getattr(context, "region_data", None) is not None and hasattr(context.region_data, "view_rotation")
 
-    def execute(self, context):
-        try:
-            m = _mirror(context, self.mirror)
-            v = api.constraint_view(m, self.index if self.index >= 0 else None)
-        except RokebyError as exc:
-            return self.fail(exc)
+    def run(self, context, mirror):
+        v = api.constraint_view(mirror, self.index_or(mirror.rokeby.active_constraint))
         rv3d = context.region_data
         rv3d.view_perspective = v["perspective"]
         rv3d.view_location = v["location"]
         rv3d.view_rotation = v["rotation"]
         rv3d.view_distance = v["distance"]
-        return {"FINISHED"}
 
 
 class ROKEBY_OT_freeze(_Op, bpy.types.Operator):
@@ -291,20 +264,15 @@ class ROKEBY_OT_freeze(_Op, bpy.types.Operator):
     mirror: StringProperty(name="Mirror")
     action: EnumProperty(name="Action", items=[("TOGGLE", "Toggle", ""), ("FREEZE", "Freeze", ""), ("UNFREEZE", "Unfreeze", "")], default="TOGGLE")
 
-    def execute(self, context):
-        try:
-            m = _mirror(context, self.mirror)
-            api._require_mirror(m)
-            frozen = {"TOGGLE": not m.rokeby.freeze, "FREEZE": True, "UNFREEZE": False}[self.action]
-            eye = None
-            if frozen and not len(m.rokeby.constraints):
-                eye, _view = _view_of(context)
-                if eye is None and context.scene.camera is not None:
-                    eye = np.array(context.scene.camera.matrix_world.translation)
-            api.freeze(m, frozen, eye=None if eye is None else tuple(eye))
-        except RokebyError as exc:
-            return self.fail(exc)
-        return {"FINISHED"}
+    def run(self, context, mirror):
+        api._require_mirror(mirror)
+        frozen = {"TOGGLE": not mirror.rokeby.freeze, "FREEZE": True, "UNFREEZE": False}[self.action]
+        eye = None
+        if frozen and not len(mirror.rokeby.constraints):
+            eye, _view = _view_of(context)
+            if eye is None and context.scene.camera is not None:
+                eye = np.array(context.scene.camera.matrix_world.translation)
+        api.freeze(mirror, frozen, eye=None if eye is None else tuple(eye))
 
 
 class ROKEBY_OT_material_toggle(_Op, bpy.types.Operator):
@@ -317,18 +285,13 @@ class ROKEBY_OT_material_toggle(_Op, bpy.types.Operator):
     mirror: StringProperty(name="Mirror")
     material: StringProperty(name="Material")
 
-    def execute(self, context):
-        try:
-            m = _mirror(context, self.mirror)
-            edited = api.edited_materials(m)
-            mat = bpy.data.materials.get(self.material)
-            if mat is None:
-                raise RokebyError(f"material: no material named '{self.material}'")
-            edited = [x for x in edited if x != mat] if mat in edited else edited + [mat]
-            api.set_edited_materials(m, edited)
-        except RokebyError as exc:
-            return self.fail(exc)
-        return {"FINISHED"}
+    def run(self, context, mirror):
+        edited = api.edited_materials(mirror)
+        mat = bpy.data.materials.get(self.material)
+        if mat is None:
+            raise RokebyError(f"material: no material named '{self.material}'")
+        edited = [x for x in edited if x != mat] if mat in edited else edited + [mat]
+        api.set_edited_materials(mirror, edited)
 
 
 class ROKEBY_OT_render_nodes(_Op, bpy.types.Operator):
@@ -341,21 +304,14 @@ class ROKEBY_OT_render_nodes(_Op, bpy.types.Operator):
     mirror: StringProperty(name="Mirror")
     action: EnumProperty(name="Action", items=[("INSTALL", "Install", ""), ("REMOVE", "Remove", "")], default="INSTALL")
 
-    def execute(self, context):
-        try:
-            m = _mirror(context, self.mirror)
-            if self.action == "INSTALL":
-                n = api.install_render_nodes(m)
-                if n == 0:
-                    self.report({"WARNING"}, f"Rokeby: no Glossy or Principled BSDF in the edited materials of '{m.name}'")
-            else:
-                api.remove_render_nodes(m)
-        except RokebyError as exc:
-            return self.fail(exc)
-        return {"FINISHED"}
+    def run(self, context, mirror):
+        if self.action == "REMOVE":
+            api.remove_render_nodes(mirror)
+        elif api.install_render_nodes(mirror) == 0:
+            self.report({"WARNING"}, f"Rokeby: no Glossy or Principled BSDF in the edited materials of '{mirror.name}'")
 
 
-class ROKEBY_OT_update(_Op, bpy.types.Operator):
+class ROKEBY_OT_update(bpy.types.Operator):
     """Recompute every mirror's field now"""
 
     bl_idname = "rokeby.update"
