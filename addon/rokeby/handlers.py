@@ -2,6 +2,7 @@
 
 - ``depsgraph_update_post``: after any edit (a handle dragged, a property changed, a mesh edited);
   meshes are re-read only for objects Blender reports with new geometry.
+  Edited materials with split Principled BSDFs bring their parts up to date (``shading.sync``).
 - ``frame_change_post``: on every frame change (playback, scrubbing, final renders); every mirror's
   mesh is re-read because animation can deform it.
 - ``load_post`` / ``undo_post`` / ``redo_post``: runtime state is rebuilt from the file's data.
@@ -18,7 +19,7 @@ import contextlib
 import bpy
 from bpy.app.handlers import persistent
 
-from . import evaluate
+from . import evaluate, shading
 
 _busy = False
 _suspend = 0
@@ -64,10 +65,29 @@ def on_depsgraph_update(scene, depsgraph):
     if _busy or _suspend:
         return
     changed = set()
+    materials = set()
     for update in depsgraph.updates:
         if update.is_updated_geometry:
             changed.add(update.id.original)
+        if isinstance(update.id, (bpy.types.Material, bpy.types.ShaderNodeTree)):
+            materials.add(update.id.original)
+    if materials:
+        _sync_materials(materials)
     _run(scene, depsgraph, geometry_changed=changed)
+
+
+def _sync_materials(ids):
+    """An artist edited a material: split Principled BSDFs follow their original (shading.sync)."""
+    global _busy
+    _busy = True
+    try:
+        for mat in bpy.data.materials:
+            if mat in ids or (mat.node_tree is not None and mat.node_tree in ids):
+                shading.sync(mat)
+    except Exception as exc:  # noqa: BLE001 - a handler must never take Blender down
+        print(f"Rokeby: material update failed: {type(exc).__name__}: {exc}")
+    finally:
+        _busy = False
 
 
 @persistent

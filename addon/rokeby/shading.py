@@ -155,49 +155,268 @@ def node_group():
     return ng
 
 
-def _targets(tree):
-    for node in tree.nodes:
-        if node.bl_idname == "ShaderNodeBsdfGlossy" or node.bl_idname == "ShaderNodeBsdfAnisotropic":
-            yield node, node.inputs["Normal"]
-        elif node.bl_idname == "ShaderNodeBsdfPrincipled":
-            yield node, node.inputs["Normal"]
+# --- wiring materials ------------------------------------------------------------------------
+# Every node the add-on puts in a material carries LINK_TAG (older files: True) and a ROLE.
+ROLE = "rokeby_role"
+SOURCE = "rokeby_source"  # on split parts: the name of the Principled BSDF they stand in for
+SPLIT = "rokeby_split"  # on a split Principled BSDF: its original outgoing links
+SIGNATURE = "rokeby_signature"  # on a split Principled BSDF: its inputs when it was split
+SPECULAR_BSDFS = ("ShaderNodeBsdfGlossy", "ShaderNodeBsdfAnisotropic")
+_SEP = "\x1f"
+
+
+def _ours(node) -> bool:
+    return bool(node.get(LINK_TAG))
+
+
+def _tag(node, role, label, source=None):
+    node[LINK_TAG] = True
+    node[ROLE] = role
+    node.label = label
+    if source is not None:
+        node[SOURCE] = source
+    return node
+
+
+def _is_normal_group(node) -> bool:
+    """One of our edited-normal group nodes (files from before roles have the tag only)."""
+    return _ours(node) and node.bl_idname == "ShaderNodeGroup" and node.get(ROLE, "normal") == "normal"
+
+
+def _feed_edited_normal(tree, socket, label, location):
+    """Feed n' to ``socket`` (a BSDF's Normal or Coat Normal) through its own group node; a normal
+    already linked there (a bump map) passes through the group. Idempotent."""
+    links = list(socket.links)
+    if links and _is_normal_group(links[0].from_node):
+        return links[0].from_node
+    group = _tag(tree.nodes.new("ShaderNodeGroup"), "normal", label)
+    group.node_tree = node_group()
+    group.location = location
+    if links:
+        tree.links.new(links[0].from_socket, group.inputs["Normal"])
+    tree.links.new(group.outputs["Edited Normal"], socket)
+    return group
+
+
+def _fixed(socket, value) -> bool:
+    """The input is unlinked and holds ``value``."""
+    return not socket.is_linked and abs(socket.default_value - value) < 1e-6
+
+
+def _is_metal(bsdf) -> bool:
+    return _fixed(bsdf.inputs["Metallic"], 1.0)
+
+
+def _has_coat(bsdf) -> bool:
+    return not _fixed(bsdf.inputs["Coat Weight"], 0.0)
+
+
+def _signature(bsdf) -> str:
+    """The Principled BSDF's inputs (values and links) and settings, to notice artists' edits."""
+    parts = [bsdf.distribution, bsdf.subsurface_method]
+    for sock in bsdf.inputs:
+        if sock.is_linked:
+            lk = sock.links[0]
+            parts.append(f"{sock.identifier}<{lk.from_node.name}.{lk.from_socket.identifier}")
+        elif hasattr(sock, "default_value"):
+            v = sock.default_value
+            parts.append(f"{sock.identifier}={tuple(v) if hasattr(v, '__len__') else v!r}")
+    return "|".join(parts)
+
+
+def _clone(tree, bsdf, role, overrides, location):
+    """A copy of the Principled BSDF ``bsdf`` (values and links) with ``overrides`` set unlinked."""
+    part = tree.nodes.new(bsdf.bl_idname)
+    part.distribution = bsdf.distribution
+    part.subsurface_method = bsdf.subsurface_method
+    for src, dst in zip(bsdf.inputs, part.inputs):
+        if hasattr(src, "default_value"):
+            dst.default_value = src.default_value
+        for lk in src.links:
+            tree.links.new(lk.from_socket, dst)
+    for name, value in overrides.items():
+        sock = part.inputs[name]
+        for lk in list(sock.links):
+            tree.links.remove(lk)
+        sock.default_value = value
+    part.location = location
+    part.hide = True
+    return _tag(part, role, f"Rokeby: {role} part of {bsdf.name}", bsdf.name)
+
+
+def _value_socket(tree, socket, bsdf, location):
+    """An output socket carrying ``socket``'s value: its upstream link, or a Value node."""
+    if socket.is_linked:
+        return socket.links[0].from_socket
+    node = _tag(tree.nodes.new("ShaderNodeValue"), "value", f"Rokeby: {socket.name} of {bsdf.name}", bsdf.name)
+    node.outputs[0].default_value = socket.default_value
+    node.location = location
+    return node.outputs[0]
+
+
+def _split(tree, bsdf) -> None:
+    """Split a dielectric (or partly metallic) Principled BSDF so only its specular lobes see n'.
+
+    Blender's Principled BSDF shades every lobe with its one Normal input, so feeding it n' would
+    also move the diffuse shading, which the paper keeps (§6). It is replaced in the node tree by
+        Mix(metallic, (1 − F) · Diffuse(N) + Specular(n'), Metal(n'))
+    where Diffuse is a copy with its specular layer, coat and metal off (diffuse, subsurface, sheen,
+    transmission, emission), Specular a copy with black base (the dielectric specular layer and the
+    coat), Metal a copy with metallic = 1, and F = min(1, 2 · Specular IOR Level) · Fresnel(IOR)
+    stands for the light the specular layer takes from the diffuse one. Alpha wraps the sum. The
+    original node stays in the tree, unlinked, holding the artist's values; ``sync`` copies later
+    edits of it into the parts and ``uninstall`` puts it back in place.
+    """
+    x, y = bsdf.location
+    outgoing = [(lk.to_node.name, lk.to_socket.identifier) for lk in bsdf.outputs["BSDF"].links]
+    bsdf[SPLIT] = [f"{a}{_SEP}{b}" for a, b in outgoing]
+    bsdf[SIGNATURE] = _signature(bsdf)
+    normal_in = bsdf.inputs["Normal"]
+    black = (0.0, 0.0, 0.0, 1.0)
+    diffuse = _clone(tree, bsdf, "diffuse", {"Metallic": 0.0, "Specular IOR Level": 0.0, "Coat Weight": 0.0, "Alpha": 1.0}, (x + 300, y + 200))
+    specular = _clone(tree, bsdf, "specular", {
+        "Base Color": black, "Metallic": 0.0, "Subsurface Weight": 0.0, "Transmission Weight": 0.0,
+        "Sheen Weight": 0.0, "Emission Strength": 0.0, "Alpha": 1.0}, (x + 300, y + 150))
+    _feed_edited_normal(tree, specular.inputs["Normal"], "Rokeby: edited reflections", (x, y - 420))
+    if _has_coat(bsdf):
+        _feed_edited_normal(tree, specular.inputs["Coat Normal"], "Rokeby: edited coat reflections", (x, y - 520))
+    # (1 − F) Diffuse: Mix(F, Diffuse, black).
+    fresnel = _tag(tree.nodes.new("ShaderNodeFresnel"), "fresnel", f"Rokeby: specular layer of {bsdf.name}", bsdf.name)
+    fresnel.location = (x + 300, y + 300)
+    tree.links.new(_value_socket(tree, bsdf.inputs["IOR"], bsdf, (x + 100, y + 300)), fresnel.inputs["IOR"])
+    if normal_in.is_linked:
+        tree.links.new(normal_in.links[0].from_socket, fresnel.inputs["Normal"])
+    level = scalar_math(tree, "MULTIPLY", _value_socket(tree, bsdf.inputs["Specular IOR Level"], bsdf, (x + 100, y + 350)), values=(2.0,))
+    weight = scalar_math(tree, "MULTIPLY", level.outputs[0], fresnel.outputs["Fac"])
+    weight.use_clamp = True
+    for node in (level, weight):
+        _tag(node, "math", f"Rokeby: specular layer of {bsdf.name}", bsdf.name)
+    nothing = _tag(tree.nodes.new("ShaderNodeEmission"), "black", "Rokeby: nothing", bsdf.name)
+    nothing.inputs["Strength"].default_value = 0.0
+    attenuated = _tag(tree.nodes.new("ShaderNodeMixShader"), "attenuate", f"Rokeby: diffuse under the specular layer of {bsdf.name}", bsdf.name)
+    tree.links.new(weight.outputs[0], attenuated.inputs["Fac"])
+    tree.links.new(diffuse.outputs["BSDF"], attenuated.inputs[1])
+    tree.links.new(nothing.outputs["Emission"], attenuated.inputs[2])
+    total = _tag(tree.nodes.new("ShaderNodeAddShader"), "sum", f"Rokeby: {bsdf.name} with edited specular", bsdf.name)
+    tree.links.new(attenuated.outputs["Shader"], total.inputs[0])
+    tree.links.new(specular.outputs["BSDF"], total.inputs[1])
+    result = total.outputs["Shader"]
+    if not _fixed(bsdf.inputs["Metallic"], 0.0):
+        metal = _clone(tree, bsdf, "metal", {"Metallic": 1.0, "Emission Strength": 0.0, "Alpha": 1.0}, (x + 300, y + 100))
+        _feed_edited_normal(tree, metal.inputs["Normal"], "Rokeby: edited reflections", (x, y - 620))
+        if _has_coat(bsdf):
+            _feed_edited_normal(tree, metal.inputs["Coat Normal"], "Rokeby: edited coat reflections", (x, y - 720))
+        mix = _tag(tree.nodes.new("ShaderNodeMixShader"), "metallic", f"Rokeby: metallic of {bsdf.name}", bsdf.name)
+        tree.links.new(_value_socket(tree, bsdf.inputs["Metallic"], bsdf, (x + 100, y + 400)), mix.inputs["Fac"])
+        tree.links.new(result, mix.inputs[1])
+        tree.links.new(metal.outputs["BSDF"], mix.inputs[2])
+        result = mix.outputs["Shader"]
+    if not _fixed(bsdf.inputs["Alpha"], 1.0):
+        clear = _tag(tree.nodes.new("ShaderNodeBsdfTransparent"), "transparent", "Rokeby: alpha", bsdf.name)
+        mix = _tag(tree.nodes.new("ShaderNodeMixShader"), "alpha", f"Rokeby: alpha of {bsdf.name}", bsdf.name)
+        tree.links.new(_value_socket(tree, bsdf.inputs["Alpha"], bsdf, (x + 100, y + 450)), mix.inputs["Fac"])
+        tree.links.new(clear.outputs["BSDF"], mix.inputs[1])
+        tree.links.new(result, mix.inputs[2])
+        result = mix.outputs["Shader"]
+    for node_name, ident in outgoing:
+        node = tree.nodes.get(node_name)
+        sock = next((s for s in node.inputs if s.identifier == ident), None) if node else None
+        if sock is not None:
+            tree.links.new(result, sock)
+
+
+def _unsplit(tree, bsdf) -> None:
+    """Remove the parts standing in for ``bsdf`` and put it back where it was linked."""
+    targets = []
+    for entry in bsdf.get(SPLIT, []):
+        node_name, _, ident = str(entry).partition(_SEP)
+        node = tree.nodes.get(node_name)
+        sock = next((s for s in node.inputs if s.identifier == ident), None) if node else None
+        if sock is not None:
+            targets.append(sock)
+    parts = [nd for nd in tree.nodes if _ours(nd) and nd.get(SOURCE) == bsdf.name]
+    # The edited-normal groups that feed the parts go with them.
+    for part in list(parts):
+        for sock in part.inputs:
+            parts.extend(lk.from_node for lk in sock.links if _is_normal_group(lk.from_node))
+    for node in {nd.name: nd for nd in parts}.values():
+        tree.nodes.remove(node)
+    for sock in targets:
+        tree.links.new(bsdf.outputs["BSDF"], sock)
+    for key in (SPLIT, SIGNATURE):
+        if key in bsdf:
+            del bsdf[key]
 
 
 def install(material) -> int:
-    """Insert the node group in ``material`` and feed the specular normals; returns how many BSDF
-    inputs were rewired. An input already driven (e.g. by a bump map) passes through the group."""
-    if material is None or not material.use_nodes:
+    """Make ``material``'s specular lobes use the edited normal; returns how many BSDFs now do.
+
+    Glossy/Anisotropic BSDFs and metallic Principled BSDFs (metallic = 1) get n' at their Normal
+    (and Coat Normal) input; other Principled BSDFs are split so that the diffuse lobe keeps the
+    original normal (see ``_split``). A normal already linked there (a bump map) passes through.
+    Installing twice changes nothing."""
+    if material is None or not material.use_nodes or material.node_tree is None:
         return 0
     tree = material.node_tree
-    group = next((nd for nd in tree.nodes if nd.bl_idname == "ShaderNodeGroup" and nd.get(LINK_TAG)), None)
-    if group is None:
-        group = tree.nodes.new("ShaderNodeGroup")
-        group.node_tree = node_group()
-        group[LINK_TAG] = True
-        group.label = "Rokeby: edited reflections"
-        group.location = (-400, -300)
     count = 0
-    for bsdf, socket in _targets(tree):
-        previous = [lk for lk in socket.links if lk.from_node != group]
-        if previous:
-            src = previous[0].from_socket
-            tree.links.new(src, group.inputs["Normal"])
-        tree.links.new(group.outputs["Edited Normal"], socket)
-        count += 1
+    for node in list(tree.nodes):
+        if _ours(node):
+            continue
+        x, y = node.location
+        if node.bl_idname in SPECULAR_BSDFS:
+            _feed_edited_normal(tree, node.inputs["Normal"], "Rokeby: edited reflections", (x - 250, y - 300))
+            count += 1
+        elif node.bl_idname == "ShaderNodeBsdfPrincipled":
+            if SPLIT in node:
+                if node.get(SIGNATURE) != _signature(node):
+                    _unsplit(tree, node)
+                    _split(tree, node)
+            elif _is_metal(node):
+                _feed_edited_normal(tree, node.inputs["Normal"], "Rokeby: edited reflections", (x - 250, y - 300))
+                if _has_coat(node):
+                    _feed_edited_normal(tree, node.inputs["Coat Normal"], "Rokeby: edited coat reflections", (x - 250, y - 400))
+            else:
+                _split(tree, node)
+            count += 1
     return count
 
 
-def uninstall(material) -> bool:
-    """Remove the group from ``material``, restoring any normal input it was passing through."""
-    if material is None or not material.use_nodes:
+def sync(material) -> bool:
+    """Bring split parts up to date after an artist edited the original Principled BSDF (values,
+    links, metallic becoming 1 or not); returns whether anything was rebuilt."""
+    if material is None or not material.use_nodes or material.node_tree is None:
         return False
     tree = material.node_tree
-    groups = [nd for nd in tree.nodes if nd.bl_idname == "ShaderNodeGroup" and nd.get(LINK_TAG)]
-    for group in groups:
-        upstream = [lk.from_socket for lk in group.inputs["Normal"].links]
-        targets = [lk.to_socket for lk in group.outputs["Edited Normal"].links]
+    stale = [nd for nd in tree.nodes if SPLIT in nd and nd.get(SIGNATURE) != _signature(nd)]
+    for bsdf in stale:
+        _unsplit(tree, bsdf)
+        if not _is_metal(bsdf):
+            _split(tree, bsdf)
+        else:
+            _feed_edited_normal(tree, bsdf.inputs["Normal"], "Rokeby: edited reflections", (bsdf.location.x - 250, bsdf.location.y - 300))
+    return bool(stale)
+
+
+def installed(material) -> bool:
+    return material is not None and material.use_nodes and material.node_tree is not None and any(_ours(nd) for nd in material.node_tree.nodes)
+
+
+def uninstall(material) -> bool:
+    """Take everything the add-on put in ``material`` out again, restoring the links it replaced
+    (bump maps feed their BSDFs again, split Principled BSDFs are linked where they were)."""
+    if material is None or not material.use_nodes or material.node_tree is None:
+        return False
+    tree = material.node_tree
+    found = installed(material)
+    for bsdf in [nd for nd in tree.nodes if SPLIT in nd]:
+        _unsplit(tree, bsdf)
+    for group in [nd for nd in tree.nodes if _ours(nd) and nd.bl_idname == "ShaderNodeGroup"]:
+        upstream = [lk.from_socket for lk in group.inputs["Normal"].links] if "Normal" in group.inputs else []
+        targets = [lk.to_socket for out in group.outputs for lk in out.links]
         tree.nodes.remove(group)
         if upstream:
             for sock in targets:
                 tree.links.new(upstream[0], sock)
-    return bool(groups)
+    for node in [nd for nd in tree.nodes if _ours(nd)]:
+        tree.nodes.remove(node)
+    return found
