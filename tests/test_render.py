@@ -140,3 +140,29 @@ def test_freeze_in_renders(chrome_ball, tmp_path):
     assert (np.abs(moved - live).max(-1) > 0.05).mean() > 0.05
     api.freeze(ball, False)
     np.testing.assert_allclose(_render(tmp_path, "unfrozen"), live, atol=1e-6)
+
+
+def test_eevee_renders_the_edit(chrome_ball, tmp_path):
+    """EEVEE (Mesa llvmpipe in background mode here) renders the same node group without error:
+    finite, not black, and the edit changes the picture inside its region."""
+    ball, _ = chrome_ball
+    sc = bpy.context.scene
+    sc.render.engine = "BLENDER_EEVEE_NEXT"
+    sc.eevee.taa_render_samples = 1
+    api.add_mirror(ball)
+    api.add_constraint(ball, (0.0, -1.0, 0.0), eye=(0.0, -4.0, 0.0))
+    api.add_region(ball, "EUCLIDEAN", center=(0.0, -1.0, 0.0), radius=0.6, border=0.2)
+    api.evaluate()
+    assert api.install_render_nodes(ball) == 1
+    identity = _render(tmp_path, "eevee_identity")
+    ball.rokeby.constraints[0].target_handle.location.z += 3.0
+    api.evaluate()
+    edited = _render(tmp_path, "eevee_edited")
+    for img in (identity, edited):
+        assert np.isfinite(img).all() and img.mean() > 0.05
+    changed = np.abs(edited - identity).max(-1) > 0.05
+    ys, xs = np.mgrid[0:SIZE, 0:SIZE]
+    half = 4.0 * 18.0 / 50.0
+    r = np.hypot((xs + 0.5) / SIZE * 2 - 1, 1 - (ys + 0.5) / SIZE * 2) * half
+    assert changed[r < 0.5].mean() > 0.3
+    assert changed[r > 0.9].mean() < 0.02  # the background and the ball's rim stay
