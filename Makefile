@@ -12,7 +12,7 @@ export ROKEBY_SHARED := $(SHARED)
 
 RUST_SRC := Cargo.toml pyproject.toml $(wildcard rust/*/Cargo.toml) $(shell find rust -name '*.rs' 2>/dev/null)
 
-.PHONY: all demo test bench cargo-test pytest native venv clean help
+.PHONY: all demo dist test bench cargo-test pytest native venv clean help
 
 all: native
 
@@ -20,6 +20,7 @@ help:
 	@echo "make demo   build everything and run the demonstration"
 	@echo "make test   cargo tests + pytest (bpy in background mode)"
 	@echo "make bench  benchmarks, printed next to the reference numbers"
+	@echo "make dist   the installable Blender extension zip, dist/rokeby-<version>.zip"
 
 # --- bootstrap -------------------------------------------------------------------------------
 $(VENV)/.deps: requirements.txt
@@ -41,8 +42,13 @@ $(VENV)/.native: $(VENV)/.deps $(RUST_SRC)
 native: $(VENV)/.native
 
 # --- the two commands ------------------------------------------------------------------------
-demo: native
+demo: native dist
 	$(PY) -m rokeby.demo
+
+# The Blender 4.2+ extension zip: add-on files at the root, the manifest with the wheel's real
+# filename, the wheel under wheels/ (tools/build_extension.py; rewrites the zip only if it changed).
+dist: native
+	$(PY) tools/build_extension.py --wheels target/wheels --out dist
 
 test: cargo-test pytest
 
