@@ -46,6 +46,11 @@ __all__ = [
     "report",
     "field",
     "stored_field",
+    "refract",
+    "refraction_field",
+    "stored_refraction",
+    "set_ior",
+    "ior_from_material",
     "stats",
     "reset_stats",
     "RokebyError",
@@ -74,6 +79,19 @@ def reflect(incident, normal) -> np.ndarray:
     i = np.asarray(incident, dtype=np.float64)
     n = np.asarray(normal, dtype=np.float64)
     return i - 2.0 * np.sum(i * n, axis=-1, keepdims=True) * n
+
+
+def refract(incident, normal, eta) -> np.ndarray:
+    """Snell refraction of unit ``incident`` (pointing at the surface, against unit ``normal``)
+    with eta = η_outside / η_inside (1/IOR when entering); zero vectors where the ray is totally
+    internally reflected. Vectorised over leading axes."""
+    i = np.asarray(incident, dtype=np.float64)
+    n = np.asarray(normal, dtype=np.float64)
+    eta = np.asarray(eta, dtype=np.float64)[..., None] if np.ndim(eta) else float(eta)
+    c = -np.sum(i * n, axis=-1, keepdims=True)
+    k = 1.0 - eta * eta * (1.0 - c * c)
+    t = eta * i + (eta * c - np.sqrt(np.maximum(k, 0.0))) * n
+    return np.where(k > 0.0, t, 0.0)
 
 
 def constraint_row(surface_point, normal, reflected_point, eye) -> np.ndarray:
@@ -339,8 +357,9 @@ def _surface_of(mirror, scene, point):
     return _ev.project_to_surface(mirror, dg, geo, _vec3(point, "surface_point"), m), geo, dg
 
 
-def add_constraint(mirror, surface_point, reflected_point=None, *, eye=None, view=None, name: str = "", scene=None):
-    """Add a reflection constraint to ``mirror`` and return its index.
+def add_constraint(mirror, surface_point, reflected_point=None, *, eye=None, view=None, name: str = "", kind: str = "REFLECTION", scene=None):
+    """Add a reflection (or, ``kind='REFRACTION'``, refraction) constraint to ``mirror`` and
+    return its index.
 
     ``surface_point`` (world space) is projected onto the mirror: the red handle goes there, kept
     on the surface by a Shrinkwrap constraint. The green handle goes to ``reflected_point``; when
@@ -349,9 +368,22 @@ def add_constraint(mirror, surface_point, reflected_point=None, *, eye=None, vie
     changes nothing until a handle moves. ``eye`` is the generating eye point (default: the scene
     camera); ``view`` optionally gives the generating 3D view as a dict with location, rotation
     (w, x, y, z), distance and perspective ('PERSP' | 'ORTHO'), used by "return to view".
+
+    A refraction constraint (paper §7.1) has a refracting position and a transmitted direction but
+    no refracted position: ``reflected_point`` is then any point along the edited transmitted
+    direction e_t. When it is None the green handle goes along the physical t = refract(view, N,
+    1/η) (η: the mirror's ``ior``), as far as the eye is from the mirror, so a fresh refraction
+    constraint is the identity too. Refused: an eye that sees the back of the surface at p, and
+    total internal reflection there (η < 1).
     """
     scene = _scene(scene)
     _require_mirror(mirror)
+    from .props import CONSTRAINT_KINDS  # noqa: PLC0415 - Blender only
+
+    kinds = [item[0] for item in CONSTRAINT_KINDS]
+    if kind not in kinds:
+        raise RokebyError(f"kind: '{kind}' is not one of {kinds}")
+    ior = _ev.valid_ior(mirror.rokeby.ior) if kind == "REFRACTION" else None
     if eye is None:
         if scene.camera is None:
             raise RokebyError("eye: not given and the scene has no camera")
@@ -362,9 +394,14 @@ def add_constraint(mirror, surface_point, reflected_point=None, *, eye=None, vie
     incident = p - eye
     if not np.linalg.norm(incident) > 1e-12 * max(geo.size, 1e-30):
         raise RokebyError("eye: lies on the surface point")
-    r = reflect(incident / np.linalg.norm(incident), sp.normal)
+    if kind == "REFRACTION":
+        r = _ev._transmitted(incident / np.linalg.norm(incident), sp.normal, ior, "surface_point")
+    else:
+        r = reflect(incident / np.linalg.norm(incident), sp.normal)
     r /= np.linalg.norm(r)
-    if reflected_point is None:
+    if reflected_point is None and kind == "REFRACTION":
+        green = p + r * max(float(np.linalg.norm(incident)), geo.size, 1e-6)
+    elif reflected_point is None:
         size = max(geo.size, 1e-6)
         origin = p + sp.normal * (1e-4 * size) * (1.0 if r @ sp.normal >= 0 else -1.0)
         hit, loc, _n, _i, _ob, _m = scene.ray_cast(dg, origin.tolist(), r.tolist())
@@ -388,10 +425,12 @@ def add_constraint(mirror, surface_point, reflected_point=None, *, eye=None, vie
         shrink.name = "Rokeby: stay on mirror"
         shrink.target = mirror
         shrink.shrinkwrap_type = "NEAREST_SURFACE"
-        green_ob = _new_empty(scene, f"{mirror.name} {label} reflected", green, "SPHERE", size, (0.1, 1.0, 0.1, 1.0))
+        role = "transmitted" if kind == "REFRACTION" else "reflected"
+        green_ob = _new_empty(scene, f"{mirror.name} {label} {role}", green, "SPHERE", size, (0.1, 1.0, 0.1, 1.0))
         created.append(green_ob)
         item = mirror.rokeby.constraints.add()
         item.name = label
+        item.kind = kind
         item.surface_handle = red
         item.target_handle = green_ob
         item.eye = eye.tolist()
@@ -571,6 +610,7 @@ def remove_mirror(mirror, *, scene=None):
     attr = mirror.data.attributes.get(ATTRIBUTE)
     if attr is not None:
         mirror.data.attributes.remove(attr)
+    _ev.remove_attribute(mirror, _ev.REFRACTION_ATTRIBUTE)
     mirror.rokeby.is_mirror = False
 
 
@@ -605,6 +645,47 @@ def field(mirror) -> "np.ndarray | None":
 def stored_field(mirror) -> "np.ndarray | None":
     """The rotation vectors (V, 3) stored in the mirror's mesh attribute (what renderers read)."""
     return _ev.read_attribute(mirror)
+
+
+def refraction_field(mirror) -> "np.ndarray | None":
+    """The last computed refraction field of ``mirror`` as (V, 4) quaternions (x, y, z, w), or
+    None while it has no usable refraction constraint."""
+    return _ev.refractions_of(mirror)
+
+
+def stored_refraction(mirror) -> "np.ndarray | None":
+    """The rotation vectors (V, 3) of the refraction field stored in the mesh attribute
+    ``rokeby_refraction`` (None when the mirror has no refraction constraint)."""
+    return _ev.read_attribute(mirror, _ev.REFRACTION_ATTRIBUTE)
+
+
+def set_ior(mirror, ior: float):
+    """Set the index of refraction refraction constraints and the render nodes use for ``mirror``
+    (outside → inside; glass about 1.45–1.5). Must be finite and > 0."""
+    _require_mirror(mirror)
+    mirror.rokeby.ior = _ev.valid_ior(ior)
+
+
+def ior_from_material(mirror, material=None) -> float:
+    """Take the mirror's IOR from its material: the IOR input of the first Glass, Refraction or
+    Principled BSDF (with transmission) found in ``material`` (default: the edited materials in
+    order). The IOR must be a plain value, not linked. Returns the IOR now set."""
+    from . import refraction  # noqa: PLC0415
+
+    _require_mirror(mirror)
+    materials = [material] if material is not None else edited_materials(mirror)
+    problems = []
+    for mat in materials:
+        try:
+            ior = refraction.material_ior(mat)
+        except RokebyError as exc:
+            problems.append(str(exc))
+            continue
+        if ior is not None:
+            set_ior(mirror, ior)
+            return mirror.rokeby.ior
+    names = ", ".join(f"'{m.name}'" for m in materials if m is not None) or "none"
+    raise RokebyError("material: no Glass, Refraction or transmissive Principled BSDF with an IOR value in " + names + ("; " + "; ".join(problems) if problems else ""))
 
 
 def stats() -> dict:
@@ -650,20 +731,22 @@ def set_edited_materials(mirror, materials=None):
 def install_render_nodes(mirror) -> int:
     """Make final renders (Cycles; EEVEE uses the same nodes) show the edit: the node group
     "Rokeby Edited Normal" feeds the edited normal to the specular BSDFs of every edited material
-    (see rokeby.shading). Returns how many BSDF inputs were rewired."""
-    from . import shading  # noqa: PLC0415
+    (see rokeby.shading). "Rokeby Edited Refraction Normal" feeds Refraction BSDFs and split
+    Glass BSDFs first (rokeby.refraction; counted too), so a split Glass's reflection part is
+    edited as well. Returns how many BSDF inputs were rewired."""
+    from . import refraction, shading  # noqa: PLC0415
 
     _require_mirror(mirror)
-    return sum(shading.install(mat) for mat in edited_materials(mirror))
+    return sum(refraction.install(mat) + shading.install(mat) for mat in edited_materials(mirror))
 
 
 def remove_render_nodes(mirror) -> int:
     """Take the node group out of the mirror's materials again; returns how many it left."""
-    from . import shading  # noqa: PLC0415
+    from . import refraction, shading  # noqa: PLC0415
 
     _require_mirror(mirror)
     mats = {slot.material for slot in mirror.material_slots if slot.material is not None}
-    return sum(bool(shading.uninstall(mat)) for mat in mats)
+    return sum(bool(shading.uninstall(mat)) | bool(refraction.uninstall(mat)) for mat in mats)
 
 
 def freeze(mirror, frozen: bool = True, *, eye=None):

@@ -7,6 +7,12 @@ and the region weights. It then computes the rotation field R(q) (paper eq. 5 an
 and writes it as the rotation vector (axis × angle) point attribute ``rokeby_rotation`` of the
 mirror's mesh with a single ``foreach_set``.
 
+Refraction constraints (``kind == 'REFRACTION'``, paper §7.1) give a second, independent field from
+rows [p, t, e_t]: t = refract(view, N, 1/η) the physical transmitted direction at p from the
+generating eye (η: the mirror's ``ior``), e_t towards the green handle. It uses the same distances,
+regions and caches and is written as ``rokeby_refraction``; the attribute is removed while the
+mirror has no usable refraction constraint. Each field is recomputed only when its own rows change.
+
 Dirty tracking: the inputs of a mirror are condensed into a fingerprint (handle positions, view
 eyes, region settings, the mirror's transform and, when Blender reports that its geometry changed
 or the frame changed, its evaluated vertex positions). When the fingerprint is unchanged nothing is
@@ -30,6 +36,8 @@ import numpy as np
 from . import native
 
 ATTRIBUTE = "rokeby_rotation"
+# The second field, from refraction constraints [p, t, e_t] (present only while the mirror has some).
+REFRACTION_ATTRIBUTE = "rokeby_refraction"
 REGION_ATTRIBUTE_PREFIX = "rokeby_vg_"
 VG_NODE_GROUP = "Rokeby Vertex Group Reader"
 VG_MODIFIER_PREFIX = "Rokeby region: "
@@ -114,6 +122,8 @@ class _State:
         self.region_cache: dict = {}
         self.report: MirrorReport | None = None
         self.rotations: np.ndarray | None = None
+        self.refractions: np.ndarray | None = None
+        self.field_fingerprints: dict = {}
 
 
 _STATE: dict[int, _State] = {}
@@ -155,6 +165,13 @@ def rotations_of(obj) -> np.ndarray | None:
     """The last computed field of a mirror as (V, 4) quaternions (x, y, z, w)."""
     st = _STATE.get(obj.session_uid)
     return quaternions(st.rotations) if st is not None and st.rotations is not None else None
+
+
+def refractions_of(obj) -> np.ndarray | None:
+    """The last computed refraction field of a mirror as (V, 4) quaternions (None: no refraction
+    constraint)."""
+    st = _STATE.get(obj.session_uid)
+    return quaternions(st.refractions) if st is not None and st.refractions is not None else None
 
 
 def quaternions(rotvec: np.ndarray) -> np.ndarray:
@@ -334,22 +351,42 @@ def reflect(incident, normal):
     return incident - 2.0 * (incident @ normal) * normal
 
 
+def refract(incident, normal, eta):
+    """Snell refraction of unit ``incident`` (pointing at the surface, against unit ``normal``)
+    with eta = η_outside / η_inside; None on total internal reflection."""
+    c = -float(incident @ normal)
+    k = 1.0 - eta * eta * (1.0 - c * c)
+    if not k > 0.0:
+        return None
+    return eta * incident + (eta * c - np.sqrt(k)) * normal
+
+
+def valid_ior(value) -> float:
+    """The IOR as a float, or a RokebyError saying why it cannot be used."""
+    ior = float(value)
+    if not (np.isfinite(ior) and ior > 0.0):
+        raise RokebyError(f"IOR must be finite and > 0, got {ior}")
+    return ior
+
+
 # --- one mirror ----------------------------------------------------------------------------------
 
 
-def _constraint_inputs(obj, scene, depsgraph, geo, mirror_matrix, report):
-    """Constraint rows [p, r, e] and their surface points; bad constraints are reported and skipped."""
+def _constraint_inputs(obj, scene, depsgraph, geo, mirror_matrix, report, kind="REFLECTION", ior=None):
+    """Constraint rows [p, r, e] (``kind`` REFLECTION) or [p, t, e_t] (REFRACTION, with the
+    mirror's ``ior``) and their surface points; bad constraints are reported and skipped."""
     rows, points = [], []
+    refraction = kind == "REFRACTION"
     for k, c in enumerate(obj.rokeby.constraints):
         label = f"constraint {k + 1} ('{c.name}')" if c.name else f"constraint {k + 1}"
-        if not c.enabled:
+        if not c.enabled or getattr(c, "kind", "REFLECTION") != kind:
             continue
         try:
             red, green = c.surface_handle, c.target_handle
             if not object_in_scene(red, scene):
                 raise RokebyError(f"{label}: its red (surface) handle was deleted")
             if not object_in_scene(green, scene):
-                raise RokebyError(f"{label}: its green (reflected) handle was deleted")
+                raise RokebyError(f"{label}: its green ({'transmitted' if refraction else 'reflected'}) handle was deleted")
             red_m = _finite_matrix(red.evaluated_get(depsgraph).matrix_world, f"{label}: red handle '{red.name}'")
             green_m = _finite_matrix(green.evaluated_get(depsgraph).matrix_world, f"{label}: green handle '{green.name}'")
             eye = np.array(c.eye, dtype=np.float64)
@@ -363,7 +400,10 @@ def _constraint_inputs(obj, scene, depsgraph, geo, mirror_matrix, report):
             view = sp.point - eye
             if not np.linalg.norm(view) > 1e-12 * max(geo.size, 1e-30):
                 raise RokebyError(f"{label}: the generating eye lies on the surface point")
-            r = reflect(view / np.linalg.norm(view), sp.normal)
+            if refraction:
+                r = _transmitted(view / np.linalg.norm(view), sp.normal, ior, label)
+            else:
+                r = reflect(view / np.linalg.norm(view), sp.normal)
             to_green = green_m[:3, 3] - sp.point
             if not np.linalg.norm(to_green) > 1e-9 * max(geo.size, 1e-30):
                 raise RokebyError(f"{label}: the green handle sits on the surface point, so it gives no direction")
@@ -373,6 +413,17 @@ def _constraint_inputs(obj, scene, depsgraph, geo, mirror_matrix, report):
         except RokebyError as exc:
             report.warn(str(exc))
     return (np.array(rows, dtype=np.float32).reshape(-1, 9), points)
+
+
+def _transmitted(incident, normal, ior, label):
+    """Physical transmitted direction t at a refraction constraint, or a RokebyError saying why
+    there is none."""
+    if incident @ normal > 0.0:
+        raise RokebyError(f"{label}: the generating eye sees the back of the surface at the red handle; refraction constraints edit where rays enter (the side the normals face)")
+    t = refract(incident, normal, 1.0 / ior)
+    if t is None:
+        raise RokebyError(f"{label}: total internal reflection at the red handle (IOR {ior:g} < 1 at this angle), so there is no transmitted ray to edit")
+    return t
 
 
 def _region_inputs(obj, scene, depsgraph, geo, mirror_matrix, report):
@@ -406,10 +457,10 @@ def _region_inputs(obj, scene, depsgraph, geo, mirror_matrix, report):
     return specs
 
 
-def _fingerprint(obj, geo_version, mirror_matrix, rows, regions) -> bytes:
+def _fingerprint(obj, geo_version, mirror_matrix, rows, regions, extra=()) -> bytes:
     s = obj.rokeby
     h = hashlib.blake2b(digest_size=20)
-    h.update(repr((s.enabled, s.metric, s.geodesic_method, s.polar, geo_version, regions)).encode())
+    h.update(repr((s.enabled, s.metric, s.geodesic_method, s.polar, geo_version, regions, extra)).encode())
     h.update(np.ascontiguousarray(mirror_matrix).tobytes())
     h.update(np.ascontiguousarray(rows).tobytes())
     return h.digest()
@@ -482,8 +533,8 @@ def _regions_for_native(state, geo, specs, points, method, timer):
     return regions
 
 
-def write_attribute(obj, values: np.ndarray):
-    """Write (V, 3) rotation vectors to the mirror mesh's point attribute in one foreach_set."""
+def write_attribute(obj, values: np.ndarray, name: str = ATTRIBUTE):
+    """Write (V, 3) rotation vectors to the mirror mesh's point attribute ``name`` in one foreach_set."""
     me = obj.data
     if me.library is not None or not getattr(me, "is_editable", True):
         where = f" from library '{me.library.filepath}'" if me.library is not None else ""
@@ -492,20 +543,38 @@ def write_attribute(obj, values: np.ndarray):
         raise RokebyError("the computed field is not finite (not written)")
     if len(values) != len(me.vertices):
         raise RokebyError(f"field has {len(values)} values, mesh '{me.name}' has {len(me.vertices)} vertices")
-    attr = me.attributes.get(ATTRIBUTE)
+    attr = me.attributes.get(name)
     if attr is not None and (attr.domain != "POINT" or attr.data_type != "FLOAT_VECTOR"):
         me.attributes.remove(attr)
         attr = None
     if attr is None:
-        attr = me.attributes.new(ATTRIBUTE, "FLOAT_VECTOR", "POINT")
+        attr = me.attributes.new(name, "FLOAT_VECTOR", "POINT")
     attr.data.foreach_set("vector", np.ascontiguousarray(values, dtype=np.float32).ravel())
     me.update()
 
 
-def read_attribute(obj) -> np.ndarray | None:
-    """The stored rotation vectors (V, 3) of a mirror, or None."""
+def remove_attribute(obj, name: str) -> bool:
+    """Remove the point attribute ``name`` from the mirror's mesh (if it has it)."""
     me = obj.data
-    attr = me.attributes.get(ATTRIBUTE) if me is not None else None
+    attr = me.attributes.get(name) if me is not None else None
+    if attr is None:
+        return False
+    if me.library is not None:
+        raise RokebyError(f"mesh '{me.name}' is linked and its attribute '{name}' cannot be removed")
+    me.attributes.remove(attr)
+    me.update()
+    return True
+
+
+def _has_attribute(obj, name: str) -> bool:
+    attr = obj.data.attributes.get(name)
+    return attr is not None and attr.domain == "POINT" and attr.data_type == "FLOAT_VECTOR" and len(attr.data) == len(obj.data.vertices)
+
+
+def read_attribute(obj, name: str = ATTRIBUTE) -> np.ndarray | None:
+    """The stored rotation vectors (V, 3) of a mirror (``name``: which field), or None."""
+    me = obj.data
+    attr = me.attributes.get(name) if me is not None else None
     if attr is None:
         return None
     out = np.empty(len(me.vertices) * 3, dtype=np.float32)
@@ -554,30 +623,61 @@ def evaluate_mirror(obj, scene, depsgraph, *, force=False, reread_geometry=False
         report.field_mesh = geo.source
         if geo.source == "base":
             report.warn("the modifiers change the vertex count: the field is computed on the base mesh and interpolated by the modifiers")
+        t_rows, t_points, ior = np.zeros((0, 9), np.float32), [], None
         if not settings.enabled:
             rows, points, specs = np.zeros((0, 9), np.float32), [], []
         else:
             rows, points = _constraint_inputs(obj, scene, depsgraph, geo, mirror_matrix, report)
             specs = _region_inputs(obj, scene, depsgraph, geo, mirror_matrix, report)
-        fp = _fingerprint(obj, state.geometry_version, mirror_matrix, rows, specs)
+            if any(c.enabled and getattr(c, "kind", "REFLECTION") == "REFRACTION" for c in settings.constraints):
+                try:
+                    ior = valid_ior(settings.ior)
+                except RokebyError as exc:
+                    report.warn(f"mirror '{name}': {exc}; its refraction constraints are skipped")
+                else:
+                    t_rows, t_points = _constraint_inputs(obj, scene, depsgraph, geo, mirror_matrix, report, "REFRACTION", ior)
+        fp_reflection = _fingerprint(obj, state.geometry_version, mirror_matrix, rows, specs)
+        fp_refraction = _fingerprint(obj, state.geometry_version, mirror_matrix, t_rows, specs, (ior,))
+        fp = fp_reflection + fp_refraction
         if fp == state.fingerprint and not force and state.report is not None and state.report.status != "ERROR":
             _STATS["skipped"] += 1
             kept = state.report
             kept.recomputed = False
             return kept
-        report.constraints_used = len(rows)
+        report.constraints_used = len(rows) + len(t_rows)
         method = "heat" if settings.geodesic_method == "HEAT" else "dijkstra"
         polar = "exact" if settings.polar == "EXACT" else "fast"
-        kwargs = {"polar": polar}
-        if len(rows) and settings.metric == "GEODESIC":
-            kwargs["distances"] = _geodesic_distances(state, geo, points, method, timer)
-            if np.all(np.isinf(kwargs["distances"])):
+        distances = None
+        if len(rows) + len(t_rows) and settings.metric == "GEODESIC":
+            # One query for both kinds: the per-point cache keeps every current constraint's solve.
+            distances = _geodesic_distances(state, geo, points + t_points, method, timer)
+            if np.all(np.isinf(distances)):
                 report.warn("no constraint reaches this mesh over its surface")
-        if specs:
-            kwargs["regions"] = _regions_for_native(state, geo, specs, points, method, timer)
-        rv = timer(native.rotation_field, geo.vertices, rows, output="rotation_vector", **kwargs)
-        write_attribute(obj, rv)
-        state.rotations = rv
+        old = state.field_fingerprints
+        if force or old.get(ATTRIBUTE) != fp_reflection or not _has_attribute(obj, ATTRIBUTE):
+            kwargs = {"polar": polar}
+            if distances is not None and len(rows):
+                kwargs["distances"] = distances[: len(rows)]
+            if specs:
+                kwargs["regions"] = _regions_for_native(state, geo, specs, points, method, timer)
+            rv = timer(native.rotation_field, geo.vertices, rows, output="rotation_vector", **kwargs)
+            write_attribute(obj, rv)
+            state.rotations = rv
+            old[ATTRIBUTE] = fp_reflection
+        if not len(t_rows):
+            old.pop(REFRACTION_ATTRIBUTE, None)
+            state.refractions = None
+            remove_attribute(obj, REFRACTION_ATTRIBUTE)
+        elif force or old.get(REFRACTION_ATTRIBUTE) != fp_refraction or not _has_attribute(obj, REFRACTION_ATTRIBUTE):
+            kwargs = {"polar": polar}
+            if distances is not None:
+                kwargs["distances"] = distances[len(rows):]
+            if specs:
+                kwargs["regions"] = _regions_for_native(state, geo, specs, t_points, method, timer)
+            tv = timer(native.rotation_field, geo.vertices, t_rows, output="rotation_vector", **kwargs)
+            write_attribute(obj, tv, REFRACTION_ATTRIBUTE)
+            state.refractions = tv
+            old[REFRACTION_ATTRIBUTE] = fp_refraction
         state.fingerprint = fp
         report.recomputed = True
         if not settings.enabled:

@@ -12,7 +12,7 @@ from bpy.props import BoolProperty, EnumProperty, FloatProperty, FloatVectorProp
 
 from . import api
 from .evaluate import RokebyError
-from .props import REGION_KINDS
+from .props import CONSTRAINT_KINDS, REGION_KINDS
 
 UNDO = {"REGISTER", "UNDO"}
 
@@ -104,7 +104,8 @@ class ROKEBY_OT_constraint_add(_Op, bpy.types.Operator):
     eye: FloatVectorProperty(name="Eye", size=3, subtype="TRANSLATION", description="Generating eye (default: the view's, else the scene camera)")
     use_eye: BoolProperty(name="Use eye", default=False, options={"HIDDEN"})
     reflected_point: FloatVectorProperty(name="Reflected point", size=3, subtype="TRANSLATION")
-    use_reflected_point: BoolProperty(name="Set reflected point", default=False, description="Place the green handle here instead of on the physical reflection")
+    use_reflected_point: BoolProperty(name="Set reflected point", default=False, description="Place the green handle here instead of on the physical reflection (refraction: on the physical transmitted ray)")
+    kind: EnumProperty(name="Kind", items=CONSTRAINT_KINDS, default="REFLECTION")
 
     def run(self, context, mirror):
         eye, view = _view_of(context)
@@ -116,6 +117,7 @@ class ROKEBY_OT_constraint_add(_Op, bpy.types.Operator):
             tuple(self.reflected_point) if self.use_reflected_point else None,
             eye=None if eye is None else tuple(eye),
             view=view,
+            kind=self.kind,
             scene=context.scene,
         )
 
@@ -311,6 +313,26 @@ class ROKEBY_OT_render_nodes(_Op, bpy.types.Operator):
             self.report({"WARNING"}, f"Rokeby: no Glossy or Principled BSDF in the edited materials of '{mirror.name}'")
 
 
+class ROKEBY_OT_ior_from_material(_Op, bpy.types.Operator):
+    """Take the mirror's IOR (used by refraction constraints and renders) from its Glass, Refraction or transmissive Principled BSDF"""
+
+    bl_idname = "rokeby.ior_from_material"
+    bl_label = "IOR from Material"
+    bl_options = UNDO
+
+    mirror: StringProperty(name="Mirror")
+    material: StringProperty(name="Material", description="Material name (default: the mirror's edited materials, in order)")
+
+    def run(self, context, mirror):
+        mat = None
+        if self.material:
+            mat = bpy.data.materials.get(self.material)
+            if mat is None:
+                raise RokebyError(f"material: no material named '{self.material}'")
+        ior = api.ior_from_material(mirror, mat)
+        self.report({"INFO"}, f"Rokeby: IOR of '{mirror.name}' set to {ior:.4g}")
+
+
 class ROKEBY_OT_update(bpy.types.Operator):
     """Recompute every mirror's field now"""
 
@@ -342,6 +364,7 @@ classes = (
     ROKEBY_OT_freeze,
     ROKEBY_OT_material_toggle,
     ROKEBY_OT_render_nodes,
+    ROKEBY_OT_ior_from_material,
     ROKEBY_OT_update,
 )
 

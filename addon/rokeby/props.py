@@ -61,11 +61,19 @@ class RokebyMaterialRef(PropertyGroup):
     material: PointerProperty(type=bpy.types.Material, name="Material", update=_touch)
 
 
+CONSTRAINT_KINDS = [
+    ("REFLECTION", "Reflection", "The green handle is what should be seen reflected at the red handle", "MOD_MIRROR", 0),
+    ("REFRACTION", "Refraction", "The green handle gives the edited transmitted direction at the red handle (paper §7.1: a direction, no refracted position)", "LIGHT_SUN", 1),
+]
+
+
 class RokebyConstraint(PropertyGroup):
-    """One reflection constraint: the red handle on the mirror and the green handle at what should
-    be seen reflected there, with the view it was made from."""
+    """One constraint: the red handle on the mirror and the green handle at what should be seen
+    reflected there (REFLECTION) or along the edited transmitted direction (REFRACTION), with the
+    view it was made from."""
 
     enabled: BoolProperty(name="Enabled", default=True, update=_touch)
+    kind: EnumProperty(name="Kind", items=CONSTRAINT_KINDS, default="REFLECTION", update=_touch)
     surface_handle: PointerProperty(
         type=bpy.types.Object,
         name="Surface handle",
@@ -134,6 +142,16 @@ class RokebyMirror(PropertyGroup):
         update=_touch,
     )
     freeze_eye: FloatVectorProperty(name="Frozen eye", size=3, subtype="TRANSLATION", update=_touch)
+    ior: FloatProperty(
+        name="IOR",
+        description="Index of refraction of the mirror's material (outside → inside) used by refraction constraints and the render nodes; keep it equal to the Glass/Refraction BSDF's IOR",
+        default=1.45,
+        min=0.0,
+        soft_min=1.0,
+        soft_max=3.0,
+        precision=3,
+        update=_touch,
+    )
     all_materials: BoolProperty(name="All materials", description="Edit the reflections of every material of the mirror", default=True, update=_touch)
     materials: CollectionProperty(type=RokebyMaterialRef, name="Edited materials")
     constraints: CollectionProperty(type=RokebyConstraint, name="Constraints")

@@ -92,6 +92,8 @@ class ROKEBY_PT_main(bpy.types.Panel):
         col = row.column(align=True)
         op = col.operator("rokeby.constraint_add", icon="ADD", text="")
         op.mirror = mirror.name
+        op = col.operator("rokeby.constraint_add", icon="LIGHT_SUN", text="")  # a refraction constraint
+        op.mirror, op.kind = mirror.name, "REFRACTION"
         op = col.operator("rokeby.constraint_remove", icon="REMOVE", text="")
         op.mirror = mirror.name
         if len(s.constraints) and s.active_constraint < len(s.constraints):
@@ -100,6 +102,13 @@ class ROKEBY_PT_main(bpy.types.Panel):
             sub.prop(c, "surface_handle", text="Red")
             sub.prop(c, "target_handle", text="Green")
             sub.prop(c, "eye")
+            sub.prop(c, "kind")
+        if any(c.kind == "REFRACTION" for c in s.constraints):
+            row = layout.row(align=True)
+            row.prop(s, "ior")
+            op = row.operator("rokeby.ior_from_material", text="", icon="MATERIAL")
+            op.mirror = mirror.name
+
 
         layout.label(text="Regions")
         row = layout.row()
