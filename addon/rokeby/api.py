@@ -256,6 +256,15 @@ def _depsgraph(scene):
     return vl.depsgraph
 
 
+def _camera_eye(scene) -> tuple:
+    """The scene camera's position, after bringing object matrices up to date (objects made or
+    moved by a script have stale matrices until the depsgraph runs)."""
+    if scene.camera is None:
+        raise RokebyError("eye: not given and the scene has no camera")
+    _depsgraph(scene)
+    return tuple(scene.camera.matrix_world.translation)
+
+
 def _check_mirror(obj):
     if obj is None:
         raise RokebyError("mirror: is None")
@@ -385,9 +394,7 @@ def add_constraint(mirror, surface_point, reflected_point=None, *, eye=None, vie
         raise RokebyError(f"kind: '{kind}' is not one of {kinds}")
     ior = _ev.valid_ior(mirror.rokeby.ior) if kind == "REFRACTION" else None
     if eye is None:
-        if scene.camera is None:
-            raise RokebyError("eye: not given and the scene has no camera")
-        eye = tuple(scene.camera.matrix_world.translation)
+        eye = _camera_eye(scene)
     eye = _vec3(eye, "eye")
     sp, geo, dg = _surface_of(mirror, scene, surface_point)
     p = sp.point
@@ -790,9 +797,7 @@ def edited_reflections(mirror, eye=None, *, scene=None) -> np.ndarray:
     if s.freeze:
         eye = tuple(s.freeze_eye)
     elif eye is None:
-        if scene.camera is None:
-            raise RokebyError("eye: not given and the scene has no camera")
-        eye = tuple(scene.camera.matrix_world.translation)
+        eye = _camera_eye(scene)
     eye = _vec3(eye, "eye")
     evaluate(scene)
     st = _ev._STATE.get(mirror.session_uid)
@@ -805,3 +810,62 @@ def edited_reflections(mirror, eye=None, *, scene=None) -> np.ndarray:
     incident /= np.maximum(np.linalg.norm(incident, axis=1, keepdims=True), 1e-300)
     r = reflect(incident, geo.normals.astype(np.float64))
     return rotate(quats, r).astype(np.float32)
+
+
+# --- highlights (paper §7.1, Figs. 6 and 7) --------------------------------------------------
+
+
+def _light_point(light, p: np.ndarray, far: float) -> np.ndarray:
+    """Where ``light`` is as seen from the points ``p`` (..., 3): its position, or for a sun the
+    points ``far`` away against its direction of travel."""
+    m = _ev._finite_matrix(light.matrix_world, f"light '{light.name}'")
+    if light.data.type == "SUN":
+        towards = m[:3, 2]  # a sun shines along its local −Z
+        return p + towards / np.linalg.norm(towards) * far
+    return np.broadcast_to(m[:3, 3], np.shape(p)).copy()
+
+
+def physical_highlight(mirror, light, eye=None, *, scene=None) -> np.ndarray:
+    """The point of ``mirror`` (world space, a vertex) where ``light``'s highlight sits for a
+    mirror-like BRDF seen from ``eye`` (default: the scene camera): the visible, lit vertex whose
+    reflected view ray points most nearly at the light."""
+    scene = _scene(scene)
+    _require_mirror(mirror)
+    if light is None or getattr(light, "type", None) != "LIGHT":
+        raise RokebyError(f"light: '{getattr(light, 'name', light)}' is not a light object")
+    if eye is None:
+        eye = _camera_eye(scene)
+    eye = _vec3(eye, "eye")
+    geo = mesh_arrays(mirror, _depsgraph(scene))  # also brings the light's matrix up to date
+    v = geo.vertices.astype(np.float64)
+    n = geo.normals.astype(np.float64)
+    to_light = _light_point(light, v, 1.0) - v
+    to_light /= np.maximum(np.linalg.norm(to_light, axis=1, keepdims=True), 1e-300)
+    incident = v - eye
+    incident /= np.maximum(np.linalg.norm(incident, axis=1, keepdims=True), 1e-300)
+    r = reflect(incident, n)
+    ok = ((n * -incident).sum(1) > 0) & ((n * to_light).sum(1) > 0)
+    if not ok.any():
+        raise RokebyError(f"light '{light.name}': no part of mirror '{mirror.name}' both faces the eye and is lit")
+    score = np.where(ok, (r * to_light).sum(1), -np.inf)
+    return v[int(np.argmax(score))].astype(np.float64)
+
+
+def add_highlight_constraint(mirror, light, surface_point=None, *, eye=None, name: str = "", scene=None) -> int:
+    """Highlight editing: a constraint whose green handle is ``light`` (parented to it, so it
+    follows the light). Its red handle goes to ``surface_point``, by default to where the light's
+    highlight physically is (``physical_highlight``), so a fresh one changes nothing; drag the red
+    handle to move the highlight, add a second one to stretch it. Only the specular lobe changes:
+    shadows stay where they are (the shading normal does not move shadow rays). Returns the index."""
+    scene = _scene(scene)
+    _require_mirror(mirror)
+    if surface_point is None:
+        surface_point = physical_highlight(mirror, light, eye, scene=scene)
+    sp, geo, _dg = _surface_of(mirror, scene, surface_point)
+    target = _light_point(light, sp.point, 1e3 * max(geo.size, 1e-6))
+    index = add_constraint(mirror, sp.point, target, eye=eye, name=name or f"Highlight {light.name}", scene=scene)
+    green = mirror.rokeby.constraints[index].target_handle
+    green.parent = light  # keeps its world location: the light's current matrix is undone
+    green.matrix_parent_inverse = light.matrix_world.inverted()
+    green.empty_display_type = "SPHERE"
+    return index

@@ -157,6 +157,26 @@ class ROKEBY_OT_constraint_add(_Op, bpy.types.Operator):
         return {"RUNNING_MODAL"}
 
 
+class ROKEBY_OT_highlight_add(_Op, bpy.types.Operator):
+    """Highlight editing: a constraint whose green handle is a light (it follows the light) and whose red handle starts where the light's highlight is; drag the red handle to move the highlight, add another to stretch it. Shadows stay where they are"""
+
+    bl_idname = "rokeby.highlight_add"
+    bl_label = "Add Highlight Constraint"
+    bl_options = UNDO
+
+    mirror: StringProperty(name="Mirror", description="Object name (default: the active object's mirror)")
+    light: StringProperty(name="Light", description="Light object (default: the selected light)")
+
+    def run(self, context, mirror):
+        light = bpy.data.objects.get(self.light) if self.light else None
+        if light is None:
+            lights = [ob for ob in context.selected_objects if ob.type == "LIGHT"]
+            if self.light or len(lights) != 1:
+                raise RokebyError(f"light: '{self.light}' is not an object" if self.light else "select one light (and the mirror), or name the light")
+            light = lights[0]
+        api.add_highlight_constraint(mirror, light, scene=context.scene)
+
+
 class ROKEBY_OT_constraint_remove(_Op, bpy.types.Operator):
     """Remove the constraint and its handles"""
 
@@ -356,6 +376,7 @@ classes = (
     ROKEBY_OT_mirror_add,
     ROKEBY_OT_mirror_remove,
     ROKEBY_OT_constraint_add,
+    ROKEBY_OT_highlight_add,
     ROKEBY_OT_constraint_remove,
     ROKEBY_OT_constraint_select,
     ROKEBY_OT_region_add,

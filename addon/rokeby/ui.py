@@ -94,6 +94,8 @@ class ROKEBY_PT_main(bpy.types.Panel):
         op.mirror = mirror.name
         op = col.operator("rokeby.constraint_add", icon="LIGHT_SUN", text="")  # a refraction constraint
         op.mirror, op.kind = mirror.name, "REFRACTION"
+        op = col.operator("rokeby.highlight_add", icon="LIGHT_POINT", text="")  # from the selected light
+        op.mirror = mirror.name
         op = col.operator("rokeby.constraint_remove", icon="REMOVE", text="")
         op.mirror = mirror.name
         if len(s.constraints) and s.active_constraint < len(s.constraints):
