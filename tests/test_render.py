@@ -166,3 +166,46 @@ def test_eevee_renders_the_edit(chrome_ball, tmp_path):
     r = np.hypot((xs + 0.5) / SIZE * 2 - 1, 1 - (ys + 0.5) / SIZE * 2) * half
     assert changed[r < 0.5].mean() > 0.3
     assert changed[r > 0.9].mean() < 0.02  # the background and the ball's rim stay
+
+
+def test_red_handle_pixel_shows_the_green_handles_object(chrome_ball, tmp_path):
+    """The constraint in pixels: where the red handle projects, the render shows the object the
+    green handle sits on (a colour-coded emitter that the ball does not reflect there physically)."""
+    from bpy_extras.object_utils import world_to_camera_view  # noqa: PLC0415
+    from mathutils import Vector  # noqa: PLC0415
+
+    ball, _ = chrome_ball
+    sc = bpy.context.scene
+    # A large green emitter up and to the left, facing the ball (above p's horizon); on a convex
+    # mirror a small one would shrink to a pixel or two.
+    bpy.ops.mesh.primitive_plane_add(size=6.0, location=(-3.5, -3.5, 3.0))
+    lamp = bpy.context.object
+    lamp.rotation_euler = Vector((3.5, 3.5, -3.0)).to_track_quat("Z", "Y").to_euler()
+    glow = bpy.data.materials.new("Green glow")
+    glow.use_nodes = True
+    tree = glow.node_tree
+    tree.nodes.remove(tree.nodes["Principled BSDF"])
+    emit = tree.nodes.new("ShaderNodeEmission")
+    emit.inputs["Color"].default_value = (0.0, 1.0, 0.0, 1.0)
+    emit.inputs["Strength"].default_value = 5.0
+    tree.links.new(emit.outputs["Emission"], tree.nodes["Material Output"].inputs["Surface"])
+    lamp.data.materials.append(glow)
+    p = np.array([0.35, -0.9, -0.25])
+    p /= np.linalg.norm(p)
+    bpy.context.view_layer.update()
+    co = world_to_camera_view(sc, sc.camera, Vector(p))
+    row, col = int((1.0 - co.y) * SIZE), int(co.x * SIZE)
+    sc.view_settings.view_transform = "Standard"  # AgX would desaturate the bright green
+
+    def at_handle(img):
+        return img[::-1][row - 1:row + 2, col - 1:col + 2].reshape(-1, 3).mean(0)
+
+    plain = at_handle(_render(tmp_path, "plain"))
+    assert not (plain[1] > 2 * max(plain[0], plain[2]) and plain[1] > 0.5)  # not green physically
+    api.add_mirror(ball)
+    api.add_constraint(ball, p, tuple(lamp.location), eye=(0.0, -4.0, 0.0))
+    api.add_region(ball, "EUCLIDEAN", center=tuple(p), radius=0.5, border=0.2)
+    api.evaluate()
+    api.install_render_nodes(ball)
+    edited = at_handle(_render(tmp_path, "edited"))
+    assert edited[1] > 2 * max(edited[0], edited[2]) and edited[1] > 0.5, edited
