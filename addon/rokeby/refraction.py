@@ -21,10 +21,14 @@ below the surface. Edits outside that set are moved into it continuously, never 
 constant: first an e_t above the tangent plane is folded back below it (about the plane
 e·N = −m, m = 0.02, or the physical t's own depth when that is less), then an e_t farther than
 the reachable cone from −V is pulled onto the cone cos α = c, c = c_max + 0.05 (1 − c_max),
-c_max = min(η, 1/η), or onto the physical t's cone where grazing views make that one wider. Both
-steps leave the identity untouched. With e_t inside the cone n'_t·V > 0 holds, so Cycles never
-sees a normal facing away from the viewer: no black and no NaN (measured in
-tests/test_refraction.py).
+c_max = min(η, 1/η), or onto the physical t's cone where grazing views make that one wider. With
+e_t inside the cone n'_t·V > 0 holds. Last, n'_t may not tip so far that the mirror reflection of
+the view about it goes below the surface (Cycles then bends such a normal itself, sending the
+transmitted ray out through the surface: the path dies, a dark pixel): r = reflect(−V, n'_t) is
+folded about the plane r·N = ε (ε = 0.05, or V·N when less) and n'_t = normalize(V + r) rebuilt;
+the transmitted direction is then refract(−V, n'_t), below the surface for η > 1. Every step
+leaves the identity untouched and is continuous. No black and no NaN pixels: measured in
+tests/test_refraction.py.
 
 Back faces (rays leaving the object) keep N: the edit acts where rays enter, as in the paper,
 where the exiting direction is the edited one. The same holds where the physical ray has no
@@ -68,7 +72,7 @@ from .evaluate import REFRACTION_ATTRIBUTE, RokebyError
 from .shading import mix_vector, scalar_math, vector_math
 
 GROUP = "Rokeby Edited Refraction Normal"
-VERSION = 1
+VERSION = 2
 OWN_VERSION_KEY = "rokeby_refraction_version"
 TAG = "rokeby_refraction"  # on every node this module adds: its role
 SOURCE = "rokeby_refraction_source"  # on the parts of a split Glass BSDF: the Glass's split id
@@ -79,6 +83,7 @@ _SEP = "\x1f"
 
 BELOW_MARGIN = 0.02  # m: edited directions are kept at least this far below the tangent plane
 REACH_MARGIN = 0.05  # μ: fraction of the reachable cone (in cos) kept clear of its grazing edge
+REFLECT_MARGIN = 0.05  # ε: reflect(−V, n'_t) is kept this far above the tangent plane
 IOR_RANGE = (1e-3, 1e3)
 IOR_ONE = 1e-4
 
@@ -158,6 +163,13 @@ def edited_normal(view, normal, ior, rotvec=None, *, frozen_view=None, backfacin
     u = _normalize(e - a * d)
     e = np.where(a < c, c * d + np.sqrt(np.maximum(1.0 - c * c, 0.0)) * u, e)
     h = half_vector(v, e, eta[:, 0])
+    # Keep reflect(−V, n'_t) above the tangent plane (Cycles would otherwise bend n'_t itself, and
+    # the transmitted ray with it, above the surface): fold it about r·N = ε and rebuild n'_t.
+    r = -v + 2.0 * _dot(v, h) * h
+    eps = np.minimum(REFLECT_MARGIN, _dot(v, n))
+    r = _normalize(r - 2.0 * np.minimum(_dot(r, n) - eps, 0.0) * n)
+    h = _normalize(v + r)
+    e = _refract(d, h, 1.0 / eta)
     ok = ok_eta & (_dot(t, t) > 0.25) & (_dot(t_view, t_view) > 0.25) & (_dot(v, n) > 1e-4)
     if backfacing is not None:
         ok &= ~np.asarray(backfacing, bool).reshape(-1, 1)
@@ -220,10 +232,13 @@ def node_group():
     ok_eta = op("MULTIPLY", ok_eta, op("GREATER_THAN", op("ABSOLUTE", op("SUBTRACT", raw, values=(1.0,))), values=(IOR_ONE,)))
     inv_eta = op("DIVIDE", _const(ng, 1.0), eta)
 
-    def refract(incident):
-        node = vector_math(ng, "REFRACT", incident, normal)
+    def refract_about(incident, about):
+        node = vector_math(ng, "REFRACT", incident, about)
         ng.links.new(inv_eta, node.inputs["Scale"])
         return node.outputs["Vector"]
+
+    def refract(incident):
+        return refract_about(incident, normal)
 
     t_view = refract(d)
     # Freeze: the physical t is refracted from the frozen eye (rokeby.freeze_eye).
@@ -262,6 +277,13 @@ def node_group():
     # n'_t = normalize(s (V + η e)), s = −1 for η > 1, +1 for η < 1.
     sign = op("SUBTRACT", _const(ng, 1.0), op("MULTIPLY", op("GREATER_THAN", eta, values=(1.0,)), values=(2.0,)))
     half = vop("NORMALIZE", scale(vop("ADD", view, scale(e, eta)), sign))
+    # Keep reflect(−V, n'_t) above the tangent plane: fold it about r·N = ε, n'_t = normalize(V + r).
+    r = vop("REFLECT", d, half)
+    eps = op("MINIMUM", dot(view, normal), values=(REFLECT_MARGIN,))
+    low = op("MINIMUM", op("SUBTRACT", dot(r, normal), eps), values=(0.0,))
+    r = vop("NORMALIZE", vop("SUBTRACT", r, scale(normal, op("MULTIPLY", low, values=(2.0,)))))
+    half = vop("NORMALIZE", vop("ADD", view, r))
+    e = refract_about(d, half)
     # Keep N on back faces, where t does not exist, where N faces away, and for an unusable IOR.
     ok = op("MULTIPLY", ok_eta, op("GREATER_THAN", dot(t, t), values=(0.25,)))
     ok = op("MULTIPLY", ok, op("GREATER_THAN", dot(t_view, t_view), values=(0.25,)))
