@@ -40,6 +40,8 @@ __all__ = [
     "edited_materials",
     "install_render_nodes",
     "remove_render_nodes",
+    "capture_reflection_map",
+    "reflection_map",
     "set_edited_materials",
     "constraint_view",
     "edited_reflections",
@@ -736,24 +738,59 @@ def set_edited_materials(mirror, materials=None):
 
 
 def install_render_nodes(mirror) -> int:
-    """Make final renders (Cycles; EEVEE uses the same nodes) show the edit: the node group
-    "Rokeby Edited Normal" feeds the edited normal to the specular BSDFs of every edited material
-    (see rokeby.shading). "Rokeby Edited Refraction Normal" feeds Refraction BSDFs and split
-    Glass BSDFs first (rokeby.refraction; counted too), so a split Glass's reflection part is
-    edited as well. Returns how many BSDF inputs were rewired."""
-    from . import refraction, shading  # noqa: PLC0415
+    """Make final renders (Cycles; EEVEE uses the same nodes) show the edit, in the mirror's
+    ``render_mode``: RAY_TRACED — the node group "Rokeby Edited Normal" feeds the edited normal
+    to the specular BSDFs of every edited material (see rokeby.shading); REFLECTION_MAP — their
+    specular lobe becomes a lookup of the captured map in the edited direction (rokeby.reflmap;
+    capture it first with ``capture_reflection_map``). The other mode's nodes are taken out.
+    Returns how many BSDF inputs (ray traced) or BSDFs (reflection map) were rewired. In both
+    modes "Rokeby Edited Refraction Normal" feeds Refraction BSDFs and split Glass BSDFs first
+    (rokeby.refraction; counted too), so a split Glass's reflection part is edited as well."""
+    from . import reflmap, refraction, shading  # noqa: PLC0415
 
     _require_mirror(mirror)
-    return sum(refraction.install(mat) + shading.install(mat) for mat in edited_materials(mirror))
+    mats = edited_materials(mirror)
+    refracted = sum(refraction.install(mat) for mat in mats)
+    if mirror.rokeby.render_mode == "REFLECTION_MAP":
+        if reflmap.image_for(mirror) is None:
+            raise RokebyError(f"mirror '{mirror.name}' is in reflection-map mode but has no map: capture one first (capture_reflection_map)")
+        for mat in mats:
+            shading.uninstall(mat)
+        return refracted + sum(reflmap.install(mat, mirror) for mat in mats)
+    for mat in mats:
+        reflmap.uninstall(mat)
+    return refracted + sum(shading.install(mat) for mat in mats)
 
 
 def remove_render_nodes(mirror) -> int:
     """Take the node group out of the mirror's materials again; returns how many it left."""
-    from . import refraction, shading  # noqa: PLC0415
+    from . import reflmap, refraction, shading  # noqa: PLC0415
 
     _require_mirror(mirror)
     mats = {slot.material for slot in mirror.material_slots if slot.material is not None}
-    return sum(bool(shading.uninstall(mat)) | bool(refraction.uninstall(mat)) for mat in mats)
+    return sum(bool(shading.uninstall(mat)) | bool(reflmap.uninstall(mat)) | bool(refraction.uninstall(mat)) for mat in mats)
+
+
+def capture_reflection_map(mirror, *, resolution=None, samples=None, storage: str = "AUTO", scene=None):
+    """Capture (or refresh) the reflection map of ``mirror``: a Cycles equirectangular panorama
+    from its bounding-box centre (or ``rokeby.map_origin``) with the mirror hidden, plus blurred
+    levels for rough materials. ``resolution``: width, a power of two (height = width / 2;
+    default: the mirror's ``map_resolution``); ``samples``: Cycles samples (default
+    ``map_samples``); ``storage``: 'AUTO' (an OpenEXR cache in //rokeby_maps/ when the .blend is
+    saved, else packed), 'FILE' or 'PACK'. Materials already in reflection-map mode show the new
+    map at once. Returns the image. See rokeby.reflmap."""
+    from . import reflmap  # noqa: PLC0415
+
+    return reflmap.capture(mirror, resolution=resolution, samples=samples, storage=storage, scene=scene)
+
+
+def reflection_map(mirror):
+    """The captured lat-long image of ``mirror`` (Blender's equirectangular convention:
+    ``rokeby.reflmap.direction_to_uv``), or None."""
+    from . import reflmap  # noqa: PLC0415
+
+    _require_mirror(mirror)
+    return reflmap.image_for(mirror)
 
 
 def freeze(mirror, frozen: bool = True, *, eye=None):

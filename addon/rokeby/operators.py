@@ -333,6 +333,28 @@ class ROKEBY_OT_render_nodes(_Op, bpy.types.Operator):
             self.report({"WARNING"}, f"Rokeby: no Glossy or Principled BSDF in the edited materials of '{mirror.name}'")
 
 
+class ROKEBY_OT_reflection_map(_Op, bpy.types.Operator):
+    """Capture (or refresh) the mirror's reflection map: a Cycles panorama from its centre, with the mirror hidden"""
+
+    bl_idname = "rokeby.reflection_map"
+    bl_label = "Capture Reflection Map"
+    bl_options = UNDO
+
+    mirror: StringProperty(name="Mirror")
+    action: EnumProperty(name="Action", items=[("CAPTURE", "Capture", ""), ("CLEAR", "Clear", "Remove the map's images")], default="CAPTURE")
+
+    def run(self, context, mirror):
+        from . import reflmap  # noqa: PLC0415
+
+        api._require_mirror(mirror)
+        if self.action == "CLEAR":
+            reflmap.clear(mirror)
+            return
+        img = api.capture_reflection_map(mirror, scene=context.scene)
+        where = "packed in the .blend" if img.packed_file else img.filepath
+        self.report({"INFO"}, f"Rokeby: {img.size[0]}×{img.size[1]} map of '{mirror.name}' in {mirror.rokeby.map_capture_seconds:.1f} s ({where})")
+
+
 class ROKEBY_OT_ior_from_material(_Op, bpy.types.Operator):
     """Take the mirror's IOR (used by refraction constraints and renders) from its Glass, Refraction or transmissive Principled BSDF"""
 
@@ -385,6 +407,7 @@ classes = (
     ROKEBY_OT_freeze,
     ROKEBY_OT_material_toggle,
     ROKEBY_OT_render_nodes,
+    ROKEBY_OT_reflection_map,
     ROKEBY_OT_ior_from_material,
     ROKEBY_OT_update,
 )

@@ -61,6 +61,17 @@ class RokebyMaterialRef(PropertyGroup):
     material: PointerProperty(type=bpy.types.Material, name="Material", update=_touch)
 
 
+RENDER_MODES = [
+    ("RAY_TRACED", "Ray traced", "Edited normals on the specular BSDFs: exact parallax, occlusion and self-reflection (slower, noisier when rough)"),
+    ("REFLECTION_MAP", "Reflection map", "A panorama captured from the mirror's centre, looked up in the edited direction (paper §6.3): fast and noise-free, but no parallax or self-reflection"),
+]
+MAP_RESOLUTIONS = [(str(w), f"{w} × {w // 2}", f"Capture a {w} × {w // 2} panorama") for w in (256, 512, 1024, 2048)]
+
+
+class RokebyImageRef(PropertyGroup):
+    image: PointerProperty(type=bpy.types.Image, name="Image")
+
+
 CONSTRAINT_KINDS = [
     ("REFLECTION", "Reflection", "The green handle is what should be seen reflected at the red handle", "MOD_MIRROR", 0),
     ("REFRACTION", "Refraction", "The green handle gives the edited transmitted direction at the red handle (paper §7.1: a direction, no refracted position)", "LIGHT_SUN", 1),
@@ -158,9 +169,18 @@ class RokebyMirror(PropertyGroup):
     active_constraint: IntProperty(name="Active constraint", default=0, min=0)
     regions: CollectionProperty(type=RokebyRegion, name="Regions")
     active_region: IntProperty(name="Active region", default=0, min=0)
+    # Reflection-map mode (rokeby.reflmap); captured on demand, not re-evaluated.
+    render_mode: EnumProperty(name="Render mode", items=RENDER_MODES, default="RAY_TRACED")
+    map_resolution: EnumProperty(name="Map resolution", description="Width of the captured panorama (height is half): sharper reflections against capture time", items=MAP_RESOLUTIONS, default="512")
+    map_samples: IntProperty(name="Capture samples", description="Cycles samples of the capture", default=32, min=1, soft_max=1024)
+    map_origin: PointerProperty(type=bpy.types.Object, name="Capture point", description="Capture the map from this object's location (default: the centre of the mirror's bounding box)")
+    map_image: PointerProperty(type=bpy.types.Image, name="Reflection map", description="The captured lat-long panorama (Blender's equirectangular convention)")
+    map_levels: CollectionProperty(type=RokebyImageRef, name="Blurred levels")
+    map_fingerprint: StringProperty(name="Captured scene", options={"HIDDEN"})
+    map_capture_seconds: FloatProperty(name="Capture time", subtype="TIME_ABSOLUTE", unit="TIME_ABSOLUTE", min=0.0)
 
 
-classes = (RokebyMaterialRef, RokebyConstraint, RokebyRegion, RokebyMirror)
+classes = (RokebyMaterialRef, RokebyImageRef, RokebyConstraint, RokebyRegion, RokebyMirror)
 
 
 def register():

@@ -111,7 +111,6 @@ class ROKEBY_PT_main(bpy.types.Panel):
             op = row.operator("rokeby.ior_from_material", text="", icon="MATERIAL")
             op.mirror = mirror.name
 
-
         layout.label(text="Regions")
         row = layout.row()
         row.template_list("ROKEBY_UL_regions", "", s, "regions", s, "active_region", rows=2)
@@ -140,6 +139,9 @@ class ROKEBY_PT_main(bpy.types.Panel):
                 on = slot.material in edited
                 op = layout.operator("rokeby.material_toggle", text=slot.material.name, icon="CHECKBOX_HLT" if on else "CHECKBOX_DEHLT", depress=on)
                 op.mirror, op.material = mirror.name, slot.material.name
+        layout.prop(s, "render_mode")
+        if s.render_mode == "REFLECTION_MAP":
+            _draw_reflection_map(layout, mirror, context.scene)
         row = layout.row(align=True)
         op = row.operator("rokeby.render_nodes", text="Render Edits", icon="NODE_MATERIAL")
         op.mirror, op.action = mirror.name, "INSTALL"
@@ -147,6 +149,33 @@ class ROKEBY_PT_main(bpy.types.Panel):
         op.mirror, op.action = mirror.name, "REMOVE"
         layout.operator("rokeby.update", icon="FILE_REFRESH")
         layout.operator("rokeby.mirror_remove", icon="TRASH")
+
+
+def _draw_reflection_map(layout, mirror, scene):
+    from . import reflmap  # noqa: PLC0415
+
+    s = mirror.rokeby
+    box = layout.box()
+    col = box.column(align=True)
+    col.prop(s, "map_resolution")
+    col.prop(s, "map_samples")
+    col.prop(s, "map_origin")
+    img = s.map_image
+    if img is None:
+        box.label(text="No map captured yet", icon="INFO")
+    else:
+        where = "packed" if img.packed_file else img.filepath
+        box.label(text=f"{img.size[0]} × {img.size[1]}, {s.map_capture_seconds:.1f} s, {where}", icon="IMAGE_DATA")
+        if reflmap.is_stale(mirror, scene):
+            row = box.row()
+            row.alert = True
+            row.label(text="Stale: the scene changed since the capture", icon="ERROR")
+    row = box.row(align=True)
+    op = row.operator("rokeby.reflection_map", text="Capture Map" if img is None else "Refresh Map", icon="WORLD")
+    op.mirror, op.action = mirror.name, "CAPTURE"
+    if img is not None:
+        op = row.operator("rokeby.reflection_map", text="", icon="X")
+        op.mirror, op.action = mirror.name, "CLEAR"
 
 
 _classes = (ROKEBY_UL_constraints, ROKEBY_UL_regions, ROKEBY_PT_main)
