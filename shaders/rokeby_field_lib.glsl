@@ -423,11 +423,14 @@ vec3 rokeby_edited_direction(vec3 q, vec3 n, ivec3 vids, vec3 bary)
   return normalize(rk_quat_rotate(rot, r));
 }
 
-/* Blender's equirectangular convention (Environment Texture node): image row 0 at the bottom. */
+/* Blender's equirectangular convention, as its Environment Texture node computes it
+ * (node_tex_environment_equirectangular, and Cycles' direction_to_equirectangular):
+ * u = 0.5 - atan2(d.y, d.x) / 2pi, v = 0.5 + atan2(d.z, hypot(d.x, d.y)) / pi; +X at the image
+ * centre, +Y at u = 0.25, -X on the seam; image row 0 (v = 0) at the bottom. */
 vec2 rokeby_equirect_uv(vec3 d)
 {
   d = normalize(d);
-  return vec2(atan(d.y, -d.x) / (2.0 * RK_PI) + 0.5, atan(d.z, length(d.xy)) / RK_PI + 0.5);
+  return vec2(0.5 - atan(d.y, d.x) / (2.0 * RK_PI), atan(d.z, length(d.xy)) / RK_PI + 0.5);
 }
 
 /* Without an image: a sky and ground with a 15-degree grid, so that edits are visible. */

@@ -218,8 +218,9 @@ def test_half_turns_and_rank_deficient_inputs(scene):
 
 def test_environment_lookup_follows_blenders_equirectangular_convention(scene):
     """A colour-coded lat-long image (16 x 8 cells): each mirror pixel shows the cell that
-    u = atan2(d.y, -d.x) / 2pi + 0.5, v = atan2(d.z, hypot(d.x, d.y)) / pi + 0.5 (row 0 at the
-    bottom) names for the reflected direction d."""
+    Blender's Environment Texture node reads for the reflected direction d:
+    u = 0.5 - atan2(d.y, d.x) / 2pi, v = 0.5 + atan2(d.z, hypot(d.x, d.y)) / pi, row 0 at the
+    bottom (EEVEE's node_tex_environment_equirectangular; rokeby.reflmap.direction_to_uv)."""
     s = scene
     r = s["renderer"]
     cells_u, cells_v, px = 16, 8, 8
@@ -233,7 +234,7 @@ def test_environment_lookup_follows_blenders_equirectangular_convention(scene):
     finally:
         r.env_tex = None
     d = rn.edited_directions(s["pos"], s["nrm"], s["eye"], np.zeros((0, 9), np.float32)).astype(np.float64)
-    u = np.arctan2(d[:, 1], -d[:, 0]) / (2 * np.pi) + 0.5
+    u = 0.5 - np.arctan2(d[:, 1], d[:, 0]) / (2 * np.pi)
     vv = np.arctan2(d[:, 2], np.hypot(d[:, 0], d[:, 1])) / np.pi + 0.5
     fu, fv = u * cells_u, vv * cells_v
     # away from cell borders (bilinear filtering mixes neighbours there)

@@ -21,9 +21,9 @@ def is_registered() -> bool:
 
 
 def _modules():
-    from . import handlers, operators, props, ui
+    from . import handlers, operators, props, ui, viewport
 
-    return (props, operators, ui, handlers)
+    return (props, operators, ui, handlers, viewport)
 
 
 def register():

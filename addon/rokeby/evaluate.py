@@ -124,6 +124,9 @@ class _State:
         self.rotations: np.ndarray | None = None
         self.refractions: np.ndarray | None = None
         self.field_fingerprints: dict = {}
+        # What the reflection field was last computed from (rows, distances or None, regions),
+        # for the viewport preview, which evaluates the same field per pixel (rokeby.viewport).
+        self.field_inputs: tuple | None = None
 
 
 _STATE: dict[int, _State] = {}
@@ -159,6 +162,14 @@ def mark_dirty(obj):
 def report_of(obj) -> MirrorReport | None:
     st = _STATE.get(obj.session_uid)
     return st.report if st else None
+
+
+def state_of(obj) -> "_State | None":
+    """The evaluator's runtime state of a mirror (geometry, field inputs, report), or None."""
+    try:
+        return _STATE.get(obj.session_uid)
+    except (AttributeError, ReferenceError):
+        return None
 
 
 def rotations_of(obj) -> np.ndarray | None:
@@ -663,6 +674,7 @@ def evaluate_mirror(obj, scene, depsgraph, *, force=False, reread_geometry=False
             rv = timer(native.rotation_field, geo.vertices, rows, output="rotation_vector", **kwargs)
             write_attribute(obj, rv)
             state.rotations = rv
+            state.field_inputs = (rows, kwargs.get("distances"), kwargs.get("regions") or [])
             old[ATTRIBUTE] = fp_reflection
         if not len(t_rows):
             old.pop(REFRACTION_ATTRIBUTE, None)

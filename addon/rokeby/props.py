@@ -153,6 +153,11 @@ class RokebyMirror(PropertyGroup):
         update=_touch,
     )
     freeze_eye: FloatVectorProperty(name="Frozen eye", size=3, subtype="TRANSLATION", update=_touch)
+    show_preview: BoolProperty(
+        name="Show in Viewport",
+        description="Draw this mirror's edited reflections in the viewport preview (when the preview is on)",
+        default=True,
+    )
     ior: FloatProperty(
         name="IOR",
         description="Index of refraction of the mirror's material (outside → inside) used by refraction constraints and the render nodes; keep it equal to the Glass/Refraction BSDF's IOR",

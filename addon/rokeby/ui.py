@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import bpy
 
-from . import api, evaluate, native
+from . import api, evaluate, native, viewport
 
 _STATUS_ICON = {"OK": "CHECKMARK", "WARNING": "ERROR", "ERROR": "CANCEL", "DISABLED": "HIDE_ON"}
 
@@ -51,6 +51,9 @@ class ROKEBY_PT_main(bpy.types.Panel):
         mirrors = [ob for ob in context.scene.objects if ob.rokeby.is_mirror]
         box = layout.box()
         box.label(text=f"Mirrors ({len(mirrors)})", icon="MOD_MIRROR")
+        box.prop(context.window_manager, "rokeby_viewport_preview", icon="SHADING_RENDERED")
+        if viewport.last_error():
+            box.label(text=f"Preview: {viewport.last_error()}"[:120], icon="ERROR")
         for m in mirrors:
             rep = evaluate.report_of(m)
             row = box.row(align=True)
@@ -82,6 +85,9 @@ class ROKEBY_PT_main(bpy.types.Panel):
         if s.metric == "GEODESIC":
             col.prop(s, "geodesic_method")
         col.prop(s, "polar")
+        col.prop(s, "show_preview")
+        if viewport.status_of(mirror):
+            col.label(text=viewport.status_of(mirror)[:120], icon="INFO")
         row = layout.row(align=True)
         row.prop(s, "freeze", toggle=True, icon="FREEZE")
         row.operator("rokeby.return_to_view", icon="HIDE_OFF")
