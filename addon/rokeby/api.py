@@ -904,5 +904,6 @@ def add_highlight_constraint(mirror, light, surface_point=None, *, eye=None, nam
     green = mirror.rokeby.constraints[index].target_handle
     green.parent = light  # keeps its world location: the light's current matrix is undone
     green.matrix_parent_inverse = light.matrix_world.inverted()
+    mirror.rokeby.constraints[index].light_name = light.name
     green.empty_display_type = "SPHERE"
     return index

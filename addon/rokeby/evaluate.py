@@ -398,6 +398,8 @@ def _constraint_inputs(obj, scene, depsgraph, geo, mirror_matrix, report, kind="
                 raise RokebyError(f"{label}: its red (surface) handle was deleted")
             if not object_in_scene(green, scene):
                 raise RokebyError(f"{label}: its green ({'transmitted' if refraction else 'reflected'}) handle was deleted")
+            if getattr(c, "light_name", "") and green.parent is None:
+                report.warn(f"{label}: the light '{c.light_name}' its green handle followed was deleted or unparented; the handle stays where it is")
             red_m = _finite_matrix(red.evaluated_get(depsgraph).matrix_world, f"{label}: red handle '{red.name}'")
             green_m = _finite_matrix(green.evaluated_get(depsgraph).matrix_world, f"{label}: green handle '{green.name}'")
             eye = np.array(c.eye, dtype=np.float64)
@@ -451,6 +453,8 @@ def _region_inputs(obj, scene, depsgraph, geo, mirror_matrix, report):
             if rg.kind == "FREEFORM":
                 if not rg.vertex_group:
                     raise RokebyError(f"{label}: no vertex group chosen")
+                if obj.vertex_groups.get(rg.vertex_group) is None:
+                    raise RokebyError(f"{label}: vertex group '{rg.vertex_group}' was deleted or renamed")
                 if rg.vertex_group not in geo.region_weights:
                     raise RokebyError(f"{label}: vertex group '{rg.vertex_group}' could not be read")
                 specs.append(("FREEFORM", rg.vertex_group, border))
@@ -654,6 +658,9 @@ def evaluate_mirror(obj, scene, depsgraph, *, force=False, reread_geometry=False
             _STATS["skipped"] += 1
             kept = state.report
             kept.recomputed = False
+            # Same field, but the warnings describe the scene as it is now (e.g. a deleted light
+            # whose highlight handle stayed where it was).
+            kept.messages, kept.status = list(report.messages), report.status
             return kept
         report.constraints_used = len(rows) + len(t_rows)
         method = "heat" if settings.geodesic_method == "HEAT" else "dijkstra"

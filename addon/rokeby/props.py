@@ -104,6 +104,11 @@ class RokebyConstraint(PropertyGroup):
         subtype="TRANSLATION",
         update=_touch,
     )
+    light_name: StringProperty(
+        name="Light",
+        description="Highlight constraints: the light the green handle follows (it is parented to it)",
+        update=_touch,
+    )
     view_location: FloatVectorProperty(name="View pivot", size=3, subtype="TRANSLATION")
     view_rotation: FloatVectorProperty(name="View rotation", size=4, subtype="QUATERNION", default=(1.0, 0.0, 0.0, 0.0))
     view_distance: FloatProperty(name="View distance", default=10.0, min=0.0)
