@@ -1,0 +1,93 @@
+"""Run by tests/test_glsl.py in a fresh bpy process: the viewport preview as Blender compiles and
+draws it (gpu module, GPUShaderCreateInfo from the same shaders/ files), offscreen.
+
+bpy as a module has no GPU context in background mode until a GPU engine has rendered once; a
+tiny EEVEE render creates it (on Mesa llvmpipe here). Prints one JSON line: RESULT {...}."""
+
+import json
+import sys
+
+import numpy as np
+import bpy
+
+import rokeby
+from rokeby import api, evaluate, glsl, viewport
+
+W, H = 96, 72
+
+
+def main():
+    bpy.ops.wm.read_factory_settings(use_empty=True)
+    rokeby.register()
+    scene = bpy.context.scene
+    bpy.ops.mesh.primitive_uv_sphere_add(segments=48, ring_count=24, radius=1.0)
+    mirror = bpy.context.object
+    bpy.ops.object.shade_smooth()
+    api.add_mirror(mirror)
+    eye = np.array([0.4, -4.0, 0.8])
+    api.add_constraint(mirror, (0.0, -1.0, 0.1), (1.5, -3.0, 2.0), eye=tuple(eye))
+    api.add_constraint(mirror, (0.6, -0.7, -0.3), (-2.0, -2.0, 0.0), eye=tuple(eye))
+    api.add_constraint(mirror, (-0.5, -0.8, 0.3), (0.0, -3.0, -2.0), eye=tuple(eye))
+    api.add_region(mirror, "EUCLIDEAN", center=(0.0, -1.0, 0.0), radius=1.2, border=0.5)
+    report = api.evaluate(force=True)[mirror.name]
+    assert report.status == "OK", report.summary()
+
+    # Create Blender's GPU context: one tiny EEVEE render.
+    cam = bpy.data.objects.new("cam", bpy.data.cameras.new("cam"))
+    scene.collection.objects.link(cam)
+    scene.camera = cam
+    scene.render.engine = "BLENDER_EEVEE_NEXT"
+    scene.render.resolution_x = scene.render.resolution_y = 8
+    bpy.ops.render.render()
+
+    import gpu
+    from mathutils import Matrix
+
+    sys.path.insert(0, sys.argv[1])
+    from gl_harness import look_at, perspective
+
+    vp = perspective(40, W / H, 0.1, 100.0) @ look_at(eye, (0, 0, 0))
+    off = gpu.types.GPUOffScreen(W, H, format="RGBA32F")
+    out = {}
+    with off.bind():
+        fb = gpu.state.active_framebuffer_get()
+        for name, mode in (("direction", glsl.OUT_DIRECTION), ("position", glsl.OUT_POSITION), ("normal", glsl.OUT_NORMAL)):
+            fb.clear(color=(0.0, 0.0, 0.0, 0.0), depth=1.0)
+            drew = viewport.draw_mirror(mirror, scene, vp, tuple(eye), output=mode)
+            assert drew, viewport.status_of(mirror) or viewport.last_error()
+            px = np.array(fb.read_color(0, 0, W, H, 4, 0, "FLOAT").to_list(), np.float32).reshape(H, W, 4)
+            out[name] = px
+        # The whole draw with overlays, as the handler runs it (built-in shaders read gpu.matrix).
+        fb.clear(color=(0.0, 0.0, 0.0, 0.0), depth=1.0)
+        with gpu.matrix.push_pop(), gpu.matrix.push_pop_projection():
+            gpu.matrix.load_identity()
+            gpu.matrix.load_projection_matrix(Matrix(vp.tolist()))
+            drawn = viewport.draw_scene(scene, vp, tuple(eye), viewport_size=(W, H), view_right=(1, 0, 0), view_up=(0, 0, 1))
+        colour = np.array(fb.read_color(0, 0, W, H, 4, 0, "FLOAT").to_list(), np.float32).reshape(H, W, 4)
+    off.free()
+    mask = out["direction"][..., 3] > 0
+    import rokeby_native as rn
+
+    st = evaluate.state_of(mirror)
+    rows, distances, regions = st.field_inputs
+    want = rn.edited_directions(out["position"][mask][:, :3], out["normal"][mask][:, :3], eye.astype(np.float32), rows, regions=regions)
+    got = out["direction"][mask][:, :3].astype(np.float64)
+    err = np.arctan2(np.linalg.norm(np.cross(got, want), axis=1), np.sum(got * want, axis=1))
+    plain = rn.edited_directions(out["position"][mask][:, :3], out["normal"][mask][:, :3], eye.astype(np.float32), rows[:0])
+    edit = np.arctan2(np.linalg.norm(np.cross(got, plain), axis=1), np.sum(got * plain, axis=1))
+    overlay = colour[..., 3] > 0
+    print("RESULT " + json.dumps({
+        "renderer": gpu.platform.renderer_get(),
+        "covered": int(mask.sum()),
+        "mean_err": float(err.mean()),
+        "max_err": float(err.max()),
+        "edited_fraction": float((edit > 1e-3).mean()),
+        "drawn": drawn,
+        "drawn_pixels": int(overlay.sum()),
+        "error": viewport.last_error(),
+        "status": viewport.status_of(mirror),
+    }))
+    rokeby.unregister()
+
+
+main()
