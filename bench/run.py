@@ -244,6 +244,34 @@ def addon_section(emit):
     emit()
 
 
+RENDER_MARKER = "## Render: "
+
+
+def render_section(emit):
+    """Issue #5: what the edit costs a Cycles render of the `make demo` scene (bpy in a fresh
+    process, bench/demo_render.py)."""
+    with tempfile.TemporaryDirectory() as tmp:
+        out = Path(tmp) / "render.json"
+        subprocess.run([sys.executable, str(ROOT / "bench" / "demo_render.py"), "--json", str(out)], check=True, stdout=subprocess.DEVNULL)
+        r = json.loads(out.read_text())
+    emit(RENDER_MARKER + "what the edit costs a Cycles render of the demo scene")
+    emit()
+    emit(f"The Rokeby Venus of `make demo` ({r['width']}x{r['height']}, {r['samples']} samples, denoiser {r['denoiser']}, CPU device,")
+    emit(f"{r['threads']} threads), rendered with the mirror's node group installed (the edit) and removed (the physical")
+    emit(f"mirror), alternated, {r['repeat']} renders each after a warm-up; medians. Wall: bpy.ops.render.render (sync, BVH,")
+    emit("path tracing, denoising). CPU: the process's CPU time over all threads, steadier on a shared machine.")
+    emit()
+    emit("| mirror | wall median (s) | CPU median (s) | wall, each (s) | CPU, each (s) |")
+    emit("|---|---:|---:|---|---|")
+    for what, label in (("physical", "physical (no node group)"), ("edited", "edited (node group)")):
+        emit(f"| {label} | {r[what + '_median_s']:.2f} | {r[what + '_cpu_median_s']:.2f} | {', '.join(f'{t:.2f}' for t in r[what + '_s'])} | {', '.join(f'{t:.2f}' for t in r[what + '_cpu_s'])} |")
+    emit()
+    emit(f"Ratio edited / physical: wall {r['edited_median_s'] / r['physical_median_s']:.3f}, CPU {r['edited_cpu_median_s'] / r['physical_cpu_median_s']:.3f}.")
+    emit(f"Load average {r['load_average'][0]:.1f} before and {r['load_average'][1]:.1f} after the renders, on {r['cpus']} CPUs: other jobs shared")
+    emit("the machine, so single renders vary by tens of percent; a ratio within that spread means no measurable cost.")
+    emit()
+
+
 VIEWPORT_MARKER = "## Viewport preview: "
 
 
@@ -295,7 +323,7 @@ def _refresh_section(emit, out, marker, section):
 def main():
     ap = argparse.ArgumentParser(description="Rokeby benchmarks")
     ap.add_argument("--peers", default=None, help="python of .venv-peers (exact geodesics, potpourri3d, libigl, matplotlib)")
-    ap.add_argument("--only", choices=["field", "geodesic", "addon", "viewport"], default=None)
+    ap.add_argument("--only", choices=["field", "geodesic", "addon", "render", "viewport"], default=None)
     args = ap.parse_args()
     rng = np.random.default_rng(2009)
     out = []
@@ -312,18 +340,21 @@ def main():
     if args.only == "viewport":
         _refresh_section(emit, out, VIEWPORT_MARKER, viewport_section)
         return
-    if args.only == "addon":
+    if args.only in ("addon", "render"):
         start = len(out)
-        addon_section(emit)
+        (addon_section if args.only == "addon" else render_section)(emit)
         doc = ROOT / "docs" / "benchmarks.md"
         old = doc.read_text() if doc.exists() else ""
-        marker = "## Add-on: "
+        marker = "## Add-on: " if args.only == "addon" else RENDER_MARKER
         if marker in old:
             # Refresh that section of the full report in place.
             head, _, tail = old.partition(marker)
             rest = tail.split("\n## ", 1)
             after = "\n## " + rest[1] if len(rest) == 2 else ""
             doc.write_text(head + "\n".join(out[start:]).rstrip("\n") + "\n" + after)
+        elif old:
+            # Not in the report yet: append the section, keep the rest.
+            doc.write_text(old.rstrip("\n") + "\n\n" + "\n".join(out[start:]).rstrip("\n") + "\n")
         else:
             doc.write_text("\n".join(out) + "\n")
         return
@@ -414,6 +445,7 @@ def main():
     emit()
     addon_section(emit)
     viewport_section(emit)
+    render_section(emit)
 
     docs = ROOT / "docs"
     docs.mkdir(exist_ok=True)
