@@ -5,12 +5,18 @@
 //! * [`region`] — regions of interest a(q) with smooth-step borders (paper §4 "Regions", eq. 7).
 //! * [`field`]  — the Moving Least Squares rotation field R(q) = ortho(Σ wₙ eₙ rₙᵀ), wₙ = 1/d²
 //!   (eqs. 2–7), evaluated per point (mesh vertices) or per pixel (a G-buffer), in parallel.
+//! * [`sh`], [`reconstruct`], [`recomposite`] — local shape editing at the compositing stage
+//!   (Zubiaga et al. 2016): SH diffuse environments (eq. 1, LS and the QP), dual-paraboloid
+//!   reflection environments (eq. 2, hole filling, regularisation) and recompositing (eqs. 3–5).
 
 pub mod error;
 pub mod field;
 pub mod geodesic;
 pub mod intrinsic;
 pub mod polar;
+pub mod reconstruct;
+pub mod recomposite;
 pub mod region;
+pub mod sh;
 
 pub use error::{Result, RokebyError};
