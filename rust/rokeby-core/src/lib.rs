@@ -8,12 +8,17 @@
 //! * [`sh`], [`reconstruct`], [`recomposite`] — local shape editing at the compositing stage
 //!   (Zubiaga et al. 2016): SH diffuse environments (eq. 1, LS and the QP), dual-paraboloid
 //!   reflection environments (eq. 2, hole filling, regularisation) and recompositing (eqs. 3–5).
+//! * [`envmap`], [`prefilter`] — environment maps (lat-long, cube, sphere, dual-paraboloid; exact
+//!   direction formulas, seam-correct bilinear lookups, conversions) and their prefiltering under
+//!   environment light (Fraser): order-2 SH irradiance, Phong/GGX/Torrance–Sparrow lobes.
 
+pub mod envmap;
 pub mod error;
 pub mod field;
 pub mod geodesic;
 pub mod intrinsic;
 pub mod polar;
+pub mod prefilter;
 pub mod reconstruct;
 pub mod recomposite;
 pub mod region;
