@@ -17,6 +17,9 @@ use rokeby_core::region::Region;
 use rokeby_core::RokebyError;
 use std::panic::{catch_unwind, AssertUnwindSafe};
 
+mod compositing;
+mod environment;
+
 /// A float array as float32: borrowed when it already is contiguous float32, else converted.
 enum F32Array<'py> {
     Borrowed(PyReadonlyArrayDyn<'py, f32>),
@@ -624,5 +627,7 @@ fn rokeby_native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(geodesic_distances, m)?)?;
     m.add_function(wrap_pyfunction!(interpolate, m)?)?;
     m.add_class::<PyGeodesicSolver>()?;
+    compositing::register(m)?;
+    environment::register(m)?;
     Ok(())
 }

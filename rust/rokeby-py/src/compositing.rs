@@ -1,0 +1,427 @@
+//! Bindings of local shape editing at the compositing stage (Zubiaga et al. 2016): the SH diffuse
+//! fit, the dual-paraboloid reflection environment and recompositing. Same house style as the
+//! parent module: float arrays in (float32/float64), shapes checked with messages naming the
+//! argument, the GIL released, core errors as ValueError.
+
+use super::{f32_array, run_detached, shape_str, F32Array};
+use numpy::ndarray::{ArrayD, IxDyn};
+use numpy::{IntoPyArray, PyArrayDyn};
+use pyo3::exceptions::{PyRuntimeError, PyTypeError, PyValueError};
+use pyo3::prelude::*;
+use pyo3::types::{PyDict, PyList};
+use rokeby_core::recomposite::{self as core_recomposite, Buffers, Params, Patch};
+use rokeby_core::reconstruct::{self, ParaboloidMap, ReflectionParams};
+use rokeby_core::sh::{self, Fit, SH_COEFFS};
+
+fn array_f32<'py>(py: Python<'py>, shape: &[usize], data: Vec<f32>) -> PyResult<Bound<'py, PyArrayDyn<f32>>> {
+    let arr = ArrayD::from_shape_vec(IxDyn(shape), data).map_err(|e| PyRuntimeError::new_err(e.to_string()))?;
+    Ok(arr.into_pyarray(py))
+}
+
+fn array_f64<'py>(py: Python<'py>, shape: &[usize], data: Vec<f64>) -> PyResult<Bound<'py, PyArrayDyn<f64>>> {
+    let arr = ArrayD::from_shape_vec(IxDyn(shape), data).map_err(|e| PyRuntimeError::new_err(e.to_string()))?;
+    Ok(arr.into_pyarray(py))
+}
+
+/// An (H, W, 3) array; `hw` fixes H, W when already known.
+fn image3<'py>(obj: &Bound<'py, PyAny>, name: &str, hw: Option<(usize, usize)>) -> PyResult<(F32Array<'py>, usize, usize)> {
+    let a = f32_array(obj, name)?;
+    let s = a.shape();
+    if s.len() != 3 || s[2] != 3 {
+        return Err(PyValueError::new_err(format!("{name}: expected shape (H, W, 3), got {}", shape_str(&s))));
+    }
+    if let Some((h, w)) = hw {
+        if (s[0], s[1]) != (h, w) {
+            return Err(PyValueError::new_err(format!("{name}: expected shape ({h}, {w}, 3) like the other passes, got {}", shape_str(&s))));
+        }
+    }
+    Ok((a, s[0], s[1]))
+}
+
+/// An (H, W) array, or None when `obj` is None.
+fn image1<'py>(obj: Option<&Bound<'py, PyAny>>, name: &str, h: usize, w: usize) -> PyResult<Option<F32Array<'py>>> {
+    let Some(obj) = obj else { return Ok(None) };
+    if obj.is_none() {
+        return Ok(None);
+    }
+    let a = f32_array(obj, name)?;
+    if a.shape() != [h, w] {
+        return Err(PyValueError::new_err(format!("{name}: expected shape ({h}, {w}) like the other passes, got {}", shape_str(&a.shape()))));
+    }
+    Ok(Some(a))
+}
+
+fn opt_image3<'py>(obj: Option<&Bound<'py, PyAny>>, name: &str, h: usize, w: usize) -> PyResult<Option<F32Array<'py>>> {
+    match obj {
+        Some(o) if !o.is_none() => Ok(Some(image3(o, name, Some((h, w)))?.0)),
+        _ => Ok(None),
+    }
+}
+
+fn parse_fit(method: &str) -> PyResult<Fit> {
+    Fit::parse(method).ok_or_else(|| PyValueError::new_err(format!("method: unknown fit {method:?} (expected 'qp'/'constrained' or 'ls'/'least_squares')")))
+}
+
+/// Order-2 SH fit (eq. 1) of D0 over the pixels of one patch.
+///
+/// normals (N, 3), values (N, C). Rows with a non-finite or zero normal or a non-finite value are
+/// left out and counted in "masked". method: 'qp' (D(n) >= D0, §3.1) or 'ls'.
+/// Returns {"coeffs": (C, 9) float64, "max_residual", "rms_residual", "iterations": (C,),
+/// "pixels", "masked"}.
+#[pyfunction]
+#[pyo3(signature = (normals, values, method = "qp"))]
+pub fn sh_fit<'py>(py: Python<'py>, normals: &Bound<'py, PyAny>, values: &Bound<'py, PyAny>, method: &str) -> PyResult<Bound<'py, PyDict>> {
+    let fit = parse_fit(method)?;
+    let n = f32_array(normals, "normals")?;
+    let v = f32_array(values, "values")?;
+    let ns = n.shape();
+    if ns.len() != 2 || ns[1] != 3 {
+        return Err(PyValueError::new_err(format!("normals: expected shape (N, 3), got {}", shape_str(&ns))));
+    }
+    let vs = v.shape();
+    let channels = match vs.len() {
+        1 => 1,
+        2 => vs[1],
+        _ => 0,
+    };
+    if channels == 0 || vs[0] != ns[0] {
+        return Err(PyValueError::new_err(format!("values: expected shape ({}, C) (one row per normal), got {}", ns[0], shape_str(&vs))));
+    }
+    let (nsl, vsl) = (n.slice(), v.slice());
+    let (keep_n, keep_v, masked) = py.detach(|| {
+        let mut kn = Vec::with_capacity(nsl.len());
+        let mut kv = Vec::with_capacity(vsl.len());
+        let mut masked = 0usize;
+        for i in 0..ns[0] {
+            let nr = &nsl[3 * i..3 * i + 3];
+            let vr = &vsl[channels * i..channels * (i + 1)];
+            let l2 = nr.iter().map(|x| (*x as f64) * (*x as f64)).sum::<f64>();
+            if nr.iter().chain(vr).all(|x| x.is_finite()) && l2 > 1e-24 {
+                kn.extend_from_slice(nr);
+                kv.extend_from_slice(vr);
+            } else {
+                masked += 1;
+            }
+        }
+        (kn, kv, masked)
+    });
+    if keep_n.is_empty() {
+        return Err(PyValueError::new_err(format!("normals: no usable pixel ({masked} of {} have a non-finite or zero normal or value)", ns[0])));
+    }
+    let pixels = keep_n.len() / 3;
+    let r = run_detached(py, || sh::fit(&keep_n, &keep_v, channels, fit))?;
+    let d = PyDict::new(py);
+    d.set_item("coeffs", array_f64(py, &[channels, SH_COEFFS], r.coeffs.iter().flatten().copied().collect())?)?;
+    d.set_item("max_residual", array_f64(py, &[channels], r.max_residual)?)?;
+    d.set_item("rms_residual", array_f64(py, &[channels], r.rms_residual)?)?;
+    d.set_item("iterations", r.iterations)?;
+    d.set_item("pixels", pixels)?;
+    d.set_item("masked", masked)?;
+    Ok(d)
+}
+
+/// D(n) for SH coefficients (C, 9) at normals (..., 3): (..., C).
+#[pyfunction]
+pub fn sh_eval<'py>(py: Python<'py>, coeffs: &Bound<'py, PyAny>, normals: &Bound<'py, PyAny>) -> PyResult<Bound<'py, PyArrayDyn<f32>>> {
+    let c = f32_array(coeffs, "coeffs")?;
+    let cs = c.shape();
+    if cs.len() != 2 || cs[1] != SH_COEFFS {
+        return Err(PyValueError::new_err(format!("coeffs: expected shape (C, 9), got {}", shape_str(&cs))));
+    }
+    let n = f32_array(normals, "normals")?;
+    let ns = n.shape();
+    if ns.last() != Some(&3) {
+        return Err(PyValueError::new_err(format!("normals: expected shape (..., 3), got {}", shape_str(&ns))));
+    }
+    // Coefficients come in float64 from sh_fit; re-read them at full precision.
+    let co: Vec<[f64; SH_COEFFS]> = {
+        let np = py.import("numpy")?;
+        let a64: Vec<f64> = np.call_method1("asarray", (coeffs, "float64"))?.call_method0("ravel")?.extract()?;
+        a64.chunks_exact(SH_COEFFS).map(|r| r.try_into().unwrap()).collect()
+    };
+    let ch = cs[0];
+    let nsl = n.slice();
+    let out = py.detach(|| {
+        let mut out = vec![0.0f32; nsl.len() / 3 * ch];
+        for (i, nr) in nsl.chunks_exact(3).enumerate() {
+            let v = [nr[0] as f64, nr[1] as f64, nr[2] as f64];
+            let l = (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt();
+            let u = v.map(|x| x / l);
+            for c in 0..ch {
+                out[i * ch + c] = sh::eval(&co[c], u) as f32;
+            }
+        }
+        out
+    });
+    let mut shape = ns[..ns.len() - 1].to_vec();
+    shape.push(ch);
+    array_f32(py, &shape, out)
+}
+
+/// r = 2(n·v)n − v for normals (H, W, 3) and view vectors (H, W, 3) or (3,) (surface → eye).
+#[pyfunction]
+pub fn reflect_dirs<'py>(py: Python<'py>, normals: &Bound<'py, PyAny>, view: &Bound<'py, PyAny>) -> PyResult<Bound<'py, PyArrayDyn<f32>>> {
+    let (n, h, w) = image3(normals, "normals", None)?;
+    let v = f32_array(view, "view")?;
+    if v.shape() != [3] && v.shape() != [h, w, 3] {
+        return Err(PyValueError::new_err(format!("view: expected shape (3,) or ({h}, {w}, 3), got {}", shape_str(&v.shape()))));
+    }
+    let (ns, vs) = (n.slice(), v.slice());
+    let out = run_detached(py, || reconstruct::reflect_dirs(ns, vs))?;
+    array_f32(py, &[h, w, 3], out)
+}
+
+fn map_from(obj: &Bound<'_, PyAny>, name: &str) -> PyResult<ParaboloidMap> {
+    let a = f32_array(obj, name)?;
+    let s = a.shape();
+    if s.len() != 4 || s[0] != 2 || s[1] != s[2] || s[1] < 2 {
+        return Err(PyValueError::new_err(format!("{name}: expected a dual-paraboloid map of shape (2, S, S, C), got {}", shape_str(&s))));
+    }
+    if let Some(i) = a.slice().iter().position(|x| !x.is_finite()) {
+        return Err(PyValueError::new_err(format!("{name}: value {i} is not finite")));
+    }
+    Ok(ParaboloidMap { size: s[1], channels: s[3], data: a.slice().to_vec() })
+}
+
+/// Reflection environment of one patch (§3.2): partial reconstruction (eq. 2), hole filling and
+/// regularisation. reflected (H, W, 3) screen-space r, values (H, W, 3) R0, mask (H, W) > 0.5 for
+/// the patch's unoccluded pixels (α_R), depth (H, W) or None. Non-finite pixels are left out.
+/// stage='full' (default) or 'partial' (eq. 2 only: holes are 0, see "covered").
+/// Returns {"map": (2, S, S, 3) float32, "covered": (2, S, S) bool, "coverage", "triangles",
+/// "filled_texels", "blurred_texels"}. Raises ValueError when the reflections cover less than
+/// min_coverage of the sphere.
+#[pyfunction]
+#[pyo3(signature = (reflected, values, mask, depth = None, size = 128, max_edge_angle = 0.5, max_depth_jump = 0.05, blur_sigma = 2.0, min_coverage = 0.01, stage = "full"))]
+#[allow(clippy::too_many_arguments)]
+pub fn reflection_env<'py>(
+    py: Python<'py>,
+    reflected: &Bound<'py, PyAny>,
+    values: &Bound<'py, PyAny>,
+    mask: &Bound<'py, PyAny>,
+    depth: Option<&Bound<'py, PyAny>>,
+    size: usize,
+    max_edge_angle: f64,
+    max_depth_jump: f64,
+    blur_sigma: f64,
+    min_coverage: f64,
+    stage: &str,
+) -> PyResult<Bound<'py, PyDict>> {
+    let (r, h, w) = image3(reflected, "reflected", None)?;
+    let (v, _, _) = image3(values, "values", Some((h, w)))?;
+    let m = image1(Some(mask), "mask", h, w)?.expect("given");
+    let d = image1(depth, "depth", h, w)?;
+    if stage != "full" && stage != "partial" {
+        return Err(PyValueError::new_err(format!("stage: expected 'full' or 'partial', got {stage:?}")));
+    }
+    let params = ReflectionParams { size, max_edge_angle, max_depth_jump, blur_sigma, min_coverage };
+    let (rs, vs, ms) = (r.slice(), v.slice(), m.slice());
+    let ds: &[f32] = d.as_ref().map(|a| a.slice()).unwrap_or(&[]);
+    let partial_only = stage == "partial";
+    let (map, covered, coverage, tris, filled, blurred) = run_detached(py, || {
+        if partial_only {
+            let p = reconstruct::partial(w, h, rs, vs, 3, ms, ds, &params)?;
+            Ok((p.map, p.covered, p.coverage, p.triangles, 0, 0))
+        } else {
+            let mut p = reconstruct::partial(w, h, rs, vs, 3, ms, ds, &params)?;
+            let covered = p.covered.clone();
+            if p.coverage < params.min_coverage {
+                return Err(rokeby_core::RokebyError::invalid(
+                    "mask",
+                    format!(
+                        "the patch's reflections cover {:.2}% of the sphere of directions ({} triangles), below min_coverage = {:.2}%: holes would cover nearly all of it",
+                        100.0 * p.coverage,
+                        p.triangles,
+                        100.0 * params.min_coverage
+                    ),
+                ));
+            }
+            let filled = reconstruct::fill_holes(&mut [&mut p.map, &mut p.positions], &p.covered)?;
+            let blurred = reconstruct::regularize(&mut p.map, &p.positions, params.blur_sigma);
+            reconstruct::fill_beyond_equator(&mut p.map);
+            Ok((p.map, covered, p.coverage, p.triangles, filled, blurred))
+        }
+    })?;
+    let s = map.size;
+    let out = PyDict::new(py);
+    out.set_item("map", array_f32(py, &[2, s, s, 3], map.data)?)?;
+    let cov: Vec<f32> = covered.iter().map(|&c| if c { 1.0 } else { 0.0 }).collect();
+    let np = py.import("numpy")?;
+    out.set_item("covered", array_f32(py, &[2, s, s], cov)?.call_method1("astype", (np.getattr("bool_")?,))?)?;
+    out.set_item("coverage", coverage)?;
+    out.set_item("triangles", tris)?;
+    out.set_item("filled_texels", filled)?;
+    out.set_item("blurred_texels", blurred)?;
+    Ok(out)
+}
+
+/// Harmonic hole filling of a dual-paraboloid map (2, S, S, C) where `covered` (2, S, S) is
+/// false; covered texels are Dirichlet values. Returns the filled map.
+#[pyfunction]
+pub fn fill_holes<'py>(py: Python<'py>, map: &Bound<'py, PyAny>, covered: &Bound<'py, PyAny>) -> PyResult<Bound<'py, PyArrayDyn<f32>>> {
+    let mut m = map_from(map, "map")?;
+    let c = f32_array(covered, "covered")?;
+    let s = m.size;
+    if c.shape() != [2, s, s] {
+        return Err(PyValueError::new_err(format!("covered: expected shape (2, {s}, {s}) like map, got {}", shape_str(&c.shape()))));
+    }
+    let cov: Vec<bool> = c.slice().iter().map(|&x| x > 0.5).collect();
+    let ch = m.channels;
+    let data = run_detached(py, move || {
+        reconstruct::fill_holes(&mut [&mut m], &cov)?;
+        reconstruct::fill_beyond_equator(&mut m);
+        Ok(m.data)
+    })?;
+    array_f32(py, &[2, s, s, ch], data)
+}
+
+/// Bilinear lookups of a dual-paraboloid map (2, S, S, C) in directions (..., 3): (..., C).
+#[pyfunction]
+pub fn envmap_lookup<'py>(py: Python<'py>, map: &Bound<'py, PyAny>, dirs: &Bound<'py, PyAny>) -> PyResult<Bound<'py, PyArrayDyn<f32>>> {
+    let m = map_from(map, "map")?;
+    let d = f32_array(dirs, "dirs")?;
+    let ds = d.shape();
+    if ds.last() != Some(&3) {
+        return Err(PyValueError::new_err(format!("dirs: expected shape (..., 3), got {}", shape_str(&ds))));
+    }
+    let dsl = d.slice();
+    let ch = m.channels;
+    let out = py.detach(|| {
+        let mut out = vec![0.0f32; dsl.len() / 3 * ch];
+        let mut tmp = vec![0.0f64; ch];
+        for (i, r) in dsl.chunks_exact(3).enumerate() {
+            m.lookup(glam::DVec3::new(r[0] as f64, r[1] as f64, r[2] as f64), &mut tmp);
+            for c in 0..ch {
+                out[i * ch + c] = tmp[c] as f32;
+            }
+        }
+        out
+    });
+    let mut shape = ds[..ds.len() - 1].to_vec();
+    shape.push(ch);
+    array_f32(py, &shape, out)
+}
+
+fn parse_patches(obj: &Bound<'_, PyAny>) -> PyResult<Vec<Patch>> {
+    let list = obj.cast::<PyList>().map_err(|_| PyTypeError::new_err("patches: must be a list of dicts {'sh': (3, 9) or None, 'env': (2, S, S, 3) or None}"))?;
+    let np = obj.py().import("numpy")?;
+    let mut out = Vec::with_capacity(list.len());
+    for (k, item) in list.iter().enumerate() {
+        let name = format!("patches[{k}]");
+        if item.is_none() {
+            out.push(Patch::default());
+            continue;
+        }
+        let d = item.cast::<PyDict>().map_err(|_| PyTypeError::new_err(format!("{name}: must be a dict or None")))?;
+        let mut p = Patch::default();
+        if let Some(s) = d.get_item("sh")? {
+            if !s.is_none() {
+                let a: Vec<f64> = np.call_method1("asarray", (&s, "float64"))?.call_method0("ravel")?.extract()?;
+                let shape: Vec<usize> = np.call_method1("shape", (&s,))?.extract()?;
+                if shape != [3, SH_COEFFS] || a.iter().any(|x| !x.is_finite()) {
+                    return Err(PyValueError::new_err(format!("{name}.sh: expected finite coefficients of shape (3, 9), got {}", shape_str(&shape))));
+                }
+                let mut c = [[0.0; SH_COEFFS]; 3];
+                for ch in 0..3 {
+                    c[ch].copy_from_slice(&a[ch * SH_COEFFS..(ch + 1) * SH_COEFFS]);
+                }
+                p.sh = Some(c);
+            }
+        }
+        if let Some(e) = d.get_item("env")? {
+            if !e.is_none() {
+                let m = map_from(&e, &format!("{name}.env"))?;
+                if m.channels != 3 {
+                    return Err(PyValueError::new_err(format!("{name}.env: expected 3 channels, got {}", m.channels)));
+                }
+                p.env = Some(m);
+            }
+        }
+        out.push(p);
+    }
+    Ok(out)
+}
+
+/// Recompositing, eqs. 3–5. ids (H, W): patch index per pixel (< 0: none), normals and
+/// edited_normals (H, W, 3) screen space, view (H, W, 3) or (3,), diffuse D0 and reflection R0
+/// (H, W, 3) (illumination when diffuse_color/reflection_color are given), image I (H, W, 3);
+/// alpha_d, alpha_r, alpha (H, W) default 1. patches: list of {'sh', 'env'} per id.
+/// Returns (image (H, W, 3) float32, {"edited": pixels recomposited, "masked": pixels left as I
+/// because an input was not finite or their patch has no reconstruction}).
+#[pyfunction]
+#[pyo3(signature = (ids, normals, edited_normals, view, diffuse, reflection, image, patches, alpha_d = None, alpha_r = None, alpha = None, diffuse_color = None, reflection_color = None, k_d = 1.0, k_r = 1.0, gamma = 1.0, epsilon = core_recomposite::EPSILON))]
+#[allow(clippy::too_many_arguments)]
+pub fn recomposite<'py>(
+    py: Python<'py>,
+    ids: &Bound<'py, PyAny>,
+    normals: &Bound<'py, PyAny>,
+    edited_normals: &Bound<'py, PyAny>,
+    view: &Bound<'py, PyAny>,
+    diffuse: &Bound<'py, PyAny>,
+    reflection: &Bound<'py, PyAny>,
+    image: &Bound<'py, PyAny>,
+    patches: &Bound<'py, PyAny>,
+    alpha_d: Option<&Bound<'py, PyAny>>,
+    alpha_r: Option<&Bound<'py, PyAny>>,
+    alpha: Option<&Bound<'py, PyAny>>,
+    diffuse_color: Option<&Bound<'py, PyAny>>,
+    reflection_color: Option<&Bound<'py, PyAny>>,
+    k_d: f64,
+    k_r: f64,
+    gamma: f64,
+    epsilon: f64,
+) -> PyResult<(Bound<'py, PyArrayDyn<f32>>, Bound<'py, PyDict>)> {
+    let (n, h, w) = image3(normals, "normals", None)?;
+    let id_arr = f32_array(ids, "ids")?;
+    if id_arr.shape() != [h, w] {
+        return Err(PyValueError::new_err(format!("ids: expected shape ({h}, {w}) like normals, got {}", shape_str(&id_arr.shape()))));
+    }
+    let ids_i: Vec<i32> = id_arr.slice().iter().map(|&x| if x.is_finite() && x >= 0.0 { x as i32 } else { -1 }).collect();
+    let (e, _, _) = image3(edited_normals, "edited_normals", Some((h, w)))?;
+    let v = f32_array(view, "view")?;
+    if v.shape() != [3] && v.shape() != [h, w, 3] {
+        return Err(PyValueError::new_err(format!("view: expected shape (3,) or ({h}, {w}, 3), got {}", shape_str(&v.shape()))));
+    }
+    let (dd, _, _) = image3(diffuse, "diffuse", Some((h, w)))?;
+    let (rr, _, _) = image3(reflection, "reflection", Some((h, w)))?;
+    let (ii, _, _) = image3(image, "image", Some((h, w)))?;
+    let ad = image1(alpha_d, "alpha_d", h, w)?;
+    let ar = image1(alpha_r, "alpha_r", h, w)?;
+    let al = image1(alpha, "alpha", h, w)?;
+    let dc = opt_image3(diffuse_color, "diffuse_color", h, w)?;
+    let rc = opt_image3(reflection_color, "reflection_color", h, w)?;
+    let pts = parse_patches(patches)?;
+    let empty: &[f32] = &[];
+    let sl = |a: &Option<F32Array<'_>>| -> Vec<f32> { a.as_ref().map(|x| x.slice().to_vec()).unwrap_or_default() };
+    let (adv, arv, alv, dcv, rcv) = (sl(&ad), sl(&ar), sl(&al), sl(&dc), sl(&rc));
+    let bufs = Buffers {
+        ids: &ids_i,
+        normals: n.slice(),
+        edited: e.slice(),
+        view: v.slice(),
+        diffuse: dd.slice(),
+        reflection: rr.slice(),
+        alpha_d: if ad.is_some() { &adv } else { empty },
+        alpha_r: if ar.is_some() { &arv } else { empty },
+        alpha: if al.is_some() { &alv } else { empty },
+        image: ii.slice(),
+        diffuse_color: if dc.is_some() { &dcv } else { empty },
+        reflection_color: if rc.is_some() { &rcv } else { empty },
+    };
+    let params = Params { k_d, k_r, gamma, epsilon };
+    let (out, st) = run_detached(py, || core_recomposite::recomposite(&bufs, &pts, &params))?;
+    let stats = PyDict::new(py);
+    stats.set_item("edited", st.edited)?;
+    stats.set_item("masked", st.masked)?;
+    Ok((array_f32(py, &[h, w, 3], out)?, stats))
+}
+
+pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    m.add_function(wrap_pyfunction!(sh_fit, m)?)?;
+    m.add_function(wrap_pyfunction!(sh_eval, m)?)?;
+    m.add_function(wrap_pyfunction!(reflect_dirs, m)?)?;
+    m.add_function(wrap_pyfunction!(reflection_env, m)?)?;
+    m.add_function(wrap_pyfunction!(fill_holes, m)?)?;
+    m.add_function(wrap_pyfunction!(envmap_lookup, m)?)?;
+    m.add_function(wrap_pyfunction!(recomposite, m)?)?;
+    Ok(())
+}
