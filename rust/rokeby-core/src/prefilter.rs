@@ -171,16 +171,12 @@ pub struct Level {
     pub rings: usize,
 }
 
-fn check_radiance(env: &EnvMap, arg: &str) -> Result<()> {
+/// The prefiltering works on lat-long maps. Values need only be finite (checked by `EnvMap::new`):
+/// every step is linear, and the shipped HDRs carry small negative values from lossy compression
+/// (courtyard.exr down to −1.6e-4), which the seed's sum would also just add.
+fn check_latlong(env: &EnvMap, arg: &str) -> Result<()> {
     if env.layout != Layout::LatLong {
         return Err(RokebyError::invalid(arg, format!("expected a lat-long map, got {} (convert it first)", env.layout.name())));
-    }
-    if let Some(k) = env.data.iter().position(|&v| v < 0.0) {
-        let t = k / env.channels;
-        return Err(RokebyError::invalid(
-            arg,
-            format!("radiance must be ≥ 0, got {} at row {}, column {}, channel {}", env.data[k], t / env.width, t % env.width, k % env.channels),
-        ));
     }
     Ok(())
 }
@@ -326,7 +322,7 @@ fn ring_pass(src: &EnvMap, lobe: &Lobe, r_in: Option<f64>, r_out: Option<f64>, c
 
 /// Specular prefiltering of a lat-long environment for each lobe (see the module docs).
 pub fn prefilter(env: &EnvMap, lobes: &[Lobe], params: &PrefilterParams) -> Result<Vec<Level>> {
-    check_radiance(env, "image")?;
+    check_latlong(env, "image")?;
     if !(params.texels_per_radius.is_finite() && params.texels_per_radius >= 1.0) {
         return Err(RokebyError::invalid("texels_per_radius", format!("must be ≥ 1, got {}", params.texels_per_radius)));
     }
@@ -402,7 +398,7 @@ fn seed_weights(env: &EnvMap) -> (Vec<DVec3>, Vec<f64>) {
 /// the same sum of the kernel; N×3 directions → N×channels (f64). A mirror lobe returns the
 /// bilinear lookup.
 pub fn brute_force(env: &EnvMap, lobe: &Lobe, directions: &[f32]) -> Result<Vec<f64>> {
-    check_radiance(env, "image")?;
+    check_latlong(env, "image")?;
     let rs = finite_dirs(directions, "directions")?;
     let c = env.channels;
     if lobe.is_mirror() {
@@ -436,7 +432,7 @@ pub const A_HAT: [f64; SH_COEFFS] = [PI, 2.0 * PI / 3.0, 2.0 * PI / 3.0, 2.0 * P
 
 /// L_lm = Σ L(d) Y_lm(d) Ω over the texels of a lat-long map (exact texel solid angles), per channel.
 pub fn sh_project(env: &EnvMap) -> Result<Vec<[f64; SH_COEFFS]>> {
-    check_radiance(env, "image")?;
+    check_latlong(env, "image")?;
     let (h, w, c) = (env.height, env.width, env.channels);
     let rows: Vec<Vec<[f64; SH_COEFFS]>> = (0..h)
         .into_par_iter()
@@ -501,7 +497,7 @@ pub fn irradiance_map(env: &EnvMap, height: usize, width: usize) -> Result<(EnvM
 /// Reference irradiance E(n)/π = (1/π) Σ L max(0, n·d) sin θ (π/M)(2π/N) (the seed's sum with the
 /// clamped cosine as the lobe); N×3 normals → N×channels.
 pub fn brute_force_irradiance(env: &EnvMap, normals: &[f32]) -> Result<Vec<f64>> {
-    check_radiance(env, "image")?;
+    check_latlong(env, "image")?;
     let ns = finite_dirs(normals, "normals")?;
     let c = env.channels;
     let (dirs, wts) = seed_weights(env);
