@@ -75,7 +75,7 @@ pub struct Buffers<'a> {
 pub struct Stats {
     /// Pixels returned unchanged because an input was not finite or the patch has nothing.
     pub masked: usize,
-    /// Pixels whose normal was edited (ñ ≠ n).
+    /// Pixels recomposited (normal edited, or k_D, k_R ≠ 1).
     pub edited: usize,
 }
 
@@ -134,8 +134,8 @@ pub fn recomposite(b: &Buffers, patches: &[Patch], p: &Params) -> Result<(Vec<f3
                 let patch = &patches[id as usize];
                 let nb = &b.normals[3 * i..3 * i + 3];
                 let eb = &b.edited[3 * i..3 * i + 3];
-                if nb == eb {
-                    // Unmodified normal: eqs. 3–5 give I exactly; skip the arithmetic.
+                if nb == eb && p.k_d == 1.0 && p.k_r == 1.0 {
+                    // Unmodified normal and material: eqs. 3–5 give I exactly; skip the arithmetic.
                     continue;
                 }
                 let opt = |v: &[f32], def: f32| if v.is_empty() { def } else { v[i] };

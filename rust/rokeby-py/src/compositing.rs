@@ -23,6 +23,15 @@ fn array_f64<'py>(py: Python<'py>, shape: &[usize], data: Vec<f64>) -> PyResult<
     Ok(arr.into_pyarray(py))
 }
 
+/// A float array, or a boolean one read as 0/1 (masks).
+fn mask_array<'py>(obj: &Bound<'py, PyAny>, name: &str) -> PyResult<F32Array<'py>> {
+    let kind: String = obj.getattr("dtype").and_then(|d| d.getattr("kind")).and_then(|k| k.extract()).unwrap_or_default();
+    if kind == "b" {
+        return f32_array(&obj.call_method1("astype", ("float32",))?, name);
+    }
+    f32_array(obj, name)
+}
+
 /// An (H, W, 3) array; `hw` fixes H, W when already known.
 fn image3<'py>(obj: &Bound<'py, PyAny>, name: &str, hw: Option<(usize, usize)>) -> PyResult<(F32Array<'py>, usize, usize)> {
     let a = f32_array(obj, name)?;
@@ -44,7 +53,7 @@ fn image1<'py>(obj: Option<&Bound<'py, PyAny>>, name: &str, h: usize, w: usize) 
     if obj.is_none() {
         return Ok(None);
     }
-    let a = f32_array(obj, name)?;
+    let a = mask_array(obj, name)?;
     if a.shape() != [h, w] {
         return Err(PyValueError::new_err(format!("{name}: expected shape ({h}, {w}) like the other passes, got {}", shape_str(&a.shape()))));
     }
@@ -259,7 +268,7 @@ pub fn reflection_env<'py>(
 #[pyfunction]
 pub fn fill_holes<'py>(py: Python<'py>, map: &Bound<'py, PyAny>, covered: &Bound<'py, PyAny>) -> PyResult<Bound<'py, PyArrayDyn<f32>>> {
     let mut m = map_from(map, "map")?;
-    let c = f32_array(covered, "covered")?;
+    let c = mask_array(covered, "covered")?;
     let s = m.size;
     if c.shape() != [2, s, s] {
         return Err(PyValueError::new_err(format!("covered: expected shape (2, {s}, {s}) like map, got {}", shape_str(&c.shape()))));

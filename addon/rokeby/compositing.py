@@ -1,0 +1,510 @@
+"""Local shape editing at the compositing stage (Zubiaga, Guennebaud, Vergne, Barla, EGSR 2016).
+
+The compositing artist edits the normal buffer; diffuse and reflection shading follow without
+re-rendering. Pipeline (numerics in the Rust core, reached through ``native``):
+
+1. ``setup_passes``: the Cycles passes the method needs — Normal, Diffuse and Glossy
+   direct/indirect/colour, object and material index, ambient occlusion (α_D), depth, and three
+   AOVs written by nodes added to every material: ``rokeby_reflocc`` (reflection occlusion α_R:
+   an Ambient Occlusion node with *Only Local* around the reflected direction, so only
+   self-reflections count), ``rokeby_incoming`` and ``rokeby_incoming_cam`` (the view vector in
+   world and camera space; their pairs give the world→camera rotation of each frame, so an EXR
+   alone is enough — no camera data to carry along).
+2. ``read_exr``: the passes from a multilayer OpenEXR (OpenEXR package); missing passes are named.
+3. ``reconstruct``: per object/material patch (IndexOB × IndexMA), the SH diffuse environment
+   (eq. 1; the QP of §3.1 or least squares) of D0 = DiffDir + DiffInd, and the dual-paraboloid
+   reflection environment (eq. 2, hole filling, regularisation) of R0 = GlossDir + GlossInd, in
+   screen space (Blender's camera space: x right, y up, z towards the viewer).
+4. ``recomposite``: eqs. 3–5 with edited normals; reflectance passes DiffCol/GlossCol multiply the
+   reconstructed illumination (the paper's §6 extension). Unmodified normals give the input image
+   back bit for bit.
+5. Normal-editing tools: ``emboss`` (n_z → β n_z), ``bump`` (height image) with ``ripple`` (the
+   paper's fading 2D ripple decal), ``bilateral_smooth`` (cross-bilateral on (n_x, n_y) with depth).
+
+Patches covering fewer than ``min_pixels`` pixels, and reflection maps whose recovered directions
+cover less than ``min_coverage`` of the sphere, are not edited: the image keeps its input values
+there, and the report (and a RuntimeWarning) says so.
+"""
+
+from __future__ import annotations
+
+import math
+import warnings
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from . import native
+
+AOV_REFLOCC = "rokeby_reflocc"
+AOV_INCOMING = "rokeby_incoming"
+AOV_INCOMING_CAM = "rokeby_incoming_cam"
+NODE_TAG = "Rokeby Compositing"
+
+# Pass name in a Blender multilayer EXR → (field, number of channels).
+PASSES = {
+    "Combined": ("image", 4),
+    "Normal": ("normal", 3),
+    "DiffDir": ("diff_dir", 3),
+    "DiffInd": ("diff_ind", 3),
+    "DiffCol": ("diff_col", 3),
+    "GlossDir": ("gloss_dir", 3),
+    "GlossInd": ("gloss_ind", 3),
+    "GlossCol": ("gloss_col", 3),
+    "IndexOB": ("index_ob", 1),
+    "IndexMA": ("index_ma", 1),
+    "AO": ("ao", 3),
+    "Depth": ("depth", 1),
+    AOV_REFLOCC: ("reflocc", 1),
+    AOV_INCOMING: ("incoming", 3),
+    AOV_INCOMING_CAM: ("incoming_cam", 3),
+}
+
+# Blender's Vector Transform "Camera" space has z pointing forward; Blender's camera object (and
+# our screen space) has z towards the viewer.
+_CAM_FLIP = np.diag([1.0, 1.0, -1.0])
+
+
+class CompositingError(ValueError):
+    pass
+
+
+class MissingPasses(CompositingError):
+    def __init__(self, missing, path=""):
+        self.missing = list(missing)
+        where = f" in {path}" if path else ""
+        super().__init__(
+            f"missing render passes{where}: {', '.join(self.missing)} "
+            "(call rokeby.compositing.setup_passes(scene) before rendering)"
+        )
+
+
+# --- Blender side -------------------------------------------------------------------------------
+
+def _material_nodes(mat) -> None:
+    """Adds (once) the AOV outputs of the reflection occlusion and the view vector."""
+    nt = mat.node_tree
+    if any(n.get("rokeby_compositing") for n in nt.nodes):
+        return
+    def node(kind, label):
+        n = nt.nodes.new(kind)
+        n.label = f"{NODE_TAG}: {label}"
+        n["rokeby_compositing"] = True
+        n.location = (-900, -600 - 120 * len([x for x in nt.nodes if x.get("rokeby_compositing")]))
+        return n
+    tex = node("ShaderNodeTexCoord", "reflection")
+    ao = node("ShaderNodeAmbientOcclusion", "self-reflection occlusion")
+    ao.only_local = True
+    ao.samples = 8
+    ao.inputs["Distance"].default_value = 1e4
+    nt.links.new(tex.outputs["Reflection"], ao.inputs["Normal"])
+    out_r = node("ShaderNodeOutputAOV", AOV_REFLOCC)
+    out_r.aov_name = AOV_REFLOCC
+    nt.links.new(ao.outputs["AO"], out_r.inputs["Value"])
+    geo = node("ShaderNodeNewGeometry", "view vector")
+    out_w = node("ShaderNodeOutputAOV", AOV_INCOMING)
+    out_w.aov_name = AOV_INCOMING
+    nt.links.new(geo.outputs["Incoming"], out_w.inputs["Color"])
+    vt = node("ShaderNodeVectorTransform", "view vector in camera space")
+    vt.vector_type, vt.convert_from, vt.convert_to = "VECTOR", "WORLD", "CAMERA"
+    nt.links.new(geo.outputs["Incoming"], vt.inputs["Vector"])
+    out_c = node("ShaderNodeOutputAOV", AOV_INCOMING_CAM)
+    out_c.aov_name = AOV_INCOMING_CAM
+    nt.links.new(vt.outputs["Vector"], out_c.inputs["Color"])
+
+
+def setup_passes(scene, view_layer=None) -> list[str]:
+    """Enables on ``view_layer`` (default: the scene's first) every pass the method needs, adds the
+    reflection-occlusion and view-vector AOVs (and their nodes in every material of the scene's
+    meshes), gives objects and materials without one a unique pass index, and sets the output to a
+    32-bit multilayer EXR. Returns the pass names (as in the EXR)."""
+    vl = view_layer or scene.view_layers[0]
+    for attr in ("use_pass_normal", "use_pass_diffuse_direct", "use_pass_diffuse_indirect", "use_pass_diffuse_color",
+                 "use_pass_glossy_direct", "use_pass_glossy_indirect", "use_pass_glossy_color", "use_pass_object_index",
+                 "use_pass_material_index", "use_pass_ambient_occlusion", "use_pass_z"):
+        setattr(vl, attr, True)
+    have = {a.name for a in vl.aovs}
+    for name, kind in ((AOV_REFLOCC, "VALUE"), (AOV_INCOMING, "COLOR"), (AOV_INCOMING_CAM, "COLOR")):
+        if name not in have:
+            a = vl.aovs.add()
+            a.name, a.type = name, kind
+    meshes = [o for o in scene.objects if o.type == "MESH"]
+    used = {o.pass_index for o in meshes if o.pass_index}
+    nxt = max(used, default=0) + 1
+    mats = []
+    for o in meshes:
+        if not o.pass_index:
+            o.pass_index = nxt
+            nxt += 1
+        for slot in o.material_slots:
+            if slot.material is not None and slot.material not in mats:
+                mats.append(slot.material)
+    mused = {m.pass_index for m in mats if m.pass_index}
+    mnxt = max(mused, default=0) + 1
+    for m in mats:
+        if not m.pass_index:
+            m.pass_index = mnxt
+            mnxt += 1
+        if not m.use_nodes:
+            m.use_nodes = True
+        _material_nodes(m)
+    st = scene.render.image_settings
+    st.file_format = "OPEN_EXR_MULTILAYER"
+    st.color_depth = "32"
+    return list(PASSES)
+
+
+def render_passes(scene, path: str) -> "Passes":
+    """Renders ``scene`` (after ``setup_passes``) to the multilayer EXR ``path`` and reads it."""
+    import bpy
+
+    setup_passes(scene)
+    old = scene.render.filepath
+    try:
+        scene.render.filepath = path
+        bpy.ops.render.render(write_still=True, scene=scene.name)
+    finally:
+        scene.render.filepath = old
+    return read_exr(path)
+
+
+def show_image(name: str, pixels: np.ndarray):
+    """The recomposited image as a new (or updated) Blender image: (H, W, 3) linear, top row first."""
+    import bpy
+
+    h, w = pixels.shape[:2]
+    img = bpy.data.images.get(name)
+    if img is None or tuple(img.size) != (w, h):
+        if img is not None:
+            bpy.data.images.remove(img)
+        img = bpy.data.images.new(name, w, h, alpha=True, float_buffer=True)
+    rgba = np.ones((h, w, 4), np.float32)
+    rgba[..., :3] = pixels
+    img.pixels.foreach_set(rgba[::-1].ravel())  # Blender stores the bottom row first
+    img.update()
+    return img
+
+
+# --- passes -------------------------------------------------------------------------------------
+
+@dataclass
+class Passes:
+    """Render passes of one frame, (H, W[, C]) float32 arrays, top row first."""
+    image: np.ndarray
+    normal: np.ndarray
+    diff_dir: np.ndarray
+    diff_ind: np.ndarray
+    diff_col: np.ndarray
+    gloss_dir: np.ndarray
+    gloss_ind: np.ndarray
+    gloss_col: np.ndarray
+    index_ob: np.ndarray
+    index_ma: np.ndarray
+    ao: np.ndarray
+    depth: np.ndarray
+    reflocc: np.ndarray
+    incoming: np.ndarray
+    incoming_cam: np.ndarray
+    alpha: np.ndarray | None = None
+    header: dict = field(default_factory=dict)
+
+    @property
+    def shape(self):
+        return self.image.shape[:2]
+
+    def validate(self) -> None:
+        h, w = self.shape
+        for name, (attr, ch) in PASSES.items():
+            a = getattr(self, attr)
+            want = (h, w) if ch == 1 else (h, w, 3)
+            if a.shape != want:
+                raise CompositingError(f"pass {name}: expected shape {want} like Combined, got {a.shape}")
+
+
+def _layer_channels(part_channels: dict, layer: str | None):
+    layers = sorted({k.split(".")[0] for k in part_channels if "." in k})
+    if layer is None:
+        if not layers:
+            raise CompositingError("not a Blender multilayer EXR (no 'Layer.Pass' channels)")
+        layer = layers[0]
+    elif layer not in layers:
+        raise CompositingError(f"view layer {layer!r} not in the EXR (it has {layers})")
+    return layer
+
+
+def read_exr(path: str, layer: str | None = None) -> Passes:
+    """Reads a Blender multilayer EXR (one view layer, default the first) into ``Passes``."""
+    import OpenEXR
+
+    with OpenEXR.File(str(path), separate_channels=False) as f:
+        part = f.parts[0]
+        chans = part.channels
+        layer = _layer_channels(chans, layer)
+        arrays, missing = {}, []
+        for name, (attr, ch) in PASSES.items():
+            base = f"{layer}.{name}"
+            if base in chans:  # grouped (RGB[A]) by the OpenEXR reader
+                a = np.asarray(chans[base].pixels, np.float32)
+            else:  # separate channels: X[YZ], R[GB], V, Z
+                for suffixes in ("XYZ", "RGB", "X", "V", "Z", "R"):
+                    keys = [f"{base}.{c}" for c in suffixes]
+                    if all(k in chans for k in keys):
+                        a = np.stack([np.asarray(chans[k].pixels, np.float32) for k in keys], -1)
+                        break
+                else:
+                    missing.append(name)
+                    continue
+            if a.ndim == 2:
+                a = a[..., None]
+            if ch == 1:
+                a = a[..., 0]
+            elif a.shape[-1] >= 3:
+                a = a[..., :3]
+            else:
+                raise CompositingError(f"pass {name}: expected 3 channels, got {a.shape[-1]}")
+            arrays[attr] = np.ascontiguousarray(a)
+        if missing:
+            raise MissingPasses(missing, str(path))
+        comb = np.asarray(chans[f"{layer}.Combined"].pixels, np.float32)
+        alpha = comb[..., 3].copy() if comb.ndim == 3 and comb.shape[2] == 4 else None
+        header = {k: v for k, v in part.header.items() if isinstance(v, (str, int, float))}
+    p = Passes(alpha=alpha, header=header, **arrays)
+    p.validate()
+    return p
+
+
+def write_exr(path: str, image: np.ndarray, header: dict | None = None) -> None:
+    """Writes an (H, W, 3) float32 image as an RGB EXR (ZIP compressed)."""
+    import OpenEXR
+
+    hdr = {"compression": OpenEXR.ZIP_COMPRESSION, "type": OpenEXR.scanlineimage}
+    for k, v in (header or {}).items():
+        if isinstance(v, str) and k not in ("File", "Date"):
+            hdr[k] = v
+    with OpenEXR.File(hdr, {"RGB": np.ascontiguousarray(image[..., :3], np.float32)}) as f:
+        f.write(str(path))
+
+
+# --- screen space -------------------------------------------------------------------------------
+
+def _unit(a: np.ndarray) -> np.ndarray:
+    n = np.linalg.norm(a, axis=-1, keepdims=True)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        return np.where(n > 1e-12, a / n, 0.0).astype(np.float32)
+
+
+def camera_rotation(incoming: np.ndarray, incoming_cam: np.ndarray) -> np.ndarray:
+    """World → screen-space rotation (3×3) from pairs of view vectors in world and camera space
+    (the two AOVs): the orthogonal Procrustes solution (SVD), then the flip to z-towards-viewer."""
+    w = incoming.reshape(-1, 3).astype(np.float64)
+    c = incoming_cam.reshape(-1, 3).astype(np.float64)
+    ok = (np.linalg.norm(w, axis=1) > 0.5) & (np.linalg.norm(c, axis=1) > 0.5) & np.isfinite(w).all(1) & np.isfinite(c).all(1)
+    if ok.sum() < 3:
+        raise CompositingError(f"passes {AOV_INCOMING}/{AOV_INCOMING_CAM}: fewer than 3 object pixels to find the camera rotation")
+    u, _s, vt = np.linalg.svd(c[ok].T @ w[ok])
+    rot = _CAM_FLIP @ (u @ vt)
+    if np.linalg.det(rot) < 0:
+        raise CompositingError("view-vector AOVs are inconsistent: no rotation maps world to camera space")
+    return rot
+
+
+def screen_space(p: Passes) -> tuple[np.ndarray, np.ndarray]:
+    """Screen-space normals and view vectors (H, W, 3) float32; zero where there is no surface."""
+    rot = camera_rotation(p.incoming, p.incoming_cam)
+    n = _unit(p.normal @ rot.T.astype(np.float32))
+    v = _unit(p.incoming_cam * _CAM_FLIP.diagonal().astype(np.float32))
+    return n, v
+
+
+def patch_ids(index_ob: np.ndarray, index_ma: np.ndarray) -> tuple[np.ndarray, list[tuple[int, int]]]:
+    """One id per (object index, material index) pair with object index > 0; −1 elsewhere."""
+    ob = np.rint(np.nan_to_num(index_ob, nan=0)).astype(np.int64)
+    ma = np.rint(np.nan_to_num(index_ma, nan=0)).astype(np.int64)
+    key = ob * (1 << 20) + ma
+    valid = ob > 0
+    keys, inv = np.unique(key[valid], return_inverse=True)
+    ids = np.full(ob.shape, -1, np.int32)
+    ids[valid] = inv
+    return ids, [(int(k >> 20), int(k & ((1 << 20) - 1))) for k in keys]
+
+
+# --- reconstruction -----------------------------------------------------------------------------
+
+@dataclass
+class PatchReport:
+    key: tuple[int, int]
+    pixels: int
+    diffuse: str            # "qp"/"ls" fit, or why not
+    reflection: str         # "ok" or why not
+    sh_rms_residual: float = float("nan")
+    sh_max_residual: float = float("nan")
+    coverage: float = 0.0
+    filled_texels: int = 0
+
+
+@dataclass
+class Reconstruction:
+    ids: np.ndarray
+    keys: list
+    patches: list           # per id: {"sh": (3, 9) | None, "env": (2, S, S, 3) | None}
+    reports: list
+    normals: np.ndarray     # screen-space normals the environments were fitted to
+    view: np.ndarray
+    timings: dict = field(default_factory=dict)
+
+    def warnings(self) -> list[str]:
+        out = []
+        for r in self.reports:
+            if r.diffuse not in ("qp", "ls"):
+                out.append(f"patch {r.key}: diffuse not edited: {r.diffuse}")
+            if r.reflection != "ok":
+                out.append(f"patch {r.key}: reflection not edited: {r.reflection}")
+            elif r.coverage < 0.5:
+                out.append(f"patch {r.key}: holes cover {100 * (1 - r.coverage):.0f}% of the sphere of reflected "
+                           "directions: strongly edited reflections are extrapolated")
+        return out
+
+
+def reconstruct(p: Passes, *, method: str = "qp", env_size: int = 128, min_pixels: int = 64,
+                min_coverage: float = 0.01, blur_sigma: float = 2.0, occlusion_threshold: float = 0.5,
+                warn: bool = True) -> Reconstruction:
+    """Diffuse (SH) and reflection (dual paraboloid) environments for every object/material patch."""
+    import time
+
+    nm = native.module()
+    p.validate()
+    normals, view = screen_space(p)
+    ids, keys = patch_ids(p.index_ob, p.index_ma)
+    d0 = p.diff_dir + p.diff_ind
+    r0 = p.gloss_dir + p.gloss_ind
+    finite = np.isfinite(normals).all(-1) & (np.abs(normals).sum(-1) > 0) & np.isfinite(d0).all(-1) & np.isfinite(r0).all(-1)
+    refl = nm.reflect_dirs(normals, view)
+    patches, reports = [], []
+    t_sh = t_env = 0.0
+    for k, key in enumerate(keys):
+        m = (ids == k) & finite
+        n_px = int(m.sum())
+        rep = PatchReport(key=key, pixels=n_px, diffuse="", reflection="")
+        entry = {"sh": None, "env": None}
+        if n_px < min_pixels:
+            rep.diffuse = rep.reflection = f"covers only {n_px} pixels (< min_pixels = {min_pixels}): left unchanged"
+        else:
+            t0 = time.perf_counter()
+            fit = nm.sh_fit(normals[m], d0[m], method)
+            t_sh += time.perf_counter() - t0
+            entry["sh"] = fit["coeffs"]
+            rep.diffuse = method
+            rep.sh_rms_residual = float(fit["rms_residual"].max())
+            rep.sh_max_residual = float(fit["max_residual"].max())
+            if not (r0[m] > 0).any():
+                rep.reflection = "no reflection shading on this patch"
+            else:
+                mask = (m & (p.reflocc >= occlusion_threshold)).astype(np.float32)
+                t0 = time.perf_counter()
+                try:
+                    env = nm.reflection_env(refl, r0, mask, p.depth, size=env_size, blur_sigma=blur_sigma, min_coverage=min_coverage)
+                    entry["env"] = env["map"]
+                    rep.reflection = "ok"
+                    rep.coverage = float(env["coverage"])
+                    rep.filled_texels = int(env["filled_texels"])
+                except ValueError as exc:
+                    rep.reflection = str(exc)
+                t_env += time.perf_counter() - t0
+        patches.append(entry)
+        reports.append(rep)
+    rec = Reconstruction(ids=ids, keys=keys, patches=patches, reports=reports, normals=normals, view=view,
+                         timings={"diffuse_s": t_sh, "reflection_s": t_env})
+    if warn:
+        for msg in rec.warnings():
+            warnings.warn(msg, RuntimeWarning, stacklevel=2)
+    return rec
+
+
+def recomposite(p: Passes, rec: Reconstruction, edited_normals: np.ndarray, *, k_d: float = 1.0,
+                k_r: float = 1.0, use_occlusion: bool = True) -> tuple[np.ndarray, dict]:
+    """Eqs. 3–5: the image (H, W, 3) with the edited screen-space normals. Returns (image, stats)."""
+    nm = native.module()
+    h, w = p.shape
+    if edited_normals.shape != (h, w, 3):
+        raise CompositingError(f"edited_normals: expected shape {(h, w, 3)} like the passes, got {edited_normals.shape}")
+    ao = p.ao.mean(-1) if p.ao.ndim == 3 else p.ao
+    return nm.recomposite(
+        rec.ids, rec.normals, edited_normals, rec.view,
+        p.diff_dir + p.diff_ind, p.gloss_dir + p.gloss_ind, p.image, rec.patches,
+        alpha_d=np.clip(ao, 0, 1) if use_occlusion else None,
+        alpha_r=np.clip(p.reflocc, 0, 1) if use_occlusion else None,
+        diffuse_color=p.diff_col, reflection_color=p.gloss_col, k_d=k_d, k_r=k_r,
+    )
+
+
+# --- normal-editing tools (screen-space normals (H, W, 3); `mask` (H, W) limits the edit) ---------
+
+def _apply(n: np.ndarray, new: np.ndarray, mask) -> np.ndarray:
+    """Renormalised ``new`` where it differs from ``n`` (inside ``mask``, on surfaces); elsewhere
+    ``n`` bit for bit, so that an edit that changes nothing leaves the image exactly as it was."""
+    out = _unit(new)
+    keep = ~(np.abs(n).sum(-1) > 0) | (new == n).all(-1)
+    if mask is not None:
+        keep |= ~(np.asarray(mask) > 0.5)
+    out[keep] = n[keep]
+    return out
+
+
+def emboss(normals: np.ndarray, beta: float, mask=None) -> np.ndarray:
+    """Normal embossing (LUMO): n_z → β n_z, renormalised; β ∈ (0, 1] makes the surface bulge."""
+    if not 0 < beta <= 1:
+        raise CompositingError(f"beta: must be in (0, 1], got {beta}")
+    e = normals.astype(np.float32).copy()
+    e[..., 2] *= beta
+    return _apply(normals, e, mask)
+
+
+def ripple(shape, center=None, wavelength: float = 24.0, radius: float | None = None) -> np.ndarray:
+    """The paper's fading 2D ripple height field (pixels): cos(2π d/λ)·(1 − d/radius)₊²."""
+    h, w = shape
+    cy, cx = center if center is not None else (h / 2, w / 2)
+    radius = radius or 0.35 * min(h, w)
+    yy, xx = np.mgrid[0:h, 0:w].astype(np.float32)
+    d = np.hypot(yy - cy, xx - cx)
+    return (np.cos(2 * math.pi * d / wavelength) * np.clip(1 - d / radius, 0, None) ** 2).astype(np.float32)
+
+
+def bump(normals: np.ndarray, height: np.ndarray, strength: float = 1.0, mask=None) -> np.ndarray:
+    """Bump mapping in screen space: ñ = normalize(n − s ∇h), ∇h = (∂h/∂col, −∂h/∂row, 0)
+    (rows go down, screen y goes up); ``height`` (H, W) in pixels of height per pixel."""
+    if height.shape != normals.shape[:2]:
+        raise CompositingError(f"height: expected shape {normals.shape[:2]} like the normals, got {height.shape}")
+    gy, gx = np.gradient(height.astype(np.float32))
+    e = normals.astype(np.float32).copy()
+    e[..., 0] -= strength * gx
+    e[..., 1] += strength * gy
+    return _apply(normals, e, mask)
+
+
+def bilateral_smooth(normals: np.ndarray, depth: np.ndarray, sigma_s: float = 3.0, sigma_d: float = 0.02,
+                     mask=None) -> np.ndarray:
+    """Cross-bilateral filter of the projected normals (n_x, n_y) with a depth range kernel
+    (relative depth difference, σ_d), so occluding contours are kept; n_z = √(1 − |n̄|²)."""
+    r = max(1, int(math.ceil(2 * sigma_s)))
+    h, w = depth.shape
+    nb = normals[..., :2].astype(np.float64)
+    valid = (np.abs(normals).sum(-1) > 0) & np.isfinite(depth)
+    dep = np.where(valid, depth, np.inf)
+    pad = lambda a, v: np.pad(a, [(r, r), (r, r)] + [(0, 0)] * (a.ndim - 2), constant_values=v)  # noqa: E731
+    nbp, dp, vp = pad(nb, 0.0), pad(dep, np.inf), pad(valid, False)
+    acc = np.zeros_like(nb)
+    wsum = np.zeros((h, w))
+    for dy in range(-r, r + 1):
+        for dx in range(-r, r + 1):
+            ws = math.exp(-(dx * dx + dy * dy) / (2 * sigma_s * sigma_s))
+            dq = dp[r + dy:r + dy + h, r + dx:r + dx + w]
+            with np.errstate(invalid="ignore"):
+                rel = (dq - dep) / np.maximum(np.abs(dep), 1e-6)
+            wt = ws * np.exp(-0.5 * np.nan_to_num(rel / sigma_d, nan=1e6, posinf=1e6, neginf=-1e6) ** 2) * vp[r + dy:r + dy + h, r + dx:r + dx + w]
+            acc += wt[..., None] * nbp[r + dy:r + dy + h, r + dx:r + dx + w]
+            wsum += wt
+    nbar = acc / np.maximum(wsum, 1e-300)[..., None]
+    l2 = np.minimum((nbar ** 2).sum(-1), 1.0)
+    e = np.concatenate([nbar, np.sqrt(1 - l2)[..., None]], -1).astype(np.float32)
+    m = valid if mask is None else (valid & (np.asarray(mask) > 0.5))
+    return _apply(normals, e, m)

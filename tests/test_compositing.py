@@ -1,0 +1,359 @@
+"""Local shape editing at the compositing stage (Zubiaga et al. 2016, issue 6): the native stages'
+properties and bad input, then the Blender pipeline on a tiny Cycles render (passes → EXR →
+reconstruction → recompositing), the fall-backs, and the command-line tool."""
+
+import subprocess
+import sys
+import warnings
+from pathlib import Path
+
+import numpy as np
+import pytest
+import rokeby_native as rn
+
+ROOT = Path(__file__).resolve().parents[1]
+C0, C1, C2 = 0.282094791773878, 0.488602511902920, 1.092548430592079
+
+
+def sh_basis(n):
+    x, y, z = n[..., 0], n[..., 1], n[..., 2]
+    return np.stack([np.full_like(x, C0), C1 * y, C1 * z, C1 * x, C2 * x * y, C2 * y * z,
+                     0.315391565252520 * (3 * z * z - 1), C2 * x * z, 0.546274215296040 * (x * x - y * y)], -1)
+
+
+def fib(n):
+    i = np.arange(n) + 0.5
+    z = 1 - 2 * i / n
+    r = np.sqrt(1 - z * z)
+    phi = np.pi * (3 - np.sqrt(5)) * i
+    return np.stack([r * np.cos(phi), r * np.sin(phi), z], -1).astype(np.float32)
+
+
+def env(r):
+    return np.stack([0.5 + 0.3 * r[..., 0] + 0.2 * r[..., 1] * r[..., 2],
+                     0.4 + 0.1 * np.sin(3 * r[..., 2]) + 0.1 * r[..., 0] * r[..., 1],
+                     0.3 + 0.2 * r[..., 1]], -1).astype(np.float32)
+
+
+def sphere_image(w):
+    """Orthographic unit sphere: screen-space normals, mask, reflected directions, R0 = env(r)."""
+    yy, xx = (np.mgrid[0:w, 0:w] + 0.5) / w * 2 - 1
+    s = xx ** 2 + yy ** 2
+    inside = s < 1
+    n = np.zeros((w, w, 3), np.float32)
+    n[..., 0], n[..., 1] = np.where(inside, xx, 0), np.where(inside, yy, 0)
+    n[..., 2] = np.where(inside, np.sqrt(np.clip(1 - s, 0, 1)), 0)
+    r = rn.reflect_dirs(n, np.array([0, 0, 1.0]))
+    vals = np.where(inside[..., None], env(np.nan_to_num(r)), 0).astype(np.float32)
+    return n, inside.astype(np.float32), r, vals
+
+
+# --- native stages ------------------------------------------------------------------------------
+
+def test_sh_fit_recovers_order2_and_qp_bounds_from_above(rng):
+    n = fib(500)
+    c = rng.normal(size=(3, 9))
+    vals = sh_basis(n.astype(np.float64)) @ c.T
+    for method in ("qp", "ls"):
+        f = rn.sh_fit(n, vals, method)
+        np.testing.assert_allclose(f["coeffs"], c, atol=1e-5)
+    noisy = vals - np.where(rng.random((500, 1)) < 0.2, 0.5, 0.0) + 0.02 * rng.normal(size=vals.shape)
+    ls, qp = rn.sh_fit(n, noisy, "ls"), rn.sh_fit(n, noisy, "qp")
+    assert (ls["max_residual"] > 0.01).all()
+    assert (qp["max_residual"] <= 1e-9).all()
+    # Recomputed here: D(n) >= D0 everywhere (f32-rounded normals as the fit saw them).
+    nn = n.astype(np.float64) / np.linalg.norm(n.astype(np.float64), axis=1, keepdims=True)
+    assert (sh_basis(nn) @ qp["coeffs"].T - noisy >= -1e-6).all()
+    assert (qp["rms_residual"] >= ls["rms_residual"] - 1e-12).all()
+    np.testing.assert_allclose(rn.sh_eval(qp["coeffs"], n), sh_basis(nn) @ qp["coeffs"].T, atol=1e-5)
+
+
+def test_sh_fit_masks_nan_pixels_and_says_how_many():
+    n = fib(100)
+    vals = np.ones((100, 3), np.float32)
+    vals[3, 1] = np.nan
+    n2 = n.copy()
+    n2[7] = np.nan
+    n2[8] = 0
+    f = rn.sh_fit(n2, vals)
+    assert f["masked"] == 3 and f["pixels"] == 97
+    np.testing.assert_allclose(rn.sh_eval(f["coeffs"], n), 1.0, atol=1e-5)
+    with pytest.raises(ValueError, match="normals: no usable pixel"):
+        rn.sh_fit(np.full((4, 3), np.nan), np.ones((4, 3)))
+
+
+def test_reflection_env_reproduces_a_known_environment():
+    n, mask, r, vals = sphere_image(160)
+    part = rn.reflection_env(r, vals, mask, size=64, stage="partial")
+    assert part["coverage"] > 0.8 and part["covered"].dtype == bool
+    full = rn.reflection_env(r, vals, mask, size=64)
+    assert full["filled_texels"] > 0 and np.isfinite(full["map"]).all()
+    d = fib(3000)
+    d = d[d[:, 2] > -0.5]
+    err = np.abs(rn.envmap_lookup(full["map"], d) - env(d)).max()
+    assert err < 0.02, err
+    # Occluded (α_R) pixels carry wrong values: masked out, they do not show.
+    bad = vals.copy()
+    bad[:, :80] = 100.0
+    m2 = mask.copy()
+    m2[:, :80] = 0
+    assert rn.reflection_env(r, bad, m2, size=48)["map"].max() < 2
+
+
+def test_hole_filling_of_a_constant_and_of_a_linear_front_field():
+    s = 64
+    uv = (np.arange(s) + 0.5) / s * 2 - 1
+    u, v = np.meshgrid(uv, uv)
+    inside = u ** 2 + v ** 2 <= 1
+    m = np.zeros((2, s, s, 1), np.float32)
+    m[0, ..., 0] = 2 * u + 0.5  # harmonic in the plane
+    m[1, ..., 0] = np.where(inside, 2 * u / np.maximum(u ** 2 + v ** 2, 1e-9) + 0.5, 0)
+    cov = np.stack([inside, inside])
+    hole = (u - 0.2) ** 2 + (v + 0.1) ** 2 < 0.3 ** 2
+    cov[0] &= ~hole
+    damaged = m.copy()
+    damaged[0, hole] = 0
+    filled = rn.fill_holes(damaged, cov)
+    assert np.abs(filled[0, hole, 0] - m[0, hole, 0]).max() < 2e-3
+    np.testing.assert_array_equal(filled[cov], m[cov])
+
+
+def _recomp(ids, n, e, img, patches, **kw):
+    h, w = ids.shape
+    d0 = np.full((h, w, 3), 0.6, np.float32)
+    r0 = np.full((h, w, 3), 0.3, np.float32)
+    return rn.recomposite(ids, n, e, np.array([0, 0, 1.0]), d0, r0, img, patches, **kw)
+
+
+def test_recomposite_identity_is_bit_exact_and_edits_stay_in_patches():
+    n, mask, r, vals = sphere_image(48)
+    ids = np.where(mask > 0, 0, -1).astype(np.int32)
+    ids[:, :10] = np.where(mask[:, :10] > 0, 1, -1)
+    env_map = rn.reflection_env(r, vals, mask, size=32)["map"]
+    sh = rn.sh_fit(n[mask > 0], env(n[mask > 0]))["coeffs"]
+    patches = [{"sh": sh, "env": env_map}, None]
+    img = np.random.default_rng(1).random((48, 48, 3)).astype(np.float32)
+    out, st = _recomp(ids, n, n, img, patches, alpha_d=mask, alpha_r=mask, gamma=2.2, k_d=1.0)
+    assert out.tobytes() == img.tobytes() and st["edited"] == 0
+    e = n.copy()
+    e[..., 2] *= 0.3
+    out, st = _recomp(ids, n, e, img, patches)
+    changed = (out != img).any(-1)
+    assert changed[ids == 0].mean() > 0.5
+    assert not changed[ids != 0].any()  # background and the patch without reconstruction
+    assert st["masked"] == int((ids == 1).sum() - ((e == n).all(-1) & (ids == 1)).sum())
+
+
+@pytest.mark.parametrize(
+    "call, words",
+    [
+        (lambda: rn.sh_fit(np.zeros((4, 2)), np.zeros((4, 3))), "normals: expected shape (N, 3)"),
+        (lambda: rn.sh_fit(np.ones((4, 3)), np.zeros((5, 3))), "values: expected shape (4, C)"),
+        (lambda: rn.sh_fit(np.ones((4, 3)), np.zeros((4, 3)), "svd"), "method: unknown fit"),
+        (lambda: rn.reflect_dirs(np.zeros((4, 5, 3)), np.zeros((4, 4, 3))), "view: expected shape (3,) or (4, 5, 3)"),
+        (lambda: rn.reflection_env(np.zeros((4, 5, 3)), np.zeros((4, 6, 3)), np.ones((4, 5))), "values: expected shape (4, 5, 3) like the other passes"),
+        (lambda: rn.reflection_env(np.zeros((4, 5, 3)), np.zeros((4, 5, 3)), np.ones((5, 4))), "mask: expected shape (4, 5)"),
+        (lambda: rn.reflection_env(np.zeros((4, 5, 3)), np.zeros((4, 5, 3)), np.ones((4, 5)), size=3), "size: map size"),
+        (lambda: rn.fill_holes(np.zeros((2, 8, 9, 1)), np.ones((2, 8, 9))), "map: expected a dual-paraboloid map"),
+        (lambda: rn.envmap_lookup(np.full((2, 8, 8, 3), np.nan), np.zeros((1, 3))), "map: value 0 is not finite"),
+        (lambda: _recomp(np.zeros((4, 5)), np.zeros((4, 5, 3)), np.zeros((4, 6, 3)), np.zeros((4, 5, 3)), []), "edited_normals: expected shape (4, 5, 3)"),
+        (lambda: _recomp(np.zeros((4, 4)), np.zeros((4, 5, 3)), np.zeros((4, 5, 3)), np.zeros((4, 5, 3)), []), "ids: expected shape (4, 5)"),
+        (lambda: _recomp(np.zeros((4, 5)), np.zeros((4, 5, 3)), np.zeros((4, 5, 3)), np.zeros((4, 5, 3)), [{"sh": np.zeros((3, 8))}]), "patches[0].sh: expected finite coefficients of shape (3, 9)"),
+        (lambda: _recomp(np.zeros((4, 5)), np.zeros((4, 5, 3)), np.zeros((4, 5, 3)), np.zeros((4, 5, 3)), "x"), "patches: must be a list"),
+        (lambda: _recomp(np.zeros((4, 5)), np.zeros((4, 5, 3)), np.zeros((4, 5, 3)), np.zeros((4, 5, 3)), [], gamma=0.0), "gamma: must be positive"),
+    ],
+)
+def test_bad_input_names_the_argument(call, words):
+    with pytest.raises((ValueError, TypeError)) as exc:
+        call()
+    assert words in str(exc.value)
+
+
+def test_few_directions_are_refused_holes_covering_most_of_the_sphere():
+    n, mask, r, vals = sphere_image(120)
+    few = np.zeros_like(mask)
+    few[56:64, 56:64] = 1
+    with pytest.raises(ValueError, match="below min_coverage"):
+        rn.reflection_env(r, vals, few, size=64)
+    # Allowed when asked for: every texel filled, finite.
+    m = rn.reflection_env(r, vals, few, size=64, min_coverage=0.0)["map"]
+    assert np.isfinite(m).all()
+    # Nothing at all recovered: said so.
+    with pytest.raises(ValueError, match="no texel was recovered"):
+        rn.reflection_env(r, vals, np.zeros_like(mask), size=32, min_coverage=0.0)
+
+
+def test_recomposite_masks_nan_pixels():
+    n, mask, r, vals = sphere_image(32)
+    ids = np.where(mask > 0, 0, -1).astype(np.int32)
+    patches = [{"sh": rn.sh_fit(n[mask > 0], env(n[mask > 0]))["coeffs"], "env": None}]
+    e = n.copy()
+    e[..., 2] *= 0.5
+    img = np.ones((32, 32, 3), np.float32)
+    d0 = np.full((32, 32, 3), 0.5, np.float32)
+    d0[16, 16] = np.nan
+    out, st = rn.recomposite(ids, n, e, np.array([0, 0, 1.0]), d0, d0 * 0, img, patches)
+    assert st["masked"] == 1 and (out[16, 16] == 1).all() and np.isfinite(out).all()
+
+
+# --- the pipeline on a Cycles render ------------------------------------------------------------
+
+def _scene(tiny_object=False):
+    import bpy
+
+    bpy.ops.wm.read_factory_settings(use_empty=True)
+    sc = bpy.context.scene
+    sc.render.engine = "CYCLES"
+    sc.cycles.samples, sc.cycles.device, sc.cycles.use_denoising = 16, "CPU", False
+    sc.render.resolution_x, sc.render.resolution_y, sc.render.resolution_percentage = 64, 48, 100
+    world = bpy.data.worlds.new("w")
+    sc.world = world
+    world.use_nodes = True
+    tex = world.node_tree.nodes.new("ShaderNodeTexEnvironment")
+    tex.image = bpy.data.images.load(str(Path(bpy.utils.system_resource("DATAFILES")) / "studiolights/world/forest.exr"))
+    world.node_tree.links.new(tex.outputs["Color"], world.node_tree.nodes["Background"].inputs["Color"])
+    bpy.ops.mesh.primitive_uv_sphere_add(segments=48, ring_count=24)
+    bpy.ops.object.shade_smooth()
+    ob = bpy.context.object
+    mat = bpy.data.materials.new("red")
+    mat.use_nodes = True
+    b = mat.node_tree.nodes["Principled BSDF"]
+    b.inputs["Base Color"].default_value = (0.8, 0.3, 0.2, 1)
+    b.inputs["Metallic"].default_value = 0.5
+    b.inputs["Roughness"].default_value = 0.2
+    ob.data.materials.append(mat)
+    if tiny_object:
+        bpy.ops.mesh.primitive_ico_sphere_add(radius=0.06, location=(1.4, 0, 0.9))
+        bpy.context.object.data.materials.append(mat)
+    bpy.ops.object.camera_add(location=(0.3, -4.5, 0.8), rotation=(1.4, 0, 0.06))
+    sc.camera = bpy.context.object
+    return sc
+
+
+@pytest.fixture(scope="module")
+def rendered(tmp_path_factory):
+    from rokeby import compositing as C
+
+    sc = _scene(tiny_object=True)
+    path = tmp_path_factory.mktemp("comp") / "frame.exr"
+    p = C.render_passes(sc, str(path))
+    return path, p, np.array(sc.camera.matrix_world.to_3x3())
+
+
+def test_missing_passes_are_named(tmp_path):
+    import OpenEXR
+    from rokeby import compositing as C
+
+    ch = {"ViewLayer.Combined": np.zeros((4, 5, 4), np.float32), "ViewLayer.Normal.X": np.zeros((4, 5), np.float32),
+          "ViewLayer.Normal.Y": np.zeros((4, 5), np.float32), "ViewLayer.Normal.Z": np.zeros((4, 5), np.float32)}
+    with OpenEXR.File({"compression": OpenEXR.ZIP_COMPRESSION, "type": OpenEXR.scanlineimage}, ch) as f:
+        f.write(str(tmp_path / "few.exr"))
+    with pytest.raises(C.MissingPasses) as exc:
+        C.read_exr(str(tmp_path / "few.exr"))
+    assert "DiffDir" in exc.value.missing and "rokeby_reflocc" in exc.value.missing and "Normal" not in exc.value.missing
+    assert "setup_passes" in str(exc.value)
+
+
+def test_mismatched_pass_sizes_are_refused(rendered):
+    import dataclasses
+
+    from rokeby import compositing as C
+
+    _path, p, _cam = rendered
+    bad = dataclasses.replace(p, gloss_col=p.gloss_col[:-1])
+    with pytest.raises(C.CompositingError, match="pass GlossCol: expected shape"):
+        C.reconstruct(bad)
+
+
+def test_screen_space_rotation_matches_the_camera(rendered):
+    from rokeby import compositing as C
+
+    _path, p, cam = rendered
+    rot = C.camera_rotation(p.incoming, p.incoming_cam)
+    np.testing.assert_allclose(rot, cam.T, atol=2e-3)  # world → camera = R_camᵀ
+    n, v = C.screen_space(p)
+    obj = p.index_ob > 0
+    assert (n[obj][:, 2] > -0.2).all() and (v[obj][:, 2] > 0.9).all()
+
+
+def test_pipeline_identity_edit_and_small_object_fallback(rendered):
+    from rokeby import compositing as C
+
+    _path, p, _cam = rendered
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        rec = C.reconstruct(p)
+    by_pixels = sorted(rec.reports, key=lambda r: r.pixels)
+    small, big = by_pixels[0], by_pixels[-1]
+    assert small.pixels < 64 and "left unchanged" in small.diffuse
+    assert any("covers only" in str(w.message) for w in caught)
+    assert big.diffuse == "qp" and big.reflection == "ok" and big.coverage > 0.5
+    assert big.sh_max_residual <= 1e-6  # the QP: D(n) >= D0
+    out, st = C.recomposite(p, rec, rec.normals)
+    assert out.tobytes() == p.image.tobytes()
+    e = C.emboss(rec.normals, 0.5)
+    out, st = C.recomposite(p, rec, e)
+    changed = (out != p.image).any(-1)
+    small_id = rec.keys.index(small.key)
+    assert not changed[rec.ids < 0].any() and not changed[rec.ids == small_id].any()
+    assert changed[rec.ids == rec.keys.index(big.key)].mean() > 0.5
+    assert np.isfinite(out).all()
+    # k_D = 0: the diffuse contribution goes, the image gets darker on the object.
+    dark, _ = C.recomposite(p, rec, rec.normals, k_d=0.0)
+    obj = rec.ids == rec.keys.index(big.key)
+    assert dark[obj].mean() < p.image[obj].mean()
+
+
+def test_normal_tools():
+    from rokeby import compositing as C
+
+    n, mask, _r, _v = sphere_image(40)
+    e = C.emboss(n, 0.5)
+    inside = mask > 0
+    assert np.allclose(np.linalg.norm(e[inside], axis=-1), 1, atol=1e-5)
+    assert (np.abs(e[inside][:, 2]) <= np.abs(n[inside][:, 2]) + 1e-6).all()
+    assert (e[~inside] == 0).all()
+    assert C.emboss(n, 1.0).tobytes() == n.tobytes()  # β = 1 is no edit, bit for bit
+    h = C.ripple((40, 40), wavelength=8)
+    b = C.bump(n, h, 2.0, mask=mask)
+    assert (b[inside] != n[inside]).any() and np.allclose(np.linalg.norm(b[inside], axis=-1), 1, atol=1e-5)
+    # A bump tilts the normal away from the height gradient (screen y up, rows down).
+    ramp = np.tile(np.arange(40, dtype=np.float32), (40, 1))  # rises to the right
+    flat = np.zeros((40, 40, 3), np.float32)
+    flat[..., 2] = 1
+    assert (C.bump(flat, ramp, 0.5)[..., 0] < 0).all()
+    # Smoothing keeps contours: two depth layers with different normals are not mixed.
+    two = flat.copy()
+    two[:, 20:] = [0.6, 0, 0.8]
+    depth = np.where(np.arange(40) < 20, 1.0, 5.0)[None].repeat(40, 0).astype(np.float32)
+    s = C.bilateral_smooth(two, depth, sigma_s=3)
+    np.testing.assert_allclose(s[:, :20], flat[:, :20], atol=1e-5)
+    np.testing.assert_allclose(s[:, 20:], two[:, 20:], atol=1e-5)
+    noisy = flat + np.random.default_rng(0).normal(0, 0.1, flat.shape).astype(np.float32)
+    noisy /= np.linalg.norm(noisy, axis=-1, keepdims=True)
+    sm = C.bilateral_smooth(noisy, np.ones((40, 40), np.float32), sigma_s=2)
+    assert sm[..., :2].std() < 0.5 * noisy[..., :2].std()
+
+
+def test_command_line_tool(rendered, tmp_path):
+    import OpenEXR
+
+    path, p, _cam = rendered
+    cmd = [sys.executable, "-m", "rokeby.composite", str(path)]
+    same = tmp_path / "same.exr"
+    r = subprocess.run(cmd + [str(same), "--emboss", "1.0"], capture_output=True, text=True, cwd=ROOT / "addon")
+    assert r.returncode == 0, r.stderr
+    assert "covers only" in r.stderr  # the small object's fall-back is reported
+    with OpenEXR.File(str(same)) as f:
+        img = np.asarray(f.parts[0].channels["RGB"].pixels)
+    # β = 1 edits nothing: the image comes back bit for bit.
+    assert img.tobytes() == p.image.tobytes()
+    out = tmp_path / "ripple.exr"
+    r = subprocess.run(cmd + [str(out), "--ripple", "1.5", "--ripple-wavelength", "6", "--report", str(tmp_path / "r.json")],
+                       capture_output=True, text=True, cwd=ROOT / "addon")
+    assert r.returncode == 0, r.stderr
+    with OpenEXR.File(str(out)) as f:
+        img = np.asarray(f.parts[0].channels["RGB"].pixels)
+    assert (img != p.image).any(-1).sum() > 100
+    r = subprocess.run(cmd[:-1] + [str(tmp_path / "nope.exr"), str(out)], capture_output=True, text=True, cwd=ROOT / "addon")
+    assert r.returncode == 2 and "rokeby.composite:" in r.stderr
