@@ -357,3 +357,24 @@ def test_command_line_tool(rendered, tmp_path):
     assert (img != p.image).any(-1).sum() > 100
     r = subprocess.run(cmd[:-1] + [str(tmp_path / "nope.exr"), str(out)], capture_output=True, text=True, cwd=ROOT / "addon")
     assert r.returncode == 2 and "rokeby.composite:" in r.stderr
+
+
+def test_api_recomposite_render_shows_a_new_image(tmp_path):
+    import bpy
+    from rokeby import api
+
+    sc = _scene()
+    names = api.setup_compositing_passes(sc)
+    assert "rokeby_reflocc" in names and sc.view_layers[0].use_pass_glossy_color
+    img, reports = api.recomposite_render(str(tmp_path / "f.exr"), edit="none", scene=sc)
+    assert img.name in bpy.data.images and tuple(img.size) == (64, 48)
+    px = np.array(img.pixels[:]).reshape(48, 64, 4)[::-1, :, :3]
+    from rokeby import compositing as C
+
+    p = C.read_exr(str(tmp_path / "f.exr"))
+    np.testing.assert_array_equal(px.astype(np.float32), p.image)
+    img2, _ = api.recomposite_render(str(tmp_path / "g.exr"), edit="emboss", amount=0.4, scene=sc, image_name="emb")
+    px2 = np.array(img2.pixels[:]).reshape(48, 64, 4)[::-1, :, :3]
+    assert (np.abs(px2 - px) > 1e-4).any(-1).sum() > 50
+    with pytest.raises(Exception, match="edit: unknown"):
+        api.recomposite_render(str(tmp_path / "h.exr"), edit="twist", scene=sc)

@@ -907,3 +907,37 @@ def add_highlight_constraint(mirror, light, surface_point=None, *, eye=None, nam
     mirror.rokeby.constraints[index].light_name = light.name
     green.empty_display_type = "SPHERE"
     return index
+
+
+# --- Local shape editing at the compositing stage (Zubiaga et al. 2016; rokeby.compositing) ------
+
+def setup_compositing_passes(scene=None, view_layer=None) -> list[str]:
+    """Enables the passes and AOVs that compositing-stage shape editing needs (see
+    ``rokeby.compositing.setup_passes``); returns their names."""
+    from . import compositing  # noqa: PLC0415
+
+    return compositing.setup_passes(_scene(scene), view_layer)
+
+
+def recomposite_render(path: str, *, edit: str = "emboss", amount: float = 0.5, scene=None,
+                       image_name: str = "Rokeby Recomposited", k_d: float = 1.0, k_r: float = 1.0):
+    """Renders ``scene`` with the compositing passes to the multilayer EXR ``path``, reconstructs
+    its environments, edits the normals (``edit``: 'emboss' with β = amount, 'ripple' with strength
+    amount, 'smooth' with σ = amount pixels, or 'none') and shows the recomposited frame as the
+    Blender image ``image_name``. Returns (image, reconstruction report list)."""
+    from . import compositing as comp  # noqa: PLC0415
+
+    p = comp.render_passes(_scene(scene), path)
+    rec = comp.reconstruct(p)
+    n = rec.normals
+    on = rec.ids >= 0
+    if edit == "emboss":
+        n = comp.emboss(n, amount, mask=on)
+    elif edit == "ripple":
+        n = comp.bump(n, comp.ripple(p.shape), amount, mask=on)
+    elif edit == "smooth":
+        n = comp.bilateral_smooth(n, p.depth, sigma_s=amount, mask=on)
+    elif edit != "none":
+        raise RokebyError(f"edit: unknown {edit!r} (expected 'emboss', 'ripple', 'smooth' or 'none')")
+    out, _stats = comp.recomposite(p, rec, n, k_d=k_d, k_r=k_r)
+    return comp.show_image(image_name, out), rec.reports
