@@ -1,0 +1,139 @@
+"""Environment maps for painting under environment light (issue 8): reading and writing HDR
+images (OpenEXR), conversions between lat-long, cube, sphere (mirror-ball) and dual-paraboloid
+maps, order-2 SH irradiance, and specular prefiltering across roughness levels — all computed by
+the Rust core (``rokeby_core::envmap``/``prefilter``) through :mod:`rokeby.native`.
+
+Arrays are float32 with row 0 the top row of the image file (as OpenEXR reads it); Blender's
+``Image.pixels`` are bottom-up, :func:`flip_rows` converts. Shapes per layout: latlong (H, W, C),
+cube (6, S, S, C) in the order +X, −X, +Y, −Y, +Z, −Z, sphere (S, S, C), paraboloid (2, S, S, C).
+Lat-long maps use Blender's equirectangular convention (+X at the image centre, as
+:func:`rokeby.reflmap.direction_to_uv`). Formulas, algorithm and measured errors:
+docs/envmaps.md.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from . import native
+
+LAYOUTS = ("latlong", "cube", "sphere", "paraboloid")
+LOBES = ("phong", "ggx", "torrance_sparrow")
+
+# Blender roughness of the default prefiltered levels (GGX, α = roughness²): level 0 is the
+# environment itself.
+ROUGHNESS_LEVELS = tuple(i / 7 for i in range(8))
+
+
+def studio_world(name: str) -> Path:
+    """Path of one of the HDR worlds bpy ships (city, courtyard, forest, interior, night, studio,
+    sunrise, sunset)."""
+    import bpy
+
+    root = Path(bpy.utils.system_resource("DATAFILES")) / "studiolights" / "world"
+    p = root / f"{name}.exr"
+    if not p.exists():
+        names = sorted(q.stem for q in root.glob("*.exr"))
+        raise ValueError(f"studio_world: no world {name!r} (have {', '.join(names)})")
+    return p
+
+
+def read_exr(path) -> np.ndarray:
+    """An OpenEXR file's RGB (or RGBA, or single-channel Y) pixels as (H, W, C) float32, row 0 at
+    the top."""
+    import OpenEXR
+
+    path = Path(path)
+    if not path.exists():
+        raise FileNotFoundError(f"read_exr: {path} does not exist")
+    with OpenEXR.File(str(path)) as f:
+        ch = f.parts[0].channels
+        if "RGBA" in ch:
+            px = ch["RGBA"].pixels
+        elif "RGB" in ch:
+            px = ch["RGB"].pixels
+        elif all(k in ch for k in "RGB"):
+            px = np.stack([ch[k].pixels for k in "RGB"], axis=-1)
+        elif "Y" in ch:
+            px = ch["Y"].pixels[..., None]
+        else:
+            raise ValueError(f"read_exr: {path} has no RGB/RGBA/Y channels (has {', '.join(ch)})")
+    return np.ascontiguousarray(px, dtype=np.float32)
+
+
+def write_exr(path, pixels) -> Path:
+    """Writes (H, W, 3|4) or (H, W) float pixels (row 0 at the top) as a half-free float32 EXR."""
+    import OpenEXR
+
+    px = np.asarray(pixels, dtype=np.float32)
+    if px.ndim == 2:
+        px = px[..., None]
+    if px.ndim != 3 or px.shape[2] not in (1, 3, 4):
+        raise ValueError(f"write_exr: pixels must have shape (H, W), (H, W, 3) or (H, W, 4), got {px.shape}")
+    if not np.isfinite(px).all():
+        raise ValueError("write_exr: pixels contain NaN or inf")
+    name = {1: "Y", 3: "RGB", 4: "RGBA"}[px.shape[2]]
+    data = px[..., 0] if name == "Y" else px
+    header = {"compression": OpenEXR.ZIP_COMPRESSION, "type": OpenEXR.scanlineimage}
+    path = Path(path)
+    with OpenEXR.File(header, {name: np.ascontiguousarray(data)}) as f:
+        f.write(str(path))
+    return path
+
+
+def flip_rows(pixels: np.ndarray) -> np.ndarray:
+    """Top-down (file) rows ↔ bottom-up (Blender ``Image.pixels``) rows."""
+    return np.ascontiguousarray(np.asarray(pixels)[::-1] if np.ndim(pixels) == 3 else np.asarray(pixels)[:, ::-1])
+
+
+def convert(image, layout_in: str, layout_out: str, size: int, supersample: int = 1) -> np.ndarray:
+    """The environment ``image`` (``layout_in``) on ``layout_out``: lat-long maps are size × 2·size,
+    faces size × size; each texel averages supersample² bilinear, seam-correct lookups."""
+    return native.module().env_convert(image, layout_in, layout_out, int(size), int(supersample))
+
+
+def sample(image, layout: str, directions) -> np.ndarray:
+    """Bilinear, seam-correct lookups E(d): (..., 3) directions → (..., C)."""
+    return native.module().env_sample(image, layout, directions)
+
+
+def prefilter(image, lobe: str = "ggx", params=ROUGHNESS_LEVELS, texels_per_radius: float = 6.0, tail: float = 1e-5) -> list:
+    """Specular prefiltering of a lat-long image: one lat-long array per lobe parameter (GGX or
+    Phong/Torrance–Sparrow σ), each at its own resolution (see docs/envmaps.md)."""
+    return native.module().env_prefilter(image, lobe, [float(p) for p in params], float(texels_per_radius), float(tail))
+
+
+def irradiance(image, size: int = 32) -> dict:
+    """Order-2 SH irradiance: {'coeffs', 'irradiance_coeffs', 'image'} (E(n)/π map, size × 2·size)."""
+    return native.module().env_irradiance(image, int(size))
+
+
+def sh_irradiance(irradiance_coeffs, normals) -> np.ndarray:
+    """E(n)/π from ``irradiance(...)['irradiance_coeffs']`` at (..., 3) normals (numpy, vectorised;
+    the basis of rokeby_core::sh, Ramamoorthi & Hanrahan 2001)."""
+    n = np.asarray(normals, dtype=np.float64)
+    n = n / np.linalg.norm(n, axis=-1, keepdims=True)
+    x, y, z = n[..., 0], n[..., 1], n[..., 2]
+    basis = np.stack(
+        [
+            np.full_like(x, 0.28209479177387814),
+            0.4886025119029199 * y,
+            0.4886025119029199 * z,
+            0.4886025119029199 * x,
+            1.0925484305920792 * x * y,
+            1.0925484305920792 * y * z,
+            0.31539156525252005 * (3 * z * z - 1),
+            1.0925484305920792 * x * z,
+            0.5462742152960396 * (x * x - y * y),
+        ],
+        axis=-1,
+    )
+    return basis @ np.asarray(irradiance_coeffs, dtype=np.float64).T
+
+
+def reference(image, lobe: str, directions, param: float = 0.0) -> np.ndarray:
+    """The seed's brute-force sum over every texel (the validation reference): lobe 'phong',
+    'ggx', 'torrance_sparrow' (normalised like the prefiltered maps) or 'lambert' (E(n)/π)."""
+    return native.module().env_reference(image, lobe, directions, float(param))
