@@ -12,7 +12,7 @@ export ROKEBY_SHARED := $(SHARED)
 
 RUST_SRC := Cargo.toml pyproject.toml $(wildcard rust/*/Cargo.toml) $(shell find rust -name '*.rs' 2>/dev/null)
 
-.PHONY: all demo dist test bench cargo-test pytest native venv clean help
+.PHONY: all demo dist test bench cargo-test pytest native venv clean help fuzz
 
 all: native
 
@@ -70,5 +70,20 @@ $(PEERS)/.deps: requirements-peers.txt
 bench: native $(PEERS)/.deps
 	$(PY) bench/run.py --peers $(PEERS)/bin/python
 
+# Fuzzing (issue #9): every rokeby-core entry point for FUZZ_SECONDS each with cargo-fuzz
+# (libFuzzer), installed into .tools on first use. The stable toolchain runs it with
+# RUSTC_BOOTSTRAP=1 and no sanitizer; a crash leaves its input under rust/fuzz/artifacts.
+FUZZ_SECONDS ?= 30
+FUZZ_TARGETS := field polar geodesic region
+CARGO_FUZZ := $(CURDIR)/.tools/bin/cargo-fuzz
+$(CARGO_FUZZ):
+	cargo install --locked --root $(CURDIR)/.tools cargo-fuzz@0.13.2
+
+fuzz: $(CARGO_FUZZ)
+	@set -e; for t in $(FUZZ_TARGETS); do \
+		echo "== fuzz $$t ($(FUZZ_SECONDS) s)"; \
+		RUSTC_BOOTSTRAP=1 $(CARGO_FUZZ) fuzz run --fuzz-dir rust/fuzz --sanitizer none --release $$t -- -max_total_time=$(FUZZ_SECONDS) -rss_limit_mb=2048; \
+	done
+
 clean:
-	rm -rf $(VENV) $(PEERS) target dist out
+	rm -rf $(VENV) $(PEERS) target dist out .tools rust/fuzz/target

@@ -276,11 +276,25 @@ pub fn ortho_iterative(m: &DMat3, init: DQuat, max_iter: usize) -> Iterated {
     Iterated::Failed
 }
 
+/// M scaled so its largest entry is 1. The polar factor of s·M is that of M for any s > 0, and
+/// at unit size the SVD's and Newton's products stay far from overflow and underflow for entries
+/// anywhere in f64's range (found by the `polar` fuzz target: entries of 1e122 overflowed).
+fn unit_scale(m: &DMat3) -> DMat3 {
+    let s = m.to_cols_array().iter().fold(0.0f64, |a, x| a.max(x.abs()));
+    if s.is_finite() && s > 0.0 {
+        DMat3::from_cols(m.x_axis / s, m.y_axis / s, m.z_axis / s)
+    } else {
+        *m
+    }
+}
+
 /// `ortho` with the chosen method; `warm` is the previous result (a neighbouring pixel) and is
 /// updated. The iterative method falls back to the SVD when its result is not verified optimal
 /// or when M is rank-deficient (where the answer is chosen by rule, not by optimisation).
 /// `tiebreak` is only formed when the rank-1 rule needs it.
 pub fn ortho(m: &DMat3, tiebreak: impl FnOnce() -> Option<DMat3>, method: PolarMethod, warm: &mut DQuat) -> DQuat {
+    let m = &unit_scale(m);
+    let tiebreak = || tiebreak().map(|b| unit_scale(&b));
     let q = match method {
         PolarMethod::Svd => ortho_tiebreak(m, tiebreak().as_ref()),
         PolarMethod::Iterative => match ortho_iterative(m, *warm, 10) {
@@ -312,6 +326,22 @@ mod tests {
         assert!((q * r - e).length() < 1e-12);
         let expect = min_rotation(r, e);
         assert!(q.dot(expect).abs() > 1.0 - 1e-12);
+    }
+
+    #[test]
+    fn huge_and_tiny_matrices_give_the_same_rotation() {
+        let r = DVec3::new(0.3, -0.2, 0.9).normalize();
+        let e = DVec3::new(0.5, 0.1, 0.8).normalize();
+        let m = outer(e, r) + outer(DVec3::X, DVec3::Y) * 0.3;
+        for method in [PolarMethod::Svd, PolarMethod::Iterative] {
+            let mut w = DQuat::IDENTITY;
+            let q = ortho(&m, || None, method, &mut w);
+            for s in [1e-300, 1e-160, 1e122, 1e300] {
+                let mut w = DQuat::IDENTITY;
+                let qs = ortho(&(m * s), || None, method, &mut w);
+                assert!(is_rotation(qs) && qs.dot(q).abs() > 1.0 - 1e-12, "{s}: {qs:?} vs {q:?}");
+            }
+        }
     }
 
     #[test]

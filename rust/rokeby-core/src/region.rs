@@ -12,7 +12,10 @@ use glam::DVec3;
 /// Hermite smooth step: 0 for t ≤ 0, 1 for t ≥ 1, 3t² − 2t³ between (C¹ at both ends).
 #[inline]
 pub fn smooth_step(t: f64) -> f64 {
-    let t = t.clamp(0.0, 1.0);
+    if !(t > 0.0) {
+        return 0.0; // t ≤ 0, and NaN (found by fuzzing: a NaN distance gave a NaN weight)
+    }
+    let t = t.min(1.0);
     t * t * (3.0 - 2.0 * t)
 }
 
@@ -22,7 +25,8 @@ pub fn smooth_step(t: f64) -> f64 {
 #[inline]
 pub fn falloff(d: f64, radius: f64, border: f64) -> f64 {
     let border = border.min(radius);
-    if d >= radius {
+    // `!(d < radius)` also sends a NaN distance (an unreachable point) to 0 (found by fuzzing).
+    if !(d < radius) {
         return 0.0;
     }
     let inner = radius - border;
