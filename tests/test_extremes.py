@@ -148,3 +148,21 @@ def test_near_degenerate_triangles_in_geodesics():
         along = d[:n]
         assert np.all(np.diff(along[::4]) > 0), method
         assert abs(along[-1] - 1.0) < 0.08, (method, along[-1])
+
+
+def test_identical_constraints_at_different_places_are_one_constraint():
+    """Constraints that all ask for the same r → e (at different points) make M rank 1 with a
+    tie-break that prefers nothing: the field is the smallest rotation r → e, as with one of them
+    (a rounding-noise tie-break used to pick an arbitrary twist about e)."""
+    rng = np.random.default_rng(11)
+    r = np.array([0.0, 0.0, 1.0])
+    e = np.array([0.6, 0.0, 0.8])
+    rows = np.array([np.r_[p, r, e] for p in rng.normal(size=(4, 3))], np.float32)
+    pts = rng.normal(size=(300, 3)).astype(np.float32)
+    for polar in ("exact", "fast"):
+        ok, err = _same_rotation(rn.rotation_field(pts, rows, polar=polar), rn.rotation_field(pts, rows[:1], polar=polar), 1e-5)
+        assert ok, (polar, err)
+    nrm = rng.normal(size=(300, 3))
+    nrm = (nrm / np.linalg.norm(nrm, axis=1, keepdims=True)).astype(np.float32)
+    eye = np.array([0.0, -5.0, 0.0], np.float32)
+    np.testing.assert_allclose(rn.edited_directions(pts, nrm, eye, rows), rn.edited_directions(pts, nrm, eye, rows[:1]), atol=1e-5)

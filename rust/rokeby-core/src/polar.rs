@@ -136,7 +136,11 @@ fn best_twist(axis: DVec3, c: &DMat3) -> DQuat {
     // C_ij = c.col(j)[i]
     let s = u.x * (c.y_axis.z - c.z_axis.y) + u.y * (c.z_axis.x - c.x_axis.z) + u.z * (c.x_axis.y - c.y_axis.x);
     let a = tr - utcu;
-    if a.abs() + s.abs() < 1e-300 {
+    // No preference when B's part that could twist about u is rounding noise relative to B
+    // (e.g. every other constraint asks for the same r → e: B ∝ u uᵀ after R₀); an absolute
+    // threshold let that noise pick an arbitrary twist.
+    let scale = c.to_cols_array().iter().fold(0.0f64, |m, x| m.max(x.abs()));
+    if !(a.abs() + s.abs() > 1e-10 * scale) {
         return DQuat::IDENTITY;
     }
     DQuat::from_axis_angle(u, s.atan2(a))
