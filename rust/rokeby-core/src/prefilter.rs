@@ -33,9 +33,9 @@
 //! over the source row is a 1D circular convolution with weights
 //! w_ij(Δφ) = k(sin λ_i sin λ_j + cos λ_i cos λ_j cos Δφ)·Ω_j, each applied to a whole row at once
 //! (contiguous, vectorised). The lobe is split by a smooth partition of unity into rings
-//! [0, 2R₀], [R₀, 4R₀], [2R₀, 8R₀], …, R₀ its half-energy angle; ring k is evaluated on a
-//! solid-angle-weighted 2×2 mip of the input whose texels are about R_k/K wide (K = 6; never finer
-//! than the input), and its output (numerator and weight sum) upsampled bilinearly to the level's
+//! [0, 2R₀], [R₀, 4R₀], [2R₀, 8R₀], …, R₀ its half-energy angle; ring k is evaluated on the
+//! solid-angle-weighted 2×2 mip of the input whose texels are nearest R_k/K wide (K = 6, so
+//! R_k spans K/√2 to K√2 texels; never finer than the input), and its output (numerator and weight sum) upsampled bilinearly to the level's
 //! resolution (ring 0's). Outer rings, where the lobe is smooth, thus cost what the core costs, and
 //! heavy tails (GGX) are kept out to where less than `tail` = 1e-5 of the lobe's energy is left.
 //! Numerator and denominator go through the same linear steps, so a constant environment comes
@@ -342,8 +342,9 @@ pub fn prefilter(env: &EnvMap, lobes: &[Lobe], params: &PrefilterParams) -> Resu
             levels.push(Level { map: env.clone(), core_radius: r0, cut_radius: cut, rings: 0 });
             continue;
         }
-        // Mip of ring k: the coarsest whose texel is ≤ R_k/K.
-        let mip_for = |r: f64| (0..mips.len()).rev().find(|&m| texel(m) <= r / kk).unwrap_or(0);
+        // Mip of ring k: the one whose texel is nearest R_k/K in ratio (R_k/texel within
+        // [K/√2, K√2], fewer only where the input is too coarse, more only at the coarsest mip).
+        let mip_for = |r: f64| ((r / (kk * texel(0))).log2().round().max(0.0) as usize).min(mips.len() - 1);
         let m0 = mip_for(r0);
         let (h0, w0) = (mips[m0].height, mips[m0].width);
         let mut total: Option<EnvMap> = None;
