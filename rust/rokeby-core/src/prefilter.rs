@@ -143,6 +143,9 @@ impl Lobe {
     }
 }
 
+/// Rows kept by lobes with a step at the horizon (see [`prefilter`]).
+pub const STEP_ROWS: usize = 64;
+
 /// Tuning of [`prefilter`].
 #[derive(Debug, Clone, Copy)]
 pub struct PrefilterParams {
@@ -344,7 +347,12 @@ pub fn prefilter(env: &EnvMap, lobes: &[Lobe], params: &PrefilterParams) -> Resu
         }
         // Mip of ring k: the one whose texel is nearest R_k/K in ratio (R_k/texel within
         // [K/√2, K√2], fewer only where the input is too coarse, more only at the coarsest mip).
-        let mip_for = |r: f64| ((r / (kk * texel(0))).log2().round().max(0.0) as usize).min(mips.len() - 1);
+        // A lobe that ends in a step at the horizon (Phong σ ≈ 0, wide Torrance–Sparrow) makes
+        // the result change sharply where a bright source crosses it: such lobes keep at least
+        // STEP_ROWS rows (cheap: their outputs are small either way).
+        let step = lobe.kernel(1e-9) > 1e-3 * lobe.kernel(1.0);
+        let coarsest = if step { (0..mips.len()).rev().find(|&m| mips[m].height >= STEP_ROWS).unwrap_or(0) } else { mips.len() - 1 };
+        let mip_for = |r: f64| ((r / (kk * texel(0))).log2().round().max(0.0) as usize).min(coarsest);
         let m0 = mip_for(r0);
         let (h0, w0) = (mips[m0].height, mips[m0].width);
         let mut total: Option<EnvMap> = None;
