@@ -1,0 +1,148 @@
+"""Appearance painting (issue 8): attributes wired into the Principled BSDF, Gaussian brushes,
+global sliders, a Cycles render under a shipped HDR world, bad input. bpy in background mode."""
+
+import numpy as np
+import pytest
+
+bpy = pytest.importorskip("bpy")
+
+from rokeby import appearance, envmaps  # noqa: E402
+
+
+@pytest.fixture
+def ball():
+    bpy.ops.wm.read_factory_settings(use_empty=True)
+    bpy.ops.mesh.primitive_uv_sphere_add(segments=48, ring_count=24, radius=1.0)
+    bpy.ops.object.shade_smooth()
+    obj = bpy.context.object
+    mat = bpy.data.materials.new("Paint")
+    mat.use_nodes = True
+    bsdf = mat.node_tree.nodes["Principled BSDF"]
+    bsdf.inputs["Roughness"].default_value = 0.1
+    bsdf.inputs["Metallic"].default_value = 1.0
+    obj.data.materials.append(mat)
+    return obj
+
+
+def _points(obj):
+    co = np.empty(3 * len(obj.data.vertices), np.float32)
+    obj.data.vertices.foreach_get("co", co)
+    m = np.asarray(obj.matrix_world)
+    return co.reshape(-1, 3) @ m[:3, :3].T + m[:3, 3]
+
+
+def test_setup_wires_attributes_into_the_principled_bsdf(ball):
+    mat = appearance.setup(ball)
+    bsdf = mat.node_tree.nodes["Principled BSDF"]
+    for param, (attr, socket, _, _) in appearance.PARAMS.items():
+        assert attr in ball.data.attributes and ball.data.attributes[attr].domain == "POINT"
+        link = bsdf.inputs[socket].links[0]
+        assert link.from_node.name == "rokeby_global_" + param
+    np.testing.assert_allclose(appearance.read(ball, "roughness"), 0.1, atol=1e-6)
+    np.testing.assert_allclose(appearance.read(ball, "metallic"), 1.0)
+    n_nodes = len(mat.node_tree.nodes)
+    appearance.setup(ball)  # idempotent
+    assert len(mat.node_tree.nodes) == n_nodes
+
+
+def test_gaussian_brush_falloff_and_modes(ball):
+    ball.location = (0.5, 0.0, 0.0)
+    bpy.context.view_layer.update()
+    appearance.setup(ball)
+    p = _points(ball)
+    c = np.array([1.5, 0.0, 0.0])  # the +X pole of the moved ball
+    before = appearance.read(ball, "roughness").astype(np.float64)
+    got = appearance.paint(ball, "roughness", c, radius=0.6, value=0.9, strength=0.8)
+    w = 0.8 * np.exp(-np.sum((p - c) ** 2, axis=1) / (2 * 0.3**2))
+    np.testing.assert_allclose(got, before + w * (0.9 - before), atol=1e-6)
+    np.testing.assert_allclose(appearance.read(ball, "roughness"), got)
+    far = np.linalg.norm(p - c, axis=1) > 1.5
+    np.testing.assert_allclose(got[far], 0.1, atol=1e-4)
+    # Fraser's sharpen lowers roughness, clamped at 0
+    sharp = appearance.paint(ball, "sharpen", c, radius=0.6, value=5.0)
+    assert sharp.min() == 0.0 and (sharp <= got + 1e-7).all()
+    # a stroke of several dabs; diffuse colour
+    col = appearance.paint(ball, "diffuse", [[1.5, 0, 0], [0.5, 1, 0]], radius=0.5, value=(1.0, 0.0, 0.0))
+    near = np.argmin(np.linalg.norm(p - [0.5, 1, 0], axis=1))
+    assert col[near, 0] > 0.99 and col[near, 1] < 0.01
+    assert col.shape == (len(p), 4)
+
+
+def test_global_sliders_scale_the_painted_values(ball):
+    mat = appearance.setup(ball)
+    appearance.set_global(mat, "roughness", 2.5)
+    appearance.set_global(mat, "diffuse", (0.2, 0.4, 1.0))
+    assert mat.node_tree.nodes["rokeby_global_roughness"].inputs[1].default_value == 2.5
+    assert tuple(mat.node_tree.nodes["rokeby_global_diffuse"].inputs[7].default_value)[:3] == pytest.approx((0.2, 0.4, 1.0))
+
+
+def _render(tmp_path, name):
+    sc = bpy.context.scene
+    sc.render.engine = "CYCLES"
+    sc.cycles.device = "CPU"
+    sc.cycles.samples = 16
+    sc.cycles.use_denoising = False
+    sc.cycles.seed = 3
+    sc.render.resolution_x = sc.render.resolution_y = 40
+    sc.render.resolution_percentage = 100
+    sc.render.image_settings.file_format = "OPEN_EXR"
+    sc.render.filepath = str(tmp_path / name)
+    bpy.ops.render.render(write_still=True)
+    return envmaps.read_exr(tmp_path / f"{name}.exr")[..., :3]
+
+
+def test_painted_roughness_renders_in_cycles_only_where_painted(ball, tmp_path):
+    """Chrome ball under the shipped courtyard world: blurring the right half (+X, the camera's
+    right) changes the right half of the render, the far-left pixels stay as they were."""
+    world = bpy.data.worlds.new("HDR")
+    world.use_nodes = True
+    env = world.node_tree.nodes.new("ShaderNodeTexEnvironment")
+    env.image = bpy.data.images.load(str(envmaps.studio_world("courtyard")))
+    world.node_tree.links.new(env.outputs["Color"], world.node_tree.nodes["Background"].inputs["Color"])
+    bpy.context.scene.world = world
+    cam = bpy.data.objects.new("Cam", bpy.data.cameras.new("Cam"))
+    bpy.context.scene.collection.objects.link(cam)
+    cam.location = (0.0, -4.0, 0.0)
+    cam.rotation_euler = (np.pi / 2, 0.0, 0.0)
+    cam.data.lens = 60
+    bpy.context.scene.camera = cam
+    appearance.setup(ball)
+    a = _render(tmp_path, "before")
+    appearance.paint(ball, "blur", [[1.0, 0.0, 0.0]], radius=0.9, value=0.8)
+    b = _render(tmp_path, "after")
+    diff = np.abs(b - a).mean(axis=2)
+    w = diff.shape[1]
+    right, left = diff[:, int(0.6 * w):].mean(), diff[:, : int(0.35 * w)].mean()
+    assert right > 5 * max(left, 1e-4), (right, left)
+    assert np.isfinite(b).all()
+
+
+def test_bad_input_gives_clear_errors(ball):
+    with pytest.raises(ValueError, match="call rokeby.appearance.setup"):
+        appearance.paint(ball, "roughness", [0, 0, 1], radius=0.5, value=0.5)
+    appearance.setup(ball)
+    with pytest.raises(ValueError, match="radius: must be a positive finite number, got -1"):
+        appearance.paint(ball, "roughness", [0, 0, 1], radius=-1, value=0.5)
+    with pytest.raises(ValueError, match=r"strength: must be in \[0, 1\]"):
+        appearance.paint(ball, "roughness", [0, 0, 1], radius=0.5, value=0.5, strength=2)
+    with pytest.raises(ValueError, match="value: must be ≥ 0"):
+        appearance.paint(ball, "metallic", [0, 0, 1], radius=0.5, value=-0.5)
+    with pytest.raises(ValueError, match="centres: contain NaN"):
+        appearance.paint(ball, "metallic", [0, np.nan, 1], radius=0.5, value=0.5)
+    with pytest.raises(ValueError, match="unknown brush 'smudge'"):
+        appearance.paint(ball, "smudge", [0, 0, 1], radius=0.5, value=0.5)
+    with pytest.raises(ValueError, match="needs a target value"):
+        appearance.paint(ball, "specular", [0, 0, 1], radius=0.5)
+    with pytest.raises(ValueError, match="a diffuse colour is 3 or 4"):
+        appearance.paint(ball, "diffuse", [0, 0, 1], radius=0.5, value=(1, 0))
+    with pytest.raises(ValueError, match="a global scale must be finite and ≥ 0"):
+        appearance.set_global(ball.active_material, "specular", -1)
+    lamp = bpy.data.objects.new("Lamp", bpy.data.lights.new("Lamp", "POINT"))
+    with pytest.raises(ValueError, match="is a LIGHT, not a mesh"):
+        appearance.setup(lamp)
+    other = bpy.data.materials.new("Emit")
+    other.use_nodes = True
+    nt = other.node_tree
+    nt.nodes.remove(nt.nodes["Principled BSDF"])
+    with pytest.raises(ValueError, match="has no Principled BSDF"):
+        appearance.setup(ball, other)
