@@ -117,6 +117,8 @@ pub fn recomposite(b: &Buffers, patches: &[Patch], p: &Params) -> Result<(Vec<f3
     }
     let mut out = vec![0.0f32; 3 * n];
     let inv_gamma = 1.0 / p.gamma;
+    let inv_eps = 1.0 / p.epsilon;
+    let chord_eps = if p.epsilon >= std::f64::consts::PI { f64::INFINITY } else { 2.0 * (0.5 * p.epsilon).sin() };
     let stats = out
         .par_chunks_mut(3 * 256)
         .enumerate()
@@ -156,26 +158,40 @@ pub fn recomposite(b: &Buffers, patches: &[Patch], p: &Params) -> Result<(Vec<f3
                     continue;
                 }
                 st.edited += 1;
-                // Eq. 3.
+                // Eq. 3: D(ñ) − D(n) = Σ_k c_k (Y_k(ñ) − Y_k(n)), the basis evaluated once per normal.
                 let mut dt = [0.0f64; 3];
+                let mut dbasis = [0.0f64; SH_COEFFS];
+                if patch.sh.is_some() {
+                    let (be, bn) = (sh::basis(ne.to_array()), sh::basis(nn.to_array()));
+                    for k in 0..SH_COEFFS {
+                        dbasis[k] = be[k] - bn[k];
+                    }
+                }
                 for c in 0..3 {
                     let d0c = d0[c] as f64;
                     let delta = match &patch.sh {
-                        Some(co) => sh::eval(&co[c], ne.to_array()) - sh::eval(&co[c], nn.to_array()),
+                        Some(co) => {
+                            let mut s = 0.0;
+                            for k in 0..SH_COEFFS {
+                                s += co[c][k] * dbasis[k];
+                            }
+                            s
+                        }
                         None => 0.0,
                     };
                     let res = (d0c + delta).max(d0c.min(0.0));
                     dt[c] = d0c + ad * (res - d0c);
                 }
-                // Eq. 4.
+                // Eq. 4. The angle from the chord |r − r~| = 2 sin(θ/2): v = 1 without any
+                // trigonometry once the chord reaches 2 sin(ε/2); exactly 0 when r~ = r.
                 let mut rt = [0.0f64; 3];
                 let r = reflect(vv, nn);
                 let re = reflect(vv, ne);
-                let angle = 2.0 * (r - re).length().atan2((r + re).length());
-                let vis = (angle / p.epsilon).min(1.0);
+                let chord = (r - re).length();
+                let vis = if chord >= chord_eps { 1.0 } else { 2.0 * (0.5 * chord).min(1.0).asin() * inv_eps };
                 match &patch.env {
-                    Some(env) => env.lookup(re, &mut look),
-                    None => look = [r0[0] as f64, r0[1] as f64, r0[2] as f64],
+                    Some(env) if vis * ar != 0.0 => env.lookup(re, &mut look),
+                    _ => look = [r0[0] as f64, r0[1] as f64, r0[2] as f64],
                 }
                 for c in 0..3 {
                     let r0c = r0[c] as f64;

@@ -105,10 +105,21 @@ impl ParaboloidMap {
         let s = self.size as f64;
         let x = ((u + 1.0) * 0.5 * s - 0.5).clamp(0.0, s - 1.0);
         let y = ((v + 1.0) * 0.5 * s - 0.5).clamp(0.0, s - 1.0);
-        let (j0, i0) = (x.floor() as usize, y.floor() as usize);
+        // x, y ≥ 0 after the clamp: truncation is floor (and needs no libm call).
+        let (j0, i0) = (x as usize, y as usize);
         let (j1, i1) = ((j0 + 1).min(self.size - 1), (i0 + 1).min(self.size - 1));
         let (fx, fy) = (x - j0 as f64, y - i0 as f64);
         let c = self.channels;
+        if c == 3 {
+            let (k00, k01, k10, k11) = (self.idx(face, i0, j0), self.idx(face, i0, j1), self.idx(face, i1, j0), self.idx(face, i1, j1));
+            let d = &self.data;
+            for ch in 0..3 {
+                let top = d[k00 + ch] as f64 + fx * (d[k01 + ch] as f64 - d[k00 + ch] as f64);
+                let bot = d[k10 + ch] as f64 + fx * (d[k11 + ch] as f64 - d[k10 + ch] as f64);
+                out[ch] = top + fy * (bot - top);
+            }
+            return;
+        }
         let taps = [(i0, j0, (1.0 - fx) * (1.0 - fy)), (i0, j1, fx * (1.0 - fy)), (i1, j0, (1.0 - fx) * fy), (i1, j1, fx * fy)];
         for o in out.iter_mut().take(c) {
             *o = 0.0;

@@ -5,7 +5,7 @@
 
 use super::{f32_array, run_detached, shape_str, F32Array};
 use numpy::ndarray::{ArrayD, IxDyn};
-use numpy::{IntoPyArray, PyArrayDyn};
+use numpy::{IntoPyArray, PyArrayDyn, PyArrayMethods, PyUntypedArrayMethods};
 use pyo3::exceptions::{PyRuntimeError, PyTypeError, PyValueError};
 use pyo3::prelude::*;
 use pyo3::types::{PyDict, PyList};
@@ -380,11 +380,23 @@ pub fn recomposite<'py>(
     epsilon: f64,
 ) -> PyResult<(Bound<'py, PyArrayDyn<f32>>, Bound<'py, PyDict>)> {
     let (n, h, w) = image3(normals, "normals", None)?;
-    let id_arr = f32_array(ids, "ids")?;
-    if id_arr.shape() != [h, w] {
-        return Err(PyValueError::new_err(format!("ids: expected shape ({h}, {w}) like normals, got {}", shape_str(&id_arr.shape()))));
-    }
-    let ids_i: Vec<i32> = id_arr.slice().iter().map(|&x| if x.is_finite() && x >= 0.0 { x as i32 } else { -1 }).collect();
+    // int32 ids (what rokeby.compositing makes) are read directly; anything else through floats.
+    let ids_i: Vec<i32> = match ids.cast::<PyArrayDyn<i32>>() {
+        Ok(a) if a.readonly().is_c_contiguous() => {
+            let ro = a.readonly();
+            if ro.shape() != [h, w] {
+                return Err(PyValueError::new_err(format!("ids: expected shape ({h}, {w}) like normals, got {}", shape_str(ro.shape()))));
+            }
+            ro.as_slice().map_err(|e| PyRuntimeError::new_err(e.to_string()))?.iter().map(|&x| x.max(-1)).collect()
+        }
+        _ => {
+            let id_arr = f32_array(ids, "ids")?;
+            if id_arr.shape() != [h, w] {
+                return Err(PyValueError::new_err(format!("ids: expected shape ({h}, {w}) like normals, got {}", shape_str(&id_arr.shape()))));
+            }
+            id_arr.slice().iter().map(|&x| if x.is_finite() && x >= 0.0 { x as i32 } else { -1 }).collect()
+        }
+    };
     let (e, _, _) = image3(edited_normals, "edited_normals", Some((h, w)))?;
     let v = f32_array(view, "view")?;
     if v.shape() != [3] && v.shape() != [h, w, 3] {
