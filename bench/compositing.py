@@ -1,0 +1,193 @@
+"""Benchmark: local shape editing at the compositing stage (issue #6), per stage.
+
+Inputs are synthetic so that they are exact and the same on every run: an orthographic sphere whose
+normals carry a procedural bump (so the Gauss map folds, patches overlap and the reflection map has
+holes, as with real objects), shaded by a known smooth environment; 20% of its pixels are darkened
+(occlusion) and all carry a little noise. Stages:
+
+* diffuse: the order-2 SH fit, least squares and the QP (D(n) >= D0), and their error against the
+  true, unoccluded SH environment over the sphere;
+* reflection: partial reconstruction (eq. 2), hole filling (sparse LU), regularisation; also with
+  only a quarter of the sphere as the patch (large holes);
+* recompositing (eqs. 3-5) of a 1920x1080 frame with ten patches, each with an SH and a 128² map,
+  half the pixels edited; and the process's peak memory for it.
+
+    python bench/compositing.py [--json OUT] [--sizes 512,1024]
+
+Threads: RAYON_NUM_THREADS (set it before starting; 1 = the paper's single core).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import resource
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT / "tests"))
+
+
+def median_time(fn, repeat=3):
+    ts = []
+    out = None
+    for _ in range(repeat):
+        t = time.perf_counter()
+        out = fn()
+        ts.append(time.perf_counter() - t)
+    return float(np.median(ts)), out
+
+
+def sh_basis(n):
+    c0, c1, c2 = 0.282094791773878, 0.488602511902920, 1.092548430592079
+    x, y, z = n[..., 0], n[..., 1], n[..., 2]
+    return np.stack([np.full_like(x, c0), c1 * y, c1 * z, c1 * x, c2 * x * y, c2 * y * z,
+                     0.315391565252520 * (3 * z * z - 1), c2 * x * z, 0.546274215296040 * (x * x - y * y)], -1)
+
+
+TRUE_SH = np.array([[1.2, 0.3, 0.5, -0.2, 0.1, 0.05, 0.15, -0.05, 0.04],
+                    [1.0, 0.2, 0.45, -0.1, 0.05, 0.02, 0.1, -0.04, 0.03],
+                    [0.9, 0.1, 0.4, 0.0, 0.02, 0.01, 0.08, -0.02, 0.02]])
+
+
+def reflection_env(r):
+    return np.stack([0.5 + 0.3 * r[..., 0] + 0.2 * r[..., 1] * r[..., 2] + 0.2 * np.clip(r[..., 2], 0, 1) ** 8,
+                     0.4 + 0.1 * np.sin(3 * r[..., 2]) + 0.1 * r[..., 0] * r[..., 1],
+                     0.3 + 0.2 * r[..., 1] + 0.1 * np.cos(4 * r[..., 0])], -1).astype(np.float32)
+
+
+def bumpy_sphere(w, rng):
+    import rokeby_native as rn
+
+    yy, xx = (np.mgrid[0:w, 0:w] + 0.5) / w * 2 - 1
+    s = xx ** 2 + yy ** 2
+    inside = s < 0.98
+    z = np.sqrt(np.clip(1 - s, 0, 1))
+    n = np.stack([xx, yy, z], -1)
+    # A procedural bump: folds in the Gauss map (overlapping sheets) like real objects.
+    a = 0.25
+    n[..., 0] += a * np.sin(9 * np.pi * xx) * np.cos(5 * np.pi * yy)
+    n[..., 1] += a * np.cos(7 * np.pi * yy) * np.sin(4 * np.pi * xx)
+    n /= np.linalg.norm(n, axis=-1, keepdims=True)
+    n[~inside] = 0
+    n = n.astype(np.float32)
+    d_true = (sh_basis(n.astype(np.float64)) @ TRUE_SH.T).astype(np.float32)
+    occl = rng.random((w, w)) < 0.2
+    d0 = d_true * np.where(occl, 0.5, 1.0)[..., None] + rng.normal(0, 0.01, (w, w, 3)).astype(np.float32)
+    r = rn.reflect_dirs(n, np.array([0, 0, 1.0]))
+    r0 = np.where(inside[..., None], reflection_env(np.nan_to_num(r)), 0).astype(np.float32)
+    depth = np.where(inside, 5 - z, np.inf).astype(np.float32)
+    return n, inside, d0, r, r0, depth
+
+
+def sphere_dirs(k=20000):
+    i = np.arange(k) + 0.5
+    z = 1 - 2 * i / k
+    rr = np.sqrt(1 - z * z)
+    phi = np.pi * (3 - np.sqrt(5)) * i
+    return np.stack([rr * np.cos(phi), rr * np.sin(phi), z], -1)
+
+
+def stages(w, rng, env_size, region="whole"):
+    import rokeby_native as rn
+
+    n, inside, d0, r, r0, depth = bumpy_sphere(w, rng)
+    if region == "quarter":
+        # Only the lower-left quarter of the sphere is the patch: large holes to fill.
+        inside = inside & (np.arange(w)[None, :] < w // 2) & (np.arange(w)[:, None] < w // 2)
+    px = int(inside.sum())
+    nm, dm = n[inside], d0[inside]
+    t_ls, ls = median_time(lambda: rn.sh_fit(nm, dm, "ls"))
+    t_qp, qp = median_time(lambda: rn.sh_fit(nm, dm, "qp"))
+    dirs = sphere_dirs()
+    truth = sh_basis(dirs) @ TRUE_SH.T
+    err = {m: float(np.sqrt(((sh_basis(dirs) @ f["coeffs"].T - truth) ** 2).mean()) / np.abs(truth).mean())
+           for m, f in (("ls", ls), ("qp", qp))}
+    mask = inside.astype(np.float32)
+    t_part, part = median_time(lambda: rn.reflection_env(r, r0, mask, depth, size=env_size, stage="partial"))
+    t_fill_total, full = median_time(lambda: rn.reflection_env(r, r0, mask, depth, size=env_size, blur_sigma=0.0))
+    t_blur_total, _ = median_time(lambda: rn.reflection_env(r, r0, mask, depth, size=env_size))
+    # Hole filling alone, on the same holes (the pure solve, incl. the texels beyond the equator).
+    t_fill, _ = median_time(lambda: rn.fill_holes(part["map"], part["covered"]))
+    s = env_size
+    uv = (np.arange(s) + 0.5) / s * 2 - 1
+    disk = (uv[None, :] ** 2 + uv[:, None] ** 2) <= 1
+    cov = part["covered"] | ~disk[None]
+    ok = np.isfinite(dirs).all(1)
+    look = rn.envmap_lookup(full["map"], dirs[ok])
+    visible = dirs[:, 2] > -0.3  # reflected directions the front of a sphere shows, not only at its rim
+    env_err = float(np.abs(look - reflection_env(dirs))[visible].mean())
+    return {
+        "width": w, "region": region, "pixels": px, "env_size": env_size,
+        "diffuse_ls_ms": 1e3 * t_ls, "diffuse_qp_ms": 1e3 * t_qp, "qp_iterations": [int(x) for x in qp["iterations"]],
+        "diffuse_ls_rel_rms": err["ls"], "diffuse_qp_rel_rms": err["qp"],
+        "ls_max_residual": float(ls["max_residual"].max()), "qp_max_residual": float(qp["max_residual"].max()),
+        "partial_ms": 1e3 * t_part, "coverage": float(part["coverage"]), "triangles": int(part["triangles"]),
+        "hole_texels": int((~cov).sum()), "fill_ms": 1e3 * t_fill,
+        "partial_plus_fill_ms": 1e3 * t_fill_total, "partial_fill_blur_ms": 1e3 * t_blur_total,
+        "blur_ms": 1e3 * max(t_blur_total - t_fill_total, 0.0),
+        "reflection_mean_abs_err": env_err,
+    }
+
+
+def recomposite_bench(rng, w=1920, h=1080, patches=10, env_size=128, repeat=5):
+    import rokeby_native as rn
+
+    ids = np.full((h, w), -1, np.int32)
+    cols = np.array_split(np.arange(w), patches)
+    for k, c in enumerate(cols):
+        ids[80:h - 80, c[0]:c[-1] + 1] = k
+    n = rng.normal(size=(h, w, 3)).astype(np.float32)
+    n[..., 2] = np.abs(n[..., 2]) + 0.5
+    n /= np.linalg.norm(n, axis=-1, keepdims=True)
+    e = n.copy()
+    e[: h // 2, :, 2] *= 0.5
+    env = np.abs(rng.normal(size=(2, env_size, env_size, 3))).astype(np.float32)
+    pts = [{"sh": TRUE_SH, "env": env} for _ in range(patches)]
+    d0 = np.abs(rng.normal(size=(h, w, 3))).astype(np.float32)
+    r0 = np.abs(rng.normal(size=(h, w, 3))).astype(np.float32)
+    img = d0 + r0
+    a = np.ones((h, w), np.float32) * 0.9
+    view = np.zeros((h, w, 3), np.float32)
+    view[..., 2] = 1
+    before = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+    run = lambda: rn.recomposite(ids, n, e, view, d0, r0, img, pts, alpha_d=a, alpha_r=a, diffuse_color=d0, reflection_color=r0)  # noqa: E731
+    run()
+    ts = []
+    for _ in range(repeat):
+        t = time.perf_counter()
+        run()
+        ts.append(time.perf_counter() - t)
+    t_id = median_time(lambda: rn.recomposite(ids, n, n, view, d0, r0, img, pts, alpha_d=a, alpha_r=a), repeat)[0]
+    peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+    return {"width": w, "height": h, "patches": patches, "env_size": env_size, "edited_fraction": 0.5 * (h - 160) / h,
+            "recomposite_ms": 1e3 * float(np.median(ts)), "recomposite_identity_ms": 1e3 * t_id,
+            "peak_rss_mb": peak / 1024, "rss_before_mb": before / 1024,
+            "inputs_mb": sum(x.nbytes for x in (ids, n, e, view, d0, r0, img, a, a)) / 2 ** 20}
+
+
+def main():
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--json")
+    ap.add_argument("--sizes", default="512,1024")
+    ap.add_argument("--env-size", type=int, default=128)
+    args = ap.parse_args()
+    rng = np.random.default_rng(2016)
+    rows = [stages(int(s), rng, args.env_size) for s in args.sizes.split(",")]
+    rows.append(stages(int(args.sizes.split(",")[0]), rng, 256))
+    rows.append(stages(int(args.sizes.split(",")[-1]), rng, 256, "quarter"))
+    rec = recomposite_bench(rng)
+    out = {"threads": os.environ.get("RAYON_NUM_THREADS", str(os.cpu_count())), "stages": rows, "recomposite": rec}
+    text = json.dumps(out, indent=1)
+    if args.json:
+        Path(args.json).write_text(text)
+    print(text)
+
+
+if __name__ == "__main__":
+    main()
