@@ -137,3 +137,28 @@ def reference(image, lobe: str, directions, param: float = 0.0) -> np.ndarray:
     """The seed's brute-force sum over every texel (the validation reference): lobe 'phong',
     'ggx', 'torrance_sparrow' (normalised like the prefiltered maps) or 'lambert' (E(n)/π)."""
     return native.module().env_reference(image, lobe, directions, float(param))
+
+
+def lookup_levels(levels, params, directions, param) -> np.ndarray:
+    """Prefiltered radiance at (..., 3) reflected ``directions`` for a lobe parameter between the
+    prefiltered ones: bilinear in each level's map, linear between the two levels that bracket
+    ``param`` (a scalar, or one value per direction) — what a preview shader does with the chain."""
+    params = np.asarray(params, np.float64)
+    if params.ndim != 1 or len(params) != len(levels) or len(levels) == 0:
+        raise ValueError(f"params: need one value per level ({len(levels)}), got shape {params.shape}")
+    order = np.argsort(params)
+    ps = params[order]
+    d = np.asarray(directions, np.float64)
+    p = np.broadcast_to(np.asarray(param, np.float64), d.shape[:-1])
+    if not np.isfinite(p).all():
+        raise ValueError("param: contains NaN or inf")
+    samples = np.stack([sample(levels[i], "latlong", d) for i in order], axis=0)
+    x = np.clip(p, ps[0], ps[-1])
+    hi = np.clip(np.searchsorted(ps, x, side="right"), 1, len(ps) - 1) if len(ps) > 1 else np.zeros(x.shape, int)
+    lo = np.maximum(hi - 1, 0)
+    span = np.where(ps[hi] > ps[lo], ps[hi] - ps[lo], 1.0)
+    t = np.clip((x - ps[lo]) / span, 0.0, 1.0)[..., None]
+    idx = np.indices(x.shape)
+    a = samples[(lo, *idx)]
+    b = samples[(hi, *idx)]
+    return (1 - t) * a + t * b
