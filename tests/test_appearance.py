@@ -149,3 +149,22 @@ def test_bad_input_gives_clear_errors(ball):
     nt.nodes.remove(nt.nodes["Principled BSDF"])
     with pytest.raises(ValueError, match="has no Principled BSDF"):
         appearance.setup(ball, other)
+
+
+def test_stretch_turns_the_anisotropy_onto_the_stroke_direction(ball):
+    """At the +X pole of a ball the radial tangent is +Y and N × T is +Z: a stroke along +Z sets
+    the anisotropic rotation to ¼ (Cycles turns T by 2πρ about N), along +Y to 0, along the
+    diagonal (0, 1, 1) to ⅛; points far from the stroke keep their rotation."""
+    mat = appearance.setup(ball)
+    assert mat.node_tree.nodes["Principled BSDF"].inputs["Tangent"].links[0].from_node.name == "rokeby_tangent"
+    p = _points(ball)
+    pole = np.argmax(p[:, 0])
+    for direction, want in (((0, 0, 1), 0.25), ((0, 1, 0), 0.0), ((0, 1, 1), 0.125)):
+        d = 0.02 * np.array(direction, float) / np.linalg.norm(direction)
+        dabs = [p[pole] - d, p[pole], p[pole] + d]
+        appearance.paint(ball, "stretch", dabs, radius=0.3, value=0.5)
+        rho = appearance.read(ball, "anisotropic_rotation")
+        assert min(abs(rho[pole] - want), 0.5 - abs(rho[pole] - want)) < 0.01, (direction, rho[pole])
+        assert appearance.read(ball, "anisotropic")[pole] > 0.4
+    far = np.argmin(p[:, 0])
+    assert appearance.read(ball, "anisotropic_rotation")[far] == pytest.approx(0.0, abs=1e-6)

@@ -12,7 +12,8 @@ brush         attribute                      Principled BSDF input
 diffuse       ``rokeby_base_color`` (RGBA)   Base Color
 specular      ``rokeby_specular``            Specular IOR Level (k_s)
 sharpen/blur  ``rokeby_roughness``           Roughness (sharpen lowers, blur raises)
-stretch       ``rokeby_anisotropic``         Anisotropic (its direction: ``rokeby_anisotropic_rotation``)
+stretch       ``rokeby_anisotropic``         Anisotropic, and its direction ``rokeby_anisotropic_rotation``
+                                             (Anisotropic Rotation) from the stroke direction
 metallic      ``rokeby_metallic``            Metallic (energy between diffuse and specular)
 ============  =============================  ==========================================
 
@@ -82,6 +83,16 @@ def setup(obj, material=None):
     nt = mat.node_tree
     me = obj.data
     n = len(me.vertices)
+    tangent_in = bsdf.inputs["Tangent"]
+    if not tangent_in.is_linked:
+        # The tangent Cycles and EEVEE use when none is given, made explicit: stroke directions
+        # are turned into anisotropic rotations relative to it (paint(..., 'stretch')).
+        tan = nt.nodes.new("ShaderNodeTangent")
+        tan.name = tan.label = NODE_PREFIX + "tangent"
+        tan.direction_type = "RADIAL"
+        tan.axis = "Z"
+        tan.location = (bsdf.location.x - 250, bsdf.location.y - 520)
+        nt.links.new(tan.outputs["Tangent"], tangent_in)
     for param, (attr, socket_name, default, _) in PARAMS.items():
         sock = bsdf.inputs[socket_name]
         if attr not in me.attributes:
@@ -217,7 +228,57 @@ def paint(obj, brush: str, centres, radius: float, value=None, strength: float =
         else:
             vals = np.maximum(vals, 0.0)
     _write(obj, param, vals)
+    if brush == "stretch" and len(c) >= 2:
+        _stretch_direction(obj, pts, m, c, radius, strength)
     return vals.astype(np.float32)
+
+
+def _radial_tangent_frame(obj, m):
+    """World-space (T, B, N) per vertex for the radial-Z tangent (Cycles' svm_node_tangent:
+    data = (−(g_y − ½), g_x − ½, 0) of the generated coordinates, object_normal_transform,
+    T = N × normalize(data × N)) and B = N × T, where T turns at rotation ¼."""
+    me = obj.data
+    n = len(me.vertices)
+    co = np.empty(3 * n, np.float32)
+    me.vertices.foreach_get("co", co)
+    co = co.reshape(n, 3).astype(np.float64)
+    nrm = np.empty(3 * n, np.float32)
+    me.vertices.foreach_get("normal", nrm)
+    lo, hi = co.min(axis=0), co.max(axis=0)
+    g = (co - lo) / np.where(hi > lo, hi - lo, 1.0)
+    inv = np.linalg.inv(m[:3, :3])  # both transformed as normals (object_normal_transform)
+    data = np.stack([-(g[:, 1] - 0.5), g[:, 0] - 0.5, np.zeros(n)], axis=-1) @ inv
+    nw = nrm.reshape(n, 3).astype(np.float64) @ inv
+    nw /= np.maximum(np.linalg.norm(nw, axis=1, keepdims=True), 1e-30)
+    x = np.cross(data, nw)
+    x /= np.maximum(np.linalg.norm(x, axis=1, keepdims=True), 1e-30)
+    t = np.cross(nw, x)
+    return t, np.cross(nw, t), nw
+
+
+def _stretch_direction(obj, pts, m, dabs, radius, strength):
+    """Fraser's stretch brush also sets the direction: the anisotropic rotation ρ turns T about N
+    by 2πρ (Cycles: rotate_around_axis(T, N, 2πρ)) onto the stroke direction s at each dab,
+    ρ = atan2(s·B, s·T)/2π. Anisotropy is a line, not an arrow, so ρ is blended on its double
+    angle: (cos 4πρ, sin 4πρ) mixed with the dab's Gaussian weights."""
+    mat = obj.active_material
+    tan = mat.node_tree.nodes.get(NODE_PREFIX + "tangent") if mat is not None and mat.use_nodes else None
+    if tan is None or not tan.outputs["Tangent"].is_linked:
+        raise ValueError("brush: 'stretch' directions are relative to the radial tangent that setup() wires; this material's Tangent input is driven by something else")
+    t, b, _ = _radial_tangent_frame(obj, m)
+    rho = read(obj, "anisotropic_rotation").astype(np.float64)
+    vec = np.stack([np.cos(4 * np.pi * rho), np.sin(4 * np.pi * rho)], axis=-1)
+    for k in range(len(dabs)):
+        s = dabs[min(k + 1, len(dabs) - 1)] - dabs[max(k - 1, 0)]
+        if not np.linalg.norm(s) > 0:
+            continue
+        target = np.arctan2(b @ s, t @ s)  # per point: the stroke direction's angle from T
+        goal = np.stack([np.cos(2 * target), np.sin(2 * target)], axis=-1)
+        w = falloff(pts, dabs[k], radius, strength)[:, None]
+        vec = vec + w * (goal - vec)
+    rho = np.mod(np.arctan2(vec[:, 1], vec[:, 0]) / (4 * np.pi), 0.5)
+    rho[rho > 0.5 - 1e-7] = 0.0  # −0 and rounding: ½ ≡ 0 for a line
+    _write(obj, "anisotropic_rotation", rho)
 
 
 def set_global(mat, param: str, value) -> None:
