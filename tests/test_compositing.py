@@ -270,7 +270,7 @@ def test_screen_space_rotation_matches_the_camera(rendered):
     from rokeby import compositing as C
 
     _path, p, cam = rendered
-    rot = C.camera_rotation(p.incoming, p.incoming_cam)
+    rot = C.camera_rotation(p.camera_x, p.camera_y)
     np.testing.assert_allclose(rot, cam.T, atol=2e-3)  # world → camera = R_camᵀ
     n, v = C.screen_space(p)
     obj = p.index_ob > 0
@@ -379,3 +379,17 @@ def test_api_recomposite_render_shows_a_new_image(tmp_path):
     assert (np.abs(px2 - px) > 1e-4).any(-1).sum() > 50
     with pytest.raises(Exception, match="edit: unknown"):
         api.recomposite_render(str(tmp_path / "h.exr"), edit="twist", scene=sc)
+
+
+def test_screen_space_with_an_orthographic_camera(tmp_path):
+    """All view vectors are parallel: the rotation must not come from them."""
+    from rokeby import compositing as C
+
+    sc = _scene()
+    sc.camera.data.type = "ORTHO"
+    sc.cycles.samples = 2
+    p = C.render_passes(sc, str(tmp_path / "o.exr"))
+    np.testing.assert_allclose(C.camera_rotation(p.camera_x, p.camera_y), np.array(sc.camera.matrix_world.to_3x3()).T, atol=1e-5)
+    n, v = C.screen_space(p)
+    obj = p.index_ob > 0
+    np.testing.assert_allclose(v[obj], np.broadcast_to([0, 0, 1], v[obj].shape), atol=1e-5)

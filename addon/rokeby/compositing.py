@@ -7,9 +7,9 @@ re-rendering. Pipeline (numerics in the Rust core, reached through ``native``):
    direct/indirect/colour, object and material index, ambient occlusion (α_D), depth, and three
    AOVs written by nodes added to every material: ``rokeby_reflocc`` (reflection occlusion α_R:
    an Ambient Occlusion node with *Only Local* around the reflected direction, so only
-   self-reflections count), ``rokeby_incoming`` and ``rokeby_incoming_cam`` (the view vector in
-   world and camera space; their pairs give the world→camera rotation of each frame, so an EXR
-   alone is enough — no camera data to carry along).
+   self-reflections count), ``rokeby_incoming_cam`` (the view vector in camera space) and
+   ``rokeby_camera_x``/``_y`` (the world axes in camera space: the camera's rotation in every
+   frame, so an EXR alone is enough — no camera data to carry along).
 2. ``read_exr``: the passes from a multilayer OpenEXR (OpenEXR package); missing passes are named.
 3. ``reconstruct``: per object/material patch (IndexOB × IndexMA), the SH diffuse environment
    (eq. 1; the QP of §3.1 or least squares) of D0 = DiffDir + DiffInd, and the dual-paraboloid
@@ -37,7 +37,8 @@ import numpy as np
 from . import native
 
 AOV_REFLOCC = "rokeby_reflocc"
-AOV_INCOMING = "rokeby_incoming"
+AOV_CAMERA_X = "rokeby_camera_x"
+AOV_CAMERA_Y = "rokeby_camera_y"
 AOV_INCOMING_CAM = "rokeby_incoming_cam"
 NODE_TAG = "Rokeby Compositing"
 
@@ -56,7 +57,8 @@ PASSES = {
     "AO": ("ao", 3),
     "Depth": ("depth", 1),
     AOV_REFLOCC: ("reflocc", 1),
-    AOV_INCOMING: ("incoming", 3),
+    AOV_CAMERA_X: ("camera_x", 3),
+    AOV_CAMERA_Y: ("camera_y", 3),
     AOV_INCOMING_CAM: ("incoming_cam", 3),
 }
 
@@ -102,9 +104,16 @@ def _material_nodes(mat) -> None:
     out_r.aov_name = AOV_REFLOCC
     nt.links.new(ao.outputs["AO"], out_r.inputs["Value"])
     geo = node("ShaderNodeNewGeometry", "view vector")
-    out_w = node("ShaderNodeOutputAOV", AOV_INCOMING)
-    out_w.aov_name = AOV_INCOMING
-    nt.links.new(geo.outputs["Incoming"], out_w.inputs["Color"])
+    # The world X and Y axes in camera space: the camera's rotation, exact at every pixel.
+    for name, axis in ((AOV_CAMERA_X, (1.0, 0.0, 0.0)), (AOV_CAMERA_Y, (0.0, 1.0, 0.0))):
+        ax = node("ShaderNodeCombineXYZ", f"world axis {name[-1]}")
+        ax.inputs[0].default_value, ax.inputs[1].default_value, ax.inputs[2].default_value = axis
+        tr = node("ShaderNodeVectorTransform", f"world axis {name[-1]} in camera space")
+        tr.vector_type, tr.convert_from, tr.convert_to = "VECTOR", "WORLD", "CAMERA"
+        nt.links.new(ax.outputs["Vector"], tr.inputs["Vector"])
+        out = node("ShaderNodeOutputAOV", name)
+        out.aov_name = name
+        nt.links.new(tr.outputs["Vector"], out.inputs["Color"])
     vt = node("ShaderNodeVectorTransform", "view vector in camera space")
     vt.vector_type, vt.convert_from, vt.convert_to = "VECTOR", "WORLD", "CAMERA"
     nt.links.new(geo.outputs["Incoming"], vt.inputs["Vector"])
@@ -124,7 +133,7 @@ def setup_passes(scene, view_layer=None) -> list[str]:
                  "use_pass_material_index", "use_pass_ambient_occlusion", "use_pass_z"):
         setattr(vl, attr, True)
     have = {a.name for a in vl.aovs}
-    for name, kind in ((AOV_REFLOCC, "VALUE"), (AOV_INCOMING, "COLOR"), (AOV_INCOMING_CAM, "COLOR")):
+    for name, kind in ((AOV_REFLOCC, "VALUE"), (AOV_CAMERA_X, "COLOR"), (AOV_CAMERA_Y, "COLOR"), (AOV_INCOMING_CAM, "COLOR")):
         if name not in have:
             a = vl.aovs.add()
             a.name, a.type = name, kind
@@ -203,7 +212,8 @@ class Passes:
     ao: np.ndarray
     depth: np.ndarray
     reflocc: np.ndarray
-    incoming: np.ndarray
+    camera_x: np.ndarray
+    camera_y: np.ndarray
     incoming_cam: np.ndarray
     alpha: np.ndarray | None = None
     header: dict = field(default_factory=dict)
@@ -293,24 +303,25 @@ def _unit(a: np.ndarray) -> np.ndarray:
         return np.where(n > 1e-12, a / n, 0.0).astype(np.float32)
 
 
-def camera_rotation(incoming: np.ndarray, incoming_cam: np.ndarray) -> np.ndarray:
-    """World → screen-space rotation (3×3) from pairs of view vectors in world and camera space
-    (the two AOVs): the orthogonal Procrustes solution (SVD), then the flip to z-towards-viewer."""
-    w = incoming.reshape(-1, 3).astype(np.float64)
-    c = incoming_cam.reshape(-1, 3).astype(np.float64)
-    ok = (np.linalg.norm(w, axis=1) > 0.5) & (np.linalg.norm(c, axis=1) > 0.5) & np.isfinite(w).all(1) & np.isfinite(c).all(1)
-    if ok.sum() < 3:
-        raise CompositingError(f"passes {AOV_INCOMING}/{AOV_INCOMING_CAM}: fewer than 3 object pixels to find the camera rotation")
-    u, _s, vt = np.linalg.svd(c[ok].T @ w[ok])
-    rot = _CAM_FLIP @ (u @ vt)
-    if np.linalg.det(rot) < 0:
-        raise CompositingError("view-vector AOVs are inconsistent: no rotation maps world to camera space")
-    return rot
+def camera_rotation(camera_x: np.ndarray, camera_y: np.ndarray) -> np.ndarray:
+    """World → screen-space rotation (3×3) from the AOVs holding the world X and Y axes in Blender's
+    shader camera space (z forward) at every surface pixel: their mean over the pixels, flipped to
+    z towards the viewer, completed by the cross product and re-orthonormalised (SVD)."""
+    x = camera_x.reshape(-1, 3).astype(np.float64)
+    y = camera_y.reshape(-1, 3).astype(np.float64)
+    ok = (np.abs(np.linalg.norm(x, axis=1) - 1) < 1e-3) & (np.abs(np.linalg.norm(y, axis=1) - 1) < 1e-3)
+    if not ok.any():
+        raise CompositingError(f"passes {AOV_CAMERA_X}/{AOV_CAMERA_Y}: no surface pixel holds the camera rotation")
+    cx = _CAM_FLIP @ x[ok].mean(0)
+    cy = _CAM_FLIP @ y[ok].mean(0)
+    m = np.stack([cx, cy, np.cross(cx, cy)], 1)  # columns: world axes in screen space
+    u, _s, vt = np.linalg.svd(m)
+    return u @ vt
 
 
 def screen_space(p: Passes) -> tuple[np.ndarray, np.ndarray]:
     """Screen-space normals and view vectors (H, W, 3) float32; zero where there is no surface."""
-    rot = camera_rotation(p.incoming, p.incoming_cam)
+    rot = camera_rotation(p.camera_x, p.camera_y)
     n = _unit(p.normal @ rot.T.astype(np.float32))
     v = _unit(p.incoming_cam * _CAM_FLIP.diagonal().astype(np.float32))
     return n, v
