@@ -161,11 +161,22 @@ def _write(obj, param, values):
     obj.data.update()
 
 
+# Dabs touch the points within CUTOFF·radius: the Gaussian is below e^(−2·CUTOFF²) = 1e-7 of its
+# peak beyond (CUTOFF = 2.84), so no stored float32 value in [0, 1] changes there.
+CUTOFF = 2.84
+
+
 def falloff(points, centre, radius: float, strength: float = 1.0) -> np.ndarray:
     """Gaussian brush weights w = strength · exp(−‖p − c‖² / (2 (radius/2)²)) for (N, 3) points."""
     d2 = np.sum((np.asarray(points, np.float64) - np.asarray(centre, np.float64)) ** 2, axis=1)
     s = 0.5 * radius
     return strength * np.exp(-d2 / (2.0 * s * s))
+
+
+def _reach(pts, dab, radius):
+    """Indices of the points a dab reaches (see CUTOFF)."""
+    d = pts - dab
+    return np.flatnonzero(np.einsum("ij,ij->i", d, d) < (CUTOFF * radius) ** 2)
 
 
 def paint(obj, brush: str, centres, radius: float, value=None, strength: float = 1.0, mode: str | None = None) -> np.ndarray:
@@ -210,45 +221,50 @@ def paint(obj, brush: str, centres, radius: float, value=None, strength: float =
         target = float(value)
     m = np.asarray(obj.matrix_world, np.float64)
     co = np.empty(3 * len(obj.data.vertices), np.float32)
-    obj.data.vertices.foreach_get("co", co)
+    obj.data.attributes["position"].data.foreach_get("vector", co)  # the fast path of `co`
     pts = co.reshape(-1, 3).astype(np.float64) @ m[:3, :3].T + m[:3, 3]
     vals = read(obj, param).astype(np.float64)
+    reached = []
     for dab in c:
-        w = falloff(pts, dab, radius, strength)
+        idx = _reach(pts, dab, radius)
+        reached.append(idx)
+        w = falloff(pts[idx], dab, radius, strength)
         if param == "diffuse":
             w = w[:, None]
+        v = vals[idx]
         if mode == "MIX":
-            vals = vals + w * (target - vals)
+            v = v + w * (target - v)
         else:
-            vals = vals + (1.0 if mode == "ADD" else -1.0) * w * target
+            v = v + (1.0 if mode == "ADD" else -1.0) * w * target
         if param == "anisotropic_rotation":
-            vals = np.mod(vals, 1.0)
+            v = np.mod(v, 1.0)
         elif param != "diffuse":
-            vals = np.clip(vals, lo, hi)
+            v = np.clip(v, lo, hi)
         else:
-            vals = np.maximum(vals, 0.0)
+            v = np.maximum(v, 0.0)
+        vals[idx] = v
     _write(obj, param, vals)
     if brush == "stretch" and len(c) >= 2:
-        _stretch_direction(obj, pts, m, c, radius, strength)
+        _stretch_direction(obj, pts, m, c, radius, strength, np.unique(np.concatenate(reached)))
     return vals.astype(np.float32)
 
 
-def _radial_tangent_frame(obj, m):
+def _radial_tangent_frame(obj, m, idx):
     """World-space (T, B, N) per vertex for the radial-Z tangent (Cycles' svm_node_tangent:
     data = (−(g_y − ½), g_x − ½, 0) of the generated coordinates, object_normal_transform,
     T = N × normalize(data × N)) and B = N × T, where T turns at rotation ¼."""
     me = obj.data
     n = len(me.vertices)
     co = np.empty(3 * n, np.float32)
-    me.vertices.foreach_get("co", co)
+    me.attributes["position"].data.foreach_get("vector", co)
     co = co.reshape(n, 3).astype(np.float64)
     nrm = np.empty(3 * n, np.float32)
-    me.vertices.foreach_get("normal", nrm)
+    me.vertex_normals.foreach_get("vector", nrm)
     lo, hi = co.min(axis=0), co.max(axis=0)
-    g = (co - lo) / np.where(hi > lo, hi - lo, 1.0)
+    g = (co[idx] - lo) / np.where(hi > lo, hi - lo, 1.0)
     inv = np.linalg.inv(m[:3, :3])  # both transformed as normals (object_normal_transform)
-    data = np.stack([-(g[:, 1] - 0.5), g[:, 0] - 0.5, np.zeros(n)], axis=-1) @ inv
-    nw = nrm.reshape(n, 3).astype(np.float64) @ inv
+    data = np.stack([-(g[:, 1] - 0.5), g[:, 0] - 0.5, np.zeros(len(idx))], axis=-1) @ inv
+    nw = nrm.reshape(n, 3)[idx].astype(np.float64) @ inv
     nw /= np.maximum(np.linalg.norm(nw, axis=1, keepdims=True), 1e-30)
     x = np.cross(data, nw)
     x /= np.maximum(np.linalg.norm(x, axis=1, keepdims=True), 1e-30)
@@ -256,7 +272,7 @@ def _radial_tangent_frame(obj, m):
     return t, np.cross(nw, t), nw
 
 
-def _stretch_direction(obj, pts, m, dabs, radius, strength):
+def _stretch_direction(obj, pts, m, dabs, radius, strength, idx):
     """Fraser's stretch brush also sets the direction: the anisotropic rotation ρ turns T about N
     by 2πρ (Cycles: rotate_around_axis(T, N, 2πρ)) onto the stroke direction s at each dab,
     ρ = atan2(s·B, s·T)/2π. Anisotropy is a line, not an arrow, so ρ is blended on its double
@@ -265,8 +281,10 @@ def _stretch_direction(obj, pts, m, dabs, radius, strength):
     tan = mat.node_tree.nodes.get(NODE_PREFIX + "tangent") if mat is not None and mat.use_nodes else None
     if tan is None or not tan.outputs["Tangent"].is_linked:
         raise ValueError("brush: 'stretch' directions are relative to the radial tangent that setup() wires; this material's Tangent input is driven by something else")
-    t, b, _ = _radial_tangent_frame(obj, m)
-    rho = read(obj, "anisotropic_rotation").astype(np.float64)
+    t, b, _ = _radial_tangent_frame(obj, m, idx)
+    all_rho = read(obj, "anisotropic_rotation").astype(np.float64)
+    rho = all_rho[idx]
+    pts = pts[idx]
     vec = np.stack([np.cos(4 * np.pi * rho), np.sin(4 * np.pi * rho)], axis=-1)
     for k in range(len(dabs)):
         s = dabs[min(k + 1, len(dabs) - 1)] - dabs[max(k - 1, 0)]
@@ -278,7 +296,8 @@ def _stretch_direction(obj, pts, m, dabs, radius, strength):
         vec = vec + w * (goal - vec)
     rho = np.mod(np.arctan2(vec[:, 1], vec[:, 0]) / (4 * np.pi), 0.5)
     rho[rho > 0.5 - 1e-7] = 0.0  # −0 and rounding: ½ ≡ 0 for a line
-    _write(obj, "anisotropic_rotation", rho)
+    all_rho[idx] = rho
+    _write(obj, "anisotropic_rotation", all_rho)
 
 
 def set_global(mat, param: str, value) -> None:
