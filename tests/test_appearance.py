@@ -168,3 +168,31 @@ def test_stretch_turns_the_anisotropy_onto_the_stroke_direction(ball):
         assert appearance.read(ball, "anisotropic")[pole] > 0.4
     far = np.argmin(p[:, 0])
     assert appearance.read(ball, "anisotropic_rotation")[far] == pytest.approx(0.0, abs=1e-6)
+
+
+def test_operators_paint_through_the_registered_add_on(ball):
+    """rokeby.register() brings the setup and paint operators, the brush settings and the panel;
+    the paint operator's exec path applies a stroke (the modal path ray-casts the mouse onto the
+    object and calls the same function per dab)."""
+    import rokeby
+
+    rokeby.register()
+    try:
+        bpy.context.view_layer.objects.active = ball
+        assert not bpy.ops.rokeby.appearance_paint.poll()  # not set up yet
+        assert bpy.ops.rokeby.appearance_setup() == {"FINISHED"}
+        s = bpy.context.window_manager.rokeby_appearance_brush
+        s.brush, s.radius, s.strength, s.value = "blur", 0.5, 1.0, 0.6
+        p = _points(ball)
+        pole = int(np.argmax(p[:, 0]))
+        assert bpy.ops.rokeby.appearance_paint(stroke=[{"name": "", "location": tuple(p[pole])}]) == {"FINISHED"}
+        assert appearance.read(ball, "roughness")[pole] == pytest.approx(0.7, abs=1e-5)
+        with pytest.raises(RuntimeError, match="stroke: give at least one"):
+            bpy.ops.rokeby.appearance_paint()
+        # one dab at a time, the previous point giving the stretch direction (+Z at the +X pole → ¼)
+        appearance.paint(ball, "stretch", [p[pole] + [0, 0, 0.01]], radius=0.3, value=0.5, previous=p[pole] - [0, 0, 0.01])
+        rho = appearance.read(ball, "anisotropic_rotation")[pole]
+        assert abs(rho - 0.25) < 0.01
+        assert "ROKEBY_PT_appearance" in dir(bpy.types)
+    finally:
+        rokeby.unregister()

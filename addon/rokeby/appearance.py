@@ -179,11 +179,13 @@ def _reach(pts, dab, radius):
     return np.flatnonzero(np.einsum("ij,ij->i", d, d) < (CUTOFF * radius) ** 2)
 
 
-def paint(obj, brush: str, centres, radius: float, value=None, strength: float = 1.0, mode: str | None = None) -> np.ndarray:
+def paint(obj, brush: str, centres, radius: float, value=None, strength: float = 1.0, mode: str | None = None, previous=None) -> np.ndarray:
     """One stroke of ``brush`` (a parameter of PARAMS or Fraser's 'sharpen', 'blur', 'stretch')
     through world-space ``centres`` ((3,) or (K, 3) dabs, applied in order). ``value`` is the
     target (mode 'MIX', an RGB(A) colour for 'diffuse') or the amount (modes 'ADD'/'SUBTRACT';
-    default 0.25). Returns the new values."""
+    default 0.25). ``previous``: the stroke's point before these dabs (not painted again; it
+    gives 'stretch' its direction when a stroke arrives one dab at a time). Returns the new
+    values."""
     _check_mesh(obj)
     param, default_mode = BRUSHES.get(brush, (brush, "MIX"))
     if param not in PARAMS:
@@ -201,6 +203,12 @@ def paint(obj, brush: str, centres, radius: float, value=None, strength: float =
         raise ValueError(f"centres: expected shape (3,) or (K, 3), got {np.shape(centres)}")
     if not np.isfinite(c).all():
         raise ValueError("centres: contain NaN or inf")
+    path = c
+    if previous is not None:
+        prev = np.asarray(previous, np.float64).reshape(-1)
+        if prev.shape != (3,) or not np.isfinite(prev).all():
+            raise ValueError(f"previous: expected 3 finite values, got {previous!r}")
+        path = np.vstack([prev, c])
     if value is None:
         if mode == "MIX":
             raise ValueError(f"value: brush {brush!r} in mode 'MIX' needs a target value")
@@ -244,8 +252,8 @@ def paint(obj, brush: str, centres, radius: float, value=None, strength: float =
             v = np.maximum(v, 0.0)
         vals[idx] = v
     _write(obj, param, vals)
-    if brush == "stretch" and len(c) >= 2:
-        _stretch_direction(obj, pts, m, c, radius, strength, np.unique(np.concatenate(reached)))
+    if brush == "stretch" and len(path) >= 2:
+        _stretch_direction(obj, pts, m, path, len(path) - len(c), radius, strength, np.unique(np.concatenate(reached)))
     return vals.astype(np.float32)
 
 
@@ -272,7 +280,7 @@ def _radial_tangent_frame(obj, m, idx):
     return t, np.cross(nw, t), nw
 
 
-def _stretch_direction(obj, pts, m, dabs, radius, strength, idx):
+def _stretch_direction(obj, pts, m, path, first, radius, strength, idx):
     """Fraser's stretch brush also sets the direction: the anisotropic rotation ρ turns T about N
     by 2πρ (Cycles: rotate_around_axis(T, N, 2πρ)) onto the stroke direction s at each dab,
     ρ = atan2(s·B, s·T)/2π. Anisotropy is a line, not an arrow, so ρ is blended on its double
@@ -286,13 +294,13 @@ def _stretch_direction(obj, pts, m, dabs, radius, strength, idx):
     rho = all_rho[idx]
     pts = pts[idx]
     vec = np.stack([np.cos(4 * np.pi * rho), np.sin(4 * np.pi * rho)], axis=-1)
-    for k in range(len(dabs)):
-        s = dabs[min(k + 1, len(dabs) - 1)] - dabs[max(k - 1, 0)]
+    for k in range(first, len(path)):  # the dabs; path[:first] only gives directions
+        s = path[min(k + 1, len(path) - 1)] - path[max(k - 1, 0)]
         if not np.linalg.norm(s) > 0:
             continue
         target = np.arctan2(b @ s, t @ s)  # per point: the stroke direction's angle from T
         goal = np.stack([np.cos(2 * target), np.sin(2 * target)], axis=-1)
-        w = falloff(pts, dabs[k], radius, strength)[:, None]
+        w = falloff(pts, path[k], radius, strength)[:, None]
         vec = vec + w * (goal - vec)
     rho = np.mod(np.arctan2(vec[:, 1], vec[:, 0]) / (4 * np.pi), 0.5)
     rho[rho > 0.5 - 1e-7] = 0.0  # −0 and rounding: ½ ≡ 0 for a line

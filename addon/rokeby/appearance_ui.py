@@ -1,0 +1,190 @@
+"""Blender UI of appearance painting (issue 8): an operator that sets an object up, a brush
+operator that paints strokes on it in the viewport (modal: the mouse is ray-cast onto the object
+and each step is one dab of :func:`rokeby.appearance.paint`; exec: a stroke given as points, for
+scripts and tests), the brush settings, and a sidebar panel with Fraser's global sliders (the
+material's ``rokeby_global_*`` node values). No ``gpu`` is touched, so it registers in background
+mode."""
+
+from __future__ import annotations
+
+import bpy
+from bpy.props import CollectionProperty, EnumProperty, FloatProperty, FloatVectorProperty, PointerProperty
+
+from . import appearance
+
+_BRUSH_ITEMS = [
+    ("diffuse", "Diffuse", "Paint the diffuse colour"),
+    ("specular", "Specular", "Paint the specular intensity k_s toward the value"),
+    ("sharpen", "Sharpen", "Lower the roughness (sharper highlights)"),
+    ("blur", "Blur", "Raise the roughness (blurrier highlights)"),
+    ("stretch", "Stretch", "Raise the anisotropy and turn it along the stroke"),
+    ("metallic", "Metallic", "Move energy between diffuse and specular (Metallic) toward the value"),
+    ("roughness", "Roughness", "Paint the roughness toward the value"),
+]
+_MODES = {"diffuse": "MIX", "specular": "MIX", "metallic": "MIX", "roughness": "MIX"}
+
+
+class RokebyStrokePoint(bpy.types.PropertyGroup):
+    location: FloatVectorProperty(name="Location", size=3, subtype="XYZ")
+
+
+class RokebyAppearanceBrush(bpy.types.PropertyGroup):
+    brush: EnumProperty(name="Brush", items=_BRUSH_ITEMS, default="blur")
+    radius: FloatProperty(name="Radius", description="Brush radius in world units (the Gaussian falls to e⁻² there)", default=0.2, min=1e-4, soft_max=2.0, subtype="DISTANCE")
+    strength: FloatProperty(name="Strength", default=0.5, min=0.0, max=1.0, subtype="FACTOR")
+    value: FloatProperty(name="Value", description="Target (specular, metallic, roughness) or amount per dab (sharpen, blur, stretch)", default=0.25, min=0.0, max=1.0)
+    color: FloatVectorProperty(name="Colour", subtype="COLOR", size=3, default=(0.8, 0.2, 0.1), min=0.0, soft_max=1.0)
+
+
+def _settings(context):
+    return context.window_manager.rokeby_appearance_brush
+
+
+def _dab(settings, obj, points, previous=None):
+    brush = settings.brush
+    value = tuple(settings.color) if brush == "diffuse" else settings.value
+    appearance.paint(obj, brush, points, settings.radius, value=value, strength=settings.strength, mode=_MODES.get(brush), previous=previous)
+
+
+class ROKEBY_OT_appearance_setup(bpy.types.Operator):
+    """Create the painted-appearance attributes on the active mesh and wire them into its
+    material's Principled BSDF"""
+
+    bl_idname = "rokeby.appearance_setup"
+    bl_label = "Set Up Appearance Painting"
+    bl_options = {"REGISTER", "UNDO"}
+
+    @classmethod
+    def poll(cls, context):
+        return context.active_object is not None and context.active_object.type == "MESH"
+
+    def execute(self, context):
+        try:
+            appearance.setup(context.active_object)
+        except ValueError as e:
+            self.report({"ERROR"}, str(e))
+            return {"CANCELLED"}
+        return {"FINISHED"}
+
+
+class ROKEBY_OT_appearance_paint(bpy.types.Operator):
+    """Paint the active object's appearance with the current brush (drag with the left mouse
+    button; right mouse or Esc ends)"""
+
+    bl_idname = "rokeby.appearance_paint"
+    bl_label = "Paint Appearance"
+    bl_options = {"REGISTER", "UNDO"}
+
+    stroke: CollectionProperty(type=RokebyStrokePoint, name="Stroke", description="exec only: the world-space dab positions", options={"HIDDEN", "SKIP_SAVE"})
+
+    @classmethod
+    def poll(cls, context):
+        ob = context.active_object
+        return ob is not None and ob.type == "MESH" and appearance.PARAMS["roughness"][0] in ob.data.attributes
+
+    def execute(self, context):
+        if len(self.stroke) == 0:
+            self.report({"ERROR"}, "stroke: give at least one {'name': '', 'location': (x, y, z)} (or run the operator from the viewport)")
+            return {"CANCELLED"}
+        pts = [tuple(e.location) for e in self.stroke]
+        try:
+            _dab(_settings(context), context.active_object, pts)
+        except ValueError as e:
+            self.report({"ERROR"}, str(e))
+            return {"CANCELLED"}
+        return {"FINISHED"}
+
+    # --- interactive ------------------------------------------------------------------------
+    def _hit(self, context, event):
+        from bpy_extras import view3d_utils
+        from mathutils import Matrix
+
+        region, rv3d = context.region, context.region_data
+        co = (event.mouse_region_x, event.mouse_region_y)
+        origin = view3d_utils.region_2d_to_origin_3d(region, rv3d, co)
+        direction = view3d_utils.region_2d_to_vector_3d(region, rv3d, co)
+        ob = context.active_object
+        inv = ob.matrix_world.inverted()
+        ok, loc, _n, _i = ob.ray_cast(inv @ origin, (inv.to_3x3() @ direction).normalized(), depsgraph=context.evaluated_depsgraph_get())
+        return (ob.matrix_world @ loc) if ok else None
+
+    def invoke(self, context, event):
+        if context.area is None or context.area.type != "VIEW_3D":
+            return self.execute(context)
+        self._last = None
+        self._painting = False
+        context.window_manager.modal_handler_add(self)
+        context.workspace.status_text_set("Rokeby: drag to paint, right mouse / Esc to finish")
+        return {"RUNNING_MODAL"}
+
+    def modal(self, context, event):
+        if event.type in {"RIGHTMOUSE", "ESC"}:
+            context.workspace.status_text_set(None)
+            return {"FINISHED"}
+        if event.type == "LEFTMOUSE":
+            self._painting = event.value == "PRESS"
+            self._last = None
+        if self._painting and event.type in {"LEFTMOUSE", "MOUSEMOVE"}:
+            hit = self._hit(context, event)
+            if hit is not None:
+                try:
+                    _dab(_settings(context), context.active_object, [tuple(hit)], previous=self._last)
+                except ValueError as e:
+                    self.report({"ERROR"}, str(e))
+                    context.workspace.status_text_set(None)
+                    return {"CANCELLED"}
+                self._last = tuple(hit)
+                context.area.tag_redraw()
+            return {"RUNNING_MODAL"}
+        return {"PASS_THROUGH"}
+
+
+class ROKEBY_PT_appearance(bpy.types.Panel):
+    bl_label = "Appearance Painting"
+    bl_idname = "ROKEBY_PT_appearance"
+    bl_space_type = "VIEW_3D"
+    bl_region_type = "UI"
+    bl_category = "Rokeby"
+    bl_options = {"DEFAULT_CLOSED"}
+
+    def draw(self, context):
+        layout = self.layout
+        ob = context.active_object
+        if ob is None or ob.type != "MESH":
+            layout.label(text="Select a mesh")
+            return
+        if appearance.PARAMS["roughness"][0] not in ob.data.attributes:
+            layout.operator(ROKEBY_OT_appearance_setup.bl_idname)
+            return
+        s = _settings(context)
+        col = layout.column(align=True)
+        col.prop(s, "brush")
+        col.prop(s, "radius")
+        col.prop(s, "strength")
+        col.prop(s, "color" if s.brush == "diffuse" else "value")
+        layout.operator(ROKEBY_OT_appearance_paint.bl_idname, icon="BRUSH_DATA")
+        mat = ob.active_material
+        nodes = mat.node_tree.nodes if mat is not None and mat.use_nodes else {}
+        box = layout.box()
+        box.label(text="Global sliders")
+        for param in appearance.PARAMS:
+            node = nodes.get(appearance.NODE_PREFIX + "global_" + param)
+            if node is not None:
+                box.prop(node.inputs[7 if param == "diffuse" else 1], "default_value", text=param.replace("_", " ").title())
+
+
+_CLASSES = (RokebyStrokePoint, RokebyAppearanceBrush, ROKEBY_OT_appearance_setup, ROKEBY_OT_appearance_paint, ROKEBY_PT_appearance)
+
+
+def register():
+    for c in _CLASSES:
+        bpy.utils.register_class(c)
+    bpy.types.WindowManager.rokeby_appearance_brush = PointerProperty(type=RokebyAppearanceBrush)
+
+
+def unregister():
+    if hasattr(bpy.types.WindowManager, "rokeby_appearance_brush"):
+        del bpy.types.WindowManager.rokeby_appearance_brush
+    for c in reversed(_CLASSES):
+        if getattr(c, "is_registered", False):
+            bpy.utils.unregister_class(c)
