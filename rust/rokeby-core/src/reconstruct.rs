@@ -69,9 +69,11 @@ pub fn uv_to_dir(face: usize, u: f64, v: f64) -> DVec3 {
 #[inline]
 pub fn dir_to_uv(d: DVec3) -> (usize, f64, f64) {
     if d.z >= 0.0 {
-        (0, d.x / (1.0 + d.z), d.y / (1.0 + d.z))
+        let k = 1.0 / (1.0 + d.z);
+        (0, d.x * k, d.y * k)
     } else {
-        (1, d.x / (1.0 - d.z), d.y / (1.0 - d.z))
+        let k = 1.0 / (1.0 - d.z);
+        (1, d.x * k, d.y * k)
     }
 }
 
@@ -204,7 +206,7 @@ pub(crate) fn unit(c: &[f32]) -> Option<DVec3> {
     let v = DVec3::new(c[0] as f64, c[1] as f64, c[2] as f64);
     let l = v.length();
     if l.is_finite() && l > 1e-12 {
-        Some(v / l)
+        Some(v * (1.0 / l))
     } else {
         None
     }

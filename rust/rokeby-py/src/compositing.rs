@@ -412,8 +412,12 @@ pub fn recomposite<'py>(
     let rc = opt_image3(reflection_color, "reflection_color", h, w)?;
     let pts = parse_patches(patches)?;
     let empty: &[f32] = &[];
-    let sl = |a: &Option<F32Array<'_>>| -> Vec<f32> { a.as_ref().map(|x| x.slice().to_vec()).unwrap_or_default() };
-    let (adv, arv, alv, dcv, rcv) = (sl(&ad), sl(&ar), sl(&al), sl(&dc), sl(&rc));
+    // Borrowed, not copied: optional buffers are empty slices when absent.
+    let adv: &[f32] = ad.as_ref().map(|x| x.slice()).unwrap_or(empty);
+    let arv: &[f32] = ar.as_ref().map(|x| x.slice()).unwrap_or(empty);
+    let alv: &[f32] = al.as_ref().map(|x| x.slice()).unwrap_or(empty);
+    let dcv: &[f32] = dc.as_ref().map(|x| x.slice()).unwrap_or(empty);
+    let rcv: &[f32] = rc.as_ref().map(|x| x.slice()).unwrap_or(empty);
     let bufs = Buffers {
         ids: &ids_i,
         normals: n.slice(),
@@ -421,12 +425,12 @@ pub fn recomposite<'py>(
         view: v.slice(),
         diffuse: dd.slice(),
         reflection: rr.slice(),
-        alpha_d: if ad.is_some() { &adv } else { empty },
-        alpha_r: if ar.is_some() { &arv } else { empty },
-        alpha: if al.is_some() { &alv } else { empty },
+        alpha_d: adv,
+        alpha_r: arv,
+        alpha: alv,
         image: ii.slice(),
-        diffuse_color: if dc.is_some() { &dcv } else { empty },
-        reflection_color: if rc.is_some() { &rcv } else { empty },
+        diffuse_color: dcv,
+        reflection_color: rcv,
     };
     let params = Params { k_d, k_r, gamma, epsilon };
     let (out, st) = run_detached(py, || core_recomposite::recomposite(&bufs, &pts, &params))?;
