@@ -11,17 +11,26 @@
 //! * [`envmap`], [`prefilter`] — environment maps (lat-long, cube, sphere, dual-paraboloid; exact
 //!   direction formulas, seam-correct bilinear lookups, conversions) and their prefiltering under
 //!   environment light (Fraser): order-2 SH irradiance, Phong/GGX/Torrance–Sparrow lobes.
+//! * [`silhouette`], [`bvh`], [`light_space`], [`mls2d`], [`shadow_mesh`], [`shadow`] — freeform
+//!   shadow boundary editing (Mattausch, Igarashi, Wimmer): smooth silhouettes from the light,
+//!   shadow handles by ray casting, 2D MLS boundary deformation, the Laplacian shadow mesh.
 
+pub mod bvh;
 pub mod envmap;
 pub mod error;
 pub mod field;
 pub mod geodesic;
 pub mod intrinsic;
+pub mod light_space;
+pub mod mls2d;
 pub mod polar;
 pub mod prefilter;
 pub mod reconstruct;
 pub mod recomposite;
 pub mod region;
 pub mod sh;
+pub mod shadow;
+pub mod shadow_mesh;
+pub mod silhouette;
 
 pub use error::{Result, RokebyError};

@@ -1,0 +1,145 @@
+//! The light's frustum around a shadow caster: the 2D space in which shadow boundaries are
+//! deformed (Mattausch et al. §5.2, "Choosing a deformation space") and the post-perspective light
+//! space in which the shadow mesh is solved (§6.1).
+//!
+//! For a point light at l the frustum looks from l along the direction to the caster's bounds
+//! centre; with light-view coordinates (X, Y, Z), Z > 0 the depth along that axis,
+//!
+//! x = X / (Z·t), y = Y / (Z·t), z = f/(f − n) · (1 − n/Z),
+//!
+//! where t is the half-opening (tangent) that just encloses the caster and [n, f] its depth range:
+//! the caster maps into x, y ∈ [−1, 1], z ∈ [0, 1] (the usual perspective divide up to an affine
+//! map). A directional light uses the orthographic frustum x = X/r, y = Y/r, z = (Z − n)/(f − n).
+//! A point light inside the caster's bounding box has no such frustum (the paper suggests a
+//! frustum per silhouette loop; that is not implemented): it is an error.
+
+use crate::error::{Result, RokebyError};
+use crate::silhouette::Light;
+use glam::{DMat3, DVec3};
+
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct LightFrame {
+    pub light: Light,
+    /// Frustum origin (the light position, or a point behind the caster for a directional light).
+    pub origin: DVec3,
+    /// Rows: the light-view axes (x, y, z = viewing direction).
+    pub basis: DMat3,
+    /// Half-opening tangent (point light) or half-width (directional light) of the frustum.
+    pub half: f64,
+    pub near: f64,
+    pub far: f64,
+}
+
+fn orthonormal_basis(z: DVec3) -> DMat3 {
+    let up = if z.z.abs() < 0.9 { DVec3::Z } else { DVec3::X };
+    let x = up.cross(z).normalize();
+    let y = z.cross(x);
+    // Rows x, y, z: basis * p gives light-view coordinates.
+    DMat3::from_cols(x, y, z).transpose()
+}
+
+impl LightFrame {
+    /// The frustum of `light` enclosing the caster's `vertices`.
+    pub fn new(light: Light, vertices: &[DVec3]) -> Result<Self> {
+        light.validate()?;
+        if vertices.is_empty() {
+            return Err(RokebyError::invalid("vertices", "the caster has no vertices"));
+        }
+        let (mn, mx) = vertices.iter().fold((DVec3::splat(f64::INFINITY), DVec3::splat(f64::NEG_INFINITY)), |(a, b), &p| (a.min(p), b.max(p)));
+        let centre = (mn + mx) * 0.5;
+        let radius = ((mx - mn) * 0.5).length().max(1e-300);
+        match light {
+            Light::Point(l) => {
+                if l.cmpge(mn).all() && l.cmple(mx).all() {
+                    return Err(RokebyError::invalid(
+                        "light",
+                        format!(
+                            "the light at ({:.4}, {:.4}, {:.4}) is inside the caster's bounding box ({:.4}, {:.4}, {:.4})–({:.4}, {:.4}, {:.4}); move it outside the caster to edit its shadow",
+                            l.x, l.y, l.z, mn.x, mn.y, mn.z, mx.x, mx.y, mx.z
+                        ),
+                    ));
+                }
+                let axis = (centre - l).normalize();
+                let basis = orthonormal_basis(axis);
+                let mut near = f64::INFINITY;
+                let mut far: f64 = 0.0;
+                let mut half: f64 = 0.0;
+                for &p in vertices {
+                    let q = basis * (p - l);
+                    if q.z <= 1e-9 * radius {
+                        return Err(RokebyError::invalid(
+                            "light",
+                            "the caster reaches beside or behind the light (it spans more than the light's forward half-space); move the light away from the caster",
+                        ));
+                    }
+                    near = near.min(q.z);
+                    far = far.max(q.z);
+                    half = half.max(q.x.abs() / q.z).max(q.y.abs() / q.z);
+                }
+                if far - near < 1e-9 * far {
+                    far = near * 2.0;
+                }
+                Ok(LightFrame { light, origin: l, basis, half: half.max(1e-12), near, far })
+            }
+            Light::Directional(d) => {
+                let axis = d.normalize();
+                let basis = orthonormal_basis(axis);
+                let origin = centre - axis * (2.0 * radius);
+                let mut near = f64::INFINITY;
+                let mut far: f64 = 0.0;
+                let mut half: f64 = 0.0;
+                for &p in vertices {
+                    let q = basis * (p - origin);
+                    near = near.min(q.z);
+                    far = far.max(q.z);
+                    half = half.max(q.x.abs()).max(q.y.abs());
+                }
+                if far - near < 1e-9 * radius {
+                    far = near + radius;
+                }
+                Ok(LightFrame { light, origin, basis, half: half.max(1e-12 * radius), near, far })
+            }
+        }
+    }
+
+    /// World point → frustum coordinates (x, y, z).
+    pub fn to_frustum(&self, p: DVec3) -> DVec3 {
+        let q = self.basis * (p - self.origin);
+        match self.light {
+            Light::Point(_) => DVec3::new(q.x / (q.z * self.half), q.y / (q.z * self.half), self.far / (self.far - self.near) * (1.0 - self.near / q.z)),
+            Light::Directional(_) => DVec3::new(q.x / self.half, q.y / self.half, (q.z - self.near) / (self.far - self.near)),
+        }
+    }
+
+    /// Frustum coordinates → world point (the inverse of [`Self::to_frustum`]).
+    pub fn from_frustum(&self, c: DVec3) -> DVec3 {
+        let q = match self.light {
+            Light::Point(_) => {
+                let z = self.near / (1.0 - c.z * (self.far - self.near) / self.far);
+                DVec3::new(c.x * z * self.half, c.y * z * self.half, z)
+            }
+            Light::Directional(_) => DVec3::new(c.x * self.half, c.y * self.half, self.near + c.z * (self.far - self.near)),
+        };
+        self.basis.transpose() * q + self.origin
+    }
+
+    /// Depth along the frustum axis (light-view Z).
+    pub fn depth(&self, p: DVec3) -> f64 {
+        (self.basis * (p - self.origin)).z
+    }
+
+    /// §5.1: the modified silhouette point f on the light ray through the receiver point `e`, at
+    /// the depth of the silhouette point `a` — or `e` itself when `e` is nearer the light than `a`
+    /// (contact shadows, Fig. 4 right).
+    pub fn drag_target(&self, a: DVec3, e: DVec3) -> DVec3 {
+        let za = self.depth(a);
+        let ze = self.depth(e);
+        if ze <= za {
+            return e;
+        }
+        match self.light {
+            Light::Point(l) => l + (e - l) * (za / ze),
+            Light::Directional(d) => e - d.normalize() * (ze - za),
+        }
+    }
+}

@@ -1,0 +1,402 @@
+//! Freeform shadow boundary editing (Mattausch, Igarashi, Wimmer): the editing session.
+//!
+//! A [`ShadowEditor`] holds a closed caster, the receivers and a light. It computes the smooth
+//! silhouette loops of the caster ([`crate::silhouette`], §4.1), the shadow handles — each
+//! silhouette vertex a projected onto the receivers by a shadow ray in direction a − l through a
+//! [`Bvh`] over receivers and caster, with a further ray from the hit point whenever the hit face is
+//! back-facing (§4.2, Fig. 4 left) — and, per drag (§5.1, Fig. 2): the receiver point e under the
+//! cursor → the modified silhouette point f at the depth of a (or e for contact shadows) → a 2D MLS
+//! deformation ([`crate::mls2d`], §5.2) of the selected boundary segment (two fixed ends and the
+//! dragged point as control points) in the light's frustum ([`crate::light_space`]), optional
+//! sinusoidal noise (§5.3), and new handles g by shadow rays from the deformed silhouette. The
+//! shadow mesh ([`crate::shadow_mesh`], §6.1) is solved from all edited loops; loops with fewer
+//! than `min_loop_vertices` vertices are inactive (shown grey, not selectable, no constraints).
+//!
+//! A silhouette vertex lies on a mesh edge, inside the smooth surface the normals describe, so
+//! its grazing shadow ray would immediately re-enter the polygonal caster through the faces
+//! around that edge; the faces incident to the edge's two vertices are skipped by its rays.
+
+use crate::bvh::{Bvh, Hit};
+use crate::error::{Result, RokebyError};
+use crate::light_space::LightFrame;
+use crate::mls2d::{sinusoidal_noise, Mls2d, MlsStyle};
+use crate::shadow_mesh::{EdgePoint, ShadowMeshSolver};
+use crate::silhouette::{silhouettes, ClosedMesh, Light, SilhouetteLoop};
+use glam::{DVec2, DVec3};
+use rayon::prelude::*;
+
+/// Most rays a handle may take when every hit is a back face (the paper's "second ray", repeated
+/// for casters that the ray crosses several times).
+pub const MAX_BACK_FACE_RAYS: usize = 8;
+
+/// A shadow handle: where a silhouette vertex's shadow ray lands.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Handle {
+    /// The landing point (the ray's last origin when it hit nothing).
+    pub position: DVec3,
+    /// Triangle hit: receivers first (0..num_receiver_faces), then the caster's faces; −1: none.
+    pub triangle: i64,
+    pub hit: bool,
+    /// The handle lies on the caster itself (a self-shadow boundary).
+    pub on_caster: bool,
+    /// Hidden from the eye: by other geometry, or its surface faces away (only set when an eye
+    /// is given; the paper's occlusion queries).
+    pub occluded: bool,
+}
+
+/// Parameters of one drag (§5.1–5.3).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Drag {
+    pub loop_index: usize,
+    /// The two fixed ends of the segment (indices into the loop).
+    pub fixed: (usize, usize),
+    /// The dragged silhouette vertex, strictly inside the segment.
+    pub moved: usize,
+    /// The receiver point e under the cursor.
+    pub target: DVec3,
+    pub style: MlsStyle,
+    /// Schaefer's α of the MLS weights 1/d^{2α}.
+    pub mls_alpha: f64,
+    pub noise_amplitude: f64,
+    pub noise_frequency: f64,
+}
+
+#[derive(Debug, Clone, PartialEq)]
+pub struct DragResult {
+    /// The loop's (modified) silhouette vertices, all of them.
+    pub silhouette: Vec<DVec3>,
+    /// Their handles.
+    pub handles: Vec<Handle>,
+    /// The loop indices of the deformed segment, fixed ends included, in order.
+    pub segment: Vec<usize>,
+    /// The modified silhouette point f of the dragged vertex.
+    pub moved_to: DVec3,
+}
+
+pub struct ShadowEditor {
+    caster: ClosedMesh,
+    frame: LightFrame,
+    bvh: Bvh,
+    num_receiver_faces: usize,
+    /// Caster vertex → incident caster faces (CSR).
+    vf_start: Vec<u32>,
+    vf_faces: Vec<u32>,
+    loops: Vec<SilhouetteLoop>,
+    active: Vec<bool>,
+    /// Per loop: rest (x, y, z) of each silhouette vertex in frustum coordinates.
+    rest: Vec<Vec<DVec3>>,
+    committed: Vec<Vec<DVec2>>,
+    current: Vec<Vec<DVec2>>,
+    t_min: f64,
+    w_z: f64,
+    constraint_weight: f64,
+    solver: Option<ShadowMeshSolver>,
+}
+
+impl ShadowEditor {
+    /// A session for `caster` lit by `light` over receivers (`receiver_vertices` N×3 flat,
+    /// `receiver_faces` F×3 flat; may be several objects merged). Errors: an open or non-manifold
+    /// caster, a light inside the caster's bounds, no receiver under the light (no handle of an
+    /// active loop lands on a receiver).
+    pub fn new(caster: ClosedMesh, receiver_vertices: &[f32], receiver_faces: &[i64], light: Light, min_loop_vertices: usize, w_z: f64, constraint_weight: f64) -> Result<Self> {
+        light.validate()?;
+        if receiver_vertices.len() % 3 != 0 {
+            return Err(RokebyError::invalid("receiver_vertices", format!("expected N×3 coordinates, got {} values", receiver_vertices.len())));
+        }
+        if receiver_faces.len() % 3 != 0 {
+            return Err(RokebyError::invalid("receiver_faces", format!("expected F×3 indices, got {} values", receiver_faces.len())));
+        }
+        if !(w_z.is_finite() && w_z > 0.0) {
+            return Err(RokebyError::invalid("w_z", format!("must be positive and finite, got {w_z}")));
+        }
+        if !(constraint_weight.is_finite() && constraint_weight > 0.0) {
+            return Err(RokebyError::invalid("constraint_weight", format!("must be positive and finite, got {constraint_weight}")));
+        }
+        let nrv = receiver_vertices.len() / 3;
+        if let Some(i) = receiver_vertices.iter().position(|x| !x.is_finite()) {
+            return Err(RokebyError::invalid("receiver_vertices", format!("vertex {} has a non-finite coordinate", i / 3)));
+        }
+        let rv: Vec<DVec3> = receiver_vertices.chunks_exact(3).map(|c| DVec3::new(c[0] as f64, c[1] as f64, c[2] as f64)).collect();
+        let mut tris = Vec::with_capacity(receiver_faces.len() / 3 + caster.faces.len());
+        for (fi, c) in receiver_faces.chunks_exact(3).enumerate() {
+            if let Some(&x) = c.iter().find(|&&x| x < 0 || x as usize >= nrv) {
+                return Err(RokebyError::invalid("receiver_faces", format!("face {fi} has vertex index {x} outside 0..{nrv}")));
+            }
+            tris.push([rv[c[0] as usize], rv[c[1] as usize], rv[c[2] as usize]]);
+        }
+        let num_receiver_faces = tris.len();
+        for f in &caster.faces {
+            tris.push([caster.vertices[f[0] as usize], caster.vertices[f[1] as usize], caster.vertices[f[2] as usize]]);
+        }
+        let frame = LightFrame::new(light, &caster.vertices)?;
+        let bvh = Bvh::new(tris, "receivers")?;
+        let (mn, mx) = bvh.bounds();
+        let t_min = 1e-7 * (mx - mn).length().max(1e-300);
+        let nv = caster.vertices.len();
+        let mut vf_start = vec![0u32; nv + 1];
+        for f in &caster.faces {
+            for &v in f {
+                vf_start[v as usize + 1] += 1;
+            }
+        }
+        for i in 0..nv {
+            vf_start[i + 1] += vf_start[i];
+        }
+        let mut fill = vf_start.clone();
+        let mut vf_faces = vec![0u32; vf_start[nv] as usize];
+        for (fi, f) in caster.faces.iter().enumerate() {
+            for &v in f {
+                vf_faces[fill[v as usize] as usize] = fi as u32;
+                fill[v as usize] += 1;
+            }
+        }
+        let loops = silhouettes(&caster, &light)?;
+        let active: Vec<bool> = loops.iter().map(|l| l.len() >= min_loop_vertices.max(3)).collect();
+        let rest: Vec<Vec<DVec3>> = loops.iter().map(|l| l.vertices.iter().map(|s| frame.to_frustum(s.position)).collect()).collect();
+        let zeros: Vec<Vec<DVec2>> = loops.iter().map(|l| vec![DVec2::ZERO; l.len()]).collect();
+        let ed = ShadowEditor {
+            caster,
+            frame,
+            bvh,
+            num_receiver_faces,
+            vf_start,
+            vf_faces,
+            loops,
+            active,
+            rest,
+            committed: zeros.clone(),
+            current: zeros,
+            t_min,
+            w_z,
+            constraint_weight,
+            solver: None,
+        };
+        if !ed.active.iter().any(|&a| a) {
+            return Err(RokebyError::invalid(
+                "min_loop_vertices",
+                format!("no silhouette loop has {} or more vertices (the longest has {}); lower the threshold", min_loop_vertices, ed.loops.first().map_or(0, |l| l.len())),
+            ));
+        }
+        let mut any_receiver = false;
+        for (k, l) in ed.loops.iter().enumerate() {
+            if ed.active[k] {
+                let hs = ed.cast_handles(&l.positions(), k, None);
+                if hs.iter().any(|h| h.hit && !h.on_caster) {
+                    any_receiver = true;
+                    break;
+                }
+            }
+        }
+        if !any_receiver {
+            return Err(RokebyError::invalid(
+                "receivers",
+                "no receiver under the light: no shadow ray from the caster's silhouette reaches a receiver; put a receiver (e.g. a ground plane) in the caster's shadow",
+            ));
+        }
+        Ok(ed)
+    }
+
+    pub fn caster(&self) -> &ClosedMesh {
+        &self.caster
+    }
+    pub fn frame(&self) -> &LightFrame {
+        &self.frame
+    }
+    pub fn loops(&self) -> &[SilhouetteLoop] {
+        &self.loops
+    }
+    pub fn active(&self) -> &[bool] {
+        &self.active
+    }
+    pub fn num_receiver_faces(&self) -> usize {
+        self.num_receiver_faces
+    }
+
+    fn check_loop(&self, k: usize) -> Result<()> {
+        if k >= self.loops.len() {
+            return Err(RokebyError::invalid("loop", format!("loop {k} does not exist ({} loops)", self.loops.len())));
+        }
+        Ok(())
+    }
+
+    /// The current (edited, not necessarily committed) silhouette vertices of loop `k`.
+    pub fn silhouette(&self, k: usize) -> Result<Vec<DVec3>> {
+        self.check_loop(k)?;
+        Ok(self.rest[k].iter().zip(&self.current[k]).map(|(r, d)| self.frame.from_frustum(DVec3::new(r.x + d.x, r.y + d.y, r.z))).collect())
+    }
+
+    /// One shadow ray (§4.2) from `from` for the silhouette vertex on caster edge (b, f).
+    fn cast_one(&self, from: DVec3, b: u32, f: u32) -> Handle {
+        let dir = self.frame.light.ray_dir(from);
+        let nr = self.num_receiver_faces;
+        let near = |v: u32| &self.vf_faces[self.vf_start[v as usize] as usize..self.vf_start[v as usize + 1] as usize];
+        let (nb, nf) = (near(b), near(f));
+        let skip = |t: usize| t >= nr && {
+            let c = (t - nr) as u32;
+            nb.contains(&c) || nf.contains(&c)
+        };
+        let mut origin = from;
+        for _ in 0..MAX_BACK_FACE_RAYS {
+            match self.bvh.intersect_filtered(origin, dir, self.t_min, f64::INFINITY, &skip) {
+                None => break,
+                Some(Hit { t, tri, back_facing, .. }) => {
+                    let p = origin + dir * t;
+                    if back_facing {
+                        origin = p;
+                        continue;
+                    }
+                    return Handle { position: p, triangle: tri as i64, hit: true, on_caster: tri >= nr, occluded: false };
+                }
+            }
+        }
+        Handle { position: origin, triangle: -1, hit: false, on_caster: false, occluded: false }
+    }
+
+    fn cast_handles(&self, points: &[DVec3], k: usize, eye: Option<DVec3>) -> Vec<Handle> {
+        let l = &self.loops[k];
+        points
+            .par_iter()
+            .zip(l.vertices.par_iter())
+            .map(|(&p, s)| {
+                let mut h = self.cast_one(p, s.back, s.front);
+                if let (Some(e), true) = (eye, h.hit) {
+                    // Hidden: seen from behind its surface, or something lies in between.
+                    let d = h.position - e;
+                    let t = self.bvh.triangle(h.triangle as usize);
+                    let facing = (t[1] - t[0]).cross(t[2] - t[0]).dot(-d) > 0.0;
+                    h.occluded = !facing || self.bvh.intersect(e, d, 0.0, 1.0 - 1e-5).is_some();
+                }
+                h
+            })
+            .collect()
+    }
+
+    /// Handles of loop `k` for its current silhouette; `eye` flags those hidden from it.
+    pub fn handles(&self, k: usize, eye: Option<DVec3>) -> Result<Vec<Handle>> {
+        if let Some(e) = eye {
+            if !e.is_finite() {
+                return Err(RokebyError::invalid("eye", "must be finite"));
+            }
+        }
+        let s = self.silhouette(k)?;
+        Ok(self.cast_handles(&s, k, eye))
+    }
+
+    /// The segment of loop `k` from `a` to `b` (cyclic) that contains `m`, ends included.
+    fn segment(&self, k: usize, a: usize, b: usize, m: usize) -> Result<Vec<usize>> {
+        let n = self.loops[k].len();
+        for (name, i) in [("fixed", a), ("fixed", b), ("moved", m)] {
+            if i >= n {
+                return Err(RokebyError::invalid(name, format!("index {i} is outside loop {k} ({n} vertices)")));
+            }
+        }
+        if a == b {
+            return Err(RokebyError::invalid("fixed", "the two fixed ends must differ"));
+        }
+        if m == a || m == b {
+            return Err(RokebyError::invalid("moved", "the dragged vertex must lie strictly between the fixed ends"));
+        }
+        let walk = |from: usize, to: usize| -> Vec<usize> {
+            let mut v = vec![from];
+            let mut i = from;
+            while i != to {
+                i = (i + 1) % n;
+                v.push(i);
+            }
+            v
+        };
+        let fwd = walk(a, b);
+        if fwd.contains(&m) {
+            Ok(fwd)
+        } else {
+            Ok(walk(b, a))
+        }
+    }
+
+    /// One drag step (§5.1–5.3), relative to the last committed state; the result becomes the
+    /// current state (see [`Self::commit`]).
+    pub fn drag(&mut self, d: &Drag) -> Result<DragResult> {
+        self.check_loop(d.loop_index)?;
+        let k = d.loop_index;
+        if !self.active[k] {
+            return Err(RokebyError::invalid("loop", format!("loop {k} has {} vertices, fewer than the threshold: it is not editable", self.loops[k].len())));
+        }
+        if !d.target.is_finite() {
+            return Err(RokebyError::invalid("target", "must be finite"));
+        }
+        let seg = self.segment(k, d.fixed.0, d.fixed.1, d.moved)?;
+        let rest = &self.rest[k];
+        let cur: Vec<DVec2> = rest.iter().zip(&self.committed[k]).map(|(r, c)| DVec2::new(r.x + c.x, r.y + c.y)).collect();
+        let a3 = self.frame.from_frustum(DVec3::new(cur[d.moved].x, cur[d.moved].y, rest[d.moved].z));
+        let f = self.frame.drag_target(a3, d.target);
+        let f2 = self.frame.to_frustum(f).truncate();
+        if !f2.is_finite() {
+            return Err(RokebyError::invalid("target", "the dragged point has no position in the light's frustum (behind the light?)"));
+        }
+        let (i0, i1) = (seg[0], *seg.last().expect("segment has ends"));
+        let mls = Mls2d::new(vec![cur[i0], cur[i1], cur[d.moved]], vec![cur[i0], cur[i1], f2], d.style, d.mls_alpha)?;
+        let pts: Vec<DVec2> = seg.iter().map(|&i| cur[i]).collect();
+        let mut moved = mls.deform_all(&pts);
+        if d.noise_amplitude != 0.0 {
+            moved = sinusoidal_noise(&moved, false, d.noise_amplitude, d.noise_frequency)?;
+            // The ends stay where the user fixed them.
+            moved[0] = cur[i0];
+            let last = moved.len() - 1;
+            moved[last] = cur[i1];
+        }
+        let mut new = self.committed[k].clone();
+        for (&i, p) in seg.iter().zip(&moved) {
+            new[i] = DVec2::new(p.x - rest[i].x, p.y - rest[i].y);
+        }
+        self.current[k] = new;
+        let silhouette = self.silhouette(k)?;
+        let handles = self.cast_handles(&silhouette, k, None);
+        Ok(DragResult { silhouette, handles, segment: seg, moved_to: f })
+    }
+
+    /// Makes the current state the base of the next drag (mouse release).
+    pub fn commit(&mut self) {
+        self.committed = self.current.clone();
+    }
+
+    /// Drops uncommitted changes.
+    pub fn cancel(&mut self) {
+        self.current = self.committed.clone();
+    }
+
+    /// Forgets every edit.
+    pub fn reset(&mut self) {
+        for (c, l) in self.committed.iter_mut().zip(&self.loops) {
+            *c = vec![DVec2::ZERO; l.len()];
+        }
+        self.current = self.committed.clone();
+    }
+
+    /// Whether the shadow-mesh system has been factored (it is on the first [`Self::shadow_mesh`]).
+    pub fn factored(&self) -> bool {
+        self.solver.is_some()
+    }
+
+    /// Factors the shadow-mesh system (once per editor; the constraints are the vertices of the
+    /// active loops).
+    pub fn factor(&mut self) -> Result<()> {
+        if self.solver.is_none() {
+            let mut cons = Vec::new();
+            for (l, &a) in self.loops.iter().zip(&self.active) {
+                if a {
+                    cons.extend(l.vertices.iter().map(|s| EdgePoint { back: s.back, front: s.front, alpha: s.alpha }));
+                }
+            }
+            self.solver = Some(ShadowMeshSolver::new(self.frame, &self.caster.vertices, &self.caster.faces, cons, self.w_z, self.constraint_weight)?);
+        }
+        Ok(())
+    }
+
+    /// The shadow mesh (§6.1) for the current edits: the caster's vertices moved so that its
+    /// silhouettes follow the edited boundaries.
+    pub fn shadow_mesh(&mut self) -> Result<Vec<DVec3>> {
+        self.factor()?;
+        let deltas: Vec<DVec2> = self.current.iter().zip(&self.active).filter(|(_, &a)| a).flat_map(|(d, _)| d.iter().copied()).collect();
+        self.solver.as_ref().expect("factored").solve(&deltas)
+    }
+}

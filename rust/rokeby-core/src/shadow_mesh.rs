@@ -1,0 +1,227 @@
+//! The shadow mesh (Mattausch et al. §6.1): the caster deformed so that its silhouettes follow
+//! the edited shadow boundaries, by Laplacian editing (Sorkine 2006) with cotangent weights.
+//!
+//! The vertices are taken to post-perspective light space ([`LightFrame::to_frustum`]) and scaled
+//! by (1, 1, 1/w_z) (w_z = 2.5 by default), so the deformation reaches far along the light
+//! direction. With L the cotangent Laplacian (w_ij = (cot α_ij + cot β_ij)/2), δ = L P the
+//! differential coordinates of the rest positions P, and one soft constraint per silhouette
+//! vertex — (1 − α) P'_b + α P'_f = (1 − α) P_b + α P_f + (Δx, Δy, 0), Δ the boundary edit in the
+//! frustum's (x, y) with its depth kept (§5.2) — the new positions minimise
+//!
+//! |L P' − δ|² + λ² Σ_k |C_k P' − t_k|² + ε² |P' − P|²,
+//!
+//! whose normal matrix LᵀL + λ² CᵀC + ε² I does not depend on the edit: it is factored once
+//! (faer's sparse Cholesky) and every edit is three back-substitutions. The small ε anchors parts
+//! of the caster without silhouette constraints. With every Δ = 0 the solution is P itself.
+//! Afterwards the positions go back through the inverse scale and projection.
+
+use crate::error::{Result, RokebyError};
+use crate::light_space::LightFrame;
+use faer::linalg::solvers::Solve;
+use faer::sparse::linalg::solvers::{Llt, SymbolicLlt};
+use faer::sparse::{SparseColMat, Triplet};
+use faer::{Mat, Side};
+use glam::{DVec2, DVec3};
+
+pub const DEFAULT_W_Z: f64 = 2.5;
+/// λ relative to the mean diagonal of LᵀL: the constraints dominate, the shape follows.
+pub const DEFAULT_CONSTRAINT_WEIGHT: f64 = 10.0;
+/// ε relative to the mean diagonal of LᵀL.
+const ANCHOR_WEIGHT: f64 = 1e-4;
+
+/// A silhouette vertex as a constraint: s = (1 − α) v_back + α v_front.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct EdgePoint {
+    pub back: u32,
+    pub front: u32,
+    pub alpha: f64,
+}
+
+/// Cotangent weights per undirected edge (i < j), summed over the edge's faces.
+pub fn cotangent_weights(v: &[DVec3], faces: &[[u32; 3]]) -> Vec<(u32, u32, f64)> {
+    let mut e: Vec<(u32, u32, f64)> = Vec::with_capacity(faces.len() * 3);
+    for f in faces {
+        for k in 0..3 {
+            let (i, j, o) = (f[k], f[(k + 1) % 3], f[(k + 2) % 3]);
+            let a = v[i as usize] - v[o as usize];
+            let b = v[j as usize] - v[o as usize];
+            let cr = a.cross(b).length();
+            let cot = if cr > 0.0 { a.dot(b) / cr } else { 0.0 };
+            e.push((i.min(j), i.max(j), 0.5 * cot));
+        }
+    }
+    e.sort_unstable_by(|a, b| (a.0, a.1).cmp(&(b.0, b.1)));
+    let mut out: Vec<(u32, u32, f64)> = Vec::with_capacity(e.len() / 2 + 1);
+    for (i, j, w) in e {
+        match out.last_mut() {
+            Some(l) if l.0 == i && l.1 == j => l.2 += w,
+            _ => out.push((i, j, w)),
+        }
+    }
+    out
+}
+
+/// The factored shadow-mesh system for one set of silhouette constraints.
+pub struct ShadowMeshSolver {
+    frame: LightFrame,
+    w_z: f64,
+    /// Rest positions in scaled post-perspective light space.
+    rest: Vec<DVec3>,
+    /// Rows of L: (column, weight) incl. the diagonal.
+    lap: Vec<Vec<(u32, f64)>>,
+    constraints: Vec<EdgePoint>,
+    lambda2: f64,
+    eps2: f64,
+    llt: Llt<u32, f64>,
+    /// The right-hand side of the rest pose, Lᵀδ + λ² Cᵀ t₀ + ε² P (t₀ the rest targets).
+    rhs_rest: Mat<f64>,
+}
+
+impl ShadowMeshSolver {
+    /// Factors the system for the caster (`vertices`, `faces`) and the silhouette vertices that
+    /// constrain it. `w_z` > 0, `constraint_weight` > 0 (relative; see the constants).
+    pub fn new(frame: LightFrame, vertices: &[DVec3], faces: &[[u32; 3]], constraints: Vec<EdgePoint>, w_z: f64, constraint_weight: f64) -> Result<Self> {
+        if !(w_z.is_finite() && w_z > 0.0) {
+            return Err(RokebyError::invalid("w_z", format!("must be positive and finite, got {w_z}")));
+        }
+        if !(constraint_weight.is_finite() && constraint_weight > 0.0) {
+            return Err(RokebyError::invalid("constraint_weight", format!("must be positive and finite, got {constraint_weight}")));
+        }
+        let n = vertices.len();
+        for (k, c) in constraints.iter().enumerate() {
+            if c.back as usize >= n || c.front as usize >= n || !(0.0..=1.0).contains(&c.alpha) {
+                return Err(RokebyError::invalid("constraints", format!("constraint {k} refers to edge ({}, {}) with α = {} outside the mesh or [0, 1]", c.back, c.front, c.alpha)));
+            }
+        }
+        let scale = DVec3::new(1.0, 1.0, 1.0 / w_z);
+        let rest: Vec<DVec3> = vertices.iter().map(|&p| frame.to_frustum(p) * scale).collect();
+        if let Some(i) = rest.iter().position(|p| !p.is_finite()) {
+            return Err(RokebyError::invalid("vertices", format!("vertex {i} has no finite position in the light's frustum")));
+        }
+        // Cotangent weights on the light-space positions (the space the editing happens in).
+        let edges = cotangent_weights(&rest, faces);
+        let mut lap: Vec<Vec<(u32, f64)>> = vec![Vec::new(); n];
+        let mut diag = vec![0.0; n];
+        for &(i, j, w) in &edges {
+            lap[i as usize].push((j, -w));
+            lap[j as usize].push((i, -w));
+            diag[i as usize] += w;
+            diag[j as usize] += w;
+        }
+        for i in 0..n {
+            lap[i].push((i as u32, diag[i]));
+        }
+        // LᵀL = L² (L is symmetric): row i = Σ_k L_ik L_k·, lower triangle only.
+        let mut acc = vec![0.0f64; n];
+        let mut mark = vec![u32::MAX; n];
+        let mut touched: Vec<u32> = Vec::new();
+        let mut trip: Vec<Triplet<u32, u32, f64>> = Vec::new();
+        let mut diag_sum = 0.0;
+        for i in 0..n {
+            touched.clear();
+            for &(k, lik) in &lap[i] {
+                for &(j, lkj) in &lap[k as usize] {
+                    if j as usize > i {
+                        continue;
+                    }
+                    if mark[j as usize] != i as u32 {
+                        mark[j as usize] = i as u32;
+                        acc[j as usize] = 0.0;
+                        touched.push(j);
+                    }
+                    acc[j as usize] += lik * lkj;
+                }
+            }
+            for &j in &touched {
+                if j as usize == i {
+                    diag_sum += acc[i];
+                }
+                trip.push(Triplet::new(i as u32, j, acc[j as usize]));
+            }
+        }
+        let mean_diag = if n > 0 { (diag_sum / n as f64).max(1e-300) } else { 1.0 };
+        let lambda2 = constraint_weight * constraint_weight * mean_diag;
+        let eps2 = ANCHOR_WEIGHT * ANCHOR_WEIGHT * mean_diag;
+        for c in &constraints {
+            let (b, f, a) = (c.back, c.front, c.alpha);
+            let (wb, wf) = (1.0 - a, a);
+            trip.push(Triplet::new(b, b, lambda2 * wb * wb));
+            trip.push(Triplet::new(f, f, lambda2 * wf * wf));
+            let (hi, lo) = (b.max(f), b.min(f));
+            trip.push(Triplet::new(hi, lo, lambda2 * wb * wf));
+        }
+        for i in 0..n as u32 {
+            trip.push(Triplet::new(i, i, eps2));
+        }
+        let m = SparseColMat::try_new_from_triplets(n, n, &trip).map_err(|e| RokebyError::invalid("faces", format!("sparse assembly failed: {e:?}")))?;
+        let symbolic = SymbolicLlt::try_new(m.symbolic(), Side::Lower).map_err(|e| RokebyError::invalid("faces", format!("symbolic factorisation failed ({e:?})")))?;
+        let llt = Llt::try_new_with_symbolic(symbolic, m.as_ref(), Side::Lower)
+            .map_err(|e| RokebyError::invalid("faces", format!("the shadow-mesh system is not positive definite ({e:?}); is the caster degenerate?")))?;
+        let mut s = ShadowMeshSolver { frame, w_z, rest, lap, constraints, lambda2, eps2, llt, rhs_rest: Mat::zeros(n, 3) };
+        s.rhs_rest = s.rhs(&vec![DVec2::ZERO; s.constraints.len()]);
+        Ok(s)
+    }
+
+    pub fn num_constraints(&self) -> usize {
+        self.constraints.len()
+    }
+
+    pub fn frame(&self) -> &LightFrame {
+        &self.frame
+    }
+
+    fn rhs(&self, deltas: &[DVec2]) -> Mat<f64> {
+        let n = self.rest.len();
+        let mut r = Mat::<f64>::zeros(n, 3);
+        // δ = L P, then Lᵀδ = L δ.
+        let delta: Vec<DVec3> = self.lap.iter().map(|row| row.iter().fold(DVec3::ZERO, |a, &(j, w)| a + self.rest[j as usize] * w)).collect();
+        for (i, row) in self.lap.iter().enumerate() {
+            let v = row.iter().fold(DVec3::ZERO, |a, &(j, w)| a + delta[j as usize] * w) + self.rest[i] * self.eps2;
+            r[(i, 0)] = v.x;
+            r[(i, 1)] = v.y;
+            r[(i, 2)] = v.z;
+        }
+        for (c, d) in self.constraints.iter().zip(deltas) {
+            let (b, f, a) = (c.back as usize, c.front as usize, c.alpha);
+            let t = self.rest[b] * (1.0 - a) + self.rest[f] * a + DVec3::new(d.x, d.y, 0.0);
+            for (idx, w) in [(b, 1.0 - a), (f, a)] {
+                let v = t * (self.lambda2 * w);
+                r[(idx, 0)] += v.x;
+                r[(idx, 1)] += v.y;
+                r[(idx, 2)] += v.z;
+            }
+        }
+        r
+    }
+
+    /// The shadow mesh's world-space vertices for the silhouette offsets `deltas` (one per
+    /// constraint, in frustum (x, y) units).
+    pub fn solve(&self, deltas: &[DVec2]) -> Result<Vec<DVec3>> {
+        if deltas.len() != self.constraints.len() {
+            return Err(RokebyError::invalid("deltas", format!("expected {} offsets (one per silhouette constraint), got {}", self.constraints.len(), deltas.len())));
+        }
+        if !deltas.iter().all(|d| d.is_finite()) {
+            return Err(RokebyError::invalid("deltas", "offsets must be finite"));
+        }
+        let mut x = if deltas.iter().all(|d| *d == DVec2::ZERO) { self.rhs_rest.clone() } else { self.rhs(deltas) };
+        self.llt.solve_in_place(x.as_mut());
+        let inv = DVec3::new(1.0, 1.0, self.w_z);
+        Ok((0..self.rest.len()).map(|i| self.frame.from_frustum(DVec3::new(x[(i, 0)], x[(i, 1)], x[(i, 2)]) * inv)).collect())
+    }
+}
+
+/// §6.2: the blend factor (l_initial · l_current)^β between shadow mesh (1) and original (0);
+/// directions are normalised, opposite half-spaces give 0, β = 0 gives no falloff.
+pub fn falloff(l_initial: DVec3, l_current: DVec3, beta: f64) -> Result<f64> {
+    if !(beta.is_finite() && beta >= 0.0) {
+        return Err(RokebyError::invalid("beta", format!("must be ≥ 0 and finite, got {beta}")));
+    }
+    let (a, b) = (l_initial.normalize_or_zero(), l_current.normalize_or_zero());
+    if a == DVec3::ZERO || b == DVec3::ZERO {
+        return Err(RokebyError::invalid("light", "light directions must be non-zero and finite"));
+    }
+    if beta == 0.0 {
+        return Ok(1.0);
+    }
+    Ok(a.dot(b).max(0.0).powf(beta))
+}

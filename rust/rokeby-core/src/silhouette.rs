@@ -1,0 +1,284 @@
+//! Smooth silhouettes of a closed mesh as seen from a light (Mattausch et al., §4.1, after
+//! Hertzmann and Zorin 2000).
+//!
+//! A vertex v faces the light when g(v) = n(v)·(l − v) > 0 (point light at l) or n(v)·(−d) > 0
+//! (directional light travelling along d), with n(v) the vertex normal. On every edge whose ends
+//! face opposite ways — v_b back-facing, v_f front-facing — the silhouette vertex is
+//! s = (1 − α) v_b + α v_f with α solving the paper's equation
+//!
+//! (1 − α) n(v_b)·(l − v_f) + α n(v_f)·(l − v_b) = 0.
+//!
+//! For a directional light both terms reduce to g(v_b) and g(v_f) and α = g_b / (g_b − g_f). For a
+//! point light the cross terms can put the root outside [0, 1] (or make it undefined) on long edges
+//! of strongly curved meshes; there the Hertzmann–Zorin root α = g_b / (g_b − g_f) is used, which
+//! always lies in [0, 1]. Every face with mixed signs holds exactly one silhouette segment between
+//! its two sign-changing edges, so on a closed, consistently oriented mesh the segments chain into
+//! closed loops; each loop is oriented so that the back-facing side lies to its left when seen
+//! from outside the surface.
+
+use crate::error::{Result, RokebyError};
+use glam::DVec3;
+use std::collections::HashMap;
+
+/// A light as the shadow editing sees it.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Light {
+    /// A point (or spot, or area-light centre) at this position.
+    Point(DVec3),
+    /// A directional (sun) light travelling along this direction (normalised on use).
+    Directional(DVec3),
+}
+
+impl Light {
+    /// The direction light travels to reach `p` (unit length).
+    pub fn ray_dir(&self, p: DVec3) -> DVec3 {
+        match *self {
+            Light::Point(l) => (p - l).normalize_or_zero(),
+            Light::Directional(d) => d.normalize_or_zero(),
+        }
+    }
+
+    /// l − v for a point light, −d for a directional light: the "towards the light" vector.
+    pub fn to_light(&self, v: DVec3) -> DVec3 {
+        match *self {
+            Light::Point(l) => l - v,
+            Light::Directional(d) => -d.normalize_or_zero(),
+        }
+    }
+
+    pub fn validate(&self) -> Result<()> {
+        match *self {
+            Light::Point(l) if !l.is_finite() => Err(RokebyError::invalid("light", "the light position must be finite")),
+            Light::Directional(d) if !d.is_finite() || d.length_squared() == 0.0 => {
+                Err(RokebyError::invalid("light", "the light direction must be finite and non-zero"))
+            }
+            _ => Ok(()),
+        }
+    }
+}
+
+/// A validated closed, consistently oriented triangle mesh (the shadow caster).
+#[derive(Debug, Clone)]
+pub struct ClosedMesh {
+    pub vertices: Vec<DVec3>,
+    pub faces: Vec<[u32; 3]>,
+    pub normals: Vec<DVec3>,
+}
+
+impl ClosedMesh {
+    /// Checks the caster: finite vertices, indices in range, no degenerate index triples, every
+    /// edge shared by exactly two faces in opposite directions (closed, manifold, oriented).
+    /// `normals`, when given, are the vertex normals (normalised here); otherwise area-weighted
+    /// face normals are averaged.
+    pub fn new(vertices: &[f32], faces: &[i64], normals: Option<&[f32]>) -> Result<Self> {
+        if vertices.len() % 3 != 0 {
+            return Err(RokebyError::invalid("vertices", format!("expected N×3 coordinates, got {} values", vertices.len())));
+        }
+        if faces.len() % 3 != 0 {
+            return Err(RokebyError::invalid("faces", format!("expected F×3 indices, got {} values", faces.len())));
+        }
+        let nv = vertices.len() / 3;
+        if nv >= u32::MAX as usize {
+            return Err(RokebyError::invalid("vertices", format!("{nv} vertices is more than supported")));
+        }
+        if faces.is_empty() {
+            return Err(RokebyError::invalid("faces", "the caster has no faces"));
+        }
+        if let Some(i) = vertices.iter().position(|x| !x.is_finite()) {
+            return Err(RokebyError::invalid("vertices", format!("vertex {} has a non-finite coordinate", i / 3)));
+        }
+        let verts: Vec<DVec3> = vertices.chunks_exact(3).map(|c| DVec3::new(c[0] as f64, c[1] as f64, c[2] as f64)).collect();
+        let mut fs = Vec::with_capacity(faces.len() / 3);
+        for (fi, c) in faces.chunks_exact(3).enumerate() {
+            for &x in c {
+                if x < 0 || x as usize >= nv {
+                    return Err(RokebyError::invalid("faces", format!("face {fi} has vertex index {x} outside 0..{nv}")));
+                }
+            }
+            if c[0] == c[1] || c[1] == c[2] || c[0] == c[2] {
+                return Err(RokebyError::invalid("faces", format!("face {fi} repeats a vertex ({}, {}, {})", c[0], c[1], c[2])));
+            }
+            fs.push([c[0] as u32, c[1] as u32, c[2] as u32]);
+        }
+        // Directed edges: each must appear once, and its reverse once.
+        let mut directed: HashMap<(u32, u32), u32> = HashMap::with_capacity(fs.len() * 3);
+        for (fi, f) in fs.iter().enumerate() {
+            for k in 0..3 {
+                let e = (f[k], f[(k + 1) % 3]);
+                if directed.insert(e, fi as u32).is_some() {
+                    return Err(RokebyError::invalid(
+                        "faces",
+                        format!("the caster is not a consistently oriented manifold: edge ({}, {}) is used twice in the same direction (face {fi})", e.0, e.1),
+                    ));
+                }
+            }
+        }
+        let open = directed.keys().filter(|&&(a, b)| !directed.contains_key(&(b, a))).count();
+        if open > 0 {
+            let &(a, b) = directed.keys().find(|&&(a, b)| !directed.contains_key(&(b, a))).expect("counted");
+            return Err(RokebyError::invalid(
+                "faces",
+                format!("the caster must be a closed mesh: {open} boundary edges (e.g. ({a}, {b})); close the holes or use a solid caster"),
+            ));
+        }
+        let normals = match normals {
+            Some(n) => {
+                if n.len() != vertices.len() {
+                    return Err(RokebyError::invalid("normals", format!("expected {nv}×3 values (one normal per vertex), got {}", n.len())));
+                }
+                let mut out = Vec::with_capacity(nv);
+                for (i, c) in n.chunks_exact(3).enumerate() {
+                    let v = DVec3::new(c[0] as f64, c[1] as f64, c[2] as f64);
+                    if !v.is_finite() || v.length_squared() == 0.0 {
+                        return Err(RokebyError::invalid("normals", format!("normal {i} is zero or not finite")));
+                    }
+                    out.push(v.normalize());
+                }
+                out
+            }
+            None => vertex_normals(&verts, &fs),
+        };
+        Ok(ClosedMesh { vertices: verts, faces: fs, normals })
+    }
+
+    /// Axis-aligned bounds of the vertices.
+    pub fn bounds(&self) -> (DVec3, DVec3) {
+        self.vertices.iter().fold((DVec3::splat(f64::INFINITY), DVec3::splat(f64::NEG_INFINITY)), |(a, b), &p| (a.min(p), b.max(p)))
+    }
+}
+
+/// Area-weighted averages of the face normals (zero for unreferenced vertices).
+pub fn vertex_normals(v: &[DVec3], f: &[[u32; 3]]) -> Vec<DVec3> {
+    let mut n = vec![DVec3::ZERO; v.len()];
+    for t in f {
+        let (a, b, c) = (v[t[0] as usize], v[t[1] as usize], v[t[2] as usize]);
+        let fnrm = (b - a).cross(c - a);
+        for &i in t {
+            n[i as usize] += fnrm;
+        }
+    }
+    n.into_iter().map(|x| x.normalize_or_zero()).collect()
+}
+
+/// One silhouette vertex: on edge (`back`, `front`) at s = (1 − α) v_back + α v_front.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct SilhouetteVertex {
+    pub back: u32,
+    pub front: u32,
+    pub alpha: f64,
+    pub position: DVec3,
+}
+
+/// A closed silhouette loop: its vertices in order and its length Σ |s_{i+1} − s_i|.
+#[derive(Debug, Clone, PartialEq)]
+pub struct SilhouetteLoop {
+    pub vertices: Vec<SilhouetteVertex>,
+    pub length: f64,
+}
+
+impl SilhouetteLoop {
+    pub fn len(&self) -> usize {
+        self.vertices.len()
+    }
+    pub fn is_empty(&self) -> bool {
+        self.vertices.is_empty()
+    }
+    pub fn positions(&self) -> Vec<DVec3> {
+        self.vertices.iter().map(|s| s.position).collect()
+    }
+}
+
+/// α of §4.1 on the edge (v_b, v_f); see the module comment for the fall-back.
+pub fn silhouette_alpha(light: &Light, vb: DVec3, nb: DVec3, vf: DVec3, nf: DVec3) -> f64 {
+    let a = nb.dot(light.to_light(vf));
+    let b = nf.dot(light.to_light(vb));
+    let den = a - b;
+    if den != 0.0 {
+        let alpha = a / den;
+        if (0.0..=1.0).contains(&alpha) {
+            return alpha;
+        }
+    }
+    let gb = nb.dot(light.to_light(vb));
+    let gf = nf.dot(light.to_light(vf));
+    if gb == gf {
+        0.5
+    } else {
+        (gb / (gb - gf)).clamp(0.0, 1.0)
+    }
+}
+
+/// The smooth silhouette loops of `mesh` from `light` (§4.1).
+pub fn silhouettes(mesh: &ClosedMesh, light: &Light) -> Result<Vec<SilhouetteLoop>> {
+    light.validate()?;
+    let v = &mesh.vertices;
+    let n = &mesh.normals;
+    let front: Vec<bool> = v.iter().zip(n).map(|(&p, &nn)| nn.dot(light.to_light(p)) > 0.0).collect();
+    // Silhouette vertex per sign-changing undirected edge.
+    let mut index: HashMap<(u32, u32), u32> = HashMap::new();
+    let mut pts: Vec<SilhouetteVertex> = Vec::new();
+    let mut next: Vec<u32> = Vec::new();
+    let mut point_of = |a: u32, b: u32, pts: &mut Vec<SilhouetteVertex>, next: &mut Vec<u32>| -> u32 {
+        let key = (a.min(b), a.max(b));
+        *index.entry(key).or_insert_with(|| {
+            let (vb, vf) = if front[a as usize] { (b, a) } else { (a, b) };
+            let alpha = silhouette_alpha(light, v[vb as usize], n[vb as usize], v[vf as usize], n[vf as usize]);
+            let position = v[vb as usize] * (1.0 - alpha) + v[vf as usize] * alpha;
+            pts.push(SilhouetteVertex { back: vb, front: vf, alpha, position });
+            next.push(u32::MAX);
+            (pts.len() - 1) as u32
+        })
+    };
+    for f in &mesh.faces {
+        let s = [front[f[0] as usize], front[f[1] as usize], front[f[2] as usize]];
+        if s[0] == s[1] && s[1] == s[2] {
+            continue;
+        }
+        // Going round the face: the back→front edge starts the segment, front→back ends it, so
+        // the back-facing side is on the segment's left (faces are counter-clockwise from outside)
+        // and neighbouring faces, which share the edge in opposite directions, agree.
+        let mut start = u32::MAX;
+        let mut end = u32::MAX;
+        for k in 0..3 {
+            let (a, b) = (f[k], f[(k + 1) % 3]);
+            let (sa, sb) = (s[k], s[(k + 1) % 3]);
+            if !sa && sb {
+                start = point_of(a, b, &mut pts, &mut next);
+            } else if sa && !sb {
+                end = point_of(a, b, &mut pts, &mut next);
+            }
+        }
+        next[start as usize] = end;
+    }
+    // Chain: every point has exactly one successor on a closed oriented manifold.
+    let mut seen = vec![false; pts.len()];
+    let mut loops = Vec::new();
+    for s0 in 0..pts.len() {
+        if seen[s0] {
+            continue;
+        }
+        let mut verts = Vec::new();
+        let mut i = s0;
+        loop {
+            if seen[i] {
+                if i != s0 {
+                    return Err(RokebyError::invalid("faces", "silhouette chaining failed: the caster is not a closed oriented manifold"));
+                }
+                break;
+            }
+            seen[i] = true;
+            verts.push(pts[i]);
+            let nx = next[i];
+            if nx == u32::MAX {
+                return Err(RokebyError::invalid("faces", "silhouette chaining failed: the caster is not a closed oriented manifold"));
+            }
+            i = nx as usize;
+        }
+        let m = verts.len();
+        let length = (0..m).map(|k| (verts[(k + 1) % m].position - verts[k].position).length()).sum();
+        loops.push(SilhouetteLoop { vertices: verts, length });
+    }
+    // Longest first: the loops an artist edits.
+    loops.sort_by(|a, b| b.vertices.len().cmp(&a.vertices.len()).then(b.length.total_cmp(&a.length)));
+    Ok(loops)
+}
