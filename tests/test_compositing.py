@@ -393,3 +393,24 @@ def test_screen_space_with_an_orthographic_camera(tmp_path):
     n, v = C.screen_space(p)
     obj = p.index_ob > 0
     np.testing.assert_allclose(v[obj], np.broadcast_to([0, 0, 1], v[obj].shape), atol=1e-5)
+
+
+def test_operators_set_up_passes_and_show_the_recomposited_image(tmp_path):
+    import bpy
+
+    import rokeby
+
+    sc = _scene()
+    rokeby.register()
+    try:
+        assert bpy.ops.rokeby.composite_setup_passes() == {"FINISHED"}
+        vl = sc.view_layers[0]
+        assert vl.use_pass_diffuse_direct and vl.use_pass_object_index and "rokeby_reflocc" in {a.name for a in vl.aovs}
+        res = bpy.ops.rokeby.composite_render(edit="RIPPLE", amount=1.0, filepath=str(tmp_path / "op.exr"), image_name="op result")
+        assert res == {"FINISHED"}
+        img = bpy.data.images["op result"]
+        assert tuple(img.size) == (64, 48)
+        px = np.array(img.pixels[:]).reshape(48, 64, 4)
+        assert np.isfinite(px).all() and px[..., :3].max() > 0
+    finally:
+        rokeby.unregister()
