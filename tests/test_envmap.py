@@ -169,6 +169,8 @@ def test_bad_input_gives_clear_errors():
         envmaps.prefilter(good, "ggx", [])
     with pytest.raises(ValueError, match="NaN or inf"):
         envmaps.write_exr("/tmp/never.exr", bad)
+    with pytest.raises(ValueError, match="4 GiB"):
+        envmaps.convert(good, "latlong", "cube", 10**6)
     with pytest.raises(ValueError, match="no world 'moon'"):
         envmaps.studio_world("moon")
 

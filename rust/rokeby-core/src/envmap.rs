@@ -441,9 +441,19 @@ fn out_direction(layout: Layout, height: usize, width: usize, face: usize, x: f6
     probe.direction(face, x, y)
 }
 
+/// The most values one map may hold (4 GiB of float32): larger requests are errors, not aborts.
+pub const MAX_VALUES: usize = 1 << 30;
+
 fn check_dims(layout: Layout, height: usize, width: usize, channels: usize, arg: &str) -> Result<()> {
     if channels == 0 {
         return Err(RokebyError::invalid(arg, "needs at least one channel"));
+    }
+    let n = [layout.faces(), height, width, channels].iter().try_fold(1usize, |a, &b| a.checked_mul(b));
+    if n.map_or(true, |n| n > MAX_VALUES) {
+        return Err(RokebyError::invalid(
+            arg,
+            format!("a {} map of {}×{height}×{width}×{channels} values is more than {MAX_VALUES} (4 GiB of float32)", layout.name(), layout.faces()),
+        ));
     }
     match layout {
         Layout::LatLong => {

@@ -210,4 +210,7 @@ fn bad_input_is_an_error() {
     assert!(m.sample_many(&[0.0, 0.0, 0.0]).is_err());
     assert!(m.sample_many(&[1.0, f32::INFINITY, 0.0]).is_err());
     assert!(m.convert(Layout::Cube, 8, 8, 0).is_err());
+    let e = m.convert(Layout::Cube, 1_000_000, 1_000_000, 1).unwrap_err();
+    assert!(e.to_string().contains("4 GiB"), "{e}");
+    assert!(EnvMap::zeros(Layout::LatLong, usize::MAX / 2, 4, 3).is_err());
 }

@@ -99,7 +99,7 @@ pub fn env_convert<'py>(py: Python<'py>, image: &Bound<'py, PyAny>, layout_in: &
     if size < 2 {
         return Err(PyValueError::new_err(format!("size: must be ≥ 2, got {size}")));
     }
-    let (h, w) = if lo == Layout::LatLong { (size, 2 * size) } else { (size, size) };
+    let (h, w) = if lo == Layout::LatLong { (size, size.saturating_mul(2)) } else { (size, size) };
     let out = run_detached(py, || env.convert(lo, h, w, supersample))?;
     out_array(py, out)
 }
@@ -146,7 +146,7 @@ pub fn env_irradiance<'py>(py: Python<'py>, image: &Bound<'py, PyAny>, size: usi
     if size < 2 {
         return Err(PyValueError::new_err(format!("size: must be ≥ 2, got {size}")));
     }
-    let (map, coeffs) = run_detached(py, || prefilter::irradiance_map(&env, size, 2 * size))?;
+    let (map, coeffs) = run_detached(py, || prefilter::irradiance_map(&env, size, size.saturating_mul(2)))?;
     let c = coeffs.len();
     let flat: Vec<f64> = coeffs.iter().flatten().copied().collect();
     let irr: Vec<f64> = coeffs.iter().flat_map(|cf| (0..SH_COEFFS).map(move |k| cf[k] * A_HAT[k] / std::f64::consts::PI)).collect();
