@@ -19,6 +19,7 @@ use std::panic::{catch_unwind, AssertUnwindSafe};
 
 mod compositing;
 mod environment;
+mod shadow;
 
 /// A float array as float32: borrowed when it already is contiguous float32, else converted.
 enum F32Array<'py> {
@@ -629,5 +630,6 @@ fn rokeby_native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<PyGeodesicSolver>()?;
     compositing::register(m)?;
     environment::register(m)?;
+    shadow::register(m)?;
     Ok(())
 }
