@@ -196,3 +196,55 @@ def test_operators_paint_through_the_registered_add_on(ball):
         assert "ROKEBY_PT_appearance" in dir(bpy.types)
     finally:
         rokeby.unregister()
+
+
+def test_preview_glsl_matches_numpy():
+    """rk_shade (GLSL 3.30, moderngl on headless EGL) against its numpy twin on an orthographic
+    sphere under the prefiltered forest.exr: specular metal, rough plastic, painted mid values."""
+    moderngl = pytest.importorskip("moderngl")
+    from rokeby import appearance_glsl
+
+    try:
+        ctx = moderngl.create_context(standalone=True, backend="egl")
+    except Exception as e:  # noqa: BLE001 - no EGL here
+        pytest.skip(f"no headless EGL context: {e}")
+    im = envmaps.read_exr(envmaps.studio_world("forest"))
+    lv = envmaps.prefilter(im, "ggx", envmaps.ROUGHNESS_LEVELS)
+    at = appearance_glsl.atlas(lv, height=64)
+    irr = envmaps.irradiance(im, size=8)["irradiance_coeffs"]  # (3, 9)
+    size = 48
+    fs = "#version 330\n" + appearance_glsl.GLSL + """
+uniform vec3 u_base; uniform float u_spec; uniform float u_rough; uniform float u_metal;
+out vec4 frag;
+void main() {
+  vec2 p = (gl_FragCoord.xy / 48.0) * 2.0 - 1.0;
+  float rho2 = dot(p, p);
+  if (rho2 >= 1.0) { frag = vec4(0.0); return; }
+  vec3 n = vec3(p.x, -sqrt(1.0 - rho2), p.y);
+  frag = vec4(rk_shade(n, vec3(0.0, -1.0, 0.0), u_base, u_spec, u_rough, u_metal), 1.0);
+}"""
+    vs = "#version 330\nin vec2 pos; void main() { gl_Position = vec4(pos, 0.0, 1.0); }"
+    prog = ctx.program(vertex_shader=vs, fragment_shader=fs)
+    tex = ctx.texture((at.shape[1], at.shape[0]), 3, at.tobytes(), dtype="f4")
+    tex.use(0)
+    prog["rk_env_atlas"].value = 0
+    prog["rk_env_levels"].value = len(lv)
+    prog["rk_sh"].write(np.ascontiguousarray(irr.T, np.float32).tobytes())
+    quad = ctx.buffer(np.array([-1, -1, 1, -1, -1, 1, 1, 1], "f4").tobytes())
+    vao = ctx.vertex_array(prog, [(quad, "2f", "pos")])
+    fbo = ctx.framebuffer(color_attachments=[ctx.texture((size, size), 4, dtype="f4")])
+    fbo.use()
+    ys, xs = np.mgrid[0:size, 0:size] + 0.5
+    p = np.stack([xs / size * 2 - 1, ys / size * 2 - 1], -1)  # row 0 = bottom, as glReadPixels
+    inside = (p**2).sum(-1) < 0.95
+    n = np.stack([p[..., 0], -np.sqrt(np.maximum(1 - (p**2).sum(-1), 0)), p[..., 1]], -1)[inside]
+    v = np.array([0.0, -1.0, 0.0])
+    for base, spec, rough, metal in (((1.0, 1.0, 1.0), 0.5, 0.1, 1.0), ((0.8, 0.3, 0.2), 0.5, 0.6, 0.0), ((0.5, 0.6, 0.7), 0.8, 0.35, 0.4)):
+        prog["u_base"].value, prog["u_spec"].value, prog["u_rough"].value, prog["u_metal"].value = base, spec, rough, metal
+        fbo.clear()
+        vao.render(moderngl.TRIANGLE_STRIP)
+        got = np.frombuffer(fbo.read(components=4, dtype="f4"), np.float32).reshape(size, size, 4)[..., :3][inside]
+        want = appearance_glsl.shade_reference(at, len(lv), irr, n, v, np.array(base), spec, rough, metal)
+        rel = np.abs(got - want).mean() / np.abs(want).mean()
+        assert rel < 2e-3, (base, spec, rough, metal, rel)
+    ctx.release()
