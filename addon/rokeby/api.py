@@ -941,3 +941,24 @@ def recomposite_render(path: str, *, edit: str = "emboss", amount: float = 0.5, 
         raise RokebyError(f"edit: unknown {edit!r} (expected 'emboss', 'ripple', 'smooth' or 'none')")
     out, _stats = comp.recomposite(p, rec, n, k_d=k_d, k_r=k_r)
     return comp.show_image(image_name, out), rec.reports
+
+
+# --- Freeform shadow boundary editing (Mattausch et al.; rokeby.shadow) ---------------------------
+
+def start_shadow_edit(caster, light, receivers=None, *, scene=None, min_loop_vertices: int = 20, w_z: float = 2.5):
+    """Starts editing the shadow that the closed mesh ``caster`` casts from ``light`` onto
+    ``receivers`` (default: the scene's other visible meshes); returns a ``rokeby.shadow.ShadowSession``
+    (loops(), handles(), drag(), commit()). Clear errors for open casters, a light inside the
+    caster's bounds or nothing under the light; nothing in the scene changes."""
+    from . import shadow  # noqa: PLC0415
+
+    return shadow.start(caster, light, receivers, scene=_scene(scene), min_loop_vertices=min_loop_vertices, w_z=w_z)
+
+
+def apply_shadow_edit(session, *, scene=None):
+    """Creates or updates the shadow-mesh object of ``session`` (shadow rays only, same vertex
+    groups and armature as the caster) and the light/shadow linking that makes the receivers show
+    the edited shadow while the caster keeps its own self-shadows. Returns (shadow object, twin light)."""
+    from . import shadow  # noqa: PLC0415
+
+    return shadow.apply(session, scene=_scene(scene))

@@ -1,0 +1,240 @@
+"""Freeform shadow boundary editing (Mattausch, Igarashi, Wimmer; issue 7) in Blender.
+
+The numerics run in Rust (``rokeby_native.ShadowEditor`` through :mod:`rokeby.native`): smooth
+silhouette loops of the caster from the light, shadow handles by ray casting, MLS boundary
+deformation and the Laplacian shadow mesh. This module turns Blender objects into the arrays it
+needs (evaluated meshes in world space, read with foreach_get) and the result back into Blender:
+
+* the **shadow mesh** object: a copy of the caster's mesh with the edited vertex positions, the
+  same vertex groups and armature modifiers (so skeletal animation carries the edit, §6.2), visible
+  to shadow rays only (``visible_camera`` and the other ray visibilities off);
+* **light and shadow linking** (Cycles; EEVEE follows light linking in 4.x but has no per-light
+  shadow linking of ray-traced shadows for every light type, see docs/shadow_editing.md when
+  written): the original light keeps lighting the caster with the caster's own (self-)shadows and
+  no shadow from the shadow mesh; a twin of the light lights every other object, blocked by the
+  shadow mesh and everything else but the original caster. So receivers show the edited shadow
+  and the caster shows no self-shadow artefacts from the shadow mesh.
+
+Edits are made at the current frame in world space. The shadow mesh stores them as local
+displacements of the caster's rest vertices (world displacement rotated by the inverse object
+matrix); with an armature this is exact for edits made in the rest pose and approximate for
+edits made in other poses (the per-vertex skinning rotation is not undone).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from . import native
+
+SHADOW_SUFFIX = " Shadow Mesh"
+TWIN_SUFFIX = " (edited shadows)"
+RAY_VISIBILITY = ("visible_camera", "visible_diffuse", "visible_glossy", "visible_transmission", "visible_volume_scatter")
+
+
+class ShadowEditError(ValueError):
+    """A shadow edit that cannot be made; nothing in the scene was changed."""
+
+
+def light_arguments(light) -> dict:
+    """``light_position=`` (point, spot, area) or ``light_direction=`` (sun) of a Blender light
+    object, in world space."""
+    if light is None or getattr(light, "type", None) != "LIGHT":
+        raise ShadowEditError(f"light: {getattr(light, 'name', light)!r} is not a light object")
+    m = np.array(light.matrix_world, dtype=np.float64)
+    if light.data.type == "SUN":
+        d = -m[:3, 2]
+        return {"light_direction": d / np.linalg.norm(d)}
+    return {"light_position": m[:3, 3].copy()}
+
+
+def _merged(meshes) -> tuple[np.ndarray, np.ndarray]:
+    vs, fs, off = [], [], 0
+    for m in meshes:
+        vs.append(m.vertices)
+        fs.append(m.triangles.astype(np.int64) + off)
+        off += len(m.vertices)
+    if not vs:
+        return np.zeros((0, 3), np.float32), np.zeros((0, 3), np.int64)
+    return np.concatenate(vs), np.concatenate(fs)
+
+
+@dataclass
+class ShadowSession:
+    """One editing session: the native editor and what it was made from."""
+
+    editor: object
+    caster: str
+    light: str
+    receivers: list
+    light_vector: np.ndarray
+    rest_world: np.ndarray
+    matrix_world: np.ndarray
+    history: list = field(default_factory=list)
+
+    def loops(self):
+        return self.editor.loops()
+
+    def handles(self, loop: int = 0, eye=None):
+        return self.editor.handles(loop, eye)
+
+    def drag(self, loop: int, fixed, moved: int, target, **kwargs):
+        """One drag step (receiver point ``target`` under the cursor), relative to the last commit."""
+        return self.editor.drag(loop, tuple(int(i) for i in fixed), int(moved), np.asarray(target, dtype=np.float64), **kwargs)
+
+    def commit(self):
+        self.editor.commit()
+
+    def shadow_mesh(self) -> np.ndarray:
+        return self.editor.shadow_mesh()
+
+
+def start(caster, light, receivers=None, *, scene=None, min_loop_vertices: int = 20, w_z: float = 2.5,
+          constraint_weight: float = 10.0) -> ShadowSession:
+    """Starts editing the shadow of the closed mesh ``caster`` from ``light`` on ``receivers``
+    (default: every other visible mesh of the scene). Errors (open caster, light inside the
+    caster's bounds, nothing under the light) are :class:`ShadowEditError` naming the cause."""
+    import bpy  # noqa: PLC0415 - Blender only
+
+    from . import api  # noqa: PLC0415
+
+    sc = scene if scene is not None else bpy.context.scene
+    if caster is None or caster.type != "MESH":
+        raise ShadowEditError(f"caster: {getattr(caster, 'name', caster)!r} is not a mesh object")
+    kw = light_arguments(light)
+    if receivers is None:
+        receivers = [o for o in sc.objects if o.type == "MESH" and o is not caster and not o.name.endswith(SHADOW_SUFFIX)
+                     and o.visible_get()]
+    vl = sc.view_layers[0] if bpy.context.view_layer is None else bpy.context.view_layer
+    vl.update()
+    dg = bpy.context.evaluated_depsgraph_get()
+    cm = api.mesh_arrays(caster, dg)
+    rm = [api.mesh_arrays(o, dg) for o in receivers]
+    rv, rf = _merged(rm)
+    try:
+        ed = native.module().ShadowEditor(cm.vertices, cm.triangles.astype(np.int64), rv, rf, normals=cm.normals,
+                                          min_loop_vertices=int(min_loop_vertices), w_z=float(w_z),
+                                          constraint_weight=float(constraint_weight), **kw)
+    except ValueError as exc:
+        raise ShadowEditError(f"cannot edit the shadow of '{caster.name}' from '{light.name}': {exc}") from exc
+    lv = kw.get("light_direction")
+    if lv is None:
+        lv = np.asarray(cm.vertices, np.float64).mean(axis=0) - kw["light_position"]
+    m = np.array(caster.matrix_world, dtype=np.float64)
+    # Light direction in the caster's local frame (§6.2: relative changes of object and light).
+    lv_local = np.linalg.solve(m[:3, :3], lv)
+    return ShadowSession(ed, caster.name, light.name, [o.name for o in receivers], lv_local / np.linalg.norm(lv_local),
+                         np.asarray(cm.vertices, np.float64), m)
+
+
+def _linking_collection(name: str):
+    import bpy  # noqa: PLC0415
+
+    c = bpy.data.collections.get(name)
+    if c is None:
+        c = bpy.data.collections.new(name)
+    for o in list(c.objects):
+        c.objects.unlink(o)
+    return c
+
+
+def _set_state(coll, obj, state: str):
+    coll.objects.link(obj)
+    # collection_objects runs parallel to objects (it holds no object reference of its own).
+    coll.collection_objects[list(coll.objects).index(obj)].light_linking.link_state = state
+
+
+def apply(session: ShadowSession, *, scene=None):
+    """Makes (or updates) the shadow-mesh object of ``session``'s current edit and sets up the
+    light and shadow linking. Returns (shadow object, twin light)."""
+    import bpy  # noqa: PLC0415
+
+    sc = scene if scene is not None else bpy.context.scene
+    caster = bpy.data.objects.get(session.caster)
+    light = bpy.data.objects.get(session.light)
+    if caster is None or light is None:
+        raise ShadowEditError("the caster or the light of this session no longer exists")
+    world = np.asarray(session.shadow_mesh(), dtype=np.float64)
+    if world.shape != session.rest_world.shape:
+        raise ShadowEditError("the caster's vertex count changed since the session started; start a new one")
+    disp = world - session.rest_world
+    local = np.linalg.solve(session.matrix_world[:3, :3], disp.T).T
+    me = caster.data
+    n = len(me.vertices)
+    if n != len(world):
+        raise ShadowEditError(f"the shadow mesh has {len(world)} vertices but '{caster.name}' has {n}: modifiers that change "
+                              "the topology (subdivision, boolean) must be applied first")
+    rest = np.empty(n * 3, np.float32)
+    me.vertices.foreach_get("co", rest)
+    name = caster.name + SHADOW_SUFFIX
+    ob = bpy.data.objects.get(name)
+    if ob is None:
+        ob = bpy.data.objects.new(name, me.copy())
+        for c in caster.users_collection:
+            c.objects.link(ob)
+    elif ob.data.users == 1 and len(ob.data.vertices) != n:
+        ob.data = me.copy()
+    ob.data.vertices.foreach_set("co", (rest.reshape(-1, 3) + local.astype(np.float32)).ravel())
+    ob.data.update()
+    ob.parent = caster.parent
+    ob.parent_type = caster.parent_type
+    ob.parent_bone = caster.parent_bone
+    ob.matrix_world = caster.matrix_world.copy()
+    # Same vertex groups (names in the same order: the mesh copy holds the weights by index).
+    ob.vertex_groups.clear()
+    for g in caster.vertex_groups:
+        ob.vertex_groups.new(name=g.name)
+    for mod in list(ob.modifiers):
+        ob.modifiers.remove(mod)
+    for mod in caster.modifiers:
+        if mod.type == "ARMATURE":
+            m2 = ob.modifiers.new(mod.name, "ARMATURE")
+            for attr in ("object", "use_vertex_groups", "use_bone_envelopes", "use_deform_preserve_volume", "use_multi_modifier", "vertex_group"):
+                setattr(m2, attr, getattr(mod, attr))
+    for attr in RAY_VISIBILITY:
+        setattr(ob, attr, False)
+    ob.visible_shadow = True
+    ob.hide_select = False
+    ob.display_type = "WIRE"
+    ob["rokeby_shadow_of"] = caster.name
+    ob["rokeby_light_initial"] = list(map(float, session.light_vector))
+
+    # The twin light: every receiver but the caster, blocked by everything but the caster.
+    twin_name = light.name + TWIN_SUFFIX
+    twin = bpy.data.objects.get(twin_name)
+    if twin is None:
+        twin = bpy.data.objects.new(twin_name, light.data)
+        for c in light.users_collection:
+            c.objects.link(twin)
+    twin.parent = light.parent
+    twin.matrix_world = light.matrix_world.copy()
+    recv_a = _linking_collection(f"{light.name} · receivers (caster)")
+    _set_state(recv_a, caster, "INCLUDE")
+    block_a = _linking_collection(f"{light.name} · blockers (caster)")
+    _set_state(block_a, ob, "EXCLUDE")
+    light.light_linking.receiver_collection = recv_a
+    light.light_linking.blocker_collection = block_a
+    recv_b = _linking_collection(f"{light.name} · receivers (edited)")
+    _set_state(recv_b, caster, "EXCLUDE")
+    block_b = _linking_collection(f"{light.name} · blockers (edited)")
+    _set_state(block_b, caster, "EXCLUDE")
+    twin.light_linking.receiver_collection = recv_b
+    twin.light_linking.blocker_collection = block_b
+    sc.view_layers[0].update()
+    return ob, twin
+
+
+def falloff(session: ShadowSession, light, beta: float, *, caster=None) -> float:
+    """(l_initial · l_current)^β (§6.2) with both light vectors in the caster's local frame."""
+    import bpy  # noqa: PLC0415
+
+    caster = caster if caster is not None else bpy.data.objects.get(session.caster)
+    kw = light_arguments(light)
+    m = np.array(caster.matrix_world, dtype=np.float64)
+    lv = kw.get("light_direction")
+    if lv is None:
+        lv = m[:3, 3] - kw["light_position"]
+    cur = np.linalg.solve(m[:3, :3], lv)
+    return native.module().shadow_falloff(session.light_vector, cur, float(beta))

@@ -1,0 +1,269 @@
+"""Freeform shadow boundary editing (issue 7): the native ShadowEditor on a sphere over a plane
+(handles, drags, shadow mesh), bad inputs with clear errors, and in Blender a Cycles render whose
+shadow edge follows a dragged handle while the far side stays."""
+
+import numpy as np
+import pytest
+
+from rokeby import native
+
+rn = native.module()
+
+
+def uv_sphere(c, r, lat=24, lon=32):
+    th = np.pi * np.arange(1, lat) / lat
+    ph = 2 * np.pi * np.arange(lon) / lon
+    ring = np.stack([np.outer(np.sin(th), np.cos(ph)), np.outer(np.sin(th), np.sin(ph)), np.repeat(np.cos(th)[:, None], lon, 1)], -1).reshape(-1, 3)
+    v = np.concatenate([[[0, 0, 1]], ring, [[0, 0, -1]]]) * r + np.asarray(c)
+    idx = lambda i, j: 1 + (i - 1) * lon + (j % lon)  # noqa: E731
+    f = [(0, idx(1, j), idx(1, j + 1)) for j in range(lon)]
+    for i in range(1, lat - 1):
+        for j in range(lon):
+            a, b, cc, d = idx(i, j), idx(i, j + 1), idx(i + 1, j), idx(i + 1, j + 1)
+            f += [(a, cc, d), (a, d, b)]
+    s = len(v) - 1
+    f += [(s, idx(lat - 1, j + 1), idx(lat - 1, j)) for j in range(lon)]
+    return v.astype(np.float32), np.asarray(f, np.int64)
+
+
+PLANE_V = np.array([[-20, -20, 0], [20, -20, 0], [20, 20, 0], [-20, 20, 0]], np.float32)
+PLANE_F = np.array([[0, 1, 2], [0, 2, 3]], np.int64)
+LIGHT = np.array([0.2, 0.1, 5.0])
+
+
+@pytest.fixture
+def editor():
+    v, f = uv_sphere((0, 0, 1.5), 0.5)
+    return rn.ShadowEditor(v, f, PLANE_V, PLANE_F, light_position=LIGHT, min_loop_vertices=10), v, f
+
+
+def test_handles_lie_on_the_plane_along_light_rays(editor):
+    ed, v, f = editor
+    loops = ed.loops()
+    assert len(loops) == ed.num_loops == 1 and loops[0]["active"]
+    h = ed.handles(0)
+    s = loops[0]["points"].astype(np.float64)
+    assert h["hit"].all() and not h["on_caster"].any()
+    want = LIGHT + (s - LIGHT) * (LIGHT[2] / (LIGHT[2] - s[:, 2]))[:, None]
+    np.testing.assert_allclose(h["points"], want, atol=1e-5)
+    sil = rn.shadow_silhouettes(v, f, light_position=LIGHT)
+    np.testing.assert_allclose(sil[0]["points"], s, atol=1e-6)
+    assert sil[0]["edges"].shape == (len(s), 2) and 0 < sil[0]["length"] < 2 * np.pi * 0.5
+
+
+def test_drag_then_shadow_mesh_and_rest_identity(editor):
+    ed, v, f = editor
+    assert not ed.factored
+    np.testing.assert_allclose(ed.shadow_mesh(), v, atol=1e-5)
+    assert ed.factored
+    h = ed.handles(0)["points"]
+    n = len(h)
+    centre = h.mean(axis=0)
+    target = centre + (h[0] - centre) * 1.3
+    r = ed.drag(0, (n - n // 6, n // 6), 0, target, style="similarity")
+    np.testing.assert_allclose(r["handles"]["points"][0], target, atol=1e-4)
+    assert r["segment"][0] == n - n // 6 and r["segment"][-1] == n // 6
+    ed.commit()
+    sm = ed.shadow_mesh()
+    assert sm.shape == v.shape and np.abs(sm - v).max() > 1e-3
+    # The edit is near the dragged vertex: the far side of the caster hardly moves.
+    far = np.argmin(v @ (h[0] - centre))
+    assert np.abs(sm[far] - v[far]).max() < 0.2 * np.abs(sm - v).max()
+    ed.reset()
+    np.testing.assert_allclose(ed.shadow_mesh(), v, atol=1e-5)
+
+
+def test_falloff():
+    assert rn.shadow_falloff([0, 0, 1], [0, 0, 1], 3.0) == pytest.approx(1.0)
+    a = np.radians(20)
+    assert rn.shadow_falloff([0, 0, 1], [0, np.sin(a), np.cos(a)], 2.0) == pytest.approx(np.cos(a) ** 2)
+
+
+@pytest.mark.parametrize(
+    "kwargs, words",
+    [
+        ({"faces": "open"}, "closed mesh"),
+        ({"light_position": [0.0, 0.0, 1.6]}, "inside the caster's bounding box"),
+        ({"light_position": [0.0, 0.0, 0.5]}, "no receiver under the light"),
+        ({"receivers": "none"}, "no receiver under the light"),
+        ({"light_position": None}, "exactly one of light_position"),
+        ({"light_position": [0, 0, 5], "light_direction": [0, 0, -1]}, "exactly one of light_position"),
+        ({"vertices": "2d"}, "vertices: expected shape (V, 3)"),
+        ({"faces": "float"}, "faces: must be an array of integers"),
+        ({"w_z": -1.0}, "w_z"),
+        ({"min_loop_vertices": 10_000}, "no silhouette loop"),
+    ],
+)
+def test_bad_inputs_are_clear_errors(kwargs, words):
+    v, f = uv_sphere((0, 0, 1.5), 0.5, 8, 12)
+    rv, rf = PLANE_V, PLANE_F
+    kw = {"light_position": [0.0, 0.0, 5.0], "min_loop_vertices": 3}
+    for k, val in kwargs.items():
+        if k == "faces":
+            f = f[1:] if val == "open" else f.astype(np.float64)
+        elif k == "vertices":
+            v = v[:, :2]
+        elif k == "receivers":
+            rv, rf = np.zeros((0, 3), np.float32), np.zeros((0, 3), np.int64)
+        elif val is None:
+            kw.pop(k)
+        else:
+            kw[k] = val
+    with pytest.raises((ValueError, TypeError)) as e:
+        rn.ShadowEditor(v, f, rv, rf, **kw)
+    assert words in str(e.value)
+
+
+def test_bad_drags_change_nothing(editor):
+    ed, v, f = editor
+    before = ed.loops()[0]["points"].copy()
+    for args, kw, words in [
+        ((0, (3, 3), 1, [0, 0, 0]), {}, "fixed ends must differ"),
+        ((0, (0, 5), 5, [0, 0, 0]), {}, "strictly between"),
+        ((4, (0, 5), 2, [0, 0, 0]), {}, "loop 4 does not exist"),
+        ((0, (0, 5), 2, [0, 0]), {}, "target: expected shape (3,)"),
+        ((0, (0, 5), 2, [0, 0, 0]), {"style": "wobbly"}, "unknown deformation style"),
+    ]:
+        with pytest.raises(ValueError, match=None) as e:
+            ed.drag(*args, **kw)
+        assert words in str(e.value)
+    np.testing.assert_array_equal(ed.loops()[0]["points"], before)
+
+
+# --- Blender: the shadow mesh object, linking, and a Cycles render ------------------------------
+
+SIZE = 96
+
+
+def _blender_scene():
+    bpy = pytest.importorskip("bpy")
+    bpy.ops.wm.read_factory_settings(use_empty=True)
+    sc = bpy.context.scene
+    sc.render.engine = "CYCLES"
+    sc.cycles.device = "CPU"
+    sc.cycles.samples = 4
+    sc.cycles.max_bounces = 0  # direct light only: a noise-free hard shadow edge
+    sc.cycles.use_denoising = False
+    sc.cycles.seed = 1
+    sc.render.resolution_x = sc.render.resolution_y = SIZE
+    sc.render.resolution_percentage = 100
+    sc.render.film_transparent = False
+    world = bpy.data.worlds.new("Black")
+    sc.world = world
+    world.color = (0, 0, 0)
+    bpy.ops.mesh.primitive_plane_add(size=12)
+    ground = bpy.context.object
+    ground.name = "Ground"
+    bpy.ops.mesh.primitive_uv_sphere_add(segments=48, ring_count=24, radius=0.5, location=(0, 0, 1.5))
+    bpy.ops.object.shade_smooth()
+    ball = bpy.context.object
+    ball.name = "Ball"
+    ld = bpy.data.lights.new("Lamp", "POINT")
+    ld.energy = 3000.0
+    ld.shadow_soft_size = 0.0
+    lamp = bpy.data.objects.new("Lamp", ld)
+    sc.collection.objects.link(lamp)
+    lamp.location = tuple(LIGHT)
+    cam = bpy.data.objects.new("Camera", bpy.data.cameras.new("Camera"))
+    cam.data.type = "ORTHO"
+    cam.data.ortho_scale = 4.0
+    sc.collection.objects.link(cam)
+    sc.camera = cam
+    cam.location = (0.0, 0.0, 10.0)
+    sc.view_layers[0].update()
+    return bpy, sc, ball, lamp, ground
+
+
+def _render(bpy, sc, path):
+    sc.render.filepath = str(path)
+    bpy.ops.render.render(write_still=True)
+    img = bpy.data.images.load(sc.render.filepath)
+    try:
+        px = np.array(img.pixels[:], dtype=np.float32).reshape(SIZE, SIZE, 4)[..., :3].mean(-1)
+    finally:
+        bpy.data.images.remove(img)
+    return px[::-1]  # row 0 = top of the image
+
+
+def _to_pixel(p):
+    """World (x, y) on the ground → (column, row) in the orthographic top view (4 units wide)."""
+    return np.array([(p[0] / 4.0 + 0.5) * SIZE, (0.5 - p[1] / 4.0) * SIZE])
+
+
+def _edge_along(img, centre, direction, r_max=1.9):
+    """Distance (world units) from ``centre`` along ``direction`` where the ground turns lit."""
+    ts = np.linspace(0.0, r_max, 400)
+    vals = []
+    for t in ts:
+        c, r = _to_pixel(centre + direction * t)
+        ci, ri = int(np.clip(c, 0, SIZE - 1)), int(np.clip(r, 0, SIZE - 1))
+        vals.append(img[ri, ci])
+    vals = np.asarray(vals)
+    thr = 0.5 * (vals.min() + vals.max())
+    lit = np.nonzero(vals > thr)[0]
+    return ts[lit[0]] if len(lit) else np.inf
+
+
+def test_cycles_shadow_edge_follows_the_dragged_handle(tmp_path):
+    bpy, sc, ball, lamp, ground = _blender_scene()
+    from rokeby import api
+
+    ball_before = _render(bpy, sc, tmp_path / "ball_before.png")
+    # The top view would see the ball over most of its shadow: hide it from the camera only.
+    ball.visible_camera = False
+    before = _render(bpy, sc, tmp_path / "before.png")
+    s = api.start_shadow_edit(ball, lamp, [ground], min_loop_vertices=10)
+    h = s.handles(0)["points"].astype(np.float64)
+    n = len(h)
+    centre = h.mean(axis=0)
+    m = int(np.argmax(h[:, 0]))  # the handle on the +x side
+    d0 = (h[m] - centre) / np.linalg.norm(h[m] - centre)
+    target = centre + (h[m] - centre) * 1.35
+    r = s.drag(0, ((m - n // 5) % n, (m + n // 5) % n), m, target)
+    np.testing.assert_allclose(r["handles"]["points"][m], target, atol=1e-3)
+    s.commit()
+    ob, twin = api.apply_shadow_edit(s)
+    assert not ob.visible_camera and ob.visible_shadow and not ob.visible_diffuse
+    assert twin.light_linking.blocker_collection is not None
+    after = _render(bpy, sc, tmp_path / "after.png")
+    px_per_unit = SIZE / 4.0
+    e0 = _edge_along(before, centre, d0)
+    e1 = _edge_along(after, centre, d0)
+    want = np.linalg.norm(target - centre)
+    assert abs(e0 - np.linalg.norm(h[m] - centre)) * px_per_unit < 2.0, "unedited render disagrees with the handles"
+    assert abs(e1 - want) * px_per_unit < 3.0, f"edited edge at {e1:.3f}, dragged to {want:.3f}"
+    # The far side of the shadow does not move.
+    f0 = _edge_along(before, centre, -d0)
+    f1 = _edge_along(after, centre, -d0)
+    assert abs(f1 - f0) * px_per_unit < 1.5, f"far side moved {abs(f1 - f0) * px_per_unit:.1f} px"
+    print(f"edge px: unedited {e0 * px_per_unit:.1f} (handle {np.linalg.norm(h[m] - centre) * px_per_unit:.1f}), "
+          f"edited {e1 * px_per_unit:.1f} (target {want * px_per_unit:.1f}), far side {f0 * px_per_unit:.1f} -> {f1 * px_per_unit:.1f}")
+    # The caster keeps its own shading and self-shadows: no shadow of the shadow mesh falls on it.
+    ball.visible_camera = True
+    ball_after = _render(bpy, sc, tmp_path / "ball_after.png")
+    yy, xx = np.mgrid[0:SIZE, 0:SIZE]
+    on_ball = np.hypot((xx + 0.5) / SIZE * 4 - 2, 2 - (yy + 0.5) / SIZE * 4) < 0.45
+    assert ball_before[on_ball].mean() > 0.1, "the ball should be lit from above"
+    assert np.abs(ball_after[on_ball] - ball_before[on_ball]).max() < 1e-3
+
+
+def test_blender_bad_inputs_change_nothing():
+    bpy, sc, ball, lamp, ground = _blender_scene()
+    from rokeby import shadow
+
+    n_objects = len(bpy.data.objects)
+    bm = ball.data
+    # An open caster: delete one face through bmesh.
+    import bmesh
+
+    b = bmesh.new()
+    b.from_mesh(bm)
+    b.faces.ensure_lookup_table()
+    bmesh.ops.delete(b, geom=[b.faces[0]], context="FACES_ONLY")
+    b.to_mesh(bm)
+    b.free()
+    with pytest.raises(shadow.ShadowEditError, match="closed mesh"):
+        shadow.start(ball, lamp, [ground])
+    with pytest.raises(shadow.ShadowEditError, match="not a light"):
+        shadow.start(ground, ground, [ball])
+    assert len(bpy.data.objects) == n_objects
