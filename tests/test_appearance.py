@@ -270,3 +270,35 @@ def test_viewport_preview_draws_through_blenders_gpu_module():
     assert 0.6 < res["covered"] < 0.7  # the ball's disk: π/(4·1.1²) = 0.649 of the frame
     assert res["rel"] < 0.04, res
     assert res["rel_turned"] > 5 * res["rel"], res
+
+
+def test_preview_handler_reads_the_world_and_toggles(ball):
+    """The draw handler's world: the scene's Environment Texture read bottom-up from Blender and
+    flipped to file order equals the EXR, prefiltered once per image; the sidebar operator adds and
+    removes the POST_VIEW handler, and unregistering removes it."""
+    import rokeby
+    from rokeby import appearance_preview
+
+    world = bpy.data.worlds.new("HDR")
+    world.use_nodes = True
+    env = world.node_tree.nodes.new("ShaderNodeTexEnvironment")
+    path = envmaps.studio_world("studio")
+    env.image = bpy.data.images.load(str(path))
+    world.node_tree.links.new(env.outputs["Color"], world.node_tree.nodes["Background"].inputs["Color"])
+    bpy.context.scene.world = world
+    px = appearance_preview.world_pixels(bpy.context.scene)
+    np.testing.assert_allclose(px[..., :3], envmaps.read_exr(path), rtol=1e-6, atol=1e-6)
+    light = appearance_preview.world_light(bpy.context.scene)
+    assert appearance_preview.world_light(bpy.context.scene) is light  # cached
+    assert len(light.levels) == 8 and light.atlas.shape == (8 * 128, 256, 3)
+    rokeby.register()
+    try:
+        assert not appearance_preview.enabled()
+        bpy.ops.rokeby.appearance_preview()
+        assert appearance_preview.enabled()
+        bpy.ops.rokeby.appearance_preview()
+        assert not appearance_preview.enabled()
+        bpy.ops.rokeby.appearance_preview()
+    finally:
+        rokeby.unregister()
+    assert not appearance_preview.enabled()

@@ -129,3 +129,86 @@ def draw_object(obj, world: WorldLight, view_projection, eye) -> None:
     batch.draw(sh)
     gpu.state.depth_test_set("NONE")
     gpu.state.depth_mask_set(False)
+
+
+# --- the viewport draw handler ---------------------------------------------------------------
+
+_handle = None
+_world_cache: dict = {}
+last_error: str | None = None
+
+
+def world_pixels(scene):
+    """The scene world's equirectangular Environment Texture as (H, W, 4) float32, row 0 at the
+    top, or None when the world has none."""
+    world = scene.world
+    if world is None or not world.use_nodes:
+        return None
+    for node in world.node_tree.nodes:
+        if node.type == "TEX_ENVIRONMENT" and node.image is not None and node.projection == "EQUIRECTANGULAR" and not node.mute:
+            img = node.image
+            w, h = img.size
+            if w < 2 or h < 2:
+                return None
+            px = np.empty(w * h * 4, np.float32)
+            img.pixels.foreach_get(px)
+            return envmaps.flip_rows(px.reshape(h, w, 4))
+    return None
+
+
+def world_light(scene):
+    """The scene world prefiltered (cached per image and size), or None."""
+    world = scene.world
+    node = None
+    if world is not None and world.use_nodes:
+        node = next((n for n in world.node_tree.nodes if n.type == "TEX_ENVIRONMENT" and n.image is not None), None)
+    if node is None:
+        return None
+    key = (node.image.name, tuple(node.image.size), node.image.filepath)
+    if key not in _world_cache:
+        px = world_pixels(scene)
+        if px is None:
+            return None
+        _world_cache.clear()
+        _world_cache[key] = WorldLight(px)
+    return _world_cache[key]
+
+
+def _draw():
+    global last_error
+    import bpy
+
+    ctx = bpy.context
+    rv3d = ctx.region_data
+    if rv3d is None:
+        return
+    try:
+        light = world_light(ctx.scene)
+        if light is None:
+            last_error = "the world has no equirectangular Environment Texture to preview under"
+            return
+        inv = rv3d.view_matrix.inverted()
+        eye = inv.translation if rv3d.is_perspective else inv.translation + inv.col[2].xyz * 1e4
+        for ob in ctx.visible_objects:
+            if ob.type == "MESH" and appearance.PARAMS["roughness"][0] in ob.data.attributes:
+                draw_object(ob, light, np.array(rv3d.perspective_matrix), tuple(eye))
+        last_error = None
+    except Exception as e:  # noqa: BLE001 - a draw handler must not raise into Blender's redraw
+        last_error = f"{type(e).__name__}: {e}"
+
+
+def enable(on: bool = True) -> bool:
+    """Adds (or removes) the POST_VIEW draw handler; returns whether it is on."""
+    global _handle
+    import bpy
+
+    if on and _handle is None:
+        _handle = bpy.types.SpaceView3D.draw_handler_add(_draw, (), "WINDOW", "POST_VIEW")
+    elif not on and _handle is not None:
+        bpy.types.SpaceView3D.draw_handler_remove(_handle, "WINDOW")
+        _handle = None
+    return _handle is not None
+
+
+def enabled() -> bool:
+    return _handle is not None

@@ -139,6 +139,22 @@ class ROKEBY_OT_appearance_paint(bpy.types.Operator):
         return {"PASS_THROUGH"}
 
 
+class ROKEBY_OT_appearance_preview(bpy.types.Operator):
+    """Show (or hide) the painted objects under the world HDR, prefiltered, in the viewport"""
+
+    bl_idname = "rokeby.appearance_preview"
+    bl_label = "Preview Under the World"
+
+    def execute(self, context):
+        from . import appearance_preview
+
+        appearance_preview.enable(not appearance_preview.enabled())
+        for area in context.screen.areas if context.screen else ():
+            if area.type == "VIEW_3D":
+                area.tag_redraw()
+        return {"FINISHED"}
+
+
 class ROKEBY_PT_appearance(bpy.types.Panel):
     bl_label = "Appearance Painting"
     bl_idname = "ROKEBY_PT_appearance"
@@ -163,6 +179,12 @@ class ROKEBY_PT_appearance(bpy.types.Panel):
         col.prop(s, "strength")
         col.prop(s, "color" if s.brush == "diffuse" else "value")
         layout.operator(ROKEBY_OT_appearance_paint.bl_idname, icon="BRUSH_DATA")
+        from . import appearance_preview
+
+        on = appearance_preview.enabled()
+        layout.operator(ROKEBY_OT_appearance_preview.bl_idname, text="Hide Preview" if on else "Preview Under the World", icon="SHADING_RENDERED", depress=on)
+        if on and appearance_preview.last_error:
+            layout.label(text=appearance_preview.last_error, icon="ERROR")
         mat = ob.active_material
         nodes = mat.node_tree.nodes if mat is not None and mat.use_nodes else {}
         box = layout.box()
@@ -173,7 +195,7 @@ class ROKEBY_PT_appearance(bpy.types.Panel):
                 box.prop(node.inputs[7 if param == "diffuse" else 1], "default_value", text=param.replace("_", " ").title())
 
 
-_CLASSES = (RokebyStrokePoint, RokebyAppearanceBrush, ROKEBY_OT_appearance_setup, ROKEBY_OT_appearance_paint, ROKEBY_PT_appearance)
+_CLASSES = (RokebyStrokePoint, RokebyAppearanceBrush, ROKEBY_OT_appearance_setup, ROKEBY_OT_appearance_paint, ROKEBY_OT_appearance_preview, ROKEBY_PT_appearance)
 
 
 def register():
@@ -183,6 +205,9 @@ def register():
 
 
 def unregister():
+    from . import appearance_preview
+
+    appearance_preview.enable(False)
     if hasattr(bpy.types.WindowManager, "rokeby_appearance_brush"):
         del bpy.types.WindowManager.rokeby_appearance_brush
     for c in reversed(_CLASSES):
