@@ -397,6 +397,44 @@ def compositing_section(emit):
     emit()
 
 
+SHADOW_MARKER = "## Shadow boundary editing: "
+
+
+def shadow_section(emit):
+    """Issue #7: silhouettes, handles, a drag step and the shadow mesh on the shared meshes of the
+    sizes of the paper's Table 1 (bench/shadow.py in fresh processes, 1 thread and all threads)."""
+    runs = {}
+    with tempfile.TemporaryDirectory() as tmp:
+        for threads in (1, os.cpu_count()):
+            out = Path(tmp) / f"shadow{threads}.json"
+            env = dict(os.environ, RAYON_NUM_THREADS=str(threads))
+            subprocess.run([sys.executable, str(ROOT / "bench" / "shadow.py"), "--json", str(out)], check=True, stdout=subprocess.DEVNULL, env=env)
+            runs[threads] = json.loads(out.read_text())
+    one, many = runs[1], runs[os.cpu_count()]
+    emit(SHADOW_MARKER + "against Table 1 of Mattausch et al.")
+    emit()
+    emit("bench/shadow.py: each caster at unit radius over an 80k-triangle height-field terrain, a point light above;")
+    emit("setup = ShadowEditor (silhouettes, BVH, receiver check); handles = shadow rays of the longest loop;")
+    emit("edit = one drag step of a third of that loop (MLS + new handles; the paper's per-frame figure also renders);")
+    emit("smesh = the first shadow_mesh() (Laplacian assembly, sparse Cholesky, solve), again = a later one (back-substitution).")
+    emit("Medians of 5 (setup: 3); smesh first is one run. `1 thr` = RAYON_NUM_THREADS=1 (the paper used one core).")
+    emit("Paper (i7-3770K, one core, GTX 580): smesh 0.2 / 1.01 / 1.28 s, editing + hard shadows 20 / 32 / 101 ms. Goal: a fifth.")
+    emit()
+    emit("| paper model (tris) | shared mesh | tris | loops (active) | longest loop | setup (ms) 1 / N thr | handles (ms) | edit (ms) 1 / N thr | paper edit (ms) | smesh (s) 1 / N thr | paper smesh (s) | again (ms) |")
+    emit("|---|---|---:|---:|---:|---|---:|---|---:|---|---:|---:|")
+    for a, b in zip(one["rows"], many["rows"]):
+        pt, ps, pe = one["paper"][a["paper"]]
+        if "error" in a:
+            emit(f"| {a['paper']} ({pt:,}) | {a['mesh']} | {a['triangles']:,} | error: {a['error']} |")
+            continue
+        emit(f"| {a['paper']} ({pt:,}) | {a['mesh']} | {a['triangles']:,} | {a['loops']} ({a['active_loops']}) | {a['loop_vertices']} | "
+             f"{a['setup_s'] * 1e3:.0f} / {b['setup_s'] * 1e3:.0f} | {b['handles_s'] * 1e3:.1f} | {a['edit_s'] * 1e3:.1f} / {b['edit_s'] * 1e3:.1f} | {pe * 1e3:.0f} | "
+             f"{a['smesh_first_s']:.2f} / {b['smesh_first_s']:.2f} | {ps:.2f} | {b['smesh_again_s'] * 1e3:.0f} |")
+    emit()
+    emit(f"Load average {many['load_average']:.1f} at the end, on {many['cpus']} CPUs (other jobs shared the machine).")
+    emit()
+
+
 def _refresh_section(emit, out, marker, section):
     """Run one section and put it into docs/benchmarks.md in place of its old text (appended
     when the report has none yet)."""
@@ -418,7 +456,7 @@ def _refresh_section(emit, out, marker, section):
 def main():
     ap = argparse.ArgumentParser(description="Rokeby benchmarks")
     ap.add_argument("--peers", default=None, help="python of .venv-peers (exact geodesics, potpourri3d, libigl, matplotlib)")
-    ap.add_argument("--only", choices=["field", "geodesic", "addon", "render", "viewport", "envmap", "compositing"], default=None)
+    ap.add_argument("--only", choices=["field", "geodesic", "addon", "render", "viewport", "envmap", "compositing", "shadow"], default=None)
     args = ap.parse_args()
     rng = np.random.default_rng(2009)
     out = []
@@ -440,6 +478,9 @@ def main():
         return
     if args.only == "envmap":
         _refresh_section(emit, out, ENVMAP_MARKER, envmap_section)
+        return
+    if args.only == "shadow":
+        _refresh_section(emit, out, SHADOW_MARKER, shadow_section)
         return
     if args.only in ("addon", "render"):
         start = len(out)
