@@ -267,3 +267,107 @@ def test_blender_bad_inputs_change_nothing():
     with pytest.raises(shadow.ShadowEditError, match="not a light"):
         shadow.start(ground, ground, [ball])
     assert len(bpy.data.objects) == n_objects
+
+
+def _edited_scene(tmp_path=None):
+    bpy, sc, ball, lamp, ground = _blender_scene()
+    from rokeby import api
+
+    s = api.start_shadow_edit(ball, lamp, [ground], min_loop_vertices=10)
+    h = s.handles(0)["points"].astype(np.float64)
+    n = len(h)
+    centre = h.mean(axis=0)
+    m = int(np.argmax(h[:, 0]))
+    s.drag(0, ((m - n // 5) % n, (m + n // 5) % n), m, centre + (h[m] - centre) * 1.35)
+    s.commit()
+    ob, twin = api.apply_shadow_edit(s)
+    return bpy, sc, ball, lamp, ground, s, ob, twin
+
+
+def _evaluated(bpy, ob):
+    dg = bpy.context.evaluated_depsgraph_get()
+    e = ob.evaluated_get(dg)
+    me = e.to_mesh()
+    co = np.empty(len(me.vertices) * 3, np.float32)
+    me.vertices.foreach_get("co", co)
+    e.to_mesh_clear()
+    mw = np.array(e.matrix_world)
+    co = co.reshape(-1, 3)
+    return co @ mw[:3, :3].T + mw[:3, 3]
+
+
+def test_shadow_mesh_follows_an_armature_pose():
+    bpy = pytest.importorskip("bpy")
+    bpy_, sc, ball, lamp, ground = _blender_scene()
+    # Skin the ball to one bone before editing: the shadow mesh gets the same group and modifier.
+    arm = bpy.data.objects.new("Rig", bpy.data.armatures.new("Rig"))
+    sc.collection.objects.link(arm)
+    bpy.context.view_layer.objects.active = arm
+    bpy.ops.object.mode_set(mode="EDIT")
+    b = arm.data.edit_bones.new("Bone")
+    b.head, b.tail = (0.0, 0.0, 1.0), (0.0, 0.0, 2.0)
+    bpy.ops.object.mode_set(mode="OBJECT")
+    g = ball.vertex_groups.new(name="Bone")
+    g.add(list(range(len(ball.data.vertices))), 1.0, "REPLACE")
+    mod = ball.modifiers.new("Armature", "ARMATURE")
+    mod.object = arm
+    from rokeby import api, shadow
+
+    s = api.start_shadow_edit(ball, lamp, [ground], min_loop_vertices=10)
+    h = s.handles(0)["points"].astype(np.float64)
+    n, m = len(h), int(np.argmax(h[:, 0]))
+    c = h.mean(axis=0)
+    s.drag(0, ((m - n // 5) % n, (m + n // 5) % n), m, c + (h[m] - c) * 1.35)
+    s.commit()
+    ob, _twin = api.apply_shadow_edit(s)
+    assert [vg.name for vg in ob.vertex_groups] == ["Bone"]
+    assert [(md.type, md.object) for md in ob.modifiers] == [("ARMATURE", arm)]
+    rest_shadow = _evaluated(bpy, ob)
+    rest_ball = _evaluated(bpy, ball)
+    assert np.abs(rest_shadow - rest_ball).max() > 1e-3  # the edit is there
+    # Pose: rotate the bone 30° about x and lift it; both meshes move the same way.
+    pb = arm.pose.bones["Bone"]
+    pb.rotation_mode = "XYZ"
+    pb.rotation_euler = (np.radians(30), 0.0, 0.0)
+    pb.location = (0.0, 0.3, 0.0)
+    sc.view_layers[0].update()
+    posed_shadow = _evaluated(bpy, ob)
+    posed_ball = _evaluated(bpy, ball)
+    assert np.abs(posed_ball - rest_ball).max() > 0.1
+    # A single rigid bone: the edit's offset rotates with the pose, its length is kept.
+    np.testing.assert_allclose(np.linalg.norm(posed_shadow - posed_ball, axis=1),
+                               np.linalg.norm(rest_shadow - rest_ball, axis=1), atol=1e-4)
+    # And the falloff key scales it: β large and the light moved far → almost the original.
+    lamp.location = (4.0, 0.0, 1.5)
+    sc.view_layers[0].update()
+    k = shadow.update_falloff(ob, lamp, 8.0)
+    assert 0.0 <= k < 0.2
+    sc.view_layers[0].update()
+    blended = _evaluated(bpy, ob)
+    np.testing.assert_allclose(blended - posed_ball, k * (posed_shadow - posed_ball), atol=1e-4)
+
+
+def test_light_moved_20_degrees_puts_no_new_shadow_on_the_caster(tmp_path):
+    bpy, sc, ball, lamp, ground, s, ob, twin = _edited_scene()
+    # Rotate light and twin 20° about the ball's centre (around the y axis).
+    a = np.radians(20)
+    rot = np.array([[np.cos(a), 0, np.sin(a)], [0, 1, 0], [-np.sin(a), 0, np.cos(a)]])
+    c = np.array([0.0, 0.0, 1.5])
+    new = rot @ (LIGHT - c) + c
+    for o in (lamp, twin):
+        o.location = tuple(new)
+    sc.view_layers[0].update()
+    edited = _render(bpy, sc, tmp_path / "edited.png")
+    # The same light without the edit: hide the shadow mesh, drop the linking.
+    ob.visible_shadow = False
+    lamp.light_linking.receiver_collection = None
+    lamp.light_linking.blocker_collection = None
+    twin.hide_render = True
+    sc.view_layers[0].update()
+    plain = _render(bpy, sc, tmp_path / "plain.png")
+    yy, xx = np.mgrid[0:SIZE, 0:SIZE]
+    on_ball = np.hypot((xx + 0.5) / SIZE * 4 - 2, 2 - (yy + 0.5) / SIZE * 4) < 0.45
+    assert plain[on_ball].mean() > 0.1
+    np.testing.assert_allclose(edited[on_ball], plain[on_ball], atol=1e-3)
+    # The edited shadow is still there on the ground (the two renders differ off the ball).
+    assert np.abs(edited - plain)[~on_ball].max() > 0.1

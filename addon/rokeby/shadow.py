@@ -31,6 +31,7 @@ from . import native
 
 SHADOW_SUFFIX = " Shadow Mesh"
 TWIN_SUFFIX = " (edited shadows)"
+EDIT_KEY = "Rokeby shadow edit"
 RAY_VISIBILITY = ("visible_camera", "visible_diffuse", "visible_glossy", "visible_transmission", "visible_volume_scatter")
 
 
@@ -119,10 +120,10 @@ def start(caster, light, receivers=None, *, scene=None, min_loop_vertices: int =
                                           constraint_weight=float(constraint_weight), **kw)
     except ValueError as exc:
         raise ShadowEditError(f"cannot edit the shadow of '{caster.name}' from '{light.name}': {exc}") from exc
+    m = np.array(caster.matrix_world, dtype=np.float64)
     lv = kw.get("light_direction")
     if lv is None:
-        lv = np.asarray(cm.vertices, np.float64).mean(axis=0) - kw["light_position"]
-    m = np.array(caster.matrix_world, dtype=np.float64)
+        lv = m[:3, 3] - kw["light_position"]
     # Light direction in the caster's local frame (§6.2: relative changes of object and light).
     lv_local = np.linalg.solve(m[:3, :3], lv)
     return ShadowSession(ed, caster.name, light.name, [o.name for o in receivers], lv_local / np.linalg.norm(lv_local),
@@ -176,16 +177,26 @@ def apply(session: ShadowSession, *, scene=None):
             c.objects.link(ob)
     elif ob.data.users == 1 and len(ob.data.vertices) != n:
         ob.data = me.copy()
-    ob.data.vertices.foreach_set("co", (rest.reshape(-1, 3) + local.astype(np.float32)).ravel())
+    # The edit lives in a shape key on the caster's rest shape, so the falloff of §6.2 can blend
+    # between original (0) and shadow mesh (1) without touching the mesh again.
+    ob.data.vertices.foreach_set("co", rest)
+    if ob.data.shape_keys is None:
+        ob.shape_key_add(name="Basis", from_mix=False)
+    key = ob.data.shape_keys.key_blocks.get(EDIT_KEY) or ob.shape_key_add(name=EDIT_KEY, from_mix=False)
+    ob.data.shape_keys.key_blocks["Basis"].data.foreach_set("co", rest)
+    key.data.foreach_set("co", (rest.reshape(-1, 3) + local.astype(np.float32)).ravel())
+    key.slider_min, key.slider_max = 0.0, 1.0
+    key.value = 1.0
     ob.data.update()
     ob.parent = caster.parent
     ob.parent_type = caster.parent_type
     ob.parent_bone = caster.parent_bone
     ob.matrix_world = caster.matrix_world.copy()
-    # Same vertex groups (names in the same order: the mesh copy holds the weights by index).
-    ob.vertex_groups.clear()
+    # Same vertex groups: since Blender 3.0 the names and weights live on the mesh, so the copy
+    # already carries them (clearing them here would drop the weights); add any that are missing.
     for g in caster.vertex_groups:
-        ob.vertex_groups.new(name=g.name)
+        if ob.vertex_groups.get(g.name) is None:
+            ob.vertex_groups.new(name=g.name)
     for mod in list(ob.modifiers):
         ob.modifiers.remove(mod)
     for mod in caster.modifiers:
@@ -226,15 +237,23 @@ def apply(session: ShadowSession, *, scene=None):
     return ob, twin
 
 
-def falloff(session: ShadowSession, light, beta: float, *, caster=None) -> float:
-    """(l_initial · l_current)^β (§6.2) with both light vectors in the caster's local frame."""
+def update_falloff(shadow_object, light, beta: float, *, caster=None) -> float:
+    """Sets the shadow mesh's edit shape key to (l_initial · l_current)^β (§6.2; β = 0: no
+    falloff) for the light's current position relative to the caster; returns the factor."""
     import bpy  # noqa: PLC0415
 
-    caster = caster if caster is not None else bpy.data.objects.get(session.caster)
+    if shadow_object is None or "rokeby_shadow_of" not in shadow_object:
+        raise ShadowEditError(f"{getattr(shadow_object, 'name', shadow_object)!r} is not a Rokeby shadow mesh")
+    caster = caster if caster is not None else bpy.data.objects.get(shadow_object["rokeby_shadow_of"])
+    if caster is None:
+        raise ShadowEditError(f"the caster '{shadow_object['rokeby_shadow_of']}' of this shadow mesh no longer exists")
     kw = light_arguments(light)
     m = np.array(caster.matrix_world, dtype=np.float64)
     lv = kw.get("light_direction")
     if lv is None:
         lv = m[:3, 3] - kw["light_position"]
     cur = np.linalg.solve(m[:3, :3], lv)
-    return native.module().shadow_falloff(session.light_vector, cur, float(beta))
+    initial = np.asarray(shadow_object["rokeby_light_initial"], dtype=np.float64)
+    k = float(native.module().shadow_falloff(initial, cur, float(beta)))
+    shadow_object.data.shape_keys.key_blocks[EDIT_KEY].value = k
+    return k
