@@ -137,7 +137,7 @@ def test_bad_drags_change_nothing(editor):
 SIZE = 96
 
 
-def _blender_scene():
+def _blender_scene(light_type="POINT"):
     bpy = pytest.importorskip("bpy")
     bpy.ops.wm.read_factory_settings(use_empty=True)
     sc = bpy.context.scene
@@ -160,9 +160,13 @@ def _blender_scene():
     bpy.ops.object.shade_smooth()
     ball = bpy.context.object
     ball.name = "Ball"
-    ld = bpy.data.lights.new("Lamp", "POINT")
+    ld = bpy.data.lights.new("Lamp", light_type)
     ld.energy = 3000.0
-    ld.shadow_soft_size = 0.0
+    if light_type == "AREA":
+        ld.size = 0.4  # soft shadows: a penumbra about 3 px wide at the edge
+        sc.cycles.samples = 64
+    else:
+        ld.shadow_soft_size = 0.0
     lamp = bpy.data.objects.new("Lamp", ld)
     sc.collection.objects.link(lamp)
     lamp.location = tuple(LIGHT)
@@ -202,20 +206,24 @@ def _edge_along(img, centre, direction, r_max=1.9):
         vals.append(img[ri, ci])
     vals = np.asarray(vals)
     thr = 0.5 * (vals.min() + vals.max())
-    lit = np.nonzero(vals > thr)[0]
-    return ts[lit[0]] if len(lit) else np.inf
+    # Dark inside, lit outside: the number of dark samples places the (half-intensity) edge, robust
+    # to sampling noise in a soft penumbra where the first crossing is not.
+    if vals[-1] <= thr:
+        return np.inf
+    return ts[1] * np.count_nonzero(vals <= thr)
 
 
 # EEVEE on a software GL (llvmpipe) spends about three minutes compiling its shaders: opt in with
 # ROKEBY_EEVEE_TESTS=1 (measured there: edited edge 22.3 px for a 23.5 px target, far side unmoved).
-EEVEE = pytest.param("BLENDER_EEVEE_NEXT", marks=pytest.mark.skipif(
+EEVEE = pytest.param("BLENDER_EEVEE_NEXT", "POINT", marks=pytest.mark.skipif(
     os.environ.get("ROKEBY_EEVEE_TESTS") != "1", reason="EEVEE on llvmpipe takes minutes; set ROKEBY_EEVEE_TESTS=1"))
 
 
-@pytest.mark.parametrize("engine", ["CYCLES", EEVEE])
-def test_render_shadow_edge_follows_the_dragged_handle(tmp_path, engine):
-    """Cycles, and EEVEE (which in 4.5 honours light and shadow linking and ray visibility)."""
-    bpy, sc, ball, lamp, ground = _blender_scene()
+@pytest.mark.parametrize("engine, light_type", [("CYCLES", "POINT"), ("CYCLES", "AREA"), EEVEE])
+def test_render_shadow_edge_follows_the_dragged_handle(tmp_path, engine, light_type):
+    """Cycles with hard (point) and soft (area light, the edge at half intensity) shadows, and EEVEE
+    (which in 4.5 honours light and shadow linking and ray visibility)."""
+    bpy, sc, ball, lamp, ground = _blender_scene(light_type)
     sc.render.engine = engine
     from rokeby import api
 
@@ -241,13 +249,17 @@ def test_render_shadow_edge_follows_the_dragged_handle(tmp_path, engine):
     e0 = _edge_along(before, centre, d0)
     e1 = _edge_along(after, centre, d0)
     want = np.linalg.norm(target - centre)
-    assert abs(e0 - np.linalg.norm(h[m] - centre)) * px_per_unit < 2.0, "unedited render disagrees with the handles"
+    # The shadow of the polygonal ball lies a pixel or so inside the handles of its smooth
+    # silhouette (and a soft shadow's half-intensity line a little further in).
+    assert abs(e0 - np.linalg.norm(h[m] - centre)) * px_per_unit < 2.5, "unedited render disagrees with the handles"
     assert abs(e1 - want) * px_per_unit < 3.0, f"edited edge at {e1:.3f}, dragged to {want:.3f}"
+    moved, asked = (e1 - e0) * px_per_unit, (want - np.linalg.norm(h[m] - centre)) * px_per_unit
+    assert abs(moved - asked) < 2.0, f"the edge moved {moved:.1f} px for a {asked:.1f} px drag"
     # The far side of the shadow does not move.
     f0 = _edge_along(before, centre, -d0)
     f1 = _edge_along(after, centre, -d0)
     assert abs(f1 - f0) * px_per_unit < 1.5, f"far side moved {abs(f1 - f0) * px_per_unit:.1f} px"
-    print(f"{engine} edge px: unedited {e0 * px_per_unit:.1f} (handle {np.linalg.norm(h[m] - centre) * px_per_unit:.1f}), "
+    print(f"{engine} {light_type} edge px: unedited {e0 * px_per_unit:.1f} (handle {np.linalg.norm(h[m] - centre) * px_per_unit:.1f}), "
           f"edited {e1 * px_per_unit:.1f} (target {want * px_per_unit:.1f}), far side {f0 * px_per_unit:.1f} -> {f1 * px_per_unit:.1f}")
     # The caster keeps its own shading and self-shadows: no shadow of the shadow mesh falls on it.
     ball.visible_camera = True
