@@ -8,12 +8,11 @@ needs (evaluated meshes in world space, read with foreach_get) and the result ba
 * the **shadow mesh** object: a copy of the caster's mesh with the edited vertex positions, the
   same vertex groups and armature modifiers (so skeletal animation carries the edit, §6.2), visible
   to shadow rays only (``visible_camera`` and the other ray visibilities off);
-* **light and shadow linking** (Cycles; EEVEE follows light linking in 4.x but has no per-light
-  shadow linking of ray-traced shadows for every light type, see docs/shadow_editing.md when
-  written): the original light keeps lighting the caster with the caster's own (self-)shadows and
-  no shadow from the shadow mesh; a twin of the light lights every other object, blocked by the
-  shadow mesh and everything else but the original caster. So receivers show the edited shadow
-  and the caster shows no self-shadow artefacts from the shadow mesh.
+* **light and shadow linking** (Cycles, and EEVEE in 4.5; see docs/shadow_editing.md): the
+  original light keeps lighting the caster with the caster's own (self-)shadows and no shadow from
+  the shadow mesh; a twin of the light lights every other object, blocked by the shadow mesh and
+  everything else but the original caster. So receivers show the edited shadow and the caster
+  shows no self-shadow artefacts from the shadow mesh.
 
 Edits are made at the current frame in world space. The shadow mesh stores them as local
 displacements of the caster's rest vertices (world displacement rotated by the inverse object
