@@ -394,3 +394,38 @@ def test_light_moved_20_degrees_puts_no_new_shadow_on_the_caster(tmp_path):
     np.testing.assert_allclose(edited[on_ball], plain[on_ball], atol=1e-3)
     # The edited shadow is still there on the ground (the two renders differ off the ball).
     assert np.abs(edited - plain)[~on_ball].max() > 0.1
+
+
+def test_operators_start_drag_apply_and_the_overlay():
+    bpy, sc, ball, lamp, ground = _blender_scene()
+    import rokeby
+    from rokeby import shadow_ui
+
+    rokeby.register()
+    try:
+        bpy.context.view_layer.objects.active = ball
+        assert bpy.ops.rokeby.shadow_start(light="Lamp", min_loop_vertices=10) == {"FINISHED"}
+        sess = shadow_ui.session(sc)
+        geo = shadow_ui.overlay_geometry(sess)
+        n = len(sess.loops()[0]["points"])
+        assert geo["lines"].shape == (2 * n, 3) and geo["points"].shape == (n, 3)
+        np.testing.assert_allclose(geo["line_colors"][0], shadow_ui.ACTIVE)
+        h = sess.handles(0)["points"].astype(np.float64)
+        c = h.mean(axis=0)
+        target = c + (h[3] - c) * 1.3
+        assert bpy.ops.rokeby.shadow_drag(loop=0, fixed=(n - 8, 14), moved=3, target=tuple(target), style="rigid") == {"FINISHED"}
+        np.testing.assert_allclose(sess.handles(0)["points"][3], target, atol=1e-3)
+        # A bad drag is refused and changes nothing.
+        before = sess.handles(0)["points"].copy()
+        with pytest.raises(RuntimeError, match="strictly between"):
+            bpy.ops.rokeby.shadow_drag(loop=0, fixed=(3, 14), moved=3, target=(0.0, 0.0, 0.0))
+        np.testing.assert_array_equal(sess.handles(0)["points"], before)
+        assert bpy.ops.rokeby.shadow_apply() == {"FINISHED"}
+        assert bpy.data.objects.get("Ball" + "" + " Shadow Mesh") is not None
+        # Errors are reported, not raised as tracebacks: a caster that is not a mesh.
+        bpy.context.view_layer.objects.active = lamp
+        with pytest.raises(RuntimeError, match="not a mesh"):
+            bpy.ops.rokeby.shadow_start(light="Lamp")
+        assert bpy.ops.rokeby.shadow_stop() == {"FINISHED"} and shadow_ui.session(sc) is None
+    finally:
+        rokeby.unregister()

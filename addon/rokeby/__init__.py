@@ -21,9 +21,9 @@ def is_registered() -> bool:
 
 
 def _modules():
-    from . import appearance_ui, compositing_ui, handlers, operators, props, ui, viewport
+    from . import appearance_ui, compositing_ui, handlers, operators, props, shadow_ui, ui, viewport
 
-    return (props, operators, ui, handlers, viewport, appearance_ui, compositing_ui)
+    return (props, operators, ui, handlers, viewport, appearance_ui, compositing_ui, shadow_ui)
 
 
 def register():
