@@ -218,8 +218,10 @@ def apply(session: ShadowSession, *, scene=None):
         twin = bpy.data.objects.new(twin_name, light.data)
         for c in light.users_collection:
             c.objects.link(twin)
-    twin.parent = light.parent
-    twin.matrix_world = light.matrix_world.copy()
+    # Parented with an identity offset: the twin follows every move of the light.
+    twin.parent = light
+    twin.matrix_parent_inverse.identity()
+    twin.location, twin.rotation_mode, twin.rotation_euler, twin.scale = (0.0, 0.0, 0.0), "XYZ", (0.0, 0.0, 0.0), (1.0, 1.0, 1.0)
     recv_a = _linking_collection(f"{light.name} · receivers (caster)")
     _set_state(recv_a, caster, "INCLUDE")
     block_a = _linking_collection(f"{light.name} · blockers (caster)")
