@@ -410,6 +410,9 @@ def test_operators_start_drag_apply_and_the_overlay():
         n = len(sess.loops()[0]["points"])
         assert geo["lines"].shape == (2 * n, 3) and geo["points"].shape == (n, 3)
         np.testing.assert_allclose(geo["line_colors"][0], shadow_ui.ACTIVE)
+        # Seen from below the ground every handle is hidden: no boundary is drawn.
+        hidden = shadow_ui.overlay_geometry(sess, eye=(0.0, 0.0, -5.0))
+        assert len(hidden["lines"]) == 0 and len(hidden["points"]) == 0
         h = sess.handles(0)["points"].astype(np.float64)
         c = h.mean(axis=0)
         target = c + (h[3] - c) * 1.3

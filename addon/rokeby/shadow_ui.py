@@ -50,7 +50,17 @@ def overlay_geometry(sess, eye=None) -> dict:
     return {"lines": cat(lines, 3), "line_colors": cat(line_colors, 4), "points": cat(points, 3), "point_colors": cat(point_colors, 4)}
 
 
+def _view_eye(rv3d):
+    """The eye of a 3D view (perspective; None for orthographic views)."""
+    if rv3d is None or not rv3d.is_perspective:
+        return None
+    return tuple(rv3d.view_matrix.inverted().translation)
+
+
 def _refresh(scene, eye=None):
+    """Recomputes the overlay; handles hidden from ``eye`` (default: the scene camera) are hidden."""
+    if eye is None and scene.camera is not None:
+        eye = tuple(scene.camera.matrix_world.translation)
     sess = session(scene)
     _OVERLAY[scene.name] = overlay_geometry(sess, eye) if sess is not None else None
     for area in getattr(bpy.context.screen, "areas", ()) if bpy.context.screen else ():
@@ -199,7 +209,7 @@ class ROKEBY_OT_shadow_drag(bpy.types.Operator):
                     self._drag(sess)
                 except ValueError as exc:
                     self.report({"WARNING"}, f"Rokeby: {exc}")
-                _refresh(context.scene)
+                _refresh(context.scene, _view_eye(rv3d))
             return {"RUNNING_MODAL"}
         if event.type == "LEFTMOUSE" and event.value == "RELEASE":
             sess.commit()
