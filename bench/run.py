@@ -435,6 +435,11 @@ def shadow_section(emit):
     emit()
 
 
+import tradeoff_sections  # noqa: E402
+
+TRADEOFFS = tradeoff_sections.SECTIONS
+
+
 def _refresh_section(emit, out, marker, section):
     """Run one section and put it into docs/benchmarks.md in place of its old text (appended
     when the report has none yet)."""
@@ -456,7 +461,7 @@ def _refresh_section(emit, out, marker, section):
 def main():
     ap = argparse.ArgumentParser(description="Rokeby benchmarks")
     ap.add_argument("--peers", default=None, help="python of .venv-peers (exact geodesics, potpourri3d, libigl, matplotlib)")
-    ap.add_argument("--only", choices=["field", "geodesic", "addon", "render", "viewport", "envmap", "compositing", "shadow"], default=None)
+    ap.add_argument("--only", choices=["field", "geodesic", "addon", "render", "viewport", "envmap", "compositing", "shadow", *TRADEOFFS], default=None)
     args = ap.parse_args()
     rng = np.random.default_rng(2009)
     out = []
@@ -478,6 +483,12 @@ def main():
         return
     if args.only == "envmap":
         _refresh_section(emit, out, ENVMAP_MARKER, envmap_section)
+        return
+    if args.only in TRADEOFFS:
+        # Issue 9: one speed-for-accuracy choice (bench/tradeoff_sections.py), with its plot.
+        marker, section = TRADEOFFS[args.only]
+        _refresh_section(emit, out, marker, lambda e: section(e, args.peers))
+        tradeoff_sections.refresh_peers_line(args.peers)
         return
     if args.only == "shadow":
         _refresh_section(emit, out, SHADOW_MARKER, shadow_section)
