@@ -227,7 +227,7 @@ def holefill_section(emit, peers=None):
                                                         "y": [x["mean_abs"] for x in rows], "labels": [f"2x{x['size']}²" for x in rows]}]},
           emit, "hole filling: time against error")
     emit("Recommendation: 128² per face (the default `env_size` of reconstruct) : the fill error is within a few percent")
-    emit("of its limit from 64² on, and the cost grows ~4-5x per doubling (1 s at 512²). Go to 256² only when the covered")
+    emit("of its limit from 64² on, and the cost grows ~4-5x per doubling (0.7-1 s at 512² in our runs). Go to 256² only when the covered")
     emit("part of the map needs the detail (sharp reflections), not for the holes.")
     emit()
 
@@ -364,6 +364,12 @@ def field_section(emit, peers=None):
     emit("path (viewport shader, `edited_directions`) for coarse meshes, for constraints close together, or when the")
     emit("edit must not depend on the tessellation.")
     emit()
+
+
+INDEX = """Speed against accuracy, one section each (table, time-against-error plot, peers, papers, recommendation):
+geodesic method (Geodesic distances), per-vertex versus per-pixel field, polar method and float32 versus float64
+(Polar method and float32 storage), reflection map versus ray traced render and map resolutions, SH order,
+QP versus least squares, hole-filling resolution; also the prefiltering ring density K (Environment maps, table only)."""
 
 
 SECTIONS = {
