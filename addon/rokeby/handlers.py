@@ -19,7 +19,7 @@ import contextlib
 import bpy
 from bpy.app.handlers import persistent
 
-from . import evaluate, shading
+from . import evaluate, shading, shadow
 
 _busy = False
 _suspend = 0
@@ -42,7 +42,10 @@ def _run(scene, depsgraph, **kwargs):
     _busy = True
     try:
         reports = evaluate.evaluate_scene(scene, depsgraph, **kwargs)
-        if any(r.recomputed for r in reports.values()):
+        # Shadow edits (#7): the falloff of each shadow mesh follows its light (writes only
+        # changed values, so the update it causes settles at once).
+        moved = shadow.sync_falloffs(scene)
+        if moved or any(r.recomputed for r in reports.values()):
             _redraw()
     except Exception as exc:  # noqa: BLE001 - a handler must never take Blender down
         print(f"Rokeby: update failed: {type(exc).__name__}: {exc}")

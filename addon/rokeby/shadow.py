@@ -146,10 +146,18 @@ def _set_state(coll, obj, state: str):
     coll.collection_objects[list(coll.objects).index(obj)].light_linking.link_state = state
 
 
-def apply(session: ShadowSession, *, scene=None):
+def apply(session: ShadowSession, *, scene=None, falloff_beta: float = 0.0):
     """Makes (or updates) the shadow-mesh object of ``session``'s current edit and sets up the
-    light and shadow linking. Returns (shadow object, twin light)."""
+    light and shadow linking. ``falloff_beta`` (β ≥ 0, §6.2) blends the edit back towards the
+    original shadow as the light moves away from where the edit was made, (l_initial · l_current)^β;
+    0 keeps the edit at full strength. It is stored on the shadow object (custom property
+    ``rokeby_falloff_beta``, editable) and applied on every scene update and frame change
+    (``sync_falloffs``). Returns (shadow object, twin light)."""
     import bpy  # noqa: PLC0415
+
+    beta = float(falloff_beta)
+    if not (np.isfinite(beta) and beta >= 0.0):
+        raise ShadowEditError(f"falloff_beta: must be finite and >= 0, got {falloff_beta}")
 
     sc = scene if scene is not None else bpy.context.scene
     caster = bpy.data.objects.get(session.caster)
@@ -210,6 +218,8 @@ def apply(session: ShadowSession, *, scene=None):
     ob.display_type = "WIRE"
     ob["rokeby_shadow_of"] = caster.name
     ob["rokeby_light_initial"] = list(map(float, session.light_vector))
+    ob["rokeby_light"] = light.name
+    ob["rokeby_falloff_beta"] = beta
 
     # The twin light: every receiver but the caster, blocked by everything but the caster.
     twin_name = light.name + TWIN_SUFFIX
@@ -238,9 +248,9 @@ def apply(session: ShadowSession, *, scene=None):
     return ob, twin
 
 
-def update_falloff(shadow_object, light, beta: float, *, caster=None) -> float:
-    """Sets the shadow mesh's edit shape key to (l_initial · l_current)^β (§6.2; β = 0: no
-    falloff) for the light's current position relative to the caster; returns the factor."""
+def falloff_factor(shadow_object, light, beta: float, *, caster=None) -> float:
+    """(l_initial · l_current)^β (§6.2; β = 0: no falloff) for the light's current position
+    relative to the caster, without writing anything."""
     import bpy  # noqa: PLC0415
 
     if shadow_object is None or "rokeby_shadow_of" not in shadow_object:
@@ -255,6 +265,39 @@ def update_falloff(shadow_object, light, beta: float, *, caster=None) -> float:
         lv = m[:3, 3] - kw["light_position"]
     cur = np.linalg.solve(m[:3, :3], lv)
     initial = np.asarray(shadow_object["rokeby_light_initial"], dtype=np.float64)
-    k = float(native.module().shadow_falloff(initial, cur, float(beta)))
+    return float(native.module().shadow_falloff(initial, cur, float(beta)))
+
+
+def update_falloff(shadow_object, light, beta: float, *, caster=None) -> float:
+    """Sets the shadow mesh's edit shape key to ``falloff_factor`` and returns it."""
+    k = falloff_factor(shadow_object, light, beta, caster=caster)
     shadow_object.data.shape_keys.key_blocks[EDIT_KEY].value = k
     return k
+
+
+def sync_falloffs(scene) -> int:
+    """Brings every shadow mesh's falloff (§6.2) up to date with its light's current position;
+    called by the add-on's depsgraph and frame-change handlers. Writes only values that changed
+    (so the write itself settles); returns how many it wrote. Shadow meshes whose light or caster
+    is gone keep their value."""
+    import bpy  # noqa: PLC0415
+
+    written = 0
+    for ob in scene.objects:
+        if "rokeby_shadow_of" not in ob or "rokeby_light" not in ob:
+            continue
+        light = bpy.data.objects.get(str(ob["rokeby_light"]))
+        keys = ob.data.shape_keys
+        if light is None or light.type != "LIGHT" or keys is None or EDIT_KEY not in keys.key_blocks:
+            continue
+        beta = float(ob.get("rokeby_falloff_beta", 0.0))
+        if not (np.isfinite(beta) and beta >= 0.0):
+            continue
+        try:
+            k = falloff_factor(ob, light, beta) if beta > 0.0 else 1.0
+        except (ShadowEditError, ValueError, np.linalg.LinAlgError):
+            continue
+        if abs(k - keys.key_blocks[EDIT_KEY].value) > 1e-6:
+            keys.key_blocks[EDIT_KEY].value = k
+            written += 1
+    return written
