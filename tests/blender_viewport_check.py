@@ -32,6 +32,22 @@ def main():
     report = api.evaluate(force=True)[mirror.name]
     assert report.status == "OK", report.summary()
 
+    # A shadow-editing session (#7) beside the mirror, for its overlay: a small closed caster, a
+    # ground plane and a light above them.
+    bpy.ops.mesh.primitive_ico_sphere_add(subdivisions=3, radius=0.35, location=(1.6, 0.0, 0.3))
+    caster = bpy.context.object
+    bpy.ops.mesh.primitive_plane_add(size=8.0, location=(1.0, 0.0, -1.2))
+    ground = bpy.context.object
+    lamp = bpy.data.objects.new("lamp", bpy.data.lights.new("lamp", "POINT"))
+    scene.collection.objects.link(lamp)
+    lamp.location = (1.6, 0.1, 3.0)
+    bpy.context.view_layer.update()
+    from rokeby import shadow_ui
+
+    shadow_ui._SESSIONS[scene.name] = api.start_shadow_edit(caster, lamp, [ground], min_loop_vertices=8)
+    shadow_ui._refresh(scene, eye=tuple(eye))
+    shadow_lines = len(shadow_ui._OVERLAY[scene.name]["lines"])
+
     # Create Blender's GPU context: one tiny EEVEE render.
     cam = bpy.data.objects.new("cam", bpy.data.cameras.new("cam"))
     scene.collection.objects.link(cam)
@@ -64,7 +80,15 @@ def main():
             gpu.matrix.load_projection_matrix(Matrix(vp.tolist()))
             drawn = viewport.draw_scene(scene, vp, tuple(eye), viewport_size=(W, H), view_right=(1, 0, 0), view_up=(0, 0, 1))
         colour = np.array(fb.read_color(0, 0, W, H, 4, 0, "FLOAT").to_list(), np.float32).reshape(H, W, 4)
+        # The shadow overlay's own draw callback, as its POST_VIEW handler runs it.
+        fb.clear(color=(0.0, 0.0, 0.0, 0.0), depth=1.0)
+        with gpu.matrix.push_pop(), gpu.matrix.push_pop_projection():
+            gpu.matrix.load_identity()
+            gpu.matrix.load_projection_matrix(Matrix(vp.tolist()))
+            shadow_ui._draw()
+        shadow_px = np.array(fb.read_color(0, 0, W, H, 4, 0, "FLOAT").to_list(), np.float32).reshape(H, W, 4)
     off.free()
+    orange = (shadow_px[..., 3] > 0) & (np.abs(shadow_px[..., :3] - np.array(shadow_ui.ACTIVE[:3])).max(-1) < 0.05)
     mask = out["direction"][..., 3] > 0
     import rokeby_native as rn
 
@@ -84,6 +108,8 @@ def main():
         "edited_fraction": float((edit > 1e-3).mean()),
         "drawn": drawn,
         "drawn_pixels": int(overlay.sum()),
+        "shadow_lines": shadow_lines,
+        "shadow_overlay_pixels": int(orange.sum()),
         "error": viewport.last_error(),
         "status": viewport.status_of(mirror),
     }))

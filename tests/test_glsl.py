@@ -312,6 +312,8 @@ def test_blender_compiles_and_draws_the_same_shader_offscreen():
     assert res["mean_err"] < MEAN_TOL and res["max_err"] < MAX_TOL, res
     assert res["edited_fraction"] > 0.5, "the edit shows on most of the mirror"
     assert res["drawn"] == 1 and res["drawn_pixels"] > res["covered"], "the overlays draw beyond the mirror"
+    # The shadow-editing overlay (#7) draws its boundary lines through Blender's gpu module too.
+    assert res["shadow_lines"] > 20 and res["shadow_overlay_pixels"] > 20, res
 
 
 def test_region_border_lines_lie_on_the_level_set():
