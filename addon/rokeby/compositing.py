@@ -448,6 +448,207 @@ def recomposite(p: Passes, rec: Reconstruction, edited_normals: np.ndarray, *, k
     )
 
 
+# --- the GLSL path: shaders/rokeby_recomposite_{vert,frag}.glsl ---------------------------------
+
+# The recompositing shader's interface; the files in shaders/ hold bodies only (as for the viewport
+# preview, rokeby.glsl), and this generates their #version header for plain OpenGL (moderngl).
+RECOMPOSITE_FILES = {"vertex": "rokeby_recomposite_vert.glsl", "fragment": "rokeby_recomposite_frag.glsl"}
+RECOMPOSITE_INTERFACE = {
+    "sampler": [(0, "sampler2D", "rk_ids"), (1, "sampler2D", "rk_normals"), (2, "sampler2D", "rk_edited"),
+                (3, "sampler2D", "rk_view"), (4, "sampler2D", "rk_diffuse"), (5, "sampler2D", "rk_reflection"),
+                (6, "sampler2D", "rk_image"), (7, "sampler2D", "rk_alphas"), (8, "sampler2D", "rk_dcolor"),
+                (9, "sampler2D", "rk_rcolor"), (10, "sampler2D", "rk_sh"), (11, "sampler2DArray", "rk_env")],
+    # (k_D, k_R, γ, 2 sin(ε/2)), 1/ε, (view per pixel, c_D given, c_R given), the one view vector.
+    "uniform": [("vec4", "rk_params"), ("float", "rk_inv_eps"), ("ivec3", "rk_flags"), ("vec3", "rk_view_const"),
+                ("int", "rk_npatches")],
+    "fragment_out": [(0, "vec4", "rk_out")],
+}
+
+
+def recomposite_sources(version: str = "330 core") -> tuple[str, str]:
+    """(vertex, fragment) GLSL of the recompositing pass for a plain OpenGL context."""
+    from . import glsl
+
+    d = glsl.shader_dir()
+    head = [f"#version {version}"]
+    frag = list(head)
+    for _slot, t, name in RECOMPOSITE_INTERFACE["sampler"]:
+        frag.append(f"uniform {t} {name};")
+    for t, name in RECOMPOSITE_INTERFACE["uniform"]:
+        frag.append(f"uniform {t} {name};")
+    for slot, t, name in RECOMPOSITE_INTERFACE["fragment_out"]:
+        frag.append(f"layout(location = {slot}) out {t} {name};")
+    vert = head + [(d / RECOMPOSITE_FILES["vertex"]).read_text()]
+    frag.append((d / RECOMPOSITE_FILES["fragment"]).read_text())
+    return "\n".join(vert) + "\n", "\n".join(frag) + "\n"
+
+
+def _gpu_image(a, name: str, h: int | None, w: int | None, channels: int) -> np.ndarray:
+    try:
+        a = np.asarray(a, np.float32)
+    except (TypeError, ValueError) as exc:
+        raise CompositingError(f"{name}: expected a numeric array ({exc})") from None
+    want = (h, w, 3) if channels == 3 else (h, w)
+    if h is None:
+        if a.ndim != 3 or a.shape[2] != 3 or 0 in a.shape:
+            raise CompositingError(f"{name}: expected shape (H, W, 3), got {a.shape}")
+    elif a.shape != want:
+        raise CompositingError(f"{name}: expected shape {want} like normals, got {a.shape}")
+    return np.ascontiguousarray(a)
+
+
+def _gpu_patches(patches) -> tuple[np.ndarray, np.ndarray]:
+    """The SH table (P, 10, 3) and the reflection maps (2P, S, S, 3) of `patches`."""
+    if not isinstance(patches, list):
+        raise CompositingError("patches: must be a list of dicts {'sh': (3, 9) or None, 'env': (2, S, S, 3) or None}")
+    table = np.zeros((max(len(patches), 1), 10, 3), np.float32)
+    maps: dict[int, np.ndarray] = {}
+    for k, item in enumerate(patches):
+        name = f"patches[{k}]"
+        if item is None:
+            continue
+        if not isinstance(item, dict):
+            raise CompositingError(f"{name}: must be a dict or None")
+        sh, env = item.get("sh"), item.get("env")
+        if sh is not None:
+            sh = np.asarray(sh, np.float64)
+            if sh.shape != (3, 9) or not np.isfinite(sh).all():
+                raise CompositingError(f"{name}.sh: expected finite coefficients of shape (3, 9), got {sh.shape}")
+            table[k, :9] = sh.T
+            table[k, 9, 0] = 1.0
+        if env is not None:
+            env = np.asarray(env, np.float32)
+            if env.ndim != 4 or env.shape[0] != 2 or env.shape[1] != env.shape[2] or env.shape[1] < 1:
+                raise CompositingError(f"{name}.env: expected a dual-paraboloid map of shape (2, S, S, 3), got {env.shape}")
+            if env.shape[3] != 3:
+                raise CompositingError(f"{name}.env: expected 3 channels, got {env.shape[3]}")
+            maps[k] = env
+            table[k, 9, 1] = 1.0
+    sizes = {m.shape[1] for m in maps.values()}
+    if len(sizes) > 1:
+        raise CompositingError(f"patches: the GLSL path needs one reflection-map size for all patches, got {sorted(sizes)}")
+    s = sizes.pop() if sizes else 1
+    layers = np.zeros((2 * max(len(patches), 1), s, s, 3), np.float32)
+    for k, m in maps.items():
+        layers[2 * k:2 * k + 2] = m
+    return table, layers
+
+
+class GLRecompositor:
+    """The recompositing shader on a moderngl context (EGL, headless; Mesa llvmpipe without a GPU).
+    Textures and the framebuffer are kept between frames of the same size."""
+
+    def __init__(self, ctx=None):
+        import moderngl
+
+        self.ctx = ctx or moderngl.create_context(standalone=True, backend="egl")
+        vs, fs = recomposite_sources()
+        self.program = self.ctx.program(vertex_shader=vs, fragment_shader=fs)
+        self.vao = self.ctx.vertex_array(self.program, [])
+        self.max_layers = int(self.ctx.info.get("GL_MAX_ARRAY_TEXTURE_LAYERS", 256))
+        self._size = None
+        self._tex: dict = {}
+        self._fbo = None
+
+    def _texture(self, name: str, data: np.ndarray, comps: int):
+        h, w = data.shape[:2]
+        t = self._tex.get(name)
+        if t is None or t.size != (w, h) or t.components != comps:
+            if t is not None:
+                t.release()
+            t = self.ctx.texture((w, h), comps, dtype="f4")
+            self._tex[name] = t
+        t.write(np.ascontiguousarray(data, np.float32).tobytes())
+        return t
+
+    def __call__(self, ids, normals, edited_normals, view, diffuse, reflection, image, patches, alpha_d=None,
+                 alpha_r=None, alpha=None, diffuse_color=None, reflection_color=None, k_d=1.0, k_r=1.0, gamma=1.0,
+                 epsilon=0.005 * math.pi):
+        n = _gpu_image(normals, "normals", None, None, 3)
+        h, w = n.shape[:2]
+        e = _gpu_image(edited_normals, "edited_normals", h, w, 3)
+        ids_a = np.asarray(ids)
+        if ids_a.shape != (h, w):
+            raise CompositingError(f"ids: expected shape ({h}, {w}) like normals, got {ids_a.shape}")
+        ids_f = ids_a.astype(np.float32)
+        ids_f[~np.isfinite(ids_f)] = -1.0
+        v = np.asarray(view, np.float32)
+        if v.shape not in ((3,), (h, w, 3)):
+            raise CompositingError(f"view: expected shape (3,) or ({h}, {w}, 3), got {v.shape}")
+        d0 = _gpu_image(diffuse, "diffuse", h, w, 3)
+        r0 = _gpu_image(reflection, "reflection", h, w, 3)
+        img = _gpu_image(image, "image", h, w, 3)
+        al = np.ones((h, w, 3), np.float32)
+        for c, (a, name) in enumerate(((alpha_d, "alpha_d"), (alpha_r, "alpha_r"), (alpha, "alpha"))):
+            if a is not None:
+                al[..., c] = _gpu_image(a, name, h, w, 1)
+        dc = None if diffuse_color is None else _gpu_image(diffuse_color, "diffuse_color", h, w, 3)
+        rc = None if reflection_color is None else _gpu_image(reflection_color, "reflection_color", h, w, 3)
+        for name, x in (("k_d", k_d), ("k_r", k_r)):
+            if not math.isfinite(x):
+                raise CompositingError(f"{name}: k_d and k_r must be finite, got {x}")
+        if not (gamma > 0 and math.isfinite(gamma)):
+            raise CompositingError(f"gamma: must be positive and finite, got {gamma}")
+        if not epsilon > 0:
+            raise CompositingError(f"epsilon: must be positive, got {epsilon}")
+        table, layers = _gpu_patches(patches)
+        if layers.shape[0] > self.max_layers:
+            raise CompositingError(f"patches: {len(patches)} patches need {layers.shape[0]} texture layers; this GL has {self.max_layers}")
+        maxsize = int(self.ctx.info.get("GL_MAX_TEXTURE_SIZE", 16384))
+        if max(h, w, table.shape[0]) > maxsize:
+            raise CompositingError(f"image: {w}×{h} (or {table.shape[0]} patches) exceed this GL's texture size {maxsize}")
+        one = np.zeros((1, 1, 3), np.float32)
+        texs = [self._texture("ids", ids_f, 1), self._texture("normals", n, 3), self._texture("edited", e, 3),
+                self._texture("view", v if v.ndim == 3 else one, 3), self._texture("diffuse", d0, 3),
+                self._texture("reflection", r0, 3), self._texture("image", img, 3), self._texture("alphas", al, 3),
+                self._texture("dcolor", dc if dc is not None else one, 3),
+                self._texture("rcolor", rc if rc is not None else one, 3), self._texture("sh", table, 3)]
+        env = self._tex.get("env")
+        s = layers.shape[1]
+        if env is None or env.size != (s, s, layers.shape[0]):
+            if env is not None:
+                env.release()
+            env = self._tex["env"] = self.ctx.texture_array((s, s, layers.shape[0]), 3, dtype="f4")
+        env.write(layers.tobytes())
+        for (unit, _t, name), t in zip(RECOMPOSITE_INTERFACE["sampler"], texs + [env]):
+            t.use(unit)
+            if name in self.program:
+                self.program[name].value = unit
+        chord_eps = 4.0 if epsilon >= math.pi else 2.0 * math.sin(0.5 * epsilon)
+        uniforms = {"rk_params": (float(k_d), float(k_r), float(gamma), chord_eps), "rk_inv_eps": 1.0 / epsilon,
+                    "rk_flags": (int(v.ndim == 3), int(dc is not None), int(rc is not None)),
+                    "rk_view_const": tuple(float(x) for x in (v if v.ndim == 1 else one[0, 0])),
+                    "rk_npatches": len(patches)}
+        for name, val in uniforms.items():
+            if name in self.program:
+                self.program[name].value = val
+        if self._fbo is None or self._size != (w, h):
+            if self._fbo is not None:
+                self._fbo.release()
+            self._fbo = self.ctx.framebuffer(color_attachments=[self.ctx.texture((w, h), 4, dtype="f4")])
+            self._size = (w, h)
+        self._fbo.use()
+        self.ctx.viewport = (0, 0, w, h)
+        self.vao.render(vertices=3)
+        out = np.frombuffer(self._fbo.read(components=4, dtype="f4"), np.float32).reshape(h, w, 4)
+        status = out[..., 3]
+        stats = {"edited": int((status == 1).sum()), "masked": int((status == 2).sum())}
+        return np.ascontiguousarray(out[..., :3]), stats
+
+
+_GL: GLRecompositor | None = None
+
+
+def recomposite_gpu(ids, normals, edited_normals, view, diffuse, reflection, image, patches, **kw):
+    """Eqs. 3–5 by the GLSL shader (shaders/rokeby_recomposite_frag.glsl): the arguments and the
+    result (image (H, W, 3) float32, {"edited", "masked"}) of ``rokeby_native.recomposite``, in
+    float32 on the GPU. Runs on a headless moderngl/EGL context made on first use."""
+    global _GL
+    if _GL is None:
+        _GL = GLRecompositor()
+    return _GL(ids, normals, edited_normals, view, diffuse, reflection, image, patches, **kw)
+
+
 # --- normal-editing tools (screen-space normals (H, W, 3); `mask` (H, W) limits the edit) ---------
 
 def _apply(n: np.ndarray, new: np.ndarray, mask) -> np.ndarray:
