@@ -169,7 +169,25 @@ def recomposite_bench(rng, w=1920, h=1080, patches=10, env_size=128, repeat=5):
     return {"width": w, "height": h, "patches": patches, "env_size": env_size, "edited_fraction": 0.5 * (h - 160) / h,
             "recomposite_ms": 1e3 * float(np.median(ts)), "recomposite_identity_ms": 1e3 * t_id,
             "peak_rss_mb": peak / 1024, "rss_before_mb": before / 1024,
-            "inputs_mb": sum(x.nbytes for x in (ids, n, e, view, d0, r0, img, a, a)) / 2 ** 20}
+            "inputs_mb": sum(x.nbytes for x in (ids, n, e, view, d0, r0, img, a, a)) / 2 ** 20,
+            **glsl_bench(run, (ids, n, e, view, d0, r0, img, pts), dict(alpha_d=a, alpha_r=a, diffuse_color=d0, reflection_color=r0), repeat)}
+
+
+def glsl_bench(run_cpu, args, kw, repeat):
+    """The same frame through the GLSL path (shaders/rokeby_recomposite_frag.glsl on moderngl/EGL):
+    per frame with uploads and read-back, and its largest relative difference from the Rust core."""
+    try:
+        sys.path.insert(0, str(ROOT / "addon"))
+        from rokeby import compositing as C
+
+        gl = C.GLRecompositor()
+    except Exception as exc:  # no moderngl or no EGL
+        return {"glsl_error": str(exc)}
+    out, _ = gl(*args, **kw)
+    t, _ = median_time(lambda: gl(*args, **kw), repeat)
+    ref, _ = run_cpu()
+    return {"glsl_ms": 1e3 * t, "glsl_renderer": gl.ctx.info.get("GL_RENDERER", "?"),
+            "glsl_max_rel_diff": float((np.abs(out.astype(np.float64) - ref) / (1 + np.abs(ref))).max())}
 
 
 def main():

@@ -404,6 +404,11 @@ def compositing_section(emit):
     emit(f"Recompositing (eqs. 3-5), {r1['width']}x{r1['height']}, {r1['patches']} patches (SH + 2x{r1['env_size']}² map each),")
     emit(f"{r1['edited_fraction']:.0%} of the pixels edited: {r1['recomposite_ms']:.0f} ms on 1 thread, {rn_['recomposite_ms']:.0f} ms on {os.cpu_count()};")
     emit(f"unmodified normals (every pixel takes the exact-identity path): {rn_['recomposite_identity_ms']:.0f} ms. Goal: under 33 ms.")
+    if "glsl_ms" in rn_:
+        emit(f"GLSL path (shaders/rokeby_recomposite_frag.glsl, moderngl/EGL on {rn_['glsl_renderer']}; no GPU lent), same frame with uploads and")
+        emit(f"read-back: {rn_['glsl_ms']:.0f} ms per frame; largest difference from the Rust core {rn_['glsl_max_rel_diff']:.1e} relative (float32 shader).")
+    else:
+        emit(f"GLSL path not measured: {rn_.get('glsl_error', 'no result')}.")
     emit(f"Peak memory of the benchmark process after it: {rn_['peak_rss_mb']:.0f} MB ({rn_['inputs_mb']:.0f} MB of it the float32 input buffers).")
     emit(f"Load average at the end: {os.getloadavg()[0]:.1f} on {os.cpu_count()} CPUs (other jobs shared the machine).")
     emit()
