@@ -63,13 +63,22 @@ def _check_mesh(obj):
         raise ValueError(f"obj: '{obj.name}' has no vertices to paint")
 
 
-def setup(obj, material=None):
+def setup(obj, material=None, target: str = "POINT", resolution: int = 1024, uv_map: str | None = None):
     """Creates the attributes (filled with the material's current values) and wires them into the
     Principled BSDF of ``material`` (default: the object's active material; a new one if none).
-    Idempotent: existing attributes and nodes are kept. Returns the material."""
+    Idempotent: existing attributes and nodes are kept. Returns the material.
+
+    ``target``: 'POINT' (per-point attributes, the default) or 'TEXTURE': an image per parameter
+    (``resolution``², float, on the UV map ``uv_map``, default the active one) filled from the
+    attributes and read through the UV map in place of them (see :func:`setup_texture`)."""
     import bpy
 
     _check_mesh(obj)
+    target = str(target).upper()
+    if target not in ("POINT", "TEXTURE"):
+        raise ValueError(f"target: expected 'POINT' or 'TEXTURE', got {target!r}")
+    if target == "TEXTURE":
+        _check_texture_args(obj, resolution, uv_map)  # before anything changes
     mat = material if material is not None else obj.active_material
     if mat is None:
         mat = bpy.data.materials.new(f"{obj.name} Painted")
@@ -129,6 +138,8 @@ def setup(obj, material=None):
             glob.name = glob.label = NODE_PREFIX + "global_" + param
             glob.location = (bsdf.location.x - 250, node_attr.location.y)
             nt.links.new(out, sock)
+    if target == "TEXTURE":
+        setup_texture(obj, resolution, uv_map, mat)
     return mat
 
 
@@ -188,6 +199,7 @@ def paint(obj, brush: str, centres, radius: float, value=None, strength: float =
     values."""
     _check_mesh(obj)
     param, default_mode = BRUSHES.get(brush, (brush, "MIX"))
+    img = _texture_image(obj, param) if param in PARAMS else None
     if param not in PARAMS:
         raise ValueError(f"brush: unknown brush {brush!r} (expected one of {', '.join(list(PARAMS) + list(BRUSHES))})")
     mode = (mode or default_mode).upper()
@@ -227,6 +239,10 @@ def paint(obj, brush: str, centres, radius: float, value=None, strength: float =
         if value < 0:
             raise ValueError(f"value: must be ≥ 0 (a {'target' if mode == 'MIX' else 'amount'}; use mode 'SUBTRACT' to lower), got {value}")
         target = float(value)
+    if img is not None:
+        if brush == "stretch":
+            raise ValueError("brush: 'stretch' on a texture target is not supported (its direction is per point); use the 'anisotropic' brush, or the point target")
+        return _paint_texture(obj, img, param, c, radius, strength, mode, target)
     m = np.asarray(obj.matrix_world, np.float64)
     co = np.empty(3 * len(obj.data.vertices), np.float32)
     obj.data.attributes["position"].data.foreach_get("vector", co)  # the fast path of `co`
@@ -327,3 +343,307 @@ def set_global(mat, param: str, value) -> None:
         if not (isinstance(value, (int, float)) and math.isfinite(value) and value >= 0):
             raise ValueError(f"value: a global scale must be finite and ≥ 0, got {value!r}")
         node.inputs[1].default_value = float(value)
+
+
+# --- texture targets -----------------------------------------------------------------------------
+# setup(obj, target='TEXTURE') adds, per parameter, an Image Texture node ``rokeby_tex_<param>``
+# (image ``rokeby <material> <param>``, float, Non-Color for the scalars) read through one UV Map
+# node ``rokeby_uv``, linked into the same ``rokeby_global_<param>`` node in place of the
+# attribute node (which stays, unlinked). Brushes then write the image: every texel covered by
+# the UV layout has a 3D surface point (numpy barycentric rasterisation of the UV triangles,
+# cached per mesh, UV map and resolution), and a dab updates the texels within CUTOFF·radius of it
+# with the same Gaussian in 3D distance. The images are packed into the .blend when it is saved
+# (a save_pre handler; OpenEXR, full float), so they travel with the file like Blender's own
+# generated images once packed. remove_texture() restores the material exactly.
+
+TEXTURE_MARGIN = 1.0  # texels outside a UV triangle, up to this far from it, get its clamped point (seam bleed)
+_RASTER: dict = {}
+
+
+def _check_texture_args(obj, resolution, uv_map):
+    if not (isinstance(resolution, int) and not isinstance(resolution, bool) and 8 <= resolution <= 16384):
+        raise ValueError(f"resolution: a texture side is an integer in [8, 16384], got {resolution!r}")
+    uvs = obj.data.uv_layers
+    if len(uvs) == 0:
+        raise ValueError(f"obj: '{obj.name}' has no UV map, which a texture target needs (add one, e.g. UV › Smart UV Project, or use target='POINT'); nothing was changed")
+    if uv_map is not None and uv_map not in uvs:
+        raise ValueError(f"uv_map: '{obj.name}' has no UV map {uv_map!r} (it has {', '.join(u.name for u in uvs)}); nothing was changed")
+
+
+def _image_name(mat, param):
+    return f"rokeby {mat.name} {param}"
+
+
+def setup_texture(obj, resolution: int = 1024, uv_map: str | None = None, material=None):
+    """Switches ``material`` (default: the active one, set up by :func:`setup`) to image-texture
+    targets: one ``resolution``² float image per parameter, filled from the painted attributes
+    through the UV map (texels outside the layout get the material's value). Idempotent."""
+    import bpy
+
+    _check_mesh(obj)
+    _check_texture_args(obj, resolution, uv_map)
+    mat = material if material is not None else obj.active_material
+    nodes = mat.node_tree.nodes if mat is not None and mat.use_nodes else None
+    if nodes is None or nodes.get(NODE_PREFIX + "global_roughness") is None:
+        raise ValueError(f"material: '{getattr(mat, 'name', mat)}' is not set up for painting: call rokeby.appearance.setup(obj) first")
+    nt = mat.node_tree
+    uv_name = uv_map if uv_map is not None else obj.data.uv_layers.active.name
+    uvn = nodes.get(NODE_PREFIX + "uv")
+    if uvn is None:
+        uvn = nodes.new("ShaderNodeUVMap")
+        uvn.name = uvn.label = NODE_PREFIX + "uv"
+        g = nodes[NODE_PREFIX + "global_roughness"]
+        uvn.location = (g.location.x - 800, g.location.y)
+    uvn.uv_map = uv_name
+    ras = _raster(obj, uv_name, resolution)
+    for param in PARAMS:
+        glob = nodes[NODE_PREFIX + "global_" + param]
+        tex = nodes.get(NODE_PREFIX + "tex_" + param)
+        if tex is not None and tex.image is not None:
+            continue
+        img = bpy.data.images.get(_image_name(mat, param))
+        if img is None or tuple(img.size) != (resolution, resolution):
+            if img is not None:
+                bpy.data.images.remove(img)
+            img = bpy.data.images.new(_image_name(mat, param), resolution, resolution, alpha=True, float_buffer=True)
+        if param != "diffuse":
+            img.colorspace_settings.name = "Non-Color"
+        img["rokeby_painted"] = True
+        # fill from the attributes: barycentric interpolation of the vertex values at each texel
+        vals = read(obj, param).astype(np.float64)
+        px = np.empty((resolution * resolution, 4), np.float32)
+        if param == "diffuse":
+            px[:] = vals.mean(axis=0)
+            px[ras["texel"]] = np.einsum("nk,nkc->nc", ras["bary"], vals[ras["tri_verts"]])
+        else:
+            px[:, :3] = float(np.median(vals))
+            px[:, 3] = 1.0
+            px[ras["texel"], :3] = np.einsum("nk,nk->n", ras["bary"], vals[ras["tri_verts"]])[:, None]
+        img.pixels.foreach_set(px.ravel())
+        img.update()
+        if tex is None:
+            tex = nodes.new("ShaderNodeTexImage")
+            tex.name = tex.label = NODE_PREFIX + "tex_" + param
+            tex.location = (glob.location.x - 520, glob.location.y)
+        tex.image = img
+        tex.interpolation = "Linear"
+        tex.extension = "EXTEND"
+        nt.links.new(uvn.outputs["UV"], tex.inputs["Vector"])
+        nt.links.new(tex.outputs["Color"], glob.inputs[6] if param == "diffuse" else glob.inputs[0])
+    _ensure_save_handler()
+    return mat
+
+
+def remove_texture(obj, material=None, delete_images: bool = True) -> None:
+    """Back to per-point targets: removes the Image Texture and UV Map nodes and relinks the
+    attribute nodes, so the material is exactly as :func:`setup` left it (nodes, links, values);
+    the images are deleted unless ``delete_images`` is False."""
+    import bpy
+
+    mat = material if material is not None else obj.active_material
+    nodes = mat.node_tree.nodes if mat is not None and mat.use_nodes else None
+    if nodes is None or nodes.get(NODE_PREFIX + "uv") is None:
+        raise ValueError(f"material: '{getattr(mat, 'name', mat)}' has no texture target to remove")
+    nt = mat.node_tree
+    for param in PARAMS:
+        tex = nodes.get(NODE_PREFIX + "tex_" + param)
+        glob = nodes.get(NODE_PREFIX + "global_" + param)
+        attr = nodes.get(NODE_PREFIX + param)
+        if tex is not None:
+            img = tex.image
+            nodes.remove(tex)
+            if delete_images and img is not None and img.users == 0:
+                bpy.data.images.remove(img)
+        if glob is not None and attr is not None:
+            if param == "diffuse":
+                nt.links.new(attr.outputs["Color"], glob.inputs[6])
+            else:
+                nt.links.new(attr.outputs["Fac"], glob.inputs[0])
+    nodes.remove(nodes[NODE_PREFIX + "uv"])
+
+
+def target(obj) -> str:
+    """'TEXTURE' when the active material reads images through ``rokeby_uv``, else 'POINT'."""
+    mat = obj.active_material
+    return "TEXTURE" if mat is not None and mat.use_nodes and mat.node_tree.nodes.get(NODE_PREFIX + "uv") is not None else "POINT"
+
+
+def _texture_image(obj, param):
+    mat = obj.active_material
+    if mat is None or not mat.use_nodes:
+        return None
+    tex = mat.node_tree.nodes.get(NODE_PREFIX + "tex_" + param)
+    if tex is None or tex.image is None or not tex.outputs["Color"].is_linked:
+        return None
+    return tex.image
+
+
+def _raster(obj, uv_name: str, res: int) -> dict:
+    """Per covered texel (flat index j·res + i, Blender's bottom-up pixel order): its triangle's
+    vertices, barycentric weights and object-space surface point. Texel centres ((i+½)/res,
+    (j+½)/res) inside a UV triangle take it (the deepest one where triangles overlap); uncovered
+    texels within TEXTURE_MARGIN texels of a triangle take its nearest point (clamped weights), so
+    bilinear lookups at island borders don't bleed the background. Cached per mesh, UV map,
+    resolution and the positions/UVs/triangles' contents."""
+    me = obj.data
+    if uv_name not in me.uv_layers:
+        raise ValueError(f"obj: '{obj.name}' has no UV map {uv_name!r}, which its texture target reads (restore it, or remove_texture())")
+    me.calc_loop_triangles()
+    nt = len(me.loop_triangles)
+    n = len(me.vertices)
+    co = np.empty(3 * n, np.float32)
+    me.attributes["position"].data.foreach_get("vector", co)
+    loops = np.empty(3 * nt, np.int32)
+    me.loop_triangles.foreach_get("loops", loops)
+    tv = np.empty(3 * nt, np.int32)
+    me.loop_triangles.foreach_get("vertices", tv)
+    uv = np.empty(2 * len(me.loops), np.float32)
+    me.uv_layers[uv_name].data.foreach_get("uv", uv)
+    key = (me.as_pointer(), uv_name, res)
+    digest = hash((co.tobytes(), uv.tobytes(), tv.tobytes(), loops.tobytes()))
+    hit = _RASTER.get(key)
+    if hit is not None and hit["digest"] == digest:
+        return hit
+    co = co.reshape(n, 3).astype(np.float64)
+    tv = tv.reshape(nt, 3)
+    P = uv.reshape(-1, 2).astype(np.float64)[loops.reshape(nt, 3)] * res - 0.5  # texel-centre units
+    a, b, c = P[:, 0], P[:, 1], P[:, 2]
+    den = (b[:, 1] - c[:, 1]) * (a[:, 0] - c[:, 0]) + (c[:, 0] - b[:, 0]) * (a[:, 1] - c[:, 1])
+    edge = np.stack([np.linalg.norm(b - c, axis=1), np.linalg.norm(c - a, axis=1), np.linalg.norm(a - b, axis=1)], 1)
+    alt = np.abs(den)[:, None] / np.maximum(edge, 1e-30)  # altitude over each vertex's opposite edge
+    lo = np.clip(np.floor(P.min(axis=1) - TEXTURE_MARGIN), 0, res - 1).astype(np.int64)
+    hi = np.clip(np.ceil(P.max(axis=1) + TEXTURE_MARGIN), 0, res - 1).astype(np.int64)
+    w, h = hi[:, 0] - lo[:, 0] + 1, hi[:, 1] - lo[:, 1] + 1
+    ok = np.abs(den) > 1e-12
+    counts = np.where(ok, w * h, 0)
+    texel_l, tri_l, l_l, depth_l = [], [], [], []
+    start = 0
+    csum = np.cumsum(counts)
+    while start < nt:  # chunks of triangles with at most ~4M candidate texels (not a texel loop)
+        stop = int(np.searchsorted(csum, (csum[start - 1] if start else 0) + 4_000_000, side="right"))
+        stop = max(stop, start + 1)
+        ts = np.arange(start, min(stop, nt))
+        cnt = counts[ts]
+        t = np.repeat(ts, cnt)
+        off = np.arange(cnt.sum()) - np.repeat(np.cumsum(cnt) - cnt, cnt)
+        x = lo[t, 0] + off % w[t]
+        y = lo[t, 1] + off // w[t]
+        qa, qb, qc = a[t], b[t], c[t]
+        l0 = ((qb[:, 1] - qc[:, 1]) * (x - qc[:, 0]) + (qc[:, 0] - qb[:, 0]) * (y - qc[:, 1])) / den[t]
+        l1 = ((qc[:, 1] - qa[:, 1]) * (x - qc[:, 0]) + (qa[:, 0] - qc[:, 0]) * (y - qc[:, 1])) / den[t]
+        lam = np.stack([l0, l1, 1.0 - l0 - l1], 1)
+        depth = (lam * alt[t]).min(axis=1)  # signed texel distance inside the nearest edge line
+        keep = depth >= -TEXTURE_MARGIN
+        texel_l.append((y * res + x)[keep])
+        tri_l.append(t[keep])
+        l_l.append(lam[keep])
+        depth_l.append(depth[keep])
+        start = int(ts[-1]) + 1
+    texel = np.concatenate(texel_l) if texel_l else np.zeros(0, np.int64)
+    tri = np.concatenate(tri_l) if tri_l else np.zeros(0, np.int64)
+    lam = np.concatenate(l_l) if l_l else np.zeros((0, 3))
+    depth = np.concatenate(depth_l) if depth_l else np.zeros(0)
+    order = np.lexsort((-depth, texel))  # per texel, deepest first
+    texel, tri, lam, depth = texel[order], tri[order], lam[order], depth[order]
+    first = np.ones(len(texel), bool)
+    first[1:] = texel[1:] != texel[:-1]
+    texel, tri, lam = texel[first], tri[first], lam[first]
+    lam = np.clip(lam, 0.0, None)
+    lam /= lam.sum(axis=1, keepdims=True)
+    verts = tv[tri]
+    pts = np.einsum("nk,nkc->nc", lam, co[verts])
+    out = {"digest": digest, "texel": texel, "tri_verts": verts, "bary": lam, "points": pts}
+    _RASTER[key] = out
+    return out
+
+
+def read_texture(obj, param) -> np.ndarray:
+    """The painted image of ``param`` on a texture target: (res, res) floats, or (res, res, 4)
+    RGBA for 'diffuse'; row 0 is v = 0 (Blender's pixel order)."""
+    if param not in PARAMS:
+        raise ValueError(f"param: unknown parameter {param!r} (expected one of {', '.join(PARAMS)})")
+    img = _texture_image(obj, param)
+    if img is None:
+        raise ValueError(f"obj: '{obj.name}' has no texture target for {param!r}: call rokeby.appearance.setup(obj, target='TEXTURE') first")
+    w, h = img.size
+    px = np.empty(w * h * 4, np.float32)
+    img.pixels.foreach_get(px)
+    px = px.reshape(h, w, 4)
+    return px if param == "diffuse" else px[..., 0].copy()
+
+
+def _paint_texture(obj, img, param, c, radius, strength, mode, target):
+    nodes = obj.active_material.node_tree.nodes
+    uvn = nodes.get(NODE_PREFIX + "uv")
+    uv_name = uvn.uv_map if uvn is not None and uvn.uv_map else (obj.data.uv_layers.active.name if obj.data.uv_layers.active else "")
+    res = img.size[0]
+    if img.size[1] != res:
+        raise ValueError(f"image: '{img.name}' is {img.size[0]}×{img.size[1]}; texture targets are square")
+    ras = _raster(obj, uv_name, res)
+    m = np.asarray(obj.matrix_world, np.float64)
+    pts = ras["points"] @ m[:3, :3].T + m[:3, 3]
+    px = np.empty(res * res * 4, np.float32)
+    img.pixels.foreach_get(px)
+    px = px.reshape(-1, 4)
+    tex = ras["texel"]
+    lo, hi = PARAMS[param][3]
+    touched = []
+    for dab in c:
+        sel = _reach(pts, dab, radius)
+        if len(sel) == 0:
+            continue
+        touched.append(sel)
+        w = falloff(pts[sel], dab, radius, strength)
+        rows = tex[sel]
+        if param == "diffuse":
+            v = px[rows].astype(np.float64)
+            w = w[:, None]
+        else:
+            v = px[rows, 0].astype(np.float64)
+        v = v + w * (target - v) if mode == "MIX" else v + (1.0 if mode == "ADD" else -1.0) * w * target
+        if param == "anisotropic_rotation":
+            v = np.mod(v, 1.0)
+        elif param != "diffuse":
+            v = np.clip(v, lo, hi)
+        else:
+            v = np.maximum(v, 0.0)
+        if param == "diffuse":
+            px[rows] = v
+        else:
+            px[rows, :3] = v[:, None]
+    if touched:
+        img.pixels.foreach_set(px.ravel())
+        img.update()
+    px = px.reshape(res, res, 4)
+    return px.copy() if param == "diffuse" else px[..., 0].copy()
+
+
+def _pack_painted_images(*_args):
+    """save_pre: packs the painted images that changed (OpenEXR, full float) into the .blend."""
+    import bpy
+
+    for img in bpy.data.images:
+        if img.get("rokeby_painted") and (img.is_dirty or img.packed_file is None):
+            img.file_format = "OPEN_EXR"
+            img.use_half_precision = False
+            img.pack()
+
+
+def _ensure_save_handler():
+    import bpy
+
+    handlers = bpy.app.handlers.save_pre
+    if not any(getattr(f, "__name__", "") == "_rokeby_pack_painted_images" for f in handlers):
+        handlers.append(_rokeby_pack_painted_images)
+
+
+def _rokeby_pack_painted_images(*args):
+    _pack_painted_images(*args)
+
+
+try:  # persistent: survives loading another file in the same session
+    from bpy.app.handlers import persistent as _persistent
+
+    _rokeby_pack_painted_images = _persistent(_rokeby_pack_painted_images)
+except ImportError:  # pragma: no cover - outside Blender
+    pass
