@@ -229,3 +229,36 @@ def test_save_and_reload_keeps_the_painted_image(ball, tmp_path):
     bpy.ops.wm.save_as_mainfile(filepath=str(path))
     bpy.ops.wm.open_mainfile(filepath=str(path))
     np.testing.assert_array_equal(appearance.read_texture(bpy.data.objects["Sphere"], "roughness"), rough2)
+
+
+def test_operators_choose_the_texture_target(ball):
+    """The sidebar's target and resolution reach the setup operator; the paint operator then
+    writes the image; a mesh without UVs is refused with the error; the remove operator goes
+    back to per-point attributes."""
+    import rokeby
+
+    rokeby.register()
+    try:
+        bpy.context.view_layer.objects.active = ball
+        s = bpy.context.window_manager.rokeby_appearance_brush
+        assert s.target == "POINT"
+        s.target, s.resolution = "TEXTURE", 64
+        assert bpy.ops.rokeby.appearance_setup() == {"FINISHED"}
+        assert appearance.target(ball) == "TEXTURE"
+        assert tuple(appearance._texture_image(ball, "roughness").size) == (64, 64)
+        s.brush, s.radius, s.strength, s.value = "blur", 0.5, 1.0, 0.6
+        attr_before = appearance.read(ball, "roughness").copy()
+        assert bpy.ops.rokeby.appearance_paint(stroke=[{"name": "", "location": (1.0, 0.0, 0.0)}]) == {"FINISHED"}
+        assert appearance.read_texture(ball, "roughness").max() == pytest.approx(0.7, abs=0.03)  # nearest 64² texel centre to the dab
+        np.testing.assert_array_equal(appearance.read(ball, "roughness"), attr_before)  # attributes untouched
+        assert bpy.ops.rokeby.appearance_texture_remove() == {"FINISHED"}
+        assert appearance.target(ball) == "POINT"
+        assert not bpy.ops.rokeby.appearance_texture_remove.poll()
+        bpy.ops.mesh.primitive_cube_add()
+        cube = bpy.context.object
+        cube.data.uv_layers.remove(cube.data.uv_layers[0])
+        with pytest.raises(RuntimeError, match="has no UV map, which a texture target needs"):
+            bpy.ops.rokeby.appearance_setup()
+        assert "rokeby_roughness" not in cube.data.attributes
+    finally:
+        rokeby.unregister()

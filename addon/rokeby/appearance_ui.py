@@ -8,7 +8,7 @@ mode."""
 from __future__ import annotations
 
 import bpy
-from bpy.props import CollectionProperty, EnumProperty, FloatProperty, FloatVectorProperty, PointerProperty
+from bpy.props import CollectionProperty, EnumProperty, FloatProperty, FloatVectorProperty, IntProperty, PointerProperty
 
 from . import appearance
 
@@ -34,6 +34,15 @@ class RokebyAppearanceBrush(bpy.types.PropertyGroup):
     strength: FloatProperty(name="Strength", default=0.5, min=0.0, max=1.0, subtype="FACTOR")
     value: FloatProperty(name="Value", description="Target (specular, metallic, roughness) or amount per dab (sharpen, blur, stretch)", default=0.25, min=0.0, max=1.0)
     color: FloatVectorProperty(name="Colour", subtype="COLOR", size=3, default=(0.8, 0.2, 0.1), min=0.0, soft_max=1.0)
+    target: EnumProperty(
+        name="Target",
+        items=[
+            ("POINT", "Per-Point Attribute", "Paint per-point attributes of the mesh"),
+            ("TEXTURE", "Image Texture", "Paint one float image per parameter on the active UV map (packed into the .blend on save)"),
+        ],
+        default="POINT",
+    )
+    resolution: IntProperty(name="Resolution", description="Side of the painted images in texels (texture target)", default=1024, min=8, max=16384)
 
 
 def _settings(context):
@@ -59,8 +68,31 @@ class ROKEBY_OT_appearance_setup(bpy.types.Operator):
         return context.active_object is not None and context.active_object.type == "MESH"
 
     def execute(self, context):
+        s = _settings(context)
         try:
-            appearance.setup(context.active_object)
+            appearance.setup(context.active_object, target=s.target, resolution=s.resolution)
+        except ValueError as e:
+            self.report({"ERROR"}, str(e))
+            return {"CANCELLED"}
+        return {"FINISHED"}
+
+
+class ROKEBY_OT_appearance_texture_remove(bpy.types.Operator):
+    """Go back to per-point attributes: remove the painted images and their nodes from the
+    active material (restoring it exactly as the per-point setup left it)"""
+
+    bl_idname = "rokeby.appearance_texture_remove"
+    bl_label = "Back to Per-Point Attributes"
+    bl_options = {"REGISTER", "UNDO"}
+
+    @classmethod
+    def poll(cls, context):
+        ob = context.active_object
+        return ob is not None and ob.type == "MESH" and appearance.target(ob) == "TEXTURE"
+
+    def execute(self, context):
+        try:
+            appearance.remove_texture(context.active_object)
         except ValueError as e:
             self.report({"ERROR"}, str(e))
             return {"CANCELLED"}
@@ -169,10 +201,22 @@ class ROKEBY_PT_appearance(bpy.types.Panel):
         if ob is None or ob.type != "MESH":
             layout.label(text="Select a mesh")
             return
-        if appearance.PARAMS["roughness"][0] not in ob.data.attributes:
-            layout.operator(ROKEBY_OT_appearance_setup.bl_idname)
-            return
         s = _settings(context)
+        if appearance.PARAMS["roughness"][0] not in ob.data.attributes or appearance.target(ob) == "POINT":
+            col = layout.column(align=True)
+            col.prop(s, "target")
+            if s.target == "TEXTURE":
+                col.prop(s, "resolution")
+                if len(ob.data.uv_layers) == 0:
+                    col.label(text="This mesh has no UV map", icon="ERROR")
+            if appearance.PARAMS["roughness"][0] not in ob.data.attributes or s.target == "TEXTURE":
+                layout.operator(ROKEBY_OT_appearance_setup.bl_idname)
+            if appearance.PARAMS["roughness"][0] not in ob.data.attributes:
+                return
+        else:
+            img = appearance._texture_image(ob, "roughness")
+            layout.label(text=f"Target: images {img.size[0]}² on UV map '{ob.active_material.node_tree.nodes[appearance.NODE_PREFIX + 'uv'].uv_map}'" if img else "Target: images", icon="IMAGE_DATA")
+            layout.operator(ROKEBY_OT_appearance_texture_remove.bl_idname)
         col = layout.column(align=True)
         col.prop(s, "brush")
         col.prop(s, "radius")
@@ -195,7 +239,7 @@ class ROKEBY_PT_appearance(bpy.types.Panel):
                 box.prop(node.inputs[7 if param == "diffuse" else 1], "default_value", text=param.replace("_", " ").title())
 
 
-_CLASSES = (RokebyStrokePoint, RokebyAppearanceBrush, ROKEBY_OT_appearance_setup, ROKEBY_OT_appearance_paint, ROKEBY_OT_appearance_preview, ROKEBY_PT_appearance)
+_CLASSES = (RokebyStrokePoint, RokebyAppearanceBrush, ROKEBY_OT_appearance_setup, ROKEBY_OT_appearance_texture_remove, ROKEBY_OT_appearance_paint, ROKEBY_OT_appearance_preview, ROKEBY_PT_appearance)
 
 
 def register():
