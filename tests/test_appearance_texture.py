@@ -262,3 +262,20 @@ def test_operators_choose_the_texture_target(ball):
         assert "rokeby_roughness" not in cube.data.attributes
     finally:
         rokeby.unregister()
+
+
+def test_raster_is_cached_and_follows_mesh_edits(ball):
+    appearance.setup(ball, target="TEXTURE", resolution=32)
+    a = appearance._raster(ball, "UVMap", 32)
+    assert appearance._raster(ball, "UVMap", 32) is a
+    co = np.empty(3 * len(ball.data.vertices), np.float32)
+    ball.data.vertices.foreach_get("co", co)
+    ball.data.vertices.foreach_set("co", co * 2.0)
+    ball.data.update()
+    b = appearance._raster(ball, "UVMap", 32)
+    assert b is not a
+    np.testing.assert_array_equal(b["texel"], a["texel"])
+    np.testing.assert_allclose(b["points"], 2.0 * a["points"], rtol=1e-6, atol=1e-7)
+    # and painting uses the moved surface: a dab at the doubled pole reaches it
+    img = appearance.paint(ball, "roughness", [2.0, 0.0, 0.0], radius=0.3, value=0.9)
+    assert img.max() > 0.8
