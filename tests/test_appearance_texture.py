@@ -276,6 +276,8 @@ def test_raster_is_cached_and_follows_mesh_edits(ball):
     assert b is not a
     np.testing.assert_array_equal(b["texel"], a["texel"])
     np.testing.assert_allclose(b["points"], 2.0 * a["points"], rtol=1e-6, atol=1e-7)
-    # and painting uses the moved surface: a dab at the doubled pole reaches it
-    img = appearance.paint(ball, "roughness", [2.0, 0.0, 0.0], radius=0.3, value=0.9)
-    assert img.max() > 0.8
+    # and painting uses the moved surface: the Gaussian of a dab at the doubled pole
+    img = appearance.paint(ball, "roughness", [2.0, 0.0, 0.0], radius=0.6, value=0.9)
+    w = np.exp(-np.sum((b["points"] - [2.0, 0.0, 0.0]) ** 2, axis=1) / (2 * 0.3**2))
+    np.testing.assert_allclose(img.ravel()[b["texel"]], 0.1 + w * 0.8, atol=2e-6)
+    assert img.max() > 0.5
