@@ -24,7 +24,7 @@
 //! other than I are returned as I unchanged (counted in [`Stats::masked`]).
 
 use crate::error::{Result, RokebyError};
-use crate::reconstruct::{reflect, unit, ParaboloidMap};
+use crate::reconstruct::{unit, ParaboloidMap};
 use crate::sh::{self, SH_COEFFS};
 use rayon::prelude::*;
 
@@ -115,63 +115,81 @@ pub fn recomposite(b: &Buffers, patches: &[Patch], p: &Params) -> Result<(Vec<f3
     if let Some(e) = patches.iter().filter_map(|q| q.env.as_ref()).find(|e| e.channels != 3) {
         return Err(RokebyError::invalid("patches", format!("reflection maps must have 3 channels, got {}", e.channels)));
     }
-    let mut out = vec![0.0f32; 3 * n];
-    let inv_gamma = 1.0 / p.gamma;
-    let inv_eps = 1.0 / p.epsilon;
-    let chord_eps = if p.epsilon >= std::f64::consts::PI { f64::INFINITY } else { 2.0 * (0.5 * p.epsilon).sin() };
+    // The fuzzer found an empty (size 0) map panicking in the lookup's clamp.
+    if let Some(e) = patches.iter().filter_map(|q| q.env.as_ref()).find(|e| e.size == 0 || e.data.len() != 2 * e.size * e.size * e.channels) {
+        return Err(RokebyError::invalid("patches", format!("reflection map of size {} holds {} values, expected 2×size×size×3 with size ≥ 1", e.size, e.data.len())));
+    }
+    // Per-patch constants, once per frame: f32 SH coefficients (channel-major) and flags.
+    let sh32: Vec<Option<[[f32; SH_COEFFS]; 3]>> = patches.iter().map(|q| q.sh.map(|c| c.map(|ch| ch.map(|x| x as f32)))).collect();
+    let (k_d, k_r) = (p.k_d as f32, p.k_r as f32);
+    let unit_material = p.k_d == 1.0 && p.k_r == 1.0;
+    let inv_gamma = (1.0 / p.gamma) as f32;
+    let gamma_one = p.gamma == 1.0;
+    let inv_eps = (1.0 / p.epsilon) as f32;
+    let chord_eps = if p.epsilon >= std::f64::consts::PI { f32::INFINITY } else { (2.0 * (0.5 * p.epsilon).sin()) as f32 };
+    let const_view = if b.view.len() == 3 { unit(b.view).map(to32) } else { None };
+    let g = |x: f32| if gamma_one { x } else { x.max(0.0).powf(inv_gamma) };
+    // Rows in parallel; every pixel starts as I (one copy), and only pixels whose normal or
+    // material changed run eqs. 3–5 — in f32 (the buffers' precision): with ñ = n the formulas
+    // below still give I bit for bit (zero SH difference, zero chord, identical shade and shade0).
+    let mut out = b.image.to_vec();
+    const CHUNK: usize = 1024;
     let stats = out
-        .par_chunks_mut(3 * 256)
+        .par_chunks_mut(3 * CHUNK)
         .enumerate()
         .map(|(chunk, o)| {
             let mut st = Stats::default();
-            let mut look = [0.0f64; 3];
             for (k, px) in o.chunks_exact_mut(3).enumerate() {
-                let i = chunk * 256 + k;
-                let img = &b.image[3 * i..3 * i + 3];
-                px.copy_from_slice(img);
+                let i = chunk * CHUNK + k;
                 let id = b.ids[i];
                 if id < 0 || id as usize >= patches.len() {
                     continue;
                 }
-                let patch = &patches[id as usize];
                 let nb = &b.normals[3 * i..3 * i + 3];
                 let eb = &b.edited[3 * i..3 * i + 3];
-                if nb == eb && p.k_d == 1.0 && p.k_r == 1.0 {
+                if unit_material && nb == eb {
                     // Unmodified normal and material: eqs. 3–5 give I exactly; skip the arithmetic.
                     continue;
                 }
-                let opt = |v: &[f32], def: f32| if v.is_empty() { def } else { v[i] };
-                let col = |v: &'_ [f32]| -> [f64; 3] { if v.is_empty() { [1.0; 3] } else { [v[3 * i] as f64, v[3 * i + 1] as f64, v[3 * i + 2] as f64] } };
-                let vb = if b.view.len() == 3 { b.view } else { &b.view[3 * i..3 * i + 3] };
-                let (an, ae, av) = (unit(nb), unit(eb), unit(vb));
-                let d0 = &b.diffuse[3 * i..3 * i + 3];
-                let r0 = &b.reflection[3 * i..3 * i + 3];
-                let (ad, ar, a) = (opt(b.alpha_d, 1.0) as f64, opt(b.alpha_r, 1.0) as f64, opt(b.alpha, 1.0) as f64);
+                let patch = &patches[id as usize];
+                let sh = &sh32[id as usize];
+                if sh.is_none() && patch.env.is_none() {
+                    st.masked += 1;
+                    continue;
+                }
+                let opt = |v: &[f32]| if v.is_empty() { 1.0 } else { v[i] };
+                let col = |v: &[f32]| -> [f32; 3] { if v.is_empty() { [1.0; 3] } else { [v[3 * i], v[3 * i + 1], v[3 * i + 2]] } };
+                let d0 = [b.diffuse[3 * i], b.diffuse[3 * i + 1], b.diffuse[3 * i + 2]];
+                let r0 = [b.reflection[3 * i], b.reflection[3 * i + 1], b.reflection[3 * i + 2]];
+                let (ad, ar, a) = (opt(b.alpha_d), opt(b.alpha_r), opt(b.alpha));
                 let (cd, cr) = (col(b.diffuse_color), col(b.reflection_color));
-                let finite = d0.iter().chain(r0).all(|x| x.is_finite()) && ad.is_finite() && ar.is_finite() && a.is_finite() && cd.iter().chain(&cr).all(|x| x.is_finite());
-                let (Some(nn), Some(ne), Some(vv)) = (an, ae, av) else {
+                let finite = d0.iter().chain(&r0).chain(&cd).chain(&cr).all(|x| x.is_finite()) && ad.is_finite() && ar.is_finite() && a.is_finite();
+                let vv = match const_view {
+                    Some(v) => Some(v),
+                    None if b.view.len() == 3 => None,
+                    None => unit(&b.view[3 * i..3 * i + 3]).map(to32),
+                };
+                let (Some(nn), Some(ne), Some(vv)) = (unit(nb).map(to32), unit(eb).map(to32), vv) else {
                     st.masked += 1;
                     continue;
                 };
-                if !finite || (patch.sh.is_none() && patch.env.is_none()) {
+                if !finite {
                     st.masked += 1;
                     continue;
                 }
                 st.edited += 1;
                 // Eq. 3: D(ñ) − D(n) = Σ_k c_k (Y_k(ñ) − Y_k(n)), the basis evaluated once per normal.
-                let mut dt = [0.0f64; 3];
-                let mut dbasis = [0.0f64; SH_COEFFS];
-                if patch.sh.is_some() {
-                    let (be, bn) = (sh::basis(ne.to_array()), sh::basis(nn.to_array()));
-                    for k in 0..SH_COEFFS {
-                        dbasis[k] = be[k] - bn[k];
-                    }
-                }
+                let mut dt = [0.0f32; 3];
+                let dbasis = if sh.is_some() {
+                    let (be, bn) = (basis32(ne), basis32(nn));
+                    std::array::from_fn(|k| be[k] - bn[k])
+                } else {
+                    [0.0f32; SH_COEFFS]
+                };
                 for c in 0..3 {
-                    let d0c = d0[c] as f64;
-                    let delta = match &patch.sh {
+                    let delta = match sh {
                         Some(co) => {
-                            let mut s = 0.0;
+                            let mut s = 0.0f32;
                             for k in 0..SH_COEFFS {
                                 s += co[c][k] * dbasis[k];
                             }
@@ -179,36 +197,75 @@ pub fn recomposite(b: &Buffers, patches: &[Patch], p: &Params) -> Result<(Vec<f3
                         }
                         None => 0.0,
                     };
-                    let res = (d0c + delta).max(d0c.min(0.0));
-                    dt[c] = d0c + ad * (res - d0c);
+                    let res = (d0[c] + delta).max(d0[c].min(0.0));
+                    dt[c] = d0[c] + ad * (res - d0[c]);
                 }
                 // Eq. 4. The angle from the chord |r − r~| = 2 sin(θ/2): v = 1 without any
                 // trigonometry once the chord reaches 2 sin(ε/2); exactly 0 when r~ = r.
-                let mut rt = [0.0f64; 3];
-                let r = reflect(vv, nn);
-                let re = reflect(vv, ne);
-                let chord = (r - re).length();
+                let r = reflect32(vv, nn);
+                let re = reflect32(vv, ne);
+                let dr = [r[0] - re[0], r[1] - re[1], r[2] - re[2]];
+                let chord = (dr[0] * dr[0] + dr[1] * dr[1] + dr[2] * dr[2]).sqrt();
                 let vis = if chord >= chord_eps { 1.0 } else { 2.0 * (0.5 * chord).min(1.0).asin() * inv_eps };
-                match &patch.env {
-                    Some(env) if vis * ar != 0.0 => env.lookup(re, &mut look),
-                    _ => look = [r0[0] as f64, r0[1] as f64, r0[2] as f64],
-                }
+                let look = match &patch.env {
+                    Some(env) if vis * ar != 0.0 => lookup32(env, re),
+                    _ => r0,
+                };
+                // Eqs. 4 and 5.
                 for c in 0..3 {
-                    let r0c = r0[c] as f64;
-                    rt[c] = r0c + vis * ar * (look[c] - r0c);
-                }
-                // Eq. 5.
-                for c in 0..3 {
-                    let shade = p.k_d * (cd[c] * dt[c]) + p.k_r * (cr[c] * rt[c]);
-                    let shade0 = cd[c] * d0[c] as f64 + cr[c] * r0[c] as f64;
-                    let g = |x: f64| if p.gamma == 1.0 { x } else { x.max(0.0).powf(inv_gamma) };
-                    px[c] = (img[c] as f64 + a * (g(shade) - g(shade0))) as f32;
+                    let rt = r0[c] + vis * ar * (look[c] - r0[c]);
+                    let shade = k_d * (cd[c] * dt[c]) + k_r * (cr[c] * rt);
+                    let shade0 = cd[c] * d0[c] + cr[c] * r0[c];
+                    px[c] += a * (g(shade) - g(shade0));
                 }
             }
             st
         })
         .reduce(Stats::default, |x, y| Stats { masked: x.masked + y.masked, edited: x.edited + y.edited });
     Ok((out, stats))
+}
+
+#[inline]
+fn to32(v: glam::DVec3) -> [f32; 3] {
+    [v.x as f32, v.y as f32, v.z as f32]
+}
+
+#[inline]
+fn reflect32(v: [f32; 3], n: [f32; 3]) -> [f32; 3] {
+    let d = 2.0 * (n[0] * v[0] + n[1] * v[1] + n[2] * v[2]);
+    [d * n[0] - v[0], d * n[1] - v[1], d * n[2] - v[2]]
+}
+
+/// [`sh::basis`] in f32.
+#[inline]
+fn basis32(n: [f32; 3]) -> [f32; SH_COEFFS] {
+    let [x, y, z] = n;
+    let (c0, c1, c2) = (0.282_094_8_f32, 0.488_602_5_f32, 1.092_548_4_f32);
+    [c0, c1 * y, c1 * z, c1 * x, c2 * x * y, c2 * y * z, 0.315_391_57 * (3.0 * z * z - 1.0), c2 * x * z, 0.546_274_2 * (x * x - y * y)]
+}
+
+/// `ParaboloidMap::lookup` for 3 channels in f32: the same face choice, texel convention (texel
+/// centres, coordinates clamped to the map) and bilinear weights.
+#[inline]
+fn lookup32(m: &ParaboloidMap, d: [f32; 3]) -> [f32; 3] {
+    let l = (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt();
+    let d = if l > 0.0 && l.is_finite() { [d[0] / l, d[1] / l, d[2] / l] } else { [0.0, 0.0, 1.0] };
+    let face = usize::from(d[2] < 0.0);
+    let k = 1.0 / (1.0 + d[2].abs());
+    let s = m.size as f32;
+    let x = ((d[0] * k + 1.0) * 0.5 * s - 0.5).clamp(0.0, s - 1.0);
+    let y = ((d[1] * k + 1.0) * 0.5 * s - 0.5).clamp(0.0, s - 1.0);
+    let (j0, i0) = (x as usize, y as usize);
+    let (j1, i1) = ((j0 + 1).min(m.size - 1), (i0 + 1).min(m.size - 1));
+    let (fx, fy) = (x - j0 as f32, y - i0 as f32);
+    let idx = |i: usize, j: usize| ((face * m.size + i) * m.size + j) * 3;
+    let (k00, k01, k10, k11) = (idx(i0, j0), idx(i0, j1), idx(i1, j0), idx(i1, j1));
+    let t = &m.data;
+    std::array::from_fn(|c| {
+        let top = t[k00 + c] + fx * (t[k01 + c] - t[k00 + c]);
+        let bot = t[k10 + c] + fx * (t[k11 + c] - t[k10 + c]);
+        top + fy * (bot - top)
+    })
 }
 
 /// Reconstructed diffuse D(n) per pixel (H·W×3; the SH of each pixel's patch; 0 without one) —
