@@ -281,3 +281,22 @@ def test_raster_is_cached_and_follows_mesh_edits(ball):
     w = np.exp(-np.sum((b["points"] - [2.0, 0.0, 0.0]) ** 2, axis=1) / (2 * 0.3**2))
     np.testing.assert_allclose(img.ravel()[b["texel"]], 0.1 + w * 0.8, atol=2e-6)
     assert img.max() > 0.5
+
+
+def test_preview_reads_a_texture_target_at_the_vertices(ball):
+    """appearance_preview draws point_values(): on a texture target the image at the vertices'
+    UVs, which agrees with the same stroke painted per point."""
+    from rokeby import appearance_preview
+
+    appearance.setup(ball)
+    pt = appearance.paint(ball, "roughness", [1.0, 0.0, 0.0], radius=0.6, value=0.9)
+    np.testing.assert_array_equal(appearance.point_values(ball, "roughness"), pt)
+    ball.data.attributes["rokeby_roughness"].data.foreach_set("value", np.full(len(ball.data.vertices), 0.1, np.float32))
+    appearance.setup(ball, target="TEXTURE", resolution=512)
+    appearance.paint(ball, "roughness", [1.0, 0.0, 0.0], radius=0.6, value=0.9)
+    got = appearance.point_values(ball, "roughness")
+    np.testing.assert_allclose(got, pt, atol=2e-3)
+    np.testing.assert_allclose(appearance.read(ball, "roughness"), 0.1)  # the attribute is not what is shown
+    pos, nor, base, par, tris = appearance_preview._mesh_arrays(ball)
+    np.testing.assert_allclose(par[:, 1], got)
+    assert base.shape == (len(pos), 4)

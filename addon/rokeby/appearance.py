@@ -662,3 +662,40 @@ try:  # persistent: survives loading another file in the same session
     _rokeby_pack_painted_images = _persistent(_rokeby_pack_painted_images)
 except ImportError:  # pragma: no cover - outside Blender
     pass
+
+
+def point_values(obj, param) -> np.ndarray:
+    """``param`` per vertex whatever the target: the attribute (see :func:`read`), or on a texture
+    target the image looked up bilinearly (texel centres at (i+½)/res, clamped) at each corner's
+    UV and averaged over the vertex's corners. The viewport preview draws these, so it shows a
+    texture target at vertex resolution."""
+    img = _texture_image(obj, param) if param in PARAMS else None
+    if img is None:
+        return read(obj, param)
+    me = obj.data
+    uvn = obj.active_material.node_tree.nodes.get(NODE_PREFIX + "uv")
+    uv_name = uvn.uv_map if uvn is not None and uvn.uv_map in me.uv_layers else None
+    if uv_name is None:
+        raise ValueError(f"obj: '{obj.name}' lacks the UV map its texture target reads")
+    uv = np.empty(2 * len(me.loops), np.float32)
+    me.uv_layers[uv_name].data.foreach_get("uv", uv)
+    lv = np.empty(len(me.loops), np.int32)
+    me.loops.foreach_get("vertex_index", lv)
+    im = read_texture(obj, param).astype(np.float64)
+    res = im.shape[0]
+    uv = uv.reshape(-1, 2).astype(np.float64)
+    x = np.clip(uv[:, 0] * res - 0.5, 0, res - 1)
+    y = np.clip(uv[:, 1] * res - 0.5, 0, res - 1)
+    x0 = np.minimum(np.floor(x).astype(np.int64), res - 2)
+    y0 = np.minimum(np.floor(y).astype(np.int64), res - 2)
+    fx, fy = x - x0, y - y0
+    if im.ndim == 3:
+        fx, fy = fx[:, None], fy[:, None]
+    v = im[y0, x0] * (1 - fx) * (1 - fy) + im[y0, x0 + 1] * fx * (1 - fy) + im[y0 + 1, x0] * (1 - fx) * fy + im[y0 + 1, x0 + 1] * fx * fy
+    n = len(me.vertices)
+    cnt = np.maximum(np.bincount(lv, minlength=n), 1)
+    if v.ndim == 2:
+        out = np.stack([np.bincount(lv, v[:, k], minlength=n) for k in range(v.shape[1])], axis=1) / cnt[:, None]
+    else:
+        out = np.bincount(lv, v, minlength=n) / cnt
+    return out.astype(np.float32)

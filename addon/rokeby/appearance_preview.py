@@ -102,8 +102,8 @@ def _mesh_arrays(obj):
     me.calc_loop_triangles()
     tris = np.empty(3 * len(me.loop_triangles), np.int32)
     me.loop_triangles.foreach_get("vertices", tris)
-    base = appearance.read(obj, "diffuse")
-    par = np.stack([appearance.read(obj, p) for p in ("specular", "roughness", "metallic")], axis=-1)
+    base = appearance.point_values(obj, "diffuse")  # a texture target looked up at the vertices
+    par = np.stack([appearance.point_values(obj, p) for p in ("specular", "roughness", "metallic")], axis=-1)
     return pos.reshape(n, 3), nor.reshape(n, 3), base, par, tris.reshape(-1, 3)
 
 
