@@ -23,6 +23,9 @@ Mix (Multiply) node with the global tint. A stroke is a list of dabs; a dab at w
 radius r changes every point p by w = strength · exp(−‖p − c‖² / (2 (r/2)²)) (Gaussian falloff,
 e⁻² ≈ 0.14 at the radius): ``value ← value + w (target − value)`` for mode 'MIX', or
 ``value ← clamp(value ± w · amount)`` for 'ADD'/'SUBTRACT'. All vectorised with numpy.
+
+``setup(obj, target='TEXTURE')`` paints images through the UV map instead (one per parameter,
+same nodes downstream, packed into the .blend on save): see the texture-targets section below.
 """
 
 from __future__ import annotations
@@ -629,6 +632,7 @@ def _paint_texture(obj, img, param, c, radius, strength, mode, target):
     if touched:
         img.pixels.foreach_set(px.ravel())
         img.update()
+        _ensure_save_handler()  # a file reopened in a new session: the next save packs this
     px = px.reshape(res, res, 4)
     return px.copy() if param == "diffuse" else px[..., 0].copy()
 
