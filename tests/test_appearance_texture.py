@@ -98,8 +98,6 @@ def test_bad_texture_arguments(ball):
         appearance.setup(ball, target="VOXEL")
     assert "rokeby_roughness" not in ball.data.attributes  # all refused before any change
     appearance.setup(ball, target="TEXTURE", resolution=32)
-    with pytest.raises(ValueError, match="'stretch' on a texture target is not supported"):
-        appearance.paint(ball, "stretch", [[1, 0, 0], [1, 0, 0.1]], radius=0.3, value=0.5)
     with pytest.raises(ValueError, match="radius: must be a positive finite number"):
         appearance.paint(ball, "roughness", [1, 0, 0], radius=0, value=0.5)
 
@@ -306,3 +304,25 @@ def test_preview_reads_a_texture_target_at_the_vertices(ball):
     pos, nor, base, par, tris = appearance_preview._mesh_arrays(ball)
     np.testing.assert_allclose(par[:, 1], got)
     assert base.shape == (len(pos), 4)
+
+
+def test_stretch_on_a_texture_turns_the_anisotropy_like_the_point_target(ball):
+    """The same stretch strokes as test_appearance's point version, into 256² textures: at the
+    texel nearest the +X pole the rotation is ¼ for a stroke along +Z, 0 along +Y, ⅛ along the
+    diagonal; its anisotropy rises; a far texel keeps rotation 0."""
+    appearance.setup(ball, target="TEXTURE", resolution=256)
+    ras = appearance._raster(ball, "UVMap", 256)
+    pole = int(np.argmax(ras["points"][:, 0]))
+    p0 = ras["points"][pole]
+    for direction, want in (((0, 0, 1), 0.25), ((0, 1, 0), 0.0), ((0, 1, 1), 0.125)):
+        d = 0.02 * np.array(direction, float) / np.linalg.norm(direction)
+        appearance.paint(ball, "stretch", [p0 - d, p0, p0 + d], radius=0.3, value=0.5)
+        rho = appearance.read_texture(ball, "anisotropic_rotation").ravel()[ras["texel"]]
+        assert min(abs(rho[pole] - want), 0.5 - abs(rho[pole] - want)) < 0.01, (direction, rho[pole])
+        assert appearance.read_texture(ball, "anisotropic").ravel()[ras["texel"][pole]] > 0.4
+    far = int(np.argmin(ras["points"][:, 0]))
+    assert appearance.read_texture(ball, "anisotropic_rotation").ravel()[ras["texel"][far]] == pytest.approx(0.0, abs=1e-6)
+    # one dab at a time with the previous point, as the modal operator paints
+    appearance.paint(ball, "stretch", [p0 + [0, 0, 0.01]], radius=0.3, value=0.5, previous=p0 - [0, 0, 0.01])
+    rho = appearance.read_texture(ball, "anisotropic_rotation").ravel()[ras["texel"][pole]]
+    assert abs(rho - 0.25) < 0.01

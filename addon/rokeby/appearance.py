@@ -243,9 +243,10 @@ def paint(obj, brush: str, centres, radius: float, value=None, strength: float =
             raise ValueError(f"value: must be ≥ 0 (a {'target' if mode == 'MIX' else 'amount'}; use mode 'SUBTRACT' to lower), got {value}")
         target = float(value)
     if img is not None:
-        if brush == "stretch":
-            raise ValueError("brush: 'stretch' on a texture target is not supported (its direction is per point); use the 'anisotropic' brush, or the point target")
-        return _paint_texture(obj, img, param, c, radius, strength, mode, target)
+        out = _paint_texture(obj, img, param, c, radius, strength, mode, target)
+        if brush == "stretch" and len(path) >= 2:
+            _stretch_direction_texture(obj, path, len(path) - len(c), radius, strength)
+        return out
     m = np.asarray(obj.matrix_world, np.float64)
     co = np.empty(3 * len(obj.data.vertices), np.float32)
     obj.data.attributes["position"].data.foreach_get("vector", co)  # the fast path of `co`
@@ -287,11 +288,17 @@ def _radial_tangent_frame(obj, m, idx):
     co = co.reshape(n, 3).astype(np.float64)
     nrm = np.empty(3 * n, np.float32)
     me.vertex_normals.foreach_get("vector", nrm)
+    return _radial_frame_at(co, co[idx], nrm.reshape(n, 3)[idx].astype(np.float64), m)
+
+
+def _radial_frame_at(co, p, nrm, m):
+    """The radial-Z tangent frame at object-space points ``p`` with normals ``nrm`` (``co``: all
+    vertex positions, whose bounds give the generated coordinates)."""
     lo, hi = co.min(axis=0), co.max(axis=0)
-    g = (co[idx] - lo) / np.where(hi > lo, hi - lo, 1.0)
+    g = (p - lo) / np.where(hi > lo, hi - lo, 1.0)
     inv = np.linalg.inv(m[:3, :3])  # both transformed as normals (object_normal_transform)
-    data = np.stack([-(g[:, 1] - 0.5), g[:, 0] - 0.5, np.zeros(len(idx))], axis=-1) @ inv
-    nw = nrm.reshape(n, 3)[idx].astype(np.float64) @ inv
+    data = np.stack([-(g[:, 1] - 0.5), g[:, 0] - 0.5, np.zeros(len(p))], axis=-1) @ inv
+    nw = nrm @ inv
     nw /= np.maximum(np.linalg.norm(nw, axis=1, keepdims=True), 1e-30)
     x = np.cross(data, nw)
     x /= np.maximum(np.linalg.norm(x, axis=1, keepdims=True), 1e-30)
@@ -703,3 +710,50 @@ def point_values(obj, param) -> np.ndarray:
     else:
         out = np.bincount(lv, v, minlength=n) / cnt
     return out.astype(np.float32)
+
+
+def _stretch_direction_texture(obj, path, first, radius, strength):
+    """:func:`_stretch_direction` on the texels of the ``anisotropic_rotation`` image: each texel's
+    frame from its surface point and its triangle's interpolated vertex normal."""
+    mat = obj.active_material
+    tan = mat.node_tree.nodes.get(NODE_PREFIX + "tangent")
+    if tan is None or not tan.outputs["Tangent"].is_linked:
+        raise ValueError("brush: 'stretch' directions are relative to the radial tangent that setup() wires; this material's Tangent input is driven by something else")
+    img = _texture_image(obj, "anisotropic_rotation")
+    if img is None:
+        raise ValueError(f"obj: '{obj.name}' has no texture for 'anisotropic_rotation'")
+    res = img.size[0]
+    ras = _raster(obj, mat.node_tree.nodes[NODE_PREFIX + "uv"].uv_map, res)
+    m = np.asarray(obj.matrix_world, np.float64)
+    pts = ras["points"] @ m[:3, :3].T + m[:3, 3]
+    idx = np.unique(np.concatenate([_reach(pts, d, radius) for d in path[first:]]))
+    if len(idx) == 0:
+        return
+    me = obj.data
+    n = len(me.vertices)
+    co = np.empty(3 * n, np.float32)
+    me.attributes["position"].data.foreach_get("vector", co)
+    nrm = np.empty(3 * n, np.float32)
+    me.vertex_normals.foreach_get("vector", nrm)
+    nv = np.einsum("nk,nkc->nc", ras["bary"][idx], nrm.reshape(n, 3).astype(np.float64)[ras["tri_verts"][idx]])
+    t, b, _ = _radial_frame_at(co.reshape(n, 3).astype(np.float64), ras["points"][idx], nv, m)
+    px = np.empty(res * res * 4, np.float32)
+    img.pixels.foreach_get(px)
+    px = px.reshape(-1, 4)
+    rows = ras["texel"][idx]
+    rho = px[rows, 0].astype(np.float64)
+    p = pts[idx]
+    vec = np.stack([np.cos(4 * np.pi * rho), np.sin(4 * np.pi * rho)], axis=-1)
+    for k in range(first, len(path)):
+        s = path[min(k + 1, len(path) - 1)] - path[max(k - 1, 0)]
+        if not np.linalg.norm(s) > 0:
+            continue
+        ang = np.arctan2(b @ s, t @ s)
+        goal = np.stack([np.cos(2 * ang), np.sin(2 * ang)], axis=-1)
+        w = falloff(p, path[k], radius, strength)[:, None]
+        vec = vec + w * (goal - vec)
+    rho = np.mod(np.arctan2(vec[:, 1], vec[:, 0]) / (4 * np.pi), 0.5)
+    rho[rho > 0.5 - 1e-7] = 0.0
+    px[rows, :3] = rho[:, None]
+    img.pixels.foreach_set(px.ravel())
+    img.update()
