@@ -574,6 +574,17 @@ def _raster(obj, uv_name: str, res: int) -> dict:
     return out
 
 
+def _world_index(ras, m):
+    """(m, order, points[order], x[order]): the texels' world points sorted by x for transform m
+    (cached in ``ras``), so a dab only measures the slab |x − c_x| < CUTOFF·radius."""
+    world = ras.get("world")
+    if world is None or not np.array_equal(world[0], m):
+        p = ras["points"] @ m[:3, :3].T + m[:3, 3]
+        order = np.argsort(p[:, 0], kind="stable")
+        world = ras["world"] = (m, order, np.ascontiguousarray(p[order]), np.ascontiguousarray(p[order, 0]))
+    return world
+
+
 def read_texture(obj, param) -> np.ndarray:
     """The painted image of ``param`` on a texture target: (res, res) floats, or (res, res, 4)
     RGBA for 'diffuse'; row 0 is v = 0 (Blender's pixel order)."""
@@ -598,13 +609,7 @@ def _paint_texture(obj, img, param, c, radius, strength, mode, target):
         raise ValueError(f"image: '{img.name}' is {img.size[0]}×{img.size[1]}; texture targets are square")
     ras = _raster(obj, uv_name, res)
     m = np.asarray(obj.matrix_world, np.float64)
-    world = ras.get("world")
-    if world is None or not np.array_equal(world[0], m):
-        # world-space texel points sorted by x, so a dab only measures the slab |x − c_x| < reach
-        p = ras["points"] @ m[:3, :3].T + m[:3, 3]
-        order = np.argsort(p[:, 0], kind="stable")
-        world = ras["world"] = (m, order, np.ascontiguousarray(p[order]), np.ascontiguousarray(p[order, 0]))
-    _, order, pts, xs = world
+    _, order, pts, xs = _world_index(ras, m)
     px = np.empty(res * res * 4, np.float32)
     img.pixels.foreach_get(px)
     px = px.reshape(-1, 4)
@@ -725,8 +730,13 @@ def _stretch_direction_texture(obj, path, first, radius, strength):
     res = img.size[0]
     ras = _raster(obj, mat.node_tree.nodes[NODE_PREFIX + "uv"].uv_map, res)
     m = np.asarray(obj.matrix_world, np.float64)
-    pts = ras["points"] @ m[:3, :3].T + m[:3, 3]
-    idx = np.unique(np.concatenate([_reach(pts, d, radius) for d in path[first:]]))
+    _, order, spts, xs = _world_index(ras, m)
+    r = CUTOFF * radius
+    near = []
+    for d in path[first:]:
+        i0, i1 = np.searchsorted(xs, [d[0] - r, d[0] + r])
+        near.append(order[i0 + _reach(spts[i0:i1], d, radius)])
+    idx = np.unique(np.concatenate(near))
     if len(idx) == 0:
         return
     me = obj.data
@@ -742,7 +752,7 @@ def _stretch_direction_texture(obj, path, first, radius, strength):
     px = px.reshape(-1, 4)
     rows = ras["texel"][idx]
     rho = px[rows, 0].astype(np.float64)
-    p = pts[idx]
+    p = ras["points"][idx] @ m[:3, :3].T + m[:3, 3]
     vec = np.stack([np.cos(4 * np.pi * rho), np.sin(4 * np.pi * rho)], axis=-1)
     for k in range(first, len(path)):
         s = path[min(k + 1, len(path) - 1)] - path[max(k - 1, 0)]
