@@ -194,7 +194,10 @@ fn slab(mn: DVec3, mx: DVec3, o: DVec3, inv: DVec3, t0: f64, t1: f64) -> bool {
     let hi = a.max(b);
     let tmin = lo.x.max(lo.y).max(lo.z).max(t0);
     let tmax = hi.x.min(hi.y).min(hi.z).min(t1);
-    tmin <= tmax
+    // Conservative by a relative 1e-9: the fuzzer found a triangle with 1e30 coordinates that the
+    // triangle test (rounding at that scale) hits just outside the box the slab test rejects, so
+    // the BVH missed a hit the brute force found.
+    tmin <= tmax + 1e-9 * tmax.abs().max(tmin.abs())
 }
 
 fn moller_trumbore(t: &[DVec3; 3], o: DVec3, d: DVec3, t_min: f64, t_max: f64) -> Option<Hit> {
@@ -218,7 +221,8 @@ fn moller_trumbore(t: &[DVec3; 3], o: DVec3, d: DVec3, t_min: f64, t_max: f64) -
         return None;
     }
     let tt = e2.dot(q) * inv;
-    if tt <= t_min || tt >= t_max {
+    // Negated so that NaN bounds reject every hit (the fuzzer found hits behind t_min = NaN).
+    if !(tt > t_min && tt < t_max) {
         return None;
     }
     // det = e1 · (d × e2) = −d · (e1 × e2): positive when the ray meets the front side.

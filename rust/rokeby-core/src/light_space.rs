@@ -48,6 +48,10 @@ impl LightFrame {
         let (mn, mx) = vertices.iter().fold((DVec3::splat(f64::INFINITY), DVec3::splat(f64::NEG_INFINITY)), |(a, b), &p| (a.min(p), b.max(p)));
         let centre = (mn + mx) * 0.5;
         let radius = ((mx - mn) * 0.5).length().max(1e-300);
+        // The fuzzer found a vertex at 1e300 giving radius = inf and a NaN frame.
+        if !radius.is_finite() {
+            return Err(RokebyError::invalid("vertices", "the caster's vertices must be finite and its extent representable (|coordinates| well below 1e154)"));
+        }
         match light {
             Light::Point(l) => {
                 if l.cmpge(mn).all() && l.cmple(mx).all() {

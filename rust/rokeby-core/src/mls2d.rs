@@ -56,6 +56,11 @@ impl Mls2d {
         if !p.iter().chain(&q).all(|x| x.is_finite()) {
             return Err(RokebyError::invalid("controls", "control points must be finite"));
         }
+        // The fuzzer found a control point at −1e300: its squared offsets overflow (inf · 0 = NaN
+        // in the moment matrices), so coordinates are bounded where squares stay finite.
+        if !p.iter().chain(&q).all(|x| x.abs().max_element() <= 1e150) {
+            return Err(RokebyError::invalid("controls", "control point coordinates must be within ±1e150"));
+        }
         if !(falloff.is_finite() && falloff > 0.0) {
             return Err(RokebyError::invalid("falloff", format!("must be positive and finite, got {falloff}")));
         }
@@ -64,14 +69,18 @@ impl Mls2d {
 
     /// f(v).
     pub fn deform(&self, v: DVec2) -> DVec2 {
-        let mut w = Vec::with_capacity(self.p.len());
+        let mut d2s = Vec::with_capacity(self.p.len());
         for (i, &pi) in self.p.iter().enumerate() {
             let d2 = (pi - v).length_squared();
             if d2 == 0.0 {
                 return self.q[i];
             }
-            w.push(1.0 / d2.powf(self.falloff));
+            d2s.push(d2);
         }
+        // Weights 1/d^{2α} scaled by the nearest one's, (d²_min/d²)^α ∈ (0, 1] (the deformation is
+        // invariant to a common factor): the fuzzer found α = 1e30 making every 1/d^{2α} 0 or inf.
+        let dmin = d2s.iter().fold(f64::INFINITY, |a, &b| a.min(b));
+        let w: Vec<f64> = d2s.iter().map(|&d2| (dmin / d2).powf(self.falloff)).collect();
         let ws: f64 = w.iter().sum();
         let ps = self.p.iter().zip(&w).fold(DVec2::ZERO, |a, (&x, &wi)| a + x * wi) / ws;
         let qs = self.q.iter().zip(&w).fold(DVec2::ZERO, |a, (&x, &wi)| a + x * wi) / ws;
@@ -95,22 +104,26 @@ impl Mls2d {
             MlsStyle::Affine => {
                 // Row-vector convention of the paper: x M with M = A⁻¹ B,
                 // A = Σ w p̂ᵀ p̂, B = Σ w p̂ᵀ q̂ (2×2, column-major here as Mᵀ acting on columns).
+                // M = I + A⁻¹ (B − A), B − A = Σ w p̂ᵀ (q̂ − p̂): the same map, but exactly the identity
+                // at rest (q = p), where A⁻¹ A carried cond(A)·ε of error (the fuzzer found 6e-5 at
+                // a nearly collinear, still invertible A).
                 let mut a = DMat2::ZERO;
                 let mut b = DMat2::ZERO;
                 for ((&pi, &qi), &wi) in self.p.iter().zip(&self.q).zip(&w) {
                     let (ph, qh) = (pi - ps, qi - qs);
-                    // outer(ph, ph) and outer(ph, qh) as column-major matrices.
+                    let dh = qh - ph;
+                    // outer(ph, ph) and outer(ph, q̂ − p̂) as column-major matrices.
                     a += DMat2::from_cols(ph * ph.x, ph * ph.y) * wi;
-                    b += DMat2::from_cols(ph * qh.x, ph * qh.y) * wi;
+                    b += DMat2::from_cols(ph * dh.x, ph * dh.y) * wi;
                 }
                 let det = a.determinant();
                 let scale = a.x_axis.length_squared() + a.y_axis.length_squared();
                 if det.abs() <= 1e-12 * scale || scale == 0.0 {
                     return rotate(similarity(), x) + qs;
                 }
-                // f = (A⁻¹ B)ᵀ x + q* in column form; B[r][c] = Σ w ph_r qh_c.
+                // f = x + (A⁻¹ (B − A))ᵀ x + q* in column form; (B − A)[r][c] = Σ w ph_r (q̂ − p̂)_c.
                 let m = a.inverse() * b;
-                m.transpose() * x + qs
+                x + m.transpose() * x + qs
             }
             MlsStyle::Similarity => rotate(similarity(), x) + qs,
             MlsStyle::Rigid => {
@@ -134,15 +147,21 @@ pub fn sinusoidal_noise(points: &[DVec2], closed: bool, amplitude: f64, frequenc
     if !(amplitude.is_finite() && frequency.is_finite()) {
         return Err(RokebyError::invalid("noise", "amplitude and frequency must be finite"));
     }
+    // The fuzzer found NaN points passed through (NaN output); they are an error like MLS controls.
+    if !points.iter().all(|p| p.is_finite()) {
+        return Err(RokebyError::invalid("points", "boundary points must be finite"));
+    }
     let m = points.len();
     if m < 2 || amplitude == 0.0 {
         return Ok(points.to_vec());
     }
+    // hypot, not length(): the fuzzer found |Δ| ≈ 1e300 squaring to inf (u = inf, sin(inf) = NaN).
+    let len = |d: DVec2| d.x.hypot(d.y);
     let mut u = vec![0.0; m];
     for i in 1..m {
-        u[i] = u[i - 1] + (points[i] - points[i - 1]).length();
+        u[i] = u[i - 1] + len(points[i] - points[i - 1]);
     }
-    Ok((0..m)
+    let out: Vec<DVec2> = (0..m)
         .map(|i| {
             let (prev, next) = if closed {
                 (points[(i + m - 1) % m], points[(i + 1) % m])
@@ -150,12 +169,16 @@ pub fn sinusoidal_noise(points: &[DVec2], closed: bool, amplitude: f64, frequenc
                 (points[i.saturating_sub(1)], points[(i + 1).min(m - 1)])
             };
             let t = prev - next;
-            let l = t.length();
+            let l = len(t);
             if l == 0.0 {
                 return points[i];
             }
             let n = DVec2::new(-t.y, t.x) / l;
             points[i] + n * (amplitude * (frequency * u[i]).sin())
         })
-        .collect())
+        .collect();
+    if !out.iter().all(|p| p.is_finite()) {
+        return Err(RokebyError::invalid("points", "the boundary's coordinates or the noise amplitude overflow f64"));
+    }
+    Ok(out)
 }

@@ -83,11 +83,13 @@ impl Lobe {
         Ok(Lobe::TorranceSparrow { sigma })
     }
 
-    /// A delta lobe (α = 0 or σ_TS = 0): the prefiltered map is the environment itself.
+    /// A delta lobe (GGX α ≤ 1e-12, or σ_TS = 0): the prefiltered map is the environment itself.
     pub fn is_mirror(&self) -> bool {
         match *self {
             Lobe::Phong { .. } => false,
-            Lobe::Ggx { alpha } => alpha <= 0.0,
+            // Below 1e-12 rad the lobe is a delta at any resolution, and its peak 1/(πα²) would
+            // overflow (the fuzzer found α = 2.3e-10 giving k(1) = inf before the stable t below).
+            Lobe::Ggx { alpha } => alpha <= 1e-12,
             Lobe::TorranceSparrow { sigma } => sigma <= 0.0,
         }
     }
@@ -99,13 +101,19 @@ impl Lobe {
             return 0.0;
         }
         let c = c.min(1.0);
+        // A mirror lobe (GGX α = 0, Torrance–Sparrow σ = 0) is a delta: its kernel is the indicator
+        // of c = 1 (the fuzzer found 0/0 = NaN at c = 1). Mirror levels never use the kernel.
+        if self.is_mirror() {
+            return if c >= 1.0 { 1.0 } else { 0.0 };
+        }
         match *self {
             Lobe::Phong { sigma } => c.powf(sigma),
             Lobe::Ggx { alpha } => {
                 // cos²θ_h = (1 + c)/2 (h halves the angle between n = r and ω_i).
                 let a2 = alpha * alpha;
                 let ch2 = 0.5 * (1.0 + c);
-                let t = ch2 * (a2 - 1.0) + 1.0;
+                // ch2·(α² − 1) + 1 without cancelling α² against 1 (t = 0 for tiny α at c = 1).
+                let t = 0.5 * (1.0 - c) + ch2 * a2;
                 a2 / (PI * t * t) * c
             }
             Lobe::TorranceSparrow { sigma } => {

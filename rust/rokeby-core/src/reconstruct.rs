@@ -255,6 +255,19 @@ pub fn partial(width: usize, height: usize, refl: &[f32], values: &[f32], channe
     if !(8..=4096).contains(&params.size) {
         return Err(RokebyError::invalid("size", format!("map size must be in 8..=4096, got {}", params.size)));
     }
+    // tests/test_properties_new.py found NaN parameters accepted (blur_sigma = NaN gave a NaN map).
+    if !(params.max_edge_angle.is_finite() && params.max_edge_angle > 0.0) {
+        return Err(RokebyError::invalid("max_edge_angle", format!("must be positive and finite (radians), got {}", params.max_edge_angle)));
+    }
+    if !(params.max_depth_jump >= 0.0) {
+        return Err(RokebyError::invalid("max_depth_jump", format!("must be ≥ 0, got {}", params.max_depth_jump)));
+    }
+    if !(params.blur_sigma.is_finite() && params.blur_sigma >= 0.0) {
+        return Err(RokebyError::invalid("blur_sigma", format!("must be ≥ 0 and finite (0 disables the blur), got {}", params.blur_sigma)));
+    }
+    if !(0.0..=1.0).contains(&params.min_coverage) {
+        return Err(RokebyError::invalid("min_coverage", format!("must be a fraction in [0, 1], got {}", params.min_coverage)));
+    }
     // Per-pixel r and n'; invalid pixels (masked, non-finite, r = −z) are None.
     let pix: Vec<Option<(DVec3, DVec3)>> = (0..np)
         .into_par_iter()

@@ -348,8 +348,20 @@ impl ShadowEditor {
         for (&i, p) in seg.iter().zip(&moved) {
             new[i] = DVec2::new(p.x - rest[i].x, p.y - rest[i].y);
         }
-        self.current[k] = new;
-        let silhouette = self.silhouette(k)?;
+        // The fuzzer found drags (1e30 targets, 1e300 noise, w_z = 1e30) whose silhouette left f64:
+        // an error that changes nothing, not NaN points.
+        let overflow = || RokebyError::invalid("drag", "the dragged boundary overflows f64 (target, noise amplitude or weights too large)");
+        if !f.is_finite() || !new.iter().all(|p| p.is_finite()) {
+            return Err(overflow());
+        }
+        let old = std::mem::replace(&mut self.current[k], new);
+        let silhouette = match self.silhouette(k) {
+            Ok(s) if s.iter().all(|p| p.is_finite()) => s,
+            res => {
+                self.current[k] = old;
+                return Err(res.err().unwrap_or_else(overflow));
+            }
+        };
         let handles = self.cast_handles(&silhouette, k, None);
         Ok(DragResult { silhouette, handles, segment: seg, moved_to: f })
     }

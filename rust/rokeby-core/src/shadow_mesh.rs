@@ -206,7 +206,13 @@ impl ShadowMeshSolver {
         let mut x = if deltas.iter().all(|d| *d == DVec2::ZERO) { self.rhs_rest.clone() } else { self.rhs(deltas) };
         self.llt.solve_in_place(x.as_mut());
         let inv = DVec3::new(1.0, 1.0, self.w_z);
-        Ok((0..self.rest.len()).map(|i| self.frame.from_frustum(DVec3::new(x[(i, 0)], x[(i, 1)], x[(i, 2)]) * inv)).collect())
+        let out: Vec<DVec3> = (0..self.rest.len()).map(|i| self.frame.from_frustum(DVec3::new(x[(i, 0)], x[(i, 1)], x[(i, 2)]) * inv)).collect();
+        // An error, not NaN vertices: the fuzzer found w_z = weight = 1e30 with a drag of 1e300
+        // noise overflowing the solve.
+        if let Some(i) = out.iter().position(|p| !p.is_finite()) {
+            return Err(RokebyError::invalid("deltas", format!("the shadow mesh overflowed at vertex {i}: the silhouette offsets or the weights (w_z, constraint_weight) are too large")));
+        }
+        Ok(out)
     }
 }
 
@@ -223,5 +229,6 @@ pub fn falloff(l_initial: DVec3, l_current: DVec3, beta: f64) -> Result<f64> {
     if beta == 0.0 {
         return Ok(1.0);
     }
-    Ok(a.dot(b).max(0.0).powf(beta))
+    // Clamped: the fuzzer found a·b = 1 + 2⁻⁵² for unit a ≈ b, giving 1.0000000000000009.
+    Ok(a.dot(b).clamp(0.0, 1.0).powf(beta))
 }

@@ -49,8 +49,10 @@ impl Light {
     pub fn validate(&self) -> Result<()> {
         match *self {
             Light::Point(l) if !l.is_finite() => Err(RokebyError::invalid("light", "the light position must be finite")),
-            Light::Directional(d) if !d.is_finite() || d.length_squared() == 0.0 => {
-                Err(RokebyError::invalid("light", "the light direction must be finite and non-zero"))
+            // try_normalize: the fuzzer found |d| ≈ 1e300 (length² = inf) normalising to zero and
+            // giving a NaN light frame.
+            Light::Directional(d) if d.try_normalize().is_none() => {
+                Err(RokebyError::invalid("light", "the light direction must be finite and non-zero (and of a length whose square is a finite, non-zero f64)"))
             }
             _ => Ok(()),
         }
