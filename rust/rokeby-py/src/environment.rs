@@ -165,6 +165,9 @@ pub fn env_irradiance<'py>(py: Python<'py>, image: &Bound<'py, PyAny>, size: usi
 pub fn env_reference<'py>(py: Python<'py>, image: &Bound<'py, PyAny>, lobe: &str, directions: &Bound<'py, PyAny>, param: f64) -> PyResult<Bound<'py, PyArrayDyn<f64>>> {
     let env = env_from(image, Layout::LatLong, "image")?;
     let (d, lead) = self::directions(directions, "directions")?;
+    // Checked here so that a zero or non-finite direction is reported as `directions` (the core's
+    // irradiance reference calls them "normals"); found by tests/test_properties_new.py.
+    run_detached(py, || rokeby_core::envmap::finite_dirs(&d, "directions").map(|_| ()))?;
     let out = if lobe.eq_ignore_ascii_case("lambert") {
         run_detached(py, || prefilter::brute_force_irradiance(&env, &d))?
     } else {

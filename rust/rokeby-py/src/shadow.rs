@@ -24,6 +24,12 @@ fn points<'py>(py: Python<'py>, p: &[DVec3]) -> PyResult<Bound<'py, PyArrayDyn<f
     arr(py, &[p.len(), 3], p.iter().flat_map(|v| [v.x as f32, v.y as f32, v.z as f32]).collect())
 }
 
+/// A loop or vertex index: negative ones are a ValueError naming the argument (as a usize
+/// parameter they were an OverflowError that named nothing; found by tests/test_properties_new.py).
+fn index(i: i64, name: &str) -> PyResult<usize> {
+    usize::try_from(i).map_err(|_| PyValueError::new_err(format!("{name}: must be a non-negative index, got {i}")))
+}
+
 /// (N, 3) float vertices and (F, 3) integer faces, flattened.
 fn mesh_arrays(vertices: &Bound<'_, PyAny>, faces: &Bound<'_, PyAny>, vname: &str, fname: &str) -> PyResult<(Vec<f32>, Vec<i64>)> {
     let v = f32_array(vertices, vname)?;
@@ -200,7 +206,8 @@ impl PyShadowEditor {
     /// Shadow handles of loop `loop` (dict: points, triangle, hit, on_caster, occluded); `eye`
     /// (3,) flags the handles hidden from it.
     #[pyo3(signature = (r#loop, eye=None))]
-    fn handles<'py>(&self, py: Python<'py>, r#loop: usize, eye: Option<&Bound<'py, PyAny>>) -> PyResult<Bound<'py, PyDict>> {
+    fn handles<'py>(&self, py: Python<'py>, r#loop: i64, eye: Option<&Bound<'py, PyAny>>) -> PyResult<Bound<'py, PyDict>> {
+        let r#loop = index(r#loop, "loop")?;
         let eye = match eye.filter(|o| !o.is_none()) {
             Some(e) => Some(DVec3::from_array(parse_vec3(e, "eye")?)),
             None => None,
@@ -217,15 +224,17 @@ impl PyShadowEditor {
     fn drag<'py>(
         &self,
         py: Python<'py>,
-        r#loop: usize,
-        fixed: (usize, usize),
-        moved: usize,
+        r#loop: i64,
+        fixed: (i64, i64),
+        moved: i64,
         target: &Bound<'py, PyAny>,
         style: &str,
         mls_alpha: f64,
         noise_amplitude: f64,
         noise_frequency: f64,
     ) -> PyResult<Bound<'py, PyDict>> {
+        let (r#loop, moved) = (index(r#loop, "loop")?, index(moved, "moved")?);
+        let fixed = (index(fixed.0, "fixed")?, index(fixed.1, "fixed")?);
         let style = MlsStyle::parse(style).ok_or_else(|| PyValueError::new_err(format!("style: unknown deformation style {style:?} (expected 'affine', 'similarity' or 'rigid')")))?;
         let target = DVec3::from_array(parse_vec3(target, "target")?);
         let d = Drag { loop_index: r#loop, fixed, moved, target, style, mls_alpha, noise_amplitude, noise_frequency };
