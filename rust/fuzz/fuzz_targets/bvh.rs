@@ -52,8 +52,12 @@ fuzz_target!(|data: &[u8]| {
         // Agreement is asserted where rounding is at the scale of the soup: slivers of 1e30
         // coordinates with O(1) offsets are hit or missed by either test at rounding level.
         let tame = tris.iter().flatten().all(|p| p.abs().max_element() <= 4.0 * scale) && origin.abs().max_element() <= 4.0 * scale && dir.abs().max_element() <= 2.0;
+        // A hit on a triangle's boundary (u, v or 1 − u − v within 1e-9) is decided by rounding
+        // in either test, and the box test may round the other way: not asserted either.
+        let on_edge = |h: &rokeby_core::bvh::Hit| h.u.min(h.v).min(1.0 - h.u - h.v) < 1e-9;
         match (a, b) {
             _ if !tame => {}
+            (None, Some(h)) | (Some(h), None) if on_edge(&h) => {}
             (Some(x), Some(y)) => assert!(x.t == y.t || (x.t - y.t).abs() <= 1e-9 * x.t.abs().max(1.0), "bvh t {} vs brute force {}", x.t, y.t),
             (None, None) => {}
             _ => panic!("bvh {a:?} and brute force {b:?} disagree for {origin:?} + t {dir:?}, t in [{t_min}, {t_max}], triangle {:?}", b.or(a).map(|h| bvh.triangle(h.tri))),

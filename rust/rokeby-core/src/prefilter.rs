@@ -437,8 +437,18 @@ pub fn brute_force(env: &EnvMap, lobe: &Lobe, directions: &[f32]) -> Result<Vec<
                 o[ch] += k * env.data[t * c + ch] as f64;
             }
         }
-        for v in o.iter_mut() {
-            *v /= den;
+        if den > 0.0 {
+            for v in o.iter_mut() {
+                *v /= den;
+            }
+        } else {
+            // Every texel's weight underflowed (a lobe far narrower than the texels; the fuzzer
+            // found 0/0 = NaN): the lobe is a delta at this resolution, as for a mirror.
+            let mut tmp = vec![0.0f32; c];
+            env.sample(*r, &mut tmp);
+            for (v, t) in o.iter_mut().zip(&tmp) {
+                *v = *t as f64;
+            }
         }
     });
     Ok(out)

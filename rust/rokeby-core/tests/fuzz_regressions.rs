@@ -232,3 +232,16 @@ fn overflowing_shadow_solve_is_an_error() {
     }
     assert!(built >= 1);
 }
+
+/// Fuzzer (prefilter): brute_force with a lobe far narrower than the texels (every weight 0)
+/// returned 0/0 = NaN; it now returns the bilinear lookup, like a mirror lobe.
+#[test]
+fn brute_force_of_a_vanishing_lobe_is_the_lookup() {
+    use rokeby_core::envmap::{EnvMap, Layout};
+    use rokeby_core::prefilter::brute_force;
+    let env = EnvMap::new(Layout::LatLong, 2, 4, 1, vec![-2.7443809509277344; 8], "image").unwrap();
+    for lobe in [Lobe::torrance_sparrow(1e-300).unwrap(), Lobe::phong(1e300).unwrap()] {
+        let v = brute_force(&env, &lobe, &[0.3, 0.2, 0.9, 0.0, -1.0, 0.0]).unwrap();
+        assert!(v.iter().all(|x| (x + 2.7443809509277344).abs() < 1e-6), "{lobe:?}: {v:?}");
+    }
+}
