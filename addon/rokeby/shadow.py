@@ -149,10 +149,11 @@ def _set_state(coll, obj, state: str):
 def apply(session: ShadowSession, *, scene=None, falloff_beta: float = 0.0):
     """Makes (or updates) the shadow-mesh object of ``session``'s current edit and sets up the
     light and shadow linking. ``falloff_beta`` (β ≥ 0, §6.2) blends the edit back towards the
-    original shadow as the light moves away from where the edit was made, (l_initial · l_current)^β;
-    0 keeps the edit at full strength. It is stored on the shadow object (custom property
-    ``rokeby_falloff_beta``, editable) and applied on every scene update and frame change
-    (``sync_falloffs``). Returns (shadow object, twin light)."""
+    original shadow as the light moves away from where the edit was made, (l_initial · l_current)^β.
+    β is stored on the shadow object (custom property ``rokeby_falloff_beta``, editable); when it
+    is > 0 the handlers apply it on every scene update and frame change (``sync_falloffs``). 0, the
+    default, leaves the edit at full strength and the falloff to scripts (``update_falloff``).
+    Returns (shadow object, twin light)."""
     import bpy  # noqa: PLC0415
 
     beta = float(falloff_beta)
@@ -291,10 +292,10 @@ def sync_falloffs(scene) -> int:
         if light is None or light.type != "LIGHT" or keys is None or EDIT_KEY not in keys.key_blocks:
             continue
         beta = float(ob.get("rokeby_falloff_beta", 0.0))
-        if not (np.isfinite(beta) and beta >= 0.0):
-            continue
+        if not (np.isfinite(beta) and beta > 0.0):
+            continue  # β = 0: no automatic falloff; the key stays as apply or a script set it
         try:
-            k = falloff_factor(ob, light, beta) if beta > 0.0 else 1.0
+            k = falloff_factor(ob, light, beta)
         except (ShadowEditError, ValueError, np.linalg.LinAlgError):
             continue
         if abs(k - keys.key_blocks[EDIT_KEY].value) > 1e-6:
