@@ -79,7 +79,6 @@ SOURCE = "rokeby_refraction_source"  # on the parts of a split Glass BSDF: the G
 SPLIT_ID = "rokeby_refraction_split_id"  # on a split Glass BSDF
 SPLIT = "rokeby_refraction_split"  # on a split Glass BSDF: its original outgoing links
 SIGNATURE = "rokeby_refraction_signature"  # on a split Glass BSDF: its inputs when it was split
-_SEP = "\x1f"
 
 BELOW_MARGIN = 0.02  # m: edited directions are kept at least this far below the tangent plane
 REACH_MARGIN = 0.05  # μ: fraction of the reachable cone (in cos) kept clear of its grazing edge
@@ -339,15 +338,7 @@ def _feed(tree, socket, location, source=None):
 
 
 def _signature(glass) -> str:
-    parts = [glass.distribution]
-    for sock in glass.inputs:
-        if sock.is_linked:
-            lk = sock.links[0]
-            parts.append(f"{sock.identifier}<{lk.from_node.name}.{lk.from_socket.identifier}")
-        elif hasattr(sock, "default_value"):
-            v = sock.default_value
-            parts.append(f"{sock.identifier}={tuple(v) if hasattr(v, '__len__') else v!r}")
-    return "|".join(parts)
+    return shading.node_signature(glass, "distribution")
 
 
 def _copy_input(tree, src, dst):
@@ -361,9 +352,8 @@ def _split(tree, glass) -> None:
     docstring); the Glass node stays, unlinked, with the artist's values."""
     x, y = glass.location
     sid = uuid.uuid4().hex[:12]
-    outgoing = [(lk.to_node.name, lk.to_socket.identifier) for lk in glass.outputs["BSDF"].links]
+    outgoing = shading.recorded_targets(tree, shading.record_outgoing(glass, SPLIT))
     glass[SPLIT_ID] = sid
-    glass[SPLIT] = [f"{a}{_SEP}{b}" for a, b in outgoing]
     glass[SIGNATURE] = _signature(glass)
     refr = _tag(tree.nodes.new("ShaderNodeBsdfRefraction"), "refraction", f"Rokeby: refraction part of {glass.name}", sid)
     refr.distribution = "BECKMANN" if glass.distribution == "BECKMANN" else "GGX"
@@ -388,22 +378,13 @@ def _split(tree, glass) -> None:
     tree.links.new(glossy.outputs["BSDF"], mix.inputs[2])
     for node, (dx, dy) in ((refr, (300, 0)), (glossy, (300, -150)), (fresnel, (300, 150)), (mix, (500, 0))):
         node.location = (x + dx, y + dy)
-    for node_name, ident in outgoing:
-        node = tree.nodes.get(node_name)
-        sock = next((s for s in node.inputs if s.identifier == ident), None) if node else None
-        if sock is not None:
-            tree.links.new(mix.outputs["Shader"], sock)
+    for sock in outgoing:
+        tree.links.new(mix.outputs["Shader"], sock)
 
 
 def _unsplit(tree, glass) -> None:
     """Remove the parts standing in for ``glass`` and link it back where it was."""
-    targets = []
-    for entry in glass.get(SPLIT, []):
-        node_name, _, ident = str(entry).partition(_SEP)
-        node = tree.nodes.get(node_name)
-        sock = next((s for s in node.inputs if s.identifier == ident), None) if node else None
-        if sock is not None:
-            targets.append(sock)
+    targets = shading.recorded_targets(tree, glass.get(SPLIT, []))
     sid = glass.get(SPLIT_ID)
     parts = [nd for nd in tree.nodes if _ours(nd) and nd.get(SOURCE) == sid]
     names = {nd.name for nd in parts}

@@ -198,6 +198,40 @@ def _feed_edited_normal(tree, socket, label, location):
     return group
 
 
+def node_signature(node, *settings: str) -> str:
+    """A node's inputs (values and links) and the named settings, to notice artists' edits of a
+    node that parts stand in for (shading's Principled split, refraction's Glass split)."""
+    parts = [str(getattr(node, name)) for name in settings]
+    for sock in node.inputs:
+        if sock.is_linked:
+            lk = sock.links[0]
+            parts.append(f"{sock.identifier}<{lk.from_node.name}.{lk.from_socket.identifier}")
+        elif hasattr(sock, "default_value"):
+            v = sock.default_value
+            parts.append(f"{sock.identifier}={tuple(v) if hasattr(v, '__len__') else v!r}")
+    return "|".join(parts)
+
+
+def record_outgoing(node, key: str) -> list:
+    """Store where ``node``'s BSDF output is linked (as node name and socket identifier) in the
+    custom property ``key``, for ``recorded_targets`` to find again; returns the records."""
+    outgoing = [f"{lk.to_node.name}{_SEP}{lk.to_socket.identifier}" for lk in node.outputs["BSDF"].links]
+    node[key] = outgoing
+    return outgoing
+
+
+def recorded_targets(tree, entries) -> list:
+    """The input sockets that ``record_outgoing`` records name (those still in ``tree``)."""
+    targets = []
+    for entry in entries:
+        node_name, _, ident = str(entry).partition(_SEP)
+        node = tree.nodes.get(node_name)
+        sock = next((sk for sk in node.inputs if sk.identifier == ident), None) if node else None
+        if sock is not None:
+            targets.append(sock)
+    return targets
+
+
 def _fixed(socket, value) -> bool:
     """The input is unlinked and holds ``value``."""
     return not socket.is_linked and abs(socket.default_value - value) < 1e-6
@@ -212,16 +246,8 @@ def _has_coat(bsdf) -> bool:
 
 
 def _signature(bsdf) -> str:
-    """The Principled BSDF's inputs (values and links) and settings, to notice artists' edits."""
-    parts = [bsdf.distribution, bsdf.subsurface_method]
-    for sock in bsdf.inputs:
-        if sock.is_linked:
-            lk = sock.links[0]
-            parts.append(f"{sock.identifier}<{lk.from_node.name}.{lk.from_socket.identifier}")
-        elif hasattr(sock, "default_value"):
-            v = sock.default_value
-            parts.append(f"{sock.identifier}={tuple(v) if hasattr(v, '__len__') else v!r}")
-    return "|".join(parts)
+    """The Principled BSDF's inputs and settings, to notice artists' edits."""
+    return node_signature(bsdf, "distribution", "subsurface_method")
 
 
 def _clone(tree, bsdf, role, overrides, location):
@@ -268,8 +294,7 @@ def _split(tree, bsdf) -> None:
     edits of it into the parts and ``uninstall`` puts it back in place.
     """
     x, y = bsdf.location
-    outgoing = [(lk.to_node.name, lk.to_socket.identifier) for lk in bsdf.outputs["BSDF"].links]
-    bsdf[SPLIT] = [f"{a}{_SEP}{b}" for a, b in outgoing]
+    outgoing = recorded_targets(tree, record_outgoing(bsdf, SPLIT))
     bsdf[SIGNATURE] = _signature(bsdf)
     normal_in = bsdf.inputs["Normal"]
     black = (0.0, 0.0, 0.0, 1.0)
@@ -318,22 +343,13 @@ def _split(tree, bsdf) -> None:
         tree.links.new(clear.outputs["BSDF"], mix.inputs[1])
         tree.links.new(result, mix.inputs[2])
         result = mix.outputs["Shader"]
-    for node_name, ident in outgoing:
-        node = tree.nodes.get(node_name)
-        sock = next((s for s in node.inputs if s.identifier == ident), None) if node else None
-        if sock is not None:
-            tree.links.new(result, sock)
+    for sock in outgoing:
+        tree.links.new(result, sock)
 
 
 def _unsplit(tree, bsdf) -> None:
     """Remove the parts standing in for ``bsdf`` and put it back where it was linked."""
-    targets = []
-    for entry in bsdf.get(SPLIT, []):
-        node_name, _, ident = str(entry).partition(_SEP)
-        node = tree.nodes.get(node_name)
-        sock = next((s for s in node.inputs if s.identifier == ident), None) if node else None
-        if sock is not None:
-            targets.append(sock)
+    targets = recorded_targets(tree, bsdf.get(SPLIT, []))
     parts = [nd for nd in tree.nodes if _ours(nd) and nd.get(SOURCE) == bsdf.name]
     # The edited-normal groups that feed the parts go with them.
     for part in list(parts):
