@@ -57,25 +57,9 @@ fn texel_uv(size: usize, i: usize, j: usize) -> (f64, f64) {
     ((j as f64 + 0.5) * h - 1.0, (i as f64 + 0.5) * h - 1.0)
 }
 
-/// Direction of (face, u, v) with u² + v² ≤ 1 (the inverse stereographic projection).
-#[inline]
-pub fn uv_to_dir(face: usize, u: f64, v: f64) -> DVec3 {
-    let s = u * u + v * v;
-    let z = (1.0 - s) / (1.0 + s);
-    DVec3::new(2.0 * u / (1.0 + s), 2.0 * v / (1.0 + s), if face == 0 { z } else { -z })
-}
-
-/// Face and (u, v) of a unit direction.
-#[inline]
-pub fn dir_to_uv(d: DVec3) -> (usize, f64, f64) {
-    if d.z >= 0.0 {
-        let k = 1.0 / (1.0 + d.z);
-        (0, d.x * k, d.y * k)
-    } else {
-        let k = 1.0 / (1.0 - d.z);
-        (1, d.x * k, d.y * k)
-    }
-}
+/// The dual-paraboloid projection both ways (face, u, v) ↔ unit direction: the map layout is the
+/// one of `envmap` (issue #8), so its formulas serve here under the names this module uses.
+pub use crate::envmap::{paraboloid_dir as uv_to_dir, paraboloid_uv as dir_to_uv};
 
 /// Solid angle of texel (i, j) of either face (the projection's area factor 4/(1 + ρ²)²).
 #[inline]
