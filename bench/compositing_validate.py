@@ -40,12 +40,9 @@ def scene(kind, hdr, w, h, samples, mesh=None):
     sc.cycles.samples, sc.cycles.device, sc.cycles.use_denoising = samples, "CPU", False
     sc.cycles.seed = 7
     sc.render.resolution_x, sc.render.resolution_y, sc.render.resolution_percentage = w, h, 100
-    world = bpy.data.worlds.new("w")
-    sc.world = world
-    world.use_nodes = True
-    tex = world.node_tree.nodes.new("ShaderNodeTexEnvironment")
-    tex.image = bpy.data.images.load(str(Path(bpy.utils.system_resource("DATAFILES")) / "studiolights/world" / hdr))
-    world.node_tree.links.new(tex.outputs["Color"], world.node_tree.nodes["Background"].inputs["Color"])
+    from rokeby import envmaps
+
+    envmaps.use_studio_world(sc, hdr.removesuffix(".exr"))
     if kind == "sphere":
         bpy.ops.mesh.primitive_uv_sphere_add(segments=96, ring_count=48, radius=1.0)
         ob = bpy.context.object

@@ -14,6 +14,19 @@ settings.register_profile("rokeby", derandomize=True, database=None, deadline=No
 settings.load_profile("rokeby")
 
 
+def cycles(sc, size: int, samples: int, seed: int = 1):
+    """Deterministic tiny Cycles renders for the pixel tests: CPU, no denoising, a fixed seed,
+    a square image of ``size`` pixels."""
+    sc.render.engine = "CYCLES"
+    sc.cycles.device = "CPU"
+    sc.cycles.samples = samples
+    sc.cycles.use_denoising = False
+    sc.cycles.seed = seed
+    sc.render.resolution_x = sc.render.resolution_y = size
+    sc.render.resolution_percentage = 100
+    return sc
+
+
 def mesh_path(name: str) -> Path:
     p = MESHES / name
     if not p.exists():

@@ -207,12 +207,9 @@ def _scene(tiny_object=False):
     sc.render.engine = "CYCLES"
     sc.cycles.samples, sc.cycles.device, sc.cycles.use_denoising = 16, "CPU", False
     sc.render.resolution_x, sc.render.resolution_y, sc.render.resolution_percentage = 64, 48, 100
-    world = bpy.data.worlds.new("w")
-    sc.world = world
-    world.use_nodes = True
-    tex = world.node_tree.nodes.new("ShaderNodeTexEnvironment")
-    tex.image = bpy.data.images.load(str(Path(bpy.utils.system_resource("DATAFILES")) / "studiolights/world/forest.exr"))
-    world.node_tree.links.new(tex.outputs["Color"], world.node_tree.nodes["Background"].inputs["Color"])
+    from rokeby import envmaps
+
+    envmaps.use_studio_world(sc, "forest")
     bpy.ops.mesh.primitive_uv_sphere_add(segments=48, ring_count=24)
     bpy.ops.object.shade_smooth()
     ob = bpy.context.object

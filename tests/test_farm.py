@@ -9,6 +9,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from conftest import cycles
 
 bpy = pytest.importorskip("bpy")
 
@@ -16,7 +17,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "blend_fixtures"))
 import make_fixtures  # noqa: E402
 
-from rokeby import api  # noqa: E402
+from rokeby import api, envmaps  # noqa: E402
 
 SHARED = Path(os.environ.get("ROKEBY_SHARED", ROOT.parent / "shared"))
 SIZE = 40
@@ -40,28 +41,13 @@ for frame in (1, 20):
 
 
 def _setup_render(sc):
-    sc.render.engine = "CYCLES"
-    sc.cycles.device = "CPU"
-    sc.cycles.samples = 4
-    sc.cycles.use_denoising = False
-    sc.cycles.seed = 3
-    sc.render.resolution_x = sc.render.resolution_y = SIZE
-    sc.render.resolution_percentage = 100
+    cycles(sc, SIZE, 4, seed=3)
     sc.render.image_settings.file_format = "OPEN_EXR"
-    world = bpy.data.worlds.new("Forest")
-    sc.world = world
-    world.use_nodes = True
-    env = world.node_tree.nodes.new("ShaderNodeTexEnvironment")
-    env.image = bpy.data.images.load(os.path.join(bpy.utils.system_resource("DATAFILES"), "studiolights", "world", "forest.exr"))
-    world.node_tree.links.new(env.outputs["Color"], world.node_tree.nodes["Background"].inputs["Color"])
+    envmaps.use_studio_world(sc, "forest")
 
 
 def _read(path):
-    import OpenEXR  # noqa: PLC0415
-
-    with OpenEXR.File(str(path)) as f:
-        ch = f.channels()
-        return np.asarray((ch.get("RGBA") or ch["RGB"]).pixels, np.float32)[..., :3]
+    return envmaps.read_exr(path)[..., :3]
 
 
 def _worker(enable, path, out):

@@ -5,6 +5,7 @@ import math
 
 import numpy as np
 import pytest
+from conftest import cycles
 
 bpy = pytest.importorskip("bpy")
 
@@ -21,13 +22,7 @@ def lit_ball():
     rokeby.register()
     evaluate.reset()
     sc = bpy.context.scene
-    sc.render.engine = "CYCLES"
-    sc.cycles.device = "CPU"
-    sc.cycles.samples = 16
-    sc.cycles.use_denoising = False
-    sc.cycles.seed = 1
-    sc.render.resolution_x = sc.render.resolution_y = SIZE
-    sc.render.resolution_percentage = 100
+    cycles(sc, SIZE, 16, seed=1)
     sc.world = bpy.data.worlds.new("Dim")
     sc.world.color = (0.02, 0.02, 0.02)
     bpy.ops.mesh.primitive_uv_sphere_add(segments=64, ring_count=32)

@@ -5,6 +5,7 @@ import os
 
 import numpy as np
 import pytest
+from conftest import cycles
 
 bpy = pytest.importorskip("bpy")
 
@@ -21,13 +22,7 @@ def _scene_basics():
     rokeby.register()
     evaluate.reset()
     sc = bpy.context.scene
-    sc.render.engine = "CYCLES"
-    sc.cycles.device = "CPU"
-    sc.cycles.samples = 8
-    sc.cycles.use_denoising = False
-    sc.cycles.seed = 1
-    sc.render.resolution_x = sc.render.resolution_y = SIZE
-    sc.render.resolution_percentage = 100
+    cycles(sc, SIZE, 8, seed=1)
     return sc
 
 

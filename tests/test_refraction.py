@@ -12,7 +12,7 @@ bpy = pytest.importorskip("bpy")
 import rokeby  # noqa: E402
 from rokeby import api, evaluate, refraction  # noqa: E402
 
-from conftest import ROOT  # noqa: E402
+from conftest import ROOT, cycles  # noqa: E402
 from reference import rotation_vectors  # noqa: E402
 
 sys.path.insert(0, str(ROOT / "blend_fixtures"))
@@ -272,13 +272,7 @@ def glass_ball():
     rokeby.register()
     evaluate.reset()
     sc = bpy.context.scene
-    sc.render.engine = "CYCLES"
-    sc.cycles.device = "CPU"
-    sc.cycles.samples = 8
-    sc.cycles.use_denoising = False
-    sc.cycles.seed = 1
-    sc.render.resolution_x = sc.render.resolution_y = SIZE
-    sc.render.resolution_percentage = 100
+    cycles(sc, SIZE, 8, seed=1)
     sc.render.image_settings.file_format = "OPEN_EXR"
     sc.render.image_settings.color_depth = "32"
     world = bpy.data.worlds.new("Grey")

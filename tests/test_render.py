@@ -1,14 +1,14 @@
 """Final renders show the edit: Cycles pixels of a chrome ball under a real HDR (bpy's forest.exr)."""
 
-import os
 
 import numpy as np
 import pytest
+from conftest import cycles
 
 bpy = pytest.importorskip("bpy")
 
 import rokeby  # noqa: E402
-from rokeby import api, evaluate  # noqa: E402
+from rokeby import api, envmaps, evaluate  # noqa: E402
 
 SIZE = 48
 
@@ -19,19 +19,8 @@ def chrome_ball():
     rokeby.register()
     evaluate.reset()
     sc = bpy.context.scene
-    sc.render.engine = "CYCLES"
-    sc.cycles.device = "CPU"
-    sc.cycles.samples = 8
-    sc.cycles.use_denoising = False
-    sc.cycles.seed = 1
-    sc.render.resolution_x = sc.render.resolution_y = SIZE
-    sc.render.resolution_percentage = 100
-    world = bpy.data.worlds.new("Forest")
-    sc.world = world
-    world.use_nodes = True
-    env = world.node_tree.nodes.new("ShaderNodeTexEnvironment")
-    env.image = bpy.data.images.load(os.path.join(bpy.utils.system_resource("DATAFILES"), "studiolights", "world", "forest.exr"))
-    world.node_tree.links.new(env.outputs["Color"], world.node_tree.nodes["Background"].inputs["Color"])
+    cycles(sc, SIZE, 8, seed=1)
+    envmaps.use_studio_world(sc, "forest")
     bpy.ops.mesh.primitive_uv_sphere_add(segments=64, ring_count=32)
     bpy.ops.object.shade_smooth()
     ball = bpy.context.object

@@ -16,7 +16,6 @@ the body").
 
 from __future__ import annotations
 
-import os
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -189,12 +188,9 @@ def build(shared: Path, *, width: int = 640, height: int = 360, samples: int = 2
     sc.render.image_settings.file_format = "PNG"
     sc.view_settings.view_transform = "Standard"
 
-    world = bpy.data.worlds.new("Forest")
-    sc.world = world
-    world.use_nodes = True
-    env = world.node_tree.nodes.new("ShaderNodeTexEnvironment")
-    env.image = bpy.data.images.load(os.path.join(bpy.utils.system_resource("DATAFILES"), "studiolights", "world", "forest.exr"))
-    world.node_tree.links.new(env.outputs["Color"], world.node_tree.nodes["Background"].inputs["Color"])
+    from . import envmaps
+
+    envmaps.use_studio_world(sc, "forest")
 
     bpy.ops.mesh.primitive_plane_add(size=12.0)
     floor = bpy.context.object

@@ -40,6 +40,20 @@ def studio_world(name: str) -> Path:
     return p
 
 
+def use_studio_world(scene, name: str = "forest"):
+    """Give ``scene`` a new world lit by one of the shipped HDRs (``studio_world``) through an
+    Environment Texture node; returns the world."""
+    import bpy
+
+    world = bpy.data.worlds.new(name.capitalize())
+    scene.world = world
+    world.use_nodes = True
+    env = world.node_tree.nodes.new("ShaderNodeTexEnvironment")
+    env.image = bpy.data.images.load(str(studio_world(name)), check_existing=True)
+    world.node_tree.links.new(env.outputs["Color"], world.node_tree.nodes["Background"].inputs["Color"])
+    return world
+
+
 def read_exr(path) -> np.ndarray:
     """An OpenEXR file's RGB (or RGBA, or single-channel Y) pixels as (H, W, C) float32, row 0 at
     the top."""

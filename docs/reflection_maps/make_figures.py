@@ -15,7 +15,7 @@ import bpy
 import numpy as np
 
 import rokeby
-from rokeby import api, evaluate, reflmap
+from rokeby import api, envmaps, evaluate, reflmap
 
 OUT = Path(__file__).resolve().parent
 SIZE = 128
@@ -34,12 +34,7 @@ def scene():
     sc.cycles.seed = 1
     sc.render.resolution_x = sc.render.resolution_y = SIZE
     sc.render.resolution_percentage = 100
-    world = bpy.data.worlds.new("Forest")
-    sc.world = world
-    world.use_nodes = True
-    env = world.node_tree.nodes.new("ShaderNodeTexEnvironment")
-    env.image = bpy.data.images.load(os.path.join(bpy.utils.system_resource("DATAFILES"), "studiolights", "world", "forest.exr"))
-    world.node_tree.links.new(env.outputs["Color"], world.node_tree.nodes["Background"].inputs["Color"])
+    envmaps.use_studio_world(sc, "forest")
     cam = bpy.data.objects.new("Camera", bpy.data.cameras.new("Camera"))
     sc.collection.objects.link(cam)
     sc.camera = cam
