@@ -14,6 +14,7 @@ import rokeby_native as rn
 from hypothesis import given, settings
 from hypothesis import strategies as st
 from hypothesis.extra.numpy import arrays
+from reference import uv_sphere
 
 FEW = settings(max_examples=25, deadline=None, derandomize=True)
 SOME = settings(max_examples=60, deadline=None, derandomize=True)
@@ -433,22 +434,6 @@ def test_env_irradiance_of_a_constant_is_the_constant(seed, h, size, c):
 # shadow editing (issue 8)
 
 
-def uv_sphere(c, r, lat=16, lon=24):
-    th = np.pi * np.arange(1, lat) / lat
-    ph = 2 * np.pi * np.arange(lon) / lon
-    ring = np.stack([np.outer(np.sin(th), np.cos(ph)), np.outer(np.sin(th), np.sin(ph)), np.repeat(np.cos(th)[:, None], lon, 1)], -1).reshape(-1, 3)
-    v = np.concatenate([[[0, 0, 1]], ring, [[0, 0, -1]]]) * r + np.asarray(c)
-    idx = lambda i, j: 1 + (i - 1) * lon + (j % lon)  # noqa: E731
-    f = [(0, idx(1, j), idx(1, j + 1)) for j in range(lon)]
-    for i in range(1, lat - 1):
-        for j in range(lon):
-            a, b, cc, d = idx(i, j), idx(i, j + 1), idx(i + 1, j), idx(i + 1, j + 1)
-            f += [(a, cc, d), (a, d, b)]
-    s = len(v) - 1
-    f += [(s, idx(lat - 1, j + 1), idx(lat - 1, j)) for j in range(lon)]
-    return v.astype(np.float32), np.asarray(f, np.int64)
-
-
 PLANE_V = np.array([[-30, -30, 0], [30, -30, 0], [30, 30, 0], [-30, 30, 0]], np.float32)
 PLANE_F = np.array([[0, 1, 2], [0, 2, 3]], np.int64)
 vec3 = st.tuples(*[st.floats(-1, 1)] * 3).filter(lambda t: np.linalg.norm(t) > 0.2)
@@ -458,7 +443,7 @@ vec3 = st.tuples(*[st.floats(-1, 1)] * 3).filter(lambda t: np.linalg.norm(t) > 0
 @given(c=st.tuples(*[st.floats(-2, 2)] * 3), r=st.floats(0.1, 3.0), d=vec3, point=st.booleans(), dist=st.floats(2.0, 10.0))
 def test_sphere_silhouette_is_the_tangent_circle(c, r, d, point, dist):
     c, d = np.asarray(c), np.asarray(d) / np.linalg.norm(d)
-    v, f = uv_sphere(c, r)
+    v, f = uv_sphere(c, r, 16, 24)
     normals = (v - c.astype(np.float32)) / np.float32(r)  # exact normals: silhouette on the true sphere's edges
     if point:
         light = c - d * dist * r
@@ -519,7 +504,7 @@ def test_shadow_falloff_is_a_clamped_power(a, b, beta):
 
 
 def make_editor(light):
-    v, f = uv_sphere((0, 0, 1.5), 0.5)
+    v, f = uv_sphere((0, 0, 1.5), 0.5, 16, 24)
     return rn.ShadowEditor(v, f, PLANE_V, PLANE_F, light_position=light, min_loop_vertices=10), v
 
 

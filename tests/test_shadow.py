@@ -7,25 +7,10 @@ import os
 import numpy as np
 import pytest
 
+from reference import uv_sphere
 from rokeby import native
 
 rn = native.module()
-
-
-def uv_sphere(c, r, lat=24, lon=32):
-    th = np.pi * np.arange(1, lat) / lat
-    ph = 2 * np.pi * np.arange(lon) / lon
-    ring = np.stack([np.outer(np.sin(th), np.cos(ph)), np.outer(np.sin(th), np.sin(ph)), np.repeat(np.cos(th)[:, None], lon, 1)], -1).reshape(-1, 3)
-    v = np.concatenate([[[0, 0, 1]], ring, [[0, 0, -1]]]) * r + np.asarray(c)
-    idx = lambda i, j: 1 + (i - 1) * lon + (j % lon)  # noqa: E731
-    f = [(0, idx(1, j), idx(1, j + 1)) for j in range(lon)]
-    for i in range(1, lat - 1):
-        for j in range(lon):
-            a, b, cc, d = idx(i, j), idx(i, j + 1), idx(i + 1, j), idx(i + 1, j + 1)
-            f += [(a, cc, d), (a, d, b)]
-    s = len(v) - 1
-    f += [(s, idx(lat - 1, j + 1), idx(lat - 1, j)) for j in range(lon)]
-    return v.astype(np.float32), np.asarray(f, np.int64)
 
 
 PLANE_V = np.array([[-20, -20, 0], [20, -20, 0], [20, 20, 0], [-20, 20, 0]], np.float32)

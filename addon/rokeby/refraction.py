@@ -323,18 +323,15 @@ def _is_group(node) -> bool:
 
 
 def _feed(tree, socket, location, source=None):
-    """Feed n'_t to ``socket`` through its own group node; a normal already linked there passes
-    through the group. Idempotent."""
-    links = list(socket.links)
-    if links and _is_group(links[0].from_node):
-        return links[0].from_node
-    group = _tag(tree.nodes.new("ShaderNodeGroup"), "normal", "Rokeby: edited refraction", source)
-    group.node_tree = node_group()
-    group.location = location
-    if links:
-        tree.links.new(links[0].from_socket, group.inputs["Normal"])
-    tree.links.new(group.outputs["Edited Normal"], socket)
-    return group
+    """Feed n'_t to ``socket`` through its own group node (``shading.feed_through``)."""
+
+    def new_group():
+        group = _tag(tree.nodes.new("ShaderNodeGroup"), "normal", "Rokeby: edited refraction", source)
+        group.node_tree = node_group()
+        group.location = location
+        return group
+
+    return shading.feed_through(tree, socket, _is_group, new_group)
 
 
 def _signature(glass) -> str:

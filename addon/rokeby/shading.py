@@ -183,19 +183,31 @@ def _is_normal_group(node) -> bool:
     return _ours(node) and node.bl_idname == "ShaderNodeGroup" and node.get(ROLE, "normal") == "normal"
 
 
-def _feed_edited_normal(tree, socket, label, location):
-    """Feed n' to ``socket`` (a BSDF's Normal or Coat Normal) through its own group node; a normal
-    already linked there (a bump map) passes through the group. Idempotent."""
+def feed_through(tree, socket, is_ours, new_group):
+    """Feed a group's "Edited Normal" output to ``socket`` (a BSDF's normal input); a normal
+    already linked there (a bump map) passes through the group's "Normal" input. A group for
+    which ``is_ours`` holds is already in place and is returned as it is (idempotent);
+    ``new_group()`` makes the node otherwise."""
     links = list(socket.links)
-    if links and _is_normal_group(links[0].from_node):
+    if links and is_ours(links[0].from_node):
         return links[0].from_node
-    group = _tag(tree.nodes.new("ShaderNodeGroup"), "normal", label)
-    group.node_tree = node_group()
-    group.location = location
+    group = new_group()
     if links:
         tree.links.new(links[0].from_socket, group.inputs["Normal"])
     tree.links.new(group.outputs["Edited Normal"], socket)
     return group
+
+
+def _feed_edited_normal(tree, socket, label, location):
+    """Feed n' to ``socket`` (a BSDF's Normal or Coat Normal) through its own group node."""
+
+    def new_group():
+        group = _tag(tree.nodes.new("ShaderNodeGroup"), "normal", label)
+        group.node_tree = node_group()
+        group.location = location
+        return group
+
+    return feed_through(tree, socket, _is_normal_group, new_group)
 
 
 def node_signature(node, *settings: str) -> str:
