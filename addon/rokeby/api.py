@@ -964,3 +964,11 @@ def apply_shadow_edit(session, *, scene=None, falloff_beta: float = 0.0):
     from . import shadow  # noqa: PLC0415
 
     return shadow.apply(session, scene=_scene(scene), falloff_beta=falloff_beta)
+
+
+def remove_shadow_edit(obj) -> None:
+    """Removes the shadow edit of ``obj`` (a caster or its shadow mesh): the shadow mesh, the twin
+    light and the linking go, and the light's own linking from before the edit comes back."""
+    from . import shadow  # noqa: PLC0415
+
+    shadow.remove(obj)

@@ -49,10 +49,11 @@ def _settings(context):
     return context.window_manager.rokeby_appearance_brush
 
 
-def _dab(settings, obj, points, previous=None):
+def _dab(settings, obj, points, previous=None, pack=True):
     brush = settings.brush
     value = tuple(settings.color) if brush == "diffuse" else settings.value
-    appearance.paint(obj, brush, points, settings.radius, value=value, strength=settings.strength, mode=_MODES.get(brush), previous=previous)
+    appearance.paint(obj, brush, points, settings.radius, value=value, strength=settings.strength, mode=_MODES.get(brush),
+                     previous=previous, pack=pack)
 
 
 class ROKEBY_OT_appearance_setup(bpy.types.Operator):
@@ -152,6 +153,7 @@ class ROKEBY_OT_appearance_paint(bpy.types.Operator):
     def modal(self, context, event):
         if event.type in {"RIGHTMOUSE", "ESC"}:
             context.workspace.status_text_set(None)
+            appearance.pack_painted(context.active_object)  # the undo step keeps texture strokes
             return {"FINISHED"}
         if event.type == "LEFTMOUSE":
             self._painting = event.value == "PRESS"
@@ -160,10 +162,11 @@ class ROKEBY_OT_appearance_paint(bpy.types.Operator):
             hit = self._hit(context, event)
             if hit is not None:
                 try:
-                    _dab(_settings(context), context.active_object, [tuple(hit)], previous=self._last)
+                    _dab(_settings(context), context.active_object, [tuple(hit)], previous=self._last, pack=False)
                 except ValueError as e:
                     self.report({"ERROR"}, str(e))
                     context.workspace.status_text_set(None)
+                    appearance.pack_painted(context.active_object)  # keep the dabs made before
                     return {"CANCELLED"}
                 self._last = tuple(hit)
                 context.area.tag_redraw()
@@ -217,6 +220,13 @@ class ROKEBY_PT_appearance(bpy.types.Panel):
             img = appearance._texture_image(ob, "roughness")
             layout.label(text=f"Target: images {img.size[0]}² on UV map '{ob.active_material.node_tree.nodes[appearance.NODE_PREFIX + 'uv'].uv_map}'" if img else "Target: images", icon="IMAGE_DATA")
             layout.operator(ROKEBY_OT_appearance_texture_remove.bl_idname)
+            missing = appearance.missing_images(ob)
+            if missing:
+                layout.label(text=f"Painted image gone: {', '.join(missing)}", icon="ERROR")
+                col = layout.column(align=True)
+                col.prop(s, "target")
+                col.prop(s, "resolution")
+                col.operator(ROKEBY_OT_appearance_setup.bl_idname, text="Make Missing Images")
         col = layout.column(align=True)
         col.prop(s, "brush")
         col.prop(s, "radius")

@@ -84,10 +84,15 @@ class MissingPasses(CompositingError):
 # --- Blender side -------------------------------------------------------------------------------
 
 def _material_nodes(mat) -> None:
-    """Adds (once) the AOV outputs of the reflection occlusion and the view vector."""
+    """Adds (once; again, whole, when an artist deleted a part) the AOV outputs of the reflection
+    occlusion, the camera rotation and the view vector."""
     nt = mat.node_tree
-    if any(n.get("rokeby_compositing") for n in nt.nodes):
+    ours = [n for n in nt.nodes if n.get("rokeby_compositing")]
+    have = {n.aov_name for n in ours if n.bl_idname == "ShaderNodeOutputAOV" and n.inputs[0].is_linked}
+    if have >= {AOV_REFLOCC, AOV_CAMERA_X, AOV_CAMERA_Y, AOV_INCOMING_CAM}:
         return
+    for n in ours:
+        nt.nodes.remove(n)
     def node(kind, label):
         n = nt.nodes.new(kind)
         n.label = f"{NODE_TAG}: {label}"
@@ -311,7 +316,8 @@ def camera_rotation(camera_x: np.ndarray, camera_y: np.ndarray) -> np.ndarray:
     y = camera_y.reshape(-1, 3).astype(np.float64)
     ok = (np.abs(np.linalg.norm(x, axis=1) - 1) < 1e-3) & (np.abs(np.linalg.norm(y, axis=1) - 1) < 1e-3)
     if not ok.any():
-        raise CompositingError(f"passes {AOV_CAMERA_X}/{AOV_CAMERA_Y}: no surface pixel holds the camera rotation")
+        raise CompositingError(f"passes {AOV_CAMERA_X}/{AOV_CAMERA_Y}: no surface pixel holds the camera rotation "
+                               "(a material without the AOV outputs? Set Up Compositing Passes adds them again)")
     cx = _CAM_FLIP @ x[ok].mean(0)
     cy = _CAM_FLIP @ y[ok].mean(0)
     m = np.stack([cx, cy, np.cross(cx, cy)], 1)  # columns: world axes in screen space

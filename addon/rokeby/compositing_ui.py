@@ -38,7 +38,7 @@ class ROKEBY_OT_composite_render(bpy.types.Operator):
 
     bl_idname = "rokeby.composite_render"
     bl_label = "Render and Recomposite"
-    bl_options = {"REGISTER"}
+    bl_options = {"REGISTER", "UNDO"}
 
     edit: bpy.props.EnumProperty(name="Edit", items=EDITS, default="EMBOSS")
     amount: bpy.props.FloatProperty(name="Amount", default=0.5, min=0.0)

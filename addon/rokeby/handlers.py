@@ -5,7 +5,8 @@
   Edited materials with split Principled BSDFs bring their parts up to date (``shading.sync``).
 - ``frame_change_post``: on every frame change (playback, scrubbing, final renders); every mirror's
   mesh is re-read because animation can deform it.
-- ``load_post`` / ``undo_post`` / ``redo_post``: runtime state is rebuilt from the file's data.
+- ``load_post`` / ``undo_post`` / ``redo_post``: runtime state is rebuilt from the file's data;
+  after undo/redo, painted images reload the pixels of the packed data the step brought back.
 
 The evaluator's dirty tracking decides what to recompute. A re-entrance guard makes the handlers
 ignore the updates that writing the field itself causes while it runs; ``suspended()`` lets the
@@ -19,7 +20,7 @@ import contextlib
 import bpy
 from bpy.app.handlers import persistent
 
-from . import evaluate, shading, shadow
+from . import appearance, evaluate, shading, shadow
 
 _busy = False
 _suspend = 0
@@ -44,6 +45,9 @@ def _run(scene, depsgraph, **kwargs):
         reports = evaluate.evaluate_scene(scene, depsgraph, **kwargs)
         # Shadow edits (#7): the falloff of each shadow mesh follows its light (writes only
         # changed values, so the update it causes settles at once).
+        # Deleted casters, lights, twins or shadow meshes leave no half set-up behind.
+        for msg in shadow.repair(scene):
+            print(f"Rokeby: {msg}")
         moved = shadow.sync_falloffs(scene)
         if moved or any(r.recomputed for r in reports.values()):
             _redraw()
@@ -103,12 +107,19 @@ def on_reset(*_args):
     evaluate.reset()
 
 
+@persistent
+def on_undo_redo(*_args):
+    evaluate.reset()
+    # Painted images (#8): pixels in memory follow the packed data the step brought back.
+    appearance.reload_after_undo()
+
+
 _HANDLERS = (
     ("depsgraph_update_post", on_depsgraph_update),
     ("frame_change_post", on_frame_change),
     ("load_post", on_reset),
-    ("undo_post", on_reset),
-    ("redo_post", on_reset),
+    ("undo_post", on_undo_redo),
+    ("redo_post", on_undo_redo),
 )
 
 

@@ -146,6 +146,173 @@ def _set_state(coll, obj, state: str):
     coll.collection_objects[list(coll.objects).index(obj)].light_linking.link_state = state
 
 
+RECEIVERS_CASTER, BLOCKERS_CASTER = "receivers (caster)", "blockers (caster)"
+RECEIVERS_EDITED, BLOCKERS_EDITED = "receivers (edited)", "blockers (edited)"
+_OURS = (RECEIVERS_CASTER, BLOCKERS_CASTER, RECEIVERS_EDITED, BLOCKERS_EDITED)
+
+
+def _collection_name(light_name: str, role: str) -> str:
+    return f"{light_name} · {role}"
+
+
+def _edits_of(light_name: str):
+    """(caster, shadow mesh) of every shadow edit made from the light named ``light_name`` whose
+    caster still exists."""
+    import bpy  # noqa: PLC0415
+
+    out = []
+    for ob in _shadow_meshes():
+        caster = bpy.data.objects.get(str(ob["rokeby_shadow_of"]))
+        if str(ob["rokeby_light"]) == light_name and caster is not None:
+            out.append((caster, ob))
+    return out
+
+
+def _link(light):
+    """The light and shadow linking of the edits made from ``light`` (made again whenever a part
+    of it is missing): ``light`` lights only the casters, blocked by everything but the shadow
+    meshes; a twin of the light (same light data, parented with an identity offset so it follows
+    every move) lights every other object, blocked by everything but the casters. The light's own
+    linking before the first edit is remembered on it (``rokeby_linking_before``) so
+    :func:`remove` restores it."""
+    import bpy  # noqa: PLC0415
+
+    ll = light.light_linking
+    if "rokeby_linking_before" not in light:
+        ours = lambda c: c is not None and c.name.startswith(light.name + " · ") and c.name.rsplit(" · ", 1)[1] in _OURS  # noqa: E731
+        light["rokeby_linking_before"] = [
+            "" if c is None or ours(c) else c.name for c in (ll.receiver_collection, ll.blocker_collection)
+        ]
+    twin_name = light.name + TWIN_SUFFIX
+    twin = bpy.data.objects.get(twin_name)
+    if twin is None:
+        twin = bpy.data.objects.new(twin_name, light.data)
+        for c in light.users_collection:
+            c.objects.link(twin)
+    twin["rokeby_twin_of"] = light.name
+    twin.parent = light
+    twin.matrix_parent_inverse.identity()
+    twin.location, twin.rotation_mode, twin.rotation_euler, twin.scale = (0.0, 0.0, 0.0), "XYZ", (0.0, 0.0, 0.0), (1.0, 1.0, 1.0)
+    edits = _edits_of(light.name)
+    recv_a = _linking_collection(_collection_name(light.name, RECEIVERS_CASTER))
+    block_a = _linking_collection(_collection_name(light.name, BLOCKERS_CASTER))
+    recv_b = _linking_collection(_collection_name(light.name, RECEIVERS_EDITED))
+    block_b = _linking_collection(_collection_name(light.name, BLOCKERS_EDITED))
+    for caster, shadow_object in edits:
+        _set_state(recv_a, caster, "INCLUDE")
+        _set_state(block_a, shadow_object, "EXCLUDE")
+        _set_state(recv_b, caster, "EXCLUDE")
+        _set_state(block_b, caster, "EXCLUDE")
+    ll.receiver_collection, ll.blocker_collection = recv_a, block_a
+    twin.light_linking.receiver_collection, twin.light_linking.blocker_collection = recv_b, block_b
+    return twin
+
+
+def _unlink(light_name: str) -> None:
+    """Takes an edit's linking down: the twin and the four collections go, the light (if it is
+    still there) gets back the linking it had before the first edit."""
+    import bpy  # noqa: PLC0415
+
+    light = bpy.data.objects.get(light_name)
+    if light is not None and light.type == "LIGHT":
+        before = list(light.get("rokeby_linking_before", ["", ""]))
+        ll = light.light_linking
+        ll.receiver_collection = bpy.data.collections.get(before[0]) if before[0] else None
+        ll.blocker_collection = bpy.data.collections.get(before[1]) if before[1] else None
+        if "rokeby_linking_before" in light:
+            del light["rokeby_linking_before"]
+    for ob in [o for o in bpy.data.objects if o.get("rokeby_twin_of") == light_name]:
+        bpy.data.objects.remove(ob, do_unlink=True)
+    for role in _OURS:
+        c = bpy.data.collections.get(_collection_name(light_name, role))
+        if c is not None:
+            bpy.data.collections.remove(c)
+
+
+def _shadow_meshes():
+    import bpy  # noqa: PLC0415
+
+    return [o for o in bpy.data.objects if "rokeby_shadow_of" in o and "rokeby_light" in o]
+
+
+def shadow_mesh_of(obj):
+    """The shadow-mesh object of ``obj`` (a caster, or a shadow mesh itself), or None."""
+    if obj is None:
+        return None
+    if "rokeby_shadow_of" in obj:
+        return obj
+    return next((o for o in _shadow_meshes() if o["rokeby_shadow_of"] == obj.name), None)
+
+
+def remove(obj) -> None:
+    """Removes the shadow edit of ``obj`` (a caster or its shadow mesh): the shadow mesh, the twin
+    light and the linking; the light's own linking before the edit comes back, so renders are
+    exactly as before the edit."""
+    import bpy  # noqa: PLC0415
+
+    ob = shadow_mesh_of(obj)
+    if ob is None:
+        raise ShadowEditError(f"{getattr(obj, 'name', obj)!r} has no shadow edit")
+    light_name = str(ob["rokeby_light"])
+    me = ob.data
+    bpy.data.objects.remove(ob, do_unlink=True)
+    if me is not None and me.users == 0:
+        bpy.data.meshes.remove(me)
+    light = bpy.data.objects.get(light_name)
+    if _edits_of(light_name) and light is not None and light.type == "LIGHT":
+        _link(light)  # other casters' edits from the same light stay
+    else:
+        _unlink(light_name)
+
+
+def repair(scene=None) -> list[str]:
+    """Keeps shadow edits whole when an artist deletes something they use (called by the
+    handlers; writes only when something is broken, so the update it causes settles):
+
+    * caster or light gone: the shadow mesh is kept (undo or a new light can use it) but hidden
+      from shadow rays, and the linking is taken down, so the remaining lights shade as without
+      the edit;
+    * shadow mesh gone: the twin and the linking go, the light's own linking comes back;
+    * twin light or a linking collection gone: made again from the shadow mesh.
+
+    Returns one message per repair."""
+    import bpy  # noqa: PLC0415
+
+    msgs = []
+    live = set()
+    for ob in _shadow_meshes():
+        caster = bpy.data.objects.get(str(ob["rokeby_shadow_of"]))
+        light = bpy.data.objects.get(str(ob["rokeby_light"]))
+        missing = "caster" if caster is None else ("light" if light is None or light.type != "LIGHT" else None)
+        if missing is not None:
+            if ob.visible_shadow:
+                ob.visible_shadow = False
+                msgs.append(f"'{ob.name}': its {missing} is gone; it no longer casts shadows (undo brings it back)")
+            continue
+        live.add(light.name)
+    for name in sorted(live):
+        light = bpy.data.objects[name]
+        twin = bpy.data.objects.get(name + TWIN_SUFFIX)
+        colls = [bpy.data.collections.get(_collection_name(name, r)) for r in _OURS]
+        ll = light.light_linking
+        edits = _edits_of(name)
+        whole = (twin is not None and twin.get("rokeby_twin_of") == name and twin.parent == light and None not in colls
+                 and ll.receiver_collection == colls[0] and ll.blocker_collection == colls[1]
+                 and twin.light_linking.receiver_collection == colls[2] and twin.light_linking.blocker_collection == colls[3]
+                 and all(c.name in colls[0].objects and s.name in colls[1].objects for c, s in edits))
+        if not whole:
+            _link(light)
+            msgs.append(f"'{name}': the twin light or linking of its shadow edit was missing and is made again")
+    for twin in [o for o in bpy.data.objects if "rokeby_twin_of" in o]:
+        name = str(twin["rokeby_twin_of"])
+        if name not in live:
+            _unlink(name)
+            msgs.append(f"'{name}': its shadow edit is gone; the twin light and the linking are removed")
+    if msgs and scene is not None:
+        scene.view_layers[0].update()
+    return msgs
+
+
 def apply(session: ShadowSession, *, scene=None, falloff_beta: float = 0.0):
     """Makes (or updates) the shadow-mesh object of ``session``'s current edit and sets up the
     light and shadow linking. ``falloff_beta`` (β ≥ 0, §6.2) blends the edit back towards the
@@ -222,29 +389,7 @@ def apply(session: ShadowSession, *, scene=None, falloff_beta: float = 0.0):
     ob["rokeby_light"] = light.name
     ob["rokeby_falloff_beta"] = beta
 
-    # The twin light: every receiver but the caster, blocked by everything but the caster.
-    twin_name = light.name + TWIN_SUFFIX
-    twin = bpy.data.objects.get(twin_name)
-    if twin is None:
-        twin = bpy.data.objects.new(twin_name, light.data)
-        for c in light.users_collection:
-            c.objects.link(twin)
-    # Parented with an identity offset: the twin follows every move of the light.
-    twin.parent = light
-    twin.matrix_parent_inverse.identity()
-    twin.location, twin.rotation_mode, twin.rotation_euler, twin.scale = (0.0, 0.0, 0.0), "XYZ", (0.0, 0.0, 0.0), (1.0, 1.0, 1.0)
-    recv_a = _linking_collection(f"{light.name} · receivers (caster)")
-    _set_state(recv_a, caster, "INCLUDE")
-    block_a = _linking_collection(f"{light.name} · blockers (caster)")
-    _set_state(block_a, ob, "EXCLUDE")
-    light.light_linking.receiver_collection = recv_a
-    light.light_linking.blocker_collection = block_a
-    recv_b = _linking_collection(f"{light.name} · receivers (edited)")
-    _set_state(recv_b, caster, "EXCLUDE")
-    block_b = _linking_collection(f"{light.name} · blockers (edited)")
-    _set_state(block_b, caster, "EXCLUDE")
-    twin.light_linking.receiver_collection = recv_b
-    twin.light_linking.blocker_collection = block_b
+    twin = _link(light)
     sc.view_layers[0].update()
     return ob, twin
 

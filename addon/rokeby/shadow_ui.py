@@ -255,6 +255,28 @@ class ROKEBY_OT_shadow_stop(bpy.types.Operator):
         return {"FINISHED"}
 
 
+class ROKEBY_OT_shadow_remove(bpy.types.Operator):
+    """Remove the shadow edit of the active object (a caster or its shadow mesh): the shadow mesh,
+    the twin light and the linking go, and the light's own linking comes back"""
+
+    bl_idname = "rokeby.shadow_remove"
+    bl_label = "Remove Shadow Edit"
+    bl_options = {"REGISTER", "UNDO"}
+
+    @classmethod
+    def poll(cls, context):
+        return shadow.shadow_mesh_of(context.active_object) is not None
+
+    def execute(self, context):
+        try:
+            shadow.remove(context.active_object)
+        except shadow.ShadowEditError as exc:
+            self.report({"ERROR"}, f"Rokeby: {exc}")
+            return {"CANCELLED"}
+        context.view_layer.update()
+        return {"FINISHED"}
+
+
 class ROKEBY_PT_shadow(bpy.types.Panel):
     bl_label = "Shadow Boundaries"
     bl_space_type = "VIEW_3D"
@@ -266,6 +288,8 @@ class ROKEBY_PT_shadow(bpy.types.Panel):
         sess = session(context.scene)
         if sess is None:
             col.operator(ROKEBY_OT_shadow_start.bl_idname, icon="LIGHT")
+            if shadow.shadow_mesh_of(context.active_object) is not None:
+                col.operator(ROKEBY_OT_shadow_remove.bl_idname, icon="TRASH")
             return
         loops = sess.loops()
         col.label(text=f"{sess.caster} from {sess.light}: {sum(lp['active'] for lp in loops)} of {len(loops)} loops editable")
@@ -274,7 +298,8 @@ class ROKEBY_PT_shadow(bpy.types.Panel):
         col.operator(ROKEBY_OT_shadow_stop.bl_idname, icon="X")
 
 
-CLASSES = (ROKEBY_OT_shadow_start, ROKEBY_OT_shadow_drag, ROKEBY_OT_shadow_apply, ROKEBY_OT_shadow_stop, ROKEBY_PT_shadow)
+CLASSES = (ROKEBY_OT_shadow_start, ROKEBY_OT_shadow_drag, ROKEBY_OT_shadow_apply, ROKEBY_OT_shadow_stop, ROKEBY_OT_shadow_remove,
+           ROKEBY_PT_shadow)
 
 
 def register():
