@@ -93,6 +93,37 @@ pub struct ShadowEditor {
     solver: Option<ShadowMeshSolver>,
 }
 
+/// A point light farther than this many caster radii from the caster's bounds centre is treated
+/// as a directional light along centre − light. The rays across the caster then differ from the
+/// exact ones by less than radius/distance ≤ 1e-6 rad, below what the f32 meshes resolve, while the
+/// exact perspective frustum would lose its depth range to rounding (1 − n/z ≈ r/D ≈ 0 in f64 for
+/// a light at 1e30: every silhouette vertex at the same depth, a degenerate shadow-mesh solve).
+pub const FAR_LIGHT_RATIO: f64 = 1e6;
+
+/// `light`, or the directional light it is indistinguishable from (see [`FAR_LIGHT_RATIO`]).
+pub fn far_point_as_directional(light: Light, vertices: &[DVec3]) -> Light {
+    let Light::Point(l) = light else { return light };
+    if vertices.is_empty() {
+        return light;
+    }
+    let (mn, mx) = vertices.iter().fold((DVec3::splat(f64::INFINITY), DVec3::splat(f64::NEG_INFINITY)), |(a, b), &p| (a.min(p), b.max(p)));
+    let centre = (mn + mx) * 0.5;
+    let radius = ((mx - mn) * 0.5).length();
+    // Componentwise first: |c − l| can overflow to inf for |l| near f64::MAX; the scaled
+    // direction is still exact.
+    let d = centre - l;
+    let scale = d.abs().max_element();
+    if !(radius.is_finite() && scale.is_finite()) || scale == 0.0 {
+        return light;
+    }
+    let dist = (d / scale).length() * scale;
+    if dist > FAR_LIGHT_RATIO * radius.max(1e-300) {
+        Light::Directional(d / scale)
+    } else {
+        light
+    }
+}
+
 impl ShadowEditor {
     /// A session for `caster` lit by `light` over receivers (`receiver_vertices` N×3 flat,
     /// `receiver_faces` F×3 flat; may be several objects merged). Errors: an open or non-manifold
@@ -100,17 +131,21 @@ impl ShadowEditor {
     /// active loop lands on a receiver).
     pub fn new(caster: ClosedMesh, receiver_vertices: &[f32], receiver_faces: &[i64], light: Light, min_loop_vertices: usize, w_z: f64, constraint_weight: f64) -> Result<Self> {
         light.validate()?;
+        let light = far_point_as_directional(light, &caster.vertices);
         if receiver_vertices.len() % 3 != 0 {
             return Err(RokebyError::invalid("receiver_vertices", format!("expected N×3 coordinates, got {} values", receiver_vertices.len())));
         }
         if receiver_faces.len() % 3 != 0 {
             return Err(RokebyError::invalid("receiver_faces", format!("expected F×3 indices, got {} values", receiver_faces.len())));
         }
-        if !(w_z.is_finite() && w_z > 0.0) {
-            return Err(RokebyError::invalid("w_z", format!("must be positive and finite, got {w_z}")));
+        // Bounds that keep the solve meaningful in f64: 1/w_z scales light-space depth, and the
+        // constraint weight enters the normal equations squared (w² beside Laplacian entries ~1;
+        // beyond 1e6 the Laplacian rows drown in rounding, below 1e-6 the handles are ignored).
+        if !(w_z.is_finite() && (1e-6..=1e6).contains(&w_z)) {
+            return Err(RokebyError::invalid("w_z", format!("must be finite and in [1e-6, 1e6], got {w_z}")));
         }
-        if !(constraint_weight.is_finite() && constraint_weight > 0.0) {
-            return Err(RokebyError::invalid("constraint_weight", format!("must be positive and finite, got {constraint_weight}")));
+        if !(constraint_weight.is_finite() && (1e-6..=1e6).contains(&constraint_weight)) {
+            return Err(RokebyError::invalid("constraint_weight", format!("must be finite and in [1e-6, 1e6], got {constraint_weight}")));
         }
         let nrv = receiver_vertices.len() / 3;
         if let Some(i) = receiver_vertices.iter().position(|x| !x.is_finite()) {

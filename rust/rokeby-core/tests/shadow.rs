@@ -116,6 +116,56 @@ fn lcg(seed: &mut u64) -> f64 {
 proptest! {
     #![proptest_config(ProptestConfig::with_cases(48))]
 
+    /// Watertightness: rays aimed exactly at shared edges and vertices of a randomly jittered,
+    /// tilted, offset triangulated grid always hit it (BVH and brute force alike),
+    /// so no shadow handle falls through a crack between receiver triangles.
+    #[test]
+    fn rays_through_shared_edges_and_vertices_hit(seed in any::<u64>(), scale_exp in -6i32..7, n in 2usize..12) {
+        let mut s = seed;
+        let mut rnd = || lcg(&mut s) * 2.0 - 1.0;
+        let scale = 10f64.powi(scale_exp);
+        let offset = DVec3::new(rnd(), rnd(), rnd()) * 1e3 * scale;
+        let tilt = glam::DQuat::from_euler(glam::EulerRot::XYZ, rnd(), rnd(), rnd());
+        let mut grid = vec![DVec3::ZERO; (n + 1) * (n + 1)];
+        for j in 0..=n {
+            for i in 0..=n {
+                let jit = if i > 0 && i < n && j > 0 && j < n { DVec3::new(rnd(), rnd(), rnd()) * 0.3 } else { DVec3::ZERO };
+                grid[j * (n + 1) + i] = offset + tilt * ((DVec3::new(i as f64, j as f64, 0.0) + jit) * scale);
+            }
+        }
+        let mut tris = Vec::new();
+        for j in 0..n {
+            for i in 0..n {
+                let (a, b, c, d) = (j * (n + 1) + i, j * (n + 1) + i + 1, (j + 1) * (n + 1) + i, (j + 1) * (n + 1) + i + 1);
+                tris.push([grid[a], grid[b], grid[d]]);
+                tris.push([grid[a], grid[d], grid[c]]);
+            }
+        }
+        let normal = tilt * DVec3::Z;
+        let bvh = Bvh::new(tris.clone(), "grid").unwrap();
+        let mut targets = Vec::new();
+        for t in &tris {
+            for k in 0..3 {
+                let w = rnd() * 0.5 + 0.5;
+                targets.push(t[k] * w + t[(k + 1) % 3] * (1.0 - w)); // on an edge
+            }
+        }
+        for j in 1..n {
+            for i in 1..n {
+                targets.push(grid[j * (n + 1) + i]); // interior vertices
+            }
+        }
+        for p in targets {
+            let d = (normal + DVec3::new(rnd(), rnd(), rnd()) * 0.5).normalize();
+            let o = p + d * (5.0 * scale);
+            for hit in [bvh.intersect(o, -d, 0.0, f64::INFINITY), bvh.intersect_brute_force(o, -d, 0.0, f64::INFINITY)] {
+                prop_assert!(hit.is_some(), "ray at {:?} through an edge or vertex missed", p);
+                // At the aimed point, or earlier where the jittered (non-planar) grid folds over it.
+                prop_assert!(hit.unwrap().t < 5.0 * scale * (1.0 + 1e-9));
+            }
+        }
+    }
+
     #[test]
     fn bvh_matches_brute_force(seed in any::<u64>(), ntri in 1usize..300) {
         let mut s = seed;
@@ -402,4 +452,62 @@ fn bad_inputs_are_errors() {
     assert!(ed.drag(&Drag { fixed: (0, 4), moved: 9999, ..d }).is_err());
     assert!(ed.drag(&Drag { fixed: (0, 4), target: DVec3::NAN, ..d }).is_err());
     assert!(ed.handles(9, None).is_err());
+}
+
+/// A point light at 1e30 (a sun placed as a far lamp) behaves as the directional light it is
+/// indistinguishable from: same handles, a finite shadow mesh that follows a drag. Closer than
+/// FAR_LIGHT_RATIO radii it stays a point light.
+#[test]
+fn far_point_lights_are_directional() {
+    let (v, f) = sphere(DVec3::new(0.0, 0.0, 1.5), 0.5, 32, 48);
+    let (pv, pf) = plane(0.0, 20.0);
+    let mesh = ClosedMesh::new(&v, &f, None).unwrap();
+    let c = DVec3::new(0.0, 0.0, 1.5);
+    let sun = ShadowEditor::new(mesh.clone(), &pv, &pf, Light::Directional(DVec3::new(0.0, 0.0, -1.0)), 20, 2.5, 10.0).unwrap();
+    for far in [1e12, 1e30, 1e300] {
+        let mut ed = ShadowEditor::new(mesh.clone(), &pv, &pf, Light::Point(c + DVec3::new(0.0, 0.0, far)), 20, 2.5, 10.0).unwrap();
+        assert!(matches!(ed.frame().light, Light::Directional(_)), "{far}");
+        let (a, b) = (ed.handles(0, None).unwrap(), sun.handles(0, None).unwrap());
+        assert_eq!(a.len(), b.len());
+        for (x, y) in a.iter().zip(&b) {
+            assert!((x.position - y.position).length() < 1e-9, "{far}: {:?} vs {:?}", x.position, y.position);
+        }
+        let n = a.len();
+        let e = DVec3::new(a[0].position.x * 1.3, a[0].position.y * 1.3, 0.0);
+        let d = Drag { loop_index: 0, fixed: ((n - n / 6) % n, n / 6), moved: 0, target: e, style: MlsStyle::Affine, mls_alpha: 1.0, noise_amplitude: 0.0, noise_frequency: 0.0 };
+        let r = ed.drag(&d).unwrap();
+        assert!((r.handles[0].position - e).length() < 1e-9);
+        ed.commit();
+        let sm = ed.shadow_mesh().unwrap();
+        assert!(sm.iter().all(|p| p.is_finite()));
+        let moved = sm.iter().zip(&ed.caster().vertices).map(|(p, q)| (*p - *q).length()).fold(0.0, f64::max);
+        assert!(moved > 0.05 && moved < 1.0, "{far}: the shadow mesh moved by {moved}");
+    }
+    let near = ShadowEditor::new(mesh.clone(), &pv, &pf, Light::Point(c + DVec3::new(0.0, 0.0, 1e5)), 20, 2.5, 10.0).unwrap();
+    assert!(matches!(near.frame().light, Light::Point(_)));
+}
+
+/// Solver weights outside [1e-6, 1e6] are refused by name (w² beside Laplacian entries ~1 would
+/// drown one or the other in rounding); the ends of the range still give a finite shadow mesh.
+#[test]
+fn extreme_solver_weights_are_bounded() {
+    let (v, f) = sphere(DVec3::new(0.0, 0.0, 1.5), 0.5, 24, 32);
+    let (pv, pf) = plane(0.0, 20.0);
+    let mesh = ClosedMesh::new(&v, &f, None).unwrap();
+    let l = Light::Point(DVec3::new(0.2, 0.1, 5.0));
+    for (wz, cw, name) in [(2.5, 1e7, "constraint_weight"), (2.5, 1e-7, "constraint_weight"), (1e7, 10.0, "w_z"), (1e-300, 10.0, "w_z")] {
+        let e = ShadowEditor::new(mesh.clone(), &pv, &pf, l, 20, wz, cw).err().unwrap().to_string();
+        assert!(e.contains(name) && e.contains("[1e-6, 1e6]"), "{e}");
+    }
+    for (wz, cw) in [(1e-6, 1e6), (1e6, 1e-6), (1e6, 1e6), (1e-6, 1e-6)] {
+        let mut ed = ShadowEditor::new(mesh.clone(), &pv, &pf, l, 20, wz, cw).unwrap();
+        let n = ed.loops()[0].len();
+        let h = ed.handles(0, None).unwrap();
+        let e = h[0].position + (h[0].position - DVec3::new(0.2, 0.1, 0.0)) * 0.3;
+        let d = Drag { loop_index: 0, fixed: ((n - n / 6) % n, n / 6), moved: 0, target: DVec3::new(e.x, e.y, 0.0), style: MlsStyle::Affine, mls_alpha: 1.0, noise_amplitude: 0.0, noise_frequency: 0.0 };
+        ed.drag(&d).unwrap();
+        ed.commit();
+        let sm = ed.shadow_mesh().unwrap();
+        assert!(sm.iter().all(|p| p.is_finite()), "w_z {wz}, weight {cw}");
+    }
 }
