@@ -363,6 +363,48 @@ def envmap_section(emit):
     emit()
 
 
+APPEARANCE_MARKER = "## Appearance preview: "
+
+
+def appearance_section(emit):
+    """Issue #8 end to end: a brush stroke until the preview's pixels are back, and the
+    Blender-drawn preview of each model against Cycles (bench/appearance_preview.py, fresh bpy)."""
+    with tempfile.TemporaryDirectory() as tmp:
+        out = Path(tmp) / "appearance.json"
+        subprocess.run([sys.executable, str(ROOT / "bench" / "appearance_preview.py"), "--json", str(out)], check=True,
+                       stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+        r = json.loads(out.read_text())
+    emit(APPEARANCE_MARKER + "a brush stroke until the preview is drawn, and the preview against Cycles")
+    emit()
+    emit(f"Blender's gpu module offscreen in background mode ({r['renderer']}: a CPU rasteriser, no GPU lent), a")
+    emit(f"{W_PREVIEW}x{W_PREVIEW} frame. One dab (`appearance.paint`, per-point roughness, radius 0.2 on a unit UV sphere),")
+    emit("then `appearance_preview.draw_object` (batch rebuilt from the painted attributes, the shader, the pixels")
+    emit("read back, which waits for the rasteriser); medians of 7. Goal: within a frame (33 ms at 30 Hz).")
+    emit()
+    emit("| vertices | dab (ms) | preview draw (ms) | stroke to pixels (ms) |")
+    emit("|---:|---:|---:|---:|")
+    for s in r["strokes"]:
+        emit(f"| {s['vertices']:,} | {s['paint_ms']:.1f} | {s['draw_ms']:.1f} | {s['total_ms']:.1f} |")
+    emit()
+    emit("The preview as Blender draws it against a Cycles render (128 samples, no denoising) of the same painted")
+    emit("sphere under courtyard.exr, orthographic, relative error of luminance over the pixels with n·v > 0.5")
+    emit("(includes Cycles' noise), and the ratio of the means (energy):")
+    emit()
+    emit("| sphere | roughness | Principled (GGX + albedo table) | Phong | Torrance–Sparrow |")
+    emit("|---|---:|---:|---:|---:|")
+    groups = {}
+    for c in r["cycles"]:
+        groups.setdefault((c["case"], c["roughness"]), {})[c["model"]] = c
+    for (case, rough), g in groups.items():
+        cells = [f"{100 * g[m]['mean_error']:.1f} % (×{g[m]['ratio']:.3f})" for m in ("PRINCIPLED", "PHONG", "TORRANCE_SPARROW")]
+        emit(f"| {case} | {rough:g} | " + " | ".join(cells) + " |")
+    emit()
+    emit(f"Load average {r['load_average'][0]:.1f} before and {r['load_average'][1]:.1f} after, on {r['cpus']} CPUs.")
+    emit()
+
+
+W_PREVIEW = 96
+
 COMPOSITING_MARKER = "## Compositing-stage shape editing: "
 
 
@@ -481,7 +523,7 @@ def _refresh_section(emit, out, marker, section):
 def main():
     ap = argparse.ArgumentParser(description="Rokeby benchmarks")
     ap.add_argument("--peers", default=None, help="python of .venv-peers (exact geodesics, potpourri3d, libigl, matplotlib)")
-    ap.add_argument("--only", choices=["field", "geodesic", "addon", "render", "viewport", "envmap", "compositing", "shadow", *TRADEOFFS], default=None)
+    ap.add_argument("--only", choices=["field", "geodesic", "addon", "render", "viewport", "envmap", "appearance", "compositing", "shadow", *TRADEOFFS], default=None)
     args = ap.parse_args()
     rng = np.random.default_rng(2009)
     out = []
@@ -511,6 +553,9 @@ def main():
         return
     if args.only == "envmap":
         _refresh_section(emit, out, ENVMAP_MARKER, envmap_section)
+        return
+    if args.only == "appearance":
+        _refresh_section(emit, out, APPEARANCE_MARKER, appearance_section)
         return
     if args.only in TRADEOFFS:
         # Issue 9: one speed-for-accuracy choice (bench/tradeoff_sections.py), with its plot.
@@ -629,6 +674,7 @@ def main():
     viewport_section(emit)
     render_section(emit)
     envmap_section(emit)
+    appearance_section(emit)
     # Sections that used to exist only through --only (a whole run dropped them from the report).
     compositing_section(emit)
     shadow_section(emit)

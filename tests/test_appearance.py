@@ -198,9 +198,16 @@ def test_operators_paint_through_the_registered_add_on(ball):
         rokeby.unregister()
 
 
+MODEL_CASES = [(m, c) for m in ("PRINCIPLED", "PHONG", "TORRANCE_SPARROW")
+               for c in (((1.0, 1.0, 1.0), 0.5, 0.1, 1.0), ((0.8, 0.3, 0.2), 0.5, 0.6, 0.0), ((0.5, 0.6, 0.7), 0.8, 0.35, 0.4))]
+
+
 def test_preview_glsl_matches_numpy():
-    """rk_shade (GLSL 3.30, moderngl on headless EGL) against its numpy twin on an orthographic
-    sphere under the prefiltered forest.exr: specular metal, rough plastic, painted mid values."""
+    """rk_shade from shaders/rokeby_appearance_lib.glsl (GLSL 3.30, moderngl on headless EGL, the
+    std140 block packed by appearance_glsl.pack_block) against its numpy twin on an orthographic
+    sphere under forest.exr prefiltered for each preview model (Principled/GGX with the albedo
+    table, Phong, Torrance–Sparrow): specular metal, rough plastic, painted mid values. The
+    three models differ from each other (rough cases) by more than twice the tolerance."""
     moderngl = pytest.importorskip("moderngl")
     from rokeby import appearance_glsl
 
@@ -209,11 +216,9 @@ def test_preview_glsl_matches_numpy():
     except Exception as e:  # noqa: BLE001 - no EGL here
         pytest.skip(f"no headless EGL context: {e}")
     im = envmaps.read_exr(envmaps.studio_world("forest"))
-    lv = envmaps.prefilter(im, "ggx", envmaps.ROUGHNESS_LEVELS)
-    at = appearance_glsl.atlas(lv, height=64)
     irr = envmaps.irradiance(im, size=8)["irradiance_coeffs"]  # (3, 9)
     size = 48
-    fs = "#version 330\n" + appearance_glsl.GLSL + """
+    fs = appearance_glsl.standalone_library() + """
 uniform vec3 u_base; uniform float u_spec; uniform float u_rough; uniform float u_metal;
 out vec4 frag;
 void main() {
@@ -225,11 +230,12 @@ void main() {
 }"""
     vs = "#version 330\nin vec2 pos; void main() { gl_Position = vec4(pos, 0.0, 1.0); }"
     prog = ctx.program(vertex_shader=vs, fragment_shader=fs)
-    tex = ctx.texture((at.shape[1], at.shape[0]), 3, at.tobytes(), dtype="f4")
-    tex.use(0)
+    assert prog["rk_appearance_block"].size == appearance_glsl.BLOCK_BYTES  # the driver's std140 layout
+    lut = appearance_glsl.brdf_lut()
+    lut_tex = ctx.texture(lut.shape[1::-1], 2, np.ascontiguousarray(lut).tobytes(), dtype="f4")
+    lut_tex.use(1)
+    prog["rk_brdf_lut"].value = 1
     prog["rk_env_atlas"].value = 0
-    prog["rk_env_levels"].value = len(lv)
-    prog["rk_sh"].write(np.ascontiguousarray(irr.T, np.float32).tobytes())
     quad = ctx.buffer(np.array([-1, -1, 1, -1, -1, 1, 1, 1], "f4").tobytes())
     vao = ctx.vertex_array(prog, [(quad, "2f", "pos")])
     fbo = ctx.framebuffer(color_attachments=[ctx.texture((size, size), 4, dtype="f4")])
@@ -239,15 +245,47 @@ void main() {
     inside = (p**2).sum(-1) < 0.95
     n = np.stack([p[..., 0], -np.sqrt(np.maximum(1 - (p**2).sum(-1), 0)), p[..., 1]], -1)[inside]
     v = np.array([0.0, -1.0, 0.0])
-    for base, spec, rough, metal in (((1.0, 1.0, 1.0), 0.5, 0.1, 1.0), ((0.8, 0.3, 0.2), 0.5, 0.6, 0.0), ((0.5, 0.6, 0.7), 0.8, 0.35, 0.4)):
-        prog["u_base"].value, prog["u_spec"].value, prog["u_rough"].value, prog["u_metal"].value = base, spec, rough, metal
-        fbo.clear()
-        vao.render(moderngl.TRIANGLE_STRIP)
-        got = np.frombuffer(fbo.read(components=4, dtype="f4"), np.float32).reshape(size, size, 4)[..., :3][inside]
-        want = appearance_glsl.shade_reference(at, len(lv), irr, n, v, np.array(base), spec, rough, metal)
-        rel = np.abs(got - want).mean() / np.abs(want).mean()
-        assert rel < 2e-3, (base, spec, rough, metal, rel)
+    shaded = {}
+    for model in appearance_glsl.MODELS:
+        lv = envmaps.prefilter(im, appearance_glsl.LOBE[model], appearance_glsl.level_params(model))
+        at = appearance_glsl.atlas(lv, height=64)
+        tex = ctx.texture((at.shape[1], at.shape[0]), 3, at.tobytes(), dtype="f4")
+        tex.use(0)
+        ubo = ctx.buffer(appearance_glsl.pack_block(np.eye(4), (0.0, -1e4, 0.0), len(lv), model, irr))
+        ubo.bind_to_uniform_block(0)
+        prog["rk_appearance_block"].binding = 0
+        for m, (base, spec, rough, metal) in MODEL_CASES:
+            if m != model:
+                continue
+            prog["u_base"].value, prog["u_spec"].value, prog["u_rough"].value, prog["u_metal"].value = base, spec, rough, metal
+            fbo.clear()
+            vao.render(moderngl.TRIANGLE_STRIP)
+            got = np.frombuffer(fbo.read(components=4, dtype="f4"), np.float32).reshape(size, size, 4)[..., :3][inside]
+            want = appearance_glsl.shade_reference(at, len(lv), irr, n, v, np.array(base), spec, rough, metal, model=model)
+            rel = np.abs(got - want).mean() / np.abs(want).mean()
+            assert rel < 2e-3, (model, base, spec, rough, metal, rel)
+            shaded[model, base] = got
+        tex.release()
+    for base in {c[0] for _m, c in MODEL_CASES if c[2] > 0.3}:  # near-mirror metal looks alike in all three
+        a, b, c = (shaded[m, base] for m in appearance_glsl.MODELS)
+        for x, y in ((a, b), (a, c), (b, c)):
+            assert np.abs(x - y).mean() > 4e-3 * np.abs(x).mean(), base  # twice the match tolerance
     ctx.release()
+
+
+def test_brdf_albedo_table():
+    """The GGX directional albedo (scale A, bias B of F0): a white metal reflects at most what
+    comes in (A + B ≤ 1), a mirror reflects everything (A + B = 1 at roughness 0), rough grazing
+    views lose energy (multiple scattering is not in single-scatter GGX), and Schlick's bias grows
+    towards grazing."""
+    from rokeby import appearance_glsl
+
+    lut = appearance_glsl.brdf_lut().astype(np.float64)
+    total = lut[..., 0] + lut[..., 1]
+    assert np.isfinite(lut).all() and (lut >= 0).all() and (total <= 1.0 + 2e-2).all()
+    np.testing.assert_allclose(total[0, 4:], 1.0, atol=2e-2)  # roughness 0, away from n·v = 0
+    assert total[-1, 16] < 0.9  # roughness 1 loses energy
+    assert lut[0, 2, 1] > lut[0, -1, 1]  # bias larger at grazing
 
 
 def test_viewport_preview_draws_through_blenders_gpu_module():

@@ -1,9 +1,23 @@
-"""GLSL of the appearance preview under environment light (issue 8): the prefiltered GGX chain in
-one texture atlas and the order-2 SH irradiance, shaded with the painted Principled parameters
-(split sum without the albedo table: F0 = mix(0.08·specular, base, metallic); diffuse
-base·(1 − metallic)·E(n)/π). Plain GLSL 3.30 functions, tested against numpy
-(:func:`rokeby.envmaps.lookup_levels`, :func:`rokeby.envmaps.sh_irradiance`) with moderngl on EGL;
-the Blender draw handler that would use them is not written yet (docs/envmaps.md).
+"""GLSL interface and numpy twin of the appearance preview under environment light (issue 8).
+
+The shader lives in ``shaders/rokeby_appearance_*.glsl`` (bodies only); this module declares its
+interface once (:data:`INTERFACE`, in GPUShaderCreateInfo's terms), turns it into a ``#version
+330`` header for plain OpenGL (:func:`standalone_sources`, the moderngl tests), packs the std140
+block (:func:`pack_block`), builds the lat-long atlas of prefiltered levels (:func:`atlas`) and
+the GGX directional-albedo table (:func:`brdf_lut`), and shades in numpy exactly as the shader
+does (:func:`shade_reference`).
+
+Preview models (``RokebyAppearance.options.y``), all driven by the painted Principled parameters:
+
+* ``PRINCIPLED`` — Blender's BSDF as a split sum: GGX prefiltered radiance times the GGX
+  directional albedo F0·A + B (Karis 2013; :func:`brdf_lut`), F0 = mix(0.08·specular, base,
+  metallic); the dielectric diffuse base·(1 − metallic)·E(n)/π is weighted by 1 − (0.08·specular·A
+  + B), the energy the specular layer does not reflect.
+* ``PHONG`` — the seed's normalised Phong lobe about the reflected direction, exponent
+  σ = (2/α² − 2)/4 with α = roughness² (the Blinn–Phong exponent of the same width, halved in
+  angle), k_s = F0; no Fresnel.
+* ``TORRANCE_SPARROW`` — Fraser's simplified Torrance–Sparrow lobe exp(−(θ_h/σ)²), σ = α, with
+  Schlick's Fresnel at n·v.
 
 The atlas stacks the levels top to bottom, each resampled to the same H×W lat-long grid (row 0 at
 the top, Blender's convention); lookups are bilinear with texelFetch, wrapping in u and crossing
@@ -12,79 +26,112 @@ the poles at u + ½, exactly like rokeby_core::envmap.
 
 from __future__ import annotations
 
+import re
+from functools import lru_cache
+
 import numpy as np
 
-from . import envmaps
+from . import envmaps, glsl
 
-GLSL = r"""
-uniform sampler2D rk_env_atlas;
-uniform int rk_env_levels;
-uniform vec3 rk_sh[9];
-const float RK_PI = 3.14159265358979;
-
-vec2 rk_equirect_uv(vec3 d)
-{
-  return vec2(0.5 - atan(d.y, d.x) / (2.0 * RK_PI), atan(d.z, length(d.xy)) / RK_PI + 0.5);
+FILES = {
+    "types": "rokeby_appearance_types.glsl",
+    "lib": "rokeby_appearance_lib.glsl",
+    "vertex": "rokeby_appearance_vert.glsl",
+    "fragment": "rokeby_appearance_frag.glsl",
 }
 
-vec3 rk_level_texel(int level, int i, int j, int h, int w)
-{
-  if (i < 0) { i = -1 - i; j += w / 2; }
-  else if (i >= h) { i = 2 * h - 1 - i; j += w / 2; }
-  i = clamp(i, 0, h - 1);
-  j = ((j % w) + w) % w;
-  return texelFetch(rk_env_atlas, ivec2(j, level * h + i), 0).rgb;
-}
+MODELS = ("PRINCIPLED", "PHONG", "TORRANCE_SPARROW")
+LOBE = {"PRINCIPLED": "ggx", "PHONG": "phong", "TORRANCE_SPARROW": "torrance_sparrow"}
 
-vec3 rk_level(vec3 d, int level)
-{
-  ivec2 size = textureSize(rk_env_atlas, 0);
-  int w = size.x;
-  int h = size.y / rk_env_levels;
-  vec2 uv = rk_equirect_uv(normalize(d));
-  float x = uv.x * float(w) - 0.5;
-  float y = (1.0 - uv.y) * float(h) - 0.5;
-  float x0 = floor(x), y0 = floor(y);
-  float fx = x - x0, fy = y - y0;
-  int j0 = int(x0), i0 = int(y0);
-  return (1.0 - fx) * (1.0 - fy) * rk_level_texel(level, i0, j0, h, w)
-       + fx * (1.0 - fy) * rk_level_texel(level, i0, j0 + 1, h, w)
-       + (1.0 - fx) * fy * rk_level_texel(level, i0 + 1, j0, h, w)
-       + fx * fy * rk_level_texel(level, i0 + 1, j0 + 1, h, w);
+INTERFACE = {
+    "vertex_in": [(0, "VEC3", "pos"), (1, "VEC3", "nor"), (2, "VEC4", "base"), (3, "VEC3", "par")],
+    "vertex_out": [("smooth", "VEC3", "v_pos"), ("smooth", "VEC3", "v_nor"), ("smooth", "VEC4", "v_base"), ("smooth", "VEC3", "v_par")],
+    "push_constant": [("MAT4", "rk_model")],  # 64 bytes: within Vulkan's guaranteed 128
+    "sampler": [(0, "FLOAT_2D", "rk_env_atlas"), (1, "FLOAT_2D", "rk_brdf_lut")],
+    "uniform_buf": [(0, "RokebyAppearance", "rk_appearance")],
+    "fragment_out": [(0, "VEC4", "frag")],
 }
+INTERFACE_NAME = "rk_appearance_iface"
+BLOCK_BYTES = (16 + 4 + 4 + 9 * 4) * 4  # mat4, vec4 eye, ivec4 options, vec4 sh[9]
 
-/* Prefiltered radiance for a Blender roughness: levels at roughness l / (levels - 1). */
-vec3 rk_specular(vec3 r, float roughness)
-{
-  float x = clamp(roughness, 0.0, 1.0) * float(rk_env_levels - 1);
-  int l0 = min(int(floor(x)), rk_env_levels - 1);
-  int l1 = min(l0 + 1, rk_env_levels - 1);
-  return mix(rk_level(r, l0), rk_level(r, l1), x - float(l0));
-}
 
-/* E(n)/pi from the irradiance coefficients (Ramamoorthi & Hanrahan 2001; rokeby_core::sh basis). */
-vec3 rk_irradiance(vec3 n)
-{
-  n = normalize(n);
-  return rk_sh[0] * 0.28209479177387814
-       + rk_sh[1] * (0.4886025119029199 * n.y)
-       + rk_sh[2] * (0.4886025119029199 * n.z)
-       + rk_sh[3] * (0.4886025119029199 * n.x)
-       + rk_sh[4] * (1.0925484305920792 * n.x * n.y)
-       + rk_sh[5] * (1.0925484305920792 * n.y * n.z)
-       + rk_sh[6] * (0.31539156525252005 * (3.0 * n.z * n.z - 1.0))
-       + rk_sh[7] * (1.0925484305920792 * n.x * n.z)
-       + rk_sh[8] * (0.5462742152960396 * (n.x * n.x - n.y * n.y));
-}
+def read_sources() -> dict:
+    d = glsl.shader_dir()
+    return {key: (d / name).read_text() for key, name in FILES.items()}
 
-/* n: shading normal, v: direction to the viewer (both unit, world space). */
-vec3 rk_shade(vec3 n, vec3 v, vec3 base, float specular, float roughness, float metallic)
-{
-  vec3 r = reflect(-v, n);
-  vec3 f0 = mix(vec3(0.08 * specular), base, metallic);
-  return base * (1.0 - metallic) * rk_irradiance(n) + f0 * rk_specular(r, roughness);
-}
-"""
+
+def model_index(model: str) -> int:
+    """RK_MODEL_* of a model name (checked against the types file, so the two cannot drift)."""
+    m = str(model).upper()
+    if m not in MODELS:
+        raise ValueError(f"model: expected one of {', '.join(MODELS)}, got {model!r}")
+    text = read_sources()["types"]
+    hit = re.search(rf"^#define\s+RK_MODEL_{m}\s+(\d+)", text, re.M)
+    if hit is None:
+        raise RuntimeError(f"{FILES['types']} does not define RK_MODEL_{m}")
+    return int(hit.group(1))
+
+
+def standalone_library(version: str = "330 core") -> str:
+    """The header (types, block, push constants, samplers) and the library, for a plain OpenGL
+    fragment shader with its own ``main`` (tests shading analytic normals)."""
+    return "\n".join(_common(version) + [read_sources()["lib"]])
+
+
+def _common(version):
+    src = read_sources()
+    common = [f"#version {version}", src["types"]]
+    for _slot, type_name, name in INTERFACE["uniform_buf"]:
+        common.append(f"layout(std140) uniform {name}_block {{ {type_name} {name}; }};")
+    for type_name, name in INTERFACE["push_constant"]:
+        common.append(f"uniform {glsl._GLSL_TYPE[type_name]} {name};")
+    for _slot, type_name, name in INTERFACE["sampler"]:
+        common.append(f"uniform {glsl._GLSL_TYPE[type_name]} {name};")
+    return common
+
+
+def standalone_sources(version: str = "330 core") -> tuple[str, str]:
+    """(vertex, fragment) for a plain OpenGL context: a header from :data:`INTERFACE`, then the
+    same files Blender compiles."""
+    src = read_sources()
+    common = _common(version)
+    vert = list(common)
+    for slot, type_name, name in INTERFACE["vertex_in"]:
+        vert.append(f"layout(location = {slot}) in {glsl._GLSL_TYPE[type_name]} {name};")
+    for _interp, type_name, name in INTERFACE["vertex_out"]:
+        vert.append(f"out {glsl._GLSL_TYPE[type_name]} {name};")
+    frag = list(common)
+    for _interp, type_name, name in INTERFACE["vertex_out"]:
+        frag.append(f"in {glsl._GLSL_TYPE[type_name]} {name};")
+    for slot, type_name, name in INTERFACE["fragment_out"]:
+        frag.append(f"layout(location = {slot}) out {glsl._GLSL_TYPE[type_name]} {name};")
+    return "\n".join(vert + [src["vertex"]]), "\n".join(frag + [src["lib"], src["fragment"]])
+
+
+def pack_block(view_projection, eye, levels: int, model: str, irradiance_coeffs) -> bytes:
+    """The std140 ``RokebyAppearance`` block (:data:`BLOCK_BYTES` bytes)."""
+    vp = np.asarray(view_projection, np.float32).reshape(4, 4)
+    sh = np.asarray(irradiance_coeffs, np.float32).reshape(3, 9)
+    out = np.zeros(BLOCK_BYTES // 4, np.float32)
+    out[0:16] = vp.T.ravel()  # column-major
+    out[16:19] = np.asarray(eye, np.float32).reshape(3)
+    out[20:24].view(np.int32)[:] = (int(levels), model_index(model), 0, 0)
+    out[24:].reshape(9, 4)[:, :3] = sh.T
+    return out.tobytes()
+
+
+def level_params(model: str, roughness=envmaps.ROUGHNESS_LEVELS) -> list[float]:
+    """The lobe parameter of each prefiltered level for a model, at Blender roughnesses."""
+    r = np.asarray(roughness, np.float64)
+    alpha = r * r
+    m = str(model).upper()
+    if m == "PRINCIPLED":
+        return [float(x) for x in r]
+    if m == "PHONG":
+        return [float(x) for x in np.minimum((2.0 / np.maximum(alpha, 1e-4) ** 2 - 2.0) / 4.0, 1e6)]
+    if m == "TORRANCE_SPARROW":
+        return [float(x) for x in alpha]
+    raise ValueError(f"model: expected one of {', '.join(MODELS)}, got {model!r}")
 
 
 def atlas(levels, height: int | None = None) -> np.ndarray:
@@ -102,14 +149,70 @@ def atlas(levels, height: int | None = None) -> np.ndarray:
     return np.ascontiguousarray(np.concatenate(parts, axis=0))
 
 
-def shade_reference(atlas_px, levels: int, irradiance_coeffs, n, v, base, specular, roughness, metallic) -> np.ndarray:
+@lru_cache(maxsize=4)
+def brdf_lut(size: int = 32, samples: int = 1024) -> np.ndarray:
+    """GGX directional albedo as (scale A, bias B) of F0 (Karis 2013): (size, size, 2) float32,
+    rows roughness 0…1, columns n·v 0…1 (texel centres at the ends). Importance-sampled with a
+    Hammersley set, Smith height-correlated visibility and Schlick's Fresnel; α = roughness²."""
+    nv = np.clip(np.linspace(0.0, 1.0, size), 1e-3, 1.0)
+    rough = np.linspace(0.0, 1.0, size)
+    i = np.arange(samples)
+    u1 = (i + 0.5) / samples
+    u2 = np.array([int(f"{k:032b}"[::-1], 2) for k in i], np.float64) / 2.0**32  # radical inverse
+    out = np.zeros((size, size, 2), np.float64)
+    for a_i, r in enumerate(rough):
+        a = max(r * r, 1e-4)
+        cos_h = np.sqrt((1 - u1) / (1 + (a * a - 1) * u1))
+        sin_h = np.sqrt(1 - cos_h**2)
+        phi = 2 * np.pi * u2
+        h = np.stack([sin_h * np.cos(phi), sin_h * np.sin(phi), cos_h], -1)  # (S, 3)
+        v = np.stack([np.sqrt(1 - nv**2), np.zeros_like(nv), nv], -1)  # (N, 3)
+        vh = v @ h.T  # (N, S)
+        l_z = 2 * vh * h[None, :, 2] - v[:, None, 2]
+        ok = (l_z > 0) & (vh > 0)
+        nl = np.where(ok, l_z, 0.0)
+        k = a * a
+        nvv = nv[:, None]
+        vis = 0.5 / (nl * np.sqrt(nvv**2 * (1 - k) + k) + nvv * np.sqrt(nl**2 * (1 - k) + k) + 1e-30)
+        g = np.where(ok, vis * nl * 4 * vh / np.maximum(h[None, :, 2], 1e-12), 0.0)
+        fc = (1 - np.clip(vh, 0, 1)) ** 5
+        out[a_i, :, 0] = np.mean(g * (1 - fc), axis=1)
+        out[a_i, :, 1] = np.mean(g * fc, axis=1)
+    return out.astype(np.float32)
+
+
+def _lut_lookup(lut, n_dot_v, roughness):
+    s = lut.shape[0]
+    p = np.stack(np.broadcast_arrays(np.clip(n_dot_v, 0, 1) * (s - 1), np.clip(roughness, 0, 1) * (s - 1)), -1)
+    p0 = np.floor(p).astype(int)
+    f = p - p0
+    p1 = np.minimum(p0 + 1, s - 1)
+    t = lambda x, y: lut[y, x]  # noqa: E731 - rows roughness, columns n·v
+    a = t(p0[..., 0], p0[..., 1]) * (1 - f[..., :1]) + t(p1[..., 0], p0[..., 1]) * f[..., :1]
+    b = t(p0[..., 0], p1[..., 1]) * (1 - f[..., :1]) + t(p1[..., 0], p1[..., 1]) * f[..., :1]
+    return a * (1 - f[..., 1:]) + b * f[..., 1:]
+
+
+def shade_reference(atlas_px, levels: int, irradiance_coeffs, n, v, base, specular, roughness, metallic,
+                    model: str = "PRINCIPLED", lut=None) -> np.ndarray:
     """numpy twin of rk_shade (for tests and CPU previews): (..., 3) normals/views → (..., 3)."""
     h = atlas_px.shape[0] // levels
     lv = [atlas_px[k * h:(k + 1) * h] for k in range(levels)]
     n = np.asarray(n, np.float64)
-    v = np.asarray(v, np.float64)
+    v = np.broadcast_to(np.asarray(v, np.float64), n.shape)
+    nv = np.clip(np.sum(n * v, axis=-1, keepdims=True), 0.0, 1.0)
     r = 2 * np.sum(n * v, axis=-1, keepdims=True) * n - v
     spec = envmaps.lookup_levels(lv, [k / (levels - 1) if levels > 1 else 0.0 for k in range(levels)], r, roughness)
     base = np.asarray(base, np.float64)
     f0 = (1 - metallic) * 0.08 * specular + metallic * base
-    return base * (1 - metallic) * envmaps.sh_irradiance(irradiance_coeffs, n) + f0 * spec
+    diffuse = base * (1 - metallic) * envmaps.sh_irradiance(irradiance_coeffs, n)
+    m = str(model).upper()
+    if m == "PRINCIPLED":
+        ab = _lut_lookup(brdf_lut() if lut is None else lut, nv[..., 0], roughness).astype(np.float64)
+        e_d = 0.08 * specular * ab[..., :1] + ab[..., 1:]
+        return diffuse * (1 - e_d) + spec * (f0 * ab[..., :1] + ab[..., 1:])
+    if m == "TORRANCE_SPARROW":
+        return diffuse + spec * (f0 + (1 - f0) * (1 - nv) ** 5)
+    if m == "PHONG":
+        return diffuse + spec * f0
+    raise ValueError(f"model: expected one of {', '.join(MODELS)}, got {model!r}")

@@ -1,10 +1,13 @@
 """Viewport preview of painted appearance under the world HDR (issue 8): the painted mesh drawn
-through Blender's gpu module with :data:`rokeby.appearance_glsl.GLSL` (prefiltered GGX chain in
-one atlas texture, order-2 SH irradiance, per-point base colour/specular/roughness/metallic).
+through Blender's gpu module with the shaders/rokeby_appearance_*.glsl files (interface in
+:mod:`rokeby.appearance_glsl`): the prefiltered chain of the chosen model's lobe in one atlas
+texture, order-2 SH irradiance, the GGX albedo table, per-point base colour/specular/roughness/
+metallic. Models: Blender's BSDF (GGX split sum), the seed's Phong, Fraser's Torrance–Sparrow.
 
-:class:`WorldLight` prefilters a lat-long world once (Rust, about half a second for 1024×512) and
-keeps its GPU texture; :func:`draw_object` draws one painted object with a view-projection
-matrix and eye position (the draw handler passes the region's; tests pass their own, offscreen).
+:class:`WorldLight` prefilters a lat-long world once per model (Rust, about a quarter to half a
+second for 1024×512) and keeps its GPU textures; :func:`draw_object` draws one painted object with
+a view-projection matrix and eye position (the draw handler passes the region's; tests pass their
+own, offscreen).
 """
 
 from __future__ import annotations
@@ -16,80 +19,86 @@ from . import appearance, appearance_glsl, envmaps
 _shader = None
 
 
-def _library() -> str:
-    # In a GPUShaderCreateInfo the uniforms are declared by the info (push constants, samplers).
-    return "\n".join(line for line in appearance_glsl.GLSL.splitlines() if not line.startswith("uniform "))
-
-
 def shader():
-    """The preview shader (compiled once per session)."""
+    """The preview shader (compiled once per session) from shaders/ through GPUShaderCreateInfo."""
     global _shader
     if _shader is not None:
         return _shader
     import gpu
 
-    iface = gpu.types.GPUStageInterfaceInfo("rk_appearance_iface")
-    iface.smooth("VEC3", "v_pos")
-    iface.smooth("VEC3", "v_nor")
-    iface.smooth("VEC4", "v_base")
-    iface.smooth("VEC3", "v_par")
+    spec = appearance_glsl.INTERFACE
+    src = appearance_glsl.read_sources()
+    iface = gpu.types.GPUStageInterfaceInfo(appearance_glsl.INTERFACE_NAME)
+    for interp, type_name, name in spec["vertex_out"]:
+        getattr(iface, interp)(type_name, name)
     info = gpu.types.GPUShaderCreateInfo()
-    info.vertex_in(0, "VEC3", "pos")
-    info.vertex_in(1, "VEC3", "nor")
-    info.vertex_in(2, "VEC4", "base")
-    info.vertex_in(3, "VEC3", "par")
+    for slot, type_name, name in spec["vertex_in"]:
+        info.vertex_in(slot, type_name, name)
     info.vertex_out(iface)
-    info.push_constant("MAT4", "rk_vp")
-    info.push_constant("MAT4", "rk_model")
-    info.push_constant("VEC3", "rk_eye")
-    info.push_constant("INT", "rk_env_levels")
-    info.push_constant("VEC3", "rk_sh", 9)
-    info.sampler(0, "FLOAT_2D", "rk_env_atlas")
-    info.fragment_out(0, "VEC4", "frag")
-    info.vertex_source(
-        "void main() {\n"
-        "  vec4 w = rk_model * vec4(pos, 1.0);\n"
-        "  v_pos = w.xyz;\n"
-        "  v_nor = transpose(inverse(mat3(rk_model))) * nor;\n"
-        "  v_base = base;\n"
-        "  v_par = par;\n"
-        "  gl_Position = rk_vp * w;\n"
-        "}\n"
-    )
-    info.fragment_source(
-        _library()
-        + "\nvoid main() {\n"
-        "  vec3 n = normalize(v_nor);\n"
-        "  vec3 v = normalize(rk_eye - v_pos);\n"
-        "  frag = vec4(rk_shade(n, v, v_base.rgb, v_par.x, v_par.y, v_par.z), 1.0);\n"
-        "}\n"
-    )
+    for type_name, name in spec["push_constant"]:
+        info.push_constant(type_name, name)
+    for slot, type_name, name in spec["sampler"]:
+        info.sampler(slot, type_name, name)
+    info.typedef_source(src["types"])
+    for slot, type_name, name in spec["uniform_buf"]:
+        info.uniform_buf(slot, type_name, name)
+    for slot, type_name, name in spec["fragment_out"]:
+        info.fragment_out(slot, type_name, name)
+    info.vertex_source(src["vertex"])
+    info.fragment_source(src["lib"] + "\n" + src["fragment"])
     _shader = gpu.shader.create_from_info(info)
     return _shader
 
 
-class WorldLight:
-    """A lat-long world (H, W, 3+) prefiltered for the preview: the GGX chain at Blender's
-    roughness 0, 1/7, …, 1 in one atlas, and the irradiance SH coefficients."""
+def _texture(rgba: np.ndarray):
+    import gpu
 
-    def __init__(self, pixels, atlas_height: int = 128):
+    h, w = rgba.shape[:2]
+    buf = gpu.types.Buffer("FLOAT", h * w * 4, np.ascontiguousarray(rgba, np.float32).ravel().tolist())
+    return gpu.types.GPUTexture((w, h), format="RGBA32F", data=buf)
+
+
+class WorldLight:
+    """A lat-long world (H, W, 3+) prefiltered for the preview with ``model``'s lobe
+    (appearance_glsl.MODELS) at Blender's roughness 0, 1/7, …, 1 in one atlas, and the irradiance
+    SH coefficients."""
+
+    def __init__(self, pixels, atlas_height: int = 128, model: str = "PRINCIPLED"):
+        self.model = str(model).upper()
+        params = appearance_glsl.level_params(self.model)
         px = np.asarray(pixels, np.float32)[..., :3]
-        self.levels = envmaps.prefilter(px, "ggx", envmaps.ROUGHNESS_LEVELS)
+        self.levels = envmaps.prefilter(px, appearance_glsl.LOBE[self.model], params)
         self.atlas = appearance_glsl.atlas(self.levels, height=min(atlas_height, px.shape[0]))
         self.sh = np.asarray(envmaps.irradiance(px, size=8)["irradiance_coeffs"], np.float32)  # (3, 9)
         self._texture = None
+        self._lut = None
+        self._ubo = None
 
     def texture(self):
         if self._texture is None:
-            import gpu
-
-            h, w = self.atlas.shape[:2]
-            rgba = np.concatenate([self.atlas, np.ones((h, w, 1), np.float32)], axis=-1)
             # GPU textures run bottom-up: the atlas row 0 (top) becomes texel row 0 via the shader's
             # own (1 − v) flip, so upload in array order.
-            buf = gpu.types.Buffer("FLOAT", h * w * 4, rgba.ravel().tolist())
-            self._texture = gpu.types.GPUTexture((w, h), format="RGBA32F", data=buf)
+            h, w = self.atlas.shape[:2]
+            self._texture = _texture(np.concatenate([self.atlas, np.ones((h, w, 1), np.float32)], axis=-1))
         return self._texture
+
+    def lut_texture(self):
+        if self._lut is None:
+            lut = appearance_glsl.brdf_lut()
+            s = lut.shape[0]
+            self._lut = _texture(np.concatenate([lut, np.zeros((s, s, 1), np.float32), np.ones((s, s, 1), np.float32)], axis=-1))
+        return self._lut
+
+    def block(self, view_projection, eye):
+        """The uniform block for one draw (one GPU buffer per world, updated in place)."""
+        import gpu
+
+        data = appearance_glsl.pack_block(view_projection, eye, len(self.levels), self.model, self.sh)
+        if self._ubo is None:
+            self._ubo = gpu.types.GPUUniformBuf(data)
+        else:
+            self._ubo.update(data)
+        return self._ubo
 
 
 def _mesh_arrays(obj):
@@ -111,21 +120,16 @@ def draw_object(obj, world: WorldLight, view_projection, eye) -> None:
     """Draws ``obj`` (set up with rokeby.appearance.setup) into the bound framebuffer."""
     import gpu
     from gpu_extras.batch import batch_for_shader
-    from mathutils import Matrix
-
     pos, nor, base, par, tris = _mesh_arrays(obj)
     sh = shader()
     batch = batch_for_shader(sh, "TRIS", {"pos": pos, "nor": nor, "base": base, "par": par}, indices=tris)
     gpu.state.depth_test_set("LESS_EQUAL")
     gpu.state.depth_mask_set(True)
     sh.bind()
-    sh.uniform_float("rk_vp", Matrix(np.asarray(view_projection, np.float64).tolist()))
     sh.uniform_float("rk_model", obj.matrix_world)
-    sh.uniform_float("rk_eye", tuple(float(x) for x in eye))
-    sh.uniform_int("rk_env_levels", len(world.levels))
-    coeffs = np.ascontiguousarray(world.sh.T, np.float32).ravel()  # 9 vec3, one per SH term
-    sh.uniform_vector_float(sh.uniform_from_name("rk_sh"), gpu.types.Buffer("FLOAT", 27, coeffs.tolist()), 3, 9)
+    sh.uniform_block("rk_appearance", world.block(view_projection, eye))
     sh.uniform_sampler("rk_env_atlas", world.texture())
+    sh.uniform_sampler("rk_brdf_lut", world.lut_texture())
     batch.draw(sh)
     gpu.state.depth_test_set("NONE")
     gpu.state.depth_mask_set(False)
@@ -156,21 +160,21 @@ def world_pixels(scene):
     return None
 
 
-def world_light(scene):
-    """The scene world prefiltered (cached per image and size), or None."""
+def world_light(scene, model: str = "PRINCIPLED"):
+    """The scene world prefiltered for ``model`` (cached per image, size and model), or None."""
     world = scene.world
     node = None
     if world is not None and world.use_nodes:
         node = next((n for n in world.node_tree.nodes if n.type == "TEX_ENVIRONMENT" and n.image is not None), None)
     if node is None:
         return None
-    key = (node.image.name, tuple(node.image.size), node.image.filepath)
+    key = (node.image.name, tuple(node.image.size), node.image.filepath, str(model).upper())
     if key not in _world_cache:
         px = world_pixels(scene)
         if px is None:
             return None
         _world_cache.clear()
-        _world_cache[key] = WorldLight(px)
+        _world_cache[key] = WorldLight(px, model=model)
     return _world_cache[key]
 
 
@@ -183,7 +187,8 @@ def _draw():
     if rv3d is None:
         return
     try:
-        light = world_light(ctx.scene)
+        settings = getattr(ctx.window_manager, "rokeby_appearance_brush", None)
+        light = world_light(ctx.scene, settings.preview_model if settings is not None else "PRINCIPLED")
         if light is None:
             last_error = "the world has no equirectangular Environment Texture to preview under"
             return

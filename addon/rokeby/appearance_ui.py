@@ -42,7 +42,24 @@ class RokebyAppearanceBrush(bpy.types.PropertyGroup):
         ],
         default="POINT",
     )
+    preview_model: EnumProperty(
+        name="Preview Model",
+        description="The BRDF the viewport preview shades with (the final render always uses Blender's Principled BSDF)",
+        items=[
+            ("PRINCIPLED", "Principled (GGX)", "Blender's BSDF as a split sum: GGX prefiltered radiance and the GGX albedo table"),
+            ("PHONG", "Phong", "The seed's normalised Phong lobe, exponent from the roughness"),
+            ("TORRANCE_SPARROW", "Torrance–Sparrow", "Fraser's simplified Torrance–Sparrow lobe with Schlick's Fresnel"),
+        ],
+        default="PRINCIPLED",
+        update=lambda self, context: _redraw_views(context),
+    )
     resolution: IntProperty(name="Resolution", description="Side of the painted images in texels (texture target)", default=1024, min=8, max=16384)
+
+
+def _redraw_views(context):
+    for area in context.screen.areas if getattr(context, "screen", None) else ():
+        if area.type == "VIEW_3D":
+            area.tag_redraw()
 
 
 def _settings(context):
@@ -237,6 +254,8 @@ class ROKEBY_PT_appearance(bpy.types.Panel):
 
         on = appearance_preview.enabled()
         layout.operator(ROKEBY_OT_appearance_preview.bl_idname, text="Hide Preview" if on else "Preview Under the World", icon="SHADING_RENDERED", depress=on)
+        if on:
+            layout.prop(s, "preview_model")
         if on and appearance_preview.last_error:
             layout.label(text=appearance_preview.last_error, icon="ERROR")
         mat = ob.active_material

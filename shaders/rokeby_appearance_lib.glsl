@@ -1,0 +1,99 @@
+/* Rokeby appearance preview (issue 8): shading under the world HDR with the prefiltered chain of
+ * the chosen lobe in one lat-long atlas (levels at roughness l / (levels - 1), stacked top to
+ * bottom) and order-2 SH irradiance. Needs: the block rk_appearance (RokebyAppearance), the
+ * samplers rk_env_atlas and rk_brdf_lut (GGX directional albedo: r = scale, g = bias of F0, at
+ * (n.v, roughness)). numpy twin: rokeby.appearance_glsl.shade_reference. */
+
+const float RK_PI = 3.14159265358979;
+
+vec2 rk_equirect_uv(vec3 d)
+{
+  return vec2(0.5 - atan(d.y, d.x) / (2.0 * RK_PI), atan(d.z, length(d.xy)) / RK_PI + 0.5);
+}
+
+vec3 rk_level_texel(int level, int i, int j, int h, int w)
+{
+  if (i < 0) { i = -1 - i; j += w / 2; }
+  else if (i >= h) { i = 2 * h - 1 - i; j += w / 2; }
+  i = clamp(i, 0, h - 1);
+  j = ((j % w) + w) % w;
+  return texelFetch(rk_env_atlas, ivec2(j, level * h + i), 0).rgb;
+}
+
+/* Bilinear, wrapping in u and crossing the poles at u + 1/2, exactly like rokeby_core::envmap. */
+vec3 rk_level(vec3 d, int level)
+{
+  ivec2 size = textureSize(rk_env_atlas, 0);
+  int w = size.x;
+  int h = size.y / rk_appearance.options.x;
+  vec2 uv = rk_equirect_uv(normalize(d));
+  float x = uv.x * float(w) - 0.5;
+  float y = (1.0 - uv.y) * float(h) - 0.5;
+  float x0 = floor(x), y0 = floor(y);
+  float fx = x - x0, fy = y - y0;
+  int j0 = int(x0), i0 = int(y0);
+  return (1.0 - fx) * (1.0 - fy) * rk_level_texel(level, i0, j0, h, w)
+       + fx * (1.0 - fy) * rk_level_texel(level, i0, j0 + 1, h, w)
+       + (1.0 - fx) * fy * rk_level_texel(level, i0 + 1, j0, h, w)
+       + fx * fy * rk_level_texel(level, i0 + 1, j0 + 1, h, w);
+}
+
+/* Prefiltered radiance for a Blender roughness: levels at roughness l / (levels - 1). */
+vec3 rk_specular(vec3 r, float roughness)
+{
+  int levels = rk_appearance.options.x;
+  float x = clamp(roughness, 0.0, 1.0) * float(levels - 1);
+  int l0 = min(int(floor(x)), levels - 1);
+  int l1 = min(l0 + 1, levels - 1);
+  return mix(rk_level(r, l0), rk_level(r, l1), x - float(l0));
+}
+
+/* E(n)/pi from the irradiance coefficients (Ramamoorthi & Hanrahan 2001; rokeby_core::sh basis). */
+vec3 rk_irradiance(vec3 n)
+{
+  n = normalize(n);
+  return rk_appearance.sh[0].rgb * 0.28209479177387814
+       + rk_appearance.sh[1].rgb * (0.4886025119029199 * n.y)
+       + rk_appearance.sh[2].rgb * (0.4886025119029199 * n.z)
+       + rk_appearance.sh[3].rgb * (0.4886025119029199 * n.x)
+       + rk_appearance.sh[4].rgb * (1.0925484305920792 * n.x * n.y)
+       + rk_appearance.sh[5].rgb * (1.0925484305920792 * n.y * n.z)
+       + rk_appearance.sh[6].rgb * (0.31539156525252005 * (3.0 * n.z * n.z - 1.0))
+       + rk_appearance.sh[7].rgb * (1.0925484305920792 * n.x * n.z)
+       + rk_appearance.sh[8].rgb * (0.5462742152960396 * (n.x * n.x - n.y * n.y));
+}
+
+/* (scale, bias) of F0 in the GGX directional albedo, bilinear at texel centres. */
+vec2 rk_brdf_albedo(float n_dot_v, float roughness)
+{
+  ivec2 size = textureSize(rk_brdf_lut, 0);
+  vec2 p = vec2(clamp(n_dot_v, 0.0, 1.0), clamp(roughness, 0.0, 1.0)) * vec2(size - 1);
+  vec2 p0 = floor(p);
+  vec2 f = p - p0;
+  ivec2 i0 = ivec2(p0);
+  ivec2 i1 = min(i0 + 1, size - 1);
+  vec2 a = mix(texelFetch(rk_brdf_lut, i0, 0).rg, texelFetch(rk_brdf_lut, ivec2(i1.x, i0.y), 0).rg, f.x);
+  vec2 b = mix(texelFetch(rk_brdf_lut, ivec2(i0.x, i1.y), 0).rg, texelFetch(rk_brdf_lut, i1, 0).rg, f.x);
+  return mix(a, b, f.y);
+}
+
+/* n: shading normal, v: direction to the viewer (both unit, world space). */
+vec3 rk_shade(vec3 n, vec3 v, vec3 base, float specular, float roughness, float metallic)
+{
+  vec3 r = reflect(-v, n);
+  float nv = clamp(dot(n, v), 0.0, 1.0);
+  vec3 f0 = mix(vec3(0.08 * specular), base, metallic);
+  vec3 diffuse = base * (1.0 - metallic) * rk_irradiance(n);
+  vec3 spec = rk_specular(r, roughness);
+  int model = rk_appearance.options.y;
+  if (model == RK_MODEL_PRINCIPLED) {
+    vec2 ab = rk_brdf_albedo(nv, roughness);
+    float e_dielectric = 0.08 * specular * ab.x + ab.y; /* the specular layer's albedo */
+    return diffuse * (1.0 - e_dielectric) + spec * (f0 * ab.x + ab.y);
+  }
+  if (model == RK_MODEL_TORRANCE_SPARROW) {
+    vec3 fresnel = f0 + (1.0 - f0) * pow(1.0 - nv, 5.0);
+    return diffuse + spec * fresnel;
+  }
+  return diffuse + spec * f0; /* Phong: k_s = F0, the lobe is normalised */
+}
