@@ -75,37 +75,14 @@ def model_index(model: str) -> int:
 def standalone_library(version: str = "330 core") -> str:
     """The header (types, block, push constants, samplers) and the library, for a plain OpenGL
     fragment shader with its own ``main`` (tests shading analytic normals)."""
-    return "\n".join(_common(version) + [read_sources()["lib"]])
-
-
-def _common(version):
     src = read_sources()
-    common = [f"#version {version}", src["types"]]
-    for _slot, type_name, name in INTERFACE["uniform_buf"]:
-        common.append(f"layout(std140) uniform {name}_block {{ {type_name} {name}; }};")
-    for type_name, name in INTERFACE["push_constant"]:
-        common.append(f"uniform {glsl._GLSL_TYPE[type_name]} {name};")
-    for _slot, type_name, name in INTERFACE["sampler"]:
-        common.append(f"uniform {glsl._GLSL_TYPE[type_name]} {name};")
-    return common
+    return "\n".join(glsl.standalone_header(INTERFACE, src["types"], version) + [src["lib"]])
 
 
 def standalone_sources(version: str = "330 core") -> tuple[str, str]:
     """(vertex, fragment) for a plain OpenGL context: a header from :data:`INTERFACE`, then the
     same files Blender compiles."""
-    src = read_sources()
-    common = _common(version)
-    vert = list(common)
-    for slot, type_name, name in INTERFACE["vertex_in"]:
-        vert.append(f"layout(location = {slot}) in {glsl._GLSL_TYPE[type_name]} {name};")
-    for _interp, type_name, name in INTERFACE["vertex_out"]:
-        vert.append(f"out {glsl._GLSL_TYPE[type_name]} {name};")
-    frag = list(common)
-    for _interp, type_name, name in INTERFACE["vertex_out"]:
-        frag.append(f"in {glsl._GLSL_TYPE[type_name]} {name};")
-    for slot, type_name, name in INTERFACE["fragment_out"]:
-        frag.append(f"layout(location = {slot}) out {glsl._GLSL_TYPE[type_name]} {name};")
-    return "\n".join(vert + [src["vertex"]]), "\n".join(frag + [src["lib"], src["fragment"]])
+    return glsl.standalone_from(INTERFACE, read_sources(), version)
 
 
 def pack_block(view_projection, eye, levels: int, model: str, irradiance_coeffs) -> bytes:

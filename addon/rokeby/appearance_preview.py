@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from . import appearance, appearance_glsl, envmaps
+from . import appearance, appearance_glsl, envmaps, glsl
 
 _shader = None
 
@@ -24,29 +24,7 @@ def shader():
     global _shader
     if _shader is not None:
         return _shader
-    import gpu
-
-    spec = appearance_glsl.INTERFACE
-    src = appearance_glsl.read_sources()
-    iface = gpu.types.GPUStageInterfaceInfo(appearance_glsl.INTERFACE_NAME)
-    for interp, type_name, name in spec["vertex_out"]:
-        getattr(iface, interp)(type_name, name)
-    info = gpu.types.GPUShaderCreateInfo()
-    for slot, type_name, name in spec["vertex_in"]:
-        info.vertex_in(slot, type_name, name)
-    info.vertex_out(iface)
-    for type_name, name in spec["push_constant"]:
-        info.push_constant(type_name, name)
-    for slot, type_name, name in spec["sampler"]:
-        info.sampler(slot, type_name, name)
-    info.typedef_source(src["types"])
-    for slot, type_name, name in spec["uniform_buf"]:
-        info.uniform_buf(slot, type_name, name)
-    for slot, type_name, name in spec["fragment_out"]:
-        info.fragment_out(slot, type_name, name)
-    info.vertex_source(src["vertex"])
-    info.fragment_source(src["lib"] + "\n" + src["fragment"])
-    _shader = gpu.shader.create_from_info(info)
+    _shader = glsl.create_shader(appearance_glsl.INTERFACE, appearance_glsl.INTERFACE_NAME, appearance_glsl.read_sources())
     return _shader
 
 

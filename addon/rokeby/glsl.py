@@ -78,30 +78,68 @@ INTERFACE_NAME = "rokeby_preview_iface"
 _GLSL_TYPE = {"VEC3": "vec3", "VEC4": "vec4", "MAT4": "mat4", "FLOAT": "float", "FLOAT_2D": "sampler2D"}
 
 
-def standalone_sources(version: str = "330 core") -> tuple[str, str]:
-    """(vertex, fragment) for a plain OpenGL context (moderngl): a header generated from
-    :data:`INTERFACE`, then the same files Blender compiles."""
-    src = read_sources()
-    common = [f"#version {version}", src["types"]]
-    for _slot, type_name, name in INTERFACE["uniform_buf"]:
+def standalone_header(interface: dict, types: str, version: str = "330 core") -> list[str]:
+    """The declarations a plain OpenGL context needs for a shader described by ``interface`` (in
+    GPUShaderCreateInfo's terms): version, the types file, uniform blocks, push constants as
+    uniforms, samplers."""
+    common = [f"#version {version}", types]
+    for _slot, type_name, name in interface["uniform_buf"]:
         common.append(f"layout(std140) uniform {name}_block {{ {type_name} {name}; }};")
-    for type_name, name in INTERFACE["push_constant"]:
+    for type_name, name in interface["push_constant"]:
         common.append(f"uniform {_GLSL_TYPE[type_name]} {name};")
+    for _slot, type_name, name in interface["sampler"]:
+        common.append(f"uniform {_GLSL_TYPE[type_name]} {name};")
+    return common
+
+
+def standalone_from(interface: dict, src: dict, version: str = "330 core") -> tuple[str, str]:
+    """(vertex, fragment) for a plain OpenGL context (moderngl): a header generated from
+    ``interface``, then the same files (``src``: types, lib, vertex, fragment) Blender compiles."""
+    common = standalone_header(interface, src["types"], version)
     vert = list(common)
-    for slot, type_name, name in INTERFACE["vertex_in"]:
+    for slot, type_name, name in interface["vertex_in"]:
         vert.append(f"layout(location = {slot}) in {_GLSL_TYPE[type_name]} {name};")
-    for interp, type_name, name in INTERFACE["vertex_out"]:
+    for interp, type_name, name in interface["vertex_out"]:
         vert.append(f"{'flat ' if interp == 'flat' else ''}out {_GLSL_TYPE[type_name]} {name};")
     frag = list(common)
-    for _slot, type_name, name in INTERFACE["sampler"]:
-        frag.append(f"uniform {_GLSL_TYPE[type_name]} {name};")
-    for interp, type_name, name in INTERFACE["vertex_out"]:
+    for interp, type_name, name in interface["vertex_out"]:
         frag.append(f"{'flat ' if interp == 'flat' else ''}in {_GLSL_TYPE[type_name]} {name};")
-    for slot, type_name, name in INTERFACE["fragment_out"]:
+    for slot, type_name, name in interface["fragment_out"]:
         frag.append(f"layout(location = {slot}) out {_GLSL_TYPE[type_name]} {name};")
     vert.append(src["vertex"])
     frag += [src["lib"], src["fragment"]]
     return "\n".join(vert) + "\n", "\n".join(frag) + "\n"
+
+
+def create_shader(interface: dict, interface_name: str, src: dict):
+    """Compiles ``src`` (types, lib, vertex, fragment) through Blender's GPUShaderCreateInfo as
+    ``interface`` declares it (call only while drawing: ``gpu`` is imported here)."""
+    import gpu  # noqa: PLC0415
+
+    info = gpu.types.GPUShaderCreateInfo()
+    iface = gpu.types.GPUStageInterfaceInfo(interface_name)
+    for interp, type_name, name in interface["vertex_out"]:
+        getattr(iface, interp)(type_name, name)
+    for slot, type_name, name in interface["vertex_in"]:
+        info.vertex_in(slot, type_name, name)
+    info.vertex_out(iface)
+    for type_name, name in interface["push_constant"]:
+        info.push_constant(type_name, name)
+    for slot, type_name, name in interface["sampler"]:
+        info.sampler(slot, type_name, name)
+    info.typedef_source(src["types"])
+    for slot, type_name, name in interface["uniform_buf"]:
+        info.uniform_buf(slot, type_name, name)
+    for slot, type_name, name in interface["fragment_out"]:
+        info.fragment_out(slot, type_name, name)
+    info.vertex_source(src["vertex"])
+    info.fragment_source(src["lib"] + "\n" + src["fragment"])
+    return gpu.shader.create_from_info(info)
+
+
+def standalone_sources(version: str = "330 core") -> tuple[str, str]:
+    """(vertex, fragment) of the field preview for a plain OpenGL context (moderngl)."""
+    return standalone_from(INTERFACE, read_sources(), version)
 
 
 # --- std140 layout of RokebyField ------------------------------------------------------------

@@ -62,30 +62,8 @@ def shader():
     """The preview shader, compiled once from shaders/ through GPUShaderCreateInfo."""
     global _shader, _shader_error
     if _shader is None and _shader_error is None:
-        import gpu  # noqa: PLC0415
-
         try:
-            src = glsl.read_sources()
-            spec = glsl.INTERFACE
-            info = gpu.types.GPUShaderCreateInfo()
-            iface = gpu.types.GPUStageInterfaceInfo(glsl.INTERFACE_NAME)
-            for interp, type_name, name in spec["vertex_out"]:
-                getattr(iface, interp)(type_name, name)
-            for slot, type_name, name in spec["vertex_in"]:
-                info.vertex_in(slot, type_name, name)
-            info.vertex_out(iface)
-            for type_name, name in spec["push_constant"]:
-                info.push_constant(type_name, name)
-            for slot, type_name, name in spec["sampler"]:
-                info.sampler(slot, type_name, name)
-            info.typedef_source(src["types"])
-            for slot, type_name, name in spec["uniform_buf"]:
-                info.uniform_buf(slot, type_name, name)
-            for slot, type_name, name in spec["fragment_out"]:
-                info.fragment_out(slot, type_name, name)
-            info.vertex_source(src["vertex"])
-            info.fragment_source(src["lib"] + "\n" + src["fragment"])
-            _shader = gpu.shader.create_from_info(info)
+            _shader = glsl.create_shader(glsl.INTERFACE, glsl.INTERFACE_NAME, glsl.read_sources())
         except Exception as exc:  # noqa: BLE001 - a driver's compile error, a missing file
             _shader_error = f"shader: {type(exc).__name__}: {exc}"
             _report("shader", _shader_error)
