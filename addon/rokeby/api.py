@@ -920,13 +920,18 @@ def setup_compositing_passes(scene=None, view_layer=None) -> list[str]:
 
 
 def recomposite_render(path: str, *, edit: str = "emboss", amount: float = 0.5, scene=None,
-                       image_name: str = "Rokeby Recomposited", k_d: float = 1.0, k_r: float = 1.0):
+                       image_name: str = "Rokeby Recomposited", k_d: float = 1.0, k_r: float = 1.0,
+                       backend: str = "cpu"):
     """Renders ``scene`` with the compositing passes to the multilayer EXR ``path``, reconstructs
     its environments, edits the normals (``edit``: 'emboss' with β = amount, 'ripple' with strength
     amount, 'smooth' with σ = amount pixels, or 'none') and shows the recomposited frame as the
-    Blender image ``image_name``. Returns (image, reconstruction report list)."""
+    Blender image ``image_name``. ``backend``: 'cpu' (the Rust core), 'blender_gpu' (the GLSL
+    shader drawn by Blender's gpu module) or 'moderngl' (see ``rokeby.compositing.recomposite``).
+    Returns (image, reconstruction report list)."""
     from . import compositing as comp  # noqa: PLC0415
 
+    if backend not in comp.RECOMPOSITE_BACKENDS:  # before rendering
+        raise RokebyError(f"backend: unknown {backend!r} (expected one of {', '.join(map(repr, comp.RECOMPOSITE_BACKENDS))})")
     p = comp.render_passes(_scene(scene), path)
     rec = comp.reconstruct(p)
     n = rec.normals
@@ -939,7 +944,7 @@ def recomposite_render(path: str, *, edit: str = "emboss", amount: float = 0.5, 
         n = comp.bilateral_smooth(n, p.depth, sigma_s=amount, mask=on)
     elif edit != "none":
         raise RokebyError(f"edit: unknown {edit!r} (expected 'emboss', 'ripple', 'smooth' or 'none')")
-    out, _stats = comp.recomposite(p, rec, n, k_d=k_d, k_r=k_r)
+    out, _stats = comp.recomposite(p, rec, n, k_d=k_d, k_r=k_r, backend=backend)
     return comp.show_image(image_name, out), rec.reports
 
 

@@ -437,15 +437,33 @@ def reconstruct(p: Passes, *, method: str = "qp", env_size: int = 128, min_pixel
     return rec
 
 
+RECOMPOSITE_BACKENDS = ("cpu", "blender_gpu", "moderngl")
+
+
 def recomposite(p: Passes, rec: Reconstruction, edited_normals: np.ndarray, *, k_d: float = 1.0,
-                k_r: float = 1.0, use_occlusion: bool = True) -> tuple[np.ndarray, dict]:
-    """Eqs. 3–5: the image (H, W, 3) with the edited screen-space normals. Returns (image, stats)."""
-    nm = native.module()
+                k_r: float = 1.0, use_occlusion: bool = True, backend: str = "cpu") -> tuple[np.ndarray, dict]:
+    """Eqs. 3–5: the image (H, W, 3) with the edited screen-space normals. Returns (image, stats).
+
+    ``backend``: 'cpu' (the Rust core, f32), 'blender_gpu' (the GLSL shader drawn by Blender's
+    ``gpu`` module, ``rokeby.recomposite_gpu``; in background mode the first call makes the GPU
+    context with one 8×8 EEVEE render) or 'moderngl' (the same shader on a headless EGL context).
+    All three agree within 1e-4 relative and give unmodified normals back bit for bit."""
+    if backend not in RECOMPOSITE_BACKENDS:
+        raise CompositingError(f"backend: unknown {backend!r} (expected one of {', '.join(map(repr, RECOMPOSITE_BACKENDS))})")
     h, w = p.shape
     if edited_normals.shape != (h, w, 3):
         raise CompositingError(f"edited_normals: expected shape {(h, w, 3)} like the passes, got {edited_normals.shape}")
+    if backend == "cpu":
+        run = native.module().recomposite
+    elif backend == "blender_gpu":
+        from . import recomposite_gpu  # noqa: PLC0415
+
+        recomposite_gpu.ensure_context()
+        run = recomposite_gpu.recomposite_blender
+    else:
+        run = recomposite_gpu
     ao = p.ao.mean(-1) if p.ao.ndim == 3 else p.ao
-    return nm.recomposite(
+    return run(
         rec.ids, rec.normals, edited_normals, rec.view,
         p.diff_dir + p.diff_ind, p.gloss_dir + p.gloss_ind, p.image, rec.patches,
         alpha_d=np.clip(ao, 0, 1) if use_occlusion else None,
@@ -456,37 +474,42 @@ def recomposite(p: Passes, rec: Reconstruction, edited_normals: np.ndarray, *, k
 
 # --- the GLSL path: shaders/rokeby_recomposite_{vert,frag}.glsl ---------------------------------
 
-# The recompositing shader's interface; the files in shaders/ hold bodies only (as for the viewport
-# preview, rokeby.glsl), and this generates their #version header for plain OpenGL (moderngl).
+# The recompositing shader's interface in GPUShaderCreateInfo's terms, declared once: Blender compiles
+# the files in shaders/ (bodies only) with it through ``glsl.create_shader`` (rokeby.recomposite_gpu),
+# and ``glsl.standalone_from`` makes their #version header for plain OpenGL (moderngl) from it.
+# Every texture is float (ids too: exact below 2^24); RGB data may sit in RGB or RGBA textures.
 RECOMPOSITE_FILES = {"vertex": "rokeby_recomposite_vert.glsl", "fragment": "rokeby_recomposite_frag.glsl"}
 RECOMPOSITE_INTERFACE = {
-    "sampler": [(0, "sampler2D", "rk_ids"), (1, "sampler2D", "rk_normals"), (2, "sampler2D", "rk_edited"),
-                (3, "sampler2D", "rk_view"), (4, "sampler2D", "rk_diffuse"), (5, "sampler2D", "rk_reflection"),
-                (6, "sampler2D", "rk_image"), (7, "sampler2D", "rk_alphas"), (8, "sampler2D", "rk_dcolor"),
-                (9, "sampler2D", "rk_rcolor"), (10, "sampler2D", "rk_sh"), (11, "sampler2DArray", "rk_env")],
+    "vertex_in": [],  # a fullscreen triangle from gl_VertexID
+    "vertex_out": [],
     # (k_D, k_R, γ, 2 sin(ε/2)), 1/ε, (view per pixel, c_D given, c_R given), the one view vector.
-    "uniform": [("vec4", "rk_params"), ("float", "rk_inv_eps"), ("ivec3", "rk_flags"), ("vec3", "rk_view_const"),
-                ("int", "rk_npatches")],
-    "fragment_out": [(0, "vec4", "rk_out")],
+    "push_constant": [("VEC4", "rk_params"), ("FLOAT", "rk_inv_eps"), ("IVEC3", "rk_flags"), ("VEC3", "rk_view_const"),
+                      ("INT", "rk_npatches")],
+    "sampler": [(0, "FLOAT_2D", "rk_ids"), (1, "FLOAT_2D", "rk_normals"), (2, "FLOAT_2D", "rk_edited"),
+                (3, "FLOAT_2D", "rk_view"), (4, "FLOAT_2D", "rk_diffuse"), (5, "FLOAT_2D", "rk_reflection"),
+                (6, "FLOAT_2D", "rk_image"), (7, "FLOAT_2D", "rk_alphas"), (8, "FLOAT_2D", "rk_dcolor"),
+                (9, "FLOAT_2D", "rk_rcolor"), (10, "FLOAT_2D", "rk_sh"), (11, "FLOAT_2D_ARRAY", "rk_env")],
+    "uniform_buf": [],
+    "fragment_out": [(0, "VEC4", "rk_out")],
 }
+RECOMPOSITE_INTERFACE_NAME = "rokeby_recomposite_iface"
+
+
+def recomposite_files() -> dict:
+    """The recompositing shader's sources as ``glsl.create_shader`` / ``glsl.standalone_from`` take
+    them (no types block, no library: the fragment file holds its helpers)."""
+    from . import glsl
+
+    d = glsl.shader_dir()
+    return {"types": "", "lib": "", "vertex": (d / RECOMPOSITE_FILES["vertex"]).read_text(),
+            "fragment": (d / RECOMPOSITE_FILES["fragment"]).read_text()}
 
 
 def recomposite_sources(version: str = "330 core") -> tuple[str, str]:
     """(vertex, fragment) GLSL of the recompositing pass for a plain OpenGL context."""
     from . import glsl
 
-    d = glsl.shader_dir()
-    head = [f"#version {version}"]
-    frag = list(head)
-    for _slot, t, name in RECOMPOSITE_INTERFACE["sampler"]:
-        frag.append(f"uniform {t} {name};")
-    for t, name in RECOMPOSITE_INTERFACE["uniform"]:
-        frag.append(f"uniform {t} {name};")
-    for slot, t, name in RECOMPOSITE_INTERFACE["fragment_out"]:
-        frag.append(f"layout(location = {slot}) out {t} {name};")
-    vert = head + [(d / RECOMPOSITE_FILES["vertex"]).read_text()]
-    frag.append((d / RECOMPOSITE_FILES["fragment"]).read_text())
-    return "\n".join(vert) + "\n", "\n".join(frag) + "\n"
+    return glsl.standalone_from(RECOMPOSITE_INTERFACE, recomposite_files(), version)
 
 
 def _gpu_image(a, name: str, h: int | None, w: int | None, channels: int) -> np.ndarray:
@@ -540,23 +563,169 @@ def _gpu_patches(patches) -> tuple[np.ndarray, np.ndarray]:
     return table, layers
 
 
+@dataclass
+class RecompositeFrame:
+    """One frame's inputs for the recompositing shader, validated: the contents of every sampler of
+    ``RECOMPOSITE_INTERFACE`` by name (float32; (H, W) for rk_ids, (H, W, 3) for images, (P, 10, 3)
+    for rk_sh, (2P, S, S, 3) for rk_env) and the push-constant values."""
+
+    height: int
+    width: int
+    textures: dict
+    uniforms: dict
+    n_patches: int
+
+    def check_limits(self, max_size: int, max_layers: int, device: str) -> None:
+        layers = self.textures["rk_env"].shape[0]
+        if layers > max_layers:
+            raise CompositingError(f"patches: {self.n_patches} patches need {layers} texture layers; {device} has {max_layers}")
+        rows = self.textures["rk_sh"].shape[0]
+        if max(self.height, self.width, rows, self.textures["rk_env"].shape[1]) > max_size:
+            raise CompositingError(f"image: {self.width}×{self.height} (or {rows} patches, or the reflection maps) exceed "
+                                   f"{device}'s texture size {max_size}")
+
+
+def recomposite_frame(ids, normals, edited_normals, view, diffuse, reflection, image, patches, alpha_d=None,
+                      alpha_r=None, alpha=None, diffuse_color=None, reflection_color=None, k_d=1.0, k_r=1.0, gamma=1.0,
+                      epsilon=0.005 * math.pi) -> RecompositeFrame:
+    """``rokeby_native.recomposite``'s arguments checked (a ``CompositingError`` names the wrong one)
+    and packed as the shader's textures and push constants; shared by every GLSL backend."""
+    n = _gpu_image(normals, "normals", None, None, 3)
+    h, w = n.shape[:2]
+    e = _gpu_image(edited_normals, "edited_normals", h, w, 3)
+    ids_a = np.asarray(ids)
+    if ids_a.shape != (h, w):
+        raise CompositingError(f"ids: expected shape ({h}, {w}) like normals, got {ids_a.shape}")
+    if ids_a.dtype.kind not in "iuf":
+        raise CompositingError(f"ids: expected integer patch indices, got dtype {ids_a.dtype}")
+    ids_f = ids_a.astype(np.float32)
+    ids_f[~np.isfinite(ids_f)] = -1.0
+    v = np.asarray(view, np.float32)
+    if v.shape not in ((3,), (h, w, 3)):
+        raise CompositingError(f"view: expected shape (3,) or ({h}, {w}, 3), got {v.shape}")
+    d0 = _gpu_image(diffuse, "diffuse", h, w, 3)
+    r0 = _gpu_image(reflection, "reflection", h, w, 3)
+    img = _gpu_image(image, "image", h, w, 3)
+    al = np.ones((h, w, 3), np.float32)
+    for c, (a, name) in enumerate(((alpha_d, "alpha_d"), (alpha_r, "alpha_r"), (alpha, "alpha"))):
+        if a is not None:
+            al[..., c] = _gpu_image(a, name, h, w, 1)
+    dc = None if diffuse_color is None else _gpu_image(diffuse_color, "diffuse_color", h, w, 3)
+    rc = None if reflection_color is None else _gpu_image(reflection_color, "reflection_color", h, w, 3)
+    for name, x in (("k_d", k_d), ("k_r", k_r)):
+        if not math.isfinite(x):
+            raise CompositingError(f"{name}: k_d and k_r must be finite, got {x}")
+    if not (gamma > 0 and math.isfinite(gamma)):
+        raise CompositingError(f"gamma: must be positive and finite, got {gamma}")
+    if not epsilon > 0:
+        raise CompositingError(f"epsilon: must be positive, got {epsilon}")
+    table, layers = _gpu_patches(patches)
+    one = np.zeros((1, 1, 3), np.float32)
+    textures = {"rk_ids": ids_f, "rk_normals": n, "rk_edited": e, "rk_view": v if v.ndim == 3 else one,
+                "rk_diffuse": d0, "rk_reflection": r0, "rk_image": img, "rk_alphas": al,
+                "rk_dcolor": dc if dc is not None else one, "rk_rcolor": rc if rc is not None else one,
+                "rk_sh": table, "rk_env": layers}
+    chord_eps = 4.0 if epsilon >= math.pi else 2.0 * math.sin(0.5 * epsilon)
+    uniforms = {"rk_params": (float(k_d), float(k_r), float(gamma), chord_eps), "rk_inv_eps": 1.0 / epsilon,
+                "rk_flags": (int(v.ndim == 3), int(dc is not None), int(rc is not None)),
+                "rk_view_const": tuple(float(x) for x in (v if v.ndim == 1 else one[0, 0])),
+                "rk_npatches": len(patches)}
+    return RecompositeFrame(h, w, textures, uniforms, len(patches))
+
+
+def frame_result(out: np.ndarray) -> tuple[np.ndarray, dict]:
+    """The shader's (H, W, 4) output as (image (H, W, 3), {"edited", "masked"}): alpha holds each
+    pixel's status (0 = I unchanged, 1 = recomposited, 2 = masked)."""
+    status = out[..., 3]
+    stats = {"edited": int((status == 1).sum()), "masked": int((status == 2).sum())}
+    return np.ascontiguousarray(out[..., :3]), stats
+
+
+_EGL_DRAW, _EGL_READ = 0x3059, 0x305A
+
+
+def _gl_lib(name: str, functions: dict):
+    import ctypes  # noqa: PLC0415
+
+    try:
+        lib = ctypes.CDLL(name)
+    except OSError:
+        return None
+    for fn, (restype, argtypes) in functions.items():
+        f = getattr(lib, fn, None)
+        if f is None:
+            return None
+        f.restype, f.argtypes = restype, argtypes
+    return lib
+
+
+class _CurrentGL:
+    """The thread's current OpenGL context (EGL or GLX), saved to be made current again.
+
+    moderngl makes its own context current; Blender's ``gpu`` module assumes that Blender's is, so
+    a moderngl call in a Blender process would send Blender's next draws (the UI, or
+    ``rokeby.recomposite_gpu``) to the wrong context. ``GLRecompositor`` saves whatever is
+    current before it touches moderngl and restores it after."""
+
+    _libs = None
+
+    @classmethod
+    def _load(cls):
+        if cls._libs is None:
+            import ctypes  # noqa: PLC0415
+
+            v, i = ctypes.c_void_p, ctypes.c_int
+            egl = _gl_lib("libEGL.so.1", {"eglGetCurrentContext": (v, []), "eglGetCurrentDisplay": (v, []),
+                                          "eglGetCurrentSurface": (v, [i]), "eglMakeCurrent": (i, [v, v, v, v])})
+            glx = _gl_lib("libGL.so.1", {"glXGetCurrentContext": (v, []), "glXGetCurrentDisplay": (v, []),
+                                         "glXGetCurrentDrawable": (ctypes.c_ulong, []),
+                                         "glXGetCurrentReadDrawable": (ctypes.c_ulong, []),
+                                         "glXMakeContextCurrent": (i, [v, ctypes.c_ulong, ctypes.c_ulong, v])})
+            cls._libs = (egl, glx)
+        return cls._libs
+
+    def __init__(self):
+        egl, glx = self._load()
+        self.egl = self.glx = None
+        if egl is not None and egl.eglGetCurrentContext():
+            self.egl = (egl.eglGetCurrentDisplay(), egl.eglGetCurrentSurface(_EGL_DRAW),
+                        egl.eglGetCurrentSurface(_EGL_READ), egl.eglGetCurrentContext())
+        if glx is not None and glx.glXGetCurrentContext():
+            self.glx = (glx.glXGetCurrentDisplay(), glx.glXGetCurrentDrawable(), glx.glXGetCurrentReadDrawable(),
+                        glx.glXGetCurrentContext())
+
+    def restore(self) -> None:
+        egl, glx = self._load()
+        if self.egl is not None:
+            egl.eglMakeCurrent(*self.egl)
+        if self.glx is not None:
+            glx.glXMakeContextCurrent(*self.glx)
+
+
 class GLRecompositor:
     """The recompositing shader on a moderngl context (EGL, headless; Mesa llvmpipe without a GPU).
-    Textures and the framebuffer are kept between frames of the same size."""
+    Textures and the framebuffer are kept between frames of the same size. Whatever OpenGL context
+    was current before a call (Blender's, inside Blender) is current again after it."""
 
     def __init__(self, ctx=None):
         import moderngl
 
-        self.ctx = ctx or moderngl.create_context(standalone=True, backend="egl")
-        vs, fs = recomposite_sources()
-        self.program = self.ctx.program(vertex_shader=vs, fragment_shader=fs)
-        self.vao = self.ctx.vertex_array(self.program, [])
-        self.max_layers = int(self.ctx.info.get("GL_MAX_ARRAY_TEXTURE_LAYERS", 256))
+        caller = _CurrentGL()
+        try:
+            self.ctx = ctx or moderngl.create_context(standalone=True, backend="egl")
+            self._own = _CurrentGL()  # moderngl's, to make current for each frame
+            vs, fs = recomposite_sources()
+            self.program = self.ctx.program(vertex_shader=vs, fragment_shader=fs)
+            self.vao = self.ctx.vertex_array(self.program, [])
+            self.max_layers = int(self.ctx.info.get("GL_MAX_ARRAY_TEXTURE_LAYERS", 256))
+        finally:
+            caller.restore()
         self._size = None
         self._tex: dict = {}
         self._fbo = None
 
-    def _texture(self, name: str, data: np.ndarray, comps: int):
+    def _texture(self, name: str, data: np.ndarray):
+        comps = 1 if data.ndim == 2 else data.shape[-1]
         h, w = data.shape[:2]
         t = self._tex.get(name)
         if t is None or t.size != (w, h) or t.components != comps:
@@ -567,65 +736,35 @@ class GLRecompositor:
         t.write(np.ascontiguousarray(data, np.float32).tobytes())
         return t
 
-    def __call__(self, ids, normals, edited_normals, view, diffuse, reflection, image, patches, alpha_d=None,
-                 alpha_r=None, alpha=None, diffuse_color=None, reflection_color=None, k_d=1.0, k_r=1.0, gamma=1.0,
-                 epsilon=0.005 * math.pi):
-        n = _gpu_image(normals, "normals", None, None, 3)
-        h, w = n.shape[:2]
-        e = _gpu_image(edited_normals, "edited_normals", h, w, 3)
-        ids_a = np.asarray(ids)
-        if ids_a.shape != (h, w):
-            raise CompositingError(f"ids: expected shape ({h}, {w}) like normals, got {ids_a.shape}")
-        ids_f = ids_a.astype(np.float32)
-        ids_f[~np.isfinite(ids_f)] = -1.0
-        v = np.asarray(view, np.float32)
-        if v.shape not in ((3,), (h, w, 3)):
-            raise CompositingError(f"view: expected shape (3,) or ({h}, {w}, 3), got {v.shape}")
-        d0 = _gpu_image(diffuse, "diffuse", h, w, 3)
-        r0 = _gpu_image(reflection, "reflection", h, w, 3)
-        img = _gpu_image(image, "image", h, w, 3)
-        al = np.ones((h, w, 3), np.float32)
-        for c, (a, name) in enumerate(((alpha_d, "alpha_d"), (alpha_r, "alpha_r"), (alpha, "alpha"))):
-            if a is not None:
-                al[..., c] = _gpu_image(a, name, h, w, 1)
-        dc = None if diffuse_color is None else _gpu_image(diffuse_color, "diffuse_color", h, w, 3)
-        rc = None if reflection_color is None else _gpu_image(reflection_color, "reflection_color", h, w, 3)
-        for name, x in (("k_d", k_d), ("k_r", k_r)):
-            if not math.isfinite(x):
-                raise CompositingError(f"{name}: k_d and k_r must be finite, got {x}")
-        if not (gamma > 0 and math.isfinite(gamma)):
-            raise CompositingError(f"gamma: must be positive and finite, got {gamma}")
-        if not epsilon > 0:
-            raise CompositingError(f"epsilon: must be positive, got {epsilon}")
-        table, layers = _gpu_patches(patches)
-        if layers.shape[0] > self.max_layers:
-            raise CompositingError(f"patches: {len(patches)} patches need {layers.shape[0]} texture layers; this GL has {self.max_layers}")
-        maxsize = int(self.ctx.info.get("GL_MAX_TEXTURE_SIZE", 16384))
-        if max(h, w, table.shape[0]) > maxsize:
-            raise CompositingError(f"image: {w}×{h} (or {table.shape[0]} patches) exceed this GL's texture size {maxsize}")
-        one = np.zeros((1, 1, 3), np.float32)
-        texs = [self._texture("ids", ids_f, 1), self._texture("normals", n, 3), self._texture("edited", e, 3),
-                self._texture("view", v if v.ndim == 3 else one, 3), self._texture("diffuse", d0, 3),
-                self._texture("reflection", r0, 3), self._texture("image", img, 3), self._texture("alphas", al, 3),
-                self._texture("dcolor", dc if dc is not None else one, 3),
-                self._texture("rcolor", rc if rc is not None else one, 3), self._texture("sh", table, 3)]
-        env = self._tex.get("env")
+    def _array(self, name: str, layers: np.ndarray):
         s = layers.shape[1]
-        if env is None or env.size != (s, s, layers.shape[0]):
-            if env is not None:
-                env.release()
-            env = self._tex["env"] = self.ctx.texture_array((s, s, layers.shape[0]), 3, dtype="f4")
-        env.write(layers.tobytes())
-        for (unit, _t, name), t in zip(RECOMPOSITE_INTERFACE["sampler"], texs + [env]):
-            t.use(unit)
+        t = self._tex.get(name)
+        if t is None or t.size != (s, s, layers.shape[0]):
+            if t is not None:
+                t.release()
+            t = self._tex[name] = self.ctx.texture_array((s, s, layers.shape[0]), 3, dtype="f4")
+        t.write(layers.tobytes())
+        return t
+
+    def __call__(self, *args, **kw):
+        f = recomposite_frame(*args, **kw)
+        f.check_limits(int(self.ctx.info.get("GL_MAX_TEXTURE_SIZE", 16384)), self.max_layers, "this GL")
+        caller = _CurrentGL()
+        self._own.restore()
+        try:
+            return self._draw(f)
+        finally:
+            caller.restore()
+
+    def _draw(self, f: "RecompositeFrame") -> tuple[np.ndarray, dict]:
+        h, w = f.height, f.width
+        for unit, t, name in RECOMPOSITE_INTERFACE["sampler"]:
+            data = f.textures[name]
+            tex = self._array(name, data) if t == "FLOAT_2D_ARRAY" else self._texture(name, data)
+            tex.use(unit)
             if name in self.program:
                 self.program[name].value = unit
-        chord_eps = 4.0 if epsilon >= math.pi else 2.0 * math.sin(0.5 * epsilon)
-        uniforms = {"rk_params": (float(k_d), float(k_r), float(gamma), chord_eps), "rk_inv_eps": 1.0 / epsilon,
-                    "rk_flags": (int(v.ndim == 3), int(dc is not None), int(rc is not None)),
-                    "rk_view_const": tuple(float(x) for x in (v if v.ndim == 1 else one[0, 0])),
-                    "rk_npatches": len(patches)}
-        for name, val in uniforms.items():
+        for name, val in f.uniforms.items():
             if name in self.program:
                 self.program[name].value = val
         if self._fbo is None or self._size != (w, h):
@@ -637,9 +776,7 @@ class GLRecompositor:
         self.ctx.viewport = (0, 0, w, h)
         self.vao.render(vertices=3)
         out = np.frombuffer(self._fbo.read(components=4, dtype="f4"), np.float32).reshape(h, w, 4)
-        status = out[..., 3]
-        stats = {"edited": int((status == 1).sum()), "masked": int((status == 2).sum())}
-        return np.ascontiguousarray(out[..., :3]), stats
+        return frame_result(out)
 
 
 _GL: GLRecompositor | None = None
@@ -648,7 +785,8 @@ _GL: GLRecompositor | None = None
 def recomposite_gpu(ids, normals, edited_normals, view, diffuse, reflection, image, patches, **kw):
     """Eqs. 3–5 by the GLSL shader (shaders/rokeby_recomposite_frag.glsl): the arguments and the
     result (image (H, W, 3) float32, {"edited", "masked"}) of ``rokeby_native.recomposite``, in
-    float32 on the GPU. Runs on a headless moderngl/EGL context made on first use."""
+    float32 on the GPU. Runs on a headless moderngl/EGL context made on first use; inside Blender,
+    ``rokeby.recomposite_gpu.recomposite_blender`` draws the same shader through the ``gpu`` module."""
     global _GL
     if _GL is None:
         _GL = GLRecompositor()

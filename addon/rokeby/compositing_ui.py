@@ -18,6 +18,11 @@ EDITS = [
     ("NONE", "None", "no edit (material edits k_D, k_R only)"),
 ]
 
+BACKENDS = [
+    ("CPU", "CPU", "eqs. 3–5 in the Rust core"),
+    ("GPU", "GPU (Blender)", "eqs. 3–5 by the GLSL shader, drawn through Blender's gpu module"),
+]
+
 
 class ROKEBY_OT_composite_setup_passes(bpy.types.Operator):
     """Enable the render passes and AOVs that compositing-stage shape editing needs"""
@@ -47,6 +52,7 @@ class ROKEBY_OT_composite_render(bpy.types.Operator):
     filepath: bpy.props.StringProperty(name="EXR", default="", subtype="FILE_PATH",
                                        description="Where the multilayer EXR goes (default: a temporary file)")
     image_name: bpy.props.StringProperty(name="Image", default="Rokeby Recomposited")
+    backend: bpy.props.EnumProperty(name="Backend", items=BACKENDS, default="CPU")
 
     def execute(self, context):
         path = bpy.path.abspath(self.filepath) if self.filepath else os.path.join(tempfile.gettempdir(), "rokeby_composite.exr")
@@ -61,7 +67,8 @@ class ROKEBY_OT_composite_render(bpy.types.Operator):
                 n = comp.bump(n, comp.ripple(p.shape), self.amount, mask=on)
             elif self.edit == "SMOOTH":
                 n = comp.bilateral_smooth(n, p.depth, sigma_s=max(self.amount, 0.5), mask=on)
-            out, stats = comp.recomposite(p, rec, n, k_d=self.k_d, k_r=self.k_r)
+            out, stats = comp.recomposite(p, rec, n, k_d=self.k_d, k_r=self.k_r,
+                                          backend="blender_gpu" if self.backend == "GPU" else "cpu")
         except (comp.CompositingError, ValueError, RuntimeError) as exc:
             self.report({"ERROR"}, f"Rokeby: {exc}")
             return {"CANCELLED"}

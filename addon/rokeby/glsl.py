@@ -75,7 +75,8 @@ INTERFACE = {
 }
 INTERFACE_NAME = "rokeby_preview_iface"
 
-_GLSL_TYPE = {"VEC3": "vec3", "VEC4": "vec4", "MAT4": "mat4", "FLOAT": "float", "FLOAT_2D": "sampler2D"}
+_GLSL_TYPE = {"VEC2": "vec2", "VEC3": "vec3", "VEC4": "vec4", "MAT4": "mat4", "FLOAT": "float", "INT": "int",
+              "IVEC3": "ivec3", "FLOAT_2D": "sampler2D", "FLOAT_2D_ARRAY": "sampler2DArray"}
 
 
 def standalone_header(interface: dict, types: str, version: str = "330 core") -> list[str]:
@@ -117,17 +118,19 @@ def create_shader(interface: dict, interface_name: str, src: dict):
     import gpu  # noqa: PLC0415
 
     info = gpu.types.GPUShaderCreateInfo()
-    iface = gpu.types.GPUStageInterfaceInfo(interface_name)
-    for interp, type_name, name in interface["vertex_out"]:
-        getattr(iface, interp)(type_name, name)
     for slot, type_name, name in interface["vertex_in"]:
         info.vertex_in(slot, type_name, name)
-    info.vertex_out(iface)
+    if interface["vertex_out"]:  # an empty interface block is a GLSL syntax error
+        iface = gpu.types.GPUStageInterfaceInfo(interface_name)
+        for interp, type_name, name in interface["vertex_out"]:
+            getattr(iface, interp)(type_name, name)
+        info.vertex_out(iface)
     for type_name, name in interface["push_constant"]:
         info.push_constant(type_name, name)
     for slot, type_name, name in interface["sampler"]:
         info.sampler(slot, type_name, name)
-    info.typedef_source(src["types"])
+    if src["types"].strip():
+        info.typedef_source(src["types"])
     for slot, type_name, name in interface["uniform_buf"]:
         info.uniform_buf(slot, type_name, name)
     for slot, type_name, name in interface["fragment_out"]:
