@@ -1,7 +1,8 @@
 """Issue #8, end to end in a fresh bpy process (gpu context from a tiny EEVEE render; llvmpipe
 here, no GPU lent): (1) "a brush stroke updates the preview within a frame": one dab through
-rokeby.appearance.paint, then the preview drawn offscreen (batch rebuilt from the painted
-attributes, shader, read-back of the pixels, which waits for the GPU); (2) the Blender-drawn
+rokeby.appearance.paint, then the preview drawn offscreen (the kept batch, the painted values
+uploaded, shader, read-back of the pixels, which waits for the GPU), per-point and 1024² texture
+targets; (2) the Blender-drawn
 preview of each model against a Cycles render of the same sphere under courtyard.exr.
 
     python bench/appearance_preview.py --json out.json
@@ -54,37 +55,62 @@ def _gpu_context(sc):
 VP = np.array([[1 / SCALE, 0, 0, 0], [0, 0, 1 / SCALE, 0], [0, 0.01, 0, 0.0], [0, 0, 0, 1.0]])
 
 
-def _draw(ball, world):
+def _draw(ball, world, off=None):
+    """The preview of ``ball`` as (H, W, 4), row 0 at the top: into ``off`` (kept between frames,
+    as a viewport's framebuffer is) or a new offscreen buffer."""
     import gpu
 
-    off = gpu.types.GPUOffScreen(W, H, format="RGBA32F")
+    own = off is None
+    if own:
+        off = gpu.types.GPUOffScreen(W, H, format="RGBA32F")
     with off.bind():
         fb = gpu.state.active_framebuffer_get()
         fb.clear(color=(0.0, 0.0, 0.0, 0.0), depth=1.0)
         appearance_preview.draw_object(ball, world, VP, (0.0, -1e4, 0.0))
         px = np.array(fb.read_color(0, 0, W, H, 4, 0, "FLOAT").to_list(), np.float32).reshape(H, W, 4)
-    off.free()
+    if own:
+        off.free()
     return px[::-1]  # row 0 = top
 
 
-def stroke_to_preview(world_px):
+def stroke_to_preview(world_px, strokes: int = 7):
+    """Per mesh size and target: a dab, then the preview drawn and read back (wall and process CPU
+    time, which llvmpipe's threads add to), and a redraw with nothing changed (the rasteriser's
+    share: the kept batch drawn again); medians."""
+    import gpu
+
     rows = []
     for seg, rings in ((128, 64), (448, 224)):
-        sc, ball, _cam = _scene(seg, rings)
-        _gpu_context(sc)
-        world = appearance_preview.WorldLight(world_px, atlas_height=64)
-        _draw(ball, world)  # compile the shader, upload the textures
-        paint_t, draw_t = [], []
-        for k in range(7):
-            t0 = time.perf_counter()
-            appearance.paint(ball, "roughness", [(0.3 * np.cos(k), -0.9, 0.3 * np.sin(k))], 0.2, value=0.1 + 0.1 * k)
-            t1 = time.perf_counter()
-            _draw(ball, world)
-            t2 = time.perf_counter()
-            paint_t.append(t1 - t0)
-            draw_t.append(t2 - t1)
-        rows.append({"vertices": len(ball.data.vertices), "paint_ms": 1e3 * float(np.median(paint_t)), "draw_ms": 1e3 * float(np.median(draw_t)),
-                     "total_ms": 1e3 * float(np.median(np.add(paint_t, draw_t)))})
+        for target in ("POINT", "TEXTURE"):
+            sc, ball, _cam = _scene(seg, rings)
+            if target == "TEXTURE":
+                appearance.setup(ball, target="TEXTURE", resolution=1024)
+            _gpu_context(sc)
+            world = appearance_preview.WorldLight(world_px, atlas_height=64)
+            off = gpu.types.GPUOffScreen(W, H, format="RGBA32F")
+            _draw(ball, world, off)  # compile the shader, upload the textures, build the batch
+            mp = appearance_preview.mesh_preview(ball)
+            builds = mp.builds
+            paint_t, draw_t, cpu_t, redraw_t = [], [], [], []
+            for k in range(strokes):
+                t0 = time.perf_counter()
+                appearance.paint(ball, "roughness", [(0.3 * np.cos(k), -0.9, 0.3 * np.sin(k))], 0.2, value=0.1 + 0.1 * k)
+                t1 = time.perf_counter()
+                c1 = time.process_time()
+                _draw(ball, world, off)
+                t2 = time.perf_counter()
+                c2 = time.process_time()
+                _draw(ball, world, off)
+                t3 = time.perf_counter()
+                paint_t.append(t1 - t0)
+                draw_t.append(t2 - t1)
+                cpu_t.append(c2 - c1)
+                redraw_t.append(t3 - t2)
+            off.free()
+            med = lambda x: 1e3 * float(np.median(x))  # noqa: E731
+            rows.append({"vertices": len(ball.data.vertices), "target": target, "paint_ms": med(paint_t), "draw_ms": med(draw_t),
+                         "draw_cpu_ms": med(cpu_t), "redraw_ms": med(redraw_t), "total_ms": med(np.add(paint_t, draw_t)),
+                         "batch_rebuilds": mp.builds - builds})
     return rows
 
 

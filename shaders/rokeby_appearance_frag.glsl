@@ -1,4 +1,6 @@
-/* Rokeby appearance preview, fragment stage (v_par: specular, roughness, metallic). */
+/* Rokeby appearance preview, fragment stage (v_par: specular, roughness, metallic). Parameters on a
+ * texture target come from their image at the fragment's UV; then the global sliders, as the
+ * material's rokeby_global_* nodes apply them. */
 void main()
 {
   vec3 n = normalize(v_nor);
@@ -6,5 +8,22 @@ void main()
   if (dot(n, v) < 0.0) {
     n = -n; /* back faces seen through an open mesh */
   }
-  frag = vec4(rk_shade(n, v, v_base.rgb, v_par.x, v_par.y, v_par.z), 1.0);
+  vec4 base = v_base;
+  vec3 par = v_par;
+  int tex = rk_appearance.options.z;
+  if ((tex & RK_TEX_BASE) != 0) {
+    base = rk_painted(rk_tex_base, v_uv);
+  }
+  if ((tex & RK_TEX_SPECULAR) != 0) {
+    par.x = rk_painted(rk_tex_specular, v_uv).r;
+  }
+  if ((tex & RK_TEX_ROUGHNESS) != 0) {
+    par.y = rk_painted(rk_tex_roughness, v_uv).r;
+  }
+  if ((tex & RK_TEX_METALLIC) != 0) {
+    par.z = rk_painted(rk_tex_metallic, v_uv).r;
+  }
+  base *= rk_appearance.tint;
+  par = clamp(par * rk_appearance.scale.xyz, 0.0, 1.0);
+  frag = vec4(rk_shade(n, v, base.rgb, par.x, par.y, par.z), 1.0);
 }

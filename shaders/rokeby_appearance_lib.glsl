@@ -97,3 +97,18 @@ vec3 rk_shade(vec3 n, vec3 v, vec3 base, float specular, float roughness, float 
   }
   return diffuse + spec * f0; /* Phong: k_s = F0, the lobe is normalised */
 }
+
+/* A painted image at uv as the material's Image Texture node reads it (Linear, Extend): bilinear
+ * between texel centres (i + 1/2) / size, clamped at the borders; row 0 is v = 0. */
+vec4 rk_painted(sampler2D image, vec2 uv)
+{
+  ivec2 size = textureSize(image, 0);
+  vec2 p = clamp(uv * vec2(size) - 0.5, vec2(0.0), vec2(size - 1));
+  vec2 p0 = floor(p);
+  vec2 f = p - p0;
+  ivec2 i0 = ivec2(p0);
+  ivec2 i1 = min(i0 + 1, size - 1);
+  vec4 a = mix(texelFetch(image, i0, 0), texelFetch(image, ivec2(i1.x, i0.y), 0), f.x);
+  vec4 b = mix(texelFetch(image, ivec2(i0.x, i1.y), 0), texelFetch(image, i1, 0), f.x);
+  return mix(a, b, f.y);
+}

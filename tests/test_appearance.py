@@ -310,6 +310,41 @@ def test_viewport_preview_draws_through_blenders_gpu_module():
     assert res["rel_turned"] > 5 * res["rel"], res
 
 
+def test_preview_keeps_its_batch_and_shows_texels():
+    """tests/appearance_preview_cache_check.py in a fresh bpy process, drawn offscreen through
+    Blender's gpu module: a redraw reuses the batch and gives the same pixels; a stroke uploads
+    the painted values again but keeps the batch, and changes the pixels at the dab only; moving
+    the vertices rebuilds it. A texture target holding the per-point values draws the same image;
+    a dab far smaller than a face shows as a red dot of about its size at texel resolution, which
+    the values at the vertices do not see at all. The global sliders act like the material's
+    nodes: roughness × 0.25 and a tint draw exactly what painting those values draws, and a
+    scale past 1 is clamped."""
+    import json
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    script = Path(__file__).with_name("appearance_preview_cache_check.py")
+    r = subprocess.run([sys.executable, str(script)], capture_output=True, text=True, timeout=600)
+    line = next((ln for ln in r.stdout.splitlines() if ln.startswith("RESULT ")), None)
+    if line is None:
+        pytest.fail(f"no result from the gpu check (rc {r.returncode}): {r.stderr[-2000:]}")
+    res = json.loads(line[len("RESULT "):])
+    assert res["redraw"] == {"builds": 1, "uploads": 1, "identical": True}, res
+    s = res["stroke"]
+    assert (s["builds"], s["uploads"]) == (1, 2) and s["changed_at_dab"] > 0.05 and s["changed_far"] == 0.0, s
+    m = res["moved"]
+    assert m["builds"] == 2 and m["covered_after"] < 0.5 * m["covered_before"], m
+    assert res["texture_vs_point"] < 2e-3, res  # half-float images on the GPU
+    assert res["texture_builds"] == 2, res  # the UVs join the batch once
+    d = res["dot"]
+    assert d["green_at_centre"] < 0.5, d
+    assert 1 <= d["red_pixels"] <= 2 * d["disk_pixels"] and d["changed_pixels"] < 0.03 * 96 * 96, d
+    assert d["vertex_green"] == 1.0, d  # no vertex is reached: the former per-vertex preview showed nothing
+    g = res["globals"]
+    assert g["slider_vs_painted"] < 1e-6 and g["clamped"] < 1e-6 and g["slider_effect"] > 0.05, g
+
+
 def test_preview_handler_reads_the_world_and_toggles(ball):
     """The draw handler's world: the scene's Environment Texture read bottom-up from Blender and
     flipped to file order equals the EXR, prefiltered once per image; the sidebar operator adds and

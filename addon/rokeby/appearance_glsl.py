@@ -44,15 +44,26 @@ MODELS = ("PRINCIPLED", "PHONG", "TORRANCE_SPARROW")
 LOBE = {"PRINCIPLED": "ggx", "PHONG": "phong", "TORRANCE_SPARROW": "torrance_sparrow"}
 
 INTERFACE = {
-    "vertex_in": [(0, "VEC3", "pos"), (1, "VEC3", "nor"), (2, "VEC4", "base"), (3, "VEC3", "par")],
-    "vertex_out": [("smooth", "VEC3", "v_pos"), ("smooth", "VEC3", "v_nor"), ("smooth", "VEC4", "v_base"), ("smooth", "VEC3", "v_par")],
+    # vid: the mesh vertex a drawn vertex belongs to (a float: exact below 2^24 vertices); uv: the
+    # UV map a texture target reads (zeros without one). Seams split drawn vertices, not vid.
+    "vertex_in": [(0, "VEC3", "pos"), (1, "VEC3", "nor"), (2, "VEC2", "uv"), (3, "FLOAT", "vid")],
+    "vertex_out": [("smooth", "VEC3", "v_pos"), ("smooth", "VEC3", "v_nor"), ("smooth", "VEC2", "v_uv"), ("smooth", "VEC4", "v_base"),
+                   ("smooth", "VEC3", "v_par")],
     "push_constant": [("MAT4", "rk_model")],  # 64 bytes: within Vulkan's guaranteed 128
-    "sampler": [(0, "FLOAT_2D", "rk_env_atlas"), (1, "FLOAT_2D", "rk_brdf_lut")],
+    "sampler": [(0, "FLOAT_2D", "rk_env_atlas"), (1, "FLOAT_2D", "rk_brdf_lut"), (2, "FLOAT_2D", "rk_points"),
+                (3, "FLOAT_2D", "rk_tex_base"), (4, "FLOAT_2D", "rk_tex_specular"), (5, "FLOAT_2D", "rk_tex_roughness"),
+                (6, "FLOAT_2D", "rk_tex_metallic")],
     "uniform_buf": [(0, "RokebyAppearance", "rk_appearance")],
     "fragment_out": [(0, "VEC4", "frag")],
 }
 INTERFACE_NAME = "rk_appearance_iface"
-BLOCK_BYTES = (16 + 4 + 4 + 9 * 4) * 4  # mat4, vec4 eye, ivec4 options, vec4 sh[9]
+BLOCK_BYTES = (16 + 4 + 4 + 9 * 4 + 4 + 4 + 16) * 4  # mat4, vec4 eye, ivec4 options, vec4 sh[9], vec4 tint, vec4 scale, mat4
+# options.z bits (RK_TEX_* in the types file): parameters read from image textures at the UV.
+TEXTURE_BITS = {"diffuse": 1, "specular": 2, "roughness": 4, "metallic": 8}
+TEXTURE_SAMPLERS = {"diffuse": "rk_tex_base", "specular": "rk_tex_specular", "roughness": "rk_tex_roughness", "metallic": "rk_tex_metallic"}
+# The per-point parameters the preview reads, in rk_points' texel order after the base colour.
+POINT_PARAMS = ("specular", "roughness", "metallic")
+MAX_VERTICES = 1 << 24  # vid is a float attribute
 
 
 def read_sources() -> dict:
@@ -85,15 +96,32 @@ def standalone_sources(version: str = "330 core") -> tuple[str, str]:
     return glsl.standalone_from(INTERFACE, read_sources(), version)
 
 
-def pack_block(view_projection, eye, levels: int, model: str, irradiance_coeffs) -> bytes:
-    """The std140 ``RokebyAppearance`` block (:data:`BLOCK_BYTES` bytes)."""
+def normal_matrix(model_matrix) -> np.ndarray:
+    """The inverse transpose of a model matrix's 3×3 part, as a 4×4 (pseudo-inverse for a
+    singular matrix, so an object scaled to zero gives no NaN)."""
+    m = np.asarray(model_matrix, np.float64).reshape(4, 4)[:3, :3]
+    out = np.eye(4)
+    out[:3, :3] = np.linalg.pinv(m).T
+    return out
+
+
+def pack_block(view_projection, eye, levels: int, model: str, irradiance_coeffs, *, textures: int = 0,
+               tint=(1.0, 1.0, 1.0, 1.0), scale=(1.0, 1.0, 1.0), model_matrix=None) -> bytes:
+    """The std140 ``RokebyAppearance`` block (:data:`BLOCK_BYTES` bytes). ``textures``: the
+    :data:`TEXTURE_BITS` of the parameters on image textures; ``tint`` and ``scale``: the global
+    sliders (diffuse tint; specular, roughness, metallic scales); ``model_matrix``: the object's
+    (for its normal matrix; identity when None)."""
     vp = np.asarray(view_projection, np.float32).reshape(4, 4)
     sh = np.asarray(irradiance_coeffs, np.float32).reshape(3, 9)
     out = np.zeros(BLOCK_BYTES // 4, np.float32)
     out[0:16] = vp.T.ravel()  # column-major
     out[16:19] = np.asarray(eye, np.float32).reshape(3)
-    out[20:24].view(np.int32)[:] = (int(levels), model_index(model), 0, 0)
-    out[24:].reshape(9, 4)[:, :3] = sh.T
+    out[20:24].view(np.int32)[:] = (int(levels), model_index(model), int(textures), 0)
+    out[24:60].reshape(9, 4)[:, :3] = sh.T
+    t = np.asarray(tint, np.float32).ravel()
+    out[60:64] = np.append(t, 1.0)[:4] if t.size == 3 else t.reshape(4)
+    out[64:67] = np.asarray(scale, np.float32).reshape(3)
+    out[68:84] = normal_matrix(np.eye(4) if model_matrix is None else model_matrix).T.ravel()  # column-major
     return out.tobytes()
 
 

@@ -1,8 +1,16 @@
 """Viewport preview of painted appearance under the world HDR (issue 8): the painted mesh drawn
 through Blender's gpu module with the shaders/rokeby_appearance_*.glsl files (interface in
 :mod:`rokeby.appearance_glsl`): the prefiltered chain of the chosen model's lobe in one atlas
-texture, order-2 SH irradiance, the GGX albedo table, per-point base colour/specular/roughness/
-metallic. Models: Blender's BSDF (GGX split sum), the seed's Phong, Fraser's Torrance–Sparrow.
+texture, order-2 SH irradiance, the GGX albedo table, the painted base colour/specular/roughness/
+metallic and the material's global sliders. Models: Blender's BSDF (GGX split sum), the seed's
+Phong, Fraser's Torrance–Sparrow.
+
+Per-point targets are fetched per vertex from one float texture (``rk_points``), texture targets
+are read from their images at each fragment's UV (texel resolution, bilinear like the material's
+Image Texture nodes). Each mesh keeps a :class:`MeshPreview` between redraws: the geometry batch
+is rebuilt only when positions, normals, topology or the UVs change, and a brush stroke on a
+per-point target re-uploads only ``rk_points`` (a texture target's images are Blender's own GPU
+textures, refreshed by Blender when painted).
 
 :class:`WorldLight` prefilters a lat-long world once per model (Rust, about a quarter to half a
 second for 1024×512) and keeps its GPU textures; :func:`draw_object` draws one painted object with
@@ -67,11 +75,12 @@ class WorldLight:
             self._lut = _texture(np.concatenate([lut, np.zeros((s, s, 1), np.float32), np.ones((s, s, 1), np.float32)], axis=-1))
         return self._lut
 
-    def block(self, view_projection, eye):
-        """The uniform block for one draw (one GPU buffer per world, updated in place)."""
+    def block(self, view_projection, eye, **material):
+        """The uniform block for one draw (one GPU buffer per world, updated in place);
+        ``material``: pack_block's textures, tint and scale."""
         import gpu
 
-        data = appearance_glsl.pack_block(view_projection, eye, len(self.levels), self.model, self.sh)
+        data = appearance_glsl.pack_block(view_projection, eye, len(self.levels), self.model, self.sh, **material)
         if self._ubo is None:
             self._ubo = gpu.types.GPUUniformBuf(data)
         else:
@@ -79,38 +88,207 @@ class WorldLight:
         return self._ubo
 
 
-def _mesh_arrays(obj):
+POINTS_WIDTH = 4096  # rk_points: texels per row (two per vertex)
+
+
+def _read_mesh(obj, uv_name):
+    """What decides the geometry batch, read with the attribute fast paths (a fraction of a ms at
+    100k vertices): positions, corner vertices, the face count and, for texture targets, the UV
+    map. Vertex normals follow from these (and are slow to read after a stroke's mesh update,
+    which makes Blender recompute them), so they are read only when the batch is rebuilt."""
     me = obj.data
-    n = len(me.vertices)
+    n, nl = len(me.vertices), len(me.loops)
     pos = np.empty(3 * n, np.float32)
     me.attributes["position"].data.foreach_get("vector", pos)
+    cv = np.empty(nl, np.int32)
+    me.attributes[".corner_vert"].data.foreach_get("value", cv)
+    uv = None
+    if uv_name is not None:
+        uv = np.empty(2 * nl, np.float32)
+        me.uv_layers[uv_name].data.foreach_get("uv", uv)
+    return {"pos": pos, "corner_vert": cv, "faces": np.array([len(me.polygons)]), "uv": uv}
+
+
+def _same(a, b) -> bool:
+    return a.keys() == b.keys() and all((x is None and y is None) or (x is not None and y is not None and np.array_equal(x, y))
+                                        for x, y in ((a[k], b[k]) for k in a))
+
+
+def _point_values(obj) -> np.ndarray:
+    """(N, 8) float32: per vertex the painted base colour (rgba), specular, roughness, metallic, 0 —
+    rk_points' two texels per vertex."""
+    n = len(obj.data.vertices)
+    out = np.zeros((n, 8), np.float32)
+    out[:, 0:4] = appearance.read(obj, "diffuse")
+    for k, param in enumerate(appearance_glsl.POINT_PARAMS):
+        out[:, 4 + k] = appearance.read(obj, param)
+    return out
+
+
+def _points_texture(values):
+    import gpu
+
+    n = len(values)
+    rows = max(1, -(-2 * n // POINTS_WIDTH))
+    flat = np.zeros((rows * POINTS_WIDTH, 4), np.float32)
+    flat[: 2 * n] = values.reshape(2 * n, 4)
+    return gpu.types.GPUTexture((POINTS_WIDTH, rows), format="RGBA32F", data=gpu.types.Buffer("FLOAT", flat.size, flat.ravel()))
+
+
+class MeshPreview:
+    """What the preview keeps for one mesh between redraws: the geometry batch (positions,
+    normals, UVs, vertex ids; rebuilt only when :func:`_read_mesh` differs) and the rk_points
+    texture of the painted per-point values (re-uploaded only when they differ). A brush stroke
+    thus costs one texture upload, not a batch. ``builds`` and ``uploads`` count both."""
+
+    def __init__(self):
+        self.mesh_state = None
+        self.batch = None
+        self.values = None
+        self.points = None
+        self.builds = 0
+        self.uploads = 0
+
+    def geometry(self, obj, shader, uv_name):
+        state = _read_mesh(obj, uv_name)
+        if self.batch is None or not _same(state, self.mesh_state):
+            self.batch = _build_batch(obj, shader, state)
+            self.mesh_state = state
+            self.builds += 1
+        return self.batch
+
+    def points_texture(self, obj):
+        values = _point_values(obj)
+        if self.points is None or not np.array_equal(values, self.values):
+            self.points = _points_texture(values)
+            self.values = values
+            self.uploads += 1
+        return self.points
+
+
+def _build_batch(obj, shader, state):
+    """The indexed triangle batch: one drawn vertex per mesh vertex, or per distinct (vertex, UV)
+    pair when a texture target needs UVs (seams split)."""
+    from gpu_extras.batch import batch_for_shader
+
+    me = obj.data
+    n = len(me.vertices)
+    if n >= appearance_glsl.MAX_VERTICES:
+        raise ValueError(f"obj: '{obj.name}' has {n} vertices; the preview draws meshes below {appearance_glsl.MAX_VERTICES}")
+    me.calc_loop_triangles()
+    nt = len(me.loop_triangles)
+    pos = state["pos"].reshape(n, 3)
     nor = np.empty(3 * n, np.float32)
     me.vertex_normals.foreach_get("vector", nor)
-    me.calc_loop_triangles()
-    tris = np.empty(3 * len(me.loop_triangles), np.int32)
-    me.loop_triangles.foreach_get("vertices", tris)
-    base = appearance.point_values(obj, "diffuse")  # a texture target looked up at the vertices
-    par = np.stack([appearance.point_values(obj, p) for p in ("specular", "roughness", "metallic")], axis=-1)
-    return pos.reshape(n, 3), nor.reshape(n, 3), base, par, tris.reshape(-1, 3)
+    nor = nor.reshape(n, 3)
+    if state["uv"] is None:
+        tris = np.empty(3 * nt, np.int32)
+        me.loop_triangles.foreach_get("vertices", tris)
+        vid = np.arange(n, dtype=np.float32)
+        uv = np.zeros((n, 2), np.float32)
+        attrs = {"pos": pos, "nor": nor, "uv": uv, "vid": vid}
+    else:
+        corners = np.empty(3 * nt, np.int32)
+        me.loop_triangles.foreach_get("loops", corners)
+        uvc = state["uv"].reshape(-1, 2)
+        key = np.empty((len(uvc), 2), np.int64)
+        key[:, 0] = state["corner_vert"]
+        key[:, 1] = uvc.view(np.int64).ravel()  # the UV's bits: equal UVs share a drawn vertex
+        uniq, first, inverse = np.unique(key, axis=0, return_index=True, return_inverse=True)
+        inverse = inverse.ravel()
+        tris = inverse[corners].astype(np.int32)
+        v = uniq[:, 0]
+        vid = v.astype(np.float32)
+        attrs = {"pos": pos[v], "nor": nor[v], "uv": np.ascontiguousarray(uvc[first]), "vid": vid}
+    return batch_for_shader(shader, "TRIS", attrs, indices=tris.reshape(-1, 3))
 
 
-def draw_object(obj, world: WorldLight, view_projection, eye) -> None:
-    """Draws ``obj`` (set up with rokeby.appearance.setup) into the bound framebuffer."""
+_previews: dict = {}
+
+
+def mesh_preview(obj) -> MeshPreview:
+    """The :class:`MeshPreview` of ``obj``'s mesh (kept per mesh datablock)."""
+    key = obj.data.as_pointer()
+    mp = _previews.get(key)
+    if mp is None:
+        if len(_previews) >= 64:  # meshes that went away: drop the oldest
+            _previews.pop(next(iter(_previews)))
+        mp = _previews[key] = MeshPreview()
+    return mp
+
+
+def material_state(obj):
+    """(texture bits, {param: GPU texture of its image}, tint, scale): what the material's
+    texture targets and global sliders (rokeby_global_* nodes) add to the painted values."""
     import gpu
-    from gpu_extras.batch import batch_for_shader
-    pos, nor, base, par, tris = _mesh_arrays(obj)
+
+    bits, textures = 0, {}
+    for param, bit in appearance_glsl.TEXTURE_BITS.items():
+        img = appearance._texture_image(obj, param)
+        if img is not None:
+            bits |= bit
+            textures[param] = gpu.texture.from_image(img)
+    tint, scale = (1.0, 1.0, 1.0, 1.0), [1.0, 1.0, 1.0]
+    mat = obj.active_material
+    nodes = mat.node_tree.nodes if mat is not None and mat.use_nodes else None
+    if nodes is not None:
+        g = nodes.get(appearance.NODE_PREFIX + "global_diffuse")
+        if g is not None:
+            tint = tuple(g.inputs[7].default_value)
+        for k, param in enumerate(appearance_glsl.POINT_PARAMS):
+            g = nodes.get(appearance.NODE_PREFIX + "global_" + param)
+            if g is not None:
+                scale[k] = float(g.inputs[1].default_value)
+    return bits, textures, tint, tuple(scale)
+
+
+def _uv_name(obj):
+    uvn = obj.active_material.node_tree.nodes.get(appearance.NODE_PREFIX + "uv")
+    me = obj.data
+    if uvn is None or uvn.uv_map not in me.uv_layers:
+        raise ValueError(f"obj: '{obj.name}' lacks the UV map its texture target reads")
+    return uvn.uv_map
+
+
+_dummy = None
+
+
+def _dummy_texture():
+    global _dummy
+    if _dummy is None:
+        import gpu
+
+        _dummy = gpu.types.GPUTexture((1, 1), format="RGBA32F", data=gpu.types.Buffer("FLOAT", 4, [0.0, 0.0, 0.0, 1.0]))
+    return _dummy
+
+
+def draw_object(obj, world: WorldLight, view_projection, eye) -> MeshPreview:
+    """Draws ``obj`` (set up with rokeby.appearance.setup) into the bound framebuffer: per-point
+    targets per vertex, texture targets at their texels, with the material's global sliders.
+    Returns the mesh's :class:`MeshPreview` (its batch and painted values are kept for the next
+    draw)."""
+    import gpu
+
+    bits, textures, tint, scale = material_state(obj)
     sh = shader()
-    batch = batch_for_shader(sh, "TRIS", {"pos": pos, "nor": nor, "base": base, "par": par}, indices=tris)
+    mp = mesh_preview(obj)
+    batch = mp.geometry(obj, sh, _uv_name(obj) if bits else None)
+    points = mp.points_texture(obj)
     gpu.state.depth_test_set("LESS_EQUAL")
     gpu.state.depth_mask_set(True)
     sh.bind()
     sh.uniform_float("rk_model", obj.matrix_world)
-    sh.uniform_block("rk_appearance", world.block(view_projection, eye))
+    sh.uniform_block("rk_appearance", world.block(view_projection, eye, textures=bits, tint=tint, scale=scale,
+                                                           model_matrix=np.array(obj.matrix_world)))
     sh.uniform_sampler("rk_env_atlas", world.texture())
     sh.uniform_sampler("rk_brdf_lut", world.lut_texture())
+    sh.uniform_sampler("rk_points", points)
+    for param in appearance_glsl.TEXTURE_BITS:
+        sh.uniform_sampler(appearance_glsl.TEXTURE_SAMPLERS[param], textures.get(param) or _dummy_texture())
     batch.draw(sh)
     gpu.state.depth_test_set("NONE")
     gpu.state.depth_mask_set(False)
+    return mp
 
 
 # --- the viewport draw handler ---------------------------------------------------------------

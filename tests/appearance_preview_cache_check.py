@@ -1,0 +1,145 @@
+"""Run by tests/test_appearance.py in a fresh bpy process: what the appearance preview keeps
+between redraws, texture targets at texel resolution, and the global sliders, drawn through
+Blender's gpu module offscreen (a tiny EEVEE render makes the GPU context; llvmpipe here).
+Prints RESULT {...}."""
+
+import json
+
+import numpy as np
+import bpy
+
+from rokeby import appearance, appearance_preview, envmaps
+
+W = H = 96
+S = 1 / 1.1
+# Orthographic view along +Y from y = −10: x → screen x, z → screen y, [−1.1, 1.1]².
+VP = np.array([[S, 0, 0, 0], [0, 0, S, 0], [0, 0.01, 0, 0.0], [0, 0, 0, 1.0]])
+
+
+def ball(segments, rings, name):
+    bpy.ops.mesh.primitive_uv_sphere_add(segments=segments, ring_count=rings, radius=1.0)
+    bpy.ops.object.shade_smooth()
+    ob = bpy.context.object
+    ob.name = name
+    mat = bpy.data.materials.new(name)
+    mat.use_nodes = True
+    ob.data.materials.append(mat)
+    appearance.setup(ob)
+    return ob
+
+
+def draw(ob, world):
+    import gpu
+
+    off = gpu.types.GPUOffScreen(W, H, format="RGBA32F")
+    with off.bind():
+        fb = gpu.state.active_framebuffer_get()
+        fb.clear(color=(0.0, 0.0, 0.0, 0.0), depth=1.0)
+        appearance_preview.draw_object(ob, world, VP, (0.0, -1e4, 0.0))
+        px = np.array(fb.read_color(0, 0, W, H, 4, 0, "FLOAT").to_list(), np.float32).reshape(H, W, 4)
+    off.free()
+    return px  # row 0 = bottom
+
+
+def paint_all(ob, base, metallic, roughness):
+    """Sets the per-point values exactly (a dab's Gaussian would leave them a little short)."""
+    n = len(ob.data.vertices)
+    appearance._write(ob, "diffuse", np.tile(np.append(np.asarray(base, np.float32), 1.0), (n, 1)))
+    appearance._write(ob, "metallic", np.full(n, metallic, np.float32))
+    appearance._write(ob, "roughness", np.full(n, roughness, np.float32))
+
+
+def screen(p):
+    """Pixel (column, row from the bottom) of a world point."""
+    return int((p[0] * S + 1) / 2 * W), int((p[2] * S + 1) / 2 * H)
+
+
+def main():
+    bpy.ops.wm.read_factory_settings(use_empty=True)
+    scene = bpy.context.scene
+    cam = bpy.data.objects.new("cam", bpy.data.cameras.new("cam"))
+    scene.collection.objects.link(cam)
+    scene.camera = cam
+    scene.render.engine = "BLENDER_EEVEE_NEXT"
+    scene.render.resolution_x = scene.render.resolution_y = 8
+    bpy.ops.render.render()
+    world = appearance_preview.WorldLight(envmaps.read_exr(envmaps.studio_world("courtyard")), atlas_height=64)
+    out = {}
+
+    # 1. What is kept: the batch across redraws and strokes; the painted values re-uploaded per stroke.
+    a = ball(64, 32, "cache")
+    paint_all(a, (1.0, 1.0, 1.0), 1.0, 0.4)
+    p0 = draw(a, world)
+    p1 = draw(a, world)
+    mp = appearance_preview.mesh_preview(a)
+    out["redraw"] = {"builds": mp.builds, "uploads": mp.uploads, "identical": bool(np.array_equal(p0, p1))}
+    appearance.paint(a, "roughness", [0.0, -1.0, 0.0], radius=0.2, value=0.0)
+    p2 = draw(a, world)
+    c, r = screen((0.0, -1.0, 0.0))
+    top = (slice(int(0.8 * H), int(0.9 * H)), slice(int(0.45 * W), int(0.55 * W)))  # z ≈ 0.8: beyond the dab's reach
+    out["stroke"] = {"builds": mp.builds, "uploads": mp.uploads, "changed_at_dab": float(np.abs(p2[r, c, :3] - p1[r, c, :3]).max()),
+                     "changed_far": float(np.abs(p2[top][..., :3] - p1[top][..., :3]).max())}
+    pos = np.empty(3 * len(a.data.vertices), np.float32)
+    a.data.attributes["position"].data.foreach_get("vector", pos)
+    a.data.attributes["position"].data.foreach_set("vector", pos * 0.5)  # sculpted smaller
+    a.data.update()
+    p3 = draw(a, world)
+    out["moved"] = {"builds": mp.builds, "covered_before": float((p2[..., 3] > 0).mean()), "covered_after": float((p3[..., 3] > 0).mean())}
+    bpy.data.objects.remove(a)
+
+    # 2. A texture target filled with the per-point values draws what the per-point target draws
+    #    (the images are half floats on the GPU).
+    b = ball(64, 32, "same")
+    paint_all(b, (0.9, 0.3, 0.2), 0.3, 0.35)
+    pt = draw(b, world)
+    appearance.setup(b, target="TEXTURE", resolution=256)
+    tx = draw(b, world)
+    inside = (pt[..., 3] > 0) & (tx[..., 3] > 0)
+    out["texture_vs_point"] = float(np.abs(tx[inside, :3] - pt[inside, :3]).max() / np.abs(pt[inside, :3]).max())
+    out["texture_builds"] = appearance_preview.mesh_preview(b).builds  # UVs added: rebuilt once
+    bpy.data.objects.remove(b)
+
+    # 3. A dab far smaller than a face shows at texel resolution: a red dot of about its size, which
+    #    the values at the vertices (what per-point targets and the former preview drew) do not show.
+    d = ball(24, 12, "dot")
+    paint_all(d, (1.0, 1.0, 1.0), 0.0, 0.5)
+    appearance.setup(d, target="TEXTURE", resolution=1024)
+    t = np.radians(7.5)  # the middle of a face next to the equator, facing the camera
+    centre = np.array([np.sin(t) * np.cos(t), -np.cos(t) * np.cos(t), np.sin(t)])
+    radius = 0.06
+    before = draw(d, world)
+    appearance.paint(d, "diffuse", [centre], radius=radius, value=(1.0, 0.0, 0.0))
+    px = draw(d, world)
+    inside = (px[..., 3] > 0) & (before[..., 3] > 0)
+    green = np.where(inside, px[..., 1] / np.maximum(before[..., 1], 1e-6), 1.0)  # 1 where unchanged, ~0 where red
+    c, r = screen(centre)
+    at_vertices = appearance.point_values(d, "diffuse")
+    out["dot"] = {"green_at_centre": float(green[r - 1:r + 2, c - 1:c + 2].min()), "red_pixels": int((green < 0.5).sum()),
+                  "disk_pixels": float(np.pi * (radius * S * W / 2) ** 2), "changed_pixels": int((np.abs(green - 1) > 1e-3).sum()),
+                  "vertex_green": float(at_vertices[:, 1].min())}
+    bpy.data.objects.remove(d)
+
+    # 4. The global sliders, as the material's rokeby_global_* nodes apply them.
+    e = ball(64, 32, "globals")
+    paint_all(e, (1.0, 1.0, 1.0), 0.0, 0.8)
+    mat = e.active_material
+    appearance.set_global(mat, "roughness", 0.25)
+    appearance.set_global(mat, "diffuse", (0.5, 0.25, 1.0))
+    g = draw(e, world)
+    appearance.set_global(mat, "roughness", 1.0)
+    appearance.set_global(mat, "diffuse", (1.0, 1.0, 1.0))
+    paint_all(e, (0.5, 0.25, 1.0), 0.0, 0.2)
+    h = draw(e, world)
+    paint_all(e, (0.5, 0.25, 1.0), 0.0, 0.5)
+    appearance.set_global(mat, "roughness", 4.0)  # 0.5 × 4 = 2, clamped to 1 like the node
+    k4 = draw(e, world)
+    paint_all(e, (0.5, 0.25, 1.0), 0.0, 1.0)
+    appearance.set_global(mat, "roughness", 1.0)
+    k1 = draw(e, world)
+    inside = g[..., 3] > 0
+    rel = lambda x, y: float(np.abs(x[inside, :3] - y[inside, :3]).max() / np.abs(y[inside, :3]).max())  # noqa: E731
+    out["globals"] = {"slider_vs_painted": rel(g, h), "slider_effect": rel(g, k1), "clamped": rel(k4, k1)}
+    print("RESULT " + json.dumps(out))
+
+
+main()
