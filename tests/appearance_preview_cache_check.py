@@ -139,6 +139,34 @@ def main():
     inside = g[..., 3] > 0
     rel = lambda x, y: float(np.abs(x[inside, :3] - y[inside, :3]).max() / np.abs(y[inside, :3]).max())  # noqa: E731
     out["globals"] = {"slider_vs_painted": rel(g, h), "slider_effect": rel(g, k1), "clamped": rel(k4, k1)}
+    bpy.data.objects.remove(e)
+
+    # 5. The viewport handler's draw (draw_view) with a 3D view's matrices: the eye and the
+    #    view-projection it takes from the view (the same up to a depth offset and an eye 10 further
+    #    away), only painted meshes drawn.
+    from types import SimpleNamespace
+
+    from mathutils import Matrix
+
+    f = ball(64, 32, "view")
+    paint_all(f, (0.2, 0.6, 0.9), 0.5, 0.3)
+    bpy.ops.mesh.primitive_cube_add(size=0.5, location=(0.0, -2.0, 0.0))  # not painted: not drawn, would cover the ball
+    envmaps.use_studio_world(scene, "courtyard")
+    view = Matrix(((1, 0, 0, 0), (0, 0, 1, 0), (0, -1, 0, -10), (0, 0, 0, 1)))  # from y = −10 along +Y, z up
+    proj = Matrix(((S, 0, 0, 0), (0, S, 0, 0), (0, 0, -0.01, 0), (0, 0, 0, 1)))  # orthographic, nearer = smaller depth
+    rv3d = SimpleNamespace(view_matrix=view, perspective_matrix=proj @ view, is_perspective=False)
+    world_v = appearance_preview.world_light(scene)
+    import gpu
+
+    off = gpu.types.GPUOffScreen(W, H, format="RGBA32F")
+    with off.bind():
+        fb = gpu.state.active_framebuffer_get()
+        fb.clear(color=(0.0, 0.0, 0.0, 0.0), depth=1.0)
+        drawn = appearance_preview.draw_view(scene, rv3d, list(scene.objects))
+        pv = np.array(fb.read_color(0, 0, W, H, 4, 0, "FLOAT").to_list(), np.float32).reshape(H, W, 4)
+    off.free()
+    direct = draw(f, world_v)
+    out["view"] = {"drawn": drawn, "eye": list(appearance_preview.view_eye(rv3d)), "vs_draw_object": float(np.abs(pv - direct).max())}
     print("RESULT " + json.dumps(out))
 
 

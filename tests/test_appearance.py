@@ -318,7 +318,8 @@ def test_preview_keeps_its_batch_and_shows_texels():
     a dab far smaller than a face shows as a red dot of about its size at texel resolution, which
     the values at the vertices do not see at all. The global sliders act like the material's
     nodes: roughness × 0.25 and a tint draw exactly what painting those values draws, and a
-    scale past 1 is clamped."""
+    scale past 1 is clamped. The viewport handler's draw_view, given a 3D view's matrices, draws
+    the painted ball (not the unpainted cube in front of it) as draw_object does."""
     import json
     import subprocess
     import sys
@@ -343,6 +344,8 @@ def test_preview_keeps_its_batch_and_shows_texels():
     assert d["vertex_green"] == 1.0, d  # no vertex is reached: the former per-vertex preview showed nothing
     g = res["globals"]
     assert g["slider_vs_painted"] < 1e-6 and g["clamped"] < 1e-6 and g["slider_effect"] > 0.05, g
+    v = res["view"]  # the viewport handler's draw_view with a 3D view's matrices
+    assert v["drawn"] == 1 and v["eye"][1] < -1e3 and v["vs_draw_object"] < 1e-4, v
 
 
 def test_preview_handler_reads_the_world_and_toggles(ball):

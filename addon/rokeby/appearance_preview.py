@@ -334,6 +334,29 @@ def world_light(scene, model: str = "PRINCIPLED"):
     return _world_cache[key]
 
 
+def view_eye(rv3d):
+    """The eye of a 3D view (its RegionView3D): the camera point, or far along the view axis for an
+    orthographic view (parallel rays)."""
+    inv = rv3d.view_matrix.inverted()
+    return tuple(inv.translation if rv3d.is_perspective else inv.translation + inv.col[2].xyz * 1e4)
+
+
+def draw_view(scene, rv3d, objects, model: str = "PRINCIPLED") -> int:
+    """What the POST_VIEW handler draws for one 3D view: every painted mesh among ``objects``
+    under ``scene``'s world, with the view's matrices. Returns how many were drawn; raises
+    ValueError when the world has nothing to preview under."""
+    light = world_light(scene, model)
+    if light is None:
+        raise ValueError("the world has no equirectangular Environment Texture to preview under")
+    eye, vp = view_eye(rv3d), np.array(rv3d.perspective_matrix)
+    drawn = 0
+    for ob in objects:
+        if ob.type == "MESH" and appearance.PARAMS["roughness"][0] in ob.data.attributes:
+            draw_object(ob, light, vp, eye)
+            drawn += 1
+    return drawn
+
+
 def _draw():
     global last_error
     import bpy
@@ -344,18 +367,10 @@ def _draw():
         return
     try:
         settings = getattr(ctx.window_manager, "rokeby_appearance_brush", None)
-        light = world_light(ctx.scene, settings.preview_model if settings is not None else "PRINCIPLED")
-        if light is None:
-            last_error = "the world has no equirectangular Environment Texture to preview under"
-            return
-        inv = rv3d.view_matrix.inverted()
-        eye = inv.translation if rv3d.is_perspective else inv.translation + inv.col[2].xyz * 1e4
-        for ob in ctx.visible_objects:
-            if ob.type == "MESH" and appearance.PARAMS["roughness"][0] in ob.data.attributes:
-                draw_object(ob, light, np.array(rv3d.perspective_matrix), tuple(eye))
+        draw_view(ctx.scene, rv3d, ctx.visible_objects, settings.preview_model if settings is not None else "PRINCIPLED")
         last_error = None
     except Exception as e:  # noqa: BLE001 - a draw handler must not raise into Blender's redraw
-        last_error = f"{type(e).__name__}: {e}"
+        last_error = str(e) if isinstance(e, ValueError) else f"{type(e).__name__}: {e}"
 
 
 def enable(on: bool = True) -> bool:
