@@ -198,6 +198,76 @@ def test_operators_paint_through_the_registered_add_on(ball):
         rokeby.unregister()
 
 
+def test_modal_brush_paints_where_the_mouse_ray_hits(ball):
+    """The paint operator's modal path, driven by a simulated drag in a perspective 3D view (a
+    stand-in region, RegionView3D and events: Blender's event loop is the only part not run): a
+    press and a move dab at the points the mouse rays hit on the sphere (analytic intersection),
+    the move's dab knows the previous point, a miss and a move after the release paint nothing,
+    Esc finishes. The ray comes from view3d_utils, as in a real viewport."""
+    import types
+
+    import rokeby
+    from mathutils import Matrix
+    from rokeby import appearance_ui
+
+    rokeby.register()
+    try:
+        bpy.context.view_layer.objects.active = ball
+        assert bpy.ops.rokeby.appearance_setup() == {"FINISHED"}
+        s = bpy.context.window_manager.rokeby_appearance_brush
+        s.brush, s.radius, s.strength, s.value = "roughness", 0.2, 1.0, 0.9
+        before = appearance.read(ball, "roughness").copy()
+        size, f, d = 200, 2.0, 5.0  # region pixels; focal length (NDC); eye at y = −5
+        view = Matrix(((1, 0, 0, 0), (0, 0, 1, 0), (0, -1, 0, -d), (0, 0, 0, 1)))  # looking along +Y, z up
+        near, far = 0.1, 100.0
+        proj = Matrix(((f, 0, 0, 0), (0, f, 0, 0), (0, 0, -(far + near) / (far - near), -2 * far * near / (far - near)), (0, 0, -1, 0)))
+        rv3d = types.SimpleNamespace(view_matrix=view, perspective_matrix=proj @ view, is_perspective=True, view_perspective="PERSP")
+        redraws = []
+        ctx = types.SimpleNamespace(region=types.SimpleNamespace(width=size, height=size), region_data=rv3d, active_object=ball,
+                                    evaluated_depsgraph_get=bpy.context.evaluated_depsgraph_get, window_manager=bpy.context.window_manager,
+                                    workspace=types.SimpleNamespace(status_text_set=lambda _t: None),
+                                    area=types.SimpleNamespace(type="VIEW_3D", tag_redraw=lambda: redraws.append(1)))
+        reports = []
+        op = types.SimpleNamespace(_last=None, _painting=False, report=lambda kind, msg: reports.append((kind, msg)))
+        op._hit = types.MethodType(appearance_ui.ROKEBY_OT_appearance_paint._hit, op)
+        modal = appearance_ui.ROKEBY_OT_appearance_paint.modal
+
+        def event(kind, value, x, y):
+            return types.SimpleNamespace(type=kind, value=value, mouse_region_x=x, mouse_region_y=y)
+
+        def assert_on_ray(hit, x, y):
+            """On the ray through pixel (x, y), at the faceted unit sphere's near side."""
+            ray = np.array([(2 * x / size - 1) / f, 1.0, (2 * y / size - 1) / f])
+            ray /= np.linalg.norm(ray)
+            off = hit - np.array([0.0, -d, 0.0])
+            assert np.linalg.norm(off - (off @ ray) * ray) < 1e-4
+            assert 0.995 < np.linalg.norm(hit) < 1.0 + 1e-5 and hit[1] < 0  # within the facets' sagitta
+
+        assert modal(op, ctx, event("LEFTMOUSE", "PRESS", 100, 100)) == {"RUNNING_MODAL"}
+        first = np.array(op._last)
+        assert_on_ray(first, 100, 100)
+        assert modal(op, ctx, event("MOUSEMOVE", "NOTHING", 130, 110)) == {"RUNNING_MODAL"}
+        second = np.array(op._last)
+        assert_on_ray(second, 130, 110)
+        assert modal(op, ctx, event("MOUSEMOVE", "NOTHING", 2, 2)) == {"RUNNING_MODAL"}  # off the ball: no dab
+        assert tuple(op._last) == tuple(second)
+        after_drag = appearance.read(ball, "roughness").copy()
+        assert modal(op, ctx, event("LEFTMOUSE", "RELEASE", 130, 110)) == {"RUNNING_MODAL"}
+        assert modal(op, ctx, event("MOUSEMOVE", "NOTHING", 60, 60)) == {"PASS_THROUGH"}  # not painting
+        assert modal(op, ctx, event("ESC", "PRESS", 60, 60)) == {"FINISHED"}
+        now = appearance.read(ball, "roughness")
+        np.testing.assert_array_equal(now, after_drag)
+        p = _points(ball)
+        for hit in (first, second):
+            k = int(np.argmin(np.linalg.norm(p - hit, axis=1)))
+            assert now[k] > before[k] + 0.3  # dabbed towards 0.9 there
+        back = p[:, 1] > 0.5  # the far side, which no ray reached
+        np.testing.assert_array_equal(now[back], before[back])
+        assert len(redraws) == 2 and not reports
+    finally:
+        rokeby.unregister()
+
+
 MODEL_CASES = [(m, c) for m in ("PRINCIPLED", "PHONG", "TORRANCE_SPARROW")
                for c in (((1.0, 1.0, 1.0), 0.5, 0.1, 1.0), ((0.8, 0.3, 0.2), 0.5, 0.6, 0.0), ((0.5, 0.6, 0.7), 0.8, 0.35, 0.4))]
 

@@ -175,6 +175,8 @@ class ROKEBY_OT_appearance_paint(bpy.types.Operator):
         if event.type == "LEFTMOUSE":
             self._painting = event.value == "PRESS"
             self._last = None
+            if not self._painting:
+                return {"RUNNING_MODAL"}  # the release ends this drag; passed on it could click-select
         if self._painting and event.type in {"LEFTMOUSE", "MOUSEMOVE"}:
             hit = self._hit(context, event)
             if hit is not None:
