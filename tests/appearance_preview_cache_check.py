@@ -166,6 +166,23 @@ def main():
         pv = np.array(fb.read_color(0, 0, W, H, 4, 0, "FLOAT").to_list(), np.float32).reshape(H, W, 4)
     off.free()
     direct = draw(f, world_v)
+    # 6. The brush cursor: the circle drawn with Blender's polyline shader through the view's matrices.
+    from rokeby import appearance_ui
+
+    off = gpu.types.GPUOffScreen(W, H, format="RGBA32F")
+    with off.bind():
+        fb = gpu.state.active_framebuffer_get()
+        fb.clear(color=(0.0, 0.0, 0.0, 0.0), depth=1.0)
+        with gpu.matrix.push_pop(), gpu.matrix.push_pop_projection():
+            gpu.matrix.load_matrix(view)
+            gpu.matrix.load_projection_matrix(proj)
+            appearance_ui.draw_cursor(appearance_ui.brush_circle((0.0, -1.0, 0.0), (0.0, -1.0, 0.0), 0.5), (W, H))
+        pc = np.array(fb.read_color(0, 0, W, H, 4, 0, "FLOAT").to_list(), np.float32).reshape(H, W, 4)
+    off.free()
+    ys, xs = np.mgrid[0:H, 0:W] + 0.5
+    rad = np.hypot(xs - W / 2, ys - H / 2) / (W / 2) / S  # world units from the circle's centre
+    lit = pc[..., 3] > 0.1
+    out["cursor"] = {"lit": int(lit.sum()), "radius_min": float(rad[lit].min()), "radius_max": float(rad[lit].max())}
     out["view"] = {"drawn": drawn, "eye": list(appearance_preview.view_eye(rv3d)), "vs_draw_object": float(np.abs(pv - direct).max())}
     print("RESULT " + json.dumps(out))
 

@@ -203,7 +203,8 @@ def test_modal_brush_paints_where_the_mouse_ray_hits(ball):
     stand-in region, RegionView3D and events: Blender's event loop is the only part not run): a
     press and a move dab at the points the mouse rays hit on the sphere (analytic intersection),
     the move's dab knows the previous point, a miss and a move after the release paint nothing,
-    Esc finishes. The ray comes from view3d_utils, as in a real viewport."""
+    Esc finishes. Hovering moves the brush circle (the radius, in the surface's tangent plane);
+    Esc removes it. The ray comes from view3d_utils, as in a real viewport."""
     import types
 
     import rokeby
@@ -230,6 +231,7 @@ def test_modal_brush_paints_where_the_mouse_ray_hits(ball):
         reports = []
         op = types.SimpleNamespace(_last=None, _painting=False, report=lambda kind, msg: reports.append((kind, msg)))
         op._hit = types.MethodType(appearance_ui.ROKEBY_OT_appearance_paint._hit, op)
+        op._end = types.MethodType(appearance_ui.ROKEBY_OT_appearance_paint._end, op)
         modal = appearance_ui.ROKEBY_OT_appearance_paint.modal
 
         def event(kind, value, x, y):
@@ -253,8 +255,14 @@ def test_modal_brush_paints_where_the_mouse_ray_hits(ball):
         assert tuple(op._last) == tuple(second)
         after_drag = appearance.read(ball, "roughness").copy()
         assert modal(op, ctx, event("LEFTMOUSE", "RELEASE", 130, 110)) == {"RUNNING_MODAL"}
-        assert modal(op, ctx, event("MOUSEMOVE", "NOTHING", 60, 60)) == {"PASS_THROUGH"}  # not painting
-        assert modal(op, ctx, event("ESC", "PRESS", 60, 60)) == {"FINISHED"}
+        assert modal(op, ctx, event("MOUSEMOVE", "NOTHING", 80, 80)) == {"PASS_THROUGH"}  # not painting: hovering
+        hover = op._hit(ctx, event("MOUSEMOVE", "NOTHING", 80, 80))
+        circle = appearance_ui._cursor["circle"]  # the brush circle follows the mouse on the surface
+        assert appearance_ui._cursor["handle"] is not None and circle.shape == (64, 3)
+        np.testing.assert_allclose(np.linalg.norm(circle - np.array(hover[0]), axis=1), 0.2, rtol=1e-5)
+        np.testing.assert_allclose((circle - np.array(hover[0])) @ np.array(hover[1]), 0.0, atol=1e-5)
+        assert modal(op, ctx, event("ESC", "PRESS", 80, 80)) == {"FINISHED"}
+        assert appearance_ui._cursor["handle"] is None and appearance_ui._cursor["circle"] is None
         now = appearance.read(ball, "roughness")
         np.testing.assert_array_equal(now, after_drag)
         p = _points(ball)
@@ -263,7 +271,7 @@ def test_modal_brush_paints_where_the_mouse_ray_hits(ball):
             assert now[k] > before[k] + 0.3  # dabbed towards 0.9 there
         back = p[:, 1] > 0.5  # the far side, which no ray reached
         np.testing.assert_array_equal(now[back], before[back])
-        assert len(redraws) == 2 and not reports
+        assert len(redraws) >= 3 and not reports
     finally:
         rokeby.unregister()
 
@@ -389,7 +397,8 @@ def test_preview_keeps_its_batch_and_shows_texels():
     the values at the vertices do not see at all. The global sliders act like the material's
     nodes: roughness × 0.25 and a tint draw exactly what painting those values draws, and a
     scale past 1 is clamped. The viewport handler's draw_view, given a 3D view's matrices, draws
-    the painted ball (not the unpainted cube in front of it) as draw_object does."""
+    the painted ball (not the unpainted cube in front of it) as draw_object does, and the brush
+    cursor draws a ring of its radius."""
     import json
     import subprocess
     import sys
@@ -416,6 +425,8 @@ def test_preview_keeps_its_batch_and_shows_texels():
     assert g["slider_vs_painted"] < 1e-6 and g["clamped"] < 1e-6 and g["slider_effect"] > 0.05, g
     v = res["view"]  # the viewport handler's draw_view with a 3D view's matrices
     assert v["drawn"] == 1 and v["eye"][1] < -1e3 and v["vs_draw_object"] < 1e-4, v
+    c = res["cursor"]  # the brush circle of radius 0.5, facing the view: a ring of lit pixels
+    assert c["lit"] > 50 and 0.4 < c["radius_min"] and c["radius_max"] < 0.6, c
 
 
 def test_preview_handler_reads_the_world_and_toggles(ball):

@@ -2,8 +2,9 @@
 operator that paints strokes on it in the viewport (modal: the mouse is ray-cast onto the object
 and each step is one dab of :func:`rokeby.appearance.paint`; exec: a stroke given as points, for
 scripts and tests), the brush settings, and a sidebar panel with Fraser's global sliders (the
-material's ``rokeby_global_*`` node values). No ``gpu`` is touched, so it registers in background
-mode."""
+material's ``rokeby_global_*`` node values). While the brush runs, a circle of its radius follows
+the mouse on the surface (a POST_VIEW handler, added and removed by the operator). ``gpu`` is
+touched only inside that draw handler, so it registers in background mode."""
 
 from __future__ import annotations
 
@@ -146,8 +147,8 @@ class ROKEBY_OT_appearance_paint(bpy.types.Operator):
 
     # --- interactive ------------------------------------------------------------------------
     def _hit(self, context, event):
+        """(world point, world normal) where the mouse ray meets the active object, or None."""
         from bpy_extras import view3d_utils
-        from mathutils import Matrix
 
         region, rv3d = context.region, context.region_data
         co = (event.mouse_region_x, event.mouse_region_y)
@@ -155,8 +156,16 @@ class ROKEBY_OT_appearance_paint(bpy.types.Operator):
         direction = view3d_utils.region_2d_to_vector_3d(region, rv3d, co)
         ob = context.active_object
         inv = ob.matrix_world.inverted()
-        ok, loc, _n, _i = ob.ray_cast(inv @ origin, (inv.to_3x3() @ direction).normalized(), depsgraph=context.evaluated_depsgraph_get())
-        return (ob.matrix_world @ loc) if ok else None
+        ok, loc, nrm, _i = ob.ray_cast(inv @ origin, (inv.to_3x3() @ direction).normalized(), depsgraph=context.evaluated_depsgraph_get())
+        if not ok:
+            return None
+        return ob.matrix_world @ loc, (inv.transposed().to_3x3() @ nrm).normalized()
+
+    def _end(self, context):
+        context.workspace.status_text_set(None)
+        show_cursor(None)
+        appearance.pack_painted(context.active_object)  # the undo step keeps texture strokes (and the dabs made before an error)
+        context.area.tag_redraw()
 
     def invoke(self, context, event):
         if context.area is None or context.area.type != "VIEW_3D":
@@ -169,28 +178,96 @@ class ROKEBY_OT_appearance_paint(bpy.types.Operator):
 
     def modal(self, context, event):
         if event.type in {"RIGHTMOUSE", "ESC"}:
-            context.workspace.status_text_set(None)
-            appearance.pack_painted(context.active_object)  # the undo step keeps texture strokes
+            self._end(context)
             return {"FINISHED"}
         if event.type == "LEFTMOUSE":
             self._painting = event.value == "PRESS"
             self._last = None
             if not self._painting:
                 return {"RUNNING_MODAL"}  # the release ends this drag; passed on it could click-select
-        if self._painting and event.type in {"LEFTMOUSE", "MOUSEMOVE"}:
-            hit = self._hit(context, event)
-            if hit is not None:
-                try:
-                    _dab(_settings(context), context.active_object, [tuple(hit)], previous=self._last, pack=False)
-                except ValueError as e:
-                    self.report({"ERROR"}, str(e))
-                    context.workspace.status_text_set(None)
-                    appearance.pack_painted(context.active_object)  # keep the dabs made before
-                    return {"CANCELLED"}
-                self._last = tuple(hit)
-                context.area.tag_redraw()
-            return {"RUNNING_MODAL"}
-        return {"PASS_THROUGH"}
+        if event.type not in {"LEFTMOUSE", "MOUSEMOVE"}:
+            return {"PASS_THROUGH"}
+        hit = self._hit(context, event)
+        settings = _settings(context)
+        # the brush cursor: a circle of the brush radius on the surface under the mouse
+        show_cursor(None if hit is None else (tuple(hit[0]), tuple(hit[1]), settings.radius))
+        context.area.tag_redraw()
+        if not self._painting:
+            return {"PASS_THROUGH"}  # hovering: the view keeps its own mouse handling
+        if hit is not None:
+            try:
+                _dab(settings, context.active_object, [tuple(hit[0])], previous=self._last, pack=False)
+            except ValueError as e:
+                self.report({"ERROR"}, str(e))
+                self._end(context)
+                return {"CANCELLED"}
+            self._last = tuple(hit[0])
+        return {"RUNNING_MODAL"}
+
+
+# --- the brush cursor (POST_VIEW, only while the brush operator runs) -------------------------
+
+CURSOR_COLOUR = (1.0, 1.0, 1.0, 0.9)
+_cursor = {"handle": None, "circle": None}
+
+
+def brush_circle(centre, normal, radius: float, segments: int = 64):
+    """(segments, 3) points of the circle of ``radius`` about ``centre`` in the plane normal to
+    ``normal`` (the brush's reach on the surface: the Gaussian falls to e⁻² there)."""
+    import numpy as np
+
+    n = np.asarray(normal, np.float64)
+    n = n / max(np.linalg.norm(n), 1e-30)
+    helper = np.array([1.0, 0.0, 0.0]) if abs(n[0]) < 0.9 else np.array([0.0, 1.0, 0.0])
+    u = np.cross(n, helper)
+    u /= np.linalg.norm(u)
+    v = np.cross(n, u)
+    t = np.linspace(0.0, 2.0 * np.pi, segments, endpoint=False)
+    return (np.asarray(centre, np.float64) + radius * (np.cos(t)[:, None] * u + np.sin(t)[:, None] * v)).astype(np.float32)
+
+
+def draw_cursor(circle, viewport_size, colour=CURSOR_COLOUR) -> None:
+    """Draws a closed loop of points (from :func:`brush_circle`) with Blender's polyline shader
+    (matrices from the gpu.matrix stack: the view's, in a draw handler)."""
+    import gpu
+    import numpy as np
+    from gpu_extras.batch import batch_for_shader
+
+    pts = np.asarray(circle, np.float32)
+    lines = np.stack([pts, np.roll(pts, -1, axis=0)], axis=1).reshape(-1, 3)
+    sh = gpu.shader.from_builtin("POLYLINE_UNIFORM_COLOR")
+    gpu.state.blend_set("ALPHA")
+    sh.bind()
+    sh.uniform_float("viewportSize", viewport_size)
+    sh.uniform_float("lineWidth", 1.5)
+    sh.uniform_float("color", colour)
+    batch_for_shader(sh, "LINES", {"pos": lines}).draw(sh)
+    gpu.state.blend_set("NONE")
+
+
+def _draw_cursor_handler():
+    circle = _cursor["circle"]
+    region = bpy.context.region
+    if circle is None or region is None:
+        return
+    try:
+        draw_cursor(circle, (region.width, region.height))
+    except Exception:  # noqa: BLE001 - a draw handler must not raise into Blender's redraw
+        pass
+
+
+def show_cursor(state) -> None:
+    """``state`` = (centre, normal, radius): show the brush circle there (adding the POST_VIEW
+    handler on first use); None hides it and removes the handler."""
+    if state is None:
+        _cursor["circle"] = None
+        if _cursor["handle"] is not None:
+            bpy.types.SpaceView3D.draw_handler_remove(_cursor["handle"], "WINDOW")
+            _cursor["handle"] = None
+        return
+    _cursor["circle"] = brush_circle(*state)
+    if _cursor["handle"] is None:
+        _cursor["handle"] = bpy.types.SpaceView3D.draw_handler_add(_draw_cursor_handler, (), "WINDOW", "POST_VIEW")
 
 
 class ROKEBY_OT_appearance_preview(bpy.types.Operator):
@@ -283,6 +360,7 @@ def unregister():
     from . import appearance_preview
 
     appearance_preview.enable(False)
+    show_cursor(None)
     if hasattr(bpy.types.WindowManager, "rokeby_appearance_brush"):
         del bpy.types.WindowManager.rokeby_appearance_brush
     for c in reversed(_CLASSES):
