@@ -166,6 +166,43 @@ def main():
         pv = np.array(fb.read_color(0, 0, W, H, 4, 0, "FLOAT").to_list(), np.float32).reshape(H, W, 4)
     off.free()
     direct = draw(f, world_v)
+    # 7. With the depsgraph (as the viewport handler draws): the mesh its modifiers make. A coarse
+    #    ball with a Subdivision Surface modifier draws as that mesh applied (a copy made with
+    #    new_from_object, drawn without modifiers), not as its cage, and a dab painted on the cage
+    #    comes through the modifier.
+    bpy.data.objects.remove(f)
+    coarse = ball(8, 4, "subdivided")
+    paint_all(coarse, (0.9, 0.9, 0.9), 0.0, 0.5)
+    sub = coarse.modifiers.new("Subdivision", "SUBSURF")
+    sub.levels = 2
+    bpy.context.view_layer.update()
+    cage = draw(coarse, world_v)
+    dg = bpy.context.evaluated_depsgraph_get()
+
+    def draw_evaluated():
+        off = gpu.types.GPUOffScreen(W, H, format="RGBA32F")
+        with off.bind():
+            fb = gpu.state.active_framebuffer_get()
+            fb.clear(color=(0.0, 0.0, 0.0, 0.0), depth=1.0)
+            appearance_preview.draw_object(coarse, world_v, VP, (0.0, -1e4, 0.0), depsgraph=dg)
+            px = np.array(fb.read_color(0, 0, W, H, 4, 0, "FLOAT").to_list(), np.float32).reshape(H, W, 4)
+        off.free()
+        return px
+
+    smooth = draw_evaluated()
+    appearance.paint(coarse, "diffuse", [0.0, -1.0, 0.0], radius=0.8, value=(1.0, 0.0, 0.0))
+    bpy.context.view_layer.update()
+    dg = bpy.context.evaluated_depsgraph_get()
+    red = draw_evaluated()
+    applied = bpy.data.objects.new("applied", bpy.data.meshes.new_from_object(coarse.evaluated_get(dg)))
+    scene.collection.objects.link(applied)
+    same_as_applied = float(np.abs(draw(applied, world_v) - red).max())
+    c, r = screen((0.0, -1.0, 0.0))
+    out["modifiers"] = {"cage_covered": float((cage[..., 3] > 0).mean()), "evaluated_covered": float((smooth[..., 3] > 0).mean()),
+                        "green_ratio_at_dab": float(red[r, c, 1] / max(smooth[r, c, 1], 1e-6)),
+                        "vs_applied": same_as_applied,
+                        "evaluated_vertices": len(coarse.evaluated_get(dg).data.vertices), "cage_vertices": len(coarse.data.vertices)}
+
     # 6. The brush cursor: the circle drawn with Blender's polyline shader through the view's matrices.
     from rokeby import appearance_ui
 

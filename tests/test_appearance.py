@@ -397,8 +397,9 @@ def test_preview_keeps_its_batch_and_shows_texels():
     the values at the vertices do not see at all. The global sliders act like the material's
     nodes: roughness × 0.25 and a tint draw exactly what painting those values draws, and a
     scale past 1 is clamped. The viewport handler's draw_view, given a 3D view's matrices, draws
-    the painted ball (not the unpainted cube in front of it) as draw_object does, and the brush
-    cursor draws a ring of its radius."""
+    the painted ball (not the unpainted cube in front of it) as draw_object does; with the
+    depsgraph a subdivided ball draws exactly as its applied mesh, with a dab painted on the cage;
+    the brush cursor draws a ring of its radius."""
     import json
     import subprocess
     import sys
@@ -425,6 +426,9 @@ def test_preview_keeps_its_batch_and_shows_texels():
     assert g["slider_vs_painted"] < 1e-6 and g["clamped"] < 1e-6 and g["slider_effect"] > 0.05, g
     v = res["view"]  # the viewport handler's draw_view with a 3D view's matrices
     assert v["drawn"] == 1 and v["eye"][1] < -1e3 and v["vs_draw_object"] < 1e-4, v
+    m = res["modifiers"]  # drawn with the depsgraph: the subdivided mesh, painted through the modifier
+    assert m["vs_applied"] < 1e-6 and m["evaluated_vertices"] > 10 * m["cage_vertices"], m
+    assert abs(m["evaluated_covered"] - m["cage_covered"]) > 0.05 and m["green_ratio_at_dab"] < 0.3, m
     c = res["cursor"]  # the brush circle of radius 0.5, facing the view: a ring of lit pixels
     assert c["lit"] > 50 and 0.4 < c["radius_min"] and c["radius_max"] < 0.6, c
 

@@ -206,9 +206,10 @@ def _build_batch(obj, shader, state):
 _previews: dict = {}
 
 
-def mesh_preview(obj) -> MeshPreview:
-    """The :class:`MeshPreview` of ``obj``'s mesh (kept per mesh datablock)."""
-    key = obj.data.as_pointer()
+def mesh_preview(obj, evaluated: bool = False) -> MeshPreview:
+    """The :class:`MeshPreview` of ``obj``'s mesh (kept per mesh datablock; ``evaluated``: the one
+    for the mesh its modifiers make)."""
+    key = (obj.data.as_pointer(), bool(evaluated))
     mp = _previews.get(key)
     if mp is None:
         if len(_previews) >= 64:  # meshes that went away: drop the oldest
@@ -242,9 +243,9 @@ def material_state(obj):
     return bits, textures, tint, tuple(scale)
 
 
-def _uv_name(obj):
+def _uv_name(obj, me=None):
     uvn = obj.active_material.node_tree.nodes.get(appearance.NODE_PREFIX + "uv")
-    me = obj.data
+    me = obj.data if me is None else me
     if uvn is None or uvn.uv_map not in me.uv_layers:
         raise ValueError(f"obj: '{obj.name}' lacks the UV map its texture target reads")
     return uvn.uv_map
@@ -262,18 +263,20 @@ def _dummy_texture():
     return _dummy
 
 
-def draw_object(obj, world: WorldLight, view_projection, eye) -> MeshPreview:
+def draw_object(obj, world: WorldLight, view_projection, eye, depsgraph=None) -> MeshPreview:
     """Draws ``obj`` (set up with rokeby.appearance.setup) into the bound framebuffer: per-point
     targets per vertex, texture targets at their texels, with the material's global sliders.
-    Returns the mesh's :class:`MeshPreview` (its batch and painted values are kept for the next
-    draw)."""
+    With a ``depsgraph`` the mesh its modifiers make is drawn (the painted attributes and UVs as
+    the modifiers carry them, as the render sees them), else the object's own mesh. Returns the
+    mesh's :class:`MeshPreview` (its batch and painted values are kept for the next draw)."""
     import gpu
 
+    src = obj.evaluated_get(depsgraph) if depsgraph is not None else obj
     bits, textures, tint, scale = material_state(obj)
     sh = shader()
-    mp = mesh_preview(obj)
-    batch = mp.geometry(obj, sh, _uv_name(obj) if bits else None)
-    points = mp.points_texture(obj)
+    mp = mesh_preview(obj, evaluated=depsgraph is not None)
+    batch = mp.geometry(src, sh, _uv_name(obj, src.data) if bits else None)
+    points = mp.points_texture(src)
     gpu.state.depth_test_set("LESS_EQUAL")
     gpu.state.depth_mask_set(True)
     sh.bind()
@@ -341,10 +344,11 @@ def view_eye(rv3d):
     return tuple(inv.translation if rv3d.is_perspective else inv.translation + inv.col[2].xyz * 1e4)
 
 
-def draw_view(scene, rv3d, objects, model: str = "PRINCIPLED") -> int:
+def draw_view(scene, rv3d, objects, model: str = "PRINCIPLED", depsgraph=None) -> int:
     """What the POST_VIEW handler draws for one 3D view: every painted mesh among ``objects``
-    under ``scene``'s world, with the view's matrices. Returns how many were drawn; raises
-    ValueError when the world has nothing to preview under."""
+    under ``scene``'s world, with the view's matrices (with a ``depsgraph``: as its modifiers
+    make it). Returns how many were drawn; raises ValueError when the world has nothing to
+    preview under."""
     light = world_light(scene, model)
     if light is None:
         raise ValueError("the world has no equirectangular Environment Texture to preview under")
@@ -352,7 +356,7 @@ def draw_view(scene, rv3d, objects, model: str = "PRINCIPLED") -> int:
     drawn = 0
     for ob in objects:
         if ob.type == "MESH" and appearance.PARAMS["roughness"][0] in ob.data.attributes:
-            draw_object(ob, light, vp, eye)
+            draw_object(ob, light, vp, eye, depsgraph)
             drawn += 1
     return drawn
 
@@ -367,7 +371,8 @@ def _draw():
         return
     try:
         settings = getattr(ctx.window_manager, "rokeby_appearance_brush", None)
-        draw_view(ctx.scene, rv3d, ctx.visible_objects, settings.preview_model if settings is not None else "PRINCIPLED")
+        draw_view(ctx.scene, rv3d, ctx.visible_objects, settings.preview_model if settings is not None else "PRINCIPLED",
+                  ctx.evaluated_depsgraph_get())
         last_error = None
     except Exception as e:  # noqa: BLE001 - a draw handler must not raise into Blender's redraw
         last_error = str(e) if isinstance(e, ValueError) else f"{type(e).__name__}: {e}"
