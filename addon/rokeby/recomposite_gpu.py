@@ -62,7 +62,9 @@ def has_context() -> bool:
 def ensure_context() -> None:
     """Makes Blender's GPU context in background mode if there is none: one 8×8 EEVEE render of a
     temporary scene (with its own camera), which is removed again. Tens of seconds on a software
-    renderer (EEVEE compiles its shaders); nothing when a context exists."""
+    renderer (EEVEE compiles its shaders); nothing when a context exists (always, in Blender with a
+    window). Side effect in background mode: the "Render Result" image then holds that 8×8 render
+    (render the frame you want after this, or read its passes from an EXR first)."""
     if has_context():
         return
     import bpy  # noqa: PLC0415
