@@ -69,6 +69,9 @@ def main(argv=None) -> int:
     ap.add_argument("--env-size", type=int, default=128, help="texels per paraboloid face")
     ap.add_argument("--kd", type=float, default=1.0, help="diffuse intensity k_D")
     ap.add_argument("--kr", type=float, default=1.0, help="reflection intensity k_R")
+    ap.add_argument("--backend", choices=C.RECOMPOSITE_BACKENDS, default="cpu",
+                    help="eqs. 3-5 on the CPU (Rust core, default), or the GLSL shader on a headless EGL context (moderngl) "
+                         "or through Blender's gpu module (blender_gpu: bpy in this process; its context costs one tiny EEVEE render)")
     ap.add_argument("--report", metavar="JSON", help="write per-patch reconstruction report and timings")
     a = ap.parse_args(argv)
 
@@ -103,7 +106,11 @@ def main(argv=None) -> int:
     if a.bump:
         n = C.bump(n, _read_height(a.bump, p.shape), a.bump_strength, mask=mask)
     t_edit = time.perf_counter()
-    out, stats = C.recomposite(p, rec, n, k_d=a.kd, k_r=a.kr)
+    try:
+        out, stats = C.recomposite(p, rec, n, k_d=a.kd, k_r=a.kr, backend=a.backend)
+    except (C.CompositingError, RuntimeError, ImportError) as exc:  # no GPU context, no EGL, …
+        print(f"rokeby.composite: --backend {a.backend}: {exc}", file=sys.stderr)
+        return 2
     t_comp = time.perf_counter()
     C.write_exr(a.output, out, p.header)
     t_end = time.perf_counter()
@@ -111,6 +118,7 @@ def main(argv=None) -> int:
         rep = {
             "patches": [r.__dict__ for r in rec.reports],
             "stats": dict(stats),
+            "backend": a.backend,
             "seconds": {"read": t_read - t0, "reconstruct": t_rec - t_read, "edit": t_edit - t_rec,
                         "recomposite": t_comp - t_edit, "write": t_end - t_comp, **rec.timings},
         }

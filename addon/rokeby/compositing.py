@@ -456,10 +456,10 @@ def recomposite(p: Passes, rec: Reconstruction, edited_normals: np.ndarray, *, k
     if backend == "cpu":
         run = native.module().recomposite
     elif backend == "blender_gpu":
-        from . import recomposite_gpu  # noqa: PLC0415
+        from . import recomposite_gpu as in_blender  # noqa: PLC0415 - not the module-level recomposite_gpu below
 
-        recomposite_gpu.ensure_context()
-        run = recomposite_gpu.recomposite_blender
+        in_blender.ensure_context()
+        run = in_blender.recomposite_blender
     else:
         run = recomposite_gpu
     ao = p.ao.mean(-1) if p.ao.ndim == 3 else p.ao
