@@ -8,6 +8,7 @@ import json
 import numpy as np
 import bpy
 
+from bpy_process import gpu_context, offscreen_pixels
 from rokeby import appearance, appearance_preview, envmaps
 
 W = H = 96
@@ -28,17 +29,9 @@ def ball(segments, rings, name):
     return ob
 
 
-def draw(ob, world):
-    import gpu
-
-    off = gpu.types.GPUOffScreen(W, H, format="RGBA32F")
-    with off.bind():
-        fb = gpu.state.active_framebuffer_get()
-        fb.clear(color=(0.0, 0.0, 0.0, 0.0), depth=1.0)
-        appearance_preview.draw_object(ob, world, VP, (0.0, -1e4, 0.0))
-        px = np.array(fb.read_color(0, 0, W, H, 4, 0, "FLOAT").to_list(), np.float32).reshape(H, W, 4)
-    off.free()
-    return px  # row 0 = bottom
+def draw(ob, world, depsgraph=None):
+    """The preview of ``ob`` (row 0 = bottom)."""
+    return offscreen_pixels(lambda: appearance_preview.draw_object(ob, world, VP, (0.0, -1e4, 0.0), depsgraph), W, H)
 
 
 def paint_all(ob, base, metallic, roughness):
@@ -57,12 +50,7 @@ def screen(p):
 def main():
     bpy.ops.wm.read_factory_settings(use_empty=True)
     scene = bpy.context.scene
-    cam = bpy.data.objects.new("cam", bpy.data.cameras.new("cam"))
-    scene.collection.objects.link(cam)
-    scene.camera = cam
-    scene.render.engine = "BLENDER_EEVEE_NEXT"
-    scene.render.resolution_x = scene.render.resolution_y = 8
-    bpy.ops.render.render()
+    gpu_context(scene)
     world = appearance_preview.WorldLight(envmaps.read_exr(envmaps.studio_world("courtyard")), atlas_height=64)
     out = {}
 
@@ -158,13 +146,9 @@ def main():
     world_v = appearance_preview.world_light(scene)
     import gpu
 
-    off = gpu.types.GPUOffScreen(W, H, format="RGBA32F")
-    with off.bind():
-        fb = gpu.state.active_framebuffer_get()
-        fb.clear(color=(0.0, 0.0, 0.0, 0.0), depth=1.0)
-        drawn = appearance_preview.draw_view(scene, rv3d, list(scene.objects))
-        pv = np.array(fb.read_color(0, 0, W, H, 4, 0, "FLOAT").to_list(), np.float32).reshape(H, W, 4)
-    off.free()
+    drawn = []
+    pv = offscreen_pixels(lambda: drawn.append(appearance_preview.draw_view(scene, rv3d, list(scene.objects))), W, H)
+    drawn = drawn[0]
     direct = draw(f, world_v)
     # 7. With the depsgraph (as the viewport handler draws): the mesh its modifiers make. A coarse
     #    ball with a Subdivision Surface modifier draws as that mesh applied (a copy made with
@@ -179,21 +163,11 @@ def main():
     cage = draw(coarse, world_v)
     dg = bpy.context.evaluated_depsgraph_get()
 
-    def draw_evaluated():
-        off = gpu.types.GPUOffScreen(W, H, format="RGBA32F")
-        with off.bind():
-            fb = gpu.state.active_framebuffer_get()
-            fb.clear(color=(0.0, 0.0, 0.0, 0.0), depth=1.0)
-            appearance_preview.draw_object(coarse, world_v, VP, (0.0, -1e4, 0.0), depsgraph=dg)
-            px = np.array(fb.read_color(0, 0, W, H, 4, 0, "FLOAT").to_list(), np.float32).reshape(H, W, 4)
-        off.free()
-        return px
-
-    smooth = draw_evaluated()
+    smooth = draw(coarse, world_v, dg)
     appearance.paint(coarse, "diffuse", [0.0, -1.0, 0.0], radius=0.8, value=(1.0, 0.0, 0.0))
     bpy.context.view_layer.update()
     dg = bpy.context.evaluated_depsgraph_get()
-    red = draw_evaluated()
+    red = draw(coarse, world_v, dg)
     applied = bpy.data.objects.new("applied", bpy.data.meshes.new_from_object(coarse.evaluated_get(dg)))
     scene.collection.objects.link(applied)
     same_as_applied = float(np.abs(draw(applied, world_v) - red).max())
@@ -206,16 +180,13 @@ def main():
     # 6. The brush cursor: the circle drawn with Blender's polyline shader through the view's matrices.
     from rokeby import appearance_ui
 
-    off = gpu.types.GPUOffScreen(W, H, format="RGBA32F")
-    with off.bind():
-        fb = gpu.state.active_framebuffer_get()
-        fb.clear(color=(0.0, 0.0, 0.0, 0.0), depth=1.0)
+    def cursor():
         with gpu.matrix.push_pop(), gpu.matrix.push_pop_projection():
             gpu.matrix.load_matrix(view)
             gpu.matrix.load_projection_matrix(proj)
             appearance_ui.draw_cursor(appearance_ui.brush_circle((0.0, -1.0, 0.0), (0.0, -1.0, 0.0), 0.5), (W, H))
-        pc = np.array(fb.read_color(0, 0, W, H, 4, 0, "FLOAT").to_list(), np.float32).reshape(H, W, 4)
-    off.free()
+
+    pc = offscreen_pixels(cursor, W, H)
     ys, xs = np.mgrid[0:H, 0:W] + 0.5
     rad = np.hypot(xs - W / 2, ys - H / 2) / (W / 2) / S  # world units from the circle's centre
     lit = pc[..., 3] > 0.1

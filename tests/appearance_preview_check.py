@@ -7,6 +7,7 @@ import json
 import numpy as np
 import bpy
 
+from bpy_process import gpu_context, offscreen_pixels
 from rokeby import appearance, appearance_glsl, appearance_preview, envmaps
 
 W = H = 64
@@ -22,12 +23,7 @@ def main():
     appearance.paint(ball, "metallic", [0, 0, 0], radius=10.0, value=1.0)
     appearance.paint(ball, "diffuse", [0, 0, 0], radius=10.0, value=(1.0, 1.0, 1.0))
     appearance.paint(ball, "roughness", [0, 0, 0], radius=10.0, value=0.4)
-    cam = bpy.data.objects.new("cam", bpy.data.cameras.new("cam"))
-    scene.collection.objects.link(cam)
-    scene.camera = cam
-    scene.render.engine = "BLENDER_EEVEE_NEXT"
-    scene.render.resolution_x = scene.render.resolution_y = 8
-    bpy.ops.render.render()
+    gpu_context(scene)
 
     import gpu
 
@@ -35,13 +31,7 @@ def main():
     # Orthographic view along +Y from y = −10: x → screen x, z → screen y, [−1.1, 1.1]².
     s = 1 / 1.1
     vp = np.array([[s, 0, 0, 0], [0, 0, s, 0], [0, 0.01, 0, 0.0], [0, 0, 0, 1.0]])  # nearer (−y) = smaller depth
-    off = gpu.types.GPUOffScreen(W, H, format="RGBA32F")
-    with off.bind():
-        fb = gpu.state.active_framebuffer_get()
-        fb.clear(color=(0.0, 0.0, 0.0, 0.0), depth=1.0)
-        appearance_preview.draw_object(ball, world, vp, (0.0, -1e4, 0.0))
-        px = np.array(fb.read_color(0, 0, W, H, 4, 0, "FLOAT").to_list(), np.float32).reshape(H, W, 4)
-    off.free()
+    px = offscreen_pixels(lambda: appearance_preview.draw_object(ball, world, vp, (0.0, -1e4, 0.0)), W, H)
     ys, xs = np.mgrid[0:H, 0:W] + 0.5
     x, z = (xs / W * 2 - 1) * 1.1, (ys / H * 2 - 1) * 1.1  # read_color row 0 = bottom
     inside = x * x + z * z < 0.8

@@ -49,12 +49,9 @@ def main():
     shadow_lines = len(shadow_ui._OVERLAY[scene.name]["lines"])
 
     # Create Blender's GPU context: one tiny EEVEE render.
-    cam = bpy.data.objects.new("cam", bpy.data.cameras.new("cam"))
-    scene.collection.objects.link(cam)
-    scene.camera = cam
-    scene.render.engine = "BLENDER_EEVEE_NEXT"
-    scene.render.resolution_x = scene.render.resolution_y = 8
-    bpy.ops.render.render()
+    from bpy_process import gpu_context
+
+    gpu_context(scene)
 
     import gpu
     from mathutils import Matrix

@@ -6,6 +6,7 @@ import pytest
 
 bpy = pytest.importorskip("bpy")
 
+from bpy_process import run_check  # noqa: E402
 from rokeby import appearance, envmaps  # noqa: E402
 
 
@@ -372,17 +373,7 @@ def test_viewport_preview_draws_through_blenders_gpu_module():
     white metal ball (roughness 0.4) under courtyard.exr against the numpy twin with analytic
     sphere normals (the mesh's interpolated normals differ slightly); the world turned half a turn
     is far off."""
-    import json
-    import subprocess
-    import sys
-    from pathlib import Path
-
-    script = Path(__file__).with_name("appearance_preview_check.py")
-    r = subprocess.run([sys.executable, str(script)], capture_output=True, text=True, timeout=600)
-    line = next((ln for ln in r.stdout.splitlines() if ln.startswith("RESULT ")), None)
-    if line is None:
-        pytest.fail(f"no result from the gpu check (rc {r.returncode}): {r.stderr[-2000:]}")
-    res = json.loads(line[len("RESULT "):])
+    res = run_check("appearance_preview_check.py")
     assert 0.6 < res["covered"] < 0.7  # the ball's disk: π/(4·1.1²) = 0.649 of the frame
     assert res["rel"] < 0.04, res
     assert res["rel_turned"] > 5 * res["rel"], res
@@ -400,17 +391,7 @@ def test_preview_keeps_its_batch_and_shows_texels():
     the painted ball (not the unpainted cube in front of it) as draw_object does; with the
     depsgraph a subdivided ball draws exactly as its applied mesh, with a dab painted on the cage;
     the brush cursor draws a ring of its radius."""
-    import json
-    import subprocess
-    import sys
-    from pathlib import Path
-
-    script = Path(__file__).with_name("appearance_preview_cache_check.py")
-    r = subprocess.run([sys.executable, str(script)], capture_output=True, text=True, timeout=600)
-    line = next((ln for ln in r.stdout.splitlines() if ln.startswith("RESULT ")), None)
-    if line is None:
-        pytest.fail(f"no result from the gpu check (rc {r.returncode}): {r.stderr[-2000:]}")
-    res = json.loads(line[len("RESULT "):])
+    res = run_check("appearance_preview_cache_check.py")
     assert res["redraw"] == {"builds": 1, "uploads": 1, "identical": True}, res
     s = res["stroke"]
     assert (s["builds"], s["uploads"]) == (1, 2) and s["changed_at_dab"] > 0.05 and s["changed_far"] == 0.0, s

@@ -295,18 +295,11 @@ def test_blender_compiles_and_draws_the_same_shader_offscreen():
     """The add-on's own draw path (rokeby.viewport: GPUShaderCreateInfo from shaders/, batches,
     uniform block, textures, overlays) in bpy, offscreen, against the Rust reference on the
     evaluator's inputs (3 constraints in a Euclidean region on a UV sphere)."""
-    import json
-    import subprocess
-    import sys
-
     pytest.importorskip("bpy")
+    from bpy_process import run_check
     from conftest import ROOT
 
-    out = subprocess.run([sys.executable, str(ROOT / "tests" / "blender_viewport_check.py"), str(ROOT / "tests")], capture_output=True, text=True, timeout=600)
-    assert out.returncode == 0, out.stderr[-3000:]
-    lines = [line for line in out.stdout.splitlines() if line.startswith("RESULT ")]
-    assert lines, out.stdout[-2000:]
-    res = json.loads(lines[-1][len("RESULT "):])
+    res = run_check("blender_viewport_check.py", args=[ROOT / "tests"])
     assert res["error"] is None and res["status"] is None
     assert res["covered"] > 1000
     assert res["mean_err"] < MEAN_TOL and res["max_err"] < MAX_TOL, res

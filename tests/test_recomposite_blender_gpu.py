@@ -6,31 +6,21 @@ tests/test_recomposite_glsl.py."""
 
 from __future__ import annotations
 
-import json
 import re
-import subprocess
-import sys
-from pathlib import Path
 
 import pytest
 
 pytest.importorskip("bpy")
 pytest.importorskip("rokeby_native")
 
+from bpy_process import run_check  # noqa: E402
+
 OPTIONS = [{}, {"k_d": 0.7, "k_r": 1.3, "gamma": 2.2}, {"epsilon": 0.2}]
 
 
 @pytest.fixture(scope="module")
 def res():
-    script = Path(__file__).with_name("recomposite_blender_gpu_check.py")
-    r = subprocess.run([sys.executable, str(script)], capture_output=True, text=True, timeout=900)
-    line = next((ln for ln in r.stdout.splitlines() if ln.startswith("RESULT ")), None)
-    if line is None:
-        pytest.fail(f"no result from the Blender gpu check (rc {r.returncode}): {r.stdout[-1500:]} {r.stderr[-2500:]}")
-    out = json.loads(line[len("RESULT "):])
-    if "skip" in out:
-        pytest.skip(out["skip"])
-    return out
+    return run_check("recomposite_blender_gpu_check.py", timeout=900)
 
 
 def test_without_a_gpu_context_the_error_says_what_to_do(res):

@@ -1,0 +1,58 @@
+"""The checks that need Blender's GPU context run in a fresh bpy process (background mode makes the
+context with one tiny EEVEE render, and a process keeps it): the test side runs a ``*_check.py``
+script and reads the one line ``RESULT {json}`` it prints (:func:`run_check`); the script side
+makes the context (:func:`gpu_context`) and draws offscreen (:func:`offscreen_pixels`)."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+
+
+def run_check(script: str, timeout: int = 600, args=()) -> dict:
+    """Runs tests/``script`` with this Python and returns its RESULT (fails the test without one,
+    skips it when the result is ``{"skip": reason}``)."""
+    import pytest
+
+    path = Path(__file__).with_name(script)
+    r = subprocess.run([sys.executable, str(path), *map(str, args)], capture_output=True, text=True, timeout=timeout)
+    line = next((ln for ln in r.stdout.splitlines() if ln.startswith("RESULT ")), None)
+    if line is None:
+        pytest.fail(f"no result from {script} (rc {r.returncode}): {r.stdout[-1500:]} {r.stderr[-2500:]}")
+    out = json.loads(line[len("RESULT "):])
+    if isinstance(out, dict) and "skip" in out:
+        pytest.skip(out["skip"])
+    return out
+
+
+def gpu_context(scene) -> None:
+    """Blender's GPU context in background mode: a camera and one 8×8 EEVEE render of ``scene``."""
+    import bpy
+
+    if scene.camera is None:
+        cam = bpy.data.objects.new("cam", bpy.data.cameras.new("cam"))
+        scene.collection.objects.link(cam)
+        scene.camera = cam
+    scene.render.engine = "BLENDER_EEVEE_NEXT"
+    scene.render.resolution_x = scene.render.resolution_y = 8
+    bpy.ops.render.render()
+
+
+def offscreen_pixels(draw, width: int, height: int) -> np.ndarray:
+    """(height, width, 4) float32 of what ``draw()`` draws into a cleared RGBA32F offscreen buffer
+    (depth cleared to 1); row 0 is the bottom, as read_color gives it."""
+    import gpu
+
+    off = gpu.types.GPUOffScreen(width, height, format="RGBA32F")
+    try:
+        with off.bind():
+            fb = gpu.state.active_framebuffer_get()
+            fb.clear(color=(0.0, 0.0, 0.0, 0.0), depth=1.0)
+            draw()
+            return np.array(fb.read_color(0, 0, width, height, 4, 0, "FLOAT").to_list(), np.float32).reshape(height, width, 4)
+    finally:
+        off.free()
