@@ -135,14 +135,14 @@ def stages(w, rng, env_size, region="whole"):
     }
 
 
-def recomposite_bench(rng, w=1920, h=1080, patches=10, env_size=128, repeat=5):
-    import rokeby_native as rn
-
+def hd_frame(rng, w=1920, h=1080, patches=10, env_size=128):
+    """The recompositing benchmark's frame: ``patches`` vertical patches (SH + a 2×env_size² map
+    each) between 80-pixel margins, smooth normals (as on rendered objects: neighbouring pixels
+    look up neighbouring texels) edited in the top half, α_D = α_R = 0.9, reflectance buffers.
+    Returns (positional args, keyword args) of ``rokeby_native.recomposite``."""
     ids = np.full((h, w), -1, np.int32)
-    cols = np.array_split(np.arange(w), patches)
-    for k, c in enumerate(cols):
+    for k, c in enumerate(np.array_split(np.arange(w), patches)):
         ids[80:h - 80, c[0]:c[-1] + 1] = k
-    # Smooth normals (as on rendered objects: neighbouring pixels look up neighbouring texels).
     yy, xx = np.mgrid[0:h, 0:w].astype(np.float32)
     n = np.stack([np.sin(xx / 37.0), np.cos(yy / 53.0), np.full_like(xx, 1.2)], -1)
     n /= np.linalg.norm(n, axis=-1, keepdims=True)
@@ -152,12 +152,20 @@ def recomposite_bench(rng, w=1920, h=1080, patches=10, env_size=128, repeat=5):
     pts = [{"sh": TRUE_SH, "env": env} for _ in range(patches)]
     d0 = np.abs(rng.normal(size=(h, w, 3))).astype(np.float32)
     r0 = np.abs(rng.normal(size=(h, w, 3))).astype(np.float32)
-    img = d0 + r0
     a = np.ones((h, w), np.float32) * 0.9
     view = np.zeros((h, w, 3), np.float32)
     view[..., 2] = 1
+    return (ids, n, e, view, d0, r0, d0 + r0, pts), dict(alpha_d=a, alpha_r=a, diffuse_color=d0, reflection_color=r0)
+
+
+def recomposite_bench(rng, w=1920, h=1080, patches=10, env_size=128, repeat=5):
+    import rokeby_native as rn
+
+    args, kw = hd_frame(rng, w, h, patches, env_size)
+    ids, n, e, view, d0, r0, img, pts = args
+    a = kw["alpha_d"]
     before = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
-    run = lambda: rn.recomposite(ids, n, e, view, d0, r0, img, pts, alpha_d=a, alpha_r=a, diffuse_color=d0, reflection_color=r0)  # noqa: E731
+    run = lambda: rn.recomposite(*args, **kw)  # noqa: E731
     run()
     ts = []
     for _ in range(repeat):
@@ -170,7 +178,7 @@ def recomposite_bench(rng, w=1920, h=1080, patches=10, env_size=128, repeat=5):
             "recomposite_ms": 1e3 * float(np.median(ts)), "recomposite_identity_ms": 1e3 * t_id,
             "peak_rss_mb": peak / 1024, "rss_before_mb": before / 1024,
             "inputs_mb": sum(x.nbytes for x in (ids, n, e, view, d0, r0, img, a, a)) / 2 ** 20,
-            **glsl_bench(run, (ids, n, e, view, d0, r0, img, pts), dict(alpha_d=a, alpha_r=a, diffuse_color=d0, reflection_color=r0), repeat)}
+            **glsl_bench(run, args, kw, repeat)}
 
 
 def glsl_bench(run_cpu, args, kw, repeat):

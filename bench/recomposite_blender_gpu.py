@@ -23,29 +23,6 @@ sys.path.insert(0, str(ROOT / "bench"))
 sys.path.insert(0, str(ROOT / "addon"))
 
 
-def hd_frame(rng, w=1920, h=1080, patches=10, env_size=128):
-    from compositing import TRUE_SH  # bench/compositing.py
-
-    ids = np.full((h, w), -1, np.int32)
-    for k, c in enumerate(np.array_split(np.arange(w), patches)):
-        ids[80:h - 80, c[0]:c[-1] + 1] = k
-    yy, xx = np.mgrid[0:h, 0:w].astype(np.float32)
-    n = np.stack([np.sin(xx / 37.0), np.cos(yy / 53.0), np.full_like(xx, 1.2)], -1)
-    n /= np.linalg.norm(n, axis=-1, keepdims=True)
-    e = n.copy()
-    e[: h // 2, :, 2] *= 0.5
-    env = np.abs(rng.normal(size=(2, env_size, env_size, 3))).astype(np.float32)
-    pts = [{"sh": TRUE_SH, "env": env} for _ in range(patches)]
-    d0 = np.abs(rng.normal(size=(h, w, 3))).astype(np.float32)
-    r0 = np.abs(rng.normal(size=(h, w, 3))).astype(np.float32)
-    a = np.ones((h, w), np.float32) * 0.9
-    view = np.zeros((h, w, 3), np.float32)
-    view[..., 2] = 1
-    args = (ids, n, e, view, d0, r0, d0 + r0, pts)
-    kw = dict(alpha_d=a, alpha_r=a, diffuse_color=d0, reflection_color=r0)
-    return args, kw
-
-
 def median_ms(fn, repeat):
     ts = []
     for _ in range(repeat):
@@ -72,6 +49,8 @@ def main():
     t = time.perf_counter()
     rc = G.BlenderRecompositor()
     t_compile = time.perf_counter() - t
+    from compositing import hd_frame  # bench/compositing.py: the benchmark's frame
+
     args, kw = hd_frame(np.random.default_rng(2016))
     out, st = rc(*args, **kw)  # first frame: offscreen, staging arrays
     ref, rst = rn.recomposite(*args, **kw)
