@@ -9,12 +9,14 @@
 //!    the partition-of-unity form the paper uses). Both triangles carry their polygon's weight
 //!    w = (1 − acos(ℓ)/π)^η, ℓ the cosine of the polygon's longest arc, η = 200, so that the least
 //!    curved image locations win. Pixels masked out (self-reflections from the reflection-occlusion
-//!    buffer α_R, other patches, non-finite values) form no polygon. As in the paper, polygons are
-//!    indexed on a 2D grid over the orthographic projection of the rectified normals
+//!    buffer α_R, other patches, non-finite values) form no polygon. As in the paper, the search
+//!    runs on a 2D grid over the orthographic projection of the rectified normals
 //!    n' = (r + z)/‖r + z‖ (so that r = reflect(z, n') — a single hemisphere), conservatively
 //!    (bounding box of the projected corners padded by the arcs' sagitta), and barycentric
-//!    coordinates are computed on n' too. Weights are combined in log space, so that η = 200 does
-//!    not underflow for large polygons when nothing smaller covers a direction.
+//!    coordinates are computed on n' too; the grid holds the texel centres (fewer than the
+//!    polygons), and each polygon visits those in its box, lazily computing its weight and its
+//!    corners' dual vectors only when one lies inside. Weights are combined in log space, so that
+//!    η = 200 does not underflow for large polygons when nothing smaller covers a direction.
 //! 2. **Hole filling** by harmonic interpolation with the recovered texels as Dirichlet values.
 //!    The paraboloid parametrisation (u, v) = (r_x, r_y)/(1 ± r_z) is the stereographic projection,
 //!    which is conformal, and harmonicity is invariant under conformal maps in 2D: the harmonic
@@ -196,11 +198,6 @@ pub(crate) fn unit(c: &[f32]) -> Option<DVec3> {
     }
 }
 
-struct Tri {
-    v: [u32; 3],
-    logw: f64,
-}
-
 /// Rectified normal n'(r) = (r + z)/‖r + z‖ (undefined for r = −z).
 #[inline]
 fn rectify(r: DVec3) -> Option<DVec3> {
@@ -213,13 +210,9 @@ fn rectify(r: DVec3) -> Option<DVec3> {
     }
 }
 
-/// Partial reconstruction (eq. 2) of one patch.
-///
-/// * `refl`: H·W×3 reflected directions r (screen space, unit);
-/// * `values`: H·W×C reflection shading R0;
-/// * `mask`: H·W, > 0.5 where the pixel belongs to the patch and is unoccluded (α_R);
-/// * `depth`: H·W or empty (no depth discontinuities).
-pub fn partial(width: usize, height: usize, refl: &[f32], values: &[f32], channels: usize, mask: &[f32], depth: &[f32], params: &ReflectionParams) -> Result<PartialMap> {
+/// Checks the arguments of [`partial`].
+#[allow(clippy::too_many_arguments)]
+fn check_partial_args(width: usize, height: usize, refl: &[f32], values: &[f32], channels: usize, mask: &[f32], depth: &[f32], params: &ReflectionParams) -> Result<()> {
     let np = width * height;
     if np == 0 {
         return Err(RokebyError::invalid("image", "empty image"));
@@ -252,6 +245,368 @@ pub fn partial(width: usize, height: usize, refl: &[f32], values: &[f32], channe
     if !(0.0..=1.0).contains(&params.min_coverage) {
         return Err(RokebyError::invalid("min_coverage", format!("must be a fraction in [0, 1], got {}", params.min_coverage)));
     }
+    Ok(())
+}
+
+/// Coverage: the covered fraction of the sphere's solid angle.
+fn coverage_of(s: usize, covered: &[bool]) -> f64 {
+    let (mut cov, mut total) = (0.0, 0.0);
+    for face in 0..2 {
+        for i in 0..s {
+            for j in 0..s {
+                let (u, v) = texel_uv(s, i, j);
+                if u * u + v * v > 1.0 {
+                    continue;
+                }
+                let a = texel_solid_angle(s, i, j);
+                total += a;
+                if covered[(face * s + i) * s + j] {
+                    cov += a;
+                }
+            }
+        }
+    }
+    cov / total
+}
+
+/// Cells per side of the lookup grid of texel centres over (n'_x, n'_y) ∈ [−1, 1]², per texel of
+/// a face's side (about one texel centre per cell).
+const TEXEL_GRID_PER_SIDE: f64 = 1.5;
+/// Bands of grid rows processed in parallel (fixed: the result does not depend on the threads).
+const BANDS: usize = 16;
+
+/// A 2×2 block of pixels that forms polygons: two triangles (a, b, c), (a, c, d) of one quad, or
+/// one boundary triangle (v[3] = u32::MAX); `bands` is the range of grid bands its boxes touch.
+struct Quad {
+    v: [u32; 4],
+    bands: [u16; 2],
+}
+
+/// Bounding box (x0, x1, y0, y1) of the orthographic projection of the spherical triangle with
+/// unit corners `ns`, padded by the sagitta of its longest arc 1 − cos(θ/2) = 1 − √((1 + cos θ)/2).
+#[inline(always)]
+fn tri_box(ns: &[DVec3; 3]) -> [f64; 4] {
+    let mind = fmin(fmin(ns[0].dot(ns[1]), ns[1].dot(ns[2])), ns[2].dot(ns[0]));
+    let pad = sagitta(mind);
+    [
+        fmin(fmin(ns[0].x, ns[1].x), ns[2].x) - pad,
+        fmax(fmax(ns[0].x, ns[1].x), ns[2].x) + pad,
+        fmin(fmin(ns[0].y, ns[1].y), ns[2].y) - pad,
+        fmax(fmax(ns[0].y, ns[1].y), ns[2].y) + pad,
+    ]
+}
+
+/// 1 − cos(θ/2) for cos θ = `c` (the sagitta of an arc of the unit sphere), plus 1e-9.
+#[inline(always)]
+fn sagitta(c: f64) -> f64 {
+    (1.0 - (0.5 * (1.0 + c.clamp(-1.0, 1.0))).sqrt()) + 1e-9
+}
+
+#[inline(always)]
+fn fmin(a: f64, b: f64) -> f64 {
+    if b < a {
+        b
+    } else {
+        a
+    }
+}
+
+#[inline(always)]
+fn fmax(a: f64, b: f64) -> f64 {
+    if b > a {
+        b
+    } else {
+        a
+    }
+}
+
+/// Partial reconstruction (eq. 2) of one patch.
+///
+/// * `refl`: H·W×3 reflected directions r (screen space, unit);
+/// * `values`: H·W×C reflection shading R0;
+/// * `mask`: H·W, > 0.5 where the pixel belongs to the patch and is unoccluded (α_R);
+/// * `depth`: H·W or empty (no depth discontinuities).
+///
+/// Eq. 2 is evaluated per texel over the polygons containing its direction, in the polygons'
+/// order (image rows, then columns), as in the paper's grid query; the search runs the other way
+/// round for speed: the texel centres are binned on a grid over (n'_x, n'_y), and each polygon
+/// visits the texel centres inside its padded box. The accumulation order per texel is the
+/// polygons' order all the same, and the grid's bands are fixed, so the map does not depend on the
+/// number of threads.
+#[allow(clippy::too_many_arguments)]
+pub fn partial(width: usize, height: usize, refl: &[f32], values: &[f32], channels: usize, mask: &[f32], depth: &[f32], params: &ReflectionParams) -> Result<PartialMap> {
+    check_partial_args(width, height, refl, values, channels, mask, depth, params)?;
+    let np = width * height;
+    let s = params.size;
+    let ch = channels;
+    // Per-pixel r and n'; invalid pixels (masked, non-finite, r = −z) have ok = false.
+    let mut rr = vec![DVec3::ZERO; np];
+    let mut nr = vec![DVec3::ZERO; np];
+    let mut ok = vec![false; np];
+    rr.par_chunks_mut(width).zip(nr.par_chunks_mut(width)).zip(ok.par_chunks_mut(width)).enumerate().for_each(|(y, ((ro, no), ko))| {
+        for x in 0..width {
+            let p = y * width + x;
+            if !(mask[p] > 0.5) || !values[p * channels..(p + 1) * channels].iter().all(|v| v.is_finite()) {
+                continue;
+            }
+            if !depth.is_empty() && !depth[p].is_finite() {
+                continue;
+            }
+            let Some(r) = unit(&refl[3 * p..3 * p + 3]) else { continue };
+            let Some(n) = rectify(r) else { continue };
+            ro[x] = r;
+            no[x] = n;
+            ko[x] = true;
+        }
+    });
+    let cos_edge = params.max_edge_angle.cos();
+    let connected = |a: usize, b: usize| -> bool {
+        if !(ok[a] && ok[b]) || rr[a].dot(rr[b]) < cos_edge {
+            return false;
+        }
+        if !depth.is_empty() {
+            let (da, db) = (depth[a] as f64, depth[b] as f64);
+            if (da - db).abs() > params.max_depth_jump * da.abs().min(db.abs()) {
+                return false;
+            }
+        }
+        true
+    };
+    // w = (1 − acos(ℓ)/π)^η of a polygon, ℓ the cosine of its longest arc; in log space.
+    let log_weight = |vs: &[u32]| -> f64 {
+        let mut l = 1.0f64;
+        for a in 0..vs.len() {
+            for b in a + 1..vs.len() {
+                l = l.min(rr[vs[a] as usize].dot(rr[vs[b] as usize]));
+            }
+        }
+        ETA * (1.0 - l.clamp(-1.0, 1.0).acos() / std::f64::consts::PI).max(1e-300).ln()
+    };
+    // Lookup grid of the texel centres' rectified directions q.
+    let gt = ((TEXEL_GRID_PER_SIDE * s as f64).ceil() as usize).max(8);
+    let half_g = 0.5 * gt as f64;
+    // floor((x + 1)·g/2) clamped to the grid; `as` saturates (negative or NaN → 0).
+    let cell = |x: f64| -> usize { (((x + 1.0) * half_g) as usize).min(gt - 1) };
+    let band_of_row = |r: usize| -> usize { r * BANDS / gt };
+    // Polygons per 2×2 block, rows in parallel.
+    let quads: Vec<Quad> = (0..height.saturating_sub(1))
+        .into_par_iter()
+        .flat_map_iter(|y| {
+            let mut out = Vec::new();
+            let bands_of = |ns: &[DVec3; 3]| {
+                let b = tri_box(ns);
+                (band_of_row(cell(b[2])), band_of_row(cell(b[3])))
+            };
+            // Both triangles of a quad: the y range of the four corners, padded for the longest
+            // of the five edges (the pads of both triangles, the larger).
+            let quad_bands = |a: usize, b: usize, c: usize, d: usize| {
+                let (na, nb, nc, nd) = (nr[a], nr[b], nr[c], nr[d]);
+                let mind = fmin(fmin(fmin(na.dot(nb), nb.dot(nc)), fmin(nc.dot(nd), nd.dot(na))), na.dot(nc));
+                let pad = sagitta(mind);
+                let y0 = fmin(fmin(na.y, nb.y), fmin(nc.y, nd.y)) - pad;
+                let y1 = fmax(fmax(na.y, nb.y), fmax(nc.y, nd.y)) + pad;
+                (band_of_row(cell(y0)), band_of_row(cell(y1)))
+            };
+            for x in 0..width - 1 {
+                let a = y * width + x;
+                let (b, c, d) = (a + 1, a + 1 + width, a + width);
+                if !(ok[a] && ok[b] && ok[c] && ok[d]) {
+                    // At most a boundary triangle.
+                } else if connected(a, b) && connected(b, c) && connected(c, d) && connected(d, a) && connected(a, c) {
+                    let (l, h) = quad_bands(a, b, c, d);
+                    out.push(Quad { v: [a as u32, b as u32, c as u32, d as u32], bands: [l as u16, h as u16] });
+                    continue;
+                }
+                for t in [[a, b, c], [a, b, d], [b, c, d], [a, c, d]] {
+                    if t.iter().all(|&p| ok[p]) && connected(t[0], t[1]) && connected(t[1], t[2]) && connected(t[2], t[0]) {
+                        let (l, h) = bands_of(&[nr[t[0]], nr[t[1]], nr[t[2]]]);
+                        out.push(Quad { v: [t[0] as u32, t[1] as u32, t[2] as u32, u32::MAX], bands: [l as u16, h as u16] });
+                        break;
+                    }
+                }
+            }
+            out
+        })
+        .collect();
+    let triangles: usize = quads.iter().map(|q| if q.v[3] == u32::MAX { 1 } else { 2 }).sum();
+    let mut map = ParaboloidMap::new(s, ch);
+    let mut positions = ParaboloidMap::new(s, 2);
+    let mut covered = vec![false; 2 * s * s];
+    if quads.is_empty() {
+        return Ok(PartialMap { map, positions, covered, coverage: 0.0, triangles: 0 });
+    }
+    // Texel centres inside the disks (the others are not reconstructed), sorted by grid cell.
+    let mut tex: Vec<(u32, u32, DVec3)> = Vec::with_capacity(2 * s * s);
+    for face in 0..2 {
+        for i in 0..s {
+            for j in 0..s {
+                let (u, v) = texel_uv(s, i, j);
+                if u * u + v * v > 1.0 {
+                    continue;
+                }
+                let Some(q) = rectify(uv_to_dir(face, u, v)) else { continue };
+                tex.push(((cell(q.y) * gt + cell(q.x)) as u32, ((face * s + i) * s + j) as u32, q));
+            }
+        }
+    }
+    // By grid row, then by q.x (so by cell within a row: cell(x) is monotone), then texel.
+    tex.sort_by(|a, b| ((a.0 as usize) / gt).cmp(&((b.0 as usize) / gt)).then(a.2.x.total_cmp(&b.2.x)).then(a.1.cmp(&b.1)));
+    let tex_xy: Vec<[f64; 2]> = tex.iter().map(|t| [t.2.x, t.2.y]).collect();
+    let mut cell_start = vec![0u32; gt * gt + 1];
+    for t in &tex {
+        cell_start[t.0 as usize + 1] += 1;
+    }
+    for k in 0..gt * gt {
+        cell_start[k + 1] += cell_start[k];
+    }
+    // Quads per band, in their order.
+    let mut band_start = vec![0usize; BANDS + 1];
+    for q in &quads {
+        for b in q.bands[0]..=q.bands[1] {
+            band_start[b as usize + 1] += 1;
+        }
+    }
+    for b in 0..BANDS {
+        band_start[b + 1] += band_start[b];
+    }
+    let mut fill = band_start.clone();
+    let mut band_quads = vec![0u32; band_start[BANDS]];
+    for (qi, q) in quads.iter().enumerate() {
+        for b in q.bands[0]..=q.bands[1] {
+            band_quads[fill[b as usize]] = qi as u32;
+            fill[b as usize] += 1;
+        }
+    }
+    // Per texel (in `tex` order): [m, den, x, y, acc…]: the online log-sum of eq. 2's weights.
+    let stride = 4 + ch;
+    let mut acc = vec![0.0f64; tex.len() * stride];
+    for a in acc.chunks_exact_mut(stride) {
+        a[0] = f64::NEG_INFINITY;
+    }
+    let band_rows = |b: usize| -> (usize, usize) {
+        // Rows r with band_of_row(r) == b.
+        let lo = (b * gt).div_ceil(BANDS);
+        let hi = ((b + 1) * gt).div_ceil(BANDS);
+        (lo, hi.min(gt))
+    };
+    let mut slices: Vec<(usize, &mut [f64])> = Vec::with_capacity(BANDS);
+    let mut rest: &mut [f64] = &mut acc;
+    for b in 0..BANDS {
+        let (r0, r1) = band_rows(b);
+        let n_tex = (cell_start[r1 * gt] - cell_start[r0 * gt]) as usize;
+        let (head, tail) = rest.split_at_mut(n_tex * stride);
+        slices.push((b, head));
+        rest = tail;
+    }
+    slices.into_par_iter().for_each(|(b, out)| {
+        let (r0, r1) = band_rows(b);
+        let t_base = cell_start[r0 * gt] as usize;
+        for &qi in &band_quads[band_start[b]..band_start[b + 1]] {
+            let quad = &quads[qi as usize];
+            let v = quad.v;
+            let mut logw: Option<f64> = None;
+            let tris: [[u32; 3]; 2] = [[v[0], v[1], v[2]], [v[0], v[2], v[3]]];
+            let n_tris = if v[3] == u32::MAX { 1 } else { 2 };
+            for tv in &tris[..n_tris] {
+                let vs = tv.map(|p| nr[p as usize]);
+                let bx = tri_box(&vs);
+                let (cy0, cy1) = (cell(bx[2]).max(r0), cell(bx[3]).min(r1.saturating_sub(1)));
+                if r0 >= r1 || cy0 > cy1 {
+                    continue;
+                }
+                // Dual vectors of the corners (λ = (q·d₀, q·d₁, q·d₂)), when a centre is in the box.
+                let mut duals: Option<[DVec3; 3]> = None;
+                let (cx0, cx1) = (cell(bx[0]), cell(bx[1]));
+                for cy in cy0..=cy1 {
+                    let (k0, k1) = (cell_start[cy * gt + cx0] as usize, cell_start[cy * gt + cx1 + 1] as usize);
+                    for t in k0..k1 {
+                        let [qx, qy] = tex_xy[t];
+                        if qx > bx[1] {
+                            break; // the row is sorted by q.x
+                        }
+                        if qx < bx[0] || qy < bx[2] || qy > bx[3] {
+                            continue;
+                        }
+                        let duals = match duals {
+                            Some(d) => d,
+                            None => {
+                                let det = vs[0].dot(vs[1].cross(vs[2]));
+                                let d = if det.abs() < 1e-300 {
+                                    // Degenerate: contains nothing.
+                                    [DVec3::ZERO, DVec3::ZERO, DVec3::ZERO]
+                                } else {
+                                    let inv = 1.0 / det;
+                                    [vs[1].cross(vs[2]) * inv, vs[2].cross(vs[0]) * inv, vs[0].cross(vs[1]) * inv]
+                                };
+                                duals = Some(d);
+                                d
+                            }
+                        };
+                        let q = tex[t].2;
+                        // Spherical barycentric coordinates: λ solves Σλⱼvⱼ = q ([LBS06]).
+                        let l = [q.dot(duals[0]), q.dot(duals[1]), q.dot(duals[2])];
+                        let tol = -1e-12;
+                        if l[0] < tol || l[1] < tol || l[2] < tol {
+                            continue;
+                        }
+                        let sum = l[0] + l[1] + l[2];
+                        if !(sum > 0.0) {
+                            continue;
+                        }
+                        let lw = *logw.get_or_insert_with(|| if v[3] == u32::MAX { log_weight(&v[..3]) } else { log_weight(&v) });
+                        let a = &mut out[(t - t_base) * stride..(t - t_base + 1) * stride];
+                        // Online log-sum of weights: rescale when a larger one appears.
+                        if lw > a[0] {
+                            let f = if a[0].is_finite() { (a[0] - lw).exp() } else { 0.0 };
+                            for x in a[1..].iter_mut() {
+                                *x *= f;
+                            }
+                            a[0] = lw;
+                        }
+                        let w = (lw - a[0]).exp();
+                        a[1] += w;
+                        let ws = w / sum;
+                        for (c, &pi) in tv.iter().enumerate() {
+                            let lam = ws * l[c];
+                            let p = pi as usize;
+                            for cc in 0..ch {
+                                a[4 + cc] += lam * values[p * ch + cc] as f64;
+                            }
+                            a[2] += lam * (p % width) as f64;
+                            a[3] += lam * (p / width) as f64;
+                        }
+                    }
+                }
+            }
+        }
+    });
+    for (t, a) in tex.iter().zip(acc.chunks_exact(stride)) {
+        let den = a[1];
+        if den > 0.0 {
+            let k = t.1 as usize;
+            covered[k] = true;
+            for cc in 0..ch {
+                map.data[k * ch + cc] = (a[4 + cc] / den) as f32;
+            }
+            positions.data[2 * k] = (a[2] / den) as f32;
+            positions.data[2 * k + 1] = (a[3] / den) as f32;
+        }
+    }
+    let coverage = coverage_of(s, &covered);
+    Ok(PartialMap { map, positions, covered, coverage, triangles })
+}
+
+/// The former partial reconstruction (grid of triangles queried per texel), kept as the
+/// reference of the tests.
+#[cfg(test)]
+#[allow(clippy::too_many_arguments)]
+pub(crate) fn partial_reference(width: usize, height: usize, refl: &[f32], values: &[f32], channels: usize, mask: &[f32], depth: &[f32], params: &ReflectionParams) -> Result<PartialMap> {
+    struct Tri {
+        v: [u32; 3],
+        logw: f64,
+    }
+    check_partial_args(width, height, refl, values, channels, mask, depth, params)?;
+    let np = width * height;
     // Per-pixel r and n'; invalid pixels (masked, non-finite, r = −z) are None.
     let pix: Vec<Option<(DVec3, DVec3)>> = (0..np)
         .into_par_iter()
@@ -811,4 +1166,72 @@ pub fn reconstruct(width: usize, height: usize, refl: &[f32], values: &[f32], ch
     let blurred = regularize(&mut p.map, &p.positions, params.blur_sigma);
     fill_beyond_equator(&mut p.map);
     Ok(ReflectionEnv { map: p.map, coverage: p.coverage, triangles: p.triangles, filled_texels: filled, blurred_texels: blurred })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// An orthographic sphere of width `w` with a procedural bump (folds in the Gauss map, as in
+    /// bench/compositing.py), its reflected directions for the view +z, a smooth R0, the mask
+    /// (the disk, minus a few pixels), the depth.
+    fn bumpy_sphere(w: usize) -> (Vec<f32>, Vec<f32>, Vec<f32>, Vec<f32>) {
+        let (mut refl, mut vals, mut mask, mut depth) = (vec![], vec![], vec![], vec![]);
+        for i in 0..w {
+            for j in 0..w {
+                let (x, y) = ((j as f64 + 0.5) / w as f64 * 2.0 - 1.0, (i as f64 + 0.5) / w as f64 * 2.0 - 1.0);
+                let s = x * x + y * y;
+                let inside = s < 0.98 && (i * 7 + j * 3) % 97 != 0;
+                let z = (1.0 - s).max(0.0).sqrt();
+                let pi = std::f64::consts::PI;
+                let n = DVec3::new(x + 0.25 * (9.0 * pi * x).sin() * (5.0 * pi * y).cos(), y + 0.25 * (7.0 * pi * y).cos() * (4.0 * pi * x).sin(), z).normalize();
+                let r = reflect(DVec3::Z, n);
+                refl.extend([r.x as f32, r.y as f32, r.z as f32]);
+                vals.extend([(0.5 + 0.3 * r.x + 0.2 * r.y * r.z) as f32, (0.4 + 0.1 * (3.0 * r.z).sin()) as f32, (0.3 + 0.2 * r.y) as f32]);
+                mask.push(if inside { 1.0 } else { 0.0 });
+                depth.push(if inside { (5.0 - z) as f32 } else { f32::INFINITY });
+            }
+        }
+        (refl, vals, mask, depth)
+    }
+
+    /// The polygon-visits-texels search gives the former per-texel grid query's map: same
+    /// triangles, same covered texels, values within f64 rounding (the barycentric coordinates
+    /// come from precomputed dual vectors) — equal after the f32 store here.
+    #[test]
+    fn partial_matches_reference() {
+        for (w, size, use_depth) in [(96, 16, true), (160, 32, true), (128, 64, false), (200, 128, true)] {
+            let (refl, vals, mask, depth) = bumpy_sphere(w);
+            let d: &[f32] = if use_depth { &depth } else { &[] };
+            let params = ReflectionParams { size, ..Default::default() };
+            let a = partial(w, w, &refl, &vals, 3, &mask, d, &params).unwrap();
+            let b = partial_reference(w, w, &refl, &vals, 3, &mask, d, &params).unwrap();
+            assert_eq!(a.triangles, b.triangles);
+            assert_eq!(a.covered, b.covered, "w {w} size {size}");
+            assert_eq!(a.coverage, b.coverage);
+            let md = a.map.data.iter().zip(&b.map.data).map(|(x, y)| (x - y).abs()).fold(0.0f32, f32::max);
+            let pd = a.positions.data.iter().zip(&b.positions.data).map(|(x, y)| (x - y).abs()).fold(0.0f32, f32::max);
+            assert!(md <= 1e-6, "w {w} size {size}: map differs by {md}");
+            assert!(pd <= 1e-3, "w {w} size {size}: positions differ by {pd} px");
+            assert!(a.coverage > 0.5);
+        }
+    }
+
+    #[test]
+    fn partial_is_the_same_on_any_thread_count() {
+        let w = 160;
+        let (refl, vals, mask, depth) = bumpy_sphere(w);
+        let params = ReflectionParams { size: 32, ..Default::default() };
+        let run = |t: usize| {
+            let pool = rayon::ThreadPoolBuilder::new().num_threads(t).build().unwrap();
+            pool.install(|| partial(w, w, &refl, &vals, 3, &mask, &depth, &params).unwrap())
+        };
+        let one = run(1);
+        for t in [2, 3, 7] {
+            let p = run(t);
+            assert_eq!(p.map.data, one.map.data);
+            assert_eq!(p.positions.data, one.positions.data);
+            assert_eq!(p.covered, one.covered);
+        }
+    }
 }
