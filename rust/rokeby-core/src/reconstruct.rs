@@ -272,21 +272,30 @@ fn coverage_of(s: usize, covered: &[bool]) -> f64 {
 /// Cells per side of the lookup grid of texel centres over (n'_x, n'_y) ∈ [−1, 1]², per texel of
 /// a face's side (about one texel centre per cell).
 const TEXEL_GRID_PER_SIDE: f64 = 1.5;
-/// Bands of grid rows processed in parallel (fixed: the result does not depend on the threads).
-const BANDS: usize = 16;
+/// Image rows of 2×2 blocks per parallel task (fixed: the hits come out in the polygons' order on
+/// any number of threads).
+const ROWS_PER_TASK: usize = 8;
 
-/// A 2×2 block of pixels that forms polygons: two triangles (a, b, c), (a, c, d) of one quad, or
-/// one boundary triangle (v[3] = u32::MAX); `bands` is the range of grid bands its boxes touch.
-struct Quad {
-    v: [u32; 4],
-    bands: [u16; 2],
+/// A texel centre inside a spherical triangle: `t` its index in the sorted texel centres, `v` the
+/// triangle's corners (pixels), `l` its (unnormalised) barycentric coordinates there, `lw` the log
+/// weight of the triangle's polygon.
+struct Hit {
+    t: u32,
+    v: [u32; 3],
+    l: [f64; 3],
+    lw: f64,
 }
 
 /// Bounding box (x0, x1, y0, y1) of the orthographic projection of the spherical triangle with
 /// unit corners `ns`, padded by the sagitta of its longest arc 1 − cos(θ/2) = 1 − √((1 + cos θ)/2).
 #[inline(always)]
 fn tri_box(ns: &[DVec3; 3]) -> [f64; 4] {
-    let mind = fmin(fmin(ns[0].dot(ns[1]), ns[1].dot(ns[2])), ns[2].dot(ns[0]));
+    box_of(ns, fmin(fmin(ns[0].dot(ns[1]), ns[1].dot(ns[2])), ns[2].dot(ns[0])))
+}
+
+/// [`tri_box`] given the smallest cosine `mind` of the three arcs.
+#[inline(always)]
+fn box_of(ns: &[DVec3; 3], mind: f64) -> [f64; 4] {
     let pad = sagitta(mind);
     [
         fmin(fmin(ns[0].x, ns[1].x), ns[2].x) - pad,
@@ -329,10 +338,11 @@ fn fmax(a: f64, b: f64) -> f64 {
 ///
 /// Eq. 2 is evaluated per texel over the polygons containing its direction, in the polygons'
 /// order (image rows, then columns), as in the paper's grid query; the search runs the other way
-/// round for speed: the texel centres are binned on a grid over (n'_x, n'_y), and each polygon
-/// visits the texel centres inside its padded box. The accumulation order per texel is the
-/// polygons' order all the same, and the grid's bands are fixed, so the map does not depend on the
-/// number of threads.
+/// round for speed: the texel centres are binned on a grid over (n'_x, n'_y), and each 2×2 block
+/// of pixels, as it is formed, looks up the centres in its padded box (both triangles of a quad at
+/// once) and then tests those in each triangle's own box. The hits come out in the polygons'
+/// order (fixed tasks of block rows) and are accumulated per texel in that order (each texel by
+/// one task), so the map does not depend on the number of threads.
 #[allow(clippy::too_many_arguments)]
 pub fn partial(width: usize, height: usize, refl: &[f32], values: &[f32], channels: usize, mask: &[f32], depth: &[f32], params: &ReflectionParams) -> Result<PartialMap> {
     check_partial_args(width, height, refl, values, channels, mask, depth, params)?;
@@ -360,8 +370,9 @@ pub fn partial(width: usize, height: usize, refl: &[f32], values: &[f32], channe
         }
     });
     let cos_edge = params.max_edge_angle.cos();
-    let connected = |a: usize, b: usize| -> bool {
-        if !(ok[a] && ok[b]) || rr[a].dot(rr[b]) < cos_edge {
+    // Pixels a and b (both valid) are connected: no discontinuity between them.
+    let edge = |a: usize, b: usize| -> bool {
+        if rr[a].dot(rr[b]) < cos_edge {
             return false;
         }
         if !depth.is_empty() {
@@ -372,6 +383,20 @@ pub fn partial(width: usize, height: usize, refl: &[f32], values: &[f32], channe
         }
         true
     };
+    let connected = |a: usize, b: usize| -> bool { ok[a] && ok[b] && edge(a, b) };
+    // Per pixel p, the edges to its neighbours without discontinuity (both pixels valid): bit 0 to
+    // p + 1, bit 1 to p + W, bit 2 to p + W + 1 (the quads' diagonal).
+    let mut links = vec![0u8; np];
+    links.par_chunks_mut(width).enumerate().for_each(|(y, lo)| {
+        for (x, l) in lo.iter_mut().enumerate() {
+            let p = y * width + x;
+            if !ok[p] {
+                continue;
+            }
+            let (right, down) = (x + 1 < width, y + 1 < height);
+            *l = (right && connected(p, p + 1)) as u8 | ((down && connected(p, p + width)) as u8) << 1 | ((right && down && connected(p, p + width + 1)) as u8) << 2;
+        }
+    });
     // w = (1 − acos(ℓ)/π)^η of a polygon, ℓ the cosine of its longest arc; in log space.
     let log_weight = |vs: &[u32]| -> f64 {
         let mut l = 1.0f64;
@@ -387,54 +412,6 @@ pub fn partial(width: usize, height: usize, refl: &[f32], values: &[f32], channe
     let half_g = 0.5 * gt as f64;
     // floor((x + 1)·g/2) clamped to the grid; `as` saturates (negative or NaN → 0).
     let cell = |x: f64| -> usize { (((x + 1.0) * half_g) as usize).min(gt - 1) };
-    let band_of_row = |r: usize| -> usize { r * BANDS / gt };
-    // Polygons per 2×2 block, rows in parallel.
-    let quads: Vec<Quad> = (0..height.saturating_sub(1))
-        .into_par_iter()
-        .flat_map_iter(|y| {
-            let mut out = Vec::new();
-            let bands_of = |ns: &[DVec3; 3]| {
-                let b = tri_box(ns);
-                (band_of_row(cell(b[2])), band_of_row(cell(b[3])))
-            };
-            // Both triangles of a quad: the y range of the four corners, padded for the longest
-            // of the five edges (the pads of both triangles, the larger).
-            let quad_bands = |a: usize, b: usize, c: usize, d: usize| {
-                let (na, nb, nc, nd) = (nr[a], nr[b], nr[c], nr[d]);
-                let mind = fmin(fmin(fmin(na.dot(nb), nb.dot(nc)), fmin(nc.dot(nd), nd.dot(na))), na.dot(nc));
-                let pad = sagitta(mind);
-                let y0 = fmin(fmin(na.y, nb.y), fmin(nc.y, nd.y)) - pad;
-                let y1 = fmax(fmax(na.y, nb.y), fmax(nc.y, nd.y)) + pad;
-                (band_of_row(cell(y0)), band_of_row(cell(y1)))
-            };
-            for x in 0..width - 1 {
-                let a = y * width + x;
-                let (b, c, d) = (a + 1, a + 1 + width, a + width);
-                if !(ok[a] && ok[b] && ok[c] && ok[d]) {
-                    // At most a boundary triangle.
-                } else if connected(a, b) && connected(b, c) && connected(c, d) && connected(d, a) && connected(a, c) {
-                    let (l, h) = quad_bands(a, b, c, d);
-                    out.push(Quad { v: [a as u32, b as u32, c as u32, d as u32], bands: [l as u16, h as u16] });
-                    continue;
-                }
-                for t in [[a, b, c], [a, b, d], [b, c, d], [a, c, d]] {
-                    if t.iter().all(|&p| ok[p]) && connected(t[0], t[1]) && connected(t[1], t[2]) && connected(t[2], t[0]) {
-                        let (l, h) = bands_of(&[nr[t[0]], nr[t[1]], nr[t[2]]]);
-                        out.push(Quad { v: [t[0] as u32, t[1] as u32, t[2] as u32, u32::MAX], bands: [l as u16, h as u16] });
-                        break;
-                    }
-                }
-            }
-            out
-        })
-        .collect();
-    let triangles: usize = quads.iter().map(|q| if q.v[3] == u32::MAX { 1 } else { 2 }).sum();
-    let mut map = ParaboloidMap::new(s, ch);
-    let mut positions = ParaboloidMap::new(s, 2);
-    let mut covered = vec![false; 2 * s * s];
-    if quads.is_empty() {
-        return Ok(PartialMap { map, positions, covered, coverage: 0.0, triangles: 0 });
-    }
     // Texel centres inside the disks (the others are not reconstructed), sorted by grid cell.
     let mut tex: Vec<(u32, u32, DVec3)> = Vec::with_capacity(2 * s * s);
     for face in 0..2 {
@@ -449,8 +426,14 @@ pub fn partial(width: usize, height: usize, refl: &[f32], values: &[f32], channe
             }
         }
     }
-    // By grid row, then by q.x (so by cell within a row: cell(x) is monotone), then texel.
-    tex.sort_by(|a, b| ((a.0 as usize) / gt).cmp(&((b.0 as usize) / gt)).then(a.2.x.total_cmp(&b.2.x)).then(a.1.cmp(&b.1)));
+    // By grid row, then by q.x (so by cell within a row: cell(x) is monotone), then texel; the
+    // keys are unique, so an unstable sort gives that order. q.x as an integer ordered like
+    // `f64::total_cmp`.
+    let total_key = |x: f64| -> i64 {
+        let b = x.to_bits() as i64;
+        b ^ ((((b >> 63) as u64) >> 1) as i64)
+    };
+    tex.sort_unstable_by_key(|t| (t.0 / gt as u32, total_key(t.2.x), t.1));
     let tex_xy: Vec<[f64; 2]> = tex.iter().map(|t| [t.2.x, t.2.y]).collect();
     let mut cell_start = vec![0u32; gt * gt + 1];
     for t in &tex {
@@ -459,127 +442,166 @@ pub fn partial(width: usize, height: usize, refl: &[f32], values: &[f32], channe
     for k in 0..gt * gt {
         cell_start[k + 1] += cell_start[k];
     }
-    // Quads per band, in their order.
-    let mut band_start = vec![0usize; BANDS + 1];
-    for q in &quads {
-        for b in q.bands[0]..=q.bands[1] {
-            band_start[b as usize + 1] += 1;
-        }
-    }
-    for b in 0..BANDS {
-        band_start[b + 1] += band_start[b];
-    }
-    let mut fill = band_start.clone();
-    let mut band_quads = vec![0u32; band_start[BANDS]];
-    for (qi, q) in quads.iter().enumerate() {
-        for b in q.bands[0]..=q.bands[1] {
-            band_quads[fill[b as usize]] = qi as u32;
-            fill[b as usize] += 1;
-        }
-    }
-    // Per texel (in `tex` order): [m, den, x, y, acc…]: the online log-sum of eq. 2's weights.
-    let stride = 4 + ch;
-    let mut acc = vec![0.0f64; tex.len() * stride];
-    for a in acc.chunks_exact_mut(stride) {
-        a[0] = f64::NEG_INFINITY;
-    }
-    let band_rows = |b: usize| -> (usize, usize) {
-        // Rows r with band_of_row(r) == b.
-        let lo = (b * gt).div_ceil(BANDS);
-        let hi = ((b + 1) * gt).div_ceil(BANDS);
-        (lo, hi.min(gt))
-    };
-    let mut slices: Vec<(usize, &mut [f64])> = Vec::with_capacity(BANDS);
-    let mut rest: &mut [f64] = &mut acc;
-    for b in 0..BANDS {
-        let (r0, r1) = band_rows(b);
-        let n_tex = (cell_start[r1 * gt] - cell_start[r0 * gt]) as usize;
-        let (head, tail) = rest.split_at_mut(n_tex * stride);
-        slices.push((b, head));
-        rest = tail;
-    }
-    slices.into_par_iter().for_each(|(b, out)| {
-        let (r0, r1) = band_rows(b);
-        let t_base = cell_start[r0 * gt] as usize;
-        for &qi in &band_quads[band_start[b]..band_start[b + 1]] {
-            let quad = &quads[qi as usize];
-            let v = quad.v;
-            let mut logw: Option<f64> = None;
-            let tris: [[u32; 3]; 2] = [[v[0], v[1], v[2]], [v[0], v[2], v[3]]];
-            let n_tris = if v[3] == u32::MAX { 1 } else { 2 };
-            for tv in &tris[..n_tris] {
-                let vs = tv.map(|p| nr[p as usize]);
-                let bx = tri_box(&vs);
-                let (cy0, cy1) = (cell(bx[2]).max(r0), cell(bx[3]).min(r1.saturating_sub(1)));
-                if r0 >= r1 || cy0 > cy1 {
+    // The texel centres in the box `bx`, into `cand`.
+    let centres_in = |bx: &[f64; 4], cand: &mut Vec<u32>| {
+        cand.clear();
+        let (cx0, cx1) = (cell(bx[0]), cell(bx[1]));
+        for cy in cell(bx[2])..=cell(bx[3]) {
+            let (k0, k1) = (cell_start[cy * gt + cx0] as usize, cell_start[cy * gt + cx1 + 1] as usize);
+            for (t, &[qx, qy]) in tex_xy[k0..k1].iter().enumerate() {
+                if qx > bx[1] {
+                    break; // the row is sorted by q.x
+                }
+                if qx < bx[0] || qy < bx[2] || qy > bx[3] {
                     continue;
                 }
-                // Dual vectors of the corners (λ = (q·d₀, q·d₁, q·d₂)), when a centre is in the box.
-                let mut duals: Option<[DVec3; 3]> = None;
-                let (cx0, cx1) = (cell(bx[0]), cell(bx[1]));
-                for cy in cy0..=cy1 {
-                    let (k0, k1) = (cell_start[cy * gt + cx0] as usize, cell_start[cy * gt + cx1 + 1] as usize);
-                    for t in k0..k1 {
-                        let [qx, qy] = tex_xy[t];
-                        if qx > bx[1] {
-                            break; // the row is sorted by q.x
+                cand.push((k0 + t) as u32);
+            }
+        }
+    };
+    // The candidates inside triangle `tv` (in its own box, barycentric coordinates ≥ 0) of the
+    // polygon `poly`, whose log weight is computed at the first hit.
+    let tri_hits = |tv: [u32; 3], vs: &[DVec3; 3], bx: &[f64; 4], poly: &[u32], cand: &[u32], logw: &mut Option<f64>, hits: &mut Vec<Hit>| {
+        // Dual vectors of the corners (λ = (q·d₀, q·d₁, q·d₂)), when a centre is in the box.
+        let mut duals: Option<[DVec3; 3]> = None;
+        for &t in cand {
+            let [qx, qy] = tex_xy[t as usize];
+            if qx < bx[0] || qx > bx[1] || qy < bx[2] || qy > bx[3] {
+                continue;
+            }
+            let duals = *duals.get_or_insert_with(|| {
+                let det = vs[0].dot(vs[1].cross(vs[2]));
+                if det.abs() < 1e-300 {
+                    // Degenerate: contains nothing.
+                    [DVec3::ZERO, DVec3::ZERO, DVec3::ZERO]
+                } else {
+                    let inv = 1.0 / det;
+                    [vs[1].cross(vs[2]) * inv, vs[2].cross(vs[0]) * inv, vs[0].cross(vs[1]) * inv]
+                }
+            });
+            let q = tex[t as usize].2;
+            // Spherical barycentric coordinates: λ solves Σλⱼvⱼ = q ([LBS06]).
+            let l = [q.dot(duals[0]), q.dot(duals[1]), q.dot(duals[2])];
+            let tol = -1e-12;
+            if l[0] < tol || l[1] < tol || l[2] < tol {
+                continue;
+            }
+            let sum = l[0] + l[1] + l[2];
+            if !(sum > 0.0) {
+                continue;
+            }
+            let lw = *logw.get_or_insert_with(|| log_weight(poly));
+            hits.push(Hit { t, v: tv, l, lw });
+        }
+    };
+    // Polygons per 2×2 block and their hits, in the polygons' order (rows of blocks in parallel).
+    let quad_rows = height.saturating_sub(1);
+    let tasks: Vec<(usize, Vec<Hit>)> = (0..quad_rows.div_ceil(ROWS_PER_TASK))
+        .into_par_iter()
+        .map(|task| {
+            let (mut n_tris, mut hits, mut cand) = (0usize, Vec::with_capacity(ROWS_PER_TASK * width / 2), Vec::new());
+            for y in task * ROWS_PER_TASK..((task + 1) * ROWS_PER_TASK).min(quad_rows) {
+                for x in 0..width - 1 {
+                    let a = y * width + x;
+                    let (b, c, d) = (a + 1, a + 1 + width, a + width);
+                    let (la, lb, ld) = (links[a], links[b], links[d]);
+                    // (a, b), (d, a), (a, c), (b, c), (d, c) all connected.
+                    if la == 7 && lb & 2 != 0 && ld & 1 != 0 {
+                        n_tris += 2;
+                        // Both triangles (a, b, c), (a, c, d) from the five arcs' cosines; the
+                        // union of their boxes selects the candidates of both.
+                        let (na, nb, nc, nd) = (nr[a], nr[b], nr[c], nr[d]);
+                        let (ab, bc, ca, cd, da) = (na.dot(nb), nb.dot(nc), nc.dot(na), nc.dot(nd), nd.dot(na));
+                        let (v1, v2) = ([na, nb, nc], [na, nc, nd]);
+                        let b1 = box_of(&v1, fmin(fmin(ab, bc), ca));
+                        let b2 = box_of(&v2, fmin(fmin(ca, cd), da));
+                        centres_in(&[fmin(b1[0], b2[0]), fmax(b1[1], b2[1]), fmin(b1[2], b2[2]), fmax(b1[3], b2[3])], &mut cand);
+                        if !cand.is_empty() {
+                            let poly = [a as u32, b as u32, c as u32, d as u32];
+                            let mut logw = None;
+                            tri_hits([poly[0], poly[1], poly[2]], &v1, &b1, &poly, &cand, &mut logw, &mut hits);
+                            tri_hits([poly[0], poly[2], poly[3]], &v2, &b2, &poly, &cand, &mut logw, &mut hits);
                         }
-                        if qx < bx[0] || qy < bx[2] || qy > bx[3] {
-                            continue;
-                        }
-                        let duals = match duals {
-                            Some(d) => d,
-                            None => {
-                                let det = vs[0].dot(vs[1].cross(vs[2]));
-                                let d = if det.abs() < 1e-300 {
-                                    // Degenerate: contains nothing.
-                                    [DVec3::ZERO, DVec3::ZERO, DVec3::ZERO]
-                                } else {
-                                    let inv = 1.0 / det;
-                                    [vs[1].cross(vs[2]) * inv, vs[2].cross(vs[0]) * inv, vs[0].cross(vs[1]) * inv]
-                                };
-                                duals = Some(d);
-                                d
-                            }
-                        };
-                        let q = tex[t].2;
-                        // Spherical barycentric coordinates: λ solves Σλⱼvⱼ = q ([LBS06]).
-                        let l = [q.dot(duals[0]), q.dot(duals[1]), q.dot(duals[2])];
-                        let tol = -1e-12;
-                        if l[0] < tol || l[1] < tol || l[2] < tol {
-                            continue;
-                        }
-                        let sum = l[0] + l[1] + l[2];
-                        if !(sum > 0.0) {
-                            continue;
-                        }
-                        let lw = *logw.get_or_insert_with(|| if v[3] == u32::MAX { log_weight(&v[..3]) } else { log_weight(&v) });
-                        let a = &mut out[(t - t_base) * stride..(t - t_base + 1) * stride];
-                        // Online log-sum of weights: rescale when a larger one appears.
-                        if lw > a[0] {
-                            let f = if a[0].is_finite() { (a[0] - lw).exp() } else { 0.0 };
-                            for x in a[1..].iter_mut() {
-                                *x *= f;
-                            }
-                            a[0] = lw;
-                        }
-                        let w = (lw - a[0]).exp();
-                        a[1] += w;
-                        let ws = w / sum;
-                        for (c, &pi) in tv.iter().enumerate() {
-                            let lam = ws * l[c];
-                            let p = pi as usize;
-                            for cc in 0..ch {
-                                a[4 + cc] += lam * values[p * ch + cc] as f64;
-                            }
-                            a[2] += lam * (p % width) as f64;
-                            a[3] += lam * (p / width) as f64;
-                        }
+                        continue;
+                    }
+                    // At most a boundary triangle: the first whole one of these.
+                    let (ab, ad, ac, bc, dc) = (la & 1 != 0, la & 2 != 0, la & 4 != 0, lb & 2 != 0, ld & 1 != 0);
+                    let tri = if ab && bc && ac {
+                        [a, b, c]
+                    } else if ab && ad && connected(b, d) {
+                        [a, b, d]
+                    } else if bc && dc && connected(b, d) {
+                        [b, c, d]
+                    } else if ac && dc && ad {
+                        [a, c, d]
+                    } else {
+                        continue;
+                    };
+                    n_tris += 1;
+                    let tv = tri.map(|p| p as u32);
+                    let vs = tri.map(|p| nr[p]);
+                    let bx = tri_box(&vs);
+                    centres_in(&bx, &mut cand);
+                    if !cand.is_empty() {
+                        tri_hits(tv, &vs, &bx, &tv, &cand, &mut None, &mut hits);
                     }
                 }
             }
+            (n_tris, hits)
+        })
+        .collect();
+    let triangles: usize = tasks.iter().map(|t| t.0).sum();
+    let mut map = ParaboloidMap::new(s, ch);
+    let mut positions = ParaboloidMap::new(s, 2);
+    let mut covered = vec![false; 2 * s * s];
+    if triangles == 0 {
+        return Ok(PartialMap { map, positions, covered, coverage: 0.0, triangles: 0 });
+    }
+    // Per texel (in `tex` order): [m, den, x, y, acc…]: the online log-sum of eq. 2's weights.
+    // The hits come in the polygons' order; each task takes a fixed range of texels and all
+    // their hits (the result does not depend on the ranges).
+    let nt = tex.len();
+    let stride = 4 + ch;
+    let mut acc = vec![0.0f64; nt * stride];
+    let per_range = nt.div_ceil(rayon::current_num_threads().max(1)).max(1);
+    acc.par_chunks_mut(per_range * stride).enumerate().for_each(|(range, out)| {
+        let t0 = range * per_range;
+        let t1 = t0 + out.len() / stride;
+        for a in out.chunks_exact_mut(stride) {
+            a[0] = f64::NEG_INFINITY;
+        }
+        for h in tasks.iter().flat_map(|t| &t.1) {
+            let t = h.t as usize;
+            if t < t0 || t >= t1 {
+                continue;
+            }
+            let a = &mut out[(t - t0) * stride..(t - t0 + 1) * stride];
+            let (l, lw) = (h.l, h.lw);
+            let sum = l[0] + l[1] + l[2];
+            // Online log-sum of weights: rescale when a larger one appears.
+            if lw > a[0] {
+                let f = if a[0].is_finite() { (a[0] - lw).exp() } else { 0.0 };
+                for x in a[1..].iter_mut() {
+                    *x *= f;
+                }
+                a[0] = lw;
+            }
+            // exp(0) = 1 exactly: the common case of the largest weight so far.
+            let w = if lw == a[0] { 1.0 } else { (lw - a[0]).exp() };
+            a[1] += w;
+            let ws = w / sum;
+            for (c, &pi) in h.v.iter().enumerate() {
+                let lam = ws * l[c];
+                let p = pi as usize;
+                for cc in 0..ch {
+                    a[4 + cc] += lam * values[p * ch + cc] as f64;
+                }
+                a[2] += lam * (p % width) as f64;
+                a[3] += lam * (p / width) as f64;
+            }
         }
     });
+    drop(tasks);
     for (t, a) in tex.iter().zip(acc.chunks_exact(stride)) {
         let den = a[1];
         if den > 0.0 {
