@@ -157,9 +157,8 @@ struct Frame<'a> {
     small_maps: bool,
 }
 
-/// [`recomposite`] with the AVX2 instantiation allowed (`simd`) or not: both give the same bits
-/// (no FMA contraction, the same operations in the same order).
-fn recomposite_with(b: &Buffers, patches: &[Patch], p: &Params, simd: bool) -> Result<(Vec<f32>, Stats)> {
+/// The buffers' lengths, the parameters and the maps, checked before any pixel is touched.
+fn validate(b: &Buffers, patches: &[Patch], p: &Params) -> Result<()> {
     let n = b.ids.len();
     check("normals", b.normals, 3 * n, false)?;
     check("edited_normals", b.edited, 3 * n, false)?;
@@ -190,6 +189,14 @@ fn recomposite_with(b: &Buffers, patches: &[Patch], p: &Params, simd: bool) -> R
     if let Some(e) = patches.iter().filter_map(|q| q.env.as_ref()).find(|e| e.size == 0 || e.data.len() != 2 * e.size * e.size * e.channels) {
         return Err(RokebyError::invalid("patches", format!("reflection map of size {} holds {} values, expected 2×size×size×3 with size ≥ 1", e.size, e.data.len())));
     }
+    Ok(())
+}
+
+/// [`recomposite`] with the AVX2 instantiation allowed (`simd`) or not: both give the same bits
+/// (no FMA contraction, the same operations in the same order).
+fn recomposite_with(b: &Buffers, patches: &[Patch], p: &Params, simd: bool) -> Result<(Vec<f32>, Stats)> {
+    let n = b.ids.len();
+    validate(b, patches, p)?;
     let f = Frame {
         b,
         sh: patches.iter().map(|q| q.sh.map(|c| c.map(|ch| ch.map(|x| x as f32))).unwrap_or([[0.0; SH_COEFFS]; 3])).collect(),
@@ -942,35 +949,7 @@ mod tests {
     /// time, scalar, f64 normalisation of n, ñ and v (as [`unit`]) and f32 arithmetic after it.
     fn recomposite_scalar(b: &Buffers, patches: &[Patch], p: &Params) -> Result<(Vec<f32>, Stats)> {
         let n = b.ids.len();
-        check("normals", b.normals, 3 * n, false)?;
-        check("edited_normals", b.edited, 3 * n, false)?;
-        if b.view.len() != 3 {
-            check("view", b.view, 3 * n, false)?;
-        }
-        check("diffuse", b.diffuse, 3 * n, false)?;
-        check("reflection", b.reflection, 3 * n, false)?;
-        check("alpha_d", b.alpha_d, n, true)?;
-        check("alpha_r", b.alpha_r, n, true)?;
-        check("alpha", b.alpha, n, true)?;
-        check("image", b.image, 3 * n, false)?;
-        check("diffuse_color", b.diffuse_color, 3 * n, true)?;
-        check("reflection_color", b.reflection_color, 3 * n, true)?;
-        if !(p.gamma > 0.0 && p.gamma.is_finite()) {
-            return Err(RokebyError::invalid("gamma", format!("must be positive and finite, got {}", p.gamma)));
-        }
-        if !(p.epsilon > 0.0) {
-            return Err(RokebyError::invalid("epsilon", "must be positive"));
-        }
-        if !(p.k_d.is_finite() && p.k_r.is_finite()) {
-            return Err(RokebyError::invalid("k_d", "k_d and k_r must be finite"));
-        }
-        if let Some(e) = patches.iter().filter_map(|q| q.env.as_ref()).find(|e| e.channels != 3) {
-            return Err(RokebyError::invalid("patches", format!("reflection maps must have 3 channels, got {}", e.channels)));
-        }
-        // The fuzzer found an empty (size 0) map panicking in the lookup's clamp.
-        if let Some(e) = patches.iter().filter_map(|q| q.env.as_ref()).find(|e| e.size == 0 || e.data.len() != 2 * e.size * e.size * e.channels) {
-            return Err(RokebyError::invalid("patches", format!("reflection map of size {} holds {} values, expected 2×size×size×3 with size ≥ 1", e.size, e.data.len())));
-        }
+        validate(b, patches, p)?;
         // Per-patch constants, once per frame: f32 SH coefficients (channel-major) and flags.
         let sh32: Vec<Option<[[f32; SH_COEFFS]; 3]>> = patches.iter().map(|q| q.sh.map(|c| c.map(|ch| ch.map(|x| x as f32)))).collect();
         let (k_d, k_r) = (p.k_d as f32, p.k_r as f32);
