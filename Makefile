@@ -74,7 +74,7 @@ bench: native $(PEERS)/.deps
 # (libFuzzer), installed into .tools on first use. The stable toolchain runs it with
 # RUSTC_BOOTSTRAP=1 and no sanitizer; a crash leaves its input under rust/fuzz/artifacts.
 FUZZ_SECONDS ?= 30
-FUZZ_TARGETS := field polar geodesic region sh reconstruct recomposite envmap prefilter silhouette bvh mls2d shadow_mesh shadow_editor
+FUZZ_TARGETS := field polar geodesic region sh reconstruct recomposite envmap prefilter silhouette bvh mls2d shadow_mesh shadow_editor rgbe
 CARGO_FUZZ := $(CURDIR)/.tools/bin/cargo-fuzz
 $(CARGO_FUZZ):
 	cargo install --locked --root $(CURDIR)/.tools cargo-fuzz@0.13.2

@@ -134,6 +134,57 @@ def test_results_written_and_read_back(tmp_path, worlds):
     assert np.array_equal(envmaps.read_exr(tmp_path / "face4.exr"), cube[4])
 
 
+def test_radiance_hdr_files_round_trip_and_agree_with_blender(tmp_path, worlds):
+    """Radiance RGBE (.hdr) files, the other format HDRIs come in: ours round-trip within the
+    format's precision (8-bit mantissas, one shared exponent); Blender reads the files we write
+    as we do, and we read the files Blender writes as it reads them; read_image picks the reader by
+    suffix; broken files are ValueErrors naming the file."""
+    bpy = pytest.importorskip("bpy")
+    im = worlds["forest"][..., :3]
+    ours = envmaps.write_hdr(tmp_path / "forest.hdr", im)
+    im = np.maximum(im, 0)  # the HDR has a few slightly negative texels: RGBE stores 0 there
+    back = envmaps.read_hdr(ours)
+    assert back.shape == im.shape and back.dtype == np.float32
+    peak = im.max(axis=-1, keepdims=True)
+    assert (np.abs(back - im) <= peak / 256 * 1.0001 + 1e-30).all()  # rounded mantissas: ½ unit ≤ 1/256 of the pixel's largest
+    raw = im.shape[0] * im.shape[1] * 4  # flat RGBE; run-length encoding of a photograph saves little, but never costs much
+    assert ours.stat().st_size <= 1.01 * raw + 200
+    np.testing.assert_array_equal(envmaps.read_image(ours), back)
+
+    def blender_pixels(path):
+        img = bpy.data.images.load(str(path))
+        w, h = img.size
+        px = np.empty(w * h * 4, np.float32)
+        img.pixels.foreach_get(px)
+        bpy.data.images.remove(img)
+        return envmaps.flip_rows(px.reshape(h, w, 4))[..., :3]
+
+    np.testing.assert_allclose(blender_pixels(ours), back, rtol=1e-6, atol=1e-30)
+    # Blender's writer, our reader
+    h, w = im.shape[:2]
+    img = bpy.data.images.new("to_hdr", w, h, alpha=True, float_buffer=True)
+    rgba = np.concatenate([im, np.ones((h, w, 1), np.float32)], -1)
+    img.pixels.foreach_set(envmaps.flip_rows(rgba).ravel())
+    img.filepath_raw = str(tmp_path / "blender.hdr")
+    img.file_format = "HDR"
+    img.save()
+    bpy.data.images.remove(img)
+    theirs = envmaps.read_hdr(tmp_path / "blender.hdr")  # (Image.save applies Blender's colour management)
+    assert theirs.shape == im.shape and theirs.max() > 1.0
+    np.testing.assert_allclose(theirs, blender_pixels(tmp_path / "blender.hdr"), rtol=1e-6, atol=1e-30)
+    # broken files
+    (tmp_path / "cut.hdr").write_bytes(ours.read_bytes()[:5000])
+    with pytest.raises(ValueError, match=r"cut\.hdr.*ends in scanline"):
+        envmaps.read_hdr(tmp_path / "cut.hdr")
+    (tmp_path / "text.hdr").write_text("P3 2 2 255")
+    with pytest.raises(ValueError, match="not a Radiance"):
+        envmaps.read_image(tmp_path / "text.hdr")
+    with pytest.raises(ValueError, match="not finite"):
+        envmaps.write_hdr(tmp_path / "nan.hdr", np.full((2, 2, 3), np.nan, np.float32))
+    with pytest.raises(ValueError, match="expected an OpenEXR"):
+        envmaps.read_image(tmp_path / "x.png")
+
+
 def test_bad_input_gives_clear_errors():
     good = np.ones((8, 16, 3), np.float32)
     bad = good.copy()

@@ -1,5 +1,5 @@
 """Environment maps for painting under environment light (issue 8): reading and writing HDR
-images (OpenEXR), conversions between lat-long, cube, sphere (mirror-ball) and dual-paraboloid
+images (OpenEXR, and Radiance RGBE ``.hdr`` through the Rust core), conversions between lat-long, cube, sphere (mirror-ball) and dual-paraboloid
 maps, order-2 SH irradiance, and specular prefiltering across roughness levels — all computed by
 the Rust core (``rokeby_core::envmap``/``prefilter``) through :mod:`rokeby.native`.
 
@@ -95,6 +95,42 @@ def write_exr(path, pixels) -> Path:
     with OpenEXR.File(header, {name: np.ascontiguousarray(data)}) as f:
         f.write(str(path))
     return path
+
+
+def read_hdr(path) -> np.ndarray:
+    """A Radiance RGBE (``.hdr``) file's pixels as (H, W, 3) float32, row 0 at the top (the Rust
+    core's decoder: flat and run-length encoded scanlines, the standard ``-Y H +X W``
+    orientation; other variants raise ValueError saying what the file holds)."""
+    path = Path(path)
+    if not path.exists():
+        raise FileNotFoundError(f"read_hdr: {path} does not exist")
+    try:
+        return native.module().rgbe_decode(path.read_bytes())
+    except ValueError as e:
+        raise ValueError(f"read_hdr: {path}: {e}") from None
+
+
+def write_hdr(path, pixels) -> Path:
+    """Writes (H, W, 3|4) float pixels (row 0 at the top; alpha dropped) as a run-length encoded
+    Radiance RGBE file: 8-bit mantissas with a shared exponent (within 1/128 of each pixel's
+    largest channel); negative values become 0, NaN/inf are refused."""
+    px = np.asarray(pixels, dtype=np.float32)
+    if px.ndim != 3 or px.shape[2] not in (3, 4):
+        raise ValueError(f"write_hdr: pixels must have shape (H, W, 3) or (H, W, 4), got {px.shape}")
+    path = Path(path)
+    path.write_bytes(native.module().rgbe_encode(np.ascontiguousarray(px[..., :3])))
+    return path
+
+
+def read_image(path) -> np.ndarray:
+    """An HDR environment image, OpenEXR (``.exr``) or Radiance (``.hdr``, ``.pic``), as (H, W, C)
+    float32 with row 0 at the top."""
+    suffix = Path(path).suffix.lower()
+    if suffix == ".exr":
+        return read_exr(path)
+    if suffix in (".hdr", ".pic", ".rgbe"):
+        return read_hdr(path)
+    raise ValueError(f"read_image: {path}: expected an OpenEXR (.exr) or Radiance (.hdr) file")
 
 
 def flip_rows(pixels: np.ndarray) -> np.ndarray:

@@ -10,7 +10,8 @@
 //!   reflection environments (eq. 2, hole filling, regularisation) and recompositing (eqs. 3–5).
 //! * [`envmap`], [`prefilter`] — environment maps (lat-long, cube, sphere, dual-paraboloid; exact
 //!   direction formulas, seam-correct bilinear lookups, conversions) and their prefiltering under
-//!   environment light (Fraser): order-2 SH irradiance, Phong/GGX/Torrance–Sparrow lobes.
+//!   environment light (Fraser): order-2 SH irradiance, Phong/GGX/Torrance–Sparrow lobes;
+//!   [`rgbe`] reads and writes Radiance `.hdr` files.
 //! * [`silhouette`], [`bvh`], [`light_space`], [`mls2d`], [`shadow_mesh`], [`shadow`] — freeform
 //!   shadow boundary editing (Mattausch, Igarashi, Wimmer): smooth silhouettes from the light,
 //!   shadow handles by ray casting, 2D MLS boundary deformation, the Laplacian shadow mesh.
@@ -28,6 +29,7 @@ pub mod prefilter;
 pub mod reconstruct;
 pub mod recomposite;
 pub mod region;
+pub mod rgbe;
 pub mod sh;
 pub mod shadow;
 pub mod shadow_mesh;

@@ -12,7 +12,7 @@ use numpy::ndarray::{ArrayD, IxDyn};
 use numpy::{IntoPyArray, PyArrayDyn};
 use pyo3::exceptions::{PyRuntimeError, PyValueError};
 use pyo3::prelude::*;
-use pyo3::types::{PyDict, PyList};
+use pyo3::types::{PyBytes, PyDict, PyList};
 use rokeby_core::envmap::{EnvMap, Layout};
 use rokeby_core::prefilter::{self, Lobe, PrefilterParams, A_HAT};
 use rokeby_core::sh::SH_COEFFS;
@@ -179,8 +179,35 @@ pub fn env_reference<'py>(py: Python<'py>, image: &Bound<'py, PyAny>, lobe: &str
     array_f64(py, &shape, out)
 }
 
+/// The pixels of a Radiance RGBE (.hdr) file's bytes: (H, W, 3) float32, row 0 at the top.
+/// Malformed or unsupported files raise ValueError saying what was found.
+#[pyfunction]
+pub fn rgbe_decode<'py>(py: Python<'py>, data: &[u8]) -> PyResult<Bound<'py, PyArrayDyn<f32>>> {
+    let (h, w, px) = run_detached(py, || rokeby_core::rgbe::decode(data))?;
+    array_f32(py, &[h, w, 3], px)
+}
+
+/// The bytes of a Radiance RGBE (.hdr) file of (H, W, 3) float pixels (row 0 at the top;
+/// run-length encoded scanlines). Negative values are written as 0; NaN/inf are refused.
+#[pyfunction]
+pub fn rgbe_encode<'py>(py: Python<'py>, pixels: &Bound<'py, PyAny>) -> PyResult<Bound<'py, PyBytes>> {
+    let a = f32_array(pixels, "pixels")?;
+    let shape = a.shape();
+    if shape.len() != 3 || shape[2] != 3 {
+        return Err(PyValueError::new_err(format!("pixels: expected shape (H, W, 3), got {}", shape_str(&shape))));
+    }
+    let sl = a.slice();
+    if let Some(i) = sl.iter().position(|x| !x.is_finite()) {
+        return Err(PyValueError::new_err(format!("pixels: value {} at pixel {} is not finite", sl[i], i / 3)));
+    }
+    let bytes = run_detached(py, || rokeby_core::rgbe::encode(shape[0], shape[1], sl))?;
+    Ok(PyBytes::new(py, &bytes))
+}
+
 pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(env_convert, m)?)?;
+    m.add_function(wrap_pyfunction!(rgbe_decode, m)?)?;
+    m.add_function(wrap_pyfunction!(rgbe_encode, m)?)?;
     m.add_function(wrap_pyfunction!(env_sample, m)?)?;
     m.add_function(wrap_pyfunction!(env_prefilter, m)?)?;
     m.add_function(wrap_pyfunction!(env_irradiance, m)?)?;
