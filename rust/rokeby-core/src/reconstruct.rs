@@ -817,23 +817,8 @@ pub(crate) fn partial_reference(width: usize, height: usize, refl: &[f32], value
                 }
             }
         });
-    let (mut cov, mut total) = (0.0, 0.0);
-    for face in 0..2 {
-        for i in 0..s {
-            for j in 0..s {
-                let (u, v) = texel_uv(s, i, j);
-                if u * u + v * v > 1.0 {
-                    continue;
-                }
-                let a = texel_solid_angle(s, i, j);
-                total += a;
-                if covered[(face * s + i) * s + j] {
-                    cov += a;
-                }
-            }
-        }
-    }
-    Ok(PartialMap { map, positions, covered, coverage: cov / total, triangles: tris.len() })
+    let coverage = coverage_of(s, &covered);
+    Ok(PartialMap { map, positions, covered, coverage, triangles: tris.len() })
 }
 
 /// Taps (texel index in face·size·size numbering, weight) of the bilinear value of `face` at
