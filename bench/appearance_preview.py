@@ -93,16 +93,13 @@ def stroke_to_preview(world_px, strokes: int = 7):
             mp = appearance_preview.mesh_preview(ball)
             builds = mp.builds
             paint_t, prep_t, draw_t, cpu_t, redraw_t = [], [], [], [], []
-            sh = appearance_preview.shader()
             for k in range(strokes):
                 t0 = time.perf_counter()
                 appearance.paint(ball, "roughness", [(0.3 * np.cos(k), -0.9, 0.3 * np.sin(k))], 0.2, value=0.1 + 0.1 * k)
                 t1 = time.perf_counter()
                 # what draw_object does before it draws: the material's state, the batch check, the
                 # painted values compared and uploaded (done here, so the draw below finds them current)
-                bits = appearance_preview.material_state(ball)[0]
-                mp.geometry(ball, sh, appearance_preview._uv_name(ball) if bits else None)
-                mp.points_texture(ball)
+                appearance_preview.prepare(ball)
                 t2 = time.perf_counter()
                 c2 = time.process_time()
                 _draw(ball, world, off)

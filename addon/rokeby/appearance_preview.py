@@ -263,6 +263,16 @@ def _dummy_texture():
     return _dummy
 
 
+def prepare(obj, depsgraph=None):
+    """What a draw of ``obj`` needs before it draws, brought up to date: (its MeshPreview, the
+    geometry batch, the rk_points texture, :func:`material_state`). Cheap when nothing changed."""
+    src = obj.evaluated_get(depsgraph) if depsgraph is not None else obj
+    state = material_state(obj)
+    mp = mesh_preview(obj, evaluated=depsgraph is not None)
+    batch = mp.geometry(src, shader(), _uv_name(obj, src.data) if state[0] else None)
+    return mp, batch, mp.points_texture(src), state
+
+
 def draw_object(obj, world: WorldLight, view_projection, eye, depsgraph=None) -> MeshPreview:
     """Draws ``obj`` (set up with rokeby.appearance.setup) into the bound framebuffer: per-point
     targets per vertex, texture targets at their texels, with the material's global sliders.
@@ -271,12 +281,8 @@ def draw_object(obj, world: WorldLight, view_projection, eye, depsgraph=None) ->
     mesh's :class:`MeshPreview` (its batch and painted values are kept for the next draw)."""
     import gpu
 
-    src = obj.evaluated_get(depsgraph) if depsgraph is not None else obj
-    bits, textures, tint, scale = material_state(obj)
+    mp, batch, points, (bits, textures, tint, scale) = prepare(obj, depsgraph)
     sh = shader()
-    mp = mesh_preview(obj, evaluated=depsgraph is not None)
-    batch = mp.geometry(src, sh, _uv_name(obj, src.data) if bits else None)
-    points = mp.points_texture(src)
     gpu.state.depth_test_set("LESS_EQUAL")
     gpu.state.depth_mask_set(True)
     sh.bind()

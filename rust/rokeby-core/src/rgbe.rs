@@ -26,7 +26,7 @@ pub fn to_float(p: [u8; 4]) -> [f32; 3] {
     if p[3] == 0 {
         return [0.0; 3];
     }
-    let f = libm_ldexp(1.0, p[3] as i32 - (128 + 8));
+    let f = pow2(p[3] as i32 - (128 + 8));
     [p[0] as f32 * f, p[1] as f32 * f, p[2] as f32 * f]
 }
 
@@ -56,9 +56,10 @@ fn frexp(v: f64) -> (f64, i32) {
     (v / 2f64.powi(e), e)
 }
 
+/// 2^e as f32 (e in −136..=119 here; below f32's normal range it is subnormal, as the value is).
 #[inline]
-fn libm_ldexp(x: f32, e: i32) -> f32 {
-    (x as f64 * 2f64.powi(e)) as f32
+fn pow2(e: i32) -> f32 {
+    2f64.powi(e) as f32
 }
 
 /// (height, width, RGB float32 pixels, row 0 at the top) of a Radiance file's bytes.
