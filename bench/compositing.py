@@ -193,8 +193,21 @@ def glsl_bench(run_cpu, args, kw, repeat):
         return {"glsl_error": str(exc)}
     out, _ = gl(*args, **kw)
     t, _ = median_time(lambda: gl(*args, **kw), repeat)
+    # An interactive session's frame (RecompositeSession): only the edited normals are written;
+    # and the draw alone (nothing written: shading and read-back), what a GPU would have left.
+    f = C.recomposite_frame(*args, **kw)
+    gl.draw(f)
+    e = args[2]
+
+    def session_frame():
+        f.set_edit(e, 1.0, 1.0)
+        gl.draw(f, ("rk_edited",))
+
+    t_session, _ = median_time(session_frame, repeat)
+    t_draw, _ = median_time(lambda: gl.draw(f, ()), repeat)
     ref, _ = run_cpu()
-    return {"glsl_ms": 1e3 * t, "glsl_renderer": gl.ctx.info.get("GL_RENDERER", "?"),
+    return {"glsl_ms": 1e3 * t, "glsl_session_ms": 1e3 * t_session, "glsl_draw_only_ms": 1e3 * t_draw,
+            "glsl_renderer": gl.ctx.info.get("GL_RENDERER", "?"),
             "glsl_max_rel_diff": float((np.abs(out.astype(np.float64) - ref) / (1 + np.abs(ref))).max())}
 
 

@@ -69,6 +69,23 @@ def main():
     for key in stages[0]:
         res[f"{key}_ms"] = 1e3 * float(np.median([s[key] for s in stages]))
     res["identity_ms"], _ = median_ms(lambda: rc(args[0], args[1], args[1], *args[3:], **kw), a.repeat)
+    # An interactive session's next frame (compositing.RecompositeSession): one texture made (the
+    # edited normals) instead of twelve; and the draw with nothing made (shading and read-back).
+    f = C.recomposite_frame(*args, **kw)
+    rc.draw(f)
+    session = []
+
+    def session_frame():
+        f.set_edit(args[2], 1.0, 1.0)
+        made = rc.uploads
+        rc.draw(f, ("rk_edited",))
+        session.append({**rc.timings, "made": rc.uploads - made})
+
+    res["session_ms"], res["session_min_ms"] = median_ms(session_frame, a.repeat)
+    for key in ("textures", "draw_read"):
+        res[f"session_{key}_ms"] = 1e3 * float(np.median([s[key] for s in session]))
+    res["session_textures_made"] = session[-1]["made"]
+    res["draw_only_ms"], _ = median_ms(lambda: rc.draw(f, ()), a.repeat)
     try:
         gl = C.GLRecompositor()
         gl(*args, **kw)

@@ -457,6 +457,9 @@ def compositing_section(emit):
     if "glsl_ms" in rn_:
         emit(f"GLSL path (shaders/rokeby_recomposite_frag.glsl, moderngl/EGL on {rn_['glsl_renderer']}; no GPU lent), same frame with uploads and")
         emit(f"read-back: {rn_['glsl_ms']:.0f} ms per frame; largest difference from the Rust core {rn_['glsl_max_rel_diff']:.1e} relative (float32 shader).")
+        if "glsl_session_ms" in rn_:
+            emit(f"The next frame of an interactive session (RecompositeSession: only the edited normals written): "
+                 f"{rn_['glsl_session_ms']:.0f} ms; the draw and read-back alone: {rn_['glsl_draw_only_ms']:.0f} ms (llvmpipe's shading).")
     else:
         emit(f"GLSL path not measured: {rn_.get('glsl_error', 'no result')}.")
     emit(f"Peak memory of the benchmark process after it: {rn_['peak_rss_mb']:.0f} MB ({rn_['inputs_mb']:.0f} MB of it the float32 input buffers).")

@@ -16,7 +16,7 @@ sys.path.insert(0, str(HERE))
 sys.path.insert(0, str(HERE.parent / "bench"))
 
 import rokeby_native as rn  # noqa: E402
-from recomposite_frames import bad_inputs, frame  # noqa: E402
+from recomposite_frames import bad_inputs, frame, passes_and_reconstruction  # noqa: E402
 from rokeby import compositing as C  # noqa: E402
 from rokeby import recomposite_gpu as G  # noqa: E402
 
@@ -115,14 +115,7 @@ def main():
                                "compositing_error": isinstance(exc, C.CompositingError), "text": str(exc)})
 
     # compositing.recomposite(..., backend=...) on passes and a reconstruction built from the frame.
-    h, w = ids.shape
-    zero3 = np.zeros((h, w, 3), np.float32)
-    p = C.Passes(image=img, normal=n, diff_dir=d0, diff_ind=zero3, diff_col=kw["diffuse_color"], gloss_dir=r0,
-                 gloss_ind=zero3, gloss_col=kw["reflection_color"], index_ob=np.zeros((h, w), np.float32),
-                 index_ma=np.zeros((h, w), np.float32), ao=np.repeat(kw["alpha_d"][..., None], 3, -1),
-                 depth=np.ones((h, w), np.float32), reflocc=kw["alpha_r"], camera_x=zero3, camera_y=zero3,
-                 incoming_cam=zero3)
-    rec = C.Reconstruction(ids=ids, keys=[], patches=patches, reports=[], normals=n, view=view)
+    p, rec = passes_and_reconstruction((ids, n, e, view, d0, r0, img, patches), kw)
     cpu, cst = C.recomposite(p, rec, e, k_d=0.8, backend="cpu")
     gpu_out, gst = C.recomposite(p, rec, e, k_d=0.8, backend="blender_gpu")
     ident, ist = C.recomposite(p, rec, n, backend="blender_gpu")
@@ -131,6 +124,20 @@ def main():
         unknown = None
     except C.CompositingError as exc:
         unknown = str(exc)
+    # A slider loop: RecompositeSession through Blender's gpu module, each frame against the CPU
+    # path's one-shot result, and how many textures each frame made (a plain call in between).
+    session = C.RecompositeSession(p, rec, backend="blender_gpu")
+    br = G.blender_recompositor()
+    res["session"] = []
+    for k, (edit, k_d, k_r) in enumerate([(e, 1.0, 1.0), (C.emboss(n, 0.3), 0.7, 1.3), (C.emboss(n, 0.6), 1.0, 0.0),
+                                          (n, 1.0, 1.0)]):
+        if k == 2:
+            C.recomposite(p, rec, C.emboss(n, 0.5), backend="blender_gpu")
+        before = br.uploads
+        out, st = session(edit, k_d=k_d, k_r=k_r)
+        ref, rst = C.recomposite(p, rec, edit, k_d=k_d, k_r=k_r, backend="cpu")
+        res["session"].append({"made": br.uploads - before, "rel": rel(out, ref), "stats": st, "cpu_stats": rst,
+                               "identity_equal": bool(np.array_equal(out, img))})
     res["backend"] = {"rel": rel(gpu_out, cpu), "stats": gst, "cpu_stats": cst,
                       "identity_equal": bool(np.array_equal(ident, img)), "identity_stats": ist, "unknown": unknown}
     print("RESULT " + json.dumps(res))

@@ -65,3 +65,21 @@ def bad_inputs():
         (dict(patches=[{"env": np.zeros((2, 8, 8, 3), np.float32)}, {"env": np.zeros((2, 16, 16, 3), np.float32)}]),
          "one reflection-map size"),
     ]
+
+
+def passes_and_reconstruction(args, kw):
+    """``frame()``'s arrays as ``compositing.Passes`` and a ``Reconstruction``, so that
+    ``compositing.recomposite(p, rec, e)`` and ``RecompositeSession`` recomposite that frame (alpha
+    = 1: ``Passes`` has no per-pixel α; D0 and R0 are the direct passes, the indirect ones zero)."""
+    from rokeby import compositing as C
+
+    ids, n, _e, view, d0, r0, img, patches = args
+    h, w = ids.shape
+    zero3 = np.zeros((h, w, 3), np.float32)
+    p = C.Passes(image=img, normal=n, diff_dir=d0, diff_ind=zero3, diff_col=kw["diffuse_color"], gloss_dir=r0,
+                 gloss_ind=zero3, gloss_col=kw["reflection_color"], index_ob=np.zeros((h, w), np.float32),
+                 index_ma=np.zeros((h, w), np.float32), ao=np.repeat(kw["alpha_d"][..., None], 3, -1),
+                 depth=np.ones((h, w), np.float32), reflocc=kw["alpha_r"], camera_x=zero3, camera_y=zero3,
+                 incoming_cam=zero3)
+    rec = C.Reconstruction(ids=ids, keys=[], patches=patches, reports=[], normals=n, view=view)
+    return p, rec

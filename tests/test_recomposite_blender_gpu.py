@@ -94,6 +94,17 @@ def test_compositing_recomposite_backend_option(res):
     assert b["unknown"].startswith("backend: unknown 'metal'")
 
 
+def test_session_makes_only_the_edited_normals_texture_per_frame(res):
+    """RecompositeSession(backend='blender_gpu'): every frame matches the CPU path; after the first
+    frame Blender makes one texture per frame (the edited normals) instead of twelve, and again all
+    twelve after another frame was drawn in between; the last frame (no edit) is I bit for bit."""
+    s = res["session"]
+    assert [f["made"] for f in s] == [12, 1, 12, 1]
+    for f in s:
+        assert f["rel"] < 1e-4 and f["stats"] == f["cpu_stats"]
+    assert s[-1]["identity_equal"] and s[-1]["stats"]["edited"] == 0
+
+
 def test_module_needs_no_gpu_at_import():
     """Importing rokeby.recomposite_gpu touches no gpu call (this pytest process may have no context)."""
     from rokeby import recomposite_gpu as G

@@ -14,7 +14,7 @@ moderngl = pytest.importorskip("moderngl")
 rn = pytest.importorskip("rokeby_native")
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "bench"))
-from recomposite_frames import bad_inputs, frame  # noqa: E402
+from recomposite_frames import bad_inputs, frame, passes_and_reconstruction  # noqa: E402
 from rokeby import compositing as C  # noqa: E402
 
 
@@ -86,6 +86,42 @@ def test_bad_inputs_are_named(gl):
     for change, msg in bad:
         with pytest.raises(C.CompositingError, match=msg):
             gl(**{**base, **change})
+
+
+def _session_edits(n, e):
+    """An artist's slider loop: (edited normals, k_D, k_R) per frame, ending with no edit."""
+    return [(e, 1.0, 1.0), (C.emboss(n, 0.3), 0.7, 1.3), (C.emboss(n, 0.6), 1.0, 0.0), (n, 1.0, 1.0)]
+
+
+def test_session_uploads_only_the_edited_normals_and_matches_one_shot_calls(gl):
+    """RecompositeSession on moderngl: each frame equals the one-shot CPU result; after the first
+    frame one texture is written per frame (the edited normals) instead of twelve; a frame of
+    another session drawn in between makes the next one write everything again, still right."""
+    args, kw = frame()
+    p, rec = passes_and_reconstruction(args, kw)
+    n, e = args[1], args[2]
+    session = C.RecompositeSession(p, rec, backend="moderngl")
+    p2, rec2 = passes_and_reconstruction(*frame(seed=9))
+    other = C.RecompositeSession(p2, rec2, backend="moderngl")
+    writes = []
+    for k, (edit, k_d, k_r) in enumerate(_session_edits(n, e)):
+        if k == 2:
+            other(C.emboss(rec2.normals, 0.5))
+        before = C.gl_recompositor().uploads
+        out, st = session(edit, k_d=k_d, k_r=k_r)
+        writes.append(C.gl_recompositor().uploads - before)
+        ref, rst = C.recomposite(p, rec, edit, k_d=k_d, k_r=k_r, backend="cpu")
+        assert st == dict(rst)
+        assert (np.abs(out.astype(np.float64) - ref) / (1 + np.abs(ref))).max() < 1e-4
+    np.testing.assert_array_equal(out, p.image)  # the last frame: unmodified normals, I bit for bit
+    assert writes == [12, 1, 12, 1]
+    with pytest.raises(C.CompositingError, match="edited_normals: expected shape"):
+        session(e[:, :-1])
+    with pytest.raises(C.CompositingError, match="k_d"):
+        session(e, k_d=float("nan"))
+    again, _ = session(e)  # a refused frame changes nothing: the session goes on
+    ref, _ = C.recomposite(p, rec, e, backend="cpu")
+    assert (np.abs(again.astype(np.float64) - ref) / (1 + np.abs(ref))).max() < 1e-4
 
 
 def test_shader_files_live_in_shaders():

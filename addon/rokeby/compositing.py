@@ -29,7 +29,9 @@ there, and the report (and a RuntimeWarning) says so.
 from __future__ import annotations
 
 import math
+import time
 import warnings
+import weakref
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -447,29 +449,69 @@ def recomposite(p: Passes, rec: Reconstruction, edited_normals: np.ndarray, *, k
     ``backend``: 'cpu' (the Rust core, f32), 'blender_gpu' (the GLSL shader drawn by Blender's
     ``gpu`` module, ``rokeby.recomposite_gpu``; in background mode the first call makes the GPU
     context with one 8×8 EEVEE render) or 'moderngl' (the same shader on a headless EGL context).
-    All three agree within 1e-4 relative and give unmodified normals back bit for bit."""
-    if backend not in RECOMPOSITE_BACKENDS:
-        raise CompositingError(f"backend: unknown {backend!r} (expected one of {', '.join(map(repr, RECOMPOSITE_BACKENDS))})")
-    h, w = p.shape
-    if edited_normals.shape != (h, w, 3):
-        raise CompositingError(f"edited_normals: expected shape {(h, w, 3)} like the passes, got {edited_normals.shape}")
-    if backend == "cpu":
-        run = native.module().recomposite
-    elif backend == "blender_gpu":
-        from . import recomposite_gpu as in_blender  # noqa: PLC0415 - not the module-level recomposite_gpu below
+    All three agree within 1e-4 relative and give unmodified normals back bit for bit. For many
+    edits of one frame (a slider), ``RecompositeSession`` packs and uploads the passes once."""
+    return RecompositeSession(p, rec, use_occlusion=use_occlusion, backend=backend)(edited_normals, k_d=k_d, k_r=k_r)
 
-        in_blender.ensure_context()
-        run = in_blender.recomposite_blender
-    else:
-        run = recomposite_gpu
-    ao = p.ao.mean(-1) if p.ao.ndim == 3 else p.ao
-    return run(
-        rec.ids, rec.normals, edited_normals, rec.view,
-        p.diff_dir + p.diff_ind, p.gloss_dir + p.gloss_ind, p.image, rec.patches,
-        alpha_d=np.clip(ao, 0, 1) if use_occlusion else None,
-        alpha_r=np.clip(p.reflocc, 0, 1) if use_occlusion else None,
-        diffuse_color=p.diff_col, reflection_color=p.gloss_col, k_d=k_d, k_r=k_r,
-    )
+
+class RecompositeSession:
+    """Interactive recompositing of one rendered frame: an artist's slider loop. The passes and the
+    reconstruction are checked and packed once, here; each call takes new edited normals (and
+    k_D, k_R) and returns (image, stats) as ``recomposite`` does. On a GLSL backend only the edited
+    normals go to the GPU again: the other ten images and the reflection maps stay there, as long
+    as no other frame is drawn by the same backend in between (then the next call uploads all).
+    ``timings`` holds the last call's seconds ('check', 'recomposite', 'total')."""
+
+    def __init__(self, p: Passes, rec: Reconstruction, *, use_occlusion: bool = True, backend: str = "cpu"):
+        if backend not in RECOMPOSITE_BACKENDS:
+            raise CompositingError(f"backend: unknown {backend!r} (expected one of {', '.join(map(repr, RECOMPOSITE_BACKENDS))})")
+        self.shape = p.shape
+        self.backend = backend
+        ao = p.ao.mean(-1) if p.ao.ndim == 3 else p.ao
+        self._args = (rec.ids, rec.normals, None, rec.view, p.diff_dir + p.diff_ind, p.gloss_dir + p.gloss_ind,
+                      p.image, rec.patches)
+        self._kw = {"alpha_d": np.clip(ao, 0, 1) if use_occlusion else None,
+                    "alpha_r": np.clip(p.reflocc, 0, 1) if use_occlusion else None,
+                    "diffuse_color": p.diff_col, "reflection_color": p.gloss_col}
+        self._frame = None  # the GLSL backends' packed frame, made on the first call
+        self.timings: dict = {}
+
+    def _check(self, edited_normals) -> np.ndarray:
+        h, w = self.shape
+        e = np.asarray(edited_normals)
+        if e.shape != (h, w, 3):
+            raise CompositingError(f"edited_normals: expected shape {(h, w, 3)} like the passes, got {e.shape}")
+        return e
+
+    def __call__(self, edited_normals, *, k_d: float = 1.0, k_r: float = 1.0) -> tuple[np.ndarray, dict]:
+        t0 = time.perf_counter()
+        e = self._check(edited_normals)
+        _check_k(k_d, k_r)
+        if self.backend == "cpu":
+            a = self._args
+            t1 = time.perf_counter()
+            out = native.module().recomposite(a[0], a[1], e, *a[3:], **self._kw, k_d=k_d, k_r=k_r)
+        else:
+            if self._frame is None:
+                a = self._args
+                self._frame = recomposite_frame(a[0], a[1], e, *a[3:], **self._kw, k_d=k_d, k_r=k_r)
+                changed = None
+            else:
+                self._frame.set_edit(e, k_d, k_r)
+                changed = ("rk_edited",)  # the backend uploads all if it drew another frame since
+            t1 = time.perf_counter()
+            out = self._backend().draw(self._frame, changed)
+        t2 = time.perf_counter()
+        self.timings = {"check": t1 - t0, "recomposite": t2 - t1, "total": t2 - t0}
+        return out
+
+    def _backend(self):
+        if self.backend == "blender_gpu":
+            from . import recomposite_gpu as in_blender  # noqa: PLC0415 - not the module-level recomposite_gpu below
+
+            in_blender.ensure_context()
+            return in_blender.blender_recompositor()
+        return gl_recompositor()
 
 
 # --- the GLSL path: shaders/rokeby_recomposite_{vert,frag}.glsl ---------------------------------
@@ -575,6 +617,15 @@ class RecompositeFrame:
     uniforms: dict
     n_patches: int
 
+    def set_edit(self, edited_normals, k_d: float, k_r: float) -> None:
+        """Replaces the edited normals and k_D, k_R (checked as ``recomposite_frame`` checks them):
+        what changes from one frame of an interactive session to the next (``RecompositeSession``)."""
+        e = _gpu_image(edited_normals, "edited_normals", self.height, self.width, 3)
+        _check_k(k_d, k_r)
+        self.textures["rk_edited"] = e
+        _k_d, _k_r, gamma, chord = self.uniforms["rk_params"]
+        self.uniforms["rk_params"] = (float(k_d), float(k_r), gamma, chord)
+
     def check_limits(self, max_size: int, max_layers: int, device: str) -> None:
         layers = self.textures["rk_env"].shape[0]
         if layers > max_layers:
@@ -583,6 +634,12 @@ class RecompositeFrame:
         if max(self.height, self.width, rows, self.textures["rk_env"].shape[1]) > max_size:
             raise CompositingError(f"image: {self.width}×{self.height} (or {rows} patches, or the reflection maps) exceed "
                                    f"{device}'s texture size {max_size}")
+
+
+def _check_k(k_d, k_r) -> None:
+    for name, x in (("k_d", k_d), ("k_r", k_r)):
+        if not math.isfinite(x):
+            raise CompositingError(f"{name}: k_d and k_r must be finite, got {x}")
 
 
 def recomposite_frame(ids, normals, edited_normals, view, diffuse, reflection, image, patches, alpha_d=None,
@@ -612,9 +669,7 @@ def recomposite_frame(ids, normals, edited_normals, view, diffuse, reflection, i
             al[..., c] = _gpu_image(a, name, h, w, 1)
     dc = None if diffuse_color is None else _gpu_image(diffuse_color, "diffuse_color", h, w, 3)
     rc = None if reflection_color is None else _gpu_image(reflection_color, "reflection_color", h, w, 3)
-    for name, x in (("k_d", k_d), ("k_r", k_r)):
-        if not math.isfinite(x):
-            raise CompositingError(f"{name}: k_d and k_r must be finite, got {x}")
+    _check_k(k_d, k_r)
     if not (gamma > 0 and math.isfinite(gamma)):
         raise CompositingError(f"gamma: must be positive and finite, got {gamma}")
     if not epsilon > 0:
@@ -723,6 +778,8 @@ class GLRecompositor:
         self._size = None
         self._tex: dict = {}
         self._fbo = None
+        self._frame = None  # a weak reference to the frame the textures hold
+        self.uploads = 0  # texture writes so far
 
     def _texture(self, name: str, data: np.ndarray):
         comps = 1 if data.ndim == 2 else data.shape[-1]
@@ -734,6 +791,7 @@ class GLRecompositor:
             t = self.ctx.texture((w, h), comps, dtype="f4")
             self._tex[name] = t
         t.write(np.ascontiguousarray(data, np.float32).tobytes())
+        self.uploads += 1
         return t
 
     def _array(self, name: str, layers: np.ndarray):
@@ -744,23 +802,32 @@ class GLRecompositor:
                 t.release()
             t = self._tex[name] = self.ctx.texture_array((s, s, layers.shape[0]), 3, dtype="f4")
         t.write(layers.tobytes())
+        self.uploads += 1
         return t
 
     def __call__(self, *args, **kw):
-        f = recomposite_frame(*args, **kw)
+        return self.draw(recomposite_frame(*args, **kw))
+
+    def draw(self, f: "RecompositeFrame", changed=None) -> tuple[np.ndarray, dict]:
+        """Draws the packed frame ``f``. ``changed``: the names of the textures that differ from the
+        last frame drawn, when that was ``f`` itself (``RecompositeSession``): only those are
+        written again. None, or a different frame, writes all of them."""
         f.check_limits(int(self.ctx.info.get("GL_MAX_TEXTURE_SIZE", 16384)), self.max_layers, "this GL")
         caller = _CurrentGL()
         self._own.restore()
         try:
-            return self._draw(f)
+            return self._draw(f, changed)
         finally:
             caller.restore()
 
-    def _draw(self, f: "RecompositeFrame") -> tuple[np.ndarray, dict]:
+    def _draw(self, f: "RecompositeFrame", changed) -> tuple[np.ndarray, dict]:
         h, w = f.height, f.width
+        same = self._frame is not None and self._frame() is f
         for unit, t, name in RECOMPOSITE_INTERFACE["sampler"]:
-            data = f.textures[name]
-            tex = self._array(name, data) if t == "FLOAT_2D_ARRAY" else self._texture(name, data)
+            tex = self._tex.get(name)
+            if tex is None or changed is None or not same or name in changed:
+                data = f.textures[name]
+                tex = self._array(name, data) if t == "FLOAT_2D_ARRAY" else self._texture(name, data)
             tex.use(unit)
             if name in self.program:
                 self.program[name].value = unit
@@ -775,6 +842,7 @@ class GLRecompositor:
         self._fbo.use()
         self.ctx.viewport = (0, 0, w, h)
         self.vao.render(vertices=3)
+        self._frame = weakref.ref(f)
         out = np.frombuffer(self._fbo.read(components=4, dtype="f4"), np.float32).reshape(h, w, 4)
         return frame_result(out)
 
@@ -782,15 +850,20 @@ class GLRecompositor:
 _GL: GLRecompositor | None = None
 
 
+def gl_recompositor() -> GLRecompositor:
+    """The process's moderngl recompositor, made on first use."""
+    global _GL
+    if _GL is None:
+        _GL = GLRecompositor()
+    return _GL
+
+
 def recomposite_gpu(ids, normals, edited_normals, view, diffuse, reflection, image, patches, **kw):
     """Eqs. 3–5 by the GLSL shader (shaders/rokeby_recomposite_frag.glsl): the arguments and the
     result (image (H, W, 3) float32, {"edited", "masked"}) of ``rokeby_native.recomposite``, in
     float32 on the GPU. Runs on a headless moderngl/EGL context made on first use; inside Blender,
     ``rokeby.recomposite_gpu.recomposite_blender`` draws the same shader through the ``gpu`` module."""
-    global _GL
-    if _GL is None:
-        _GL = GLRecompositor()
-    return _GL(ids, normals, edited_normals, view, diffuse, reflection, image, patches, **kw)
+    return gl_recompositor()(ids, normals, edited_normals, view, diffuse, reflection, image, patches, **kw)
 
 
 # --- normal-editing tools (screen-space normals (H, W, 3); `mask` (H, W) limits the edit) ---------

@@ -12,8 +12,9 @@ makes it (``ensure_context``). Nothing here touches ``gpu`` at import time.
 
 Blender specifics (4.5):
 
-* Its Python API has no way to write into an existing ``GPUTexture``, so every frame makes new
-  textures; the shader, the batch, the offscreen buffer, the read-back buffer and the RGBA staging
+* Its Python API has no way to write into an existing ``GPUTexture``, so a frame makes new
+  textures — all of them for a new frame, only the edited normals for the next frame of an
+  interactive session (``compositing.RecompositeSession``); the shader, the batch, the offscreen buffer, the read-back buffer and the RGBA staging
   arrays are kept between frames of one size.
 * There is no RGB32F texture format: RGB buffers are padded into RGBA32F staging arrays (the
   shader reads ``.rgb``); ids are R32F (integer textures need an INT buffer, which
@@ -27,6 +28,7 @@ Blender specifics (4.5):
 from __future__ import annotations
 
 import time
+import weakref
 
 import numpy as np
 
@@ -117,7 +119,9 @@ class BlenderRecompositor:
         self._offscreen = None
         self._read = None
         self._staging: dict = {}
-        self.textures: dict = {}  # the last frame's, kept alive until the next one
+        self.textures: dict = {}  # the last frame's, kept for the next one (see draw's ``changed``)
+        self._frame = None  # a weak reference to the frame those textures hold
+        self.uploads = 0  # textures made so far
         self.timings: dict = {}  # the last frame's stages, seconds
 
     def _rgba(self, name: str, data: np.ndarray) -> np.ndarray:
@@ -133,6 +137,7 @@ class BlenderRecompositor:
 
     def _texture(self, gpu, name: str, data: np.ndarray, array: bool):
         a = self._rgba(name, data)
+        self.uploads += 1
         buf = gpu.types.Buffer("FLOAT", a.size, a.reshape(-1))
         fmt = "R32F" if a.ndim == 2 else "RGBA32F"
         if array:  # (layers, S, S, 4)
@@ -141,7 +146,14 @@ class BlenderRecompositor:
 
     def __call__(self, *args, **kw):
         t0 = time.perf_counter()
-        f = recomposite_frame(*args, **kw)
+        return self.draw(recomposite_frame(*args, **kw), t0=t0)
+
+    def draw(self, f, changed=None, *, t0=None):
+        """Draws the packed frame ``f`` (``compositing.recomposite_frame``). ``changed``: the names of
+        the textures that differ from the last frame drawn, when that was ``f`` itself (an
+        interactive session's, ``compositing.RecompositeSession``): only those are made again, the
+        other textures stay on the GPU. None, or a different frame, makes all of them."""
+        t0 = time.perf_counter() if t0 is None else t0
         f.check_limits(self.max_size, self.max_layers, f"this GPU ({self.renderer})")
         gpu = _gpu()
         h, w = f.height, f.width
@@ -152,8 +164,11 @@ class BlenderRecompositor:
             self._read = gpu.types.Buffer("FLOAT", w * h * 4)
             self._size = (w, h)
         t1 = time.perf_counter()
-        self.textures = {name: self._texture(gpu, name, f.textures[name], t == "FLOAT_2D_ARRAY")
-                         for _unit, t, name in RECOMPOSITE_INTERFACE["sampler"]}
+        same = self._frame is not None and self._frame() is f and set(self.textures) == set(f.textures)
+        for _unit, t, name in RECOMPOSITE_INTERFACE["sampler"]:
+            if changed is None or not same or name in changed:
+                self.textures[name] = self._texture(gpu, name, f.textures[name], t == "FLOAT_2D_ARRAY")
+        self._frame = weakref.ref(f)
         t2 = time.perf_counter()
         sh = self.shader
         with self._offscreen.bind():
@@ -187,21 +202,27 @@ class BlenderRecompositor:
         self._offscreen = self._read = None
         self._size = None
         self.textures = {}
+        self._frame = None
         self._staging = {}
 
 
 _BLENDER: BlenderRecompositor | None = None
 
 
+def blender_recompositor() -> BlenderRecompositor:
+    """The process's recompositor on Blender's GPU context, made on first use."""
+    global _BLENDER
+    if _BLENDER is None:
+        _BLENDER = BlenderRecompositor()
+    return _BLENDER
+
+
 def recomposite_blender(ids, normals, edited_normals, view, diffuse, reflection, image, patches, **kw):
     """Eqs. 3–5 by the GLSL shader drawn through Blender's ``gpu`` module: the arguments and the result
     (image (H, W, 3) float32, {"edited", "masked"}) of ``rokeby_native.recomposite``. Bad inputs raise
     ``CompositingError`` naming the argument; no GPU context raises ``NoGPUContext``."""
-    global _BLENDER
-    if _BLENDER is None:
-        _BLENDER = BlenderRecompositor()
-    return _BLENDER(ids, normals, edited_normals, view, diffuse, reflection, image, patches, **kw)
+    return blender_recompositor()(ids, normals, edited_normals, view, diffuse, reflection, image, patches, **kw)
 
 
-__all__ = ["BlenderRecompositor", "CompositingError", "NoGPUContext", "ensure_context", "has_context",
-           "recomposite_blender"]
+__all__ = ["BlenderRecompositor", "CompositingError", "NoGPUContext", "blender_recompositor", "ensure_context",
+           "has_context", "recomposite_blender"]
