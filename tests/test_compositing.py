@@ -415,6 +415,46 @@ def test_api_recomposite_render_shows_a_new_image(tmp_path):
         api.recomposite_render(str(tmp_path / "h.exr"), edit="twist", scene=sc)
 
 
+def test_recomposite_exr_edits_a_rendered_frame_without_rendering_or_reconstructing_again(tmp_path, monkeypatch):
+    """api.recomposite_exr: the first edit of a file reads and reconstructs it; further edits of the
+    unchanged file reuse both (only the edit and eqs. 3–5 run) and give what a fresh open gives;
+    a re-rendered file is read again; a missing file and an unknown edit are named."""
+    import bpy
+    from rokeby import api
+    from rokeby import compositing as C
+
+    sc = _scene()
+    path = str(tmp_path / "frame.exr")
+    api.recomposite_render(path, edit="none", scene=sc)
+    calls = []
+    real = C.reconstruct
+    monkeypatch.setattr(C, "reconstruct", lambda *a, **k: calls.append(1) or real(*a, **k))
+    img, st = api.recomposite_exr(path, edit="emboss", amount=0.4, image_name="e1")
+    assert st["reused"] and not calls  # recomposite_render left the frame open
+    px1 = np.array(img.pixels[:]).reshape(48, 64, 4)
+    img, st2 = api.recomposite_exr(path, edit="emboss", amount=0.8, k_d=0.5, image_name="e2")
+    px2 = np.array(img.pixels[:]).reshape(48, 64, 4)
+    assert st2["reused"] and not calls and st2["edited"] > 100
+    assert (np.abs(px2 - px1) > 1e-4).any(-1).sum() > 50
+    C.close_render()
+    img, st3 = api.recomposite_exr(path, edit="emboss", amount=0.8, k_d=0.5, image_name="e3")
+    assert not st3["reused"] and len(calls) == 1
+    np.testing.assert_array_equal(np.array(img.pixels[:]).reshape(48, 64, 4), px2)
+    # Re-rendered (another material colour): the file changed, so it is read and reconstructed again.
+    bpy.data.materials["red"].node_tree.nodes["Principled BSDF"].inputs["Base Color"].default_value = (0.2, 0.3, 0.8, 1)
+    C.render_passes(sc, path)
+    img, st4 = api.recomposite_exr(path, edit="none", image_name="e4")
+    assert not st4["reused"] and len(calls) == 2
+    px4 = np.array(img.pixels[:]).reshape(48, 64, 4)[::-1, :, :3]
+    np.testing.assert_array_equal(px4.astype(np.float32), C.read_exr(path).image)
+    with pytest.raises(C.CompositingError, match="nope.exr: cannot open the rendered passes"):
+        api.recomposite_exr(str(tmp_path / "nope.exr"))
+    with pytest.raises(C.CompositingError, match="edit: unknown 'twist'"):
+        api.recomposite_exr(path, edit="twist")
+    assert "e5" not in bpy.data.images
+    C.close_render()
+
+
 def test_screen_space_with_an_orthographic_camera(tmp_path):
     """All view vectors are parallel: the rotation must not come from them."""
     from rokeby import compositing as C
@@ -446,5 +486,16 @@ def test_operators_set_up_passes_and_show_the_recomposited_image(tmp_path):
         assert tuple(img.size) == (64, 48)
         px = np.array(img.pixels[:]).reshape(48, 64, 4)
         assert np.isfinite(px).all() and px[..., :3].max() > 0
+        # Recomposite Render: the same frame edited again without rendering (the scene remembers it).
+        assert sc["rokeby_composite_exr"] == str(tmp_path / "op.exr")
+        assert bpy.ops.rokeby.composite_edit(edit="EMBOSS", amount=0.3, image_name="edited") == {"FINISHED"}
+        ed = np.array(bpy.data.images["edited"].pixels[:]).reshape(48, 64, 4)
+        assert np.isfinite(ed).all() and (np.abs(ed - px) > 1e-4).any(-1).sum() > 50
+        del sc["rokeby_composite_exr"]
+        from rokeby import compositing as C
+
+        C.close_render()
+        with pytest.raises(RuntimeError, match="no rendered frame to edit"):
+            bpy.ops.rokeby.composite_edit(edit="EMBOSS")
     finally:
         rokeby.unregister()

@@ -6,6 +6,7 @@ their own undo step: the test pushes it after each one, as Blender's UI does for
 with the UNDO flag (which every Rokeby operator that changes data carries; checked here)."""
 
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -201,6 +202,15 @@ def _composite_render(ball, tmp):
     return bpy.ops.rokeby.composite_render(edit="EMBOSS", amount=0.5, filepath=str(tmp / "undo.exr"), image_name="Recomposited")
 
 
+def _with_rendered_frame(ball):
+    import tempfile  # noqa: PLC0415
+
+    _with_passes(ball)
+    path = str(Path(tempfile.mkdtemp(prefix="rokeby_undo_")) / "frame.exr")
+    assert bpy.ops.rokeby.composite_render(edit="NONE", filepath=path, image_name="Rendered") == {"FINISHED"}
+    bpy.ops.ed.undo_push(message="rendered")
+
+
 CASES = {
     "mirror_add": (None, lambda b: bpy.ops.rokeby.mirror_add(mirror=b.name)),
     "mirror_remove": (_with_mirror, lambda b: bpy.ops.rokeby.mirror_remove(mirror=b.name)),
@@ -217,6 +227,7 @@ CASES = {
     # Compositing (#6), appearance painting (#8), shadow editing (#7).
     "composite_setup_passes": (lambda b: _tiny_renders(), lambda b: bpy.ops.rokeby.composite_setup_passes()),
     "composite_render": (_with_passes, _composite_render),
+    "composite_edit": (_with_rendered_frame, lambda b: bpy.ops.rokeby.composite_edit(edit="EMBOSS", amount=0.5, image_name="Edited")),
     "appearance_setup": (lambda b: _active(b), lambda b: bpy.ops.rokeby.appearance_setup()),
     "appearance_paint": (_with_painting, lambda b: bpy.ops.rokeby.appearance_paint(stroke=[{"name": "", "location": (0.0, -1.0, 0.0)}])),
     "appearance_texture_remove": (lambda b: _with_painting(b, "TEXTURE"), lambda b: bpy.ops.rokeby.appearance_texture_remove()),

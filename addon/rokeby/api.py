@@ -8,6 +8,7 @@ Python with numpy and rokeby_native.
 from __future__ import annotations
 
 import hashlib
+import time
 from collections import OrderedDict
 from dataclasses import dataclass
 
@@ -927,25 +928,51 @@ def recomposite_render(path: str, *, edit: str = "emboss", amount: float = 0.5, 
     amount, 'smooth' with σ = amount pixels, or 'none') and shows the recomposited frame as the
     Blender image ``image_name``. ``backend``: 'cpu' (the Rust core), 'blender_gpu' (the GLSL
     shader drawn by Blender's gpu module) or 'moderngl' (see ``rokeby.compositing.recomposite``).
+    The frame stays open for ``recomposite_exr`` (further edits without rendering again).
     Returns (image, reconstruction report list)."""
     from . import compositing as comp  # noqa: PLC0415
 
     if backend not in comp.RECOMPOSITE_BACKENDS:  # before rendering
         raise RokebyError(f"backend: unknown {backend!r} (expected one of {', '.join(map(repr, comp.RECOMPOSITE_BACKENDS))})")
+    if edit not in comp.EDITS:
+        raise RokebyError(f"edit: unknown {edit!r} (expected one of {', '.join(map(repr, comp.EDITS))})")
     p = comp.render_passes(_scene(scene), path)
-    rec = comp.reconstruct(p)
-    n = rec.normals
-    on = rec.ids >= 0
-    if edit == "emboss":
-        n = comp.emboss(n, amount, mask=on)
-    elif edit == "ripple":
-        n = comp.bump(n, comp.ripple(p.shape), amount, mask=on)
-    elif edit == "smooth":
-        n = comp.bilateral_smooth(n, p.depth, sigma_s=amount, mask=on)
-    elif edit != "none":
-        raise RokebyError(f"edit: unknown {edit!r} (expected 'emboss', 'ripple', 'smooth' or 'none')")
-    out, _stats = comp.recomposite(p, rec, n, k_d=k_d, k_r=k_r, backend=backend)
-    return comp.show_image(image_name, out), rec.reports
+    comp.close_render()
+    opened = comp.open_render(path, backend=backend, passes=p)
+    img, _stats = _recomposite_opened(opened, edit, amount, k_d, k_r, image_name)
+    return img, opened.reconstruction.reports
+
+
+def recomposite_exr(path: str, *, edit: str = "emboss", amount: float = 0.5, image_name: str = "Rokeby Recomposited",
+                    k_d: float = 1.0, k_r: float = 1.0, backend: str = "cpu"):
+    """Edits a frame already rendered with the compositing passes (the multilayer EXR ``path``, say
+    from ``recomposite_render``) without rendering: as ``recomposite_render`` otherwise. The last
+    file stays open (``compositing.open_render``), so a second edit of the same unchanged file
+    skips reading and reconstructing it and, on a GLSL backend, uploads only the edited normals.
+    Returns (image, stats): stats has 'edited', 'masked', 'reused' (the frame was open) and the
+    seconds of 'open', 'edit', 'recomposite' and 'show'."""
+    from . import compositing as comp  # noqa: PLC0415
+
+    t0 = time.perf_counter()
+    opened = comp.open_render(path, backend=backend)
+    t1 = time.perf_counter()
+    img, stats = _recomposite_opened(opened, edit, amount, k_d, k_r, image_name)
+    stats["open_s"] = t1 - t0
+    return img, stats
+
+
+def _recomposite_opened(opened, edit, amount, k_d, k_r, image_name):
+    from . import compositing as comp  # noqa: PLC0415
+
+    t0 = time.perf_counter()
+    n = comp.edit_normals(opened.passes, opened.reconstruction, edit, amount)
+    t1 = time.perf_counter()
+    out, stats = opened.session(n, k_d=k_d, k_r=k_r)
+    t2 = time.perf_counter()
+    img = comp.show_image(image_name, out)
+    stats = {**stats, "reused": opened.reused, "edit_s": t1 - t0, "recomposite_s": t2 - t1,
+             "show_s": time.perf_counter() - t2}
+    return img, stats
 
 
 # --- Freeform shadow boundary editing (Mattausch et al.; rokeby.shadow) ---------------------------

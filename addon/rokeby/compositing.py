@@ -372,8 +372,13 @@ class Reconstruction:
     timings: dict = field(default_factory=dict)
 
     def warnings(self) -> list[str]:
+        return self.warnings_of(self.reports)
+
+    @staticmethod
+    def warnings_of(reports) -> list[str]:
+        """What a user should hear of these patch reports: patches left unedited, large holes."""
         out = []
-        for r in self.reports:
+        for r in reports:
             if r.diffuse not in ("qp", "ls"):
                 out.append(f"patch {r.key}: diffuse not edited: {r.diffuse}")
             if r.reflection != "ok":
@@ -512,6 +517,79 @@ class RecompositeSession:
             in_blender.ensure_context()
             return in_blender.blender_recompositor()
         return gl_recompositor()
+
+
+EDITS = ("emboss", "ripple", "smooth", "none")
+
+
+def edit_normals(p: Passes, rec: Reconstruction, edit: str, amount: float) -> np.ndarray:
+    """The one-knob edits of the operators and ``rokeby.api`` on the patches' pixels: 'emboss'
+    (β = amount), 'ripple' (a decal at the centre, strength amount), 'smooth' (cross-bilateral
+    with depth, σ = amount pixels) or 'none' (the shown normals: material edits k_D, k_R only)."""
+    n = rec.normals
+    on = rec.ids >= 0
+    if edit == "emboss":
+        return emboss(n, amount, mask=on)
+    if edit == "ripple":
+        return bump(n, ripple(p.shape), amount, mask=on)
+    if edit == "smooth":
+        return bilateral_smooth(n, p.depth, sigma_s=amount, mask=on)
+    if edit == "none":
+        return n
+    raise CompositingError(f"edit: unknown {edit!r} (expected one of {', '.join(map(repr, EDITS))})")
+
+
+@dataclass
+class RenderEdit:
+    """A rendered frame open for editing: its passes, its reconstruction and a recompositing
+    session, kept by ``open_render`` between edits of the same file."""
+
+    path: str
+    passes: Passes
+    reconstruction: Reconstruction
+    session: RecompositeSession
+    reused: bool = False  # whether open_render found it already open
+
+
+_OPEN: dict = {}  # the one frame open for editing (its arrays are ~150 MB at 1920×1080)
+
+
+def _file_key(path: str) -> tuple:
+    import os  # noqa: PLC0415
+
+    st = os.stat(path)
+    return os.path.realpath(path), st.st_mtime_ns, st.st_size
+
+
+def open_render(path: str, *, backend: str = "cpu", passes: Passes | None = None, warn: bool = True) -> RenderEdit:
+    """The multilayer EXR ``path`` (rendered after ``setup_passes``) read, reconstructed and ready to
+    recomposite. The last file opened stays open: opening it again with the same backend, while the
+    file is unchanged (same modification time and size), reuses its reconstruction and its session
+    (on a GLSL backend the passes stay on the GPU), so that trying edit after edit costs only the
+    edit and the recompositing. A changed file is read again. ``passes``: the file's passes if the
+    caller has read them already (``render_passes``)."""
+    if backend not in RECOMPOSITE_BACKENDS:
+        raise CompositingError(f"backend: unknown {backend!r} (expected one of {', '.join(map(repr, RECOMPOSITE_BACKENDS))})")
+    try:
+        key = _file_key(path)
+    except OSError as exc:
+        raise CompositingError(f"{path}: cannot open the rendered passes ({exc.strerror or exc})") from None
+    got = _OPEN.get("frame")
+    if got is not None and got[0] == key and got[1].session.backend == backend:
+        got[1].reused = True
+        return got[1]
+    _OPEN.clear()  # before reading the next one: only one frame's arrays at a time
+    p = passes if passes is not None else read_exr(path)
+    rec = reconstruct(p, warn=warn)
+    opened = RenderEdit(path=path, passes=p, reconstruction=rec,
+                        session=RecompositeSession(p, rec, backend=backend))
+    _OPEN["frame"] = (key, opened)
+    return opened
+
+
+def close_render() -> None:
+    """Forgets the frame ``open_render`` keeps (and its memory)."""
+    _OPEN.clear()
 
 
 # --- the GLSL path: shaders/rokeby_recomposite_{vert,frag}.glsl ---------------------------------

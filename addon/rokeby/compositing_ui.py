@@ -37,7 +37,27 @@ class ROKEBY_OT_composite_setup_passes(bpy.types.Operator):
         return {"FINISHED"}
 
 
-class ROKEBY_OT_composite_render(bpy.types.Operator):
+LAST_EXR = "rokeby_composite_exr"  # scene custom property: the EXR the last Render and Recomposite wrote
+
+
+def _edit_args(op) -> dict:
+    """The operator's edit as ``rokeby.api`` takes it, with the knob clamped to what each edit accepts."""
+    edit = op.edit.lower()
+    amount = {"emboss": min(max(op.amount, 1e-3), 1.0), "smooth": max(op.amount, 0.5)}.get(edit, op.amount)
+    return {"edit": edit, "amount": amount, "k_d": op.k_d, "k_r": op.k_r, "image_name": op.image_name,
+            "backend": "blender_gpu" if op.backend == "GPU" else "cpu"}
+
+
+class _EditProps:
+    edit: bpy.props.EnumProperty(name="Edit", items=EDITS, default="EMBOSS")
+    amount: bpy.props.FloatProperty(name="Amount", default=0.5, min=0.0)
+    k_d: bpy.props.FloatProperty(name="Diffuse k_D", default=1.0, min=0.0)
+    k_r: bpy.props.FloatProperty(name="Reflection k_R", default=1.0, min=0.0)
+    image_name: bpy.props.StringProperty(name="Image", default="Rokeby Recomposited")
+    backend: bpy.props.EnumProperty(name="Backend", items=BACKENDS, default="CPU")
+
+
+class ROKEBY_OT_composite_render(_EditProps, bpy.types.Operator):
     """Render the passes, reconstruct the shading environments, edit the normals and show the
     recomposited frame as a new image"""
 
@@ -45,37 +65,53 @@ class ROKEBY_OT_composite_render(bpy.types.Operator):
     bl_label = "Render and Recomposite"
     bl_options = {"REGISTER", "UNDO"}
 
-    edit: bpy.props.EnumProperty(name="Edit", items=EDITS, default="EMBOSS")
-    amount: bpy.props.FloatProperty(name="Amount", default=0.5, min=0.0)
-    k_d: bpy.props.FloatProperty(name="Diffuse k_D", default=1.0, min=0.0)
-    k_r: bpy.props.FloatProperty(name="Reflection k_R", default=1.0, min=0.0)
     filepath: bpy.props.StringProperty(name="EXR", default="", subtype="FILE_PATH",
                                        description="Where the multilayer EXR goes (default: a temporary file)")
-    image_name: bpy.props.StringProperty(name="Image", default="Rokeby Recomposited")
-    backend: bpy.props.EnumProperty(name="Backend", items=BACKENDS, default="CPU")
 
     def execute(self, context):
+        from . import api  # noqa: PLC0415
+
         path = bpy.path.abspath(self.filepath) if self.filepath else os.path.join(tempfile.gettempdir(), "rokeby_composite.exr")
         try:
-            p = comp.render_passes(context.scene, path)
-            rec = comp.reconstruct(p, warn=False)
-            n = rec.normals
-            on = rec.ids >= 0
-            if self.edit == "EMBOSS":
-                n = comp.emboss(n, min(max(self.amount, 1e-3), 1.0), mask=on)
-            elif self.edit == "RIPPLE":
-                n = comp.bump(n, comp.ripple(p.shape), self.amount, mask=on)
-            elif self.edit == "SMOOTH":
-                n = comp.bilateral_smooth(n, p.depth, sigma_s=max(self.amount, 0.5), mask=on)
-            out, stats = comp.recomposite(p, rec, n, k_d=self.k_d, k_r=self.k_r,
-                                          backend="blender_gpu" if self.backend == "GPU" else "cpu")
-        except (comp.CompositingError, ValueError, RuntimeError) as exc:
+            img, reports = api.recomposite_render(path, scene=context.scene, **_edit_args(self))
+        except (comp.CompositingError, api.RokebyError, ValueError, RuntimeError) as exc:
             self.report({"ERROR"}, f"Rokeby: {exc}")
             return {"CANCELLED"}
-        img = comp.show_image(self.image_name, out)
-        for msg in rec.warnings():
+        context.scene[LAST_EXR] = path
+        for msg in comp.Reconstruction.warnings_of(reports):
             self.report({"WARNING"}, f"Rokeby: {msg}")
-        self.report({"INFO"}, f"Rokeby: image '{img.name}': {stats['edited']} pixels recomposited")
+        self.report({"INFO"}, f"Rokeby: image '{img.name}' recomposited; edit it again without rendering: "
+                              "Recomposite Render")
+        return {"FINISHED"}
+
+
+class ROKEBY_OT_composite_edit(_EditProps, bpy.types.Operator):
+    """Edit the normals of the frame already rendered (the last Render and Recomposite, or an EXR)
+    and show it recomposited, without rendering again: adjust the edit in the redo panel"""
+
+    bl_idname = "rokeby.composite_edit"
+    bl_label = "Recomposite Render"
+    bl_options = {"REGISTER", "UNDO"}
+
+    filepath: bpy.props.StringProperty(name="EXR", default="", subtype="FILE_PATH",
+                                       description="A multilayer EXR rendered with the compositing passes "
+                                                   "(default: the last Render and Recomposite of this scene)")
+
+    def execute(self, context):
+        from . import api  # noqa: PLC0415
+
+        path = bpy.path.abspath(self.filepath) if self.filepath else context.scene.get(LAST_EXR, "")
+        if not path:
+            self.report({"ERROR"}, "Rokeby: no rendered frame to edit: run Render and Recomposite first, or pick an EXR")
+            return {"CANCELLED"}
+        try:
+            img, stats = api.recomposite_exr(path, **_edit_args(self))
+        except (comp.CompositingError, api.RokebyError, ValueError, RuntimeError) as exc:
+            self.report({"ERROR"}, f"Rokeby: {exc}")
+            return {"CANCELLED"}
+        ms = 1e3 * (stats["edit_s"] + stats["recomposite_s"] + stats["show_s"])
+        self.report({"INFO"}, f"Rokeby: image '{img.name}': {stats['edited']} pixels recomposited in {ms:.0f} ms"
+                              + ("" if stats["reused"] else f" (reading and reconstructing the frame: {stats['open_s']:.1f} s)"))
         return {"FINISHED"}
 
 
@@ -89,9 +125,10 @@ class ROKEBY_PT_compositing(bpy.types.Panel):
         col = self.layout.column()
         col.operator(ROKEBY_OT_composite_setup_passes.bl_idname, icon="RENDERLAYERS")
         col.operator(ROKEBY_OT_composite_render.bl_idname, icon="RENDER_STILL")
+        col.operator(ROKEBY_OT_composite_edit.bl_idname, icon="IMAGE")
 
 
-CLASSES = (ROKEBY_OT_composite_setup_passes, ROKEBY_OT_composite_render, ROKEBY_PT_compositing)
+CLASSES = (ROKEBY_OT_composite_setup_passes, ROKEBY_OT_composite_render, ROKEBY_OT_composite_edit, ROKEBY_PT_compositing)
 
 
 def register():
