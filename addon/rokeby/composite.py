@@ -66,6 +66,9 @@ def main(argv=None) -> int:
     ap.add_argument("--smooth-depth", type=float, default=0.02, metavar="REL", help="depth range kernel σ (relative)")
     ap.add_argument("--objects", help="comma-separated object pass indices to edit (default: all)")
     ap.add_argument("--fit", choices=("qp", "ls"), default="qp", help="diffuse SH fit (default: the QP)")
+    ap.add_argument("--noise-tolerance", type=float, default=0.0, metavar="KAPPA",
+                    help="the QP's constraint D(n) >= D0 - KAPPA*sigma, sigma the pixel noise of the diffuse pass "
+                         "(default 0: the paper's QP; about 2-3 for a noisy render)")
     ap.add_argument("--env-size", type=int, default=128, help="texels per paraboloid face")
     ap.add_argument("--kd", type=float, default=1.0, help="diffuse intensity k_D")
     ap.add_argument("--kr", type=float, default=1.0, help="reflection intensity k_R")
@@ -86,7 +89,11 @@ def main(argv=None) -> int:
 
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
-        rec = C.reconstruct(p, method=a.fit, env_size=a.env_size)
+        try:
+            rec = C.reconstruct(p, method=a.fit, env_size=a.env_size, noise_tolerance=a.noise_tolerance)
+        except C.CompositingError as exc:
+            print(f"rokeby.composite: {exc}", file=sys.stderr)
+            return 2
     for w in caught:
         print(f"rokeby.composite: warning: {w.message}", file=sys.stderr)
     t_rec = time.perf_counter()

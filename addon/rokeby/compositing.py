@@ -359,6 +359,8 @@ class PatchReport:
     sh_max_residual: float = float("nan")
     coverage: float = 0.0
     filled_texels: int = 0
+    noise_sigma: tuple = ()  # per channel: the estimated noise of D0 (``pixel_noise``), when measured
+    sh_tolerance: tuple = ()  # per channel: the QP's tolerance τ (D(n) ≥ D0 − τ), when not 0
 
 
 @dataclass
@@ -389,11 +391,40 @@ class Reconstruction:
         return out
 
 
+def pixel_noise(values: np.ndarray, mask: np.ndarray) -> np.ndarray:
+    """Per channel, the standard deviation of the per-pixel noise of ``values`` (H, W, C) on ``mask``
+    (H, W): from the differences of horizontally and vertically adjacent pixels both in the mask,
+    σ = 1.4826 · median|Δ| / √2 (the median absolute deviation of the difference of two independent
+    noisy pixels; robust to the few pairs that straddle an edge or a shading change). Zeros when
+    fewer than 16 pairs exist. Path-traced passes have independent noise per pixel; smooth shading
+    changes little between neighbours."""
+    diffs = []
+    for axis in (0, 1):
+        a = np.swapaxes(values, 0, axis)
+        m = np.swapaxes(mask, 0, axis)
+        both = m[1:] & m[:-1]
+        diffs.append((a[1:] - a[:-1])[both])
+    d = np.concatenate(diffs, 0)
+    if len(d) < 16:
+        return np.zeros(values.shape[-1])
+    return 1.4826 * np.median(np.abs(d), axis=0) / np.sqrt(2.0)
+
+
 def reconstruct(p: Passes, *, method: str = "qp", env_size: int = 128, min_pixels: int = 64,
                 min_coverage: float = 0.01, blur_sigma: float = 2.0, occlusion_threshold: float = 0.5,
-                warn: bool = True) -> Reconstruction:
-    """Diffuse (SH) and reflection (dual paraboloid) environments for every object/material patch."""
+                noise_tolerance: float = 0.0, warn: bool = True) -> Reconstruction:
+    """Diffuse (SH) and reflection (dual paraboloid) environments for every object/material patch.
+
+    ``method``: 'qp' (§3.1: D(n) ≥ D0 at every pixel, so that the residual is occlusion) or 'ls'
+    (least squares, the fast option). ``noise_tolerance`` κ (for 'qp'): the constraint becomes
+    D(n) ≥ D0 − κσ with σ the patch's pixel noise (``pixel_noise``) — on a path-traced render the
+    paper's QP (κ = 0) rises to the noisiest pixel; κ ≈ 2 leaves the noise to the residual."""
     import time
+
+    if not (math.isfinite(noise_tolerance) and noise_tolerance >= 0):
+        raise CompositingError(f"noise_tolerance: must be finite and ≥ 0 (in noise standard deviations), got {noise_tolerance}")
+    if noise_tolerance > 0 and method != "qp":
+        raise CompositingError(f"noise_tolerance: only the 'qp' fit has constraints to relax (method is {method!r})")
 
     nm = native.module()
     p.validate()
@@ -414,7 +445,12 @@ def reconstruct(p: Passes, *, method: str = "qp", env_size: int = 128, min_pixel
             rep.diffuse = rep.reflection = f"covers only {n_px} pixels (< min_pixels = {min_pixels}): left unchanged"
         else:
             t0 = time.perf_counter()
-            fit = nm.sh_fit(normals[m], d0[m], method)
+            tol = None
+            if noise_tolerance > 0:
+                sigma = pixel_noise(d0, m)
+                tol = noise_tolerance * sigma
+                rep.noise_sigma, rep.sh_tolerance = tuple(map(float, sigma)), tuple(map(float, tol))
+            fit = nm.sh_fit(normals[m], d0[m], method, tol)
             t_sh += time.perf_counter() - t0
             entry["sh"] = fit["coeffs"]
             rep.diffuse = method

@@ -948,7 +948,6 @@ mod tests {
     /// The former per-pixel implementation of eqs. 3–5, kept as the reference: one pixel at a
     /// time, scalar, f64 normalisation of n, ñ and v (as [`unit`]) and f32 arithmetic after it.
     fn recomposite_scalar(b: &Buffers, patches: &[Patch], p: &Params) -> Result<(Vec<f32>, Stats)> {
-        let n = b.ids.len();
         validate(b, patches, p)?;
         // Per-patch constants, once per frame: f32 SH coefficients (channel-major) and flags.
         let sh32: Vec<Option<[[f32; SH_COEFFS]; 3]>> = patches.iter().map(|q| q.sh.map(|c| c.map(|ch| ch.map(|x| x as f32)))).collect();

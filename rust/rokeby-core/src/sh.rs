@@ -253,6 +253,16 @@ fn first_bad(data: &[f32], width: usize, bad: impl Fn(&[f32]) -> bool + Sync) ->
 /// pixel constraints, checked against all pixels by further passes (see [`qp_screened`]); a last
 /// pass gives the residual statistics.
 pub fn fit(normals: &[f32], values: &[f32], channels: usize, method: Fit) -> Result<ShFit> {
+    fit_with_tolerance(normals, values, channels, method, &[])
+}
+
+/// [`fit`] with the QP's constraints relaxed by a per-channel noise tolerance τ_c ≥ 0:
+/// D(n(x)) ≥ D0(x) − τ_c. The paper's QP (τ = 0) treats every pixel as exact, so on a
+/// path-traced render the fit rises until the noisiest pixel sits below it; τ of about two noise
+/// standard deviations leaves the noise in the residual and keeps the constraint for what it is
+/// meant for, occlusion (which darkens pixels by more than the noise). `tolerance`: empty (all
+/// zero) or one value per channel; only [`Fit::Constrained`] takes a non-zero one.
+pub fn fit_with_tolerance(normals: &[f32], values: &[f32], channels: usize, method: Fit, tolerance: &[f64]) -> Result<ShFit> {
     if channels == 0 {
         return Err(RokebyError::invalid("values", "need at least one channel"));
     }
@@ -271,6 +281,16 @@ pub fn fit(normals: &[f32], values: &[f32], channels: usize, method: Fit) -> Res
     }
     if let Some(i) = first_bad(values, 1, |v| !v[0].is_finite()) {
         return Err(RokebyError::invalid("values", format!("value {} of pixel {} is not finite", i % channels, i / channels)));
+    }
+    if !tolerance.is_empty() && tolerance.len() != channels {
+        return Err(RokebyError::invalid("tolerance", format!("expected one value per channel ({channels}), got {}", tolerance.len())));
+    }
+    if let Some(t) = tolerance.iter().find(|t| !(t.is_finite() && **t >= 0.0)) {
+        return Err(RokebyError::invalid("tolerance", format!("must be finite and ≥ 0, got {t}")));
+    }
+    let slack: Vec<f64> = if tolerance.is_empty() { vec![0.0; channels] } else { tolerance.to_vec() };
+    if method == Fit::LeastSquares && slack.iter().any(|&t| t > 0.0) {
+        return Err(RokebyError::invalid("tolerance", "only the constrained fit (qp) has constraints to relax"));
     }
     // Hessian H = AᵀA (+ ridge), shared by all channels, and g = Aᵀb per channel; f64.
     let parts: Vec<(Vec<f64>, Vec<f64>)> = normals
@@ -310,7 +330,7 @@ pub fn fit(normals: &[f32], values: &[f32], channels: usize, method: Fit) -> Res
             let stats = residual_pass(normals, values, channels, &x0, &[]).0;
             (x0, vec![0; channels], stats)
         }
-        Fit::Constrained => qp_screened(&chol, normals, values, channels, x0)?,
+        Fit::Constrained => qp_screened(&chol, normals, values, channels, x0, &slack)?,
     };
     Ok(ShFit {
         coeffs,
@@ -322,7 +342,7 @@ pub fn fit(normals: &[f32], values: &[f32], channels: usize, method: Fit) -> Res
 
 /// One chunk of [`residual_pass`] (chunk index `ci`), dispatched like [`normal_equations_chunk`].
 #[allow(clippy::type_complexity)]
-fn residual_chunk(ci: usize, nc: &[f32], vc: &[f32], channels: usize, x: &[[f64; SH_COEFFS]], watch: &[(usize, f64)]) -> (Vec<(f64, f64)>, Vec<Vec<(u32, f64)>>) {
+fn residual_chunk(ci: usize, nc: &[f32], vc: &[f32], channels: usize, x: &[[f64; SH_COEFFS]], watch: &[(usize, f64, f64)]) -> (Vec<(f64, f64)>, Vec<Vec<(u32, f64)>>) {
     #[cfg(target_arch = "x86_64")]
     if std::arch::is_x86_feature_detected!("avx2") {
         // SAFETY: the CPU has AVX2 (checked just above).
@@ -334,13 +354,13 @@ fn residual_chunk(ci: usize, nc: &[f32], vc: &[f32], channels: usize, x: &[[f64;
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2")]
 #[allow(clippy::type_complexity)]
-unsafe fn residual_chunk_avx2(ci: usize, nc: &[f32], vc: &[f32], channels: usize, x: &[[f64; SH_COEFFS]], watch: &[(usize, f64)]) -> (Vec<(f64, f64)>, Vec<Vec<(u32, f64)>>) {
+unsafe fn residual_chunk_avx2(ci: usize, nc: &[f32], vc: &[f32], channels: usize, x: &[[f64; SH_COEFFS]], watch: &[(usize, f64, f64)]) -> (Vec<(f64, f64)>, Vec<Vec<(u32, f64)>>) {
     residual_chunk_any(ci, nc, vc, channels, x, watch)
 }
 
 #[inline(always)]
 #[allow(clippy::type_complexity)]
-fn residual_chunk_any(ci: usize, nc: &[f32], vc: &[f32], channels: usize, x: &[[f64; SH_COEFFS]], watch: &[(usize, f64)]) -> (Vec<(f64, f64)>, Vec<Vec<(u32, f64)>>) {
+fn residual_chunk_any(ci: usize, nc: &[f32], vc: &[f32], channels: usize, x: &[[f64; SH_COEFFS]], watch: &[(usize, f64, f64)]) -> (Vec<(f64, f64)>, Vec<Vec<(u32, f64)>>) {
     let n = nc.len() / 3;
     let mut mx = vec![[f64::NEG_INFINITY; LANES]; channels];
     let mut ss = vec![[0.0f64; LANES]; channels];
@@ -373,9 +393,9 @@ fn residual_chunk_any(ci: usize, nc: &[f32], vc: &[f32], channels: usize, x: &[[
                 }
             }
         }
-        for (w, &(c, tol)) in watch.iter().enumerate() {
+        for (w, &(c, tol, tau)) in watch.iter().enumerate() {
             for l in 0..m {
-                let slack = dots[c][l] - vc[(p0 + l) * channels + c] as f64;
+                let slack = dots[c][l] - (vc[(p0 + l) * channels + c] as f64 - tau);
                 if slack < -tol {
                     viol[w].push(((ci * CHUNK + p0 + l) as u32, slack));
                 }
@@ -388,11 +408,11 @@ fn residual_chunk_any(ci: usize, nc: &[f32], vc: &[f32], channels: usize, x: &[[
 }
 
 /// One pass over the pixels with the coefficients `x[c]`: per channel (largest residual
-/// D0 − D(n), sum of squared residuals), and, for the channels listed in `watch`, the pixels whose
-/// slack D(n) − D0 is below −tol (index, slack), in pixel order. The slack is the one [GI83]
-/// computes (`GiState::run`: dot9(a, x) − b), bit for bit.
+/// D0 − D(n), sum of squared residuals), and, for the channels listed in `watch` as (c, tol, τ),
+/// the pixels whose slack D(n) − (D0 − τ) is below −tol (index, slack), in pixel order. The slack
+/// is the one [GI83] computes (`GiState::run`: dot9(a, x) − b with b = D0 − τ), bit for bit.
 #[allow(clippy::type_complexity)]
-fn residual_pass(normals: &[f32], values: &[f32], channels: usize, x: &[[f64; SH_COEFFS]], watch: &[(usize, f64)]) -> (Vec<(f64, f64)>, Vec<Vec<(u32, f64)>>) {
+fn residual_pass(normals: &[f32], values: &[f32], channels: usize, x: &[[f64; SH_COEFFS]], watch: &[(usize, f64, f64)]) -> (Vec<(f64, f64)>, Vec<Vec<(u32, f64)>>) {
     let parts: Vec<(Vec<(f64, f64)>, Vec<Vec<(u32, f64)>>)> = normals
         .par_chunks(3 * CHUNK)
         .zip(values.par_chunks(channels * CHUNK))
@@ -428,7 +448,7 @@ const SCREEN_BATCH: usize = 512;
 /// optimum of the whole QP (strictly convex: the optimum is unique). Same result as running [GI83]
 /// on all N constraints at once, at a few passes over the pixels instead of one per step.
 #[allow(clippy::type_complexity)]
-fn qp_screened(chol: &Chol, normals: &[f32], values: &[f32], channels: usize, x0: Vec<[f64; SH_COEFFS]>) -> Result<(Vec<[f64; SH_COEFFS]>, Vec<usize>, Vec<(f64, f64)>)> {
+fn qp_screened(chol: &Chol, normals: &[f32], values: &[f32], channels: usize, x0: Vec<[f64; SH_COEFFS]>, slack: &[f64]) -> Result<(Vec<[f64; SH_COEFFS]>, Vec<usize>, Vec<(f64, f64)>)> {
     let n = normals.len() / 3;
     let tols: Vec<f64> = (0..channels)
         .map(|c| {
@@ -445,7 +465,7 @@ fn qp_screened(chol: &Chol, normals: &[f32], values: &[f32], channels: usize, x0
     for p in (0..n).step_by(k) {
         let a = basis(unit_row(&normals[3 * p..3 * p + 3]).expect("validated"));
         for c in 0..channels {
-            let bv = values[p * channels + c] as f64;
+            let bv = values[p * channels + c] as f64 - slack[c];
             if dot9(&a, &st[c].x) - bv < -tols[c] {
                 rows[c].push(a);
                 rhs[c].push(bv);
@@ -466,7 +486,7 @@ fn qp_screened(chol: &Chol, normals: &[f32], values: &[f32], channels: usize, x0
         }
         // One pass over all pixels: the statistics, and the constraints still violated.
         let x: Vec<[f64; SH_COEFFS]> = st.iter().map(|s| s.x).collect();
-        let watch: Vec<(usize, f64)> = open.iter().map(|&c| (c, tols[c])).collect();
+        let watch: Vec<(usize, f64, f64)> = open.iter().map(|&c| (c, tols[c], slack[c])).collect();
         let (stats, viol) = residual_pass(normals, values, channels, &x, &watch);
         let mut still = Vec::new();
         for (w, mut v) in viol.into_iter().enumerate() {
@@ -483,7 +503,7 @@ fn qp_screened(chol: &Chol, normals: &[f32], values: &[f32], channels: usize, x0
             for (p, _) in v {
                 let p = p as usize;
                 rows[c].push(basis(unit_row(&normals[3 * p..3 * p + 3]).expect("validated")));
-                rhs[c].push(values[p * channels + c] as f64);
+                rhs[c].push(values[p * channels + c] as f64 - slack[c]);
             }
             still.push(c);
         }
@@ -881,9 +901,11 @@ mod tests {
 
     /// N random normals (not unit, as the fit normalises them) and C channels of D0: a known SH
     /// environment, `occl` of the pixels darkened (occlusion), plus noise of amplitude `noise`.
+    const TRUTH: [[f64; SH_COEFFS]; 3] = [[1.2, 0.3, 0.5, -0.2, 0.1, 0.05, 0.15, -0.05, 0.04], [1.0, 0.2, 0.45, -0.1, 0.05, 0.02, 0.1, -0.04, 0.03], [0.9, 0.1, 0.4, 0.0, 0.02, 0.01, 0.08, -0.02, 0.02]];
+
     fn scene(n: usize, channels: usize, occl: f64, noise: f64, seed: u64) -> (Vec<f32>, Vec<f32>) {
         let mut st = seed;
-        let truth = [[1.2, 0.3, 0.5, -0.2, 0.1, 0.05, 0.15, -0.05, 0.04], [1.0, 0.2, 0.45, -0.1, 0.05, 0.02, 0.1, -0.04, 0.03], [0.9, 0.1, 0.4, 0.0, 0.02, 0.01, 0.08, -0.02, 0.02]];
+        let truth = TRUTH;
         let mut ns = Vec::with_capacity(3 * n);
         let mut vs = Vec::with_capacity(channels * n);
         for _ in 0..n {
@@ -901,6 +923,52 @@ mod tests {
             }
         }
         (ns, vs)
+    }
+
+    /// Relative RMS of D(n) − D_true(n) over 2000 directions spread over the sphere.
+    fn error_vs_truth(f: &ShFit, c: usize) -> f64 {
+        let (mut e2, mut t2) = (0.0, 0.0);
+        let m = 2000;
+        for i in 0..m {
+            let z = 1.0 - 2.0 * (i as f64 + 0.5) / m as f64;
+            let r = (1.0 - z * z).sqrt();
+            let phi = std::f64::consts::PI * (3.0 - 5f64.sqrt()) * i as f64;
+            let n = [r * phi.cos(), r * phi.sin(), z];
+            let t = eval(&TRUTH[c], n);
+            e2 += (eval(&f.coeffs[c], n) - t).powi(2);
+            t2 += t * t;
+        }
+        (e2 / t2).sqrt()
+    }
+
+    #[test]
+    fn noise_tolerance_keeps_the_qp_near_the_truth_on_noisy_pixels() {
+        // 20% of the pixels occluded (×0.5), uniform noise of ±0.06 (σ ≈ 0.035) on every pixel.
+        let (ns, vs) = scene(30_000, 3, 0.2, 0.06, 11);
+        let qp = fit(&ns, &vs, 3, Fit::Constrained).unwrap();
+        let ls = fit(&ns, &vs, 3, Fit::LeastSquares).unwrap();
+        let tau = [0.06; 3];
+        let tol = fit_with_tolerance(&ns, &vs, 3, Fit::Constrained, &tau).unwrap();
+        for c in 0..3 {
+            let (e_qp, e_ls, e_tol) = (error_vs_truth(&qp, c), error_vs_truth(&ls, c), error_vs_truth(&tol, c));
+            // The plain QP sits on the noise peaks (+0.06 everywhere), LS on the occlusion's average
+            // darkening; the tolerant QP on neither.
+            assert!(e_tol < 0.25 * e_qp && e_tol < 0.25 * e_ls, "ch {c}: tolerant {e_tol} qp {e_qp} ls {e_ls}");
+            assert!(tol.max_residual[c] <= tau[c] + 1e-9, "D0 − D(n) ≤ τ: {}", tol.max_residual[c]);
+            assert!(tol.max_residual[c] > 0.5 * tau[c], "the tolerance is used: {}", tol.max_residual[c]);
+        }
+        // τ = 0 is the paper's QP, bit for bit; a τ above every residual leaves the LS optimum.
+        let zero = fit_with_tolerance(&ns, &vs, 3, Fit::Constrained, &[0.0; 3]).unwrap();
+        assert_eq!(zero.coeffs, qp.coeffs);
+        let loose = fit_with_tolerance(&ns, &vs, 3, Fit::Constrained, &[10.0; 3]).unwrap();
+        assert_eq!(loose.coeffs, ls.coeffs);
+        assert_eq!(loose.iterations, vec![0; 3]);
+        for (t, msg) in [(vec![0.1; 2], "one value per channel"), (vec![0.1, -0.1, 0.1], "≥ 0"), (vec![0.1, f64::NAN, 0.1], "≥ 0")] {
+            let e = fit_with_tolerance(&ns, &vs, 3, Fit::Constrained, &t).unwrap_err().to_string();
+            assert!(e.contains("tolerance") && e.contains(msg), "{e}");
+        }
+        let e = fit_with_tolerance(&ns, &vs, 3, Fit::LeastSquares, &tau).unwrap_err().to_string();
+        assert!(e.contains("tolerance") && e.contains("only the constrained fit"), "{e}");
     }
 
     #[test]

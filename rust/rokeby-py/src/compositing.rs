@@ -74,13 +74,22 @@ fn parse_fit(method: &str) -> PyResult<Fit> {
 /// Order-2 SH fit (eq. 1) of D0 over the pixels of one patch.
 ///
 /// normals (N, 3), values (N, C). Rows with a non-finite or zero normal or a non-finite value are
-/// left out and counted in "masked". method: 'qp' (D(n) >= D0, §3.1) or 'ls'.
-/// Returns {"coeffs": (C, 9) float64, "max_residual", "rms_residual", "iterations": (C,),
-/// "pixels", "masked"}.
+/// left out and counted in "masked". method: 'qp' (D(n) >= D0, §3.1) or 'ls'. tolerance: the
+/// QP's noise tolerance, D(n) >= D0 - tolerance, a number or one per channel (default 0: the
+/// paper's QP). Returns {"coeffs": (C, 9) float64, "max_residual", "rms_residual",
+/// "iterations": (C,), "pixels", "masked"}.
 #[pyfunction]
-#[pyo3(signature = (normals, values, method = "qp"))]
-pub fn sh_fit<'py>(py: Python<'py>, normals: &Bound<'py, PyAny>, values: &Bound<'py, PyAny>, method: &str) -> PyResult<Bound<'py, PyDict>> {
+#[pyo3(signature = (normals, values, method = "qp", tolerance = None))]
+pub fn sh_fit<'py>(py: Python<'py>, normals: &Bound<'py, PyAny>, values: &Bound<'py, PyAny>, method: &str, tolerance: Option<&Bound<'py, PyAny>>) -> PyResult<Bound<'py, PyDict>> {
     let fit = parse_fit(method)?;
+    let tolerance: Vec<f64> = match tolerance {
+        None => Vec::new(),
+        Some(t) => {
+            let np = py.import("numpy")?;
+            let a = np.call_method1("asarray", (t, "float64")).map_err(|e| PyValueError::new_err(format!("tolerance: expected a number or one per channel ({e})")))?;
+            a.call_method0("ravel")?.extract()?
+        }
+    };
     let n = f32_array(normals, "normals")?;
     let v = f32_array(values, "values")?;
     let ns = n.shape();
@@ -122,7 +131,8 @@ pub fn sh_fit<'py>(py: Python<'py>, normals: &Bound<'py, PyAny>, values: &Bound<
         })
     };
     let pixels = ns[0] - masked;
-    let r = run_detached(py, || sh::fit(&keep_n, &keep_v, channels, fit))?;
+    let tolerance = if tolerance.len() == 1 && channels > 1 { vec![tolerance[0]; channels] } else { tolerance };
+    let r = run_detached(py, || sh::fit_with_tolerance(&keep_n, &keep_v, channels, fit, &tolerance))?;
     let d = PyDict::new(py);
     d.set_item("coeffs", array_f64(py, &[channels, SH_COEFFS], r.coeffs.iter().flatten().copied().collect())?)?;
     d.set_item("max_residual", array_f64(py, &[channels], r.max_residual)?)?;
