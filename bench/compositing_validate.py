@@ -169,6 +169,15 @@ def mesh_file(name: str) -> Path:
     return p if p.suffix == ".obj" else SHARED / "meshes" / f"{name}.obj"
 
 
+# The bump decal of C: Noise texture (scale) → Bump (strength, distance). The distance is set: the
+# Bump node's default in Blender 4.5 is 0.001, which turned the first versions' decal (scale 12,
+# strength 1, distance left at that default) into a 0.06° change of the normals — nothing to
+# validate. Distance 0.1 tilts the teapot's normals by 12° (median) and changes its image by ~20%.
+BUMP = (12.0, 1.0, 0.1)
+# The QP with a noise tolerance κσ (compositing.reconstruct's noise_tolerance), measured beside qp and ls.
+TOLERANT = ("qp1", "qp2", "qp3")
+
+
 def scene(kind, hdr, w, h, samples, mesh=None):
     import bpy
 
@@ -203,9 +212,10 @@ def scene(kind, hdr, w, h, samples, mesh=None):
     b.inputs["Metallic"].default_value = 0.0
     if kind == "bumped":
         noise = nt.nodes.new("ShaderNodeTexNoise")
-        noise.inputs["Scale"].default_value = 12.0
+        noise.inputs["Scale"].default_value = BUMP[0]
         bump = nt.nodes.new("ShaderNodeBump")
-        bump.inputs["Strength"].default_value = 1.0
+        bump.inputs["Strength"].default_value = BUMP[1]
+        bump.inputs["Distance"].default_value = BUMP[2]
         nt.links.new(noise.outputs["Fac"], bump.inputs["Height"])
         nt.links.new(bump.outputs["Normal"], b.inputs["Normal"])
     ob.data.materials.clear()
@@ -228,7 +238,8 @@ def scene(kind, hdr, w, h, samples, mesh=None):
 def render(kind, hdr, w, h, samples, mesh, exr_dir, log):
     from rokeby import compositing as C
 
-    name = f"{kind}_{hdr}" + (f"_{Path(mesh).stem}" if mesh else "") + f"_{w}x{h}_{samples}.exr"
+    decal = f"_bump{BUMP[0]:g}-{BUMP[1]:g}-{BUMP[2]:g}" if kind == "bumped" else ""
+    name = f"{kind}_{hdr}" + (f"_{Path(mesh).stem}" if mesh else "") + f"{decal}_{w}x{h}_{samples}.exr"
     path = Path(exr_dir) / name
     if path.exists():
         log.append(f"{name}: reused")
@@ -413,8 +424,10 @@ def mesh_measures(pa, pb, pc, env, fib) -> tuple[dict, dict]:
     db = (pb.diff_dir + pb.diff_ind)[inner]
     rb = (pb.gloss_dir + pb.gloss_ind)[inner]
     recs = {}
-    for method in ("qp", "ls"):
-        rec = C.reconstruct(pa, method=method, warn=False)
+    # The paper's QP, least squares, and the QP with a noise tolerance of κ = 1, 2, 3 σ ("qp2": κ = 2).
+    for method in ("qp", "ls", *TOLERANT):
+        kappa = float(method[2:]) if method in TOLERANT else 0.0
+        rec = C.reconstruct(pa, method=method[:2], noise_tolerance=kappa, warn=False)
         recs[method] = rec
         k = int(np.argmax([r.pixels for r in rec.reports]))
         rep = rec.reports[k]
@@ -426,6 +439,8 @@ def mesh_measures(pa, pb, pc, env, fib) -> tuple[dict, dict]:
         out[f"diffuse_{method}_vs_true_sh"] = diffuse_against_true(
             sh, env["irradiance_coeffs"], rot, {"shown": shown, "front": fib[fib[:, 2] > 0], "full": fib})
     out["patch_pixels"] = rep.pixels
+    sig = recs["qp2"].reports[k].noise_sigma
+    out["noise_rel"] = float(np.mean(sig) / (pa.diff_dir + pa.diff_ind)[recs["qp2"].ids == k].mean())
     out["reflection_coverage"] = rep.coverage
     rec = recs["qp"]  # the maps do not depend on the diffuse fit
     env_map = rec.patches[k]["env"]
@@ -455,8 +470,26 @@ def mesh_measures(pa, pb, pc, env, fib) -> tuple[dict, dict]:
         scale = ref[obj].mean()
         out["bump_recomposited_rel_mean_abs"] = float(np.abs(comp - ref)[obj].mean() / scale)
         out["bump_unedited_rel_mean_abs"] = float(np.abs(pa.image - ref)[obj].mean() / scale)
-        out["bump_recomposited_minus_unedited_detail_corr"] = float(
-            np.corrcoef((comp - pa.image)[obj].ravel(), (ref - pa.image)[obj].ravel())[0, 1])
+        d_pred, d_true = (comp - pa.image)[obj].ravel(), (ref - pa.image)[obj].ravel()
+        out["bump_recomposited_minus_unedited_detail_corr"] = float(np.corrcoef(d_pred, d_true)[0, 1])
+        # The share of the true change (C − A) that recompositing explains: 1 − |ΔC − Δ~|² / |ΔC|²
+        # (1: all of it; 0: no better than leaving A unedited; the noise of A and C bounds it below 1).
+        out["bump_explained"] = float(1.0 - ((d_true - d_pred) ** 2).sum() / max((d_true ** 2).sum(), 1e-30))
+        out["bump_true_change_rel_mean_abs"] = float(np.abs(d_true).mean() / scale)
+        # The same without the 1% of pixels with the largest squared error (highlights of small,
+        # bright sources, where the reflection map extrapolates): how much of the share they take.
+        e2 = ((d_true - d_pred) ** 2).reshape(-1, 3).sum(-1)
+        t2 = (d_true ** 2).reshape(-1, 3).sum(-1)
+        keep = np.argsort(e2)[: len(e2) - max(1, len(e2) // 100)]
+        out["bump_explained_without_worst_1pct"] = float(1.0 - e2[keep].sum() / max(t2[keep].sum(), 1e-30))
+        out["bump_worst_1pct_share_of_squared_error"] = float(1.0 - e2[keep].sum() / max(e2.sum(), 1e-30))
+        # The same with each diffuse fit (the maps are the same): what the fit's choice does to an edit.
+        out["bump_by_fit"] = {}
+        for method, r in recs.items():
+            cm, _ = C.recomposite(pa, r, edited)
+            dp = (cm - pa.image)[obj].ravel()
+            out["bump_by_fit"][method] = {"rel_mean_abs": float(np.abs(cm - ref)[obj].mean() / scale),
+                                          "explained": float(1.0 - ((d_true - dp) ** 2).sum() / max((d_true ** 2).sum(), 1e-30))}
         grid["bump_side"] = np.concatenate([tonemap(pa.image), tonemap(comp), tonemap(ref)], 1)
     return out, grid
 
@@ -485,16 +518,27 @@ def markdown(res) -> str:
         ls, qp = r["diffuse_ls_vs_true_sh"], r["diffuse_qp_vs_true_sh"]
         lines.append(f"| {r['mesh']} | {r['hdr']} | {r['patch_pixels']:,} | {pct(ls['shown'])} | {pct(ls['front'])} | {pct(ls['full'])} "
                      f"| {pct(qp['shown'])} | {pct(qp['front'])} | {pct(qp['full'])} | {pct(r['diffuse_ls_rel_rms'])} | {pct(r['diffuse_qp_rel_rms'])} |")
+    lines += ["", "The QP with a noise tolerance (`reconstruct(..., noise_tolerance=κ)`: D(n) ≥ D0 − κσ, σ the pixel "
+              "noise of D0) against the true SH on the shown normals, beside QP (κ = 0) and LS; and the bump "
+              "recomposited with each fit (relative mean abs. error against the re-render / share of the true change explained):", "",
+              "| mesh | world | σ / mean D0 | QP | κ = 1 | κ = 2 | κ = 3 | LS | bump: QP | κ = 2 | LS |",
+              "|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|"]
+    for r in res["runs"]:
+        sh = [pct(r[f"diffuse_{m}_vs_true_sh"]["shown"]) for m in ("qp", *TOLERANT, "ls")]
+        bf = r.get("bump_by_fit", {})
+        bump = [f"{pct(bf[m]['rel_mean_abs'])} / {pct(bf[m]['explained'])}" if m in bf else "–" for m in ("qp", "qp2", "ls")]
+        lines.append(f"| {r['mesh']} | {r['hdr']} | {pct(r['noise_rel'])} | " + " | ".join(sh + bump) + " |")
     lines += ["", "Reflection: the reconstructed map against P, the HDR prefiltered with GGX at roughness 0.15 "
               "(relative mean abs.; covered = directions the mesh's pixels recover, eq. 2 only; all = with hole filling), "
               "against B's glossy pass, and the bump:", "",
               "| mesh | world | coverage | vs P covered | median ratio covered | vs P all | vs B's pass (covered) | own pixels "
-              "| bump: recomposited / unedited vs re-render | corr. |",
-              "|---|---|---:|---:|---:|---:|---:|---:|---:|---:|"]
+              "| bump: recomposited / unedited vs re-render | corr. | explained |",
+              "|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|"]
     for r in res["runs"]:
         p = r["reflection_vs_prefiltered"]
         b = (f"{pct(r['bump_recomposited_rel_mean_abs'])} / {pct(r['bump_unedited_rel_mean_abs'])} | "
-             f"{r['bump_recomposited_minus_unedited_detail_corr']:.2f}") if "bump_recomposited_rel_mean_abs" in r else "– | –"
+             f"{r['bump_recomposited_minus_unedited_detail_corr']:.2f} | {pct(r['bump_explained'])}") \
+            if "bump_recomposited_rel_mean_abs" in r else "– | – | –"
         lines.append(f"| {r['mesh']} | {r['hdr']} | {pct(p['covered_fraction'])} | {pct(p['covered_rel_mean_abs'])} "
                      f"| {p['covered_median_ratio']:.2f} | {pct(p['all_rel_mean_abs'])} | {pct(r['reflection_rel_mean_abs'])} "
                      f"({pct(r['reflection_rel_mean_abs_covered'])}) | {pct(r['reflection_own_pixels_rel_mean_abs'])} | {b} |")
@@ -507,6 +551,7 @@ def _shown(path) -> str:
 
 
 def main():
+    global BUMP
     from rokeby import envmaps
 
     ap = argparse.ArgumentParser()
@@ -521,16 +566,21 @@ def main():
     ap.add_argument("--size", default="160,120")
     ap.add_argument("--samples", type=int, default=128)
     ap.add_argument("--no-bump", action="store_true")
+    ap.add_argument("--bump", default=",".join(f"{v:g}" for v in BUMP), help="C's decal: Noise scale, Bump strength, distance")
     ap.add_argument("--exr-dir", help="keep the renders here and reuse those already there")
     ap.add_argument("--directions", type=int, default=8192)
     ap.add_argument("--tile", type=int, default=48, help="grid tile size in pixels (each tile: two discs)")
     a = ap.parse_args()
+    BUMP = tuple(float(v) for v in a.bump.split(","))
+    if len(BUMP) != 3:
+        ap.error("--bump: three numbers, scale,strength,distance")
     t_start = time.perf_counter()
     w, h = (int(v) for v in a.size.split(","))
     hdrs = [x.removesuffix(".exr") for x in (a.hdr or a.hdrs).split(",") if x]
     meshes = [mesh_file(x) for x in (a.mesh or a.meshes).split(",") if x]
     res = {"config": {"hdrs": hdrs, "meshes": [m.name for m in meshes], "width": w, "height": h, "samples": a.samples,
-                      "roughness": ROUGHNESS, "directions": a.directions}, "spheres": {}, "runs": [], "renders": []}
+                      "roughness": ROUGHNESS, "directions": a.directions,
+                      "bump": list(BUMP)}, "spheres": {}, "runs": [], "renders": []}
     fib = fibonacci_sphere(a.directions)
     # The bump's side-by-side PNG: forest and the first mesh (the first version's figure), if run.
     bump_key = ("forest" if "forest" in hdrs else hdrs[0], meshes[0])
