@@ -426,6 +426,10 @@ def compositing_section(emit):
             env = dict(os.environ, RAYON_NUM_THREADS=str(threads))
             subprocess.run([sys.executable, str(ROOT / "bench" / "compositing.py"), "--json", str(out)], check=True, stdout=subprocess.DEVNULL, env=env)
             runs[threads] = json.loads(out.read_text())
+        loop_json = Path(tmp) / "loop.json"
+        loop_run = subprocess.run([sys.executable, str(ROOT / "bench" / "composite_edit_loop.py"), "--json", str(loop_json)],
+                                  stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+        edit_loop = json.loads(loop_json.read_text()) if loop_run.returncode == 0 else {"error": loop_run.stderr[-400:]}
     one, many = runs[1], runs[os.cpu_count()]
     emit(COMPOSITING_MARKER + "reconstruction stages and recompositing (Zubiaga et al. 2016)")
     emit()
@@ -463,6 +467,24 @@ def compositing_section(emit):
     else:
         emit(f"GLSL path not measured: {rn_.get('glsl_error', 'no result')}.")
     emit(f"Peak memory of the benchmark process after it: {rn_['peak_rss_mb']:.0f} MB ({rn_['inputs_mb']:.0f} MB of it the float32 input buffers).")
+    emit()
+    emit("*Recomposite Render*'s loop (bench/composite_edit_loop.py: `api.recomposite_exr` on a Cycles frame with three")
+    emit("objects and the passes, in bpy): the first edit of the file reads and reconstructs it; each further edit of the")
+    emit("same frame (one change in the operator's redo panel) costs the normal edit, eqs. 3-5 and writing the Blender image.")
+    if "error" in edit_loop:
+        emit(f"Not measured: {edit_loop['error']}")
+    else:
+        emit()
+        emit("| backend | frame | first edit (open) | next edit: normals | eqs. 3-5 | image | total |")
+        emit("|---|---|---:|---:|---:|---:|---:|")
+        for key, label in (("cpu", "CPU (Rust)"), ("blender_gpu", f"Blender gpu ({edit_loop.get('renderer', '?')})")):
+            r = edit_loop.get(key)
+            if r is None:
+                emit(f"| {label} | not measured: {edit_loop.get(key + '_error', '?')} | | | | | |")
+                continue
+            emit(f"| {label} | {edit_loop['width']}x{edit_loop['height']}, {r['edited']:,} px edited | {r['first_ms']:.0f} ms ({r['first_open_ms']:.0f}) "
+                 f"| {r['edit_ms']:.1f} ms | {r['recomposite_ms']:.0f} ms | {r['show_ms']:.0f} ms | {r['total_ms']:.0f} ms |")
+    emit()
     emit(f"Load average at the end: {os.getloadavg()[0]:.1f} on {os.cpu_count()} CPUs (other jobs shared the machine).")
     emit()
 

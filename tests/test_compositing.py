@@ -364,6 +364,76 @@ def test_session_frames_equal_one_shot_recompositing_bit_for_bit():
     assert session(e)[0].tobytes() == C.recomposite(p, rec, e)[0].tobytes()
 
 
+def _numpy_unit(a):
+    n = np.linalg.norm(a, axis=-1, keepdims=True)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        return np.where(n > 1e-12, a / n, 0.0).astype(np.float32)
+
+
+def _numpy_apply(n, new, mask):
+    """The normal tools' rule, written independently in numpy (the tools' first implementation)."""
+    out = _numpy_unit(new)
+    keep = ~(np.abs(n).sum(-1) > 0) | (new == n).all(-1)
+    if mask is not None:
+        keep |= ~(np.asarray(mask) > 0.5)
+    out[keep] = n[keep]
+    return out
+
+
+def test_native_normal_tools_match_a_numpy_reference(rng):
+    """emboss and bump (rokeby_core::normals) give the numpy formulas' bits; the bilateral filter
+    agrees with a numpy loop over the window to 1 ulp of f32 — except next to a NaN normal, which the
+    numpy loop spread as NaN (0 · NaN) into zero normals over its window, and which the core skips."""
+    from rokeby import compositing as C
+
+    h, w = 90, 160
+    n = rng.normal(size=(h, w, 3)).astype(np.float32)
+    n /= np.linalg.norm(n, axis=-1, keepdims=True)
+    n[:10] = 0  # background
+    mask = rng.random((h, w)) > 0.3
+    hgt = rng.normal(size=(h, w)).astype(np.float32)
+    e = n.copy()
+    e[..., 2] *= 0.4
+    np.testing.assert_array_equal(C.emboss(n, 0.4, mask), _numpy_apply(n, e, mask))
+    gy, gx = np.gradient(hgt)
+    e = n.copy()
+    e[..., 0] -= 1.3 * gx
+    e[..., 1] += 1.3 * gy
+    np.testing.assert_array_equal(C.bump(n, hgt, 1.3, mask), _numpy_apply(n, e, mask))
+    depth = (5 + rng.random((h, w))).astype(np.float32)
+    depth[40:44] = np.inf
+    sigma_s, sigma_d, r = 1.5, 0.05, 3
+    valid = (np.abs(n).sum(-1) > 0) & np.isfinite(depth)
+    acc, wsum = np.zeros((h, w, 2)), np.zeros((h, w))
+    for dy in range(-r, r + 1):
+        for dx in range(-r, r + 1):
+            ys, xs = slice(max(0, -dy), min(h, h - dy)), slice(max(0, -dx), min(w, w - dx))
+            yq, xq = slice(max(0, dy), min(h, h + dy)), slice(max(0, dx), min(w, w + dx))
+            with np.errstate(invalid="ignore", over="ignore"):
+                rel = (depth[yq, xq].astype(np.float64) - depth[ys, xs]) / np.maximum(np.abs(depth[ys, xs]), 1e-6)
+                wt = np.exp(-(dx * dx + dy * dy) / (2 * sigma_s ** 2)) * np.exp(-0.5 * np.nan_to_num(rel / sigma_d, nan=1e6) ** 2)
+            wt = np.where(valid[yq, xq] & valid[ys, xs], wt, 0.0)
+            acc[ys, xs] += wt[..., None] * np.where(valid[yq, xq, None], n[yq, xq, :2], 0.0)
+            wsum[ys, xs] += wt
+    nbar = acc / np.maximum(wsum, 1e-300)[..., None]
+    ref = np.concatenate([nbar, np.sqrt(1 - np.minimum((nbar ** 2).sum(-1), 1))[..., None]], -1).astype(np.float32)
+    ref = _numpy_apply(n, ref, valid & mask)
+    got = C.bilateral_smooth(n, depth, sigma_s, sigma_d, mask)
+    np.testing.assert_allclose(got, ref, atol=2e-7, rtol=0)
+    n2 = n.copy()
+    n2[60, 80] = np.nan
+    got2 = C.bilateral_smooth(n2, depth, sigma_s, sigma_d, mask)
+    around = got2[57:64, 77:84].reshape(-1, 3)
+    assert np.isnan(got2[60, 80]).all() and np.isfinite(np.delete(around, 24, 0)).all()
+    assert (np.linalg.norm(np.delete(around, 24, 0), axis=-1) > 0.99).all()  # not zeroed
+    with pytest.raises(C.CompositingError, match="sigma_s: at most 50 pixels"):
+        C.bilateral_smooth(n, depth, 80.0)
+    with pytest.raises(C.CompositingError, match="mask: expected shape"):
+        C.emboss(n, 0.5, mask[:-1])
+    with pytest.raises(C.CompositingError, match="normals: expected shape"):
+        C.emboss(n[..., :2], 0.5)
+
+
 def test_normal_tools():
     from rokeby import compositing as C
 

@@ -194,9 +194,10 @@ def show_image(name: str, pixels: np.ndarray):
         if img is not None:
             bpy.data.images.remove(img)
         img = bpy.data.images.new(name, w, h, alpha=True, float_buffer=True)
-    rgba = np.ones((h, w, 4), np.float32)
-    rgba[..., :3] = pixels
-    img.pixels.foreach_set(rgba[::-1].ravel())  # Blender stores the bottom row first
+    rgba = np.empty((h, w, 4), np.float32)
+    rgba[..., :3] = pixels[::-1]  # Blender stores the bottom row first
+    rgba[..., 3] = 1.0
+    img.pixels.foreach_set(rgba.reshape(-1))
     img.update()
     return img
 
@@ -982,24 +983,21 @@ def recomposite_gpu(ids, normals, edited_normals, view, diffuse, reflection, ima
 
 # --- normal-editing tools (screen-space normals (H, W, 3); `mask` (H, W) limits the edit) ---------
 
-def _apply(n: np.ndarray, new: np.ndarray, mask) -> np.ndarray:
-    """Renormalised ``new`` where it differs from ``n`` (inside ``mask``, on surfaces); elsewhere
-    ``n`` bit for bit, so that an edit that changes nothing leaves the image exactly as it was."""
-    out = _unit(new)
-    keep = ~(np.abs(n).sum(-1) > 0) | (new == n).all(-1)
-    if mask is not None:
-        keep |= ~(np.asarray(mask) > 0.5)
-    out[keep] = n[keep]
-    return out
+def _native_edit(fn, *args, **kw) -> np.ndarray:
+    """A normal tool of the Rust core (``rokeby_core::normals``), its ValueErrors as CompositingError."""
+    try:
+        return fn(*args, **kw)
+    except ValueError as exc:
+        raise CompositingError(str(exc)) from None
 
 
 def emboss(normals: np.ndarray, beta: float, mask=None) -> np.ndarray:
-    """Normal embossing (LUMO): n_z → β n_z, renormalised; β ∈ (0, 1] makes the surface bulge."""
+    """Normal embossing (LUMO): n_z → β n_z, renormalised; β ∈ (0, 1] makes the surface bulge.
+    Background pixels (|n|₁ = 0), pixels outside ``mask`` (H, W; > 0.5 edits) and pixels the edit
+    leaves unchanged keep their input bits (``rokeby_core::normals``, rows in parallel)."""
     if not 0 < beta <= 1:
         raise CompositingError(f"beta: must be in (0, 1], got {beta}")
-    e = normals.astype(np.float32).copy()
-    e[..., 2] *= beta
-    return _apply(normals, e, mask)
+    return _native_edit(native.module().normals_emboss, normals, beta, mask)
 
 
 def ripple(shape, center=None, wavelength: float = 24.0, radius: float | None = None) -> np.ndarray:
@@ -1014,40 +1012,18 @@ def ripple(shape, center=None, wavelength: float = 24.0, radius: float | None = 
 
 def bump(normals: np.ndarray, height: np.ndarray, strength: float = 1.0, mask=None) -> np.ndarray:
     """Bump mapping in screen space: ñ = normalize(n − s ∇h), ∇h = (∂h/∂col, −∂h/∂row, 0)
-    (rows go down, screen y goes up); ``height`` (H, W) in pixels of height per pixel."""
-    if height.shape != normals.shape[:2]:
-        raise CompositingError(f"height: expected shape {normals.shape[:2]} like the normals, got {height.shape}")
-    gy, gx = np.gradient(height.astype(np.float32))
-    e = normals.astype(np.float32).copy()
-    e[..., 0] -= strength * gx
-    e[..., 1] += strength * gy
-    return _apply(normals, e, mask)
+    (rows go down, screen y goes up; the gradient as ``np.gradient`` takes it); ``height`` (H, W)
+    in pixels of height per pixel. Kept pixels as for ``emboss``."""
+    height = np.asarray(height)
+    if height.shape != np.shape(normals)[:2]:
+        raise CompositingError(f"height: expected shape {np.shape(normals)[:2]} like the normals, got {height.shape}")
+    return _native_edit(native.module().normals_bump, normals, height, float(strength), mask)
 
 
 def bilateral_smooth(normals: np.ndarray, depth: np.ndarray, sigma_s: float = 3.0, sigma_d: float = 0.02,
                      mask=None) -> np.ndarray:
     """Cross-bilateral filter of the projected normals (n_x, n_y) with a depth range kernel
-    (relative depth difference, σ_d), so occluding contours are kept; n_z = √(1 − |n̄|²)."""
-    r = max(1, int(math.ceil(2 * sigma_s)))
-    h, w = depth.shape
-    nb = normals[..., :2].astype(np.float64)
-    valid = (np.abs(normals).sum(-1) > 0) & np.isfinite(depth)
-    dep = np.where(valid, depth, np.inf)
-    pad = lambda a, v: np.pad(a, [(r, r), (r, r)] + [(0, 0)] * (a.ndim - 2), constant_values=v)  # noqa: E731
-    nbp, dp, vp = pad(nb, 0.0), pad(dep, np.inf), pad(valid, False)
-    acc = np.zeros_like(nb)
-    wsum = np.zeros((h, w))
-    for dy in range(-r, r + 1):
-        for dx in range(-r, r + 1):
-            ws = math.exp(-(dx * dx + dy * dy) / (2 * sigma_s * sigma_s))
-            dq = dp[r + dy:r + dy + h, r + dx:r + dx + w]
-            with np.errstate(invalid="ignore"):
-                rel = (dq - dep) / np.maximum(np.abs(dep), 1e-6)
-            wt = ws * np.exp(-0.5 * np.nan_to_num(rel / sigma_d, nan=1e6, posinf=1e6, neginf=-1e6) ** 2) * vp[r + dy:r + dy + h, r + dx:r + dx + w]
-            acc += wt[..., None] * nbp[r + dy:r + dy + h, r + dx:r + dx + w]
-            wsum += wt
-    nbar = acc / np.maximum(wsum, 1e-300)[..., None]
-    l2 = np.minimum((nbar ** 2).sum(-1), 1.0)
-    e = np.concatenate([nbar, np.sqrt(1 - l2)[..., None]], -1).astype(np.float32)
-    m = valid if mask is None else (valid & (np.asarray(mask) > 0.5))
-    return _apply(normals, e, m)
+    (relative depth difference, σ_d), so occluding contours are kept; n_z = √(1 − |n̄|²). Window
+    radius ⌈2σ_s⌉ (σ_s ≤ 50 pixels); pixels without a finite depth or normal neither move nor
+    weigh. Kept pixels as for ``emboss``."""
+    return _native_edit(native.module().normals_bilateral, normals, depth, float(sigma_s), float(sigma_d), mask)

@@ -24,6 +24,7 @@ pub mod geodesic;
 pub mod intrinsic;
 pub mod light_space;
 pub mod mls2d;
+pub mod normals;
 pub mod polar;
 pub mod prefilter;
 pub mod reconstruct;

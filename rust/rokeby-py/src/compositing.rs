@@ -9,6 +9,7 @@ use numpy::{IntoPyArray, PyArrayDyn, PyArrayMethods, PyUntypedArrayMethods};
 use pyo3::exceptions::{PyRuntimeError, PyTypeError, PyValueError};
 use pyo3::prelude::*;
 use pyo3::types::{PyDict, PyList};
+use rokeby_core::normals;
 use rokeby_core::recomposite::{self as core_recomposite, Buffers, Params, Patch};
 use rokeby_core::reconstruct::{self, ParaboloidMap, ReflectionParams};
 use rokeby_core::sh::{self, Fit, SH_COEFFS};
@@ -454,7 +455,52 @@ pub fn recomposite<'py>(
     Ok((array_f32(py, &[h, w, 3], out)?, stats))
 }
 
+/// The edit mask of the normal tools: None, or (H, W) bool/float (> 0.5: may be edited).
+fn edit_mask(mask: Option<&Bound<'_, PyAny>>, h: usize, w: usize) -> PyResult<Option<Vec<bool>>> {
+    Ok(image1(mask, "mask", h, w)?.map(|m| m.slice().iter().map(|&v| v > 0.5).collect()))
+}
+
+/// Embossing of screen-space normals (H, W, 3): n_z → β n_z, renormalised, β in (0, 1]; background,
+/// masked-out and unchanged pixels keep their input bits. Returns (H, W, 3) float32.
+#[pyfunction]
+#[pyo3(signature = (normals, beta, mask = None))]
+pub fn normals_emboss<'py>(py: Python<'py>, normals: &Bound<'py, PyAny>, beta: f32, mask: Option<&Bound<'py, PyAny>>) -> PyResult<Bound<'py, PyArrayDyn<f32>>> {
+    let (n, h, w) = image3(normals, "normals", None)?;
+    let m = edit_mask(mask, h, w)?;
+    let ns = n.slice();
+    let out = run_detached(py, || normals::emboss(ns, &normals::Frame { width: w, height: h, mask: m.as_deref() }, beta))?;
+    array_f32(py, &[h, w, 3], out)
+}
+
+/// Bump mapping: ñ = normalize(n − strength ∇height), ∇h = (∂h/∂col, −∂h/∂row, 0); height (H, W).
+#[pyfunction]
+#[pyo3(signature = (normals, height, strength = 1.0, mask = None))]
+pub fn normals_bump<'py>(py: Python<'py>, normals: &Bound<'py, PyAny>, height: &Bound<'py, PyAny>, strength: f32, mask: Option<&Bound<'py, PyAny>>) -> PyResult<Bound<'py, PyArrayDyn<f32>>> {
+    let (n, h, w) = image3(normals, "normals", None)?;
+    let hh = image1(Some(height), "height", h, w)?.expect("given");
+    let m = edit_mask(mask, h, w)?;
+    let (ns, hs) = (n.slice(), hh.slice());
+    let out = run_detached(py, || normals::bump(ns, &normals::Frame { width: w, height: h, mask: m.as_deref() }, hs, strength))?;
+    array_f32(py, &[h, w, 3], out)
+}
+
+/// Cross-bilateral smoothing of the normals with depth (H, W): spatial σ_s pixels, range σ_d on
+/// the relative depth difference; n_z = √(1 − |n̄|²).
+#[pyfunction]
+#[pyo3(signature = (normals, depth, sigma_s = 3.0, sigma_d = 0.02, mask = None))]
+pub fn normals_bilateral<'py>(py: Python<'py>, normals: &Bound<'py, PyAny>, depth: &Bound<'py, PyAny>, sigma_s: f64, sigma_d: f64, mask: Option<&Bound<'py, PyAny>>) -> PyResult<Bound<'py, PyArrayDyn<f32>>> {
+    let (n, h, w) = image3(normals, "normals", None)?;
+    let d = image1(Some(depth), "depth", h, w)?.expect("given");
+    let m = edit_mask(mask, h, w)?;
+    let (ns, ds) = (n.slice(), d.slice());
+    let out = run_detached(py, || normals::bilateral(ns, &normals::Frame { width: w, height: h, mask: m.as_deref() }, ds, sigma_s, sigma_d))?;
+    array_f32(py, &[h, w, 3], out)
+}
+
 pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    m.add_function(wrap_pyfunction!(normals_emboss, m)?)?;
+    m.add_function(wrap_pyfunction!(normals_bump, m)?)?;
+    m.add_function(wrap_pyfunction!(normals_bilateral, m)?)?;
     m.add_function(wrap_pyfunction!(sh_fit, m)?)?;
     m.add_function(wrap_pyfunction!(sh_eval, m)?)?;
     m.add_function(wrap_pyfunction!(reflect_dirs, m)?)?;

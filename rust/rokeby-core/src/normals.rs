@@ -1,0 +1,322 @@
+//! The normal-editing tools of compositing-stage shape editing (Zubiaga et al. 2016, §5 and
+//! Fig. 1: "embossing", bump decals and smoothing of the normal buffer), on screen-space normal
+//! buffers (H×W×3 f32, rows top first, x right, y up, z towards the viewer).
+//!
+//! Every tool follows one rule (`apply`): the edited normal is renormalised (f32) where it
+//! differs from the input, and the input is kept bit for bit elsewhere — on background pixels
+//! (|n|₁ = 0, or not finite), outside the mask, and where the edit changes nothing — so that an
+//! edit that changes nothing leaves the recomposited image exactly as it was (eqs. 3–5 take the
+//! identity path there).
+//!
+//! * [`emboss`]: n_z → β n_z (β ∈ (0, 1]: the surface bulges; the paper's LUMO-style emboss).
+//! * [`bump`]: ñ = normalize(n − s ∇h), ∇h = (∂h/∂col, −∂h/∂row, 0), with the gradient as
+//!   numpy's `gradient` takes it (central differences inside, one-sided at the borders).
+//! * [`bilateral`]: a cross-bilateral filter of (n_x, n_y) with a spatial Gaussian σ_s (pixels,
+//!   window radius ⌈2σ_s⌉) and a range Gaussian on the relative depth difference σ_d, so that
+//!   occluding contours stay sharp; n_z = √(1 − |n̄|²). Accumulated in f64.
+//!
+//! Rows run in parallel (rayon); the output does not depend on the number of threads.
+
+use crate::error::{Result, RokebyError};
+use rayon::prelude::*;
+
+/// The largest spatial σ of [`bilateral`], in pixels (its window is ⌈2σ⌉ pixels each way).
+pub const MAX_SIGMA_S: f64 = 50.0;
+
+/// A screen-space normal buffer's size, and the optional edit mask (true: may be edited).
+#[derive(Clone, Copy)]
+pub struct Frame<'a> {
+    pub width: usize,
+    pub height: usize,
+    pub mask: Option<&'a [bool]>,
+}
+
+impl Frame<'_> {
+    fn check(&self, normals: &[f32]) -> Result<()> {
+        let px = self.width * self.height;
+        if px == 0 {
+            return Err(RokebyError::invalid("normals", "the frame is empty"));
+        }
+        if normals.len() != 3 * px {
+            return Err(RokebyError::invalid("normals", format!("expected {}×{}×3 values, got {}", self.height, self.width, normals.len())));
+        }
+        if let Some(m) = self.mask {
+            if m.len() != px {
+                return Err(RokebyError::invalid("mask", format!("expected {}×{} values like the normals, got {}", self.height, self.width, m.len())));
+            }
+        }
+        Ok(())
+    }
+}
+
+/// f32 unit vector as `compositing._unit` makes it: e/‖e‖ when ‖e‖ > 1e-12, else 0.
+#[inline]
+fn unit(e: [f32; 3]) -> [f32; 3] {
+    let l = (e[0] * e[0] + e[1] * e[1] + e[2] * e[2]).sqrt();
+    if l > 1e-12 {
+        [e[0] / l, e[1] / l, e[2] / l]
+    } else {
+        [0.0; 3]
+    }
+}
+
+/// The rule shared by the tools: for each pixel, `edit(i, n)` proposes ñ; the result is
+/// unit(ñ) unless the pixel is background (|n|₁ not > 0), masked out, or ñ equals n exactly.
+fn apply<F>(normals: &[f32], f: &Frame, edit: F) -> Vec<f32>
+where
+    F: Fn(usize, [f32; 3]) -> [f32; 3] + Sync,
+{
+    let w = f.width;
+    let mut out = vec![0.0f32; normals.len()];
+    out.par_chunks_mut(3 * w).enumerate().for_each(|(y, row)| {
+        for x in 0..w {
+            let i = y * w + x;
+            let n = [normals[3 * i], normals[3 * i + 1], normals[3 * i + 2]];
+            let on = n[0].abs() + n[1].abs() + n[2].abs() > 0.0 && f.mask.is_none_or(|m| m[i]);
+            let r = if on {
+                let e = edit(i, n);
+                if e == n {
+                    n
+                } else {
+                    unit(e)
+                }
+            } else {
+                n
+            };
+            row[3 * x..3 * x + 3].copy_from_slice(&r);
+        }
+    });
+    out
+}
+
+/// Embossing: n_z → β n_z, renormalised; β ∈ (0, 1].
+pub fn emboss(normals: &[f32], f: &Frame, beta: f32) -> Result<Vec<f32>> {
+    f.check(normals)?;
+    if !(beta > 0.0 && beta <= 1.0) {
+        return Err(RokebyError::invalid("beta", format!("must be in (0, 1], got {beta}")));
+    }
+    Ok(apply(normals, f, |_, n| [n[0], n[1], n[2] * beta]))
+}
+
+/// ∂h/∂row and ∂h/∂col at pixel (y, x) as numpy's `gradient` (edge order 1): central differences
+/// inside, one-sided at the borders, 0 along an axis of length 1.
+#[inline]
+fn gradient(h: &[f32], w: usize, rows: usize, y: usize, x: usize) -> (f32, f32) {
+    let at = |yy: usize, xx: usize| h[yy * w + xx];
+    let d = |len: usize, k: usize, get: &dyn Fn(usize) -> f32| -> f32 {
+        if len < 2 {
+            0.0
+        } else if k == 0 {
+            get(1) - get(0)
+        } else if k == len - 1 {
+            get(len - 1) - get(len - 2)
+        } else {
+            (get(k + 1) - get(k - 1)) / 2.0
+        }
+    };
+    (d(rows, y, &|yy| at(yy, x)), d(w, x, &|xx| at(y, xx)))
+}
+
+/// Bump mapping in screen space: ñ = normalize(n − s ∇h) with ∇h = (∂h/∂col, −∂h/∂row, 0);
+/// `height` (H×W) in pixels of height per pixel.
+pub fn bump(normals: &[f32], f: &Frame, height: &[f32], strength: f32) -> Result<Vec<f32>> {
+    f.check(normals)?;
+    if height.len() != f.width * f.height {
+        return Err(RokebyError::invalid("height", format!("expected {}×{} values like the normals, got {}", f.height, f.width, height.len())));
+    }
+    if !strength.is_finite() {
+        return Err(RokebyError::invalid("strength", format!("must be finite, got {strength}")));
+    }
+    let (w, rows) = (f.width, f.height);
+    Ok(apply(normals, f, |i, n| {
+        let (gy, gx) = gradient(height, w, rows, i / w, i % w);
+        [n[0] - strength * gx, n[1] + strength * gy, n[2]]
+    }))
+}
+
+/// Cross-bilateral smoothing of the normals with depth: per pixel, the weighted mean of (n_x, n_y)
+/// over the window |dx|, |dy| ≤ r = max(1, ⌈2σ_s⌉) of valid pixels q (finite depth, |n|₁ > 0),
+/// weights exp(−(dx² + dy²)/(2σ_s²)) · exp(−½ ((d_q − d_p)/max(|d_p|, 1e-6)/σ_d)²), summed in
+/// the window's row-major order in f64; n_z = √(1 − min(|n̄|², 1)).
+pub fn bilateral(normals: &[f32], f: &Frame, depth: &[f32], sigma_s: f64, sigma_d: f64) -> Result<Vec<f32>> {
+    f.check(normals)?;
+    let (w, rows) = (f.width, f.height);
+    if depth.len() != w * rows {
+        return Err(RokebyError::invalid("depth", format!("expected {rows}×{w} values like the normals, got {}", depth.len())));
+    }
+    if !(sigma_s.is_finite() && sigma_s > 0.0) {
+        return Err(RokebyError::invalid("sigma_s", format!("must be positive and finite, got {sigma_s}")));
+    }
+    if !(sigma_d.is_finite() && sigma_d > 0.0) {
+        return Err(RokebyError::invalid("sigma_d", format!("must be positive and finite, got {sigma_d}")));
+    }
+    if sigma_s > MAX_SIGMA_S {
+        return Err(RokebyError::invalid("sigma_s", format!("at most {MAX_SIGMA_S} pixels (a window of {0}×{0} pixels around every pixel), got {sigma_s}", 2 * (2.0 * MAX_SIGMA_S).ceil() as usize + 1)));
+    }
+    let r = ((2.0 * sigma_s).ceil() as usize).max(1);
+    let valid = |i: usize| {
+        let n = &normals[3 * i..3 * i + 3];
+        n[0].abs() + n[1].abs() + n[2].abs() > 0.0 && depth[i].is_finite()
+    };
+    let side = 2 * r + 1;
+    let ws: Vec<f64> = (0..side * side)
+        .map(|k| {
+            let (dy, dx) = ((k / side) as f64 - r as f64, (k % side) as f64 - r as f64);
+            (-(dx * dx + dy * dy) / (2.0 * sigma_s * sigma_s)).exp()
+        })
+        .collect();
+    let inv_sd = 1.0 / sigma_d;
+    let edit = |i: usize, n: [f32; 3]| -> [f32; 3] {
+        if !valid(i) {
+            return n; // kept by the rule below (masked: not valid)
+        }
+        let (y, x) = ((i / w) as isize, (i % w) as isize);
+        let dp = depth[i] as f64;
+        let scale = dp.abs().max(1e-6);
+        let (mut ax, mut ay, mut wsum) = (0.0f64, 0.0f64, 0.0f64);
+        for dy in -(r as isize)..=(r as isize) {
+            let yy = y + dy;
+            if yy < 0 || yy >= rows as isize {
+                continue;
+            }
+            for dx in -(r as isize)..=(r as isize) {
+                let xx = x + dx;
+                if xx < 0 || xx >= w as isize {
+                    continue;
+                }
+                let q = yy as usize * w + xx as usize;
+                if !valid(q) {
+                    continue;
+                }
+                let rel = (depth[q] as f64 - dp) / scale * inv_sd;
+                let wt = ws[(dy + r as isize) as usize * side + (dx + r as isize) as usize] * (-0.5 * rel * rel).exp();
+                ax += wt * normals[3 * q] as f64;
+                ay += wt * normals[3 * q + 1] as f64;
+                wsum += wt;
+            }
+        }
+        let d = wsum.max(1e-300);
+        let (mx, my) = (ax / d, ay / d);
+        let l2 = (mx * mx + my * my).min(1.0);
+        [mx as f32, my as f32, (1.0 - l2).sqrt() as f32]
+    };
+    Ok(apply(normals, f, edit))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn sphere(w: usize) -> (Vec<f32>, Vec<f32>) {
+        let mut n = vec![0.0f32; 3 * w * w];
+        let mut d = vec![f32::INFINITY; w * w];
+        for y in 0..w {
+            for x in 0..w {
+                let (u, v) = ((x as f32 + 0.5) / w as f32 * 2.0 - 1.0, 1.0 - (y as f32 + 0.5) / w as f32 * 2.0);
+                let s = u * u + v * v;
+                if s < 1.0 {
+                    let i = y * w + x;
+                    n[3 * i..3 * i + 3].copy_from_slice(&[u, v, (1.0 - s).sqrt()]);
+                    d[i] = 5.0 - (1.0 - s).sqrt();
+                }
+            }
+        }
+        (n, d)
+    }
+
+    #[test]
+    fn tools_keep_background_masked_and_unchanged_pixels_bit_for_bit() {
+        let w = 40;
+        let (n, d) = sphere(w);
+        let mask: Vec<bool> = (0..w * w).map(|i| i % w < w / 2).collect();
+        let f = Frame { width: w, height: w, mask: Some(&mask) };
+        let h: Vec<f32> = (0..w * w).map(|i| ((i % w) as f32 * 0.3).sin() * 2.0).collect();
+        for out in [emboss(&n, &f, 0.5).unwrap(), bump(&n, &f, &h, 1.0).unwrap(), bilateral(&n, &f, &d, 2.0, 0.02).unwrap()] {
+            for i in 0..w * w {
+                let (a, b) = (&out[3 * i..3 * i + 3], &n[3 * i..3 * i + 3]);
+                let bg = b.iter().all(|&v| v == 0.0);
+                if bg || !mask[i] {
+                    assert_eq!(a, b, "pixel {i} must be kept");
+                } else {
+                    let l = (a[0] * a[0] + a[1] * a[1] + a[2] * a[2]).sqrt();
+                    assert!((l - 1.0).abs() < 1e-6, "unit: {l}");
+                }
+            }
+        }
+        // β = 1 and a flat height change nothing: the input comes back bit for bit.
+        let all = Frame { width: w, height: w, mask: None };
+        assert_eq!(emboss(&n, &all, 1.0).unwrap(), n);
+        assert_eq!(bump(&n, &all, &vec![3.0; w * w], 2.0).unwrap(), n);
+    }
+
+    #[test]
+    fn emboss_and_bump_do_what_they_say() {
+        let w = 32;
+        let (n, _) = sphere(w);
+        let f = Frame { width: w, height: w, mask: None };
+        let e = emboss(&n, &f, 0.25).unwrap();
+        let i = (w / 2) * w + w / 4; // left of the centre: n_x < 0
+        let (a, b) = (&n[3 * i..3 * i + 3], &e[3 * i..3 * i + 3]);
+        assert!(b[2] < a[2] && b[0].abs() > a[0].abs() && b[0] * a[0] > 0.0);
+        // A ramp h = col: ∇h = (1, 0) → ñ ∝ n − s(1, 0, 0) on every surface pixel.
+        let h: Vec<f32> = (0..w * w).map(|i| (i % w) as f32).collect();
+        let bu = bump(&n, &f, &h, 0.5).unwrap();
+        let want = unit([a[0] - 0.5, a[1], a[2]]);
+        assert_eq!(&bu[3 * i..3 * i + 3], &want);
+        // Rows go down, screen y up: h = row gives ∂h/∂row = 1 → ñ_y = n_y + s.
+        let hv: Vec<f32> = (0..w * w).map(|i| (i / w) as f32).collect();
+        let bv = bump(&n, &f, &hv, 0.5).unwrap();
+        assert_eq!(&bv[3 * i..3 * i + 3], &unit([a[0], a[1] + 0.5, a[2]]));
+    }
+
+    #[test]
+    fn bilateral_smooths_surfaces_and_keeps_depth_edges() {
+        // Two planes at different depths, normals noisy; the filter must not mix them.
+        let (w, rows) = (48, 24);
+        let mut n = vec![0.0f32; 3 * w * rows];
+        let mut d = vec![0.0f32; w * rows];
+        let mut st = 12345u64;
+        for i in 0..w * rows {
+            st = st.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+            let jitter = ((st >> 33) as f32 / (1u64 << 31) as f32 - 0.5) * 0.2;
+            let left = i % w < w / 2;
+            let (nx, dep) = if left { (0.5 + jitter, 2.0) } else { (-0.5 + jitter, 8.0) };
+            n[3 * i..3 * i + 3].copy_from_slice(&unit([nx, 0.0, 0.8]));
+            d[i] = dep;
+        }
+        let f = Frame { width: w, height: rows, mask: None };
+        let s = bilateral(&n, &f, &d, 3.0, 0.02).unwrap();
+        let spread = |a: &[f32], left: bool| {
+            let xs: Vec<f32> = (0..w * rows).filter(|i| (i % w < w / 2) == left).map(|i| a[3 * i]).collect();
+            let m = xs.iter().sum::<f32>() / xs.len() as f32;
+            (m, (xs.iter().map(|x| (x - m) * (x - m)).sum::<f32>() / xs.len() as f32).sqrt())
+        };
+        for left in [true, false] {
+            let (m0, s0) = spread(&n, left);
+            let (m1, s1) = spread(&s, left);
+            assert!(s1 < 0.3 * s0, "smoothed: {s1} vs {s0}");
+            assert!((m1 - m0).abs() < 0.01, "the depth edge keeps the planes apart: {m1} vs {m0}");
+        }
+        // Threads do not change the result.
+        let one = rayon::ThreadPoolBuilder::new().num_threads(1).build().unwrap().install(|| bilateral(&n, &f, &d, 3.0, 0.02).unwrap());
+        assert_eq!(one, s);
+    }
+
+    #[test]
+    fn bad_arguments_are_named() {
+        let (n, d) = sphere(8);
+        let f = Frame { width: 8, height: 8, mask: None };
+        let err = |r: Result<Vec<f32>>| r.unwrap_err().to_string();
+        assert!(err(emboss(&n, &f, 0.0)).contains("beta"));
+        assert!(err(emboss(&n, &f, f32::NAN)).contains("beta"));
+        assert!(err(emboss(&n[..9], &f, 0.5)).contains("normals"));
+        assert!(err(bump(&n, &f, &d[..5], 1.0)).contains("height"));
+        assert!(err(bump(&n, &f, &d, f32::INFINITY)).contains("strength"));
+        assert!(err(bilateral(&n, &f, &d, 0.0, 0.02)).contains("sigma_s"));
+        assert!(err(bilateral(&n, &f, &d, 1.0, -1.0)).contains("sigma_d"));
+        assert!(err(bilateral(&n, &f, &d, 1e6, 0.02)).contains("at most 50 pixels"));
+        let short = [true; 3];
+        assert!(err(emboss(&n, &Frame { width: 8, height: 8, mask: Some(&short) }, 0.5)).contains("mask"));
+        assert!(err(emboss(&[], &Frame { width: 0, height: 0, mask: None }, 0.5)).contains("empty"));
+    }
+}
