@@ -101,6 +101,8 @@ def test_noise_tolerance_takes_the_qp_off_the_noise_peaks(rng):
             rn.sh_fit(n[inside], d0[inside], "qp", bad)
     with pytest.raises(ValueError, match="only the constrained fit"):
         rn.sh_fit(n[inside], d0[inside], "ls", 0.1)
+    with pytest.raises(ValueError, match="tolerance: expected a number or one per channel, got an array of 2"):
+        rn.sh_fit(n[inside], d0[inside], "qp", [[0.1, 0.1, 0.1]])
 
 
 def test_sh_fit_masks_nan_pixels_and_says_how_many():
@@ -432,6 +434,10 @@ def test_native_normal_tools_match_a_numpy_reference(rng):
         C.emboss(n, 0.5, mask[:-1])
     with pytest.raises(C.CompositingError, match="normals: expected shape"):
         C.emboss(n[..., :2], 0.5)
+    with pytest.raises(C.CompositingError, match=r"depth: expected an \(90, 160\) array, got None"):
+        C.bilateral_smooth(n, None)  # a required array given as None: named, not a Rust panic
+    with pytest.raises(C.CompositingError, match="height: expected shape"):
+        C.bump(n, None)
 
 
 def test_normal_tools():
@@ -497,6 +503,13 @@ def test_command_line_tool(rendered, tmp_path):
         assert r.returncode == 2 and "--backend moderngl" in r.stderr, r.stderr
     r = subprocess.run(cmd[:-1] + [str(tmp_path / "nope.exr"), str(out)], capture_output=True, text=True, cwd=ROOT / "addon")
     assert r.returncode == 2 and "rokeby.composite:" in r.stderr
+    # Bad edits are named, exit 2 and write nothing (no traceback).
+    for args, msg in ((["--smooth", "60"], "sigma_s: at most 50 pixels"), (["--emboss", "1.5"], "beta: must be in (0, 1]"),
+                      (["--fit", "ls", "--noise-tolerance", "2"], "noise_tolerance: only the 'qp' fit")):
+        bad = tmp_path / "bad.exr"
+        r = subprocess.run(cmd + [str(bad), *args], capture_output=True, text=True, cwd=ROOT / "addon")
+        assert r.returncode == 2 and msg in r.stderr and "Traceback" not in r.stderr, r.stderr
+        assert not bad.exists()
 
 
 def test_api_recomposite_render_shows_a_new_image(tmp_path):
@@ -552,11 +565,28 @@ def test_recomposite_exr_edits_a_rendered_frame_without_rendering_or_reconstruct
     assert not st4["reused"] and len(calls) == 2
     px4 = np.array(img.pixels[:]).reshape(48, 64, 4)[::-1, :, :3]
     np.testing.assert_array_equal(px4.astype(np.float32), C.read_exr(path).image)
+    images = {im.name: np.array(im.pixels[:]) for im in bpy.data.images}
     with pytest.raises(C.CompositingError, match="nope.exr: cannot open the rendered passes"):
-        api.recomposite_exr(str(tmp_path / "nope.exr"))
-    with pytest.raises(C.CompositingError, match="edit: unknown 'twist'"):
-        api.recomposite_exr(path, edit="twist")
-    assert "e5" not in bpy.data.images
+        api.recomposite_exr(str(tmp_path / "nope.exr"), image_name="e4")
+    with pytest.raises(api.RokebyError, match="edit: unknown 'twist'"):
+        api.recomposite_exr(path, edit="twist", image_name="e4")
+    with pytest.raises(C.CompositingError, match="beta: must be in"):
+        api.recomposite_exr(path, edit="emboss", amount=2.0, image_name="e4")
+    # The refused calls made no image and left the existing ones as they were.
+    assert {im.name for im in bpy.data.images} == set(images)
+    for name, px in images.items():
+        np.testing.assert_array_equal(np.array(bpy.data.images[name].pixels[:]), px)
+    # Another backend on the same open frame: a new session, no new reconstruction.
+    try:
+        C.gl_recompositor()
+        gl_ok = True
+    except Exception:  # noqa: BLE001 - no headless OpenGL on this machine
+        gl_ok = False
+    if gl_ok:
+        img5, st5 = api.recomposite_exr(path, edit="none", backend="moderngl", image_name="e5")
+        assert st5["reused"] and len(calls) == 2
+        np.testing.assert_array_equal(np.array(img5.pixels[:]).reshape(48, 64, 4)[::-1, :, :3].astype(np.float32),
+                                      C.read_exr(path).image)
     C.close_render()
 
 

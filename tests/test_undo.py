@@ -206,7 +206,7 @@ def _with_rendered_frame(ball):
     import tempfile  # noqa: PLC0415
 
     _with_passes(ball)
-    path = str(Path(tempfile.mkdtemp(prefix="rokeby_undo_")) / "frame.exr")
+    path = str(Path(tempfile.gettempdir()) / "rokeby_undo_frame.exr")  # rewritten by every run
     assert bpy.ops.rokeby.composite_render(edit="NONE", filepath=path, image_name="Rendered") == {"FINISHED"}
     bpy.ops.ed.undo_push(message="rendered")
 

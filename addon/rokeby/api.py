@@ -922,13 +922,14 @@ def setup_compositing_passes(scene=None, view_layer=None) -> list[str]:
 
 def recomposite_render(path: str, *, edit: str = "emboss", amount: float = 0.5, scene=None,
                        image_name: str = "Rokeby Recomposited", k_d: float = 1.0, k_r: float = 1.0,
-                       backend: str = "cpu"):
+                       backend: str = "cpu", warn: bool = True):
     """Renders ``scene`` with the compositing passes to the multilayer EXR ``path``, reconstructs
     its environments, edits the normals (``edit``: 'emboss' with β = amount, 'ripple' with strength
     amount, 'smooth' with σ = amount pixels, or 'none') and shows the recomposited frame as the
     Blender image ``image_name``. ``backend``: 'cpu' (the Rust core), 'blender_gpu' (the GLSL
     shader drawn by Blender's gpu module) or 'moderngl' (see ``rokeby.compositing.recomposite``).
     The frame stays open for ``recomposite_exr`` (further edits without rendering again).
+    ``warn``: reconstruction warnings (patches left unedited, large holes) as Python warnings.
     Returns (image, reconstruction report list)."""
     from . import compositing as comp  # noqa: PLC0415
 
@@ -938,26 +939,30 @@ def recomposite_render(path: str, *, edit: str = "emboss", amount: float = 0.5, 
         raise RokebyError(f"edit: unknown {edit!r} (expected one of {', '.join(map(repr, comp.EDITS))})")
     p = comp.render_passes(_scene(scene), path)
     comp.close_render()
-    opened = comp.open_render(path, backend=backend, passes=p)
+    opened = comp.open_render(path, backend=backend, passes=p, warn=warn)
     img, _stats = _recomposite_opened(opened, edit, amount, k_d, k_r, image_name)
     return img, opened.reconstruction.reports
 
 
 def recomposite_exr(path: str, *, edit: str = "emboss", amount: float = 0.5, image_name: str = "Rokeby Recomposited",
-                    k_d: float = 1.0, k_r: float = 1.0, backend: str = "cpu"):
+                    k_d: float = 1.0, k_r: float = 1.0, backend: str = "cpu", warn: bool = True):
     """Edits a frame already rendered with the compositing passes (the multilayer EXR ``path``, say
     from ``recomposite_render``) without rendering: as ``recomposite_render`` otherwise. The last
     file stays open (``compositing.open_render``), so a second edit of the same unchanged file
     skips reading and reconstructing it and, on a GLSL backend, uploads only the edited normals.
-    Returns (image, stats): stats has 'edited', 'masked', 'reused' (the frame was open) and the
-    seconds of 'open', 'edit', 'recomposite' and 'show'."""
+    Returns (image, stats): stats has 'edited', 'masked', 'reused' (the frame was open), the
+    seconds of 'open', 'edit', 'recomposite' and 'show', and 'warnings' (the reconstruction's,
+    when this call read the file; ``warn`` also raises them as Python warnings)."""
     from . import compositing as comp  # noqa: PLC0415
 
+    if edit not in comp.EDITS:  # before reading the file
+        raise RokebyError(f"edit: unknown {edit!r} (expected one of {', '.join(map(repr, comp.EDITS))})")
     t0 = time.perf_counter()
-    opened = comp.open_render(path, backend=backend)
+    opened = comp.open_render(path, backend=backend, warn=warn)
     t1 = time.perf_counter()
     img, stats = _recomposite_opened(opened, edit, amount, k_d, k_r, image_name)
     stats["open_s"] = t1 - t0
+    stats["warnings"] = [] if stats["reused"] else opened.reconstruction.warnings()
     return img, stats
 
 

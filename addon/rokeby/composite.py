@@ -102,16 +102,20 @@ def main(argv=None) -> int:
         wanted = {int(v) for v in a.objects.split(",")}
         mask &= np.isin(np.rint(p.index_ob).astype(int), sorted(wanted))
     n = rec.normals
-    if a.smooth:
-        n = C.bilateral_smooth(n, p.depth, sigma_s=a.smooth, sigma_d=a.smooth_depth, mask=mask)
-    if a.emboss is not None:
-        n = C.emboss(n, a.emboss, mask=mask)
-    if a.ripple:
-        c = a.ripple_center
-        h = C.ripple(p.shape, None if c is None else (c[1], c[0]), a.ripple_wavelength, a.ripple_radius)
-        n = C.bump(n, h, a.ripple, mask=mask)
-    if a.bump:
-        n = C.bump(n, _read_height(a.bump, p.shape), a.bump_strength, mask=mask)
+    try:
+        if a.smooth:
+            n = C.bilateral_smooth(n, p.depth, sigma_s=a.smooth, sigma_d=a.smooth_depth, mask=mask)
+        if a.emboss is not None:
+            n = C.emboss(n, a.emboss, mask=mask)
+        if a.ripple:
+            c = a.ripple_center
+            h = C.ripple(p.shape, None if c is None else (c[1], c[0]), a.ripple_wavelength, a.ripple_radius)
+            n = C.bump(n, h, a.ripple, mask=mask)
+        if a.bump:
+            n = C.bump(n, _read_height(a.bump, p.shape), a.bump_strength, mask=mask)
+    except (C.CompositingError, OSError, ValueError) as exc:  # a bad edit: say which, write nothing
+        print(f"rokeby.composite: {exc}", file=sys.stderr)
+        return 2
     t_edit = time.perf_counter()
     try:
         out, stats = C.recomposite(p, rec, n, k_d=a.kd, k_r=a.kr, backend=a.backend)

@@ -399,6 +399,11 @@ def pixel_noise(values: np.ndarray, mask: np.ndarray) -> np.ndarray:
     noisy pixels; robust to the few pairs that straddle an edge or a shading change). Zeros when
     fewer than 16 pairs exist. Path-traced passes have independent noise per pixel; smooth shading
     changes little between neighbours."""
+    rows, cols = np.flatnonzero(mask.any(1)), np.flatnonzero(mask.any(0))
+    if len(rows) == 0:
+        return np.zeros(values.shape[-1])
+    box = (slice(rows[0], rows[-1] + 1), slice(cols[0], cols[-1] + 1))  # the patch's bounding box
+    values, mask = values[box], mask[box]
     diffs = []
     for axis in (0, 1):
         a = np.swapaxes(values, 0, axis)
@@ -502,7 +507,9 @@ class RecompositeSession:
     k_D, k_R) and returns (image, stats) as ``recomposite`` does. On a GLSL backend only the edited
     normals go to the GPU again: the other ten images and the reflection maps stay there, as long
     as no other frame is drawn by the same backend in between (then the next call uploads all).
-    ``timings`` holds the last call's seconds ('check', 'recomposite', 'total')."""
+    The passes and the reconstruction are read when the session is made (and, on a GLSL backend,
+    uploaded on its first call): change them in place and make a new session. ``timings`` holds
+    the last call's seconds ('check', 'recomposite', 'total')."""
 
     def __init__(self, p: Passes, rec: Reconstruction, *, use_occlusion: bool = True, backend: str = "cpu"):
         if backend not in RECOMPOSITE_BACKENDS:
@@ -594,8 +601,8 @@ _OPEN: dict = {}  # the one frame open for editing (its arrays are ~150 MB at 19
 def _file_key(path: str) -> tuple:
     import os  # noqa: PLC0415
 
-    st = os.stat(path)
-    return os.path.realpath(path), st.st_mtime_ns, st.st_size
+    st = os.stat(path)  # the change time and inode too: a coarse-clock filesystem may keep mtime and size
+    return os.path.realpath(path), st.st_mtime_ns, st.st_ctime_ns, st.st_ino, st.st_size
 
 
 def open_render(path: str, *, backend: str = "cpu", passes: Passes | None = None, warn: bool = True) -> RenderEdit:
@@ -603,8 +610,10 @@ def open_render(path: str, *, backend: str = "cpu", passes: Passes | None = None
     recomposite. The last file opened stays open: opening it again with the same backend, while the
     file is unchanged (same modification time and size), reuses its reconstruction and its session
     (on a GLSL backend the passes stay on the GPU), so that trying edit after edit costs only the
-    edit and the recompositing. A changed file is read again. ``passes``: the file's passes if the
-    caller has read them already (``render_passes``)."""
+    edit and the recompositing; another backend gets a new session on the same reconstruction. A
+    changed file is read again. ``passes``: the file's passes if the caller has just read them
+    (``render_passes``); ``warn``: reconstruction warnings as Python warnings (when the file is
+    read; ``.reconstruction.warnings()`` lists them in any case)."""
     if backend not in RECOMPOSITE_BACKENDS:
         raise CompositingError(f"backend: unknown {backend!r} (expected one of {', '.join(map(repr, RECOMPOSITE_BACKENDS))})")
     try:
@@ -612,9 +621,12 @@ def open_render(path: str, *, backend: str = "cpu", passes: Passes | None = None
     except OSError as exc:
         raise CompositingError(f"{path}: cannot open the rendered passes ({exc.strerror or exc})") from None
     got = _OPEN.get("frame")
-    if got is not None and got[0] == key and got[1].session.backend == backend:
-        got[1].reused = True
-        return got[1]
+    if got is not None and got[0] == key:
+        opened = got[1]
+        if opened.session.backend != backend:  # same frame, another backend: a new session only
+            opened.session = RecompositeSession(opened.passes, opened.reconstruction, backend=backend)
+        opened.reused = True
+        return opened
     _OPEN.clear()  # before reading the next one: only one frame's arrays at a time
     p = passes if passes is not None else read_exr(path)
     rec = reconstruct(p, warn=warn)
@@ -938,6 +950,7 @@ class GLRecompositor:
     def _draw(self, f: "RecompositeFrame", changed) -> tuple[np.ndarray, dict]:
         h, w = f.height, f.width
         same = self._frame is not None and self._frame() is f
+        self._frame = None  # until every texture of f is written: a failure leaves no frame claimed
         for unit, t, name in RECOMPOSITE_INTERFACE["sampler"]:
             tex = self._tex.get(name)
             if tex is None or changed is None or not same or name in changed:
@@ -956,8 +969,8 @@ class GLRecompositor:
             self._size = (w, h)
         self._fbo.use()
         self.ctx.viewport = (0, 0, w, h)
-        self.vao.render(vertices=3)
         self._frame = weakref.ref(f)
+        self.vao.render(vertices=3)
         out = np.frombuffer(self._fbo.read(components=4, dtype="f4"), np.float32).reshape(h, w, 4)
         return frame_result(out)
 

@@ -37,13 +37,15 @@ class ROKEBY_OT_composite_setup_passes(bpy.types.Operator):
         return {"FINISHED"}
 
 
+MAX_SMOOTH_SIGMA = 50.0  # rokeby_core::normals::MAX_SIGMA_S: the smoothing's largest σ in pixels
 LAST_EXR = "rokeby_composite_exr"  # scene custom property: the EXR the last Render and Recomposite wrote
 
 
 def _edit_args(op) -> dict:
     """The operator's edit as ``rokeby.api`` takes it, with the knob clamped to what each edit accepts."""
     edit = op.edit.lower()
-    amount = {"emboss": min(max(op.amount, 1e-3), 1.0), "smooth": max(op.amount, 0.5)}.get(edit, op.amount)
+    amount = {"emboss": min(max(op.amount, 1e-3), 1.0),
+              "smooth": min(max(op.amount, 0.5), MAX_SMOOTH_SIGMA)}.get(edit, op.amount)
     return {"edit": edit, "amount": amount, "k_d": op.k_d, "k_r": op.k_r, "image_name": op.image_name,
             "backend": "blender_gpu" if op.backend == "GPU" else "cpu"}
 
@@ -73,7 +75,7 @@ class ROKEBY_OT_composite_render(_EditProps, bpy.types.Operator):
 
         path = bpy.path.abspath(self.filepath) if self.filepath else os.path.join(tempfile.gettempdir(), "rokeby_composite.exr")
         try:
-            img, reports = api.recomposite_render(path, scene=context.scene, **_edit_args(self))
+            img, reports = api.recomposite_render(path, scene=context.scene, warn=False, **_edit_args(self))
         except (comp.CompositingError, api.RokebyError, ValueError, RuntimeError) as exc:
             self.report({"ERROR"}, f"Rokeby: {exc}")
             return {"CANCELLED"}
@@ -105,10 +107,12 @@ class ROKEBY_OT_composite_edit(_EditProps, bpy.types.Operator):
             self.report({"ERROR"}, "Rokeby: no rendered frame to edit: run Render and Recomposite first, or pick an EXR")
             return {"CANCELLED"}
         try:
-            img, stats = api.recomposite_exr(path, **_edit_args(self))
+            img, stats = api.recomposite_exr(path, warn=False, **_edit_args(self))
         except (comp.CompositingError, api.RokebyError, ValueError, RuntimeError) as exc:
             self.report({"ERROR"}, f"Rokeby: {exc}")
             return {"CANCELLED"}
+        for msg in stats["warnings"]:
+            self.report({"WARNING"}, f"Rokeby: {msg}")
         ms = 1e3 * (stats["edit_s"] + stats["recomposite_s"] + stats["show_s"])
         self.report({"INFO"}, f"Rokeby: image '{img.name}': {stats['edited']} pixels recomposited in {ms:.0f} ms"
                               + ("" if stats["reused"] else f" (reading and reconstructing the frame: {stats['open_s']:.1f} s)"))

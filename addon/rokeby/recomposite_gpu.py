@@ -165,6 +165,7 @@ class BlenderRecompositor:
             self._size = (w, h)
         t1 = time.perf_counter()
         same = self._frame is not None and self._frame() is f and set(self.textures) == set(f.textures)
+        self._frame = None  # until every texture of f is made: a failure here leaves no frame claimed
         for _unit, t, name in RECOMPOSITE_INTERFACE["sampler"]:
             if changed is None or not same or name in changed:
                 self.textures[name] = self._texture(gpu, name, f.textures[name], t == "FLOAT_2D_ARRAY")

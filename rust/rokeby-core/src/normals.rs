@@ -61,7 +61,8 @@ fn unit(e: [f32; 3]) -> [f32; 3] {
 }
 
 /// The rule shared by the tools: for each pixel, `edit(i, n)` proposes ñ; the result is
-/// unit(ñ) unless the pixel is background (|n|₁ not > 0), masked out, or ñ equals n exactly.
+/// unit(ñ) unless the pixel is background (|n|₁ = 0, or a component not finite), masked out, or
+/// ñ equals n exactly.
 fn apply<F>(normals: &[f32], f: &Frame, edit: F) -> Vec<f32>
 where
     F: Fn(usize, [f32; 3]) -> [f32; 3] + Sync,
@@ -72,7 +73,7 @@ where
         for x in 0..w {
             let i = y * w + x;
             let n = [normals[3 * i], normals[3 * i + 1], normals[3 * i + 2]];
-            let on = n[0].abs() + n[1].abs() + n[2].abs() > 0.0 && f.mask.is_none_or(|m| m[i]);
+            let on = n.iter().all(|v| v.is_finite()) && n[0].abs() + n[1].abs() + n[2].abs() > 0.0 && f.mask.is_none_or(|m| m[i]);
             let r = if on {
                 let e = edit(i, n);
                 if e == n {
@@ -156,16 +157,21 @@ pub fn bilateral(normals: &[f32], f: &Frame, depth: &[f32], sigma_s: f64, sigma_
     let r = ((2.0 * sigma_s).ceil() as usize).max(1);
     let valid = |i: usize| {
         let n = &normals[3 * i..3 * i + 3];
-        n[0].abs() + n[1].abs() + n[2].abs() > 0.0 && depth[i].is_finite()
+        n.iter().all(|v| v.is_finite()) && n[0].abs() + n[1].abs() + n[2].abs() > 0.0 && depth[i].is_finite()
     };
     let side = 2 * r + 1;
+    // The centre weighs 1 exactly (so that a σ_s small enough to underflow 2σ_s² still leaves the
+    // pixel itself, instead of 0/0).
     let ws: Vec<f64> = (0..side * side)
         .map(|k| {
             let (dy, dx) = ((k / side) as f64 - r as f64, (k % side) as f64 - r as f64);
-            (-(dx * dx + dy * dy) / (2.0 * sigma_s * sigma_s)).exp()
+            if dx == 0.0 && dy == 0.0 {
+                1.0
+            } else {
+                (-(dx * dx + dy * dy) / (2.0 * sigma_s * sigma_s)).exp()
+            }
         })
         .collect();
-    let inv_sd = 1.0 / sigma_d;
     let edit = |i: usize, n: [f32; 3]| -> [f32; 3] {
         if !valid(i) {
             return n; // kept by the rule below (masked: not valid)
@@ -188,7 +194,7 @@ pub fn bilateral(normals: &[f32], f: &Frame, depth: &[f32], sigma_s: f64, sigma_
                 if !valid(q) {
                     continue;
                 }
-                let rel = (depth[q] as f64 - dp) / scale * inv_sd;
+                let rel = (depth[q] as f64 - dp) / scale / sigma_d;
                 let wt = ws[(dy + r as isize) as usize * side + (dx + r as isize) as usize] * (-0.5 * rel * rel).exp();
                 ax += wt * normals[3 * q] as f64;
                 ay += wt * normals[3 * q + 1] as f64;
@@ -315,6 +321,28 @@ mod tests {
         assert!(err(bilateral(&n, &f, &d, 0.0, 0.02)).contains("sigma_s"));
         assert!(err(bilateral(&n, &f, &d, 1.0, -1.0)).contains("sigma_d"));
         assert!(err(bilateral(&n, &f, &d, 1e6, 0.02)).contains("at most 50 pixels"));
+        // Extremes that are allowed: a σ_s whose square underflows leaves each pixel as it was (its
+        // own weight only); a denormal σ_d keeps only neighbours at exactly the same depth. Never
+        // NaN, never a zeroed normal.
+        for (ss, sd) in [(1e-200, 0.02), (1.0, 1e-310)] {
+            let out = bilateral(&n, &f, &d, ss, sd).unwrap();
+            for i in 0..64 {
+                let (a, b) = (&out[3 * i..3 * i + 3], &n[3 * i..3 * i + 3]);
+                assert!(a.iter().all(|v| v.is_finite()));
+                if b.iter().any(|&v| v != 0.0) {
+                    let l = (a[0] * a[0] + a[1] * a[1] + a[2] * a[2]).sqrt();
+                    assert!((l - 1.0).abs() < 1e-5, "σ_s {ss} σ_d {sd}: {a:?}");
+                    if ss < 1e-100 {
+                        assert!((a[0] - b[0]).abs() < 1e-6 && (a[1] - b[1]).abs() < 1e-6, "{a:?} vs {b:?}");
+                    }
+                }
+            }
+        }
+        // An infinite normal is not a surface: kept as it is, not turned into NaN.
+        let mut inf = n.clone();
+        inf[3 * 27] = f32::INFINITY;
+        let e = emboss(&inf, &f, 0.5).unwrap();
+        assert_eq!(e[3 * 27], f32::INFINITY);
         let short = [true; 3];
         assert!(err(emboss(&n, &Frame { width: 8, height: 8, mask: Some(&short) }, 0.5)).contains("mask"));
         assert!(err(emboss(&[], &Frame { width: 0, height: 0, mask: None }, 0.5)).contains("empty"));

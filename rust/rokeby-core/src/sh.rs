@@ -627,6 +627,12 @@ impl GiState {
 /// constraints with a full pass per step.
 #[cfg(test)]
 pub(crate) fn fit_reference(normals: &[f32], values: &[f32], channels: usize, method: Fit) -> Result<ShFit> {
+    fit_reference_tolerance(normals, values, channels, method, &[])
+}
+
+/// [`fit_reference`] with the constraints D(n) ≥ D0 − τ_c (`tolerance` empty: τ = 0).
+#[cfg(test)]
+pub(crate) fn fit_reference_tolerance(normals: &[f32], values: &[f32], channels: usize, method: Fit, tolerance: &[f64]) -> Result<ShFit> {
     if channels == 0 {
         return Err(RokebyError::invalid("values", "need at least one channel"));
     }
@@ -685,7 +691,11 @@ pub(crate) fn fit_reference(normals: &[f32], values: &[f32], channels: usize, me
             let x0 = chol.solve(&g);
             match method {
                 Fit::LeastSquares => Ok((x0, 0)),
-                Fit::Constrained => goldfarb_idnani(&chol, x0, &a, &b),
+                Fit::Constrained => {
+                    let tau = tolerance.get(c).copied().unwrap_or(0.0);
+                    let rhs: Vec<f64> = b.iter().map(|v| v - tau).collect();
+                    goldfarb_idnani(&chol, x0, &a, &rhs)
+                }
             }
         })
         .collect();
@@ -956,6 +966,20 @@ mod tests {
             assert!(e_tol < 0.25 * e_qp && e_tol < 0.25 * e_ls, "ch {c}: tolerant {e_tol} qp {e_qp} ls {e_ls}");
             assert!(tol.max_residual[c] <= tau[c] + 1e-9, "D0 − D(n) ≤ τ: {}", tol.max_residual[c]);
             assert!(tol.max_residual[c] > 0.5 * tau[c], "the tolerance is used: {}", tol.max_residual[c]);
+        }
+        // An independent check of middle τs: the former solver (`fit_reference`: the N×9 matrix
+        // stored, one Goldfarb–Idnani run over all N constraints, no screening) with b − τ.
+        for t in [[0.01, 0.03, 0.05], [0.02; 3]] {
+            let refq = fit_reference_tolerance(&ns, &vs, 3, Fit::Constrained, &t).unwrap();
+            let mid = fit_with_tolerance(&ns, &vs, 3, Fit::Constrained, &t).unwrap();
+            for c in 0..3 {
+                let scale = refq.coeffs[c].iter().fold(1.0f64, |s, x| s.max(x.abs()));
+                for k in 0..SH_COEFFS {
+                    assert!((mid.coeffs[c][k] - refq.coeffs[c][k]).abs() <= 1e-9 * scale, "τ {t:?} ch {c} k {k}: {} vs {}", mid.coeffs[c][k], refq.coeffs[c][k]);
+                }
+                assert!((mid.max_residual[c] - refq.max_residual[c]).abs() <= 1e-9 * scale);
+                assert!(mid.max_residual[c] <= t[c] + 1e-9);
+            }
         }
         // τ = 0 is the paper's QP, bit for bit; a τ above every residual leaves the LS optimum.
         let zero = fit_with_tolerance(&ns, &vs, 3, Fit::Constrained, &[0.0; 3]).unwrap();

@@ -61,6 +61,11 @@ fn image1<'py>(obj: Option<&Bound<'py, PyAny>>, name: &str, h: usize, w: usize) 
     Ok(Some(a))
 }
 
+/// A required (H, W) array: None is refused by name (not a panic).
+fn required1<'py>(obj: &Bound<'py, PyAny>, name: &str, h: usize, w: usize) -> PyResult<F32Array<'py>> {
+    image1(Some(obj), name, h, w)?.ok_or_else(|| PyValueError::new_err(format!("{name}: expected an ({h}, {w}) array, got None")))
+}
+
 fn opt_image3<'py>(obj: Option<&Bound<'py, PyAny>>, name: &str, h: usize, w: usize) -> PyResult<Option<F32Array<'py>>> {
     match obj {
         Some(o) if !o.is_none() => Ok(Some(image3(o, name, Some((h, w)))?.0)),
@@ -88,6 +93,10 @@ pub fn sh_fit<'py>(py: Python<'py>, normals: &Bound<'py, PyAny>, values: &Bound<
         Some(t) => {
             let np = py.import("numpy")?;
             let a = np.call_method1("asarray", (t, "float64")).map_err(|e| PyValueError::new_err(format!("tolerance: expected a number or one per channel ({e})")))?;
+            let ndim: usize = a.getattr("ndim")?.extract()?;
+            if ndim > 1 {
+                return Err(PyValueError::new_err(format!("tolerance: expected a number or one per channel, got an array of {ndim} dimensions")));
+            }
             a.call_method0("ravel")?.extract()?
         }
     };
@@ -232,7 +241,7 @@ pub fn reflection_env<'py>(
 ) -> PyResult<Bound<'py, PyDict>> {
     let (r, h, w) = image3(reflected, "reflected", None)?;
     let (v, _, _) = image3(values, "values", Some((h, w)))?;
-    let m = image1(Some(mask), "mask", h, w)?.expect("given");
+    let m = required1(mask, "mask", h, w)?;
     let d = image1(depth, "depth", h, w)?;
     if stage != "full" && stage != "partial" {
         return Err(PyValueError::new_err(format!("stage: expected 'full' or 'partial', got {stage:?}")));
@@ -477,7 +486,7 @@ pub fn normals_emboss<'py>(py: Python<'py>, normals: &Bound<'py, PyAny>, beta: f
 #[pyo3(signature = (normals, height, strength = 1.0, mask = None))]
 pub fn normals_bump<'py>(py: Python<'py>, normals: &Bound<'py, PyAny>, height: &Bound<'py, PyAny>, strength: f32, mask: Option<&Bound<'py, PyAny>>) -> PyResult<Bound<'py, PyArrayDyn<f32>>> {
     let (n, h, w) = image3(normals, "normals", None)?;
-    let hh = image1(Some(height), "height", h, w)?.expect("given");
+    let hh = required1(height, "height", h, w)?;
     let m = edit_mask(mask, h, w)?;
     let (ns, hs) = (n.slice(), hh.slice());
     let out = run_detached(py, || normals::bump(ns, &normals::Frame { width: w, height: h, mask: m.as_deref() }, hs, strength))?;
@@ -490,7 +499,7 @@ pub fn normals_bump<'py>(py: Python<'py>, normals: &Bound<'py, PyAny>, height: &
 #[pyo3(signature = (normals, depth, sigma_s = 3.0, sigma_d = 0.02, mask = None))]
 pub fn normals_bilateral<'py>(py: Python<'py>, normals: &Bound<'py, PyAny>, depth: &Bound<'py, PyAny>, sigma_s: f64, sigma_d: f64, mask: Option<&Bound<'py, PyAny>>) -> PyResult<Bound<'py, PyArrayDyn<f32>>> {
     let (n, h, w) = image3(normals, "normals", None)?;
-    let d = image1(Some(depth), "depth", h, w)?.expect("given");
+    let d = required1(depth, "depth", h, w)?;
     let m = edit_mask(mask, h, w)?;
     let (ns, ds) = (n.slice(), d.slice());
     let out = run_detached(py, || normals::bilateral(ns, &normals::Frame { width: w, height: h, mask: m.as_deref() }, ds, sigma_s, sigma_d))?;
