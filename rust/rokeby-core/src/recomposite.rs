@@ -521,7 +521,7 @@ fn basis_diff_lanes(n: &[Lanes; 3], e: &[Lanes; 3], dy: &mut [Lanes; SH_COEFFS],
     for l in 0..nb {
         let (x, y, z) = (n[0][l], n[1][l], n[2][l]);
         let (xe, ye, ze) = (e[0][l], e[1][l], e[2][l]);
-        dy[0][l] = c0 - c0;
+        dy[0][l] = 0.0; // Y_00 is the constant c0: c0 − c0
         dy[1][l] = c1 * ye - c1 * y;
         dy[2][l] = c1 * ze - c1 * z;
         dy[3][l] = c1 * xe - c1 * x;
