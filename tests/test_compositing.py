@@ -587,6 +587,24 @@ def test_recomposite_exr_edits_a_rendered_frame_without_rendering_or_reconstruct
         assert st5["reused"] and len(calls) == 2
         np.testing.assert_array_equal(np.array(img5.pixels[:]).reshape(48, 64, 4)[::-1, :, :3].astype(np.float32),
                                       C.read_exr(path).image)
+    # Another diffuse fit of the open frame: reconstructed again from the passes kept, not read again.
+    reads = []
+    real_read = C.read_exr
+    monkeypatch.setattr(C, "read_exr", lambda *a, **k: reads.append(1) or real_read(*a, **k))
+    img6, st6 = api.recomposite_exr(path, edit="emboss", amount=0.8, k_d=0.5, fit="ls", image_name="e6")
+    assert st6["reused"] and len(calls) == 3 and not reads and isinstance(st6["warnings"], list)
+    p = real_read(path)
+    rec_ls = real(p, method="ls", warn=False)  # what a fresh open with the LS fit gives
+    ref = C.recomposite(p, rec_ls, C.emboss(rec_ls.normals, 0.8, mask=rec_ls.ids >= 0), k_d=0.5)[0]
+    np.testing.assert_array_equal(np.array(img6.pixels[:]).reshape(48, 64, 4)[::-1, :, :3].astype(np.float32), ref)
+    _img, st7 = api.recomposite_exr(path, edit="none", fit="qp", noise_tolerance=3.0, image_name="e6")
+    assert len(calls) == 4 and st7["reused"]
+    _img, st8 = api.recomposite_exr(path, edit="none", fit="qp", noise_tolerance=3.0, image_name="e6")
+    assert len(calls) == 4 and st8["warnings"] == []
+    for kw, msg in (({"fit": "svd"}, "fit: unknown 'svd'"), ({"fit": "ls", "noise_tolerance": 1.0}, "only the 'qp' fit"),
+                    ({"noise_tolerance": -1.0}, "noise_tolerance: must be finite")):
+        with pytest.raises(api.RokebyError, match=msg):
+            api.recomposite_exr(path, **kw)
     C.close_render()
 
 
@@ -626,6 +644,10 @@ def test_operators_set_up_passes_and_show_the_recomposited_image(tmp_path):
         assert bpy.ops.rokeby.composite_edit(edit="EMBOSS", amount=0.3, image_name="edited") == {"FINISHED"}
         ed = np.array(bpy.data.images["edited"].pixels[:]).reshape(48, 64, 4)
         assert np.isfinite(ed).all() and (np.abs(ed - px) > 1e-4).any(-1).sum() > 50
+        for fit in ("LS", "QP_TOLERANT"):  # the diffuse fit is the artist's choice too
+            assert bpy.ops.rokeby.composite_edit(edit="EMBOSS", amount=0.3, fit=fit, image_name=fit) == {"FINISHED"}
+            other = np.array(bpy.data.images[fit].pixels[:]).reshape(48, 64, 4)
+            assert np.isfinite(other).all() and (np.abs(other - ed) > 1e-6).any()
         del sc["rokeby_composite_exr"]
         from rokeby import compositing as C
 

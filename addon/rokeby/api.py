@@ -922,7 +922,7 @@ def setup_compositing_passes(scene=None, view_layer=None) -> list[str]:
 
 def recomposite_render(path: str, *, edit: str = "emboss", amount: float = 0.5, scene=None,
                        image_name: str = "Rokeby Recomposited", k_d: float = 1.0, k_r: float = 1.0,
-                       backend: str = "cpu", warn: bool = True):
+                       backend: str = "cpu", warn: bool = True, fit: str = "qp", noise_tolerance: float = 0.0):
     """Renders ``scene`` with the compositing passes to the multilayer EXR ``path``, reconstructs
     its environments, edits the normals (``edit``: 'emboss' with β = amount, 'ripple' with strength
     amount, 'smooth' with σ = amount pixels, or 'none') and shows the recomposited frame as the
@@ -930,40 +930,58 @@ def recomposite_render(path: str, *, edit: str = "emboss", amount: float = 0.5, 
     shader drawn by Blender's gpu module) or 'moderngl' (see ``rokeby.compositing.recomposite``).
     The frame stays open for ``recomposite_exr`` (further edits without rendering again).
     ``warn``: reconstruction warnings (patches left unedited, large holes) as Python warnings.
-    Returns (image, reconstruction report list)."""
+    ``fit``, ``noise_tolerance``: the diffuse fit, 'qp' (the paper's; κ = noise_tolerance relaxes it
+    by κ standard deviations of the pass's noise) or 'ls' (faster, and on noisy renders measured
+    closer to the true environment; see docs/compositing.md). Returns (image, reconstruction
+    report list)."""
     from . import compositing as comp  # noqa: PLC0415
 
     if backend not in comp.RECOMPOSITE_BACKENDS:  # before rendering
         raise RokebyError(f"backend: unknown {backend!r} (expected one of {', '.join(map(repr, comp.RECOMPOSITE_BACKENDS))})")
     if edit not in comp.EDITS:
         raise RokebyError(f"edit: unknown {edit!r} (expected one of {', '.join(map(repr, comp.EDITS))})")
+    _check_fit(fit, noise_tolerance)
     p = comp.render_passes(_scene(scene), path)
     comp.close_render()
-    opened = comp.open_render(path, backend=backend, passes=p, warn=warn)
+    opened = comp.open_render(path, backend=backend, passes=p, warn=warn, method=fit, noise_tolerance=noise_tolerance)
     img, _stats = _recomposite_opened(opened, edit, amount, k_d, k_r, image_name)
     return img, opened.reconstruction.reports
 
 
 def recomposite_exr(path: str, *, edit: str = "emboss", amount: float = 0.5, image_name: str = "Rokeby Recomposited",
-                    k_d: float = 1.0, k_r: float = 1.0, backend: str = "cpu", warn: bool = True):
+                    k_d: float = 1.0, k_r: float = 1.0, backend: str = "cpu", warn: bool = True, fit: str = "qp",
+                    noise_tolerance: float = 0.0):
     """Edits a frame already rendered with the compositing passes (the multilayer EXR ``path``, say
     from ``recomposite_render``) without rendering: as ``recomposite_render`` otherwise. The last
     file stays open (``compositing.open_render``), so a second edit of the same unchanged file
     skips reading and reconstructing it and, on a GLSL backend, uploads only the edited normals.
     Returns (image, stats): stats has 'edited', 'masked', 'reused' (the frame was open), the
     seconds of 'open', 'edit', 'recomposite' and 'show', and 'warnings' (the reconstruction's,
-    when this call read the file; ``warn`` also raises them as Python warnings)."""
+    when this call reconstructed; ``warn`` also raises them as Python warnings). ``fit`` and
+    ``noise_tolerance`` as for ``recomposite_render``: another fit of the open frame reconstructs
+    again without reading the file."""
     from . import compositing as comp  # noqa: PLC0415
 
     if edit not in comp.EDITS:  # before reading the file
         raise RokebyError(f"edit: unknown {edit!r} (expected one of {', '.join(map(repr, comp.EDITS))})")
+    _check_fit(fit, noise_tolerance)
     t0 = time.perf_counter()
-    opened = comp.open_render(path, backend=backend, warn=warn)
+    opened = comp.open_render(path, backend=backend, warn=warn, method=fit, noise_tolerance=noise_tolerance)
     t1 = time.perf_counter()
     img, stats = _recomposite_opened(opened, edit, amount, k_d, k_r, image_name)
     stats["open_s"] = t1 - t0
-    stats["warnings"] = [] if stats["reused"] else opened.reconstruction.warnings()
+    stats["warnings"] = opened.reconstruction.warnings() if opened.reconstructed else []
     return img, stats
+
+
+def _check_fit(fit, noise_tolerance):
+    """The diffuse fit's arguments, checked before any rendering or reading."""
+    if fit not in ("qp", "ls"):
+        raise RokebyError(f"fit: unknown {fit!r} (expected 'qp' or 'ls')")
+    if not 0 <= noise_tolerance < float("inf"):
+        raise RokebyError(f"noise_tolerance: must be finite and ≥ 0 (in noise standard deviations), got {noise_tolerance}")
+    if noise_tolerance > 0 and fit != "qp":
+        raise RokebyError("noise_tolerance: only the 'qp' fit has constraints to relax")
 
 
 def _recomposite_opened(opened, edit, amount, k_d, k_r, image_name):

@@ -592,7 +592,9 @@ class RenderEdit:
     passes: Passes
     reconstruction: Reconstruction
     session: RecompositeSession
-    reused: bool = False  # whether open_render found it already open
+    fit: tuple = ("qp", 0.0)  # the reconstruction's (method, noise_tolerance)
+    reused: bool = False  # whether open_render found the file already open
+    reconstructed: bool = True  # whether the last open_render reconstructed it
 
 
 _OPEN: dict = {}  # the one frame open for editing (its arrays are ~150 MB at 1920×1080)
@@ -605,17 +607,20 @@ def _file_key(path: str) -> tuple:
     return os.path.realpath(path), st.st_mtime_ns, st.st_ctime_ns, st.st_ino, st.st_size
 
 
-def open_render(path: str, *, backend: str = "cpu", passes: Passes | None = None, warn: bool = True) -> RenderEdit:
+def open_render(path: str, *, backend: str = "cpu", passes: Passes | None = None, warn: bool = True,
+                method: str = "qp", noise_tolerance: float = 0.0) -> RenderEdit:
     """The multilayer EXR ``path`` (rendered after ``setup_passes``) read, reconstructed and ready to
-    recomposite. The last file opened stays open: opening it again with the same backend, while the
-    file is unchanged (same modification time and size), reuses its reconstruction and its session
-    (on a GLSL backend the passes stay on the GPU), so that trying edit after edit costs only the
-    edit and the recompositing; another backend gets a new session on the same reconstruction. A
-    changed file is read again. ``passes``: the file's passes if the caller has just read them
-    (``render_passes``); ``warn``: reconstruction warnings as Python warnings (when the file is
-    read; ``.reconstruction.warnings()`` lists them in any case)."""
+    recomposite. The last file opened stays open: opening it again while the file is unchanged
+    (same modification and change times, inode and size) reuses its passes; with the same diffuse
+    fit (``method``, ``noise_tolerance``: see ``reconstruct``) its reconstruction, and with the same
+    backend its session too (on a GLSL backend the passes stay on the GPU), so that trying edit
+    after edit costs only the edit and the recompositing. A changed file is read again.
+    ``passes``: the file's passes if the caller has just read them (``render_passes``); ``warn``:
+    reconstruction warnings as Python warnings (when reconstructing; ``.reconstruction.warnings()``
+    lists them in any case)."""
     if backend not in RECOMPOSITE_BACKENDS:
         raise CompositingError(f"backend: unknown {backend!r} (expected one of {', '.join(map(repr, RECOMPOSITE_BACKENDS))})")
+    fit = (method, float(noise_tolerance))
     try:
         key = _file_key(path)
     except OSError as exc:
@@ -623,15 +628,20 @@ def open_render(path: str, *, backend: str = "cpu", passes: Passes | None = None
     got = _OPEN.get("frame")
     if got is not None and got[0] == key:
         opened = got[1]
-        if opened.session.backend != backend:  # same frame, another backend: a new session only
+        opened.reconstructed = opened.fit != fit
+        if opened.reconstructed:  # another diffuse fit of the same passes: reconstruct, no reading
+            opened.reconstruction = reconstruct(opened.passes, method=method, noise_tolerance=noise_tolerance, warn=warn)
+            opened.fit = fit
+            opened.session = RecompositeSession(opened.passes, opened.reconstruction, backend=backend)
+        elif opened.session.backend != backend:  # same reconstruction, another backend: a new session
             opened.session = RecompositeSession(opened.passes, opened.reconstruction, backend=backend)
         opened.reused = True
         return opened
     _OPEN.clear()  # before reading the next one: only one frame's arrays at a time
     p = passes if passes is not None else read_exr(path)
-    rec = reconstruct(p, warn=warn)
+    rec = reconstruct(p, method=method, noise_tolerance=noise_tolerance, warn=warn)
     opened = RenderEdit(path=path, passes=p, reconstruction=rec,
-                        session=RecompositeSession(p, rec, backend=backend))
+                        session=RecompositeSession(p, rec, backend=backend), fit=fit)
     _OPEN["frame"] = (key, opened)
     return opened
 

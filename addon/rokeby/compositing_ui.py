@@ -18,6 +18,12 @@ EDITS = [
     ("NONE", "None", "no edit (material edits k_D, k_R only)"),
 ]
 
+FITS = [
+    ("QP", "QP", "the paper's fit, D(n) ≥ D0 at every pixel (occlusion-aware; rides a render's noise)"),
+    ("QP_TOLERANT", "QP, noise-tolerant", "D(n) ≥ D0 − κσ, σ the diffuse pass's pixel noise (κ: Noise Tolerance)"),
+    ("LS", "Least squares", "the fast fit; on noisy renders measured closest to the true environment"),
+]
+
 BACKENDS = [
     ("CPU", "CPU", "eqs. 3–5 in the Rust core"),
     ("GPU", "GPU (Blender)", "eqs. 3–5 by the GLSL shader, drawn through Blender's gpu module"),
@@ -47,7 +53,8 @@ def _edit_args(op) -> dict:
     amount = {"emboss": min(max(op.amount, 1e-3), 1.0),
               "smooth": min(max(op.amount, 0.5), MAX_SMOOTH_SIGMA)}.get(edit, op.amount)
     return {"edit": edit, "amount": amount, "k_d": op.k_d, "k_r": op.k_r, "image_name": op.image_name,
-            "backend": "blender_gpu" if op.backend == "GPU" else "cpu"}
+            "backend": "blender_gpu" if op.backend == "GPU" else "cpu", "fit": "ls" if op.fit == "LS" else "qp",
+            "noise_tolerance": op.noise_tolerance if op.fit == "QP_TOLERANT" else 0.0}
 
 
 class _EditProps:
@@ -57,6 +64,9 @@ class _EditProps:
     k_r: bpy.props.FloatProperty(name="Reflection k_R", default=1.0, min=0.0)
     image_name: bpy.props.StringProperty(name="Image", default="Rokeby Recomposited")
     backend: bpy.props.EnumProperty(name="Backend", items=BACKENDS, default="CPU")
+    fit: bpy.props.EnumProperty(name="Diffuse Fit", items=FITS, default="QP")
+    noise_tolerance: bpy.props.FloatProperty(name="Noise Tolerance", default=3.0, min=0.0, soft_max=6.0,
+                                             description="κ of the noise-tolerant QP, in standard deviations of the pixel noise")
 
 
 class ROKEBY_OT_composite_render(_EditProps, bpy.types.Operator):
