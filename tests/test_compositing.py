@@ -440,6 +440,25 @@ def test_native_normal_tools_match_a_numpy_reference(rng):
         C.bump(n, None)
 
 
+def test_noise_decal_bumps_only_inside_its_radius_and_by_seed():
+    from rokeby import compositing as C
+
+    n, mask, _r, _v = sphere_image(120)
+    h = C.noise_decal(n.shape[:2], size=8, octaves=3, seed=11, center=(60, 60), radius=40)
+    assert h.shape == (120, 120) and h.dtype == np.float32
+    yy, xx = np.mgrid[0:120, 0:120] + 0.5
+    outside = np.hypot(yy - 60, xx - 60) >= 41  # one pixel of margin: the bump's gradient reaches in
+    assert (h[np.hypot(yy - 60, xx - 60) >= 40] == 0).all() and np.abs(h).max() > 0.3
+    e = C.bump(n, h, 2.0)
+    moved = (e != n).any(-1)
+    assert moved[mask > 0].mean() > 0.2 and not moved[outside].any() and not moved[mask == 0].any()
+    assert not np.array_equal(h, C.noise_decal(n.shape[:2], size=8, octaves=3, seed=12, center=(60, 60), radius=40))
+    np.testing.assert_array_equal(h, C.noise_decal(n.shape[:2], size=8, octaves=3, seed=11, center=(60, 60), radius=40))
+    for kw, msg in (({"seed": -1}, "seed"), ({"octaves": 9}, "octaves"), ({"size": 0.0}, "size")):
+        with pytest.raises(C.CompositingError, match=msg):
+            C.noise_decal((20, 20), **kw)
+
+
 def test_normal_tools():
     from rokeby import compositing as C
 
@@ -485,6 +504,12 @@ def test_command_line_tool(rendered, tmp_path):
     # β = 1 edits nothing: the image comes back bit for bit.
     assert img.tobytes() == p.image.tobytes()
     out = tmp_path / "ripple.exr"
+    noisy = tmp_path / "noise.exr"
+    r = subprocess.run(cmd + [str(noisy), "--noise", "2", "--noise-size", "6", "--noise-seed", "4"],
+                       capture_output=True, text=True, cwd=ROOT / "addon")
+    assert r.returncode == 0, r.stderr
+    with OpenEXR.File(str(noisy)) as f:
+        assert (np.asarray(f.parts[0].channels["RGB"].pixels) != p.image).any(-1).sum() > 100
     r = subprocess.run(cmd + [str(out), "--ripple", "1.5", "--ripple-wavelength", "6", "--report", str(tmp_path / "r.json")],
                        capture_output=True, text=True, cwd=ROOT / "addon")
     assert r.returncode == 0, r.stderr
@@ -554,6 +579,9 @@ def test_recomposite_exr_edits_a_rendered_frame_without_rendering_or_reconstruct
     px2 = np.array(img.pixels[:]).reshape(48, 64, 4)
     assert st2["reused"] and not calls and st2["edited"] > 100
     assert (np.abs(px2 - px1) > 1e-4).any(-1).sum() > 50
+    img_n, st_n = api.recomposite_exr(path, edit="noise", amount=2.0, image_name="en")
+    assert st_n["reused"] and st_n["edited"] > 50 and not calls
+    assert np.isfinite(np.array(img_n.pixels[:])).all()
     C.close_render()
     img, st3 = api.recomposite_exr(path, edit="emboss", amount=0.8, k_d=0.5, image_name="e3")
     assert not st3["reused"] and len(calls) == 1

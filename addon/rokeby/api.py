@@ -924,8 +924,8 @@ def recomposite_render(path: str, *, edit: str = "emboss", amount: float = 0.5, 
                        image_name: str = "Rokeby Recomposited", k_d: float = 1.0, k_r: float = 1.0,
                        backend: str = "cpu", warn: bool = True, fit: str = "qp", noise_tolerance: float = 0.0):
     """Renders ``scene`` with the compositing passes to the multilayer EXR ``path``, reconstructs
-    its environments, edits the normals (``edit``: 'emboss' with β = amount, 'ripple' with strength
-    amount, 'smooth' with σ = amount pixels, or 'none') and shows the recomposited frame as the
+    its environments, edits the normals (``edit``: 'emboss' with β = amount, 'ripple' or 'noise'
+    (a procedural decal) with strength amount, 'smooth' with σ = amount pixels, or 'none') and shows the recomposited frame as the
     Blender image ``image_name``. ``backend``: 'cpu' (the Rust core), 'blender_gpu' (the GLSL
     shader drawn by Blender's gpu module) or 'moderngl' (see ``rokeby.compositing.recomposite``).
     The frame stays open for ``recomposite_exr`` (further edits without rendering again).

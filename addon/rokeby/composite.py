@@ -3,11 +3,12 @@ render farm can run a sequence as independent tasks).
 
     python -m rokeby.composite in.exr out.exr --emboss 0.5
     python -m rokeby.composite in.exr out.exr --ripple 0.4 --ripple-center 120,80 --ripple-wavelength 20
+    python -m rokeby.composite in.exr out.exr --noise 1.5 --noise-size 12 --noise-seed 3
     python -m rokeby.composite in.exr out.exr --bump height.exr --bump-strength 2 --smooth 3
 
 ``in.exr`` is a Blender multilayer EXR rendered after ``rokeby.compositing.setup_passes``. The
 output is an RGB EXR of the recomposited image. Edits apply in that order: smoothing, emboss,
-ripple, bump. ``--objects 1,3`` limits them to those object pass indices. A sequence:
+ripple, noise, bump. ``--objects 1,3`` limits them to those object pass indices. A sequence:
 
     for f in frames/*.exr; do python -m rokeby.composite "$f" "out/$(basename "$f")" --emboss 0.6; done
 """
@@ -60,6 +61,12 @@ def main(argv=None) -> int:
     ap.add_argument("--ripple-center", type=_pair, metavar="X,Y", help="ripple centre in pixels (default: image centre)")
     ap.add_argument("--ripple-wavelength", type=float, default=24.0, metavar="PX")
     ap.add_argument("--ripple-radius", type=float, metavar="PX")
+    ap.add_argument("--noise", type=float, metavar="STRENGTH", help="fading procedural noise bump decal of this strength")
+    ap.add_argument("--noise-size", type=float, default=16.0, metavar="PX", help="its feature size (default 16)")
+    ap.add_argument("--noise-octaves", type=int, default=3, metavar="N")
+    ap.add_argument("--noise-seed", type=int, default=0)
+    ap.add_argument("--noise-center", type=_pair, metavar="X,Y", help="its centre in pixels (default: image centre)")
+    ap.add_argument("--noise-radius", type=float, metavar="PX")
     ap.add_argument("--bump", metavar="HEIGHT", help="height image (EXR or .npy, frame-sized)")
     ap.add_argument("--bump-strength", type=float, default=1.0)
     ap.add_argument("--smooth", type=float, metavar="SIGMA_PX", help="cross-bilateral smoothing of normals with depth")
@@ -111,6 +118,11 @@ def main(argv=None) -> int:
             c = a.ripple_center
             h = C.ripple(p.shape, None if c is None else (c[1], c[0]), a.ripple_wavelength, a.ripple_radius)
             n = C.bump(n, h, a.ripple, mask=mask)
+        if a.noise:
+            c = a.noise_center
+            h = C.noise_decal(p.shape, a.noise_size, a.noise_octaves, a.noise_seed, None if c is None else (c[1], c[0]),
+                              a.noise_radius)
+            n = C.bump(n, h, a.noise, mask=mask)
         if a.bump:
             n = C.bump(n, _read_height(a.bump, p.shape), a.bump_strength, mask=mask)
     except (C.CompositingError, OSError, ValueError) as exc:  # a bad edit: say which, write nothing

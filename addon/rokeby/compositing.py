@@ -563,19 +563,22 @@ class RecompositeSession:
         return gl_recompositor()
 
 
-EDITS = ("emboss", "ripple", "smooth", "none")
+EDITS = ("emboss", "ripple", "noise", "smooth", "none")
 
 
 def edit_normals(p: Passes, rec: Reconstruction, edit: str, amount: float) -> np.ndarray:
     """The one-knob edits of the operators and ``rokeby.api`` on the patches' pixels: 'emboss'
-    (β = amount), 'ripple' (a decal at the centre, strength amount), 'smooth' (cross-bilateral
-    with depth, σ = amount pixels) or 'none' (the shown normals: material edits k_D, k_R only)."""
+    (β = amount), 'ripple' or 'noise' (a decal at the centre, strength amount), 'smooth'
+    (cross-bilateral with depth, σ = amount pixels) or 'none' (the shown normals: material edits
+    k_D, k_R only)."""
     n = rec.normals
     on = rec.ids >= 0
     if edit == "emboss":
         return emboss(n, amount, mask=on)
     if edit == "ripple":
         return bump(n, ripple(p.shape), amount, mask=on)
+    if edit == "noise":
+        return bump(n, noise_decal(p.shape), amount, mask=on)
     if edit == "smooth":
         return bilateral_smooth(n, p.depth, sigma_s=amount, mask=on)
     if edit == "none":
@@ -1031,6 +1034,23 @@ def ripple(shape, center=None, wavelength: float = 24.0, radius: float | None = 
     yy, xx = np.mgrid[0:h, 0:w].astype(np.float32)
     d = np.hypot(yy - cy, xx - cx)
     return (np.cos(2 * math.pi * d / wavelength) * np.clip(1 - d / radius, 0, None) ** 2).astype(np.float32)
+
+
+def noise_decal(shape, size: float = 16.0, octaves: int = 3, seed: int = 0, center=None,
+                radius: float | None = None) -> np.ndarray:
+    """A procedural noise bump decal (H, W): fractal gradient noise of feature size ``size`` pixels
+    and ``octaves`` octaves, seeded, faded like ``ripple`` by (1 − d/radius)₊² around ``center``
+    ((row, col) pixels; default the frame's centre, radius 0.35·min(H, W)). Heights in pixels,
+    within about ±size/4, so that ``bump(n, noise_decal(...), s)`` tilts normals alike at any size."""
+    h, w = shape
+    cy, cx = center if center is not None else (h / 2, w / 2)
+    radius = radius or 0.35 * min(h, w)
+    if not (isinstance(seed, (int, np.integer)) and 0 <= seed < 2 ** 32):
+        raise CompositingError(f"seed: expected an integer in [0, 2^32), got {seed!r}")
+    if not (isinstance(octaves, (int, np.integer)) and 1 <= octaves <= 8):
+        raise CompositingError(f"octaves: must be 1 to 8, got {octaves!r}")
+    return _native_edit(native.module().normals_noise_decal, int(h), int(w), float(size), int(octaves), int(seed),
+                        (float(cx), float(cy)), float(radius))
 
 
 def bump(normals: np.ndarray, height: np.ndarray, strength: float = 1.0, mask=None) -> np.ndarray:

@@ -14,6 +14,7 @@ from . import compositing as comp
 EDITS = [
     ("EMBOSS", "Emboss", "n_z → β n_z (amount = β in (0, 1])"),
     ("RIPPLE", "Ripple", "fading 2D ripple decal (amount = strength)"),
+    ("NOISE", "Noise", "fading procedural noise bump decal (amount = strength)"),
     ("SMOOTH", "Smooth", "cross-bilateral smoothing with depth (amount = σ in pixels)"),
     ("NONE", "None", "no edit (material edits k_D, k_R only)"),
 ]

@@ -11,6 +11,8 @@
 //! * [`emboss`]: n_z → β n_z (β ∈ (0, 1]: the surface bulges; the paper's LUMO-style emboss).
 //! * [`bump`]: ñ = normalize(n − s ∇h), ∇h = (∂h/∂col, −∂h/∂row, 0), with the gradient as
 //!   numpy's `gradient` takes it (central differences inside, one-sided at the borders).
+//! * [`noise_decal`]: a procedural height decal (fractal gradient noise, faded like the paper's
+//!   ripple) for [`bump`].
 //! * [`bilateral`]: a cross-bilateral filter of (n_x, n_y) with a spatial Gaussian σ_s (pixels,
 //!   window radius ⌈2σ_s⌉) and a range Gaussian on the relative depth difference σ_d, so that
 //!   occluding contours stay sharp; n_z = √(1 − |n̄|²). Accumulated in f64.
@@ -209,6 +211,80 @@ pub fn bilateral(normals: &[f32], f: &Frame, depth: &[f32], sigma_s: f64, sigma_
     Ok(apply(normals, f, edit))
 }
 
+/// A procedural bump decal: fractal gradient noise (Perlin's 2002 noise with a quintic fade,
+/// `octaves` octaves of halving amplitude, each with its own hashed gradients from `seed`) of
+/// feature size `size` pixels, faded by (1 − d/radius)₊² around `center` (x, y in pixels, the
+/// ripple's window). Heights in pixels, within about ±size/4 (lower towards the rim), so that
+/// slopes are about ±0.5 whatever the size; (H×W) row-major, rows top first. Pair with [`bump`].
+pub fn noise_decal(width: usize, height: usize, size: f64, octaves: u32, seed: u32, center: (f64, f64), radius: f64) -> Result<Vec<f32>> {
+    if width == 0 || height == 0 {
+        return Err(RokebyError::invalid("shape", "the frame is empty"));
+    }
+    if !(size.is_finite() && size >= 1.0) {
+        return Err(RokebyError::invalid("size", format!("must be at least 1 pixel, got {size}")));
+    }
+    if !(1..=8).contains(&octaves) {
+        return Err(RokebyError::invalid("octaves", format!("must be 1 to 8, got {octaves}")));
+    }
+    if !(radius.is_finite() && radius > 0.0) {
+        return Err(RokebyError::invalid("radius", format!("must be positive and finite, got {radius}")));
+    }
+    if !(center.0.is_finite() && center.1.is_finite()) {
+        return Err(RokebyError::invalid("center", "must be finite"));
+    }
+    let norm: f64 = (0..octaves).map(|o| 0.5f64.powi(o as i32)).sum();
+    let amp = size / 4.0 / norm;
+    let mut out = vec![0.0f32; width * height];
+    out.par_chunks_mut(width).enumerate().for_each(|(y, row)| {
+        for (x, v) in row.iter_mut().enumerate() {
+            let (dx, dy) = (x as f64 + 0.5 - center.0, y as f64 + 0.5 - center.1);
+            let fade = (1.0 - (dx * dx + dy * dy).sqrt() / radius).max(0.0);
+            if fade == 0.0 {
+                continue;
+            }
+            let mut sum = 0.0;
+            for o in 0..octaves {
+                let f = (1u64 << o) as f64 / size;
+                sum += 0.5f64.powi(o as i32) * gradient_noise(x as f64 * f, y as f64 * f, seed.wrapping_add(o.wrapping_mul(0x9e37_79b9)));
+            }
+            *v = (amp * sum * fade * fade) as f32;
+        }
+    });
+    Ok(out)
+}
+
+/// A 32-bit integer hash of a lattice point (x, y) and a seed (a multiply–xorshift mix).
+#[inline]
+fn lattice_hash(ix: i64, iy: i64, seed: u32) -> u32 {
+    let mut h = (ix as u32).wrapping_mul(0x8da6_b343) ^ (iy as u32).wrapping_mul(0xd816_3841) ^ seed.wrapping_mul(0xcb1a_b31f);
+    h ^= h >> 16;
+    h = h.wrapping_mul(0x7feb_352d);
+    h ^= h >> 15;
+    h = h.wrapping_mul(0x846c_a68b);
+    h ^ (h >> 16)
+}
+
+/// 2D gradient noise in [−1, 1] (unit gradients at hashed angles, quintic interpolation, scaled
+/// by √2 so that its extremes reach about ±1).
+fn gradient_noise(x: f64, y: f64, seed: u32) -> f64 {
+    let (x0, y0) = (x.floor(), y.floor());
+    let (fx, fy) = (x - x0, y - y0);
+    let (ix, iy) = (x0 as i64, y0 as i64);
+    let dot = |cx: i64, cy: i64, ox: f64, oy: f64| {
+        let a = lattice_hash(ix + cx, iy + cy, seed) as f64 / 4_294_967_296.0 * std::f64::consts::TAU;
+        a.cos() * ox + a.sin() * oy
+    };
+    let fade = |t: f64| t * t * t * (t * (t * 6.0 - 15.0) + 10.0);
+    let (u, v) = (fade(fx), fade(fy));
+    let n00 = dot(0, 0, fx, fy);
+    let n10 = dot(1, 0, fx - 1.0, fy);
+    let n01 = dot(0, 1, fx, fy - 1.0);
+    let n11 = dot(1, 1, fx - 1.0, fy - 1.0);
+    let a = n00 + u * (n10 - n00);
+    let b = n01 + u * (n11 - n01);
+    std::f64::consts::SQRT_2 * (a + v * (b - a))
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -306,6 +382,48 @@ mod tests {
         // Threads do not change the result.
         let one = rayon::ThreadPoolBuilder::new().num_threads(1).build().unwrap().install(|| bilateral(&n, &f, &d, 3.0, 0.02).unwrap());
         assert_eq!(one, s);
+    }
+
+    #[test]
+    fn noise_decal_is_a_seeded_fading_bump_of_its_size() {
+        let (w, h) = (200, 120);
+        let c = (100.0, 60.0);
+        let a = noise_decal(w, h, 12.0, 3, 7, c, 50.0).unwrap();
+        assert_eq!(a, noise_decal(w, h, 12.0, 3, 7, c, 50.0).unwrap(), "deterministic");
+        let b = noise_decal(w, h, 12.0, 3, 8, c, 50.0).unwrap();
+        assert!(a.iter().zip(&b).filter(|(x, y)| x != y).count() > 1000, "another seed, another decal");
+        // Zero outside the radius, not zero inside; heights about ±size/4, slopes about ±0.5.
+        let mut slopes = Vec::new();
+        for y in 1..h - 1 {
+            for x in 1..w - 1 {
+                let d = ((x as f64 + 0.5 - c.0).powi(2) + (y as f64 + 0.5 - c.1).powi(2)).sqrt();
+                let v = a[y * w + x];
+                if d >= 50.0 {
+                    assert_eq!(v, 0.0);
+                } else if d < 20.0 {
+                    assert!(v.abs() <= 12.0 / 4.0 * 1.6, "{v}");
+                    slopes.push(((a[y * w + x + 1] - a[y * w + x - 1]) / 2.0).abs());
+                }
+            }
+        }
+        slopes.sort_by(f32::total_cmp);
+        let median = slopes[slopes.len() / 2];
+        assert!((0.05..1.0).contains(&median), "median slope {median}");
+        let inside: Vec<f32> = (0..w * h).filter(|i| a[*i] != 0.0).map(|i| a[i]).collect();
+        assert!(inside.len() > 5000);
+        let mean = inside.iter().map(|v| *v as f64).sum::<f64>() / inside.len() as f64;
+        assert!(mean.abs() < 0.5, "about zero-mean: {mean}");
+        // Finer size, finer detail: more sign changes along a row through the centre.
+        let changes = |z: &[f32]| (61..139).filter(|&x| (z[60 * w + x] > 0.0) != (z[60 * w + x + 1] > 0.0)).count();
+        let fine = noise_decal(w, h, 4.0, 1, 7, c, 50.0).unwrap();
+        let coarse = noise_decal(w, h, 24.0, 1, 7, c, 50.0).unwrap();
+        assert!(changes(&fine) > 2 * changes(&coarse).max(1), "{} vs {}", changes(&fine), changes(&coarse));
+        let err = |r: Result<Vec<f32>>| r.unwrap_err().to_string();
+        assert!(err(noise_decal(w, h, 0.5, 3, 1, c, 50.0)).contains("size"));
+        assert!(err(noise_decal(w, h, 8.0, 0, 1, c, 50.0)).contains("octaves"));
+        assert!(err(noise_decal(w, h, 8.0, 3, 1, c, 0.0)).contains("radius"));
+        assert!(err(noise_decal(0, h, 8.0, 3, 1, c, 5.0)).contains("empty"));
+        assert!(err(noise_decal(w, h, 8.0, 3, 1, (f64::NAN, 0.0), 5.0)).contains("center"));
     }
 
     #[test]

@@ -506,7 +506,18 @@ pub fn normals_bilateral<'py>(py: Python<'py>, normals: &Bound<'py, PyAny>, dept
     array_f32(py, &[h, w, 3], out)
 }
 
+/// A procedural bump decal (fractal gradient noise faded by (1 − d/radius)₊² around `center`,
+/// (x, y) pixels): heights (H, W) float32 in pixels, within about ±size/4.
+#[pyfunction]
+#[pyo3(signature = (height, width, size, octaves, seed, center, radius))]
+#[allow(clippy::too_many_arguments)]
+pub fn normals_noise_decal<'py>(py: Python<'py>, height: usize, width: usize, size: f64, octaves: u32, seed: u32, center: (f64, f64), radius: f64) -> PyResult<Bound<'py, PyArrayDyn<f32>>> {
+    let out = run_detached(py, || normals::noise_decal(width, height, size, octaves, seed, center, radius))?;
+    array_f32(py, &[height, width], out)
+}
+
 pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    m.add_function(wrap_pyfunction!(normals_noise_decal, m)?)?;
     m.add_function(wrap_pyfunction!(normals_emboss, m)?)?;
     m.add_function(wrap_pyfunction!(normals_bump, m)?)?;
     m.add_function(wrap_pyfunction!(normals_bilateral, m)?)?;
