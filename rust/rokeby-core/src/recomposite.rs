@@ -517,11 +517,11 @@ fn unit_lanes(v: &[Lanes; 3], u: &mut [Lanes; 3], ok: &mut [bool; LANES], nb: us
 #[inline(always)]
 fn basis_diff_lanes(n: &[Lanes; 3], e: &[Lanes; 3], dy: &mut [Lanes; SH_COEFFS], nb: usize) {
     let nb = nb.min(LANES);
-    let (c0, c1, c2, c6, c8) = (0.282_094_8_f32, 0.488_602_5_f32, 1.092_548_4_f32, 0.315_391_57_f32, 0.546_274_2_f32);
+    let (c1, c2, c6, c8) = (0.488_602_5_f32, 1.092_548_4_f32, 0.315_391_57_f32, 0.546_274_2_f32);
     for l in 0..nb {
         let (x, y, z) = (n[0][l], n[1][l], n[2][l]);
         let (xe, ye, ze) = (e[0][l], e[1][l], e[2][l]);
-        dy[0][l] = 0.0; // Y_00 is the constant c0: c0 − c0
+        dy[0][l] = 0.0; // Y_00 is a constant: its difference is 0
         dy[1][l] = c1 * ye - c1 * y;
         dy[2][l] = c1 * ze - c1 * z;
         dy[3][l] = c1 * xe - c1 * x;
