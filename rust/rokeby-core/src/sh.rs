@@ -393,10 +393,10 @@ fn residual_chunk_any(ci: usize, nc: &[f32], vc: &[f32], channels: usize, x: &[[
                 }
             }
         }
-        for (w, &(c, tol, tau)) in watch.iter().enumerate() {
+        for (w, &(c, theta, tau)) in watch.iter().enumerate() {
             for l in 0..m {
                 let slack = dots[c][l] - (vc[(p0 + l) * channels + c] as f64 - tau);
-                if slack < -tol {
+                if slack < theta {
                     viol[w].push(((ci * CHUNK + p0 + l) as u32, slack));
                 }
             }
@@ -408,8 +408,8 @@ fn residual_chunk_any(ci: usize, nc: &[f32], vc: &[f32], channels: usize, x: &[[
 }
 
 /// One pass over the pixels with the coefficients `x[c]`: per channel (largest residual
-/// D0 − D(n), sum of squared residuals), and, for the channels listed in `watch` as (c, tol, τ),
-/// the pixels whose slack D(n) − (D0 − τ) is below −tol (index, slack), in pixel order. The slack
+/// D0 − D(n), sum of squared residuals), and, for the channels listed in `watch` as (c, θ, τ),
+/// the pixels whose slack D(n) − (D0 − τ) is below θ (index, slack), in pixel order. The slack
 /// is the one [GI83] computes (`GiState::run`: dot9(a, x) − b with b = D0 − τ), bit for bit.
 #[allow(clippy::type_complexity)]
 fn residual_pass(normals: &[f32], values: &[f32], channels: usize, x: &[[f64; SH_COEFFS]], watch: &[(usize, f64, f64)]) -> (Vec<(f64, f64)>, Vec<Vec<(u32, f64)>>) {
@@ -443,10 +443,13 @@ const SCREEN_BATCH: usize = 512;
 /// when constraints are added to the problem. So each channel runs it on a subset S of the pixel
 /// constraints (at first those of a regular sample of `SCREEN_SAMPLE` pixels violated at the
 /// least-squares optimum); a pass over all pixels then lists those the subset's optimum violates,
-/// the most violated `SCREEN_BATCH` of them join S and the method continues from where it stopped. When a pass finds no violation
-/// (beyond the tolerance) the subset's optimum is feasible for all pixels and therefore the
-/// optimum of the whole QP (strictly convex: the optimum is unique). Same result as running [GI83]
-/// on all N constraints at once, at a few passes over the pixels instead of one per step.
+/// the most violated `SCREEN_BATCH` of them join S and the method continues from where it stopped.
+/// The same pass lists the candidates, pixels with a slack under a small margin; the next rounds
+/// check only those, and a full pass follows when none of them is violated. When a full pass finds
+/// no violation (beyond the tolerance) the subset's optimum is feasible for all pixels and
+/// therefore the optimum of the whole QP (strictly convex: the optimum is unique). Same result as
+/// running [GI83] on all N constraints at once, at two or three passes over the pixels instead of
+/// one per step.
 #[allow(clippy::type_complexity)]
 fn qp_screened(chol: &Chol, normals: &[f32], values: &[f32], channels: usize, x0: Vec<[f64; SH_COEFFS]>, slack: &[f64]) -> Result<(Vec<[f64; SH_COEFFS]>, Vec<usize>, Vec<(f64, f64)>)> {
     let n = normals.len() / 3;
@@ -472,40 +475,63 @@ fn qp_screened(chol: &Chol, normals: &[f32], values: &[f32], channels: usize, x0
             }
         }
     }
-    let mut open: Vec<usize> = (0..channels).collect();
+    // Candidate screening: a full pass also lists, per channel, the pixels whose slack is below
+    // θ (a small positive margin), the ones that can become violated while x moves a little. The
+    // rounds after it check only those; when none of them is violated, a full pass over all
+    // pixels verifies the optimum (and gives the statistics), or starts over with what it finds.
+    // The result is the same unique optimum as screening every pixel in every round.
+    let theta: Vec<f64> = tols.iter().map(|t| t * CANDIDATE_MARGIN).collect();
+    let mut cand: Vec<Option<Vec<u32>>> = vec![None; channels];
+    let mut open: Vec<usize> = (0..channels).collect(); // not yet verified by a full pass
+    let mut dirty: Vec<usize> = open.clone(); // working set grown since [GI83] last ran
     loop {
-        // [GI83] on each open channel's working set, from where it stopped.
+        // [GI83] on each channel whose working set grew, from where it stopped.
         let res: Vec<Result<()>> = st
             .par_iter_mut()
             .enumerate()
-            .filter(|(c, _)| open.contains(c))
+            .filter(|(c, _)| dirty.contains(c))
             .map(|(c, s)| s.run(chol, &rows[c], &rhs[c], tols[c], max_steps))
             .collect();
         for r in res {
             r?;
         }
-        // One pass over all pixels: the statistics, and the constraints still violated.
-        let x: Vec<[f64; SH_COEFFS]> = st.iter().map(|s| s.x).collect();
-        let watch: Vec<(usize, f64, f64)> = open.iter().map(|&c| (c, tols[c], slack[c])).collect();
-        let (stats, viol) = residual_pass(normals, values, channels, &x, &watch);
-        let mut still = Vec::new();
-        for (w, mut v) in viol.into_iter().enumerate() {
-            let c = open[w];
-            if v.is_empty() {
+        dirty.clear();
+        if open.iter().all(|&c| cand[c].is_some()) {
+            for &c in &open {
+                let x = st[c].x;
+                let mut v: Vec<(u32, f64)> = cand[c]
+                    .as_ref()
+                    .expect("checked")
+                    .iter()
+                    .filter_map(|&p| {
+                        let pu = p as usize;
+                        let a = basis(unit_row(&normals[3 * pu..3 * pu + 3]).expect("validated"));
+                        let sl = dot9(&a, &x) - (values[pu * channels + c] as f64 - slack[c]);
+                        (sl < -tols[c]).then_some((p, sl))
+                    })
+                    .collect();
+                if add_most_violated(&mut v, c, normals, values, channels, slack, &mut rows, &mut rhs) {
+                    dirty.push(c);
+                }
+            }
+            if !dirty.is_empty() {
                 continue;
             }
-            // The most violated batch (ties by pixel index), in pixel order.
-            if v.len() > SCREEN_BATCH {
-                v.select_nth_unstable_by(SCREEN_BATCH, |a, b| a.1.total_cmp(&b.1).then(a.0.cmp(&b.0)));
-                v.truncate(SCREEN_BATCH);
-                v.sort_unstable_by_key(|e| e.0);
+        }
+        // One pass over all pixels: the statistics, the constraints still violated and the candidates.
+        let x: Vec<[f64; SH_COEFFS]> = st.iter().map(|s| s.x).collect();
+        let watch: Vec<(usize, f64, f64)> = open.iter().map(|&c| (c, theta[c], slack[c])).collect();
+        let (stats, listed) = residual_pass(normals, values, channels, &x, &watch);
+        let mut still = Vec::new();
+        for (w, l) in listed.into_iter().enumerate() {
+            let c = open[w];
+            let mut v: Vec<(u32, f64)> = l.iter().copied().filter(|e| e.1 < -tols[c]).collect();
+            // Candidates worth keeping only while they are few; otherwise full passes, as before.
+            cand[c] = (l.len() <= n / 8).then(|| l.into_iter().map(|e| e.0).collect());
+            if add_most_violated(&mut v, c, normals, values, channels, slack, &mut rows, &mut rhs) {
+                dirty.push(c);
+                still.push(c);
             }
-            for (p, _) in v {
-                let p = p as usize;
-                rows[c].push(basis(unit_row(&normals[3 * p..3 * p + 3]).expect("validated")));
-                rhs[c].push(values[p * channels + c] as f64 - slack[c]);
-            }
-            still.push(c);
         }
         if still.is_empty() {
             let it = st.iter().map(|s| s.steps).collect();
@@ -513,6 +539,30 @@ fn qp_screened(chol: &Chol, normals: &[f32], values: &[f32], channels: usize, x0
         }
         open = still;
     }
+}
+
+/// Candidates' margin θ over the violation tolerance (θ = CANDIDATE_MARGIN · tol = 1e-3 of the
+/// channel's largest |D0|, tol being 1e-12 of it).
+const CANDIDATE_MARGIN: f64 = 1e9;
+
+/// Adds the most violated `SCREEN_BATCH` of the (pixel, slack) list `v` to channel c's working
+/// set, in pixel order (ties by pixel index); whether there was any.
+#[allow(clippy::too_many_arguments)]
+fn add_most_violated(v: &mut Vec<(u32, f64)>, c: usize, normals: &[f32], values: &[f32], channels: usize, slack: &[f64], rows: &mut [Vec<[f64; SH_COEFFS]>], rhs: &mut [Vec<f64>]) -> bool {
+    if v.is_empty() {
+        return false;
+    }
+    if v.len() > SCREEN_BATCH {
+        v.select_nth_unstable_by(SCREEN_BATCH, |a, b| a.1.total_cmp(&b.1).then(a.0.cmp(&b.0)));
+        v.truncate(SCREEN_BATCH);
+    }
+    v.sort_unstable_by_key(|e| e.0);
+    for &(p, _) in v.iter() {
+        let p = p as usize;
+        rows[c].push(basis(unit_row(&normals[3 * p..3 * p + 3]).expect("validated")));
+        rhs[c].push(values[p * channels + c] as f64 - slack[c]);
+    }
+    true
 }
 
 /// The state of [GI83] on one channel: x, the active constraints (indices into the working set)
