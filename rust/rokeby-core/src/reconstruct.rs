@@ -344,6 +344,23 @@ fn fmax(a: f64, b: f64) -> f64 {
 /// order (fixed tasks of block rows) and are accumulated per texel in that order (each texel by
 /// one task), so the map does not depend on the number of threads.
 #[allow(clippy::too_many_arguments)]
+/// Whether neighbouring pixels a, b (reflected directions ra, rb) lie on one smooth piece of the
+/// surface: their directions within the edge angle (cos_edge) and, with a depth pass, their
+/// depths within max_depth_jump relative of each other (eq. 2's quads stop at discontinuities).
+#[inline]
+fn no_discontinuity(ra: DVec3, rb: DVec3, depth: &[f32], a: usize, b: usize, cos_edge: f64, max_depth_jump: f64) -> bool {
+    if ra.dot(rb) < cos_edge {
+        return false;
+    }
+    if !depth.is_empty() {
+        let (da, db) = (depth[a] as f64, depth[b] as f64);
+        if (da - db).abs() > max_depth_jump * da.abs().min(db.abs()) {
+            return false;
+        }
+    }
+    true
+}
+
 pub fn partial(width: usize, height: usize, refl: &[f32], values: &[f32], channels: usize, mask: &[f32], depth: &[f32], params: &ReflectionParams) -> Result<PartialMap> {
     check_partial_args(width, height, refl, values, channels, mask, depth, params)?;
     let np = width * height;
@@ -371,18 +388,7 @@ pub fn partial(width: usize, height: usize, refl: &[f32], values: &[f32], channe
     });
     let cos_edge = params.max_edge_angle.cos();
     // Pixels a and b (both valid) are connected: no discontinuity between them.
-    let edge = |a: usize, b: usize| -> bool {
-        if rr[a].dot(rr[b]) < cos_edge {
-            return false;
-        }
-        if !depth.is_empty() {
-            let (da, db) = (depth[a] as f64, depth[b] as f64);
-            if (da - db).abs() > params.max_depth_jump * da.abs().min(db.abs()) {
-                return false;
-            }
-        }
-        true
-    };
+    let edge = |a: usize, b: usize| -> bool { no_discontinuity(rr[a], rr[b], depth, a, b, cos_edge, params.max_depth_jump) };
     let connected = |a: usize, b: usize| -> bool { ok[a] && ok[b] && edge(a, b) };
     // Per pixel p, the edges to its neighbours without discontinuity (both pixels valid): bit 0 to
     // p + 1, bit 1 to p + W, bit 2 to p + W + 1 (the quads' diagonal).
@@ -646,18 +652,7 @@ pub(crate) fn partial_reference(width: usize, height: usize, refl: &[f32], value
     let cos_edge = params.max_edge_angle.cos();
     let connected = |a: usize, b: usize| -> bool {
         match (pix[a], pix[b]) {
-            (Some((ra, _)), Some((rb, _))) => {
-                if ra.dot(rb) < cos_edge {
-                    return false;
-                }
-                if !depth.is_empty() {
-                    let (da, db) = (depth[a] as f64, depth[b] as f64);
-                    if (da - db).abs() > params.max_depth_jump * da.abs().min(db.abs()) {
-                        return false;
-                    }
-                }
-                true
-            }
+            (Some((ra, _)), Some((rb, _))) => no_discontinuity(ra, rb, depth, a, b, cos_edge, params.max_depth_jump),
             _ => false,
         }
     };
