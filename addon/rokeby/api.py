@@ -180,15 +180,6 @@ def edited_directions(positions, normals, eye, constraints, **kwargs) -> np.ndar
     return native.edited_directions(positions, normals, eye, constraints, **kwargs)
 
 
-def rotate(quats: np.ndarray, vectors: np.ndarray) -> np.ndarray:
-    """Apply unit quaternions (..., 4) as (x, y, z, w) to vectors (..., 3), vectorised."""
-    q = np.asarray(quats, dtype=np.float64)
-    v = np.asarray(vectors, dtype=np.float64)
-    u, w = q[..., :3], q[..., 3:4]
-    t = 2.0 * np.cross(u, v)
-    return v + w * t + np.cross(u, t)
-
-
 def quat_angle(quats: np.ndarray) -> np.ndarray:
     """Rotation angle in radians of each quaternion (..., 4), accurate for small angles."""
     q = np.asarray(quats, dtype=np.float64)
@@ -234,7 +225,7 @@ def geodesic_distances(vertices, faces, sources, *, method: str = "heat", bounda
 # functions, and background scripts (render farms, pipelines) call them directly.
 
 from . import evaluate as _ev  # noqa: E402 - aliased: api.evaluate is a function
-from .evaluate import ATTRIBUTE, MirrorReport, RokebyError  # noqa: E402
+from .evaluate import ATTRIBUTE, MirrorReport, RokebyError, rotate  # noqa: E402
 
 HANDLE_COLLECTION = "Rokeby Handles"
 
@@ -621,7 +612,12 @@ def remove_mirror(mirror, *, scene=None):
     if attr is not None:
         mirror.data.attributes.remove(attr)
     _ev.remove_attribute(mirror, _ev.REFRACTION_ATTRIBUTE)
+    _ev.remove_render_attribute(mirror)
     mirror.rokeby.is_mirror = False
+    from . import rendering  # noqa: PLC0415
+
+    # Its materials come back as they were (unless another mirror still edits them).
+    rendering.sync_scene(scene)
 
 
 def evaluate(scene=None, frame=None, *, force: bool = False) -> "dict[str, MirrorReport]":
@@ -639,7 +635,12 @@ def evaluate(scene=None, frame=None, *, force: bool = False) -> "dict[str, Mirro
             whole = int(np.floor(f))
             scene.frame_set(whole, subframe=f - whole)
         dg = _depsgraph(scene)
-        return _ev.evaluate_scene(scene, dg, force=force, all_geometry=frame is not None)
+        reports = _ev.evaluate_scene(scene, dg, force=force, all_geometry=frame is not None)
+        from . import rendering  # noqa: PLC0415
+
+        # Final renders follow: render nodes in every edited material (see rokeby.rendering).
+        rendering.sync_scene(scene, reports, force=force)
+        return reports
 
 
 def report(mirror) -> "MirrorReport | None":
@@ -710,11 +711,10 @@ def reset_stats():
 def edited_materials(mirror) -> list:
     """The materials whose reflections are edited: every material of the mirror unless a
     subset was chosen with ``set_edited_materials``."""
+    from . import rendering  # noqa: PLC0415
+
     _require_mirror(mirror)
-    s = mirror.rokeby
-    if s.all_materials:
-        return [slot.material for slot in mirror.material_slots if slot.material is not None]
-    return [item.material for item in s.materials if item.material is not None]
+    return rendering.edited_materials(mirror)
 
 
 def set_edited_materials(mirror, materials=None):
@@ -739,7 +739,9 @@ def set_edited_materials(mirror, materials=None):
 
 
 def install_render_nodes(mirror) -> int:
-    """Make final renders (Cycles; EEVEE uses the same nodes) show the edit, in the mirror's
+    """Make final renders (Cycles; EEVEE uses the same nodes) show the edit now. Evaluation does
+    this by itself for every mirror with a constraint while its ``render_edits`` is on (the
+    default; this call turns it on): see rokeby.rendering. In the mirror's
     ``render_mode``: RAY_TRACED — the node group "Rokeby Edited Normal" feeds the edited normal
     to the specular BSDFs of every edited material (see rokeby.shading); REFLECTION_MAP — their
     specular lobe becomes a lookup of the captured map in the edited direction (rokeby.reflmap;
@@ -747,29 +749,23 @@ def install_render_nodes(mirror) -> int:
     Returns how many BSDF inputs (ray traced) or BSDFs (reflection map) were rewired. In both
     modes "Rokeby Edited Refraction Normal" feeds Refraction BSDFs and split Glass BSDFs first
     (rokeby.refraction; counted too), so a split Glass's reflection part is edited as well."""
-    from . import reflmap, refraction, shading  # noqa: PLC0415
+    from . import rendering  # noqa: PLC0415
 
     _require_mirror(mirror)
-    mats = edited_materials(mirror)
-    refracted = sum(refraction.install(mat) for mat in mats)
-    if mirror.rokeby.render_mode == "REFLECTION_MAP":
-        if reflmap.image_for(mirror) is None:
-            raise RokebyError(f"mirror '{mirror.name}' is in reflection-map mode but has no map: capture one first (capture_reflection_map)")
-        for mat in mats:
-            shading.uninstall(mat)
-        return refracted + sum(reflmap.install(mat, mirror) for mat in mats)
-    for mat in mats:
-        reflmap.uninstall(mat)
-    return refracted + sum(shading.install(mat) for mat in mats)
+    count = rendering.install(mirror)
+    mirror.rokeby.render_edits = True
+    return count
 
 
 def remove_render_nodes(mirror) -> int:
-    """Take the node group out of the mirror's materials again; returns how many it left."""
-    from . import reflmap, refraction, shading  # noqa: PLC0415
+    """Take the render nodes out of the mirror's materials again and turn its ``render_edits``
+    off (so evaluation does not put them back); returns from how many materials they went."""
+    from . import rendering  # noqa: PLC0415
 
     _require_mirror(mirror)
+    mirror.rokeby.render_edits = False
     mats = {slot.material for slot in mirror.material_slots if slot.material is not None}
-    return sum(bool(shading.uninstall(mat)) | bool(reflmap.uninstall(mat)) | bool(refraction.uninstall(mat)) for mat in mats)
+    return sum(rendering.uninstall_material(mat) for mat in mats)
 
 
 def capture_reflection_map(mirror, *, resolution=None, samples=None, storage: str = "AUTO", scene=None):
@@ -805,8 +801,11 @@ def freeze(mirror, frozen: bool = True, *, eye=None):
             if not len(s.constraints):
                 raise RokebyError("eye: not given and the mirror has no constraint to take a generating eye from")
             eye = tuple(s.constraints[min(s.active_constraint, len(s.constraints) - 1)].eye)
-        s.freeze_eye = _vec3(eye, "eye").tolist()
-    s.freeze = bool(frozen)
+        eye = _vec3(eye, "eye").tolist()
+        s.freeze = True  # its update stores the camera's eye; the chosen one replaces it
+        s.freeze_eye = eye
+    else:
+        s.freeze = False
 
 
 def constraint_view(mirror, index: "int | None" = None) -> dict:
@@ -864,9 +863,9 @@ def _light_point(light, p: np.ndarray, far: float) -> np.ndarray:
 
 
 def physical_highlight(mirror, light, eye=None, *, scene=None) -> np.ndarray:
-    """The point of ``mirror`` (world space, a vertex) where ``light``'s highlight sits for a
-    mirror-like BRDF seen from ``eye`` (default: the scene camera): the visible, lit vertex whose
-    reflected view ray points most nearly at the light."""
+    """The point of ``mirror`` (world space) where ``light``'s highlight sits for a mirror-like
+    BRDF seen from ``eye`` (default: the scene camera): the visible, lit vertex whose reflected view
+    ray points most nearly at the light, refined to the surface point where it points at it."""
     scene = _scene(scene)
     _require_mirror(mirror)
     if light is None or getattr(light, "type", None) != "LIGHT":
@@ -886,7 +885,50 @@ def physical_highlight(mirror, light, eye=None, *, scene=None) -> np.ndarray:
     if not ok.any():
         raise RokebyError(f"light '{light.name}': no part of mirror '{mirror.name}' both faces the eye and is lit")
     score = np.where(ok, (r * to_light).sum(1), -np.inf)
-    return v[int(np.argmax(score))].astype(np.float64)
+    best = int(np.argmax(score))
+    return _refine_highlight(geo, light, eye, best)
+
+
+def _refine_highlight(geo, light, eye, vertex: int) -> np.ndarray:
+    """The surface point (inside the triangles around ``vertex`` and their neighbours) where the
+    reflected view ray points at the light, with the smooth (interpolated) normal the renderers
+    shade with: a zooming barycentric grid search per triangle, vectorised. A highlight
+    constraint placed there is neutral (its r and e agree to well under 0.01°)."""
+    tri = geo.triangles
+    ring = np.flatnonzero((tri == vertex).any(1))
+    near = np.unique(tri[ring])
+    cand = tri[np.flatnonzero(np.isin(tri, near).any(1))].astype(np.int64)  # (T, 3)
+    verts = geo.vertices.astype(np.float64)[cand]  # (T, 3, 3)
+    nrms = geo.normals.astype(np.float64)[cand]
+
+    def score(bary):  # bary (T, G, 3) → (T, G), and the points
+        p = np.einsum("tgk,tkj->tgj", bary, verts)
+        n = np.einsum("tgk,tkj->tgj", bary, nrms)
+        n /= np.maximum(np.linalg.norm(n, axis=-1, keepdims=True), 1e-300)
+        i = p - eye
+        i /= np.maximum(np.linalg.norm(i, axis=-1, keepdims=True), 1e-300)
+        r = i - 2.0 * (i * n).sum(-1, keepdims=True) * n
+        to_light = _light_point(light, p, 1.0) - p
+        to_light /= np.maximum(np.linalg.norm(to_light, axis=-1, keepdims=True), 1e-300)
+        lit = ((n * -i).sum(-1) > 0) & ((n * to_light).sum(-1) > 0)
+        return np.where(lit, (r * to_light).sum(-1), -np.inf), p
+
+    g = np.linspace(-1.0, 1.0, 9)
+    du, dv = (x.ravel() for x in np.meshgrid(g, g))
+    centre = np.full((len(cand), 2), 1.0 / 3.0)  # (b1, b2); b0 = 1 − b1 − b2
+    step = 0.5
+    for _ in range(24):
+        b12 = centre[:, None, :] + step * np.stack([du, dv], -1)[None]
+        b12 = np.clip(b12, 0.0, 1.0)
+        b12 = b12 / np.maximum(b12.sum(-1, keepdims=True), 1.0)  # back into the triangle
+        bary = np.concatenate([1.0 - b12.sum(-1, keepdims=True), b12], -1)
+        sc, _p = score(bary)
+        centre = b12[np.arange(len(cand)), np.argmax(sc, axis=1)]
+        step *= 0.5
+    bary = np.concatenate([1.0 - centre.sum(-1, keepdims=True), centre], -1)[:, None, :]
+    sc, p = score(bary)
+    t = int(np.argmax(sc[:, 0]))
+    return p[t, 0]
 
 
 def add_highlight_constraint(mirror, light, surface_point=None, *, eye=None, name: str = "", scene=None) -> int:

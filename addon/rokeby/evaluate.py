@@ -36,6 +36,22 @@ import numpy as np
 from . import native
 
 ATTRIBUTE = "rokeby_rotation"
+# What final renders read (rokeby.shading): the field's view-independent parts per face corner,
+# the region rotation R as a unit quaternion (x, y, z in RENDER_ATTRIBUTE; w and the region weight
+# a in RENDER_ATTRIBUTE_WA as (w, a, 0)). The render nodes form eq. 7's R_a r per shading point for
+# the render camera's (or the frozen eye's) own r, as the per-pixel preview does. The corners of
+# each polygon are kept in one hemisphere of the quaternion sphere, so interpolation across a face
+# never crosses the antipodal seam that rotation vectors have at half turns.
+RENDER_ATTRIBUTE = "rokeby_render_rotation"
+RENDER_ATTRIBUTE_WA = "rokeby_render_rotation_wa"
+# The render/preview agreement the status promises (degrees, 99th percentile at triangle centres).
+AGREEMENT_DEGREES = 1.0
+# A camera and a constraint's generating eye that see its target this far apart are reported.
+EYE_MISMATCH_DEGREES = 3.0
+# A larger share of the visible surface reflecting below itself is reported.
+FOLDED_SHARE = 0.05
+# At most this many triangles are sampled for the interpolation-error estimate.
+AGREEMENT_SAMPLES = 20000
 # The second field, from refraction constraints [p, t, e_t] (present only while the mirror has some).
 REFRACTION_ATTRIBUTE = "rokeby_refraction"
 REGION_ATTRIBUTE_PREFIX = "rokeby_vg_"
@@ -62,6 +78,13 @@ class MirrorReport:
     field_mesh: str = "evaluated"  # evaluated | base
     python_ms: float = 0.0
     native_ms: float = 0.0
+    # The eye the render field is evaluated for: "camera", "frozen" or "none" (view-independent).
+    eye: str = "none"
+    # What F12 shows: filled in by rokeby.rendering (True: the edit renders; False: why not).
+    renders: "bool | None" = None
+    render_note: str = ""
+    # Estimated render-vs-preview difference between vertices, degrees: (99th percentile, max).
+    interpolation_error: "tuple | None" = None
 
     def warn(self, text: str):
         self.messages.append(text)
@@ -127,6 +150,9 @@ class _State:
         # What the reflection field was last computed from (rows, distances or None, regions),
         # for the viewport preview, which evaluates the same field per pixel (rokeby.viewport).
         self.field_inputs: tuple | None = None
+        # What the interpolation-error estimate found (kept with the report while nothing changes).
+        self.field_notes: list = []
+        self.corner_topology = None
 
 
 _STATE: dict[int, _State] = {}
@@ -383,11 +409,41 @@ def valid_ior(value) -> float:
 # --- one mirror ----------------------------------------------------------------------------------
 
 
-def _constraint_inputs(obj, scene, depsgraph, geo, mirror_matrix, report, kind="REFLECTION", ior=None):
+def render_eye(obj, scene, depsgraph, size: float = 1.0):
+    """The eye final renders see ``obj`` from, as (point or None, kind): the frozen eye of a
+    frozen mirror ("frozen"), else the scene camera ("camera"; an orthographic camera's eye is
+    placed far behind it along its view axis), else (None, "none")."""
+    s = obj.rokeby
+    if s.freeze:
+        eye = np.array(s.freeze_eye, dtype=np.float64)
+        if not np.all(np.isfinite(eye)):
+            raise RokebyError(f"mirror '{obj.name}': its frozen eye is not finite")
+        return eye, "frozen"
+    cam = scene.camera
+    if cam is None:
+        return None, "none"
+    m = _finite_matrix(cam.evaluated_get(depsgraph).matrix_world, f"camera '{cam.name}'")
+    eye = m[:3, 3].copy()
+    if cam.type == "CAMERA" and cam.data.type == "ORTHO":
+        back = m[:3, 2] / max(np.linalg.norm(m[:3, 2]), 1e-300)  # a camera looks along its local −Z
+        eye = eye + back * 1e4 * max(size, float(cam.data.ortho_scale), 1e-6)
+    return eye, "camera"
+
+
+def _angle_deg(a, b) -> float:
+    return float(np.degrees(np.arccos(np.clip(np.dot(a, b) / max(np.linalg.norm(a) * np.linalg.norm(b), 1e-300), -1.0, 1.0))))
+
+
+def _constraint_inputs(obj, scene, depsgraph, geo, mirror_matrix, report, kind="REFLECTION", ior=None, eye_now=None):
     """Constraint rows [p, r, e] (``kind`` REFLECTION) or [p, t, e_t] (REFRACTION, with the
-    mirror's ``ior``) and their surface points; bad constraints are reported and skipped."""
+    mirror's ``ior``) and their surface points; bad constraints are reported and skipped.
+
+    r is the physical direction seen from ``eye_now`` (the render eye) when the mirror's
+    generating eye is the scene camera, else from each constraint's stored eye; in that case a
+    render eye that sees the target more than EYE_MISMATCH_DEGREES away is reported."""
     rows, points = [], []
     refraction = kind == "REFRACTION"
+    from_camera = getattr(obj.rokeby, "eye_source", "CREATION") == "CAMERA" and eye_now is not None
     for k, c in enumerate(obj.rokeby.constraints):
         label = f"constraint {k + 1} ('{c.name}')" if c.name else f"constraint {k + 1}"
         if not c.enabled or getattr(c, "kind", "REFLECTION") != kind:
@@ -402,7 +458,7 @@ def _constraint_inputs(obj, scene, depsgraph, geo, mirror_matrix, report, kind="
                 report.warn(f"{label}: the light '{c.light_name}' its green handle followed was deleted or unparented; the handle stays where it is")
             red_m = _finite_matrix(red.evaluated_get(depsgraph).matrix_world, f"{label}: red handle '{red.name}'")
             green_m = _finite_matrix(green.evaluated_get(depsgraph).matrix_world, f"{label}: green handle '{green.name}'")
-            eye = np.array(c.eye, dtype=np.float64)
+            eye = np.array(eye_now if from_camera else c.eye, dtype=np.float64)
             if not np.all(np.isfinite(eye)):
                 raise RokebyError(f"{label}: its generating eye is not finite")
             sp = project_to_surface(obj, depsgraph, geo, red_m[:3, 3], mirror_matrix)
@@ -421,6 +477,17 @@ def _constraint_inputs(obj, scene, depsgraph, geo, mirror_matrix, report, kind="
             if not np.linalg.norm(to_green) > 1e-9 * max(geo.size, 1e-30):
                 raise RokebyError(f"{label}: the green handle sits on the surface point, so it gives no direction")
             e = to_green / np.linalg.norm(to_green)
+            if not refraction and e @ sp.normal < 0.0:
+                if getattr(c, "light_name", ""):
+                    report.warn(f"{label}: no light reaches the red handle (the light is {np.degrees(np.arcsin(min(1.0, -e @ sp.normal))):.0f}° behind the surface there), so no highlight shows; move the red handle to the lit side")
+                else:
+                    report.warn(f"{label}: the green handle is {np.degrees(np.arcsin(min(1.0, -e @ sp.normal))):.0f}° behind the surface at the red handle; renders fold the reflection back above it, so it cannot show that point")
+            if not from_camera and eye_now is not None and not refraction:
+                view_now = sp.point - eye_now
+                if np.linalg.norm(view_now) > 0.0:
+                    off = _angle_deg(reflect(view_now / np.linalg.norm(view_now), sp.normal), r)
+                    if off > EYE_MISMATCH_DEGREES:
+                        report.warn(f"{label}: from the render eye its reflection lands {off:.1f}° away from the green handle (it was made from another view); set Generating Eye to Scene Camera, or render from its view (Return to View)")
             rows.append(np.concatenate([sp.point, r / np.linalg.norm(r), e]))
             points.append(sp)
         except RokebyError as exc:
@@ -548,7 +615,7 @@ def _regions_for_native(state, geo, specs, points, method, timer):
     return regions
 
 
-def write_attribute(obj, values: np.ndarray, name: str = ATTRIBUTE):
+def write_attribute(obj, values: np.ndarray, name: str = ATTRIBUTE, *, update: bool = True):
     """Write (V, 3) rotation vectors to the mirror mesh's point attribute ``name`` in one foreach_set."""
     me = obj.data
     if me.library is not None or not getattr(me, "is_editable", True):
@@ -565,7 +632,179 @@ def write_attribute(obj, values: np.ndarray, name: str = ATTRIBUTE):
     if attr is None:
         attr = me.attributes.new(name, "FLOAT_VECTOR", "POINT")
     attr.data.foreach_set("vector", np.ascontiguousarray(values, dtype=np.float32).ravel())
-    me.update()
+    if update:
+        me.update()
+
+
+def _corner_topology(me, state):
+    """(corner → vertex, corner → its polygon's first corner's vertex), read once per topology."""
+    key = (len(me.loops), len(me.polygons), state.geometry_version if state is not None else None)
+    if state is not None and state.corner_topology is not None and state.corner_topology[0] == key:
+        return state.corner_topology[1]
+    corner_vert = np.empty(len(me.loops), dtype=np.int32)
+    me.loops.foreach_get("vertex_index", corner_vert)
+    start = np.empty(len(me.polygons), dtype=np.int32)
+    total = np.empty(len(me.polygons), dtype=np.int32)
+    me.polygons.foreach_get("loop_start", start)
+    me.polygons.foreach_get("loop_total", total)
+    # Corners are stored polygon by polygon (contiguous offsets), so repeating each polygon's
+    # first corner gives every corner its polygon's first corner.
+    ref_vert = corner_vert[np.repeat(start, total)]
+    topo = (corner_vert, ref_vert)
+    if state is not None:
+        state.corner_topology = (key, topo)
+    return topo
+
+
+def corner_quaternions(quat: np.ndarray, corner_vert: np.ndarray, ref_vert: np.ndarray) -> np.ndarray:
+    """(C, 4+) rows per face corner from per-vertex rows whose first 4 columns are a unit
+    quaternion: the quaternion's sign is chosen to lie in the hemisphere of its polygon's first
+    corner (q and −q are the same rotation; the renderer's linear interpolation across a face is
+    only meaningful within one hemisphere). Further columns (the region weight) are copied."""
+    qc = np.array(np.asarray(quat, dtype=np.float32)[corner_vert])
+    qr = np.asarray(quat, dtype=np.float32)[ref_vert, :4]
+    sign = np.where(np.einsum("ij,ij->i", qc[:, :4], qr) < 0.0, np.float32(-1.0), np.float32(1.0))
+    qc[:, :4] *= sign[:, None]
+    return qc
+
+
+def write_render_attribute(obj, parts: np.ndarray, state=None, *, ramp: bool = False, update: bool = True):
+    """Write the field's view-independent parts (V, 6) = (x, y, z, w, a, u) per face corner
+    (RENDER_ATTRIBUTE: x, y, z; RENDER_ATTRIBUTE_WA: (w, a, 0), or with ``ramp`` (one Euclidean
+    region) (w, −1, u): the nodes then take a = smoothstep(u) per shading point), what
+    rokeby.shading's node group reads, in two foreach_set calls."""
+    me = obj.data
+    if not np.all(np.isfinite(parts)):
+        raise RokebyError("the computed field is not finite (not written)")
+    if len(parts) != len(me.vertices):
+        raise RokebyError(f"field has {len(parts)} values, mesh '{me.name}' has {len(me.vertices)} vertices")
+    qc = corner_quaternions(parts, *_corner_topology(me, state))
+    wa = np.zeros((len(qc), 3), dtype=np.float32)
+    wa[:, 0] = qc[:, 3]
+    if ramp:
+        wa[:, 1] = -1.0
+        wa[:, 2] = qc[:, 5]
+    else:
+        wa[:, 1] = qc[:, 4]
+    for name, values in ((RENDER_ATTRIBUTE, qc[:, :3]), (RENDER_ATTRIBUTE_WA, wa)):
+        attr = me.attributes.get(name)
+        if attr is not None and (attr.domain != "CORNER" or attr.data_type != "FLOAT_VECTOR"):
+            me.attributes.remove(attr)
+            attr = None
+        if attr is None:
+            attr = me.attributes.new(name, "FLOAT_VECTOR", "CORNER")
+        attr.data.foreach_set("vector", np.ascontiguousarray(values, dtype=np.float32).ravel())
+    if update:
+        me.update()
+
+
+def remove_render_attribute(obj) -> bool:
+    me = obj.data
+    found = False
+    for name in (RENDER_ATTRIBUTE, RENDER_ATTRIBUTE_WA):
+        attr = me.attributes.get(name) if me is not None else None
+        if attr is not None:
+            if me.library is not None:
+                raise RokebyError(f"mesh '{me.name}' is linked and its attribute '{name}' cannot be removed")
+            me.attributes.remove(attr)
+            found = True
+    if found:
+        me.update()
+    return found
+
+
+def _has_render_attribute(obj) -> bool:
+    me = obj.data
+    return all(
+        (a := me.attributes.get(name)) is not None and a.domain == "CORNER" and a.data_type == "FLOAT_VECTOR" and len(a.data) == len(me.loops)
+        for name in (RENDER_ATTRIBUTE, RENDER_ATTRIBUTE_WA)
+    )
+
+
+def view_independent_rotation_vectors(parts: np.ndarray) -> np.ndarray:
+    """(N, 6) parts (R as x, y, z, w and the region weight a; rokeby_core's ViewBlend) → (N, 3) rotation vectors of
+    eq. 7 blended towards the identity, ortho(a R + (1 − a) I): a rotation about R's axis by
+    ψ = atan2(a sin α, a cos α + 1 − a), α R's angle (the view-independent form of the field,
+    which acts on r as a R r + (1 − a) r does; stored in ATTRIBUTE for scripts and tools)."""
+    q = np.asarray(parts, dtype=np.float64)[:, :4]
+    a = np.clip(np.asarray(parts, dtype=np.float64)[:, 4], 0.0, 1.0)
+    q = q * np.where(q[:, 3:4] < 0.0, -1.0, 1.0)
+    s = np.linalg.norm(q[:, :3], axis=1)
+    alpha = 2.0 * np.arctan2(s, q[:, 3])
+    psi = np.arctan2(a * np.sin(alpha), a * np.cos(alpha) + 1.0 - a)
+    axis = q[:, :3] / np.maximum(s, 1e-300)[:, None]
+    small = s < 1e-12  # rotation vector ≈ 2u a (the limit of ψ / sin(α/2) at α → 0)
+    rv = axis * psi[:, None]
+    rv[small] = 2.0 * q[small, :3] * a[small, None]
+    return rv.astype(np.float32)
+
+
+def rotate(quats: np.ndarray, vectors: np.ndarray) -> np.ndarray:
+    """Apply unit quaternions (..., 4) as (x, y, z, w) to vectors (..., 3), vectorised."""
+    q = np.asarray(quats, dtype=np.float64)
+    v = np.asarray(vectors, dtype=np.float64)
+    u, w = q[..., :3], q[..., 3:4]
+    t = 2.0 * np.cross(u, v)
+    return v + w * t + np.cross(u, t)
+
+
+def ramp_form(specs) -> bool:
+    """Whether the region weight reaches renders as the border ramp u (one Euclidean region with
+    a border): see rokeby_core's FieldOutput::ViewBlend."""
+    return len(specs) == 1 and specs[0][0] == "EUCLIDEAN" and specs[0][3] > 0.0 and specs[0][2] > 0.0
+
+
+def _interpolation_error(geo, parts, eye, rows, kwargs, timer, ramp=False):
+    """How far the renderer's interpolation of the per-corner field between vertices lands from
+    the per-pixel field (what the viewport preview evaluates), in degrees at the centres of the
+    triangles that face the eye: (99th percentile, max, samples). The region weights and
+    distances are interpolated there as the preview does."""
+    tri = geo.triangles
+    if len(tri) == 0 or len(rows) == 0:
+        return None
+    if len(tri) > AGREEMENT_SAMPLES:
+        tri = tri[np.linspace(0, len(tri) - 1, AGREEMENT_SAMPLES).astype(np.int64)]
+    c = geo.vertices[tri].astype(np.float64).mean(1)
+    n = geo.normals[tri].astype(np.float64).sum(1)
+    nl = np.linalg.norm(n, axis=1)
+    incident = c - eye
+    il = np.linalg.norm(incident, axis=1)
+    ok = (nl > 1e-6) & (il > 1e-12)
+    ok[ok] &= np.einsum("ij,ij->i", n[ok], incident[ok]) < 0.0  # seen from the front
+    if not ok.any():
+        return None
+    tri, c, n, incident = tri[ok], c[ok], n[ok] / nl[ok, None], incident[ok] / il[ok, None]
+    q = parts[tri].astype(np.float64)  # (S, 3, 6)
+    sign = np.where(np.einsum("sij,sj->si", q[..., :4], q[:, 0, :4]) < 0.0, -1.0, 1.0)
+    q[..., :4] *= sign[..., None]
+    qi = q.mean(1)  # the renderer's interpolation at the centre: (q, a) averaged
+    qi[:, :4] /= np.maximum(np.linalg.norm(qi[:, :4], axis=1, keepdims=True), 1e-300)
+    r = incident - 2.0 * np.einsum("ij,ij->i", incident, n)[:, None] * n
+    got = np.asarray(timer(native.view_blend, qi.astype(np.float32), r.astype(np.float32), ramp=ramp), dtype=np.float64)
+    dkw = {"polar": kwargs["polar"]}
+    if kwargs.get("distances") is not None:
+        dkw["distances"] = np.ascontiguousarray(np.asarray(kwargs["distances"])[:, tri].mean(2), dtype=np.float32)
+    if kwargs.get("regions"):
+        regs = []
+        for reg in kwargs["regions"]:
+            if reg["kind"] == "weights":
+                reg = dict(reg, values=np.ascontiguousarray(np.asarray(reg["values"])[tri].mean(1), dtype=np.float32))
+            regs.append(reg)
+        dkw["regions"] = regs
+    want = timer(native.edited_directions, c.astype(np.float32), n.astype(np.float32), tuple(float(x) for x in eye), rows, **dkw)
+    want = np.asarray(want, dtype=np.float64)
+    cos = np.einsum("ij,ij->i", got, want) / np.maximum(np.linalg.norm(got, axis=1), 1e-300)
+    ang = np.degrees(np.arccos(np.clip(cos, -1.0, 1.0)))
+    # Where e points below the surface, renders fold it back above (rokeby.shading) while the
+    # preview looks it up as it is: those samples are counted apart.
+    below = np.einsum("ij,ij->i", want, n) < 0.0
+    kept = ang[~below] if (~below).any() else np.zeros(1)
+    # Their share of the picture: each triangle weighted by the solid angle it covers from the eye.
+    v = geo.vertices[tri].astype(np.float64)
+    area = 0.5 * np.linalg.norm(np.cross(v[:, 1] - v[:, 0], v[:, 2] - v[:, 0]), axis=1)
+    seen = area * np.abs(np.einsum("ij,ij->i", n, incident)) / np.maximum(il[ok] ** 2, 1e-300)
+    share = float(seen[below].sum() / seen.sum()) if seen.sum() > 0 else 0.0
+    return float(np.percentile(kept, 99)), float(kept.max()), int(len(ang)), share
 
 
 def remove_attribute(obj, name: str) -> bool:
@@ -638,19 +877,24 @@ def evaluate_mirror(obj, scene, depsgraph, *, force=False, reread_geometry=False
         report.field_mesh = geo.source
         if geo.source == "base":
             report.warn("the modifiers change the vertex count: the field is computed on the base mesh and interpolated by the modifiers")
+        eye_now, report.eye = render_eye(obj, scene, depsgraph, geo.size)
         t_rows, t_points, ior = np.zeros((0, 9), np.float32), [], None
         if not settings.enabled:
             rows, points, specs = np.zeros((0, 9), np.float32), [], []
         else:
-            rows, points = _constraint_inputs(obj, scene, depsgraph, geo, mirror_matrix, report)
+            rows, points = _constraint_inputs(obj, scene, depsgraph, geo, mirror_matrix, report, eye_now=eye_now)
             specs = _region_inputs(obj, scene, depsgraph, geo, mirror_matrix, report)
+            if eye_now is None and len(settings.constraints):
+                report.warn("the scene has no camera, so the render eye is unknown: constraints use the views they were made from and region borders blend view-independently; set a scene camera (or freeze the mirror)")
             if any(c.enabled and getattr(c, "kind", "REFLECTION") == "REFRACTION" for c in settings.constraints):
                 try:
                     ior = valid_ior(settings.ior)
                 except RokebyError as exc:
                     report.warn(f"mirror '{name}': {exc}; its refraction constraints are skipped")
                 else:
-                    t_rows, t_points = _constraint_inputs(obj, scene, depsgraph, geo, mirror_matrix, report, "REFRACTION", ior)
+                    t_rows, t_points = _constraint_inputs(obj, scene, depsgraph, geo, mirror_matrix, report, "REFRACTION", ior, eye_now=eye_now)
+        # The stored field does not depend on the eye (renders blend eq. 7 per pixel); the rows
+        # carry it when constraints are seen from the camera.
         fp_reflection = _fingerprint(obj, state.geometry_version, mirror_matrix, rows, specs)
         fp_refraction = _fingerprint(obj, state.geometry_version, mirror_matrix, t_rows, specs, (ior,))
         fp = fp_reflection + fp_refraction
@@ -661,6 +905,9 @@ def evaluate_mirror(obj, scene, depsgraph, *, force=False, reread_geometry=False
             # Same field, but the warnings describe the scene as it is now (e.g. a deleted light
             # whose highlight handle stayed where it was).
             kept.messages, kept.status = list(report.messages), report.status
+            for msg in state.field_notes:
+                kept.warn(msg)
+            kept.eye = report.eye
             return kept
         report.constraints_used = len(rows) + len(t_rows)
         method = "heat" if settings.geodesic_method == "HEAT" else "dijkstra"
@@ -672,17 +919,41 @@ def evaluate_mirror(obj, scene, depsgraph, *, force=False, reread_geometry=False
             if np.all(np.isinf(distances)):
                 report.warn("no constraint reaches this mesh over its surface")
         old = state.field_fingerprints
-        if force or old.get(ATTRIBUTE) != fp_reflection or not _has_attribute(obj, ATTRIBUTE):
+        if force or old.get(ATTRIBUTE) != fp_reflection or not _has_attribute(obj, ATTRIBUTE) or not _has_render_attribute(obj):
             kwargs = {"polar": polar}
             if distances is not None and len(rows):
                 kwargs["distances"] = distances[: len(rows)]
             if specs:
                 kwargs["regions"] = _regions_for_native(state, geo, specs, points, method, timer)
-            rv = timer(native.rotation_field, geo.vertices, rows, output="rotation_vector", **kwargs)
-            write_attribute(obj, rv)
+            # One field for the preview and the render: the parts of eq. 7 that do not depend on
+            # the view, blended towards r rᵀ per shading point by the render nodes.
+            parts = timer(native.rotation_field, geo.vertices, rows, output="view_blend", **kwargs)
+            rv = view_independent_rotation_vectors(parts)
+            write_attribute(obj, rv, update=False)
+            ramp = ramp_form(specs)
+            write_render_attribute(obj, parts, state, ramp=ramp)
             state.rotations = rv
             state.field_inputs = (rows, kwargs.get("distances"), kwargs.get("regions") or [])
+            state.field_notes = []
+            report.interpolation_error = None
+            if eye_now is not None and len(rows):
+                est = _interpolation_error(geo, parts, eye_now, rows, kwargs, timer, ramp)
+                report.interpolation_error = est
+                if est is not None and est[0] > AGREEMENT_DEGREES:
+                    state.field_notes.append(
+                        f"the mesh is too coarse for this field: between vertices renders differ from the per-pixel preview by up to {est[1]:.1f}° "
+                        f"(99th percentile {est[0]:.1f}° over {est[2]:,} triangles); subdivide the mirror's mesh where the reflection changes fast, or widen the region border")
+                if est is not None and est[3] > FOLDED_SHARE:
+                    state.field_notes.append(
+                        f"on {100 * est[3]:.0f}% of the mirror as the render eye sees it the edited reflection points below the surface: renders fold it back "
+                        "above (no black), the preview shows it unfolded; make that edit smaller or confine it with a region")
+            for msg in state.field_notes:
+                report.warn(msg)
             old[ATTRIBUTE] = fp_reflection
+        elif state.report is not None:
+            report.interpolation_error = state.report.interpolation_error
+            for msg in state.field_notes:
+                report.warn(msg)
         if not len(t_rows):
             old.pop(REFRACTION_ATTRIBUTE, None)
             state.refractions = None

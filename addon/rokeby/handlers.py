@@ -5,7 +5,11 @@
   Edited materials with split Principled BSDFs bring their parts up to date (``shading.sync``).
 - ``frame_change_post``: on every frame change (playback, scrubbing, final renders); every mirror's
   mesh is re-read because animation can deform it.
-- ``load_post`` / ``undo_post`` / ``redo_post``: runtime state is rebuilt from the file's data;
+- ``render_pre``: before every final render the mirrors are evaluated for the render camera.
+- After each evaluation, ``rendering.sync_scene`` keeps the render nodes in the mirrors'
+  materials (new and swapped materials included), so F12 shows the edit with no extra step.
+- ``load_post`` / ``undo_post`` / ``redo_post``: runtime state is rebuilt from the file's data
+  (files from before data version 1 are migrated so that they keep their meaning);
   after undo/redo, painted images reload the pixels of the packed data the step brought back.
 
 The evaluator's dirty tracking decides what to recompute. A re-entrance guard makes the handlers
@@ -20,7 +24,7 @@ import contextlib
 import bpy
 from bpy.app.handlers import persistent
 
-from . import appearance, evaluate, shading, shadow
+from . import appearance, evaluate, rendering, shading, shadow
 
 _busy = False
 _suspend = 0
@@ -36,13 +40,15 @@ def suspended():
         _suspend -= 1
 
 
-def _run(scene, depsgraph, **kwargs):
+def _run(scene, depsgraph, materials=(), **kwargs):
     global _busy
     if _busy or _suspend or scene is None:
         return
     _busy = True
     try:
         reports = evaluate.evaluate_scene(scene, depsgraph, **kwargs)
+        # F12 shows the edit with no extra step: render nodes follow mirrors and materials.
+        rendering.sync_scene(scene, reports, changed_materials=materials)
         # Shadow edits (#7): the falloff of each shadow mesh follows its light (writes only
         # changed values, so the update it causes settles at once).
         # Deleted casters, lights, twins or shadow meshes leave no half set-up behind.
@@ -80,7 +86,7 @@ def on_depsgraph_update(scene, depsgraph):
             materials.add(update.id.original)
     if materials:
         _sync_materials(materials)
-    _run(scene, depsgraph, geometry_changed=changed)
+    _run(scene, depsgraph, materials=materials, geometry_changed=changed)
 
 
 def _sync_materials(ids):
@@ -103,13 +109,48 @@ def on_frame_change(scene, depsgraph):
 
 
 @persistent
-def on_reset(*_args):
+def on_render_pre(scene, *_args):
+    """Before a final render (F12, an animation frame, a farm job): every mirror is brought up
+    to date for the render camera, so a render never shows a field from an older state."""
+    global _busy
+    if _busy or _suspend or scene is None:
+        return
+    try:
+        view_layer = scene.view_layers[0] if bpy.context.scene != scene or bpy.context.view_layer is None else bpy.context.view_layer
+        depsgraph = view_layer.depsgraph
+    except (AttributeError, IndexError, ReferenceError):
+        return
+    _run(scene, depsgraph, all_geometry=True)
+
+
+@persistent
+def on_load(*_args):
+    migrate_file()
     evaluate.reset()
+    rendering.reset()
+
+
+def migrate_file():
+    """Mirrors saved before their data version 1 keep their meaning: constraints stay seen
+    from the views they were made from, and final renders show the edit only where the artist
+    had installed the render nodes (then they stay in sync)."""
+    from .props import DATA_VERSION  # noqa: PLC0415
+
+    for ob in bpy.data.objects:
+        s = getattr(ob, "rokeby", None)
+        if s is None or not s.is_mirror or s.data_version >= DATA_VERSION or ob.library is not None:
+            continue
+        s.eye_source = "CREATION"
+        mats = [slot.material for slot in ob.material_slots if slot.material is not None]
+        s.render_edits = any(rendering.installed(m) for m in mats)
+        s.freeze_eye_set = True
+        s.data_version = DATA_VERSION
 
 
 @persistent
 def on_undo_redo(*_args):
     evaluate.reset()
+    rendering.reset()
     # Painted images (#8): pixels in memory follow the packed data the step brought back.
     appearance.reload_after_undo()
 
@@ -117,7 +158,8 @@ def on_undo_redo(*_args):
 _HANDLERS = (
     ("depsgraph_update_post", on_depsgraph_update),
     ("frame_change_post", on_frame_change),
-    ("load_post", on_reset),
+    ("load_post", on_load),
+    ("render_pre", on_render_pre),
     ("undo_post", on_undo_redo),
     ("redo_post", on_undo_redo),
 )

@@ -47,3 +47,7 @@ def edited_directions(*args, **kwargs):
 
 def ortho(*args, **kwargs):
     return module().ortho(*args, **kwargs)
+
+
+def view_blend(*args, **kwargs):
+    return module().view_blend(*args, **kwargs)

@@ -57,6 +57,35 @@ def _region_radius_changed(self, context):
     _touch(self, context)
 
 
+def _is_mirror_changed(self, context):
+    # A mirror made now (by the API, the operator or a script setting the flag) is current data;
+    # only files saved before DATA_VERSION existed load with 0 (handlers.on_load migrates them).
+    if self.is_mirror and self.data_version < DATA_VERSION:
+        self.data_version = DATA_VERSION
+    _touch(self, context)
+
+
+def _freeze_changed(self, context):
+    """Freeze from any entry point (sidebar toggle, a script setting the property, the operator,
+    the shortcut) stores the eye it freezes at: the render eye of this moment (the scene camera),
+    else the active constraint's generating eye. ``api.freeze(eye=...)`` sets its own eye after."""
+    if self.freeze:
+        scene = getattr(context, "scene", None) or bpy.context.scene
+        cam = scene.camera if scene is not None else None
+        if cam is not None:
+            self.freeze_eye = tuple(cam.matrix_world.translation)
+            self.freeze_eye_set = True
+        elif len(self.constraints):
+            self.freeze_eye = tuple(self.constraints[min(self.active_constraint, len(self.constraints) - 1)].eye)
+            self.freeze_eye_set = True
+    _touch(self, context)
+
+
+def _freeze_eye_changed(self, context):
+    self.freeze_eye_set = True
+    _touch(self, context)
+
+
 class RokebyMaterialRef(PropertyGroup):
     material: PointerProperty(type=bpy.types.Material, name="Material", update=_touch)
 
@@ -65,6 +94,12 @@ RENDER_MODES = [
     ("RAY_TRACED", "Ray traced", "Edited normals on the specular BSDFs: exact parallax, occlusion and self-reflection (slower, noisier when rough)"),
     ("REFLECTION_MAP", "Reflection map", "A panorama captured from the mirror's centre, looked up in the edited direction (paper §6.3): fast and noise-free, but no parallax or self-reflection"),
 ]
+EYE_SOURCES = [
+    ("CAMERA", "Scene Camera", "Constraints' reflected directions r are taken from the render eye (the scene camera, or the frozen eye), so renders hit every green handle from the camera", "CAMERA_DATA", 0),
+    ("CREATION", "View at Creation", "Each constraint keeps the eye of the view it was made from (Return to View shows it); renders from elsewhere miss its green handle by the angle the status reports", "VIEW3D", 1),
+]
+# Saved with each mirror: 0 = made before these settings existed (load_post migrates it), 1 = now.
+DATA_VERSION = 1
 MAP_RESOLUTIONS = [(str(w), f"{w} × {w // 2}", f"Capture a {w} × {w // 2} panorama") for w in (256, 512, 1024, 2048)]
 
 
@@ -146,7 +181,7 @@ class RokebyMirror(PropertyGroup):
     """Per-object settings: whether the object is an edited mirror, how distances are measured,
     which materials are edited, and its constraints and regions."""
 
-    is_mirror: BoolProperty(name="Mirror", default=False, update=_touch)
+    is_mirror: BoolProperty(name="Mirror", default=False, update=_is_mirror_changed)
     enabled: BoolProperty(name="Enabled", description="Apply this mirror's reflection edits", default=True, update=_touch)
     metric: EnumProperty(name="Distance", items=METRICS, default="EUCLIDEAN", update=_touch)
     geodesic_method: EnumProperty(name="Geodesic method", items=GEODESIC_METHODS, default="HEAT", update=_touch)
@@ -155,9 +190,24 @@ class RokebyMirror(PropertyGroup):
         name="Freeze",
         description="Reflections stop following the camera: reflected directions are evaluated from the frozen eye",
         default=False,
+        update=_freeze_changed,
+    )
+    freeze_eye: FloatVectorProperty(name="Frozen eye", size=3, subtype="TRANSLATION", update=_freeze_eye_changed)
+    freeze_eye_set: BoolProperty(name="Frozen eye stored", default=False, options={"HIDDEN"})
+    render_edits: BoolProperty(
+        name="Edit Final Renders",
+        description="Final renders (F12, Cycles and EEVEE) show this mirror's edits: the render nodes are installed and kept in sync with its materials automatically",
+        default=True,
         update=_touch,
     )
-    freeze_eye: FloatVectorProperty(name="Frozen eye", size=3, subtype="TRANSLATION", update=_touch)
+    eye_source: EnumProperty(
+        name="Generating Eye",
+        description="Where each constraint's physical reflected direction is seen from",
+        items=EYE_SOURCES,
+        default="CAMERA",
+        update=_touch,
+    )
+    data_version: IntProperty(name="Data version", default=0, options={"HIDDEN"})
     show_preview: BoolProperty(
         name="Show in Viewport",
         description="Draw this mirror's edited reflections in the viewport preview (when the preview is on)",

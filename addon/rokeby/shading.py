@@ -2,8 +2,13 @@
 normal of the specular lobe.
 
 For a shading point with normal N seen along V (towards the viewer), the physical reflection is
-r = reflect(−V, N). The field stores R(q) as the rotation vector ``rokeby_rotation`` (axis × angle),
-so the edited reflection is e = R r (paper eq. 6) and the normal that reflects V into e is
+r = reflect(−V, N). The field is stored for renders per face corner as its view-independent
+parts: the region rotation R as a unit quaternion (``rokeby_render_rotation`` x, y, z and
+``rokeby_render_rotation_wa`` (w, a, 0), kept in one hemisphere per polygon so that interpolation
+across a face never tears at half turns) and the region weight a. The nodes form eq. 7's
+R_a r = ortho(a R + (1 − a) r rᵀ) r per shading point in closed form (``view_blend_nodes``), for
+the r of the render camera or of the frozen eye: the field the viewport preview evaluates per
+pixel. The edited reflection is e = R_a r (paper eq. 6) and the normal that reflects V into e is
 n' = normalize(e + V) (paper §6: only the specular part is edited). With the identity field n' = N
 exactly, so an unedited mirror renders as before. When the mirror is frozen, r is reflected from
 the frozen eye (``rokeby.freeze_eye``) instead of the camera, so the reflection stays put as the
@@ -24,13 +29,14 @@ from __future__ import annotations
 
 import bpy
 
-from .evaluate import ATTRIBUTE
+from .evaluate import RENDER_ATTRIBUTE, RENDER_ATTRIBUTE_WA
 
 DIRECTION_GROUP = "Rokeby Edited Direction"
 GROUP = "Rokeby Edited Normal"
 LINK_TAG = "rokeby_edited_normal"
 VERSION_KEY = "rokeby_version"
-VERSION = 2
+# 3: the field is read as per-corner quaternions (RENDER_ATTRIBUTE) instead of rotation vectors.
+VERSION = 3
 
 
 def vector_math(ng, op, *inputs, scale=None):
@@ -65,6 +71,65 @@ def mix_vector(ng, factor, a, b):
     return node.outputs[1]
 
 
+def _rotate_nodes(ng, u, w, k, v, inverse=False):
+    """v rotated by the quaternion q = (u, w) scaled by k = 2 / |q|² (so q need not be unit):
+    R v = v + k (w (u × v) + u × (u × v)); the inverse rotation negates the w term."""
+    c1 = vector_math(ng, "CROSS_PRODUCT", u, v)
+    wc1 = vector_math(ng, "SCALE", c1.outputs["Vector"])
+    ng.links.new(w, wc1.inputs["Scale"])
+    c2 = vector_math(ng, "CROSS_PRODUCT", u, c1.outputs["Vector"])
+    t = vector_math(ng, "SUBTRACT" if inverse else "ADD", c2.outputs["Vector"], wc1.outputs["Vector"])
+    kt = vector_math(ng, "SCALE", t.outputs["Vector"])
+    ng.links.new(k, kt.inputs["Scale"])
+    return vector_math(ng, "ADD", v, kt.outputs["Vector"]).outputs["Vector"]
+
+
+def view_blend_nodes(ng, u, wa, r):
+    """Eq. 7 per shading point (rokeby_core::field::view_blend, derived there): the corner
+    attributes give the region rotation R = (u, w) and weight a (``wa`` = (w, a, 0), or
+    (w, −1, u) for a = smoothstep(u)); with
+    s = Rᵀ r, φ = ∠(r, s), θ = atan2((1 − a) sin φ, 2a + (1 − a) cos φ) and t the unit part of s
+    orthogonal to r, R_a r = R (cos θ r + sin θ t). A missing attribute reads u = 0, w = a = 0,
+    and the division by zero gives 0 in shader nodes, so e = r (objects sharing the material)."""
+    parts = ng.nodes.new("ShaderNodeSeparateXYZ")
+    ng.links.new(wa, parts.inputs[0])
+    w, a_stored, u_ramp = parts.outputs["X"], parts.outputs["Y"], parts.outputs["Z"]
+    # (w, −1, u) marks the ramp form (one Euclidean region): a = smoothstep(u) per shading point,
+    # rokeby_core::region::smooth_step (3t² − 2t³ on [0, 1]) as Map Range's Smooth Step does.
+    ramp = scalar_math(ng, "LESS_THAN", a_stored, values=(-0.5,)).outputs["Value"]
+    step = ng.nodes.new("ShaderNodeMapRange")
+    step.interpolation_type = "SMOOTHSTEP"
+    step.clamp = True
+    ng.links.new(u_ramp, step.inputs["Value"])
+    diff = scalar_math(ng, "SUBTRACT", step.outputs["Result"], a_stored).outputs["Value"]
+    a = scalar_math(ng, "MULTIPLY_ADD", ramp, diff, a_stored).outputs["Value"]
+    norm2 = scalar_math(ng, "ADD", vector_math(ng, "DOT_PRODUCT", u, u).outputs["Value"], scalar_math(ng, "MULTIPLY", w, w).outputs["Value"])
+    k = scalar_math(ng, "DIVIDE", values=(2.0,))
+    ng.links.new(norm2.outputs["Value"], k.inputs[1])
+    k = k.outputs["Value"]
+    s = _rotate_nodes(ng, u, w, k, r, inverse=True)
+    cos_phi = vector_math(ng, "DOT_PRODUCT", r, s).outputs["Value"]
+    along = vector_math(ng, "SCALE", r)
+    ng.links.new(cos_phi, along.inputs["Scale"])
+    perp = vector_math(ng, "SUBTRACT", s, along.outputs["Vector"]).outputs["Vector"]
+    sin_phi = vector_math(ng, "LENGTH", perp).outputs["Value"]
+    t = vector_math(ng, "NORMALIZE", perp).outputs["Vector"]
+    b = scalar_math(ng, "SUBTRACT", values=(1.0,))
+    ng.links.new(a, b.inputs[1])
+    b = b.outputs["Value"]
+    y = scalar_math(ng, "MULTIPLY", b, sin_phi).outputs["Value"]
+    x = scalar_math(ng, "ADD", scalar_math(ng, "MULTIPLY", a, values=(2.0,)).outputs["Value"], scalar_math(ng, "MULTIPLY", b, cos_phi).outputs["Value"]).outputs["Value"]
+    theta = scalar_math(ng, "ARCTAN2", y, x).outputs["Value"]
+    cos_t = scalar_math(ng, "COSINE", theta).outputs["Value"]
+    sin_t = scalar_math(ng, "SINE", theta).outputs["Value"]
+    rc = vector_math(ng, "SCALE", r)
+    ng.links.new(cos_t, rc.inputs["Scale"])
+    ts = vector_math(ng, "SCALE", t)
+    ng.links.new(sin_t, ts.inputs["Scale"])
+    r_blend = vector_math(ng, "ADD", rc.outputs["Vector"], ts.outputs["Vector"]).outputs["Vector"]
+    return _rotate_nodes(ng, u, w, k, r_blend)
+
+
 def _fresh_group(name, sockets):
     """The group ``name`` emptied for (re)building if it is missing or older than VERSION;
     None if it is current. Rebuilding in place keeps every material that uses it pointing at it."""
@@ -95,15 +160,16 @@ def direction_group():
     out = n.new("NodeGroupOutput")
     gin = n.new("NodeGroupInput")
     geo = n.new("ShaderNodeNewGeometry")
-    attr = n.new("ShaderNodeAttribute")
-    attr.attribute_type = "GEOMETRY"
-    attr.attribute_name = ATTRIBUTE
+    quat_xyz = n.new("ShaderNodeAttribute")
+    quat_xyz.attribute_type = "GEOMETRY"
+    quat_xyz.attribute_name = RENDER_ATTRIBUTE
+    quat_wa = n.new("ShaderNodeAttribute")
+    quat_wa.attribute_type = "GEOMETRY"
+    quat_wa.attribute_name = RENDER_ATTRIBUTE_WA
     # The shading normal: the group's Normal input when one is linked (the unlinked default is the
     # zero vector), else the geometry's.
     linked = scalar_math(ng, "GREATER_THAN", vector_math(ng, "LENGTH", gin.outputs["Normal"]).outputs["Value"], values=(0.0,))
     normal = mix_vector(ng, linked.outputs["Value"], geo.outputs["Normal"], gin.outputs["Normal"])
-    angle = vector_math(ng, "LENGTH", attr.outputs["Vector"])
-    axis = vector_math(ng, "NORMALIZE", attr.outputs["Vector"])
     # Freeze: the reflection is evaluated from the mirror's frozen eye instead of the camera,
     # V_f = normalize(eye − P); the object properties are read through their RNA paths.
     frozen = n.new("ShaderNodeAttribute")
@@ -116,12 +182,8 @@ def direction_group():
     view = mix_vector(ng, frozen.outputs["Fac"], geo.outputs["Incoming"], to_eye.outputs["Vector"])
     minus_v = vector_math(ng, "SCALE", view, scale=-1.0)
     r = vector_math(ng, "REFLECT", minus_v.outputs["Vector"], normal)
-    rot = n.new("ShaderNodeVectorRotate")
-    rot.rotation_type = "AXIS_ANGLE"
-    ng.links.new(r.outputs["Vector"], rot.inputs["Vector"])
-    ng.links.new(axis.outputs["Vector"], rot.inputs["Axis"])
-    ng.links.new(angle.outputs["Value"], rot.inputs["Angle"])
-    ng.links.new(rot.outputs["Vector"], out.inputs["Direction"])
+    e = view_blend_nodes(ng, quat_xyz.outputs["Vector"], quat_wa.outputs["Vector"], r.outputs["Vector"])
+    ng.links.new(e, out.inputs["Direction"])
     ng.links.new(r.outputs["Vector"], out.inputs["Reflection"])
     # V is the actual view ray (also when e was evaluated from the frozen eye): n' must reflect it.
     ng.links.new(geo.outputs["Incoming"], out.inputs["View"])
@@ -162,6 +224,9 @@ SOURCE = "rokeby_source"  # on split parts: the name of the Principled BSDF they
 SPLIT = "rokeby_split"  # on a split Principled BSDF: its original outgoing links
 SIGNATURE = "rokeby_signature"  # on a split Principled BSDF: its inputs when it was split
 SPECULAR_BSDFS = ("ShaderNodeBsdfGlossy", "ShaderNodeBsdfAnisotropic")
+# BSDFs inside a node group are edited in a copy of the group local to the material:
+COPY_OF = "rokeby_copy_of"  # on the copy (a node tree): the group it copies
+ORIGINAL_TREE = "rokeby_original_tree"  # on the material's group node: the group it used
 _SEP = "\x1f"
 
 
@@ -385,13 +450,47 @@ def install(material) -> int:
     Installing twice changes nothing."""
     if material is None or not material.use_nodes or material.node_tree is None:
         return 0
-    tree = material.node_tree
+    return _install_tree(material.node_tree, material)
+
+
+def _bsdfs_inside(tree, seen=None) -> bool:
+    """Whether ``tree`` (a node group) holds a BSDF the add-on edits, at any depth."""
+    seen = set() if seen is None else seen
+    if tree is None or tree.name in seen:
+        return False
+    seen.add(tree.name)
+    for node in tree.nodes:
+        if node.bl_idname in SPECULAR_BSDFS or node.bl_idname == "ShaderNodeBsdfPrincipled":
+            return True
+        if node.bl_idname == "ShaderNodeGroup" and _bsdfs_inside(node.node_tree, seen):
+            return True
+    return False
+
+
+def _local_copy(node, material):
+    """The group-local copy of ``node``'s node group that this material's edit goes into (made on
+    first use): the original group, used by other materials, stays unedited."""
+    tree = node.node_tree
+    if tree.get(COPY_OF) is not None:
+        return tree
+    copy = tree.copy()
+    copy.name = f"{tree.name} (Rokeby: {material.name})"
+    copy[COPY_OF] = tree
+    node[ORIGINAL_TREE] = tree
+    node.node_tree = copy
+    return copy
+
+
+def _install_tree(tree, material) -> int:
     count = 0
     for node in list(tree.nodes):
         if _ours(node):
             continue
         x, y = node.location
-        if node.bl_idname in SPECULAR_BSDFS:
+        if node.bl_idname == "ShaderNodeGroup" and node.node_tree is not None:
+            if node.node_tree.get(COPY_OF) is not None or _bsdfs_inside(node.node_tree):
+                count += _install_tree(_local_copy(node, material), material)
+        elif node.bl_idname in SPECULAR_BSDFS:
             _feed_edited_normal(tree, node.inputs["Normal"], "Rokeby: edited reflections", (x - 250, y - 300))
             count += 1
         elif node.bl_idname == "ShaderNodeBsdfPrincipled":
@@ -409,12 +508,25 @@ def install(material) -> int:
     return count
 
 
+def _copies_in(tree) -> list:
+    """The group-local copies used by ``tree`` (and by those, recursively)."""
+    out = []
+    for node in tree.nodes:
+        if node.bl_idname == "ShaderNodeGroup" and node.node_tree is not None and node.node_tree.get(COPY_OF) is not None:
+            out.append(node.node_tree)
+            out.extend(_copies_in(node.node_tree))
+    return out
+
+
 def sync(material) -> bool:
     """Bring split parts up to date after an artist edited the original Principled BSDF (values,
     links, metallic becoming 1 or not); returns whether anything was rebuilt."""
     if material is None or not material.use_nodes or material.node_tree is None:
         return False
-    tree = material.node_tree
+    return any([_sync_tree(t) for t in [material.node_tree, *_copies_in(material.node_tree)]])
+
+
+def _sync_tree(tree) -> bool:
     stale = [nd for nd in tree.nodes if SPLIT in nd and nd.get(SIGNATURE) != _signature(nd)]
     for bsdf in stale:
         _unsplit(tree, bsdf)
@@ -426,7 +538,10 @@ def sync(material) -> bool:
 
 
 def installed(material) -> bool:
-    return material is not None and material.use_nodes and material.node_tree is not None and any(_ours(nd) for nd in material.node_tree.nodes)
+    if material is None or not material.use_nodes or material.node_tree is None:
+        return False
+    tree = material.node_tree
+    return any(_ours(nd) or ORIGINAL_TREE in nd for nd in tree.nodes)
 
 
 def uninstall(material) -> bool:
@@ -434,8 +549,19 @@ def uninstall(material) -> bool:
     (bump maps feed their BSDFs again, split Principled BSDFs are linked where they were)."""
     if material is None or not material.use_nodes or material.node_tree is None:
         return False
-    tree = material.node_tree
     found = installed(material)
+    _uninstall_tree(material.node_tree)
+    return found
+
+
+def _uninstall_tree(tree) -> None:
+    for node in [nd for nd in tree.nodes if ORIGINAL_TREE in nd]:
+        copy, original = node.node_tree, node[ORIGINAL_TREE]
+        del node[ORIGINAL_TREE]
+        if original is not None:
+            node.node_tree = original
+        if copy is not None and copy.get(COPY_OF) is not None and copy.users == 0:
+            bpy.data.node_groups.remove(copy)
     for bsdf in [nd for nd in tree.nodes if SPLIT in nd]:
         _unsplit(tree, bsdf)
     for group in [nd for nd in tree.nodes if _ours(nd) and nd.bl_idname == "ShaderNodeGroup"]:
@@ -447,4 +573,3 @@ def uninstall(material) -> bool:
                 tree.links.new(upstream[0], sock)
     for node in [nd for nd in tree.nodes if _ours(nd)]:
         tree.nodes.remove(node)
-    return found

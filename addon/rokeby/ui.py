@@ -77,6 +77,13 @@ class ROKEBY_PT_main(bpy.types.Panel):
             col.label(text=f"{rep.status.title()}: {rep.constraints_used} constraint(s), {rep.vertices:,} vertices", icon=_STATUS_ICON[rep.status])
             for msg in rep.messages[:6]:
                 col.label(text=msg)
+            if rep.render_note:
+                row = col.row()
+                row.alert = rep.renders is False
+                row.label(text=rep.render_note[:120], icon={True: "RENDER_STILL", False: "ERROR", None: "INFO"}[rep.renders])
+            if rep.interpolation_error is not None:
+                p99, worst = rep.interpolation_error[:2]
+                col.label(text=f"render vs preview: {p99:.2f}° (99th percentile), {worst:.2f}° max", icon="CHECKMARK" if p99 <= evaluate.AGREEMENT_DEGREES else "ERROR")
             if rep.recomputed or rep.python_ms:
                 col.label(text=f"last update {rep.python_ms + rep.native_ms:.1f} ms (Python {rep.python_ms:.1f}, Rust {rep.native_ms:.1f})")
         col = layout.column()
@@ -85,6 +92,8 @@ class ROKEBY_PT_main(bpy.types.Panel):
         if s.metric == "GEODESIC":
             col.prop(s, "geodesic_method")
         col.prop(s, "polar")
+        col.prop(s, "eye_source")
+        col.prop(s, "render_edits")
         col.prop(s, "show_preview")
         if viewport.status_of(mirror):
             col.label(text=viewport.status_of(mirror)[:120], icon="INFO")
@@ -149,7 +158,7 @@ class ROKEBY_PT_main(bpy.types.Panel):
         if s.render_mode == "REFLECTION_MAP":
             _draw_reflection_map(layout, mirror, context.scene)
         row = layout.row(align=True)
-        op = row.operator("rokeby.render_nodes", text="Render Edits", icon="NODE_MATERIAL")
+        op = row.operator("rokeby.render_nodes", text="Reinstall Render Nodes", icon="NODE_MATERIAL")
         op.mirror, op.action = mirror.name, "INSTALL"
         op = row.operator("rokeby.render_nodes", text="", icon="X")
         op.mirror, op.action = mirror.name, "REMOVE"

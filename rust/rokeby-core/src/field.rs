@@ -93,7 +93,6 @@ fn unit(v: DVec3, arg: &str, what: &str) -> Result<DVec3> {
     Ok(v / len)
 }
 
-/// The original reflected direction r(q) = reflect(i, n), i = (q − eye)/|q − eye| (eq. 6's r(q)).
 /// The form in which the per-point field is returned.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum FieldOutput {
@@ -101,7 +100,78 @@ pub enum FieldOutput {
     Quaternion,
     /// Rotation vectors axis × angle, angle in [0, π].
     RotationVector,
+    /// The view-independent parts of eq. 7, (x, y, z, w, a, u) per point: the rotation R of the
+    /// region(s) acting there (w ≥ 0) and the region weight a ∈ [0, 1]. A renderer forms
+    /// R_a r = `view_blend(R, a, r)` per shading point for its own r (see there), so the blend
+    /// towards r rᵀ is exact per pixel and the stored field does not depend on the eye. Where
+    /// several regions overlap with Σa < 1, R = ortho(Σⱼ aⱼ Rⱼ) and a = Σⱼ aⱼ (exact when the
+    /// overlapping rotations agree, and wherever Σa ≥ 1 or one region acts).
+    /// u: when the field has exactly one region and it is Euclidean with a border > 0, its
+    /// unclamped border ramp (radius − |q − c|) / border, so that a = `smooth_step(u)`; a
+    /// renderer interpolating u instead of a across a face follows the border per pixel, as the
+    /// preview does (a distance interpolates far better than its smooth step). Otherwise u = a.
+    ViewBlend,
 }
+
+/// Width of one point's output for `output`.
+pub fn output_width(output: FieldOutput) -> usize {
+    match output {
+        FieldOutput::Quaternion => 4,
+        FieldOutput::RotationVector => 3,
+        FieldOutput::ViewBlend => 6,
+    }
+}
+
+/// Eq. 7 for one region in closed form: R_a r with R_a = ortho(a R + (1 − a) r rᵀ), r unit.
+///
+/// Write aR + (1 − a) r rᵀ = R N with N = a I + (1 − a) s rᵀ, s = Rᵀ r. N keeps the plane P
+/// spanned by r and s and is a·I on P⊥, so its polar factor is a rotation in P (when
+/// a + (1 − a) cos φ > 0, φ = ∠(r, s); otherwise the closest rotation in P, the continuous
+/// choice a shader can make), by θ = atan2((1 − a) sin φ, 2a + (1 − a) cos φ) from r towards s.
+/// Hence R_a r = R (cos θ r + sin θ t), t the unit part of s orthogonal to r. a = 1 gives R r,
+/// a = 0 gives r. The render nodes (rokeby.shading) implement the same lines.
+pub fn view_blend(rot: DQuat, a: f64, r: DVec3) -> DVec3 {
+    let a = a.clamp(0.0, 1.0);
+    let b = 1.0 - a;
+    let s = rot.inverse() * r;
+    let cos_phi = r.dot(s);
+    let perp = s - r * cos_phi;
+    let sin_phi = perp.length();
+    let theta = (b * sin_phi).atan2(2.0 * a + b * cos_phi);
+    let t = if sin_phi > 1e-300 { perp / sin_phi } else { DVec3::ZERO };
+    rot * (r * theta.cos() + t * theta.sin())
+}
+
+/// `view_blend` for N points: `parts` (N×6, `FieldOutput::ViewBlend`, possibly interpolated)
+/// and unit directions r (N×3), both flattened; the weight is a, or `smooth_step(u)` when
+/// `ramp` (the single-Euclidean-region form). Returns the edited directions (N×3).
+pub fn view_blend_directions(parts: &[f32], r: &[f32], ramp: bool) -> Result<Vec<f32>> {
+    if parts.len() % 6 != 0 || r.len() % 3 != 0 || parts.len() / 6 != r.len() / 3 {
+        return Err(RokebyError::invalid("parts", format!("expected (N, 6) parts for (N, 3) directions, got {} and {} values", parts.len(), r.len())));
+    }
+    check_finite(r, "directions")?;
+    if let Some(i) = parts.par_iter().position_first(|x| !x.is_finite()) {
+        return Err(RokebyError::invalid("parts", format!("row {} has a non-finite value", i / 6)));
+    }
+    let mut out = vec![0f32; r.len()];
+    out.par_chunks_mut(3 * 4096).enumerate().for_each(|(ci, chunk)| {
+        for (j, o) in chunk.chunks_exact_mut(3).enumerate() {
+            let i = ci * 4096 + j;
+            let p = &parts[6 * i..6 * i + 6];
+            let q = DQuat::from_xyzw(p[0] as f64, p[1] as f64, p[2] as f64, p[3] as f64);
+            let len = q.length();
+            let q = if len > 1e-30 { q / len } else { DQuat::IDENTITY };
+            let d = vec3_at(r, i).normalize_or_zero();
+            let a = if ramp { crate::region::smooth_step(p[5] as f64) } else { p[4] as f64 };
+            let e = view_blend(q, a, d);
+            o.copy_from_slice(&[e.x as f32, e.y as f32, e.z as f32]);
+        }
+    });
+    check_output(&out)?;
+    Ok(out)
+}
+
+/// The original reflected direction r(q) = reflect(i, n), i = (q − eye)/|q − eye| (eq. 6's r(q)).
 
 pub fn reflect_dir(q: DVec3, n: DVec3, eye: DVec3) -> Option<DVec3> {
     let i = (q - eye).try_normalize()?;
@@ -267,6 +337,37 @@ impl Field {
         polar::ortho(&acc, || None, polar, &mut s.blend_warm)
     }
 
+    /// The view-independent parts of R_a(q) (see `FieldOutput::ViewBlend`): (R, a).
+    fn view_blend_parts_at(&self, idx: usize, n_points: usize, q: DVec3, dist: Distances, polar: PolarMethod, s: &mut Scratch) -> (DQuat, f64) {
+        if self.groups.is_empty() {
+            return (DQuat::IDENTITY, 0.0);
+        }
+        if self.regions.is_empty() {
+            return (self.solve_group(0, idx, n_points, q, dist, polar, s), 1.0);
+        }
+        let mut acc = DMat3::ZERO;
+        let mut asum = 0.0;
+        let mut count = 0;
+        let mut last = (DQuat::IDENTITY, 0.0);
+        for gi in 0..self.groups.len() {
+            let reg = &self.regions[self.groups[gi].region.expect("regions are set")];
+            let a = reg.at_point(idx, q);
+            if a <= 0.0 {
+                continue;
+            }
+            let rg = self.solve_group(gi, idx, n_points, q, dist, polar, s);
+            acc += DMat3::from_quat(rg) * a;
+            asum += a;
+            count += 1;
+            last = (rg, a);
+        }
+        match count {
+            0 => (DQuat::IDENTITY, 0.0),
+            1 => (last.0, last.1.min(1.0)),
+            _ => (polar::ortho(&acc, || None, polar, &mut s.blend_warm), asum.min(1.0)),
+        }
+    }
+
     fn check_distances(&self, dist: Distances, n_points: usize) -> Result<()> {
         if let Distances::Given(d) = dist {
             let k = self.constraints.len();
@@ -329,10 +430,7 @@ impl Field {
             }
             None => None,
         };
-        let width = match output {
-            FieldOutput::Quaternion => 4,
-            FieldOutput::RotationVector => 3,
-        };
+        let width = output_width(output);
         let mut out = vec![0f32; n * width];
         const CHUNK: usize = 2048;
         out.par_chunks_mut(CHUNK * width).enumerate().for_each(|(ci, chunk)| {
@@ -341,9 +439,20 @@ impl Field {
             for (j, o) in chunk.chunks_exact_mut(width).enumerate() {
                 let i = base + j;
                 let q = vec3_at(points, i);
+                if output == FieldOutput::ViewBlend {
+                    let (rot, a) = self.view_blend_parts_at(i, n, q, dist, polar, &mut s);
+                    let rot = polar::canonical(rot);
+                    let u = match self.regions.as_slice() {
+                        [Region::Euclidean { center, radius, border }] if *border > 0.0 => (radius - q.distance(*center)) / border.min(*radius),
+                        _ => a,
+                    };
+                    o.copy_from_slice(&[rot.x as f32, rot.y as f32, rot.z as f32, rot.w as f32, a as f32, u as f32]);
+                    continue;
+                }
                 let r_view = eye.and_then(|(normals, eye)| reflect_dir(q, vec3_at(normals, i), eye));
                 let rot = polar::canonical(self.rotation_at(i, n, q, r_view, dist, polar, &mut s));
                 match output {
+                    FieldOutput::ViewBlend => {} // written above
                     FieldOutput::Quaternion => o.copy_from_slice(&[rot.x as f32, rot.y as f32, rot.z as f32, rot.w as f32]),
                     FieldOutput::RotationVector => {
                         let v = polar::rotation_vector(rot);

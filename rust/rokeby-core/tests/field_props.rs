@@ -285,3 +285,68 @@ fn bad_constraints_are_errors_not_panics() {
     assert!(f.edited_directions(&[0.0, 0.0, 0.0], &[0.0, 0.0, 0.0], [0.0, 0.0, 1.0], Distances::Euclidean, PolarMethod::Svd, 1).is_err());
     assert!(f.edited_directions(&[0.0, 0.0, 1.0], &[0.0, 0.0, 1.0], [0.0, 0.0, 1.0], Distances::Euclidean, PolarMethod::Svd, 1).is_err());
 }
+
+// --- eq. 7 in closed form for renderers (FieldOutput::ViewBlend + view_blend) -------------------
+
+fn rotation() -> impl Strategy<Value = DQuat> {
+    (unit_vec(), 0.0f64..std::f64::consts::PI).prop_map(|(axis, angle)| DQuat::from_axis_angle(axis, angle))
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig { cases: 2000, rng_seed: RngSeed::Fixed(0x2009_7E0C), failure_persistence: None, .. ProptestConfig::default() })]
+
+    /// view_blend(R, a, r) = ortho(a R + (1 − a) r rᵀ) r wherever the in-plane factor is a proper
+    /// rotation (a + (1 − a) cos φ > 0), which is eq. 7's domain of continuity.
+    #[test]
+    fn view_blend_is_eq7_in_closed_form(rot in rotation(), a in 0.0f64..=1.0, r in unit_vec()) {
+        let s = rot.inverse() * r;
+        prop_assume!(a + (1.0 - a) * r.dot(s) > 0.05);
+        let m = DMat3::from_quat(rot) * a + DMat3::from_cols(r * r.x, r * r.y, r * r.z) * (1.0 - a);
+        let want = rokeby_core::polar::ortho_svd(&m) * r;
+        let got = rokeby_core::field::view_blend(rot, a, r);
+        prop_assert!((got.length() - 1.0).abs() < 1e-9);
+        prop_assert!(dir_angle(got, want) < 1e-6, "{} rad", dir_angle(got, want));
+    }
+
+    /// The stored parts (R, a) blended per point give the per-pixel path's edited directions,
+    /// with one region (exact) for any constraints, points, normals and eye.
+    #[test]
+    fn view_blend_parts_reproduce_the_per_pixel_field(cs in constraints(6), qs in prop::collection::vec((point(), unit_vec()), 1..24), eye in point()) {
+        let c = rows(&cs);
+        let region = Region::euclidean([0.1, -0.2, 0.0], 0.9, 0.6, "regions[0]").unwrap();
+        let f = Field::new(&c, vec![region]).unwrap();
+        let eye = eye * 5.0 + DVec3::new(0.0, 0.0, 6.0);
+        let pts: Vec<f32> = qs.iter().flat_map(|(p, _)| [p.x as f32, p.y as f32, p.z as f32]).collect();
+        let nrm: Vec<f32> = qs.iter().flat_map(|(_, n)| [n.x as f32, n.y as f32, n.z as f32]).collect();
+        let want = f.edited_directions(&pts, &nrm, eye.to_array(), Distances::Euclidean, PolarMethod::Svd, 8).unwrap();
+        let parts = f.rotation_field_as(&pts, Distances::Euclidean, None, PolarMethod::Svd, rokeby_core::field::FieldOutput::ViewBlend).unwrap();
+        let r: Vec<f32> = qs.iter().flat_map(|(p, n)| {
+            let d = rokeby_core::field::reflect_dir(*p, *n, eye).unwrap();
+            [d.x as f32, d.y as f32, d.z as f32]
+        }).collect();
+        let got = rokeby_core::field::view_blend_directions(&parts, &r, false).unwrap();
+        let by_ramp = rokeby_core::field::view_blend_directions(&parts, &r, true).unwrap();
+        prop_assert!(got.iter().zip(&by_ramp).all(|(a, b)| (a - b).abs() < 1e-5), "smooth_step(u) is a for one Euclidean region");
+        for i in 0..qs.len() {
+            let p = &parts[6 * i..6 * i + 6];
+            let rot = DQuat::from_xyzw(p[0] as f64, p[1] as f64, p[2] as f64, p[3] as f64).normalize();
+            let rr = DVec3::new(r[3 * i] as f64, r[3 * i + 1] as f64, r[3 * i + 2] as f64);
+            // Outside eq. 7's continuous domain both answers are legitimate closest rotations.
+            prop_assume!(p[4] as f64 + (1.0 - p[4] as f64) * rr.dot(rot.inverse() * rr) > 0.05);
+            let g = DVec3::new(got[3 * i] as f64, got[3 * i + 1] as f64, got[3 * i + 2] as f64);
+            let w = DVec3::new(want[3 * i] as f64, want[3 * i + 1] as f64, want[3 * i + 2] as f64);
+            prop_assert!(dir_angle(g, w) < 2e-5, "point {i}: {} rad", dir_angle(g, w));
+        }
+    }
+}
+
+#[test]
+fn view_blend_ends_and_bad_input() {
+    let rot = DQuat::from_axis_angle(DVec3::X, 1.0);
+    let r = DVec3::new(0.0, 0.6, 0.8);
+    assert!(dir_angle(rokeby_core::field::view_blend(rot, 1.0, r), rot * r) < 1e-12);
+    assert!(dir_angle(rokeby_core::field::view_blend(rot, 0.0, r), r) < 1e-12);
+    assert!(dir_angle(rokeby_core::field::view_blend(DQuat::IDENTITY, 0.5, r), r) < 1e-12);
+    assert!(rokeby_core::field::view_blend_directions(&[0.0; 6], &[0.0; 6], false).is_err());
+    assert!(rokeby_core::field::view_blend_directions(&[0.0, 0.0, 0.0, 1.0, f32::NAN, 0.0], &[0.0, 0.0, 1.0], false).is_err());
+}

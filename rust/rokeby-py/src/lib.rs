@@ -9,7 +9,7 @@ use numpy::{IntoPyArray, PyArrayDyn, PyArrayMethods, PyReadonlyArrayDyn, PyUntyp
 use pyo3::exceptions::{PyRuntimeError, PyTypeError, PyValueError};
 use pyo3::prelude::*;
 use pyo3::types::{PyDict, PyList, PyTuple};
-use rokeby_core::field::{Distances, Field, FieldOutput};
+use rokeby_core::field::{output_width, Distances, Field, FieldOutput};
 use rokeby_core::geodesic::{self, GeodesicSolver as CoreSolver, Mesh, Method, Source, SurfacePoint};
 use std::sync::Arc;
 use rokeby_core::polar::{self, PolarMethod};
@@ -209,7 +209,8 @@ fn parse_distances<'py>(obj: Option<&Bound<'py, PyAny>>, k: usize, lead: &[usize
 /// eq. 5) at every point. constraints: (K, 9) rows [p, r, e]; K = 0 gives identities.
 /// distances: optional (K, N) precomputed (e.g. geodesic) distances, +inf = unreachable.
 /// regions: list of dicts (see README). normals + eye: make eq. 7 blend towards r rᵀ exactly.
-/// output="quaternion" (N, 4) or "rotation_vector" (N, 3): axis × angle, angle in [0, π].
+/// output="quaternion" (N, 4), "rotation_vector" (N, 3): axis × angle, angle in [0, π], or
+/// "view_blend" (N, 6): eq. 7's view-independent parts (x, y, z, w, a, u) for `view_blend`.
 #[pyfunction]
 #[pyo3(signature = (points, constraints, *, distances=None, regions=None, normals=None, eye=None, polar="exact", output="quaternion"))]
 #[allow(clippy::too_many_arguments)]
@@ -225,11 +226,13 @@ fn rotation_field<'py>(
     output: &str,
 ) -> PyResult<Bound<'py, PyArrayDyn<f32>>> {
     let method = parse_polar(polar)?;
-    let (output, width) = match output {
-        "quaternion" => (FieldOutput::Quaternion, 4),
-        "rotation_vector" => (FieldOutput::RotationVector, 3),
-        other => return Err(PyValueError::new_err(format!("output: expected \"quaternion\" or \"rotation_vector\", got {other:?}"))),
+    let output = match output {
+        "quaternion" => FieldOutput::Quaternion,
+        "rotation_vector" => FieldOutput::RotationVector,
+        "view_blend" => FieldOutput::ViewBlend,
+        other => return Err(PyValueError::new_err(format!("output: expected \"quaternion\", \"rotation_vector\" or \"view_blend\", got {other:?}"))),
     };
+    let width = output_width(output);
     let pts = f32_array(points, "points")?;
     let shape = pts.shape();
     if shape.len() != 2 || shape[1] != 3 {
@@ -264,6 +267,30 @@ fn rotation_field<'py>(
     let view = nrm.as_ref().map(|(a, e)| (a.slice(), *e));
     let out = run_detached(py, || field.rotation_field_as(p, d, view, method, output))?;
     let arr = ArrayD::from_shape_vec(IxDyn(&[n, width]), out).map_err(|e| PyRuntimeError::new_err(e.to_string()))?;
+    Ok(arr.into_pyarray(py))
+}
+
+/// view_blend(parts, directions, *, ramp=False) -> (N, 3) float32 unit vectors.
+///
+/// Eq. 7 in closed form per point, R_a r = ortho(a R + (1 − a) r rᵀ) r, from the parts
+/// (N, 6) = (x, y, z, w, a, u) of rotation_field(..., output="view_blend") (or an interpolation
+/// of them) and unit directions r (N, 3): what the render nodes compute per shading point. The
+/// weight is a, or smooth_step(u) with ramp=True (a field with one Euclidean region).
+#[pyfunction]
+#[pyo3(signature = (parts, directions, *, ramp=false))]
+fn view_blend<'py>(py: Python<'py>, parts: &Bound<'py, PyAny>, directions: &Bound<'py, PyAny>, ramp: bool) -> PyResult<Bound<'py, PyArrayDyn<f32>>> {
+    let pa = f32_array(parts, "parts")?;
+    let da = f32_array(directions, "directions")?;
+    let (ps, ds) = (pa.shape(), da.shape());
+    if ps.len() != 2 || ps[1] != 6 {
+        return Err(PyValueError::new_err(format!("parts: expected shape (N, 6), got {}", shape_str(&ps))));
+    }
+    if ds.len() != 2 || ds[1] != 3 || ds[0] != ps[0] {
+        return Err(PyValueError::new_err(format!("directions: expected shape ({}, 3), got {}", ps[0], shape_str(&ds))));
+    }
+    let (p, d) = (pa.slice(), da.slice());
+    let out = run_detached(py, || rokeby_core::field::view_blend_directions(p, d, ramp))?;
+    let arr = ArrayD::from_shape_vec(IxDyn(&[ps[0], 3]), out).map_err(|e| PyRuntimeError::new_err(e.to_string()))?;
     Ok(arr.into_pyarray(py))
 }
 
@@ -624,6 +651,7 @@ fn rokeby_native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
     m.add_function(wrap_pyfunction!(rotation_field, m)?)?;
     m.add_function(wrap_pyfunction!(edited_directions, m)?)?;
+    m.add_function(wrap_pyfunction!(view_blend, m)?)?;
     m.add_function(wrap_pyfunction!(ortho, m)?)?;
     m.add_function(wrap_pyfunction!(geodesic_distances, m)?)?;
     m.add_function(wrap_pyfunction!(interpolate, m)?)?;
