@@ -366,6 +366,44 @@ def field_section(emit, peers=None):
     emit()
 
 
+REPRESENTATION_MARKER = "## What the render reads: "
+
+
+def representation_section(emit, peers=None):
+    r = _measure("tradeoffs.py", ["representation"])
+    emit(REPRESENTATION_MARKER + "representations of the field, render against preview (issue 17)")
+    emit()
+    emit(_stamp())
+    emit()
+    emit("A renderer reads the field from mesh data and interpolates it across each triangle; the viewport preview")
+    emit("evaluates it per pixel (`edited_directions`, eq. 7 towards r rᵀ). Each row emulates one way of storing it:")
+    emit(f"barycentric interpolation at {r['samples']:,} random points of the triangles facing the eye (area-weighted,")
+    emit("smooth normals), against the per-pixel field there; points whose edited direction is below the surface are")
+    emit("left out (renders fold them, the status counts them apart). Two constraints, eye (0, −4, 0); the region is")
+    emit("a Euclidean sphere of radius 0.9 with a 0.5 border; the plane has ±170° edits (121 vertices). Update: the")
+    emit("native call plus the numpy conversion to what is stored, medians of 3 (the add-on then writes it with")
+    emit("foreach_set). Memory: what is stored per mirror. Eye-dependent: must be recomputed when the camera moves.")
+    emit("The add-on's own Cycles renders agree with these figures (tests/test_wysiwyg.py).")
+    emit()
+    emit("| mesh | vertices | region | representation | p99 (°) | max (°) | > 5° | update (ms) | memory (bytes) | eye-dependent |")
+    emit("|---|---:|---|---|---:|---:|---:|---:|---:|---|")
+    for x in r["rows"]:
+        emit(f"| {x['mesh']} | {x['vertices']:,} | {'yes' if x['region'] else 'no'} | {x['representation']} | {x['p99']:.2f} | {x['max']:.2f} | "
+             f"{100 * x['over_5']:.1f}% | {x['update_ms']:.1f} | {x['bytes']:,} | {x['eye_dependent']} |")
+    emit()
+    emit("The pick: the view-independent parts per face corner (the region's rotation R as a quaternion kept in one")
+    emit("hemisphere per polygon, and the weight a, or the border ramp for one Euclidean region), with eq. 7 formed in")
+    emit("closed form per shading point by the render nodes. It is the only stored form that follows the preview")
+    emit("inside a region's border (where the blend towards r rᵀ depends on each pixel's r), it does not tear at")
+    emit("half turns (rotation vectors do: ~100° on the ±170° plane), it needs no recomputation when the camera")
+    emit("moves, and its error falls as h² with the mesh (rows for 202 → 32k vertices). It costs 24 bytes per face")
+    emit("corner. The edited direction per vertex is cheaper but depends on the eye and is 4x further off in the")
+    emit("border; the whole field per pixel is what the viewport shader does, but Cycles nodes would need a node tree")
+    emit("per mirror rebuilt on every drag. Where the interpolation error stays above 1° (the 202-vertex sphere),")
+    emit("the add-on's status says so with its own estimate of this figure.")
+    emit()
+
+
 INDEX = """Speed against accuracy, one section each (table, time-against-error plot, peers, papers, recommendation):
 geodesic method (Geodesic distances), per-vertex versus per-pixel field, polar method and float32 versus float64
 (Polar method and float32 storage), reflection map versus ray traced render and map resolutions, SH order,
@@ -379,4 +417,5 @@ SECTIONS = {
     "precision": (PRECISION_MARKER, precision_section),
     "reflmap": (REFLMAP_MARKER, reflmap_section),
     "field_vertex_pixel": (FIELD_MARKER, field_section),
+    "render_representation": (REPRESENTATION_MARKER, representation_section),
 }

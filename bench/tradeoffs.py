@@ -356,13 +356,152 @@ def field_section(k=8, n_pixels=1280 * 960, levels=(0, 1, 2, 3)):
     return {"rows": rows, "pixels": n_pixels, "k": k, "load_average": [load0, os.getloadavg()[0]], "cpus": os.cpu_count()}
 
 
+# --- what the render reads: the representation of the field (issue 17) -----------------------
+
+def _uv_sphere(segments, rings):
+    """Vertices, smooth normals and triangles of Blender's UV sphere (radius 1)."""
+    th = np.pi * np.arange(1, rings) / rings
+    ph = 2 * np.pi * np.arange(segments) / segments
+    ring = np.stack([np.sin(th)[:, None] * np.cos(ph), np.sin(th)[:, None] * np.sin(ph), np.repeat(np.cos(th)[:, None], segments, 1)], -1).reshape(-1, 3)
+    v = np.concatenate([[[0, 0, 1]], ring, [[0, 0, -1]]]).astype(np.float32)
+    tris = []
+    for j in range(segments):
+        k = (j + 1) % segments
+        tris.append((0, 1 + j, 1 + k))
+        for i in range(rings - 2):
+            a, b = 1 + i * segments + j, 1 + i * segments + k
+            c, d = a + segments, b + segments
+            tris += [(a, c, d), (a, d, b)]
+        last = len(v) - 1
+        tris.append((1 + (rings - 2) * segments + j, last, 1 + (rings - 2) * segments + k))
+    return v, v.copy(), np.array(tris, dtype=np.int64)
+
+
+def _grid(n, size=2.0):
+    x = np.linspace(-size / 2, size / 2, n)
+    xx, yy = np.meshgrid(x, x)
+    v = np.stack([xx.ravel(), yy.ravel(), np.zeros(n * n)], -1).astype(np.float32)
+    nrm = np.tile(np.array([[0, 0, 1]], np.float32), (n * n, 1))
+    idx = np.arange(n * n).reshape(n, n)
+    a, b, c, d = idx[:-1, :-1].ravel(), idx[:-1, 1:].ravel(), idx[1:, :-1].ravel(), idx[1:, 1:].ravel()
+    return v, nrm, np.concatenate([np.stack([a, b, d], 1), np.stack([a, d, c], 1)])
+
+
+def _row(p, g, eye):
+    p, g, eye = (np.asarray(x, dtype=np.float64) for x in (p, g, eye))
+    n = p / np.linalg.norm(p) if np.linalg.norm(p) > 0 else np.array([0.0, 0.0, 1.0])
+    i = (p - eye) / np.linalg.norm(p - eye)
+    r = i - 2 * (i @ n) * n
+    e = (g - p) / np.linalg.norm(g - p)
+    return np.concatenate([p, r, e])
+
+
+def representation_section(n_samples=100_000):
+    """Each way a renderer can read the field, interpolated across triangles as the renderer does,
+    against edited_directions (the per-pixel preview) at random points of the triangles facing the
+    eye (area-weighted; the normal interpolated as smooth shading does). Update: the native call and
+    the numpy conversion to what is stored (writing to Blender is the same foreach_set for all)."""
+    import rokeby_native as rn
+
+    rng = np.random.default_rng(17)
+    eye = np.array([0.0, -4.0, 0.0])
+    region = [{"kind": "euclidean", "center": [0.2, -1.0, 0.0], "radius": 0.9, "border": 0.5}]
+    sphere_rows = np.array([_row((0, -1, 0), (0.6, -3.0, 1.0), eye), _row((0.5, -0.85, 0), (1.2, -3.0, -0.5), eye)], np.float32)
+    sphere_rows[1, :3] /= np.linalg.norm(sphere_rows[1, :3])
+    sphere_rows[1] = _row(sphere_rows[1, :3], (1.2, -3.0, -0.5), eye)
+
+    def rz(deg, v):
+        a = np.radians(deg)
+        return np.array([np.cos(a) * v[0] - np.sin(a) * v[1], np.sin(a) * v[0] + np.cos(a) * v[1], v[2]])
+    plane_eye = np.array([0.0, -2.2, 2.2])
+    plane_rows = []
+    for x, turn in ((-0.5, 170.0), (0.5, -170.0)):
+        p = np.array([x, 0.0, 0.0])
+        i = (p - plane_eye) / np.linalg.norm(p - plane_eye)
+        r = i * np.array([1.0, 1.0, -1.0])
+        plane_rows.append(np.concatenate([p, r, rz(turn, r)]))
+    plane_rows = np.array(plane_rows, np.float32)
+    cases = [("sphere", 20, 11, True), ("sphere", 64, 32, False), ("sphere", 64, 32, True), ("sphere", 128, 64, True), ("sphere", 256, 128, True), ("plane ±170°", 11, 0, False)]
+    out = []
+    for name, a, b, with_region in cases:
+        if name == "sphere":
+            v, nrm, f = _uv_sphere(a, b)
+            rows, e = sphere_rows, eye
+        else:
+            v, nrm, f = _grid(a)
+            rows, e = plane_rows, plane_eye
+        kw = {"regions": region} if with_region else {}
+        v64 = v.astype(np.float64)
+        fn = np.cross(v64[f[:, 1]] - v64[f[:, 0]], v64[f[:, 2]] - v64[f[:, 0]])
+        area = 0.5 * np.linalg.norm(fn, axis=1)
+        front = np.einsum("ij,ij->i", nrm[f].mean(1), v64[f].mean(1) - e) < 0
+        w = np.where(front, area, 0.0)
+        tri = rng.choice(len(f), n_samples, p=w / w.sum())
+        u = rng.random((n_samples, 2))
+        flip = u.sum(1) > 1
+        u[flip] = 1 - u[flip]
+        bary = np.column_stack([1 - u.sum(1), u[:, 0], u[:, 1]])
+        P = np.einsum("ni,nij->nj", bary, v64[f[tri]])
+        N = np.einsum("ni,nij->nj", bary, nrm[f[tri]].astype(np.float64))
+        N /= np.linalg.norm(N, axis=1, keepdims=True)
+        inc = (P - e) / np.linalg.norm(P - e, axis=1, keepdims=True)
+        R = inc - 2 * np.einsum("ij,ij->i", inc, N)[:, None] * N
+        want = rn.edited_directions(P.astype(np.float32), N.astype(np.float32), tuple(e), rows, **kw).astype(np.float64)
+        above = np.einsum("ij,ij->i", want, N) > 0  # renders fold the rest: compared apart
+
+        def rotate(q, x):
+            uu, ww = q[:, :3], q[:, 3:4]
+            t = 2 * np.cross(uu, x)
+            return x + ww * t + np.cross(uu, t)
+
+        def hemi(q):  # (n, 3, k): quaternions of a triangle in its first corner's hemisphere
+            q = q.copy()
+            q[..., :4] *= np.where(np.einsum("nij,nj->ni", q[..., :4], q[:, 0, :4]) < 0, -1.0, 1.0)[..., None]
+            return q
+
+        def nlerp(q):
+            x = np.einsum("ni,nij->nj", bary, q)
+            x[:, :4] /= np.linalg.norm(x[:, :4], axis=1, keepdims=True)
+            return x
+
+        reps = {}
+        # A. rotation vectors per vertex, blended towards I (before this issue).
+        t, rv = best_time(lambda: rn.rotation_field(v, rows, output="rotation_vector", **kw), 3)
+        x = np.einsum("ni,nij->nj", bary, rv[f[tri]].astype(np.float64))
+        ang = np.linalg.norm(x, axis=1)
+        axis = x / np.maximum(ang, 1e-30)[:, None]
+        got = R * np.cos(ang)[:, None] + np.cross(axis, R) * np.sin(ang)[:, None] + axis * np.einsum("ij,ij->i", axis, R)[:, None] * (1 - np.cos(ang))[:, None]
+        reps["rotation vector per vertex, eq. 7 towards I (before)"] = (got, t, 12 * len(v), "no")
+        # B. quaternions per corner, eq. 7 towards r rᵀ at each vertex for the current eye.
+        t, qv = best_time(lambda: hemi(rn.rotation_field(v, rows, normals=nrm, eye=tuple(e), **kw).astype(np.float64)[f]), 3)
+        reps["quaternion per corner, eq. 7 at the vertices for the eye"] = (rotate(nlerp(hemi(rn.rotation_field(v, rows, normals=nrm, eye=tuple(e), **kw).astype(np.float64)[f[tri]])), R), t, 16 * 3 * len(f), "yes")
+        # C. the edited direction per vertex for the current eye.
+        t, ev = best_time(lambda: rn.edited_directions(v, nrm, tuple(e), rows, **kw), 3)
+        x = np.einsum("ni,nij->nj", bary, ev[f[tri]].astype(np.float64))
+        reps["edited direction per vertex for the eye"] = (x / np.linalg.norm(x, axis=1, keepdims=True), t, 12 * len(v), "yes")
+        # D. eq. 7's view-independent parts per corner, closed form per pixel (the add-on's pick).
+        ramp = with_region
+        t, parts = best_time(lambda: hemi(rn.rotation_field(v, rows, output="view_blend", **kw).astype(np.float64)[f]), 3)
+        pi = nlerp(hemi(rn.rotation_field(v, rows, output="view_blend", **kw).astype(np.float64)[f[tri]]))
+        got = rn.view_blend(pi.astype(np.float32), R.astype(np.float32), ramp=ramp).astype(np.float64)
+        reps["view-independent parts per corner, eq. 7 per pixel (the add-on)"] = (got, t, 24 * 3 * len(f), "no")
+        # E. the whole field per pixel (the preview's way), timed for a 1280x960 frame.
+        t, _ = best_time(lambda: rn.edited_directions(P.astype(np.float32), N.astype(np.float32), tuple(e), rows, **kw), 3)
+        reps["whole field per pixel, 1280x960 on this CPU (the preview's way, in GLSL there)"] = (want, t * 1280 * 960 / n_samples, 0, "yes, every frame")
+        for rep, (got, t, mem, eye_dep) in reps.items():
+            a = np.degrees(np.arccos(np.clip(np.einsum("ij,ij->i", got, want)[above] / np.linalg.norm(got[above], axis=1), -1, 1)))
+            out.append({"mesh": name, "vertices": int(len(v)), "region": with_region, "representation": rep, "p99": float(np.percentile(a, 99)),
+                        "max": float(a.max()), "over_5": float((a > 5).mean()), "update_ms": 1e3 * t, "bytes": int(mem), "eye_dependent": eye_dep})
+    return {"rows": out, "samples": n_samples, "load_average": os.getloadavg()[0], "cpus": os.cpu_count()}
+
+
 def main():
     ap = argparse.ArgumentParser()
-    ap.add_argument("what", choices=["sh", "qp", "holefill", "precision", "field"])
+    ap.add_argument("what", choices=["sh", "qp", "holefill", "precision", "field", "representation"])
     ap.add_argument("--json", required=True)
     ap.add_argument("--peers", default=None)
     a = ap.parse_args()
-    r = {"sh": sh_section, "qp": lambda: qp_section(a.peers), "holefill": holefill_section, "precision": precision_section, "field": field_section}[a.what]()
+    r = {"sh": sh_section, "qp": lambda: qp_section(a.peers), "holefill": holefill_section, "precision": precision_section, "field": field_section, "representation": representation_section}[a.what]()
     Path(a.json).write_text(json.dumps(r, indent=1))
 
 

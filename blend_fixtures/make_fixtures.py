@@ -5,11 +5,11 @@
 Each builder makes a scene with bpy (background mode) through ``rokeby.api`` and can save it; the
 tests call the builders directly and save into a temporary folder.
 
-- ``keyframed_spot``: Keenan Crane's spot (a real mesh from ../shared/meshes) as the mirror, a
-  camera, two reflection constraints whose green handles are keyframed at frames 1 and 20, a
+- ``keyframed_spot``: Keenan Crane's spot (a real mesh from ../shared/meshes) as a chrome
+  mirror, a camera, two reflection constraints whose green handles are keyframed at frames 1 and 20, a
   Euclidean region, and a floor the physical reflections hit.
-- ``plane_mirror``: a flat subdivided plane (normal exactly +Z), where the expected field can be
-  computed independently of Blender; ``animate_shape_key`` makes it deform over time.
+- ``plane_mirror``: a flat subdivided chrome plane (normal exactly +Z) and a camera at the eye
+  the tests use, where the expected field can be computed independently of Blender; ``animate_shape_key`` makes it deform over time.
 """
 
 from __future__ import annotations
@@ -48,6 +48,18 @@ def import_obj(path: Path, name: str):
     return ob
 
 
+def chrome(name="Mirror Chrome"):
+    """A mirror-like material (metallic Principled BSDF, roughness 0): what a mirror is given."""
+    import bpy
+
+    mat = bpy.data.materials.new(name)
+    mat.use_nodes = True
+    bsdf = mat.node_tree.nodes["Principled BSDF"]
+    bsdf.inputs["Metallic"].default_value = 1.0
+    bsdf.inputs["Roughness"].default_value = 0.0
+    return mat
+
+
 def keyframed_spot(shared=None):
     """The spot scene; returns (mirror, constraint indices)."""
     bpy = _fresh()
@@ -55,6 +67,8 @@ def keyframed_spot(shared=None):
 
     scene = bpy.context.scene
     mirror = import_obj(_shared(shared) / "meshes" / "spot.obj", "Spot")
+    mirror.data.materials.clear()
+    mirror.data.materials.append(chrome())
     bpy.ops.mesh.primitive_plane_add(size=20.0, location=(0.0, 0.0, -1.0))
     bpy.context.object.name = "Floor"
     cam_data = bpy.data.cameras.new("Camera")
@@ -86,8 +100,13 @@ def plane_mirror():
     bpy.ops.mesh.primitive_grid_add(x_subdivisions=40, y_subdivisions=30, size=4.0, location=(0.0, 0.0, 0.0))
     mirror = bpy.context.object
     mirror.name = "Plane"
-    api.add_mirror(mirror)
+    mirror.data.materials.append(chrome())
     eye = (0.3, -3.0, 2.0)
+    cam = bpy.data.objects.new("Camera", bpy.data.cameras.new("Camera"))
+    bpy.context.scene.collection.objects.link(cam)
+    cam.location = eye
+    bpy.context.scene.camera = cam
+    api.add_mirror(mirror)
     return mirror, eye
 
 

@@ -30,7 +30,7 @@ def main():
     api.add_constraint(mirror, (-0.5, -0.8, 0.3), (0.0, -3.0, -2.0), eye=tuple(eye))
     api.add_region(mirror, "EUCLIDEAN", center=(0.0, -1.0, 0.0), radius=1.2, border=0.5)
     report = api.evaluate(force=True)[mirror.name]
-    assert report.status == "OK", report.summary()
+    assert report.status != "ERROR", report.summary()  # no camera or material here: warned, evaluated
 
     # A shadow-editing session (#7) beside the mirror, for its overlay: a small closed caster, a
     # ground plane and a light above them.

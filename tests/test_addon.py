@@ -160,4 +160,5 @@ def test_background_script_exits_promptly():
     )
     out = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, timeout=60)
     assert out.returncode == 0, out.stderr
-    assert "STATUS OK" in out.stdout
+    # Evaluated (a bare sphere with no camera or material is warned about, not refused).
+    assert "STATUS OK" in out.stdout or "STATUS WARNING" in out.stdout, out.stdout

@@ -171,4 +171,4 @@ def test_installs_and_registers_in_a_throwaway_blender_user_repo(built, tmp_path
     assert Path(out["file"]).is_relative_to(tmp_path / "repo"), out["file"]  # the zip's copy, not the checkout's
     assert (tmp_path / "repo" / "rokeby" / "shaders").is_dir()
     assert out["native_file"] and Path(out["native_file"]).is_relative_to(tmp_path / "user"), out["native_file"]  # from the zip's wheel
-    assert out["status"] == "OK" and out["operators"]
+    assert out["status"] in ("OK", "WARNING") and out["operators"]  # evaluated with the zip's wheel

@@ -154,7 +154,7 @@ def test_highlight_refusals(lit_ball):
     bpy.context.scene.collection.objects.link(sun)
     sun.rotation_euler = (math.radians(60), 0.0, math.radians(20))
     p = api.physical_highlight(ball, sun)
-    assert np.isfinite(p).all() and abs(np.linalg.norm(p) - 1.0) < 1e-3
+    assert np.isfinite(p).all() and abs(np.linalg.norm(p) - 1.0) < 5e-3  # on a facet of the unit sphere
 
 
 def test_highlight_operator(lit_ball):

@@ -35,6 +35,7 @@ def plastic_ball(chrome_ball):  # noqa: F811
     aov = vl.aovs.add()
     aov.name, aov.type = "rokeby_n", "COLOR"
     api.add_mirror(ball)
+    ball.rokeby.render_edits = False  # these tests install and remove the render nodes themselves
     api.add_constraint(ball, (0.0, -1.0, 0.0), eye=(0.0, -4.0, 0.0))
     api.add_region(ball, "EUCLIDEAN", center=(0.0, -1.0, 0.0), radius=0.6, border=0.3)
     api.evaluate()

@@ -290,6 +290,7 @@ def test_edit_in_map_mode_stays_in_its_region_and_removal_restores(chrome_ball, 
     plain = _render(tmp_path, "plain")
     original = _snapshot(mat)
     api.add_mirror(ball)
+    ball.rokeby.render_edits = False  # installed by hand below, to see the refusal touch nothing
     api.add_constraint(ball, (0.0, -1.0, 0.0), eye=(0.0, -4.0, 0.0))
     api.evaluate()
     ball.rokeby.render_mode = "REFLECTION_MAP"

@@ -222,7 +222,9 @@ CASES = {
     "region_remove": (_with_mirror, lambda b: bpy.ops.rokeby.region_remove(mirror=b.name, index=0)),
     "freeze": (_with_mirror, lambda b: bpy.ops.rokeby.freeze(mirror=b.name, action="FREEZE")),
     "material_toggle": (_with_mirror, lambda b: bpy.ops.rokeby.material_toggle(mirror=b.name, material="Glass")),
-    "render_nodes": (_with_mirror, lambda b: bpy.ops.rokeby.render_nodes(mirror=b.name)),
+    # Installing is automatic now (a mirror with a constraint renders its edit): the operator's
+    # undoable change is taking the nodes out (Edit Final Renders off).
+    "render_nodes": (_with_mirror, lambda b: bpy.ops.rokeby.render_nodes(mirror=b.name, action="REMOVE")),
     "ior_from_material": (_with_mirror, lambda b: bpy.ops.rokeby.ior_from_material(mirror=b.name, material="Glass")),
     # Compositing (#6), appearance painting (#8), shadow editing (#7).
     "composite_setup_passes": (lambda b: _tiny_renders(), lambda b: bpy.ops.rokeby.composite_setup_passes()),

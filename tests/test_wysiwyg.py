@@ -439,6 +439,32 @@ def test_fresh_highlight_constraint_changes_nothing():
     assert np.degrees(api.quat_angle(api.field(ball))).max() < 0.01
 
 
+def test_highlight_whose_red_handle_no_light_reaches_is_reported():
+    new_scene()
+    ball = sphere(32, 16)
+    light = bpy.data.objects.new("Key", bpy.data.lights.new("Key", "POINT"))
+    bpy.context.scene.collection.objects.link(light)
+    light.location = (2.0, -3.0, 2.5)
+    api.add_mirror(ball)
+    api.add_highlight_constraint(ball, light)
+    light.location = (0.0, 4.0, 0.0)  # moved behind the ball: the handle's point is unlit now
+    rep = api.evaluate()["Ball"]
+    assert rep.status == "WARNING" and any("no light reaches the red handle" in m for m in rep.messages), rep.summary()
+
+
+def test_frozen_without_any_eye_says_so():
+    new_scene()
+    bpy.context.scene.camera = None
+    ball = sphere(32, 16)
+    api.add_mirror(ball)
+    ball.rokeby.freeze = True  # no constraint and no camera: nothing to take an eye from
+    assert not ball.rokeby.freeze_eye_set
+    rep = api.evaluate()["Ball"]
+    assert any("no eye was stored" in m for m in rep.messages), rep.summary()
+    ball.rokeby.freeze_eye = (0.0, -4.0, 0.0)  # setting the eye stores it
+    assert ball.rokeby.freeze_eye_set and not any("no eye was stored" in m for m in api.evaluate()["Ball"].messages)
+
+
 # --- save/reload and a fresh process ----------------------------------------------------------
 
 

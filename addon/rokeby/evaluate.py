@@ -51,7 +51,7 @@ EYE_MISMATCH_DEGREES = 3.0
 # A larger share of the visible surface reflecting below itself is reported.
 FOLDED_SHARE = 0.05
 # At most this many triangles are sampled for the interpolation-error estimate.
-AGREEMENT_SAMPLES = 20000
+AGREEMENT_SAMPLES = 8000
 # The second field, from refraction constraints [p, t, e_t] (present only while the mirror has some).
 REFRACTION_ATTRIBUTE = "rokeby_refraction"
 REGION_ATTRIBUTE_PREFIX = "rokeby_vg_"
@@ -748,6 +748,28 @@ def rotate(quats: np.ndarray, vectors: np.ndarray) -> np.ndarray:
     return v + w * t + np.cross(u, t)
 
 
+def extend_rotations_outward(parts: np.ndarray, triangles: np.ndarray, rings: int = 2) -> np.ndarray:
+    """Vertices where no region acts (a = 0) take R from a neighbour where one does, ``rings``
+    edges out. Their weight stays 0, so nothing changes there; but a triangle across a region's
+    edge then interpolates the region's rotation, as the preview sees it, instead of blending it
+    with the identity (which a weight of a few tenths would turn into a visible error)."""
+    out = np.array(parts, dtype=np.float32)
+    if len(triangles) == 0:
+        return out
+    e = np.concatenate([triangles[:, [0, 1]], triangles[:, [1, 2]], triangles[:, [2, 0]]])
+    e = np.concatenate([e, e[:, ::-1]])  # both directions
+    outside = (out[:, 4] <= 0.0) & (out[:, 5] <= 0.0)
+    filled = ~outside
+    for _ in range(rings):
+        take = outside[e[:, 0]] & filled[e[:, 1]] & ~filled[e[:, 0]]
+        if not take.any():
+            break
+        dst, src = e[take, 0], e[take, 1]
+        out[dst, :4] = out[src, :4]
+        filled[dst] = True
+    return out
+
+
 def ramp_form(specs) -> bool:
     """Whether the region weight reaches renders as the border ramp u (one Euclidean region with
     a border): see rokeby_core's FieldOutput::ViewBlend."""
@@ -878,6 +900,9 @@ def evaluate_mirror(obj, scene, depsgraph, *, force=False, reread_geometry=False
         if geo.source == "base":
             report.warn("the modifiers change the vertex count: the field is computed on the base mesh and interpolated by the modifiers")
         eye_now, report.eye = render_eye(obj, scene, depsgraph, geo.size)
+        if settings.freeze and not getattr(settings, "freeze_eye_set", True):
+            report.warn("frozen, but no eye was stored (it had no constraint and the scene no camera): renders reflect from the frozen eye "
+                        f"{tuple(round(float(x), 3) for x in settings.freeze_eye)}; unfreeze and freeze again, or set the frozen eye")
         t_rows, t_points, ior = np.zeros((0, 9), np.float32), [], None
         if not settings.enabled:
             rows, points, specs = np.zeros((0, 9), np.float32), [], []
@@ -928,6 +953,8 @@ def evaluate_mirror(obj, scene, depsgraph, *, force=False, reread_geometry=False
             # One field for the preview and the render: the parts of eq. 7 that do not depend on
             # the view, blended towards r rᵀ per shading point by the render nodes.
             parts = timer(native.rotation_field, geo.vertices, rows, output="view_blend", **kwargs)
+            if specs:
+                parts = extend_rotations_outward(parts, geo.triangles)
             rv = view_independent_rotation_vectors(parts)
             write_attribute(obj, rv, update=False)
             ramp = ramp_form(specs)

@@ -67,16 +67,16 @@ def _is_mirror_changed(self, context):
 
 def _freeze_changed(self, context):
     """Freeze from any entry point (sidebar toggle, a script setting the property, the operator,
-    the shortcut) stores the eye it freezes at: the render eye of this moment (the scene camera),
-    else the active constraint's generating eye. ``api.freeze(eye=...)`` sets its own eye after."""
+    the shortcut) stores the eye it freezes at, as ``api.freeze`` does: the active constraint's
+    generating eye, else the scene camera's position. ``api.freeze(eye=...)`` sets its own after."""
     if self.freeze:
         scene = getattr(context, "scene", None) or bpy.context.scene
         cam = scene.camera if scene is not None else None
-        if cam is not None:
-            self.freeze_eye = tuple(cam.matrix_world.translation)
-            self.freeze_eye_set = True
-        elif len(self.constraints):
+        if len(self.constraints):
             self.freeze_eye = tuple(self.constraints[min(self.active_constraint, len(self.constraints) - 1)].eye)
+            self.freeze_eye_set = True
+        elif cam is not None:
+            self.freeze_eye = tuple(cam.matrix_world.translation)
             self.freeze_eye_set = True
     _touch(self, context)
 

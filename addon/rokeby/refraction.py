@@ -412,8 +412,10 @@ def install(material) -> int:
         return 0
     tree = material.node_tree
     count = 0
-    for node in list(tree.nodes):
-        if _ours(node) or _shading_ours(node):
+    # By name: re-splitting removes nodes of this loop's snapshot (never touch a removed node).
+    for name in [nd.name for nd in tree.nodes]:
+        node = tree.nodes.get(name)
+        if node is None or _ours(node) or _shading_ours(node):
             continue
         x, y = node.location
         if node.bl_idname == "ShaderNodeBsdfRefraction":

@@ -9,9 +9,10 @@ constraint, when a material is assigned or swapped, when a slot is added, and wh
 node tree changes; a Principled or Glossy BSDF inside a node group is edited through a copy of the
 group local to that material, so the group used elsewhere stays unedited (rokeby.shading).
 
-A material is edited while any mirror using it wants it. When no mirror does (Edit Final Renders
-turned off, the last constraint removed, the mirror removed or disabled), the nodes come out
-again and the material is restored exactly.
+A material keeps its nodes while any mirror using it has final-render edits on. When none does
+(Edit Final Renders turned off, the mirror removed), the nodes come out again and the material is
+restored exactly. (A mirror without a constraint, or disabled, keeps them: its field is then the
+identity, which renders the physical mirror.)
 
 Each mirror's report says whether F12 shows its edit (``MirrorReport.renders`` and
 ``render_note``), and a mirror whose edit will not render (no material, no BSDF to edit, a
@@ -48,9 +49,17 @@ def edited_materials(mirror) -> list:
 
 
 def wanted(mirror) -> bool:
-    """Whether final renders should show ``mirror``'s edit."""
+    """Whether final renders should show ``mirror``'s edit (its nodes are installed)."""
     s = mirror.rokeby
-    return bool(s.is_mirror and s.enabled and s.render_edits and any(c.enabled for c in s.constraints))
+    return bool(kept(mirror) and s.enabled and any(c.enabled for c in s.constraints))
+
+
+def kept(mirror) -> bool:
+    """Whether ``mirror``'s render nodes may stay in its materials: while its final-render edits
+    are on. (Without a constraint, or disabled, its field is the identity, which renders the
+    physical mirror through the nodes too; they are not taken out for that.)"""
+    s = mirror.rokeby
+    return bool(s.is_mirror and s.render_edits)
 
 
 def install(mirror) -> int:
@@ -82,7 +91,7 @@ def _key(mirror) -> tuple:
     slots = tuple(slot.material.session_uid if slot.material is not None else 0 for slot in mirror.material_slots)
     chosen = () if s.all_materials else tuple(item.material.session_uid if item.material else 0 for item in s.materials)
     image = reflmap.image_for(mirror) if s.render_mode == "REFLECTION_MAP" else None
-    return (wanted(mirror), s.render_mode, slots, s.all_materials, chosen, image.session_uid if image is not None else 0, shading.VERSION)
+    return (wanted(mirror), kept(mirror), s.render_mode, slots, s.all_materials, chosen, image.session_uid if image is not None else 0, shading.VERSION)
 
 
 def _note(mirror, count: int) -> tuple:
@@ -100,12 +109,23 @@ def sync_scene(scene, reports=None, *, changed_materials=(), force=False) -> boo
     fills each mirror's report (``renders``, ``render_note``). ``changed_materials``: materials
     or node trees Blender reported as edited (their nodes are checked again). Returns whether
     anything was (re)installed or removed. Never raises: problems go into the reports."""
-    mirrors = [ob for ob in scene.objects if ob.type == "MESH" and ob.rokeby.is_mirror]
+    if reports is not None:  # the evaluator's mirrors: no second pass over the scene's objects
+        mirrors = [ob for ob in (scene.objects.get(name) for name in reports) if ob is not None and ob.type == "MESH"]
+    else:
+        mirrors = [ob for ob in scene.objects if ob.type == "MESH" and ob.rokeby.is_mirror]
+    done = _KEYS.setdefault(scene.session_uid, {})
+    if not mirrors and not done and not force:
+        return False  # nothing to do: no cost in scenes without mirrors
     changed = set(changed_materials)
     keys = {m.session_uid: _key(m) for m in mirrors}
-    done = _KEYS.setdefault(scene.session_uid, {})
     touched = False
-    dirty = force or bool(changed) or done != keys
+    if changed and done == keys and not force:
+        # Only materials were edited: bring the mirrors that use them up to date, nothing else.
+        for m in mirrors:
+            if wanted(m) and any(mat in changed or mat.node_tree in changed for mat in edited_materials(m)):
+                touched |= _install_noted(m)
+        changed = set()
+    dirty = force or done != keys
     if dirty:
         want = {}
         for m in mirrors:
@@ -115,7 +135,7 @@ def sync_scene(scene, reports=None, *, changed_materials=(), force=False) -> boo
         # mirror deleted or removed leaves its old materials behind).
         import bpy  # noqa: PLC0415
 
-        wanted_mats = {mat for mat, ms in want.items() if any(wanted(m) for m in ms)}
+        wanted_mats = {mat for mat, ms in want.items() if any(kept(m) for m in ms)}
         # Candidates: this scene's mirrors' materials, and materials no mirror in the file uses
         # any more; a material edited for a mirror of another scene is that scene's business.
         elsewhere, elsewhere_wanted = set(), set()
@@ -123,7 +143,7 @@ def sync_scene(scene, reports=None, *, changed_materials=(), force=False) -> boo
             if ob.type == "MESH" and ob.rokeby.is_mirror and ob not in mirrors:
                 mats = edited_materials(ob)
                 elsewhere.update(mats)
-                if wanted(ob):
+                if kept(ob):
                     elsewhere_wanted.update(mats)
         for mat in bpy.data.materials:
             if mat in wanted_mats or mat in elsewhere_wanted or (mat in elsewhere and mat not in want) or not installed(mat):
@@ -132,12 +152,7 @@ def sync_scene(scene, reports=None, *, changed_materials=(), force=False) -> boo
         for m in mirrors:
             uid = m.session_uid
             if wanted(m) and (done.get(uid) != keys[uid] or force or any(mat in changed or mat.node_tree in changed for mat in edited_materials(m))):
-                try:
-                    count = install(m)
-                    touched = True
-                    _NOTES[uid] = _note(m, count)
-                except RokebyError as exc:
-                    _NOTES[uid] = (False, f"renders do not show the edit: {exc}")
+                touched |= _install_noted(m)
         done.clear()
         done.update(keys)
     for m in mirrors:
@@ -158,6 +173,16 @@ def sync_scene(scene, reports=None, *, changed_materials=(), force=False) -> boo
         if note[0] is False and rep.status in ("OK", "WARNING") and note[1] not in rep.messages:
             rep.warn(note[1])
     return touched
+
+
+def _install_noted(m) -> bool:
+    try:
+        count = install(m)
+        _NOTES[m.session_uid] = _note(m, count)
+        return True
+    except RokebyError as exc:
+        _NOTES[m.session_uid] = (False, f"renders do not show the edit: {exc}")
+        return False
 
 
 def status(mirror) -> tuple:

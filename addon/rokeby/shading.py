@@ -483,8 +483,11 @@ def _local_copy(node, material):
 
 def _install_tree(tree, material) -> int:
     count = 0
-    for node in list(tree.nodes):
-        if _ours(node):
+    # By name: re-splitting a BSDF removes nodes of this very loop's snapshot (a removed node's
+    # Python object must not be touched again).
+    for name in [nd.name for nd in tree.nodes]:
+        node = tree.nodes.get(name)
+        if node is None or _ours(node):
             continue
         x, y = node.location
         if node.bl_idname == "ShaderNodeGroup" and node.node_tree is not None:
