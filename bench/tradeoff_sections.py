@@ -391,8 +391,9 @@ def representation_section(emit, peers=None):
         emit(f"| {x['mesh']} | {x['vertices']:,} | {'yes' if x['region'] else 'no'} | {x['representation']} | {x['p99']:.2f} | {x['max']:.2f} | "
              f"{100 * x['over_5']:.1f}% | {x['update_ms']:.1f} | {x['bytes']:,} | {x['eye_dependent']} |")
     emit()
-    emit("The pick: the view-independent parts per face corner (the region's rotation R as a quaternion kept in one")
-    emit("hemisphere per polygon, and the weight a, or the border ramp for one Euclidean region), with eq. 7 formed in")
+    emit("The pick: the view-independent parts (the region's rotation R as a quaternion, per face corner kept in one")
+    emit("hemisphere per polygon where a polygon straddles the seam, else per vertex at a quarter of the memory shown;")
+    emit("and the weight a, or the border ramp for one Euclidean region), with eq. 7 formed in")
     emit("closed form per shading point by the render nodes. It is the only stored form that follows the preview")
     emit("inside a region's border (where the blend towards r rᵀ depends on each pixel's r), it does not tear at")
     emit("half turns (rotation vectors do: ~100° on the ±170° plane), it needs no recomputation when the camera")

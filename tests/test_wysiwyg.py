@@ -249,6 +249,7 @@ def test_render_agrees_with_the_preview_per_pixel(tmp_path, region):
     assert np.percentile(ang, 99) < 1.0, np.percentile(ang, 99)
     # The status's own estimate agrees: no coarse-mesh warning on this mesh.
     assert rep.interpolation_error is not None and rep.interpolation_error[0] < 1.0
+    assert ball.data.attributes[evaluate.RENDER_ATTRIBUTE].domain == "POINT"  # no seam: per vertex
 
 
 def _rz(deg, v):
@@ -281,6 +282,7 @@ def test_half_turns_do_not_tear(tmp_path):
     ang = agreement(plane, layers, eye)
     turn = np.degrees(api.quat_angle(api.field(plane)))
     assert (turn > 165).mean() > 0.9 and (turn > 179).any()  # the field passes through 180°
+    assert plane.data.attributes[evaluate.RENDER_ATTRIBUTE].domain == "CORNER"  # stored per corner there
     assert np.percentile(ang, 99) < 1.0 and ang.max() < 10.0, (np.percentile(ang, 99), ang.max())
 
 
@@ -463,6 +465,34 @@ def test_frozen_without_any_eye_says_so():
     assert any("no eye was stored" in m for m in rep.messages), rep.summary()
     ball.rokeby.freeze_eye = (0.0, -4.0, 0.0)  # setting the eye stores it
     assert ball.rokeby.freeze_eye_set and not any("no eye was stored" in m for m in api.evaluate()["Ball"].messages)
+
+
+def test_a_drag_defers_the_estimate_and_it_follows_when_the_updates_pause(monkeypatch):
+    """In a Blender window each drag step pays only for the field; the render-vs-preview
+    estimate runs when the updates pause (a timer, captured here) and then fixes the status."""
+    scheduled = []
+    monkeypatch.setattr(evaluate, "_schedule", lambda fn, seconds: scheduled.append(fn))
+    new_scene()
+    ball = sphere(20, 11)  # coarse: the estimate will warn
+    api.add_mirror(ball)
+    api.add_constraint(ball, (0.0, -1.0, 0.0), (0.6, -3.0, 1.0))
+    api.add_region(ball, "EUCLIDEAN", center=(0.0, -1.0, 0.0), radius=0.7, border=0.3)
+    sc = bpy.context.scene
+    dg = bpy.context.evaluated_depsgraph_get()
+    first = evaluate.evaluate_mirror(ball, sc, dg, force=True, interactive=True)  # estimates
+    assert any("too coarse" in m for m in first.messages)
+    with handlers.suspended():  # only the drag step below evaluates
+        drag(ball, 0, (0.0, -3.0, 0.2))  # a much smaller edit: fine on this mesh
+        bpy.context.view_layer.update()
+        dg = bpy.context.evaluated_depsgraph_get()
+        during = evaluate.evaluate_mirror(ball, sc, dg, force=True, interactive=True)
+    assert during.recomputed and scheduled  # the estimate waits for a pause:
+    assert any("too coarse" in m for m in during.messages)  # the last one still stands
+    evaluate.state_of(ball).estimate_time -= 10.0  # the pause
+    assert scheduled[0]() is None
+    after = api.report(ball)
+    assert after.interpolation_error[0] < first.interpolation_error[0]
+    assert not any("too coarse" in m for m in after.messages) and after.status == "OK", after.summary()
 
 
 # --- save/reload and a fresh process ----------------------------------------------------------

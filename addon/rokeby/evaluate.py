@@ -36,7 +36,8 @@ import numpy as np
 from . import native
 
 ATTRIBUTE = "rokeby_rotation"
-# What final renders read (rokeby.shading): the field's view-independent parts per face corner,
+# What final renders read (rokeby.shading): the field's view-independent parts per vertex (per
+# face corner where a polygon's quaternions straddle the antipodal seam),
 # the region rotation R as a unit quaternion (x, y, z in RENDER_ATTRIBUTE; w and the region weight
 # a in RENDER_ATTRIBUTE_WA as (w, a, 0)). The render nodes form eq. 7's R_a r per shading point for
 # the render camera's (or the frozen eye's) own r, as the per-pixel preview does. The corners of
@@ -50,8 +51,10 @@ AGREEMENT_DEGREES = 1.0
 EYE_MISMATCH_DEGREES = 3.0
 # A larger share of the visible surface reflecting below itself is reported.
 FOLDED_SHARE = 0.05
+# While the artist drags, the estimate runs at most this often (seconds), and once after.
+ESTIMATE_INTERVAL = 0.4
 # At most this many triangles are sampled for the interpolation-error estimate.
-AGREEMENT_SAMPLES = 8000
+AGREEMENT_SAMPLES = 4000
 # The second field, from refraction constraints [p, t, e_t] (present only while the mirror has some).
 REFRACTION_ATTRIBUTE = "rokeby_refraction"
 REGION_ATTRIBUTE_PREFIX = "rokeby_vg_"
@@ -150,8 +153,11 @@ class _State:
         # What the reflection field was last computed from (rows, distances or None, regions),
         # for the viewport preview, which evaluates the same field per pixel (rokeby.viewport).
         self.field_inputs: tuple | None = None
-        # What the interpolation-error estimate found (kept with the report while nothing changes).
+        # What the interpolation-error estimate found (kept with the report while nothing changes),
+        # when it last ran, and what a deferred one will estimate (None: nothing pending).
         self.field_notes: list = []
+        self.estimate_time = -1e9
+        self.estimate_args = None
         self.corner_topology = None
 
 
@@ -625,15 +631,19 @@ def write_attribute(obj, values: np.ndarray, name: str = ATTRIBUTE, *, update: b
         raise RokebyError("the computed field is not finite (not written)")
     if len(values) != len(me.vertices):
         raise RokebyError(f"field has {len(values)} values, mesh '{me.name}' has {len(me.vertices)} vertices")
-    attr = me.attributes.get(name)
-    if attr is not None and (attr.domain != "POINT" or attr.data_type != "FLOAT_VECTOR"):
-        me.attributes.remove(attr)
-        attr = None
-    if attr is None:
-        attr = me.attributes.new(name, "FLOAT_VECTOR", "POINT")
-    attr.data.foreach_set("vector", np.ascontiguousarray(values, dtype=np.float32).ravel())
+    _vector_attribute(me, name, "POINT").data.foreach_set("vector", np.ascontiguousarray(values, dtype=np.float32).ravel())
     if update:
         me.update()
+
+
+def _vector_attribute(me, name: str, domain: str):
+    """The FLOAT_VECTOR attribute ``name`` on ``domain`` of ``me``, made (or remade, when one of
+    another type or domain has that name) for writing."""
+    attr = me.attributes.get(name)
+    if attr is not None and (attr.domain != domain or attr.data_type != "FLOAT_VECTOR"):
+        me.attributes.remove(attr)
+        attr = None
+    return attr if attr is not None else me.attributes.new(name, "FLOAT_VECTOR", domain)
 
 
 def _corner_topology(me, state):
@@ -648,7 +658,8 @@ def _corner_topology(me, state):
     me.polygons.foreach_get("loop_start", start)
     me.polygons.foreach_get("loop_total", total)
     # Corners are stored polygon by polygon (contiguous offsets), so repeating each polygon's
-    # first corner gives every corner its polygon's first corner.
+    # first corner gives every corner its polygon's first corner. (int64: what the core takes.)
+    corner_vert = corner_vert.astype(np.int64)
     ref_vert = corner_vert[np.repeat(start, total)]
     topo = (corner_vert, ref_vert)
     if state is not None:
@@ -656,44 +667,21 @@ def _corner_topology(me, state):
     return topo
 
 
-def corner_quaternions(quat: np.ndarray, corner_vert: np.ndarray, ref_vert: np.ndarray) -> np.ndarray:
-    """(C, 4+) rows per face corner from per-vertex rows whose first 4 columns are a unit
-    quaternion: the quaternion's sign is chosen to lie in the hemisphere of its polygon's first
-    corner (q and −q are the same rotation; the renderer's linear interpolation across a face is
-    only meaningful within one hemisphere). Further columns (the region weight) are copied."""
-    qc = np.array(np.asarray(quat, dtype=np.float32)[corner_vert])
-    qr = np.asarray(quat, dtype=np.float32)[ref_vert, :4]
-    sign = np.where(np.einsum("ij,ij->i", qc[:, :4], qr) < 0.0, np.float32(-1.0), np.float32(1.0))
-    qc[:, :4] *= sign[:, None]
-    return qc
-
-
 def write_render_attribute(obj, parts: np.ndarray, state=None, *, ramp: bool = False, update: bool = True):
-    """Write the field's view-independent parts (V, 6) = (x, y, z, w, a, u) per face corner
+    """Write the field's view-independent parts (V, 6) = (x, y, z, w, a, u) for renders
     (RENDER_ATTRIBUTE: x, y, z; RENDER_ATTRIBUTE_WA: (w, a, 0), or with ``ramp`` (one Euclidean
     region) (w, −1, u): the nodes then take a = smoothstep(u) per shading point), what
-    rokeby.shading's node group reads, in two foreach_set calls."""
+    rokeby.shading's node group reads, in two foreach_set calls: per vertex while every
+    polygon's quaternions share a hemisphere, per face corner otherwise (half turns)."""
     me = obj.data
     if not np.all(np.isfinite(parts)):
         raise RokebyError("the computed field is not finite (not written)")
     if len(parts) != len(me.vertices):
         raise RokebyError(f"field has {len(parts)} values, mesh '{me.name}' has {len(me.vertices)} vertices")
-    qc = corner_quaternions(parts, *_corner_topology(me, state))
-    wa = np.zeros((len(qc), 3), dtype=np.float32)
-    wa[:, 0] = qc[:, 3]
-    if ramp:
-        wa[:, 1] = -1.0
-        wa[:, 2] = qc[:, 5]
-    else:
-        wa[:, 1] = qc[:, 4]
-    for name, values in ((RENDER_ATTRIBUTE, qc[:, :3]), (RENDER_ATTRIBUTE_WA, wa)):
-        attr = me.attributes.get(name)
-        if attr is not None and (attr.domain != "CORNER" or attr.data_type != "FLOAT_VECTOR"):
-            me.attributes.remove(attr)
-            attr = None
-        if attr is None:
-            attr = me.attributes.new(name, "FLOAT_VECTOR", "CORNER")
-        attr.data.foreach_set("vector", np.ascontiguousarray(values, dtype=np.float32).ravel())
+    per_corner, xyz, wa = native.view_blend_render_rows(parts, *_corner_topology(me, state), ramp=ramp)
+    domain = "CORNER" if per_corner else "POINT"
+    for name, values in ((RENDER_ATTRIBUTE, xyz), (RENDER_ATTRIBUTE_WA, wa)):
+        _vector_attribute(me, name, domain).data.foreach_set("vector", np.ascontiguousarray(values, dtype=np.float32).ravel())
     if update:
         me.update()
 
@@ -716,27 +704,10 @@ def remove_render_attribute(obj) -> bool:
 def _has_render_attribute(obj) -> bool:
     me = obj.data
     return all(
-        (a := me.attributes.get(name)) is not None and a.domain == "CORNER" and a.data_type == "FLOAT_VECTOR" and len(a.data) == len(me.loops)
+        (a := me.attributes.get(name)) is not None and a.data_type == "FLOAT_VECTOR"
+        and len(a.data) == {"CORNER": len(me.loops), "POINT": len(me.vertices)}.get(a.domain, -1)
         for name in (RENDER_ATTRIBUTE, RENDER_ATTRIBUTE_WA)
     )
-
-
-def view_independent_rotation_vectors(parts: np.ndarray) -> np.ndarray:
-    """(N, 6) parts (R as x, y, z, w and the region weight a; rokeby_core's ViewBlend) → (N, 3) rotation vectors of
-    eq. 7 blended towards the identity, ortho(a R + (1 − a) I): a rotation about R's axis by
-    ψ = atan2(a sin α, a cos α + 1 − a), α R's angle (the view-independent form of the field,
-    which acts on r as a R r + (1 − a) r does; stored in ATTRIBUTE for scripts and tools)."""
-    q = np.asarray(parts, dtype=np.float64)[:, :4]
-    a = np.clip(np.asarray(parts, dtype=np.float64)[:, 4], 0.0, 1.0)
-    q = q * np.where(q[:, 3:4] < 0.0, -1.0, 1.0)
-    s = np.linalg.norm(q[:, :3], axis=1)
-    alpha = 2.0 * np.arctan2(s, q[:, 3])
-    psi = np.arctan2(a * np.sin(alpha), a * np.cos(alpha) + 1.0 - a)
-    axis = q[:, :3] / np.maximum(s, 1e-300)[:, None]
-    small = s < 1e-12  # rotation vector ≈ 2u a (the limit of ψ / sin(α/2) at α → 0)
-    rv = axis * psi[:, None]
-    rv[small] = 2.0 * q[small, :3] * a[small, None]
-    return rv.astype(np.float32)
 
 
 def rotate(quats: np.ndarray, vectors: np.ndarray) -> np.ndarray:
@@ -858,8 +829,70 @@ def read_attribute(obj, name: str = ATTRIBUTE) -> np.ndarray | None:
     return out.reshape(-1, 3)
 
 
-def evaluate_mirror(obj, scene, depsgraph, *, force=False, reread_geometry=False) -> MirrorReport:
-    """Evaluate one mirror if its inputs changed (or ``force``); never raises."""
+def _estimate(state, args, timer=None):
+    """Run the render-vs-preview estimate (``_interpolation_error``) and turn it into the notes
+    the report carries; returns the figures."""
+    geo, parts, eye, rows, kwargs, ramp = args
+    est = _interpolation_error(geo, parts, eye, rows, kwargs, timer or (lambda fn, *a, **k: fn(*a, **k)), ramp)
+    notes = []
+    if est is not None and est[0] > AGREEMENT_DEGREES:
+        notes.append(
+            f"the mesh is too coarse for this field: between vertices renders differ from the per-pixel preview by up to {est[1]:.1f}° "
+            f"(99th percentile {est[0]:.1f}° over {est[2]:,} triangles); subdivide the mirror's mesh where the reflection changes fast, or widen the region border")
+    if est is not None and est[3] > FOLDED_SHARE:
+        notes.append(
+            f"on {100 * est[3]:.0f}% of the mirror as the render eye sees it the edited reflection points below the surface: renders fold it back "
+            "above (no black), the preview shows it unfolded; make that edit smaller or confine it with a region")
+    state.field_notes, state.estimate_args = notes, None
+    state.estimate_time = time.perf_counter()
+    return est
+
+
+def _defer_estimate(obj, state, args):
+    """Estimate once the updates pause (``ESTIMATE_INTERVAL`` after the last one), then refresh
+    the mirror's report; a render or an API evaluation estimates at once instead."""
+    first = state.estimate_args is None
+    state.estimate_args = args
+    if not first:
+        return
+    uid = obj.session_uid
+
+    def later():
+        st = _STATE.get(uid)
+        if st is None or st.estimate_args is None:
+            return None
+        if time.perf_counter() - st.estimate_time < ESTIMATE_INTERVAL:
+            return ESTIMATE_INTERVAL  # still dragging: look again later
+        est = _estimate(st, st.estimate_args)
+        rep = st.report
+        if rep is not None and rep.status != "ERROR":
+            rep.interpolation_error = est
+            base = [m for m in rep.messages if not (m.startswith("the mesh is too coarse") or " the edited reflection points below the surface" in m)]
+            rep.messages, rep.status = base, ("DISABLED" if rep.status == "DISABLED" else "OK" if not base else rep.status)
+            for msg in st.field_notes:
+                rep.warn(msg)
+        import bpy  # noqa: PLC0415
+
+        for window in getattr(bpy.context.window_manager, "windows", ()):
+            for area in window.screen.areas:
+                if area.type == "VIEW_3D":
+                    area.tag_redraw()
+        return None
+
+    _schedule(later, ESTIMATE_INTERVAL)
+
+
+def _schedule(fn, seconds: float):
+    """Run ``fn`` from Blender's event loop after ``seconds`` (again after what it returns)."""
+    import bpy  # noqa: PLC0415
+
+    bpy.app.timers.register(fn, first_interval=seconds)
+
+
+def evaluate_mirror(obj, scene, depsgraph, *, force=False, reread_geometry=False, interactive=False) -> MirrorReport:
+    """Evaluate one mirror if its inputs changed (or ``force``); never raises. ``interactive``
+    (the depsgraph handler, while the artist drags): the render-vs-preview estimate runs at most
+    every ESTIMATE_INTERVAL seconds, and once more when the updates pause."""
     t0 = time.perf_counter()
     timer = _NativeTimer()
     _STATS["checks"] += 1
@@ -955,25 +988,25 @@ def evaluate_mirror(obj, scene, depsgraph, *, force=False, reread_geometry=False
             parts = timer(native.rotation_field, geo.vertices, rows, output="view_blend", **kwargs)
             if specs:
                 parts = extend_rotations_outward(parts, geo.triangles)
-            rv = view_independent_rotation_vectors(parts)
+            # The view-independent form for scripts and tools (eq. 7 towards I).
+            rv = timer(native.view_blend_rotation_vectors, parts)
             write_attribute(obj, rv, update=False)
             ramp = ramp_form(specs)
             write_render_attribute(obj, parts, state, ramp=ramp)
             state.rotations = rv
             state.field_inputs = (rows, kwargs.get("distances"), kwargs.get("regions") or [])
-            state.field_notes = []
             report.interpolation_error = None
-            if eye_now is not None and len(rows):
-                est = _interpolation_error(geo, parts, eye_now, rows, kwargs, timer, ramp)
-                report.interpolation_error = est
-                if est is not None and est[0] > AGREEMENT_DEGREES:
-                    state.field_notes.append(
-                        f"the mesh is too coarse for this field: between vertices renders differ from the per-pixel preview by up to {est[1]:.1f}° "
-                        f"(99th percentile {est[0]:.1f}° over {est[2]:,} triangles); subdivide the mirror's mesh where the reflection changes fast, or widen the region border")
-                if est is not None and est[3] > FOLDED_SHARE:
-                    state.field_notes.append(
-                        f"on {100 * est[3]:.0f}% of the mirror as the render eye sees it the edited reflection points below the surface: renders fold it back "
-                        "above (no black), the preview shows it unfolded; make that edit smaller or confine it with a region")
+            if eye_now is None or not len(rows):
+                state.field_notes, state.estimate_args = [], None
+            else:
+                args = (geo, parts, eye_now, rows, kwargs, ramp)
+                if interactive and time.perf_counter() - state.estimate_time < ESTIMATE_INTERVAL:
+                    # In the middle of a drag: the last estimate stands, a new one follows when
+                    # the updates pause (a timer), so each drag step pays only for the field.
+                    report.interpolation_error = state.report.interpolation_error if state.report is not None else None
+                    _defer_estimate(obj, state, args)
+                else:
+                    report.interpolation_error = _estimate(state, args, timer)
             for msg in state.field_notes:
                 report.warn(msg)
             old[ATTRIBUTE] = fp_reflection
@@ -1024,15 +1057,15 @@ def mirrors_of(scene) -> list:
     return [ob for ob in scene.objects if ob.rokeby.is_mirror]
 
 
-def evaluate_scene(scene, depsgraph, *, force=False, geometry_changed=None, all_geometry=False) -> dict:
+def evaluate_scene(scene, depsgraph, *, force=False, geometry_changed=None, all_geometry=False, interactive=False) -> dict:
     """Evaluate every mirror of ``scene``; ``geometry_changed``: original IDs Blender reported
     with new geometry (their meshes are re-read), ``all_geometry``: re-read every mirror's mesh
-    (a frame change can deform any of them)."""
+    (a frame change can deform any of them); ``interactive``: see ``evaluate_mirror``."""
     out = {}
     changed = geometry_changed or set()
     for ob in mirrors_of(scene):
         reread = all_geometry or ob in changed or (ob.type == "MESH" and ob.data in changed)
-        out[ob.name] = evaluate_mirror(ob, scene, depsgraph, force=force, reread_geometry=reread)
+        out[ob.name] = evaluate_mirror(ob, scene, depsgraph, force=force, reread_geometry=reread, interactive=interactive)
     # Forget objects that no longer exist.
     import bpy  # noqa: PLC0415
 

@@ -86,7 +86,9 @@ def on_depsgraph_update(scene, depsgraph):
             materials.add(update.id.original)
     if materials:
         _sync_materials(materials)
-    _run(scene, depsgraph, materials=materials, geometry_changed=changed)
+    # In a Blender window a drag is a stream of these updates; in background mode (scripts,
+    # farms, tests) there is no event loop to finish a deferred estimate, so each one is final.
+    _run(scene, depsgraph, materials=materials, geometry_changed=changed, interactive=not bpy.app.background)
 
 
 def _sync_materials(ids):

@@ -51,3 +51,11 @@ def ortho(*args, **kwargs):
 
 def view_blend(*args, **kwargs):
     return module().view_blend(*args, **kwargs)
+
+
+def view_blend_render_rows(*args, **kwargs):
+    return module().view_blend_render_rows(*args, **kwargs)
+
+
+def view_blend_rotation_vectors(*args, **kwargs):
+    return module().view_blend_rotation_vectors(*args, **kwargs)

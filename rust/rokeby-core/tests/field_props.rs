@@ -350,3 +350,53 @@ fn view_blend_ends_and_bad_input() {
     assert!(rokeby_core::field::view_blend_directions(&[0.0; 6], &[0.0; 6], false).is_err());
     assert!(rokeby_core::field::view_blend_directions(&[0.0, 0.0, 0.0, 1.0, f32::NAN, 0.0], &[0.0, 0.0, 1.0], false).is_err());
 }
+
+proptest! {
+    #![proptest_config(ProptestConfig { cases: 500, rng_seed: RngSeed::Fixed(0x2009_7E0D), failure_persistence: None, .. ProptestConfig::default() })]
+
+    /// The per-point rotation vectors made from the parts are the view-independent field
+    /// (eq. 7 towards I) that rotation_field returns without a view, for one region.
+    #[test]
+    fn view_blend_rotation_vectors_are_the_view_independent_field(cs in constraints(6), qs in prop::collection::vec(point(), 1..24)) {
+        let region = Region::euclidean([0.1, -0.2, 0.0], 0.9, 0.6, "regions[0]").unwrap();
+        let f = Field::new(&rows(&cs), vec![region]).unwrap();
+        let pts: Vec<f32> = qs.iter().flat_map(|p| [p.x as f32, p.y as f32, p.z as f32]).collect();
+        let parts = f.rotation_field_as(&pts, Distances::Euclidean, None, PolarMethod::Svd, rokeby_core::field::FieldOutput::ViewBlend).unwrap();
+        let want = f.rotation_field_as(&pts, Distances::Euclidean, None, PolarMethod::Svd, rokeby_core::field::FieldOutput::RotationVector).unwrap();
+        let got = rokeby_core::field::view_blend_rotation_vectors(&parts).unwrap();
+        for (g, w) in got.chunks_exact(3).zip(want.chunks_exact(3)) {
+            let (g, w) = (DVec3::new(g[0] as f64, g[1] as f64, g[2] as f64), DVec3::new(w[0] as f64, w[1] as f64, w[2] as f64));
+            let (qg, qw) = (DQuat::from_scaled_axis(g), DQuat::from_scaled_axis(w));
+            prop_assert!(angle(qg, qw) < 2e-5, "{} rad", angle(qg, qw));
+        }
+    }
+}
+
+#[test]
+fn view_blend_render_rows_keep_each_polygon_in_one_hemisphere() {
+    use rokeby_core::field::view_blend_render_rows as rows_of;
+    let q = DQuat::from_axis_angle(DVec3::Z, 3.0);
+    let parts: Vec<f32> = [q, -DQuat::from_axis_angle(DVec3::Z, 3.1)]
+        .iter()
+        .enumerate()
+        .flat_map(|(i, q)| [q.x as f32, q.y as f32, q.z as f32, q.w as f32, 0.5, 0.25 + i as f32])
+        .collect();
+    // One triangle (0, 1, 1) whose first corner is vertex 0: the quaternions straddle the seam.
+    let r = rows_of(&parts, &[0, 1, 1], &[0, 0, 0], false).unwrap();
+    assert!(r.per_corner && r.xyz.len() == 9);
+    for c in 0..3 {
+        let v = r.xyz[3 * c] * r.xyz[0] + r.xyz[3 * c + 1] * r.xyz[1] + r.xyz[3 * c + 2] * r.xyz[2] + r.wa[3 * c] * r.wa[0];
+        assert!(v > 0.0, "corner {c} in the other hemisphere");
+        assert_eq!(r.wa[3 * c + 1], 0.5);
+    }
+    let ramp = rows_of(&parts, &[0, 1], &[0, 0], true).unwrap();
+    assert_eq!((ramp.wa[1], ramp.wa[2], ramp.wa[4], ramp.wa[5]), (-1.0, 0.25, -1.0, 1.25));
+    // Without a seam the rows are per vertex.
+    let same: Vec<f32> = parts[..6].iter().chain(parts[..6].iter()).copied().collect();
+    let r = rows_of(&same, &[0, 1, 1], &[0, 0, 0], false).unwrap();
+    assert!(!r.per_corner && r.xyz.len() == 6);
+    assert!(rows_of(&parts, &[0, 2], &[0, 0], false).is_err());
+    assert!(rows_of(&parts, &[0, -1], &[0, 0], false).is_err());
+    assert!(rows_of(&parts, &[0], &[0, 0], false).is_err());
+    assert!(rokeby_core::field::view_blend_rotation_vectors(&parts[..5]).is_err());
+}
