@@ -66,7 +66,13 @@ def measure(kind: str, shared: Path, metric: str, method: str, polar: str, steps
 
     from rokeby import api
 
+    from rokeby import evaluate, handlers
+
     mirror, size = _scene(kind, shared)
+    # A drag in a Blender window: the render-vs-preview estimate waits for the pause (its timer
+    # is not run here), as the add-on does outside background mode.
+    handlers.WINDOW_UPDATES = True
+    evaluate._schedule = lambda fn, seconds: None
     mirror.rokeby.metric, mirror.rokeby.geodesic_method, mirror.rokeby.polar = metric, method, polar
     api.evaluate(force=True)  # factorisation and caches
     green = mirror.rokeby.constraints[3].target_handle

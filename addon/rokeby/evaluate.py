@@ -667,7 +667,7 @@ def _corner_topology(me, state):
     return topo
 
 
-def write_render_attribute(obj, parts: np.ndarray, state=None, *, ramp: bool = False, update: bool = True):
+def write_render_attribute(obj, parts: np.ndarray, state=None, *, ramp: bool = False, update: bool = True, timer=None):
     """Write the field's view-independent parts (V, 6) = (x, y, z, w, a, u) for renders
     (RENDER_ATTRIBUTE: x, y, z; RENDER_ATTRIBUTE_WA: (w, a, 0), or with ``ramp`` (one Euclidean
     region) (w, −1, u): the nodes then take a = smoothstep(u) per shading point), what
@@ -678,7 +678,8 @@ def write_render_attribute(obj, parts: np.ndarray, state=None, *, ramp: bool = F
         raise RokebyError("the computed field is not finite (not written)")
     if len(parts) != len(me.vertices):
         raise RokebyError(f"field has {len(parts)} values, mesh '{me.name}' has {len(me.vertices)} vertices")
-    per_corner, xyz, wa = native.view_blend_render_rows(parts, *_corner_topology(me, state), ramp=ramp)
+    run = timer if timer is not None else (lambda fn, *a, **k: fn(*a, **k))
+    per_corner, xyz, wa = run(native.view_blend_render_rows, parts, *_corner_topology(me, state), ramp=ramp)
     domain = "CORNER" if per_corner else "POINT"
     for name, values in ((RENDER_ATTRIBUTE, xyz), (RENDER_ATTRIBUTE_WA, wa)):
         _vector_attribute(me, name, domain).data.foreach_set("vector", np.ascontiguousarray(values, dtype=np.float32).ravel())
@@ -992,7 +993,7 @@ def evaluate_mirror(obj, scene, depsgraph, *, force=False, reread_geometry=False
             rv = timer(native.view_blend_rotation_vectors, parts)
             write_attribute(obj, rv, update=False)
             ramp = ramp_form(specs)
-            write_render_attribute(obj, parts, state, ramp=ramp)
+            write_render_attribute(obj, parts, state, ramp=ramp, timer=timer)
             state.rotations = rv
             state.field_inputs = (rows, kwargs.get("distances"), kwargs.get("regions") or [])
             report.interpolation_error = None

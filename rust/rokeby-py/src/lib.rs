@@ -311,13 +311,31 @@ fn parts_array<'py>(parts: &Bound<'py, PyAny>) -> PyResult<F32Array<'py>> {
 #[allow(clippy::type_complexity)]
 fn view_blend_render_rows<'py>(py: Python<'py>, parts: &Bound<'py, PyAny>, corner_vert: &Bound<'py, PyAny>, first_vert: &Bound<'py, PyAny>, ramp: bool) -> PyResult<(bool, Bound<'py, PyArrayDyn<f32>>, Bound<'py, PyArrayDyn<f32>>)> {
     let pa = parts_array(parts)?;
-    let (cv, cs) = i64_array(corner_vert, "corner_vert")?;
-    let (fv, fs) = i64_array(first_vert, "first_vert")?;
-    if cs.len() != 1 || fs.len() != 1 {
-        return Err(PyValueError::new_err(format!("corner_vert, first_vert: expected shape (C,), got {} and {}", shape_str(&cs), shape_str(&fs))));
+    // Contiguous int64 index arrays (what the add-on keeps per mesh) are read in place; others
+    // are converted.
+    let borrowed = |a: &Bound<'py, PyAny>| a.cast::<PyArrayDyn<i64>>().ok().map(|x| x.readonly()).filter(|r| r.is_c_contiguous() && r.ndim() == 1);
+    let (cb, fb) = (borrowed(corner_vert), borrowed(first_vert));
+    let owned_c = if cb.is_none() { Some(i64_array(corner_vert, "corner_vert")?) } else { None };
+    let owned_f = if fb.is_none() { Some(i64_array(first_vert, "first_vert")?) } else { None };
+    for (what, shape) in [("corner_vert", owned_c.as_ref().map(|o| o.1.clone())), ("first_vert", owned_f.as_ref().map(|o| o.1.clone()))] {
+        if let Some(sh) = shape {
+            if sh.len() != 1 {
+                return Err(PyValueError::new_err(format!("{what}: expected shape (C,), got {}", shape_str(&sh))));
+            }
+        }
     }
+    let cv: &[i64] = match (&cb, &owned_c) {
+        (Some(r), _) => r.as_slice().map_err(|e| PyRuntimeError::new_err(e.to_string()))?,
+        (None, Some(o)) => &o.0,
+        _ => return Err(PyRuntimeError::new_err("internal: corner_vert unread")),
+    };
+    let fv: &[i64] = match (&fb, &owned_f) {
+        (Some(r), _) => r.as_slice().map_err(|e| PyRuntimeError::new_err(e.to_string()))?,
+        (None, Some(o)) => &o.0,
+        _ => return Err(PyRuntimeError::new_err("internal: first_vert unread")),
+    };
     let p = pa.slice();
-    let r = run_detached(py, || rokeby_core::field::view_blend_render_rows(p, &cv, &fv, ramp))?;
+    let r = run_detached(py, || rokeby_core::field::view_blend_render_rows(p, cv, fv, ramp))?;
     let rows = r.xyz.len() / 3;
     let a = ArrayD::from_shape_vec(IxDyn(&[rows, 3]), r.xyz).map_err(|e| PyRuntimeError::new_err(e.to_string()))?;
     let b = ArrayD::from_shape_vec(IxDyn(&[rows, 3]), r.wa).map_err(|e| PyRuntimeError::new_err(e.to_string()))?;
