@@ -425,6 +425,42 @@ def test_bsdf_inside_a_node_group_is_edited_through_a_local_copy(tmp_path):
     assert node.node_tree == group and bpy.data.node_groups.get(f"{group.name} (Rokeby: Chrome A)") is None
 
 
+# --- 9. modifiers that change the vertex count -------------------------------------------------
+
+
+def test_subdivided_mirror_gets_the_field_of_the_surface_it_renders(tmp_path):
+    """A coarse cage under a Subdivision Surface: the field is computed on the subdivided surface
+    (handles projected there) and reaches the render through the carrier, with no warning."""
+    new_scene()
+    ball = sphere(16, 8)  # 114 vertices: far too coarse on its own
+    sub = ball.modifiers.new("Subdivision", "SUBSURF")
+    sub.levels = sub.render_levels = 3
+    api.add_mirror(ball)
+    api.add_constraint(ball, (0.0, -1.0, 0.0), (0.6, -3.0, 1.0))
+    api.add_region(ball, "EUCLIDEAN", center=(0.0, -1.0, 0.0), radius=0.9, border=0.5)
+    rep = api.evaluate()["Ball"]
+    assert rep.status == "OK", rep.summary()
+    assert rep.field_mesh == "transfer" and rep.vertices > 5000 and rep.interpolation_error[0] < 1.0
+    got, want = _seen_at_red_handle(ball)
+    assert angles_deg(got, want) < 0.05  # the edited ray hits its target on the rendered surface
+    layers = render(tmp_path, "subdivided")
+    ang = agreement(ball, layers)
+    assert np.percentile(ang, 99) < 1.0, np.percentile(ang, 99)
+    path = tmp_path / "subdivided.blend"  # the carrier is saved with the file
+    bpy.ops.wm.save_as_mainfile(filepath=str(path))
+    np.testing.assert_allclose(fresh_process_render(path, tmp_path / "fresh.exr"), layers["Combined"], atol=1e-5)
+    # Removing the modifier goes back to the mesh itself; removing the mirror cleans up.
+    ball.modifiers.remove(sub)
+    rep = api.evaluate(force=True)["Ball"]
+    assert rep.field_mesh == "evaluated" and evaluate.carrier_of(ball) is None and not ball.modifiers
+    ball.modifiers.new("Subdivision", "SUBSURF").levels = 2
+    api.evaluate(force=True)
+    assert evaluate.carrier_of(ball) is not None
+    api.remove_mirror(ball)
+    assert evaluate.carrier_of(ball) is None and [m.type for m in ball.modifiers] == ["SUBSURF"]
+    assert not [o for o in bpy.data.objects if o.name.startswith(evaluate.CARRIER_PREFIX)]
+
+
 # --- 8. a fresh highlight constraint is neutral ---------------------------------------------
 
 
@@ -498,6 +534,21 @@ def test_a_drag_defers_the_estimate_and_it_follows_when_the_updates_pause(monkey
 # --- save/reload and a fresh process ----------------------------------------------------------
 
 
+def fresh_process_render(path, out):
+    """Open the saved ``path`` in a new bpy process with the add-on and render it to ``out``."""
+    script = textwrap.dedent(f"""
+        import bpy, rokeby
+        rokeby.register()
+        bpy.ops.wm.open_mainfile(filepath={str(path)!r})
+        sc = bpy.context.scene
+        sc.render.filepath = {str(out)!r}
+        bpy.ops.render.render(write_still=True)
+    """)
+    r = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, timeout=300, cwd=ROOT)
+    assert r.returncode == 0, r.stderr[-2000:]
+    return read_layers(out)["Combined"]
+
+
 def test_saved_file_renders_the_same_pixels_in_a_fresh_process(tmp_path):
     new_scene()
     ball = sphere(64, 32)
@@ -508,22 +559,7 @@ def test_saved_file_renders_the_same_pixels_in_a_fresh_process(tmp_path):
     here = render(tmp_path, "here")["Combined"]
     path = tmp_path / "scene.blend"
     bpy.ops.wm.save_as_mainfile(filepath=str(path))
-    out = tmp_path / "fresh.exr"
-    script = textwrap.dedent(f"""
-        import bpy, rokeby
-        rokeby.register()
-        bpy.ops.wm.open_mainfile(filepath={str(path)!r})
-        sc = bpy.context.scene
-        sc.render.filepath = {str(out)!r}
-        bpy.ops.render.render(write_still=True)
-        from rokeby import evaluate
-        rep = evaluate.report_of(bpy.data.objects["Ball"])
-        print("RESULT", {{"status": rep.status if rep else None}})
-    """)
-    r = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, timeout=300, cwd=ROOT)
-    assert r.returncode == 0, r.stderr[-2000:]
-    fresh = read_layers(out)["Combined"]
-    np.testing.assert_allclose(fresh, here, atol=1e-5)
+    np.testing.assert_allclose(fresh_process_render(path, tmp_path / "fresh.exr"), here, atol=1e-5)
     bpy.ops.wm.open_mainfile(filepath=str(path))  # and reloaded here
     np.testing.assert_allclose(render(tmp_path, "reloaded")["Combined"], here, atol=1e-5)
 

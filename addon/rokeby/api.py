@@ -613,6 +613,7 @@ def remove_mirror(mirror, *, scene=None):
         mirror.data.attributes.remove(attr)
     _ev.remove_attribute(mirror, _ev.REFRACTION_ATTRIBUTE)
     _ev.remove_render_attribute(mirror)
+    _ev.remove_carrier(mirror)
     mirror.rokeby.is_mirror = False
     from . import rendering  # noqa: PLC0415
 
@@ -654,8 +655,11 @@ def field(mirror) -> "np.ndarray | None":
 
 
 def stored_field(mirror) -> "np.ndarray | None":
-    """The rotation vectors (V, 3) stored in the mirror's mesh attribute (what renderers read)."""
-    return _ev.read_attribute(mirror)
+    """The rotation vectors stored for ``mirror`` (the view-independent form, eq. 7 towards I): per
+    vertex of its mesh, or of its evaluated mesh when a modifier changes the vertex count (then
+    held by its field carrier)."""
+    carrier = _ev.carrier_of(mirror)
+    return _ev.read_attribute(carrier if carrier is not None else mirror)
 
 
 def refraction_field(mirror) -> "np.ndarray | None":

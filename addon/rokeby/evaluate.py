@@ -274,16 +274,13 @@ def to_world(co, nrm, matrix, what: str):
 
 
 def read_geometry(obj, depsgraph, mirror_matrix: np.ndarray, freeform_groups=()) -> _Geometry:
-    """The mirror's mesh in world space: the evaluated mesh (modifiers, shape keys, armatures) when
-    it has as many vertices as the object's own mesh, which carries the attribute; otherwise the
-    base mesh (a modifier such as Subdivision changes the vertex count and then interpolates the
-    attribute itself)."""
+    """The mirror's mesh in world space: always the evaluated mesh (modifiers, shape keys,
+    armatures), the surface the render shows. When a modifier changes the vertex count
+    (Subdivision), source is "transfer": the field goes to a carrier mesh of that topology,
+    which the 'Rokeby field' modifier at the end of the stack copies onto the evaluated mesh."""
     ob_eval = obj.evaluated_get(depsgraph)
     me = ob_eval.data
-    source = "evaluated"
-    if len(me.vertices) != len(obj.data.vertices):
-        me = obj.data
-        source = "base"
+    source = "evaluated" if len(me.vertices) == len(obj.data.vertices) else "transfer"
     nv = len(me.vertices)
     if nv == 0 or len(me.polygons) == 0:
         raise RokebyError(f"mirror '{obj.name}' has no faces")
@@ -312,8 +309,6 @@ def _vertex_group_weights(obj, me, group: str, source: str) -> np.ndarray:
     the evaluated mesh."""
     if obj.vertex_groups.get(group) is None:
         raise RokebyError(f"free-form region: mirror '{obj.name}' has no vertex group '{group}'")
-    if source != "evaluated":
-        raise RokebyError(f"free-form region '{group}': the mirror's modifiers change its vertex count; apply them or use a geodesic region")
     attr = me.attributes.get(REGION_ATTRIBUTE_PREFIX + group)
     if attr is None or attr.domain != "POINT" or attr.data_type != "FLOAT":
         raise RokebyError(f"free-form region '{group}': its reader modifier '{VG_MODIFIER_PREFIX}{group}' is missing or disabled")
@@ -356,7 +351,7 @@ def project_to_surface(obj, depsgraph, geo: _Geometry, world_point, mirror_matri
     """The surface point of the mirror nearest ``world_point``: triangle, barycentric coordinates
     and the interpolated vertex normal (the normal the renderers shade with)."""
     x = np.asarray(world_point, dtype=np.float64)
-    if geo.source == "evaluated":
+    if geo.source in ("evaluated", "transfer"):
         ob_eval = obj.evaluated_get(depsgraph)
         inv = np.linalg.inv(mirror_matrix)
         local = inv[:3, :3] @ x + inv[:3, 3]
@@ -801,6 +796,115 @@ def _interpolation_error(geo, parts, eye, rows, kwargs, timer, ramp=False):
     return float(np.percentile(kept, 99)), float(kept.max()), int(len(ang)), share
 
 
+# --- modifiers that change the vertex count: the field on the evaluated surface ----------------
+CARRIER_PREFIX = "Rokeby field: "
+TRANSFER_GROUP = "Rokeby Field Transfer"
+TRANSFER_MODIFIER = "Rokeby field"
+TRANSFER_VERSION = 1
+
+
+def carrier_of(obj):
+    """The carrier object of ``obj`` (a mesh of the evaluated topology holding the field), or None."""
+    c = getattr(obj.rokeby, "field_carrier", None)
+    try:
+        return c if c is not None and c.type == "MESH" else None
+    except ReferenceError:
+        return None
+
+
+def _transfer_group():
+    """"Rokeby Field Transfer": copies the render rows and the rotation vectors of the Source
+    object's mesh onto the modified geometry, by index (the carrier has the same topology), on
+    face corners (a point attribute of the carrier adapts to its corners)."""
+    import bpy  # noqa: PLC0415
+
+    ng = bpy.data.node_groups.get(TRANSFER_GROUP)
+    if ng is not None and ng.bl_idname == "GeometryNodeTree" and ng.get("rokeby_version") == TRANSFER_VERSION:
+        return ng
+    if ng is None or ng.bl_idname != "GeometryNodeTree":
+        ng = bpy.data.node_groups.new(TRANSFER_GROUP, "GeometryNodeTree")
+    ng.nodes.clear()
+    ng.interface.clear()
+    ng.interface.new_socket("Geometry", in_out="INPUT", socket_type="NodeSocketGeometry")
+    ng.interface.new_socket("Source", in_out="INPUT", socket_type="NodeSocketObject")
+    ng.interface.new_socket("Geometry", in_out="OUTPUT", socket_type="NodeSocketGeometry")
+    gin, gout = ng.nodes.new("NodeGroupInput"), ng.nodes.new("NodeGroupOutput")
+    info = ng.nodes.new("GeometryNodeObjectInfo")
+    ng.links.new(gin.outputs["Source"], info.inputs["Object"])
+    index = ng.nodes.new("GeometryNodeInputIndex")
+    geometry = gin.outputs["Geometry"]
+    for name, domain in ((RENDER_ATTRIBUTE, "CORNER"), (RENDER_ATTRIBUTE_WA, "CORNER"), (ATTRIBUTE, "POINT")):
+        read = ng.nodes.new("GeometryNodeInputNamedAttribute")
+        read.data_type = "FLOAT_VECTOR"
+        read.inputs["Name"].default_value = name
+        sample = ng.nodes.new("GeometryNodeSampleIndex")
+        sample.data_type, sample.domain = "FLOAT_VECTOR", domain
+        ng.links.new(info.outputs["Geometry"], sample.inputs["Geometry"])
+        ng.links.new(read.outputs["Attribute"], sample.inputs["Value"])
+        ng.links.new(index.outputs["Index"], sample.inputs["Index"])
+        store = ng.nodes.new("GeometryNodeStoreNamedAttribute")
+        store.data_type, store.domain = "FLOAT_VECTOR", domain
+        store.inputs["Name"].default_value = name
+        ng.links.new(geometry, store.inputs["Geometry"])
+        ng.links.new(sample.outputs[0], store.inputs["Value"])
+        geometry = store.outputs["Geometry"]
+    ng.links.new(geometry, gout.inputs["Geometry"])
+    ng["rokeby_version"] = TRANSFER_VERSION
+    return ng
+
+
+def ensure_carrier(obj, depsgraph):
+    """The carrier of ``obj`` with the evaluated mesh's topology (rebuilt when it changes), and
+    the 'Rokeby field' modifier at the end of the stack reading it."""
+    import bpy  # noqa: PLC0415
+
+    ob_eval = obj.evaluated_get(depsgraph)
+    me_eval = ob_eval.data
+    carrier = carrier_of(obj)
+    if carrier is None or len(carrier.data.vertices) != len(me_eval.vertices) or len(carrier.data.loops) != len(me_eval.loops):
+        mesh = bpy.data.meshes.new_from_object(ob_eval, preserve_all_data_layers=False)
+        mesh.name = CARRIER_PREFIX + obj.name
+        if carrier is None:
+            carrier = bpy.data.objects.new(CARRIER_PREFIX + obj.name, mesh)  # in no scene: never drawn
+        else:
+            old = carrier.data
+            carrier.data = mesh
+            if old.users == 0:
+                bpy.data.meshes.remove(old)
+        obj.rokeby.field_carrier = carrier
+    mod = obj.modifiers.get(TRANSFER_MODIFIER)
+    if mod is None or mod.type != "NODES":
+        mod = obj.modifiers.new(TRANSFER_MODIFIER, "NODES")
+        mod.show_in_editmode = False
+    if mod.node_group is None or mod.node_group.name != TRANSFER_GROUP or mod.node_group.get("rokeby_version") != TRANSFER_VERSION:
+        mod.node_group = _transfer_group()
+    ident = next(i.identifier for i in mod.node_group.interface.items_tree if getattr(i, "in_out", "") == "INPUT" and i.name == "Source")
+    if mod.get(ident) != carrier:
+        mod[ident] = carrier
+    return carrier
+
+
+def remove_carrier(obj) -> bool:
+    """Remove the transfer modifier and the carrier of ``obj`` (the vertex count matches again,
+    or the mirror goes)."""
+    import bpy  # noqa: PLC0415
+
+    found = False
+    mod = obj.modifiers.get(TRANSFER_MODIFIER)
+    if mod is not None:
+        obj.modifiers.remove(mod)
+        found = True
+    carrier = carrier_of(obj)
+    if carrier is not None:
+        mesh = carrier.data
+        obj.rokeby.field_carrier = None
+        bpy.data.objects.remove(carrier)
+        if mesh is not None and mesh.users == 0:
+            bpy.data.meshes.remove(mesh)
+        found = True
+    return found
+
+
 def remove_attribute(obj, name: str) -> bool:
     """Remove the point attribute ``name`` from the mirror's mesh (if it has it)."""
     me = obj.data
@@ -931,8 +1035,6 @@ def evaluate_mirror(obj, scene, depsgraph, *, force=False, reread_geometry=False
             state.geometry = geo = new
         report.vertices = len(geo.vertices)
         report.field_mesh = geo.source
-        if geo.source == "base":
-            report.warn("the modifiers change the vertex count: the field is computed on the base mesh and interpolated by the modifiers")
         eye_now, report.eye = render_eye(obj, scene, depsgraph, geo.size)
         if settings.freeze and not getattr(settings, "freeze_eye_set", True):
             report.warn("frozen, but no eye was stored (it had no constraint and the scene no camera): renders reflect from the frozen eye "
@@ -978,7 +1080,10 @@ def evaluate_mirror(obj, scene, depsgraph, *, force=False, reread_geometry=False
             if np.all(np.isinf(distances)):
                 report.warn("no constraint reaches this mesh over its surface")
         old = state.field_fingerprints
-        if force or old.get(ATTRIBUTE) != fp_reflection or not _has_attribute(obj, ATTRIBUTE) or not _has_render_attribute(obj):
+        transfer = geo.source == "transfer"
+        target = carrier_of(obj) if transfer else obj
+        stored = target is not None and _has_attribute(target, ATTRIBUTE) and _has_render_attribute(target)
+        if force or old.get(ATTRIBUTE) != fp_reflection or not stored:
             kwargs = {"polar": polar}
             if distances is not None and len(rows):
                 kwargs["distances"] = distances[: len(rows)]
@@ -991,9 +1096,13 @@ def evaluate_mirror(obj, scene, depsgraph, *, force=False, reread_geometry=False
                 parts = extend_rotations_outward(parts, geo.triangles)
             # The view-independent form for scripts and tools (eq. 7 towards I).
             rv = timer(native.view_blend_rotation_vectors, parts)
-            write_attribute(obj, rv, update=False)
             ramp = ramp_form(specs)
-            write_render_attribute(obj, parts, state, ramp=ramp, timer=timer)
+            if transfer:
+                target = ensure_carrier(obj, depsgraph)
+            else:
+                remove_carrier(obj)
+            write_attribute(target, rv, update=False)
+            write_render_attribute(target, parts, state if not transfer else None, ramp=ramp, timer=timer)
             state.rotations = rv
             state.field_inputs = (rows, kwargs.get("distances"), kwargs.get("regions") or [])
             report.interpolation_error = None

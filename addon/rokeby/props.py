@@ -208,6 +208,12 @@ class RokebyMirror(PropertyGroup):
         update=_touch,
     )
     data_version: IntProperty(name="Data version", default=0, options={"HIDDEN"})
+    field_carrier: PointerProperty(
+        type=bpy.types.Object,
+        name="Field carrier",
+        description="Mesh holding the field on the evaluated (e.g. subdivided) surface, read by the 'Rokeby field' modifier",
+        options={"HIDDEN"},
+    )
     show_preview: BoolProperty(
         name="Show in Viewport",
         description="Draw this mirror's edited reflections in the viewport preview (when the preview is on)",
