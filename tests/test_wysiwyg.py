@@ -250,6 +250,12 @@ def test_render_agrees_with_the_preview_per_pixel(tmp_path, region):
     # The status's own estimate agrees: no coarse-mesh warning on this mesh.
     assert rep.interpolation_error is not None and rep.interpolation_error[0] < 1.0
     assert ball.data.attributes[evaluate.RENDER_ATTRIBUTE].domain == "POINT"  # no seam: per vertex
+    # api.edited_reflections gives what the render shows at each vertex: the preview's field there.
+    st = evaluate.state_of(ball)
+    rows, _dist, regions = st.field_inputs
+    kwargs = {"regions": regions} if regions else {}
+    at_vertices = native.edited_directions(st.geometry.vertices, st.geometry.normals, EYE, rows, **kwargs)
+    assert np.percentile(angles_deg(api.edited_reflections(ball, eye=EYE), at_vertices), 99) < 0.1  # float32 rounding
 
 
 def _rz(deg, v):

@@ -842,15 +842,16 @@ def edited_reflections(mirror, eye=None, *, scene=None) -> np.ndarray:
     eye = _vec3(eye, "eye")
     evaluate(scene)
     st = _ev._STATE.get(mirror.session_uid)
-    quats = _ev.rotations_of(mirror)
-    if st is None or st.geometry is None or quats is None:
+    if st is None or st.geometry is None or st.view_parts is None:
         rep = report(mirror)
         raise RokebyError(f"mirror '{mirror.name}' has no field: {rep.summary() if rep else 'not evaluated'}")
     geo = st.geometry
     incident = geo.vertices.astype(np.float64) - eye
     incident /= np.maximum(np.linalg.norm(incident, axis=1, keepdims=True), 1e-300)
     r = reflect(incident, geo.normals.astype(np.float64))
-    return rotate(quats, r).astype(np.float32)
+    # Eq. 7 per vertex for this eye, as the render nodes form it (rokeby_core's view_blend).
+    parts, ramp = st.view_parts
+    return native.view_blend(parts, r.astype(np.float32), ramp=ramp)
 
 
 # --- highlights (paper §7.1, Figs. 6 and 7) --------------------------------------------------

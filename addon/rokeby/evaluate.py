@@ -112,6 +112,7 @@ class _Geometry:
         self.region_weights: dict[str, np.ndarray] = {}
         self.bvh = None
         self._poly_start = None
+        self.edges = None  # mesh_edges(triangles), made on first use
 
     def triangles_of_polygon(self, poly: int) -> range:
         if self._poly_start is None:
@@ -148,6 +149,8 @@ class _State:
         self.region_cache: dict = {}
         self.report: MirrorReport | None = None
         self.rotations: np.ndarray | None = None
+        # What the render nodes read, per vertex of the field mesh: (parts (V, 6), ramp form).
+        self.view_parts: tuple | None = None
         self.refractions: np.ndarray | None = None
         self.field_fingerprints: dict = {}
         # What the reflection field was last computed from (rows, distances or None, regions),
@@ -642,8 +645,9 @@ def _vector_attribute(me, name: str, domain: str):
 
 
 def _corner_topology(me, state):
-    """(corner → vertex, corner → its polygon's first corner's vertex), read once per topology."""
-    key = (len(me.loops), len(me.polygons), state.geometry_version if state is not None else None)
+    """(corner → vertex, corner → its polygon's first corner's vertex), read once per topology
+    (of the mirror's mesh, or of its carrier: their corner counts differ)."""
+    key = (me.name, len(me.loops), len(me.polygons), state.geometry_version if state is not None else None)
     if state is not None and state.corner_topology is not None and state.corner_topology[0] == key:
         return state.corner_topology[1]
     corner_vert = np.empty(len(me.loops), dtype=np.int32)
@@ -715,16 +719,21 @@ def rotate(quats: np.ndarray, vectors: np.ndarray) -> np.ndarray:
     return v + w * t + np.cross(u, t)
 
 
-def extend_rotations_outward(parts: np.ndarray, triangles: np.ndarray, rings: int = 2) -> np.ndarray:
+def mesh_edges(triangles: np.ndarray) -> np.ndarray:
+    """Every directed edge (i, j) of the triangles, both directions, (6F, 2)."""
+    e = np.concatenate([triangles[:, [0, 1]], triangles[:, [1, 2]], triangles[:, [2, 0]]])
+    return np.concatenate([e, e[:, ::-1]])
+
+
+def extend_rotations_outward(parts: np.ndarray, edges: np.ndarray, rings: int = 2) -> np.ndarray:
     """Vertices where no region acts (a = 0) take R from a neighbour where one does, ``rings``
-    edges out. Their weight stays 0, so nothing changes there; but a triangle across a region's
+    edges out (``edges``: ``mesh_edges`` of the triangles). Their weight stays 0, so nothing changes there; but a triangle across a region's
     edge then interpolates the region's rotation, as the preview sees it, instead of blending it
     with the identity (which a weight of a few tenths would turn into a visible error)."""
     out = np.array(parts, dtype=np.float32)
-    if len(triangles) == 0:
+    e = edges
+    if len(e) == 0:
         return out
-    e = np.concatenate([triangles[:, [0, 1]], triangles[:, [1, 2]], triangles[:, [2, 0]]])
-    e = np.concatenate([e, e[:, ::-1]])  # both directions
     outside = (out[:, 4] <= 0.0) & (out[:, 5] <= 0.0)
     filled = ~outside
     for _ in range(rings):
@@ -1031,7 +1040,7 @@ def evaluate_mirror(obj, scene, depsgraph, *, force=False, reread_geometry=False
                 state.distance_cache.clear()
                 state.region_cache.clear()
             else:
-                new.bvh, new._poly_start = geo.bvh, geo._poly_start
+                new.bvh, new._poly_start, new.edges = geo.bvh, geo._poly_start, geo.edges
             state.geometry = geo = new
         report.vertices = len(geo.vertices)
         report.field_mesh = geo.source
@@ -1093,7 +1102,9 @@ def evaluate_mirror(obj, scene, depsgraph, *, force=False, reread_geometry=False
             # the view, blended towards r rᵀ per shading point by the render nodes.
             parts = timer(native.rotation_field, geo.vertices, rows, output="view_blend", **kwargs)
             if specs:
-                parts = extend_rotations_outward(parts, geo.triangles)
+                if geo.edges is None:
+                    geo.edges = mesh_edges(geo.triangles)
+                parts = extend_rotations_outward(parts, geo.edges)
             # The view-independent form for scripts and tools (eq. 7 towards I).
             rv = timer(native.view_blend_rotation_vectors, parts)
             ramp = ramp_form(specs)
@@ -1102,7 +1113,8 @@ def evaluate_mirror(obj, scene, depsgraph, *, force=False, reread_geometry=False
             else:
                 remove_carrier(obj)
             write_attribute(target, rv, update=False)
-            write_render_attribute(target, parts, state if not transfer else None, ramp=ramp, timer=timer)
+            write_render_attribute(target, parts, state, ramp=ramp, timer=timer)
+            state.view_parts = (parts, ramp)
             state.rotations = rv
             state.field_inputs = (rows, kwargs.get("distances"), kwargs.get("regions") or [])
             report.interpolation_error = None

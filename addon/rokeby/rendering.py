@@ -183,8 +183,3 @@ def _install_noted(m) -> bool:
     except RokebyError as exc:
         _NOTES[m.session_uid] = (False, f"renders do not show the edit: {exc}")
         return False
-
-
-def status(mirror) -> tuple:
-    """(renders show the edit: True / False / None for "no edit to show", a sentence)."""
-    return _NOTES.get(mirror.session_uid, (None, "not evaluated yet"))
