@@ -174,7 +174,7 @@ def test_radiance_hdr_files_round_trip_and_agree_with_blender(tmp_path, worlds):
     np.testing.assert_allclose(theirs, blender_pixels(tmp_path / "blender.hdr"), rtol=1e-6, atol=1e-30)
     # broken files
     (tmp_path / "cut.hdr").write_bytes(ours.read_bytes()[:5000])
-    with pytest.raises(ValueError, match=r"cut\.hdr.*ends in scanline"):
+    with pytest.raises(ValueError, match=r"cut\.hdr.*(ends in scanline|truncated)"):
         envmaps.read_hdr(tmp_path / "cut.hdr")
     (tmp_path / "text.hdr").write_text("P3 2 2 255")
     with pytest.raises(ValueError, match="not a Radiance"):

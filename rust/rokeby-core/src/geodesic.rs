@@ -456,10 +456,10 @@ impl GeodesicSolver {
         // All three matrices share one sparsity pattern: one symbolic factorisation (ordering and
         // elimination tree) serves them all, which saves its memory and time twice over.
         let heat_m = lower_matrix(nv, &edges, t, &heat_diag)?;
-        let symbolic = SymbolicLlt::try_new(heat_m.symbolic(), Side::Lower).map_err(|e| RokebyError::invalid("mesh", format!("symbolic factorisation failed ({e:?})")))?;
+        let symbolic = SymbolicLlt::try_new(heat_m.symbolic(), Side::Lower).map_err(|e| factor_error("symbolic", format!("{e:?}")))?;
         let factor = |m: SparseColMat<u32, f64>, what: &str| {
             Llt::try_new_with_symbolic(symbolic.clone(), m.as_ref(), Side::Lower)
-                .map_err(|e| RokebyError::invalid("mesh", format!("{what} system is not positive definite ({e:?})")))
+                .map_err(|e| factor_error(what, format!("{e:?}")))
         };
         let heat_dirichlet = if self.average_boundary && boundary.iter().any(|&b| b) {
             // u = 0 on the boundary by a penalty 1e8 times the largest diagonal entry.
@@ -673,17 +673,43 @@ impl GeodesicSolver {
 }
 
 /// Values at surface points by barycentric interpolation of per-vertex values (paper §6.2: the
-/// per-vertex distance field drawn with smooth shading).
-pub fn interpolate(values: &[f32], n_vertices: usize, faces: &[[usize; 3]], points: &[SurfacePoint]) -> Vec<f32> {
+/// per-vertex distance field drawn with smooth shading). `values` holds `rows` rows of
+/// `n_vertices`; the result is (rows, points). A vertex whose weight is exactly 0 does not
+/// enter the sum (an unreachable +inf there does not turn the point into NaN); a result that
+/// finite input cannot hold in float32 is an error, not an inf.
+pub fn interpolate(values: &[f32], n_vertices: usize, faces: &[[usize; 3]], points: &[SurfacePoint]) -> Result<Vec<f32>> {
     let rows = values.len() / n_vertices.max(1);
-    let mut out = Vec::with_capacity(rows * points.len());
+    let mut out = crate::alloc::with_capacity::<f32>("interpolate output (rows × points)", &[rows, points.len()])?;
     for r in 0..rows {
         let row = &values[r * n_vertices..(r + 1) * n_vertices];
-        for p in points {
+        for (k, p) in points.iter().enumerate() {
             let f = faces[p.face];
-            let v: f64 = (0..3).map(|k| p.bary[k] * row[f[k]] as f64).sum();
+            let mut v = 0.0f64;
+            let mut finite_in = true;
+            for c in 0..3 {
+                if p.bary[c] != 0.0 {
+                    let x = row[f[c]];
+                    finite_in &= x.is_finite();
+                    v += p.bary[c] * x as f64;
+                }
+            }
+            if finite_in && v.is_finite() && v.abs() > f32::MAX as f64 {
+                return Err(RokebyError::invalid("values", format!("the value interpolated at point {k} ({v:e}) overflows float32")));
+            }
             out.push(v as f32);
         }
     }
-    out
+    Ok(out)
+}
+
+/// A failed sparse factorisation: out of memory is [`RokebyError::OutOfMemory`] (faer reports it
+/// as such), anything else a numerical failure of the named system.
+pub(crate) fn factor_error(what: &str, debug: String) -> RokebyError {
+    if debug.contains("OutOfMemory") {
+        RokebyError::out_of_memory(format!("the {what} factorisation"), None, None)
+    } else if what == "symbolic" {
+        RokebyError::numerical("mesh", format!("symbolic factorisation failed ({debug})"))
+    } else {
+        RokebyError::numerical("mesh", format!("the {what} system is not positive definite ({debug})"))
+    }
 }

@@ -16,7 +16,9 @@
 //!   shadow boundary editing (Mattausch, Igarashi, Wimmer): smooth silhouettes from the light,
 //!   shadow handles by ray casting, 2D MLS boundary deformation, the Laplacian shadow mesh.
 
+pub mod alloc;
 pub mod bvh;
+pub mod cancel;
 pub mod envmap;
 pub mod error;
 pub mod field;

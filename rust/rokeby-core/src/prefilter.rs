@@ -331,7 +331,11 @@ fn ring_pass(src: &EnvMap, lobe: &Lobe, r_in: Option<f64>, r_out: Option<f64>, c
     EnvMap { layout: Layout::LatLong, height: h, width: w, channels: c + 1, data: out }
 }
 
+/// The most lobe parameters [`prefilter`] takes in one call (a roughness ladder has 5–10).
+pub const MAX_LOBES: usize = 256;
+
 /// Specular prefiltering of a lat-long environment for each lobe (see the module docs).
+/// Cancellable between rings ([`crate::cancel`]).
 pub fn prefilter(env: &EnvMap, lobes: &[Lobe], params: &PrefilterParams) -> Result<Vec<Level>> {
     check_latlong(env, "image")?;
     if !(params.texels_per_radius.is_finite() && params.texels_per_radius >= 1.0) {
@@ -340,6 +344,11 @@ pub fn prefilter(env: &EnvMap, lobes: &[Lobe], params: &PrefilterParams) -> Resu
     if !(params.tail.is_finite() && params.tail > 0.0 && params.tail < 0.5) {
         return Err(RokebyError::invalid("tail", format!("must be in (0, 0.5), got {}", params.tail)));
     }
+    if lobes.len() > MAX_LOBES {
+        return Err(RokebyError::invalid("params", format!("at most {MAX_LOBES} lobe parameters in one call, got {}", lobes.len())));
+    }
+    // Every level can be as large as the input: bound the whole result before computing any.
+    crate::alloc::check::<f32>("prefiltered levels (params × image)", &[lobes.len() + 1, env.data.len()])?;
     let mut mips = vec![env.clone()];
     while let Some(m) = downsample(mips.last().expect("non-empty")) {
         mips.push(m);
@@ -348,6 +357,7 @@ pub fn prefilter(env: &EnvMap, lobes: &[Lobe], params: &PrefilterParams) -> Resu
     let kk = params.texels_per_radius;
     let mut levels = Vec::with_capacity(lobes.len());
     for lobe in lobes {
+        crate::cancel::check()?;
         let (r0, cut) = if lobe.is_mirror() { (0.0, 0.0) } else { lobe.radii(params.tail) };
         if lobe.is_mirror() || r0 < 0.5 * texel(0) {
             levels.push(Level { map: env.clone(), core_radius: r0, cut_radius: cut, rings: 0 });
@@ -366,6 +376,7 @@ pub fn prefilter(env: &EnvMap, lobes: &[Lobe], params: &PrefilterParams) -> Resu
         let mut total: Option<EnvMap> = None;
         let mut k = 0usize;
         loop {
+            crate::cancel::check()?;
             let rk = r0 * (1u64 << k.min(60)) as f64;
             let last = 2.0 * rk >= cut;
             let r_in = if k == 0 { None } else { Some(0.5 * rk) };

@@ -159,8 +159,9 @@ pub struct PartialMap {
 }
 
 /// Screen-space reflected directions r = 2(n·v)n − v for unit normals n and unit view vectors v
-/// (pointing from the surface to the eye), both H·W×3. Pixels whose n or v is not finite or zero
-/// give NaN.
+/// (pointing from the surface to the eye), both H·W×3. Pixels whose n or v is not finite give
+/// NaN (NaN in, NaN out); pixels whose n or v is zero (background pixels of a normal pass) give
+/// the zero vector: they have no direction, and finite input never gives NaN.
 pub fn reflect_dirs(normals: &[f32], view: &[f32]) -> Result<Vec<f32>> {
     if normals.len() % 3 != 0 {
         return Err(RokebyError::invalid("normals", "expected N×3 values"));
@@ -172,8 +173,11 @@ pub fn reflect_dirs(normals: &[f32], view: &[f32]) -> Result<Vec<f32>> {
     out.par_chunks_mut(3).enumerate().for_each(|(p, o)| {
         let n = unit(&normals[3 * p..3 * p + 3]);
         let vv = if view.len() == 3 { unit(view) } else { unit(&view[3 * p..3 * p + 3]) };
+        let finite = normals[3 * p..3 * p + 3].iter().all(|x| x.is_finite())
+            && if view.len() == 3 { view.iter().all(|x| x.is_finite()) } else { view[3 * p..3 * p + 3].iter().all(|x| x.is_finite()) };
         let r = match (n, vv) {
             (Some(n), Some(v)) => reflect(v, n),
+            _ if finite => DVec3::ZERO,
             _ => DVec3::NAN,
         };
         o.copy_from_slice(&[r.x as f32, r.y as f32, r.z as f32]);
@@ -1044,11 +1048,17 @@ pub fn fill_beyond_equator(m: &mut ParaboloidMap) {
 /// magnitude of the (hole-filled) position map. σ = σ_max · clamp((g − g₀)/(g₁ − g₀), 0, 1) with
 /// g₀ = 4 and g₁ = 16 times the median gradient: smooth parts (neighbouring texels from
 /// neighbouring pixels) are untouched. Returns the number of blurred texels.
-pub fn regularize(map: &mut ParaboloidMap, positions: &ParaboloidMap, sigma_max: f64) -> usize {
+///
+/// The kernel is clipped to the map: σ is capped at the map's size S (a wider Gaussian over an
+/// S×S map is indistinguishable from a box, and uncapped σ = 1e9 never returned) and its
+/// support at S texels each side, so one texel costs at most (2S+1)² taps. Cancellable between
+/// rows ([`crate::cancel`]).
+pub fn regularize(map: &mut ParaboloidMap, positions: &ParaboloidMap, sigma_max: f64) -> Result<usize> {
     let s = map.size;
-    if sigma_max <= 0.0 {
-        return 0;
+    if sigma_max.is_nan() || sigma_max <= 0.0 {
+        return Ok(0);
     }
+    let sigma_max = sigma_max.min(s as f64);
     let inside = |i: i64, j: i64| {
         if i < 0 || j < 0 || i >= s as i64 || j >= s as i64 {
             return false;
@@ -1087,18 +1097,19 @@ pub fn regularize(map: &mut ParaboloidMap, positions: &ParaboloidMap, sigma_max:
         .collect();
     let mut g_sorted: Vec<f64> = grad.iter().cloned().filter(|g| *g >= 0.0).collect();
     if g_sorted.is_empty() {
-        return 0;
+        return Ok(0);
     }
     g_sorted.sort_by(|a, b| a.total_cmp(b));
     let med = g_sorted[g_sorted.len() / 2].max(1e-6);
     let (g0, g1) = (4.0 * med, 16.0 * med);
     let c = map.channels;
     let src = map.data.clone();
-    let blurred: Vec<usize> = map
+    let blurred: Vec<Result<usize>> = map
         .data
         .par_chunks_mut(s * c)
         .enumerate()
         .map(|(row, out)| {
+            crate::cancel::check()?;
             let (f, i) = (row / s, row % s);
             let mut n = 0;
             let mut acc = vec![0.0f64; c];
@@ -1112,13 +1123,15 @@ pub fn regularize(map: &mut ParaboloidMap, positions: &ParaboloidMap, sigma_max:
                     continue;
                 }
                 n += 1;
-                let rad = (2.5 * sigma).ceil() as i64;
+                let rad = ((2.5 * sigma).ceil() as i64).min(s as i64);
                 let mut wsum = 0.0;
                 for a in acc.iter_mut() {
                     *a = 0.0;
                 }
-                for di in -rad..=rad {
-                    for dj in -rad..=rad {
+                let (i0, i1) = ((-rad).max(-(i as i64)), rad.min(s as i64 - 1 - i as i64));
+                let (j0, j1) = ((-rad).max(-(j as i64)), rad.min(s as i64 - 1 - j as i64));
+                for di in i0..=i1 {
+                    for dj in j0..=j1 {
                         let (ii, jj) = (i as i64 + di, j as i64 + dj);
                         if !inside(ii, jj) {
                             continue;
@@ -1135,10 +1148,10 @@ pub fn regularize(map: &mut ParaboloidMap, positions: &ParaboloidMap, sigma_max:
                     out[j * c + ch] = (acc[ch] / wsum) as f32;
                 }
             }
-            n
+            Ok(n)
         })
         .collect();
-    blurred.iter().sum()
+    blurred.into_iter().sum()
 }
 
 /// The three steps for one patch: partial map, hole filling, regularisation.
@@ -1165,7 +1178,7 @@ pub fn reconstruct(width: usize, height: usize, refl: &[f32], values: &[f32], ch
         ));
     }
     let filled = fill_holes(&mut [&mut p.map, &mut p.positions], &p.covered)?;
-    let blurred = regularize(&mut p.map, &p.positions, params.blur_sigma);
+    let blurred = regularize(&mut p.map, &p.positions, params.blur_sigma)?;
     fill_beyond_equator(&mut p.map);
     Ok(ReflectionEnv { map: p.map, coverage: p.coverage, triangles: p.triangles, filled_texels: filled, blurred_texels: blurred })
 }

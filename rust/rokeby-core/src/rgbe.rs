@@ -108,7 +108,19 @@ pub fn decode(bytes: &[u8]) -> Result<(usize, usize, Vec<f32>)> {
     if h == 0 || w == 0 || h > 1 << 16 || w > 1 << 16 {
         return Err(bad(format!("image of {w}×{h} pixels: sizes must be 1 to 65536")));
     }
-    let mut out = vec![0.0f32; h * w * 3];
+    // Bound what the file can ask for before allocating: every scanline takes at least
+    // `min_line` bytes (new RLE: a 4-byte header and at most 127 pixels per 2-byte run in each of
+    // the 4 planes; flat: 4 bytes a pixel; old-style RLE is refused below), so a short file that
+    // declares a huge image is refused here instead of allocating for it.
+    let min_line = if (8..=0x7fff).contains(&w) { 4 + 8 * w.div_ceil(127) } else { 4 * w };
+    let have = bytes.len().saturating_sub(pos);
+    if (have as u128) < (h as u128) * (min_line as u128) {
+        return Err(bad(format!(
+            "the file declares {w}×{h} pixels but holds only {have} bytes of pixel data (at least {} needed): it is truncated or not a Radiance .hdr file",
+            (h as u128) * (min_line as u128)
+        )));
+    }
+    let mut out = crate::alloc::filled("image", &[h, w, 3], 0.0f32)?;
     let mut row = vec![0u8; 4 * w];
     for y in 0..h {
         let rest = &bytes[pos.min(bytes.len())..];
@@ -306,7 +318,9 @@ mod tests {
             (b"#?RADIANCE\n\n+Y 1 +X 1\n\0\0\0\0".to_vec(), "orientation"),
             (b"#?RADIANCE\n\n-Y 0 +X 1\n".to_vec(), "sizes"),
             (b"#?RADIANCE\n\n-Y 1 +X 2\n\x01\x01\x01\x05\0\0\0\0".to_vec(), "old-style"),
-            (good[..good.len() - 5].to_vec(), "ends in scanline"),
+            (good[..good.len() - 5].to_vec(), "truncated"),
+            // 53 bytes declaring 65536×65536 (issue 24: allocated 51.5 GB and aborted)
+            (b"#?RADIANCE\nFORMAT=32-bit_rle_rgbe\n\n-Y 65536 +X 65536\n\x02\x02\x01\x00".to_vec(), "declares 65536×65536"),
             (b"#?RADIANCE\nFORMAT=32-bit_rle_rgbe".to_vec(), "ends inside its header"),
         ];
         for (bytes, want) in cases {

@@ -58,6 +58,37 @@ pub fn eval(coeffs: &[f64; SH_COEFFS], n: [f64; 3]) -> f64 {
     s
 }
 
+/// D(n) of every channel's coefficients at each normal (N×3, any length, normalised here):
+/// N×C values, row-major. A zero or non-finite normal is an error naming its row (it has no
+/// direction, and would give NaN).
+pub fn eval_many(coeffs: &[[f64; SH_COEFFS]], normals: &[f32]) -> Result<Vec<f32>> {
+    if normals.len() % 3 != 0 {
+        return Err(RokebyError::invalid("normals", "expected N×3 values"));
+    }
+    let ch = coeffs.len();
+    if let Some((c, _)) = coeffs.iter().enumerate().find(|(_, r)| r.iter().any(|x| !x.is_finite())) {
+        return Err(RokebyError::invalid("coeffs", format!("row {c} is not finite")));
+    }
+    let n = normals.len() / 3;
+    let mut out = crate::alloc::filled("normals × channels", &[n, ch], 0.0f32)?;
+    for (i, nr) in normals.chunks_exact(3).enumerate() {
+        let v = [nr[0] as f64, nr[1] as f64, nr[2] as f64];
+        let l = (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt();
+        if !(l.is_finite() && l > 1e-30) {
+            return Err(RokebyError::invalid("normals", format!("normal {i} is zero or not finite: it has no direction")));
+        }
+        let u = v.map(|x| x / l);
+        for c in 0..ch {
+            let d = eval(&coeffs[c], u);
+            if d.abs() > f32::MAX as f64 {
+                return Err(RokebyError::invalid("coeffs", format!("D(n) of channel {c} at normal {i} ({d:e}) overflows float32")));
+            }
+            out[i * ch + c] = d as f32;
+        }
+    }
+    Ok(out)
+}
+
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Fit {
     /// Plain least squares (the fast option).

@@ -3,7 +3,7 @@
 //! parent module: float arrays in (float32/float64), shapes checked with messages naming the
 //! argument, the GIL released, core errors as ValueError.
 
-use super::{f32_array, run_detached, shape_str, F32Array};
+use super::{f32_array, run_cancellable, run_detached, shape_str, F32Array};
 use numpy::ndarray::{ArrayD, IxDyn};
 use numpy::{IntoPyArray, PyArrayDyn, PyArrayMethods, PyUntypedArrayMethods};
 use pyo3::exceptions::{PyRuntimeError, PyTypeError, PyValueError};
@@ -143,6 +143,11 @@ pub fn sh_fit<'py>(py: Python<'py>, normals: &Bound<'py, PyAny>, values: &Bound<
     let pixels = ns[0] - masked;
     let tolerance = if tolerance.len() == 1 && channels > 1 { vec![tolerance[0]; channels] } else { tolerance };
     let r = run_detached(py, || sh::fit_with_tolerance(&keep_n, &keep_v, channels, fit, &tolerance))?;
+    // The arrays are read in place (no copy): the caller must not write them while the call runs.
+    // Validated rows that changed under the fit would surface here as non-finite coefficients.
+    if r.coeffs.iter().flatten().any(|x| !x.is_finite()) {
+        return Err(PyValueError::new_err("normals/values: the fit is not finite; were the arrays written by another thread during the call?"));
+    }
     let d = PyDict::new(py);
     d.set_item("coeffs", array_f64(py, &[channels, SH_COEFFS], r.coeffs.iter().flatten().copied().collect())?)?;
     d.set_item("max_residual", array_f64(py, &[channels], r.max_residual)?)?;
@@ -172,22 +177,10 @@ pub fn sh_eval<'py>(py: Python<'py>, coeffs: &Bound<'py, PyAny>, normals: &Bound
         let a64: Vec<f64> = np.call_method1("asarray", (coeffs, "float64"))?.call_method0("ravel")?.extract()?;
         a64.chunks_exact(SH_COEFFS).map(|r| r.try_into().unwrap()).collect()
     };
-    let ch = cs[0];
     let nsl = n.slice();
-    let out = py.detach(|| {
-        let mut out = vec![0.0f32; nsl.len() / 3 * ch];
-        for (i, nr) in nsl.chunks_exact(3).enumerate() {
-            let v = [nr[0] as f64, nr[1] as f64, nr[2] as f64];
-            let l = (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt();
-            let u = v.map(|x| x / l);
-            for c in 0..ch {
-                out[i * ch + c] = sh::eval(&co[c], u) as f32;
-            }
-        }
-        out
-    });
+    let out = run_detached(py, || sh::eval_many(&co, nsl))?;
     let mut shape = ns[..ns.len() - 1].to_vec();
-    shape.push(ch);
+    shape.push(cs[0]);
     array_f32(py, &shape, out)
 }
 
@@ -250,7 +243,7 @@ pub fn reflection_env<'py>(
     let (rs, vs, ms) = (r.slice(), v.slice(), m.slice());
     let ds: &[f32] = d.as_ref().map(|a| a.slice()).unwrap_or(&[]);
     let partial_only = stage == "partial";
-    let (map, covered, coverage, tris, filled, blurred) = run_detached(py, || {
+    let (map, covered, coverage, tris, filled, blurred) = run_cancellable(py, || {
         if partial_only {
             let p = reconstruct::partial(w, h, rs, vs, 3, ms, ds, &params)?;
             Ok((p.map, p.covered, p.coverage, p.triangles, 0, 0))
@@ -269,12 +262,15 @@ pub fn reflection_env<'py>(
                 ));
             }
             let filled = reconstruct::fill_holes(&mut [&mut p.map, &mut p.positions], &p.covered)?;
-            let blurred = reconstruct::regularize(&mut p.map, &p.positions, params.blur_sigma);
+            let blurred = reconstruct::regularize(&mut p.map, &p.positions, params.blur_sigma)?;
             reconstruct::fill_beyond_equator(&mut p.map);
             Ok((p.map, covered, p.coverage, p.triangles, filled, blurred))
         }
     })?;
     let s = map.size;
+    if map.data.iter().any(|x| !x.is_finite()) {
+        return Err(PyValueError::new_err("reflected/values: the map is not finite; were the arrays written by another thread during the call?"));
+    }
     let out = PyDict::new(py);
     out.set_item("map", array_f32(py, &[2, s, s, 3], map.data)?)?;
     let cov: Vec<f32> = covered.iter().map(|&c| if c { 1.0 } else { 0.0 }).collect();
@@ -502,7 +498,7 @@ pub fn normals_bilateral<'py>(py: Python<'py>, normals: &Bound<'py, PyAny>, dept
     let d = required1(depth, "depth", h, w)?;
     let m = edit_mask(mask, h, w)?;
     let (ns, ds) = (n.slice(), d.slice());
-    let out = run_detached(py, || normals::bilateral(ns, &normals::Frame { width: w, height: h, mask: m.as_deref() }, ds, sigma_s, sigma_d))?;
+    let out = run_cancellable(py, || normals::bilateral(ns, &normals::Frame { width: w, height: h, mask: m.as_deref() }, ds, sigma_s, sigma_d))?;
     array_f32(py, &[h, w, 3], out)
 }
 

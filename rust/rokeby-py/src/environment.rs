@@ -7,7 +7,7 @@
 //! latlong (H, W, C) · cube (6, S, S, C) in the order +X, −X, +Y, −Y, +Z, −Z · sphere (S, S, C) ·
 //! paraboloid (2, S, S, C), face 0 looking along +Z.
 
-use super::{f32_array, run_detached, shape_str};
+use super::{f32_array, run_cancellable, run_detached, shape_str};
 use numpy::ndarray::{ArrayD, IxDyn};
 use numpy::{IntoPyArray, PyArrayDyn};
 use pyo3::exceptions::{PyRuntimeError, PyValueError};
@@ -128,7 +128,7 @@ pub fn env_prefilter<'py>(py: Python<'py>, image: &Bound<'py, PyAny>, lobe: &str
     }
     let lobes = params.iter().enumerate().map(|(i, &p)| parse_lobe(lobe, p, &format!("params[{i}]"))).collect::<PyResult<Vec<_>>>()?;
     let pp = PrefilterParams { texels_per_radius, tail };
-    let levels = run_detached(py, || prefilter::prefilter(&env, &lobes, &pp))?;
+    let levels = run_cancellable(py, || prefilter::prefilter(&env, &lobes, &pp))?;
     let out = PyList::empty(py);
     for lv in levels {
         out.append(out_array(py, lv.map)?)?;
@@ -146,7 +146,7 @@ pub fn env_irradiance<'py>(py: Python<'py>, image: &Bound<'py, PyAny>, size: usi
     if size < 2 {
         return Err(PyValueError::new_err(format!("size: must be ≥ 2, got {size}")));
     }
-    let (map, coeffs) = run_detached(py, || prefilter::irradiance_map(&env, size, size.saturating_mul(2)))?;
+    let (map, coeffs) = run_cancellable(py, || prefilter::irradiance_map(&env, size, size.saturating_mul(2)))?;
     let c = coeffs.len();
     let flat: Vec<f64> = coeffs.iter().flatten().copied().collect();
     let irr: Vec<f64> = coeffs.iter().flat_map(|cf| (0..SH_COEFFS).map(move |k| cf[k] * A_HAT[k] / std::f64::consts::PI)).collect();

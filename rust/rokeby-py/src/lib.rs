@@ -2,11 +2,13 @@
 //!
 //! This crate only converts: numpy arrays in (float32 or float64, any layout; float64 is stored
 //! as float32 like Blender's mesh data), validated shapes with errors that name the argument,
-//! the GIL released around the work, panics caught, core errors mapped to `ValueError`.
+//! the GIL released around the work, panics caught, core errors mapped by kind: bad input →
+//! `ValueError`, memory → `MemoryError`, numerical failure → `NumericalError` (a `RuntimeError`),
+//! cancelled → `KeyboardInterrupt`, internal bug or panic → `RuntimeError`.
 
 use numpy::ndarray::{ArrayD, IxDyn};
 use numpy::{IntoPyArray, PyArrayDyn, PyArrayMethods, PyReadonlyArrayDyn, PyUntypedArray, PyUntypedArrayMethods};
-use pyo3::exceptions::{PyRuntimeError, PyTypeError, PyValueError};
+use pyo3::exceptions::{PyKeyboardInterrupt, PyMemoryError, PyRuntimeError, PyTypeError, PyValueError};
 use pyo3::prelude::*;
 use pyo3::types::{PyDict, PyList, PyTuple};
 use rokeby_core::field::{output_width, Distances, Field, FieldOutput};
@@ -85,8 +87,31 @@ fn f32_array<'py>(obj: &Bound<'py, PyAny>, name: &str) -> PyResult<F32Array<'py>
     Err(PyTypeError::new_err(format!("{name}: must be an array of floats (float32 or float64; integers are converted), got dtype {dtype}")))
 }
 
+pyo3::create_exception!(
+    rokeby_native,
+    NumericalError,
+    PyRuntimeError,
+    "A numerical method of the core failed on input that passed validation (a factorisation broke down, an iteration did not converge)."
+);
+
 fn core_err(e: RokebyError) -> PyErr {
-    PyValueError::new_err(e.to_string())
+    let text = e.to_string();
+    match e {
+        RokebyError::InvalidArgument { .. } => PyValueError::new_err(text),
+        RokebyError::OutOfMemory { .. } => PyMemoryError::new_err(text),
+        RokebyError::Numerical { .. } => NumericalError::new_err(text),
+        RokebyError::Cancelled => PyKeyboardInterrupt::new_err("rokeby_native: cancelled"),
+        RokebyError::Internal(_) => PyRuntimeError::new_err(format!("rokeby_native {text}")),
+    }
+}
+
+fn panic_err(p: Box<dyn std::any::Any + Send>) -> PyErr {
+    let msg = p
+        .downcast_ref::<&str>()
+        .map(|s| s.to_string())
+        .or_else(|| p.downcast_ref::<String>().cloned())
+        .unwrap_or_else(|| "unknown".into());
+    PyRuntimeError::new_err(format!("rokeby_native internal error (please report): {msg}"))
 }
 
 /// Runs `f` without the GIL; a panic (a bug) becomes RuntimeError instead of crossing into Python.
@@ -95,15 +120,63 @@ fn run_detached<T: Send, F: FnOnce() -> Result<T, RokebyError> + Send>(py: Pytho
     match res {
         Ok(Ok(v)) => Ok(v),
         Ok(Err(e)) => Err(core_err(e)),
-        Err(p) => {
-            let msg = p
-                .downcast_ref::<&str>()
-                .map(|s| s.to_string())
-                .or_else(|| p.downcast_ref::<String>().cloned())
-                .unwrap_or_else(|| "unknown".into());
-            Err(PyRuntimeError::new_err(format!("rokeby_native internal error (please report): {msg}")))
-        }
+        Err(p) => Err(panic_err(p)),
     }
+}
+
+/// Like [`run_detached`] for long work that checks [`rokeby_core::cancel`] between rows: the work
+/// runs on a worker thread while this thread, every 50 ms, takes the GIL back to let Python run
+/// its signal handlers; Ctrl-C (KeyboardInterrupt) or `rokeby_native.cancel()` from another
+/// thread stops the work at its next row and the call raises.
+pub(crate) fn run_cancellable<T: Send, F: FnOnce() -> Result<T, RokebyError> + Send>(py: Python<'_>, f: F) -> PyResult<T> {
+    use std::sync::mpsc;
+    use std::time::Duration;
+    rokeby_core::cancel::reset();
+    std::thread::scope(|scope| {
+        let (tx, rx) = mpsc::channel();
+        scope.spawn(move || {
+            let _ = tx.send(catch_unwind(AssertUnwindSafe(f)));
+        });
+        let mut interrupted: Option<PyErr> = None;
+        let mut rx = rx;
+        loop {
+            let (got, back) = py.detach(move || (rx.recv_timeout(Duration::from_millis(50)), rx));
+            rx = back;
+            match got {
+                Ok(res) => {
+                    if let Some(err) = interrupted {
+                        return Err(err);
+                    }
+                    return match res {
+                        Ok(Ok(v)) => Ok(v),
+                        Ok(Err(e)) => Err(core_err(e)),
+                        Err(p) => Err(panic_err(p)),
+                    };
+                }
+                Err(mpsc::RecvTimeoutError::Timeout) => {
+                    if interrupted.is_none() {
+                        if let Err(e) = py.check_signals() {
+                            rokeby_core::cancel::request();
+                            interrupted = Some(e);
+                        }
+                    }
+                }
+                Err(mpsc::RecvTimeoutError::Disconnected) => {
+                    return Err(PyRuntimeError::new_err("rokeby_native internal error (please report): the worker thread ended without a result"));
+                }
+            }
+        }
+    })
+}
+
+/// cancel()
+///
+/// Stops the cancellable native calls in flight (blurs, filters, prefiltering, reconstruction) at
+/// their next row: they raise KeyboardInterrupt. For a Blender operator's Esc or a watchdog
+/// thread; Ctrl-C does the same for a call made from the main thread.
+#[pyfunction]
+fn cancel() {
+    rokeby_core::cancel::request();
 }
 
 fn parse_polar(name: &str) -> PyResult<PolarMethod> {
@@ -707,7 +780,7 @@ fn interpolate<'py>(py: Python<'py>, values: &Bound<'py, PyAny>, faces: &Bound<'
         pts.push(SurfacePoint { face: face as usize, bary: [bc[0] as f64, bc[1] as f64, bc[2] as f64] });
     }
     let v = vals.slice();
-    let out = run_detached(py, || Ok(geodesic::interpolate(v, nv, &faces3, &pts)))?;
+    let out = run_detached(py, || geodesic::interpolate(v, nv, &faces3, &pts))?;
     let arr = ArrayD::from_shape_vec(IxDyn(&[rows, pts.len()]), out).map_err(|e| PyRuntimeError::new_err(e.to_string()))?;
     Ok(arr.into_pyarray(py))
 }
@@ -715,6 +788,8 @@ fn interpolate<'py>(py: Python<'py>, values: &Bound<'py, PyAny>, faces: &Bound<'
 #[pymodule]
 fn rokeby_native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
+    m.add("NumericalError", m.py().get_type::<NumericalError>())?;
+    m.add_function(wrap_pyfunction!(cancel, m)?)?;
     m.add_function(wrap_pyfunction!(rotation_field, m)?)?;
     m.add_function(wrap_pyfunction!(edited_directions, m)?)?;
     m.add_function(wrap_pyfunction!(view_blend, m)?)?;
