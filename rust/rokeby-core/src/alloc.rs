@@ -21,13 +21,15 @@ fn physical_memory() -> Option<u128> {
 pub fn max_bytes() -> Option<u128> {
     static LIMIT: OnceLock<Option<u128>> = OnceLock::new();
     *LIMIT.get_or_init(|| {
-        if let Some(v) = std::env::var("ROKEBY_MAX_ALLOC_BYTES").ok().and_then(|s| s.trim().parse::<u128>().ok()) {
+        if let Some(v) = std::env::var("ROKEBY_MAX_ALLOC_BYTES")
+            .ok()
+            .and_then(|s| s.trim().parse::<u128>().ok())
+        {
             return Some(v);
         }
         physical_memory()
     })
 }
-
 
 /// The byte count of `dims` elements of `T`, checked for overflow and against [`max_bytes`].
 pub fn check<T>(what: &str, dims: &[usize]) -> Result<usize> {
@@ -38,7 +40,11 @@ pub fn check<T>(what: &str, dims: &[usize]) -> Result<usize> {
     let bytes = n.saturating_mul(std::mem::size_of::<T>().max(1) as u128);
     let over_limit = max_bytes().is_some_and(|l| bytes > l);
     if over_limit || bytes > isize::MAX as u128 {
-        return Err(RokebyError::out_of_memory(what, Some(bytes), Some(max_bytes().unwrap_or(isize::MAX as u128))));
+        return Err(RokebyError::out_of_memory(
+            what,
+            Some(bytes),
+            Some(max_bytes().unwrap_or(isize::MAX as u128)),
+        ));
     }
     Ok(n as usize)
 }
@@ -47,7 +53,13 @@ pub fn check<T>(what: &str, dims: &[usize]) -> Result<usize> {
 pub fn filled<T: Clone>(what: &str, dims: &[usize], value: T) -> Result<Vec<T>> {
     let n = check::<T>(what, dims)?;
     let mut v: Vec<T> = Vec::new();
-    v.try_reserve_exact(n).map_err(|_| RokebyError::out_of_memory(what, Some((n as u128) * std::mem::size_of::<T>() as u128), None))?;
+    v.try_reserve_exact(n).map_err(|_| {
+        RokebyError::out_of_memory(
+            what,
+            Some((n as u128) * std::mem::size_of::<T>() as u128),
+            None,
+        )
+    })?;
     v.resize(n, value);
     Ok(v)
 }
@@ -56,7 +68,13 @@ pub fn filled<T: Clone>(what: &str, dims: &[usize], value: T) -> Result<Vec<T>> 
 pub fn with_capacity<T>(what: &str, dims: &[usize]) -> Result<Vec<T>> {
     let n = check::<T>(what, dims)?;
     let mut v: Vec<T> = Vec::new();
-    v.try_reserve_exact(n).map_err(|_| RokebyError::out_of_memory(what, Some((n as u128) * std::mem::size_of::<T>() as u128), None))?;
+    v.try_reserve_exact(n).map_err(|_| {
+        RokebyError::out_of_memory(
+            what,
+            Some((n as u128) * std::mem::size_of::<T>() as u128),
+            None,
+        )
+    })?;
     Ok(v)
 }
 

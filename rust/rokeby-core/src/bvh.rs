@@ -63,15 +63,26 @@ impl Bvh {
     /// A BVH over `tris` (non-finite corners are an error naming `arg`).
     pub fn new(tris: Vec<[DVec3; 3]>, arg: &str) -> Result<Self> {
         if let Some(i) = tris.iter().position(|t| !t.iter().all(|p| p.is_finite())) {
-            return Err(RokebyError::invalid(arg, format!("triangle {i} has a non-finite corner")));
+            return Err(RokebyError::invalid(
+                arg,
+                format!("triangle {i} has a non-finite corner"),
+            ));
         }
         if tris.len() >= u32::MAX as usize {
-            return Err(RokebyError::invalid(arg, format!("{} triangles is more than the BVH supports", tris.len())));
+            return Err(RokebyError::invalid(
+                arg,
+                format!("{} triangles is more than the BVH supports", tris.len()),
+            ));
         }
         let mut order: Vec<u32> = (0..tris.len() as u32).collect();
         let centroids: Vec<DVec3> = tris.iter().map(|t| (t[0] + t[1] + t[2]) / 3.0).collect();
         let mut nodes = Vec::with_capacity(2 * tris.len() / LEAF_SIZE + 1);
-        nodes.push(Node { min: DVec3::ZERO, max: DVec3::ZERO, start: 0, count: 0 });
+        nodes.push(Node {
+            min: DVec3::ZERO,
+            max: DVec3::ZERO,
+            start: 0,
+            count: 0,
+        });
         // Iterative build: (node index, range in `order`).
         let mut stack = vec![(0usize, 0usize, tris.len())];
         while let Some((ni, lo, hi)) = stack.pop() {
@@ -93,12 +104,30 @@ impl Bvh {
                 nodes[ni].count = (hi - lo) as u32;
                 continue;
             }
-            let axis = if ext.x >= ext.y && ext.x >= ext.z { 0 } else if ext.y >= ext.z { 1 } else { 2 };
+            let axis = if ext.x >= ext.y && ext.x >= ext.z {
+                0
+            } else if ext.y >= ext.z {
+                1
+            } else {
+                2
+            };
             let mid = (lo + hi) / 2;
-            order[lo..hi].select_nth_unstable_by(mid - lo, |&a, &b| centroids[a as usize][axis].total_cmp(&centroids[b as usize][axis]));
+            order[lo..hi].select_nth_unstable_by(mid - lo, |&a, &b| {
+                centroids[a as usize][axis].total_cmp(&centroids[b as usize][axis])
+            });
             let left = nodes.len();
-            nodes.push(Node { min: DVec3::ZERO, max: DVec3::ZERO, start: 0, count: 0 });
-            nodes.push(Node { min: DVec3::ZERO, max: DVec3::ZERO, start: 0, count: 0 });
+            nodes.push(Node {
+                min: DVec3::ZERO,
+                max: DVec3::ZERO,
+                start: 0,
+                count: 0,
+            });
+            nodes.push(Node {
+                min: DVec3::ZERO,
+                max: DVec3::ZERO,
+                start: 0,
+                count: 0,
+            });
             nodes[ni].start = left as u32;
             stack.push((left, lo, mid));
             stack.push((left + 1, mid, hi));
@@ -129,7 +158,14 @@ impl Bvh {
 
     /// The closest hit with `t_min < t < t_max` (`dir` need not be normalised), skipping the
     /// triangles `filter` rejects.
-    pub fn intersect_filtered(&self, origin: DVec3, dir: DVec3, t_min: f64, t_max: f64, filter: &dyn TriFilter) -> Option<Hit> {
+    pub fn intersect_filtered(
+        &self,
+        origin: DVec3,
+        dir: DVec3,
+        t_min: f64,
+        t_max: f64,
+        filter: &dyn TriFilter,
+    ) -> Option<Hit> {
         if self.tris.is_empty() || !origin.is_finite() || !dir.is_finite() || dir == DVec3::ZERO {
             return None;
         }
@@ -167,12 +203,25 @@ impl Bvh {
     }
 
     /// One closest-hit query per (origin, dir), in parallel.
-    pub fn intersect_many(&self, rays: &[(DVec3, DVec3)], t_min: f64, t_max: f64) -> Vec<Option<Hit>> {
-        rays.par_iter().map(|&(o, d)| self.intersect(o, d, t_min, t_max)).collect()
+    pub fn intersect_many(
+        &self,
+        rays: &[(DVec3, DVec3)],
+        t_min: f64,
+        t_max: f64,
+    ) -> Vec<Option<Hit>> {
+        rays.par_iter()
+            .map(|&(o, d)| self.intersect(o, d, t_min, t_max))
+            .collect()
     }
 
     /// Reference: every triangle tested (for tests and validation).
-    pub fn intersect_brute_force(&self, origin: DVec3, dir: DVec3, t_min: f64, t_max: f64) -> Option<Hit> {
+    pub fn intersect_brute_force(
+        &self,
+        origin: DVec3,
+        dir: DVec3,
+        t_min: f64,
+        t_max: f64,
+    ) -> Option<Hit> {
         let mut best: Option<Hit> = None;
         let mut t_best = t_max;
         for (i, tri) in self.tris.iter().enumerate() {
@@ -235,5 +284,11 @@ fn moller_trumbore(t: &[DVec3; 3], o: DVec3, d: DVec3, t_min: f64, t_max: f64) -
         return None;
     }
     // det = e1 · (d × e2) = −d · (e1 × e2): positive when the ray meets the front side.
-    Some(Hit { t: tt, tri: 0, u, v, back_facing: det < 0.0 })
+    Some(Hit {
+        t: tt,
+        tri: 0,
+        u,
+        v,
+        back_facing: det < 0.0,
+    })
 }

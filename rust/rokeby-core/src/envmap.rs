@@ -63,7 +63,9 @@ impl Layout {
         match s.to_ascii_lowercase().as_str() {
             "latlong" | "lat-long" | "lat_long" | "equirectangular" => Some(Layout::LatLong),
             "cube" | "cubemap" | "cube_map" => Some(Layout::Cube),
-            "sphere" | "spheremap" | "sphere_map" | "mirror_ball" | "mirrorball" => Some(Layout::Sphere),
+            "sphere" | "spheremap" | "sphere_map" | "mirror_ball" | "mirrorball" => {
+                Some(Layout::Sphere)
+            }
             "paraboloid" | "dual_paraboloid" | "dual-paraboloid" => Some(Layout::Paraboloid),
             _ => None,
         }
@@ -115,9 +117,17 @@ pub fn latlong_dir(u: f64, v: f64) -> DVec3 {
 pub fn cube_face_st(d: DVec3) -> (usize, f64, f64) {
     let (ax, ay, az) = (d.x.abs(), d.y.abs(), d.z.abs());
     let (face, sc, tc, ma) = if ax >= ay && ax >= az {
-        if d.x >= 0.0 { (0, -d.z, -d.y, ax) } else { (1, d.z, -d.y, ax) }
+        if d.x >= 0.0 {
+            (0, -d.z, -d.y, ax)
+        } else {
+            (1, d.z, -d.y, ax)
+        }
     } else if ay >= az {
-        if d.y >= 0.0 { (2, d.x, d.z, ay) } else { (3, d.x, -d.z, ay) }
+        if d.y >= 0.0 {
+            (2, d.x, d.z, ay)
+        } else {
+            (3, d.x, -d.z, ay)
+        }
     } else if d.z >= 0.0 {
         (4, d.x, -d.y, az)
     } else {
@@ -187,7 +197,11 @@ pub fn paraboloid_uv(d: DVec3) -> (usize, f64, f64) {
 pub fn paraboloid_dir(face: usize, u: f64, v: f64) -> DVec3 {
     let s = u * u + v * v;
     let z = (1.0 - s) / (1.0 + s);
-    DVec3::new(2.0 * u / (1.0 + s), 2.0 * v / (1.0 + s), if face == 0 { z } else { -z })
+    DVec3::new(
+        2.0 * u / (1.0 + s),
+        2.0 * v / (1.0 + s),
+        if face == 0 { z } else { -z },
+    )
 }
 
 /// Solid angle of row `i` of texels of an H×W lat-long map: (2π/W)(sin λ_top − sin λ_bottom).
@@ -212,25 +226,62 @@ pub struct EnvMap {
 
 impl EnvMap {
     /// Checks the shape (`arg` names the argument in messages) and that every value is finite.
-    pub fn new(layout: Layout, height: usize, width: usize, channels: usize, data: Vec<f32>, arg: &str) -> Result<EnvMap> {
+    pub fn new(
+        layout: Layout,
+        height: usize,
+        width: usize,
+        channels: usize,
+        data: Vec<f32>,
+        arg: &str,
+    ) -> Result<EnvMap> {
         check_dims(layout, height, width, channels, arg)?;
         let n = layout.faces() * height * width * channels;
         if data.len() != n {
-            return Err(RokebyError::invalid(arg, format!("expected {n} values ({}×{height}×{width}×{channels}), got {}", layout.faces(), data.len())));
+            return Err(RokebyError::invalid(
+                arg,
+                format!(
+                    "expected {n} values ({}×{height}×{width}×{channels}), got {}",
+                    layout.faces(),
+                    data.len()
+                ),
+            ));
         }
         if let Some(k) = data.iter().position(|v| !v.is_finite()) {
             let t = k / channels;
             let (f, r, c) = (t / (height * width), (t / width) % height, t % width);
-            let at = if layout.faces() > 1 { format!("face {f}, row {r}, column {c}") } else { format!("row {r}, column {c}") };
-            return Err(RokebyError::invalid(arg, format!("value at {at}, channel {} is {} (NaN/inf are not radiance)", k % channels, data[k])));
+            let at = if layout.faces() > 1 {
+                format!("face {f}, row {r}, column {c}")
+            } else {
+                format!("row {r}, column {c}")
+            };
+            return Err(RokebyError::invalid(
+                arg,
+                format!(
+                    "value at {at}, channel {} is {} (NaN/inf are not radiance)",
+                    k % channels,
+                    data[k]
+                ),
+            ));
         }
-        Ok(EnvMap { layout, height, width, channels, data })
+        Ok(EnvMap {
+            layout,
+            height,
+            width,
+            channels,
+            data,
+        })
     }
 
     /// A map filled with zeros (shape checked).
     pub fn zeros(layout: Layout, height: usize, width: usize, channels: usize) -> Result<EnvMap> {
         check_dims(layout, height, width, channels, "size")?;
-        Ok(EnvMap { layout, height, width, channels, data: vec![0.0; layout.faces() * height * width * channels] })
+        Ok(EnvMap {
+            layout,
+            height,
+            width,
+            channels,
+            data: vec![0.0; layout.faces() * height * width * channels],
+        })
     }
 
     pub fn faces(&self) -> usize {
@@ -354,7 +405,12 @@ impl EnvMap {
         for o in out[..c].iter_mut() {
             *o = 0.0;
         }
-        for (i, j, wt) in [(i0, j0, (1.0 - fx) * (1.0 - fy)), (i0, j0 + 1, fx * (1.0 - fy)), (i0 + 1, j0, (1.0 - fx) * fy), (i0 + 1, j0 + 1, fx * fy)] {
+        for (i, j, wt) in [
+            (i0, j0, (1.0 - fx) * (1.0 - fy)),
+            (i0, j0 + 1, fx * (1.0 - fy)),
+            (i0 + 1, j0, (1.0 - fx) * fy),
+            (i0 + 1, j0 + 1, fx * fy),
+        ] {
             let k = self.offset(face, i.clamp(0, h - 1) as usize, j.clamp(0, w - 1) as usize);
             for ch in 0..c {
                 out[ch] += wt * self.data[k + ch];
@@ -371,7 +427,12 @@ impl EnvMap {
         for o in out[..self.channels].iter_mut() {
             *o = 0.0;
         }
-        let taps = [(i0, j0, (1.0 - fx) * (1.0 - fy)), (i0, j0 + 1, fx * (1.0 - fy)), (i0 + 1, j0, (1.0 - fx) * fy), (i0 + 1, j0 + 1, fx * fy)];
+        let taps = [
+            (i0, j0, (1.0 - fx) * (1.0 - fy)),
+            (i0, j0 + 1, fx * (1.0 - fy)),
+            (i0 + 1, j0, (1.0 - fx) * fy),
+            (i0 + 1, j0 + 1, fx * fy),
+        ];
         for (i, j, wt) in taps {
             if wt != 0.0 {
                 self.add_tap(face, i, j, wt, out);
@@ -391,64 +452,99 @@ impl EnvMap {
         let dirs = finite_dirs(dirs, "directions")?;
         let c = self.channels;
         let mut out = vec![0.0f32; dirs.len() * c];
-        out.par_chunks_mut(c).zip(dirs.par_iter()).for_each(|(o, d)| self.sample(*d, o));
+        out.par_chunks_mut(c)
+            .zip(dirs.par_iter())
+            .for_each(|(o, d)| self.sample(*d, o));
         Ok(out)
     }
 
     /// The same environment on another parametrisation (`height`×`width` texels per face; cube,
     /// sphere and paraboloid faces must be square). Each target texel averages `supersample`²
     /// bilinear lookups at a regular sub-texel grid (1: the texel centre only).
-    pub fn convert(&self, layout: Layout, height: usize, width: usize, supersample: usize) -> Result<EnvMap> {
+    pub fn convert(
+        &self,
+        layout: Layout,
+        height: usize,
+        width: usize,
+        supersample: usize,
+    ) -> Result<EnvMap> {
         if supersample == 0 || supersample > 16 {
-            return Err(RokebyError::invalid("supersample", format!("must be 1..16, got {supersample}")));
+            return Err(RokebyError::invalid(
+                "supersample",
+                format!("must be 1..16, got {supersample}"),
+            ));
         }
         let mut out = EnvMap::zeros(layout, height, width, self.channels)?;
         let c = self.channels;
         let n = supersample;
         let inv = 1.0 / (n * n) as f32;
         let row_len = width * c;
-        out.data.par_chunks_mut(row_len).enumerate().for_each(|(fr, row)| {
-            let (face, i) = (fr / height, fr % height);
-            let mut tmp = vec![0.0f32; c];
-            for j in 0..width {
-                let o = &mut row[j * c..(j + 1) * c];
-                for a in 0..n {
-                    for b in 0..n {
-                        let x = j as f64 + (b as f64 + 0.5) / n as f64;
-                        let y = i as f64 + (a as f64 + 0.5) / n as f64;
-                        let d = out_direction(layout, height, width, face, x, y);
-                        self.sample(d, &mut tmp);
-                        for ch in 0..c {
-                            o[ch] += tmp[ch];
+        out.data
+            .par_chunks_mut(row_len)
+            .enumerate()
+            .for_each(|(fr, row)| {
+                let (face, i) = (fr / height, fr % height);
+                let mut tmp = vec![0.0f32; c];
+                for j in 0..width {
+                    let o = &mut row[j * c..(j + 1) * c];
+                    for a in 0..n {
+                        for b in 0..n {
+                            let x = j as f64 + (b as f64 + 0.5) / n as f64;
+                            let y = i as f64 + (a as f64 + 0.5) / n as f64;
+                            let d = out_direction(layout, height, width, face, x, y);
+                            self.sample(d, &mut tmp);
+                            for ch in 0..c {
+                                o[ch] += tmp[ch];
+                            }
+                        }
+                    }
+                    if n > 1 {
+                        for v in o.iter_mut() {
+                            *v *= inv;
                         }
                     }
                 }
-                if n > 1 {
-                    for v in o.iter_mut() {
-                        *v *= inv;
-                    }
-                }
-            }
-        });
+            });
         Ok(out)
     }
 }
 
 /// Direction at map coordinates of a map of the given layout and size (without the map).
 #[inline]
-fn out_direction(layout: Layout, height: usize, width: usize, face: usize, x: f64, y: f64) -> DVec3 {
-    let probe = EnvMap { layout, height, width, channels: 0, data: Vec::new() };
+fn out_direction(
+    layout: Layout,
+    height: usize,
+    width: usize,
+    face: usize,
+    x: f64,
+    y: f64,
+) -> DVec3 {
+    let probe = EnvMap {
+        layout,
+        height,
+        width,
+        channels: 0,
+        data: Vec::new(),
+    };
     probe.direction(face, x, y)
 }
 
 /// The most values one map may hold (4 GiB of float32): larger requests are errors, not aborts.
 pub const MAX_VALUES: usize = 1 << 30;
 
-fn check_dims(layout: Layout, height: usize, width: usize, channels: usize, arg: &str) -> Result<()> {
+fn check_dims(
+    layout: Layout,
+    height: usize,
+    width: usize,
+    channels: usize,
+    arg: &str,
+) -> Result<()> {
     if channels == 0 {
         return Err(RokebyError::invalid(arg, "needs at least one channel"));
     }
-    let n = [layout.faces(), height, width, channels].iter().try_fold(1usize, |a, &b| a.checked_mul(b));
+    let n = [layout.faces(), height, width, channels]
+        .iter()
+        .try_fold(1usize, |a, &b| a.checked_mul(b));
     if n.map_or(true, |n| n > MAX_VALUES) {
         return Err(RokebyError::invalid(
             arg,
@@ -458,12 +554,21 @@ fn check_dims(layout: Layout, height: usize, width: usize, channels: usize, arg:
     match layout {
         Layout::LatLong => {
             if height < 2 || width < 2 {
-                return Err(RokebyError::invalid(arg, format!("a lat-long map needs at least 2×2 texels, got {height}×{width}")));
+                return Err(RokebyError::invalid(
+                    arg,
+                    format!("a lat-long map needs at least 2×2 texels, got {height}×{width}"),
+                ));
             }
         }
         _ => {
             if height != width || height == 0 {
-                return Err(RokebyError::invalid(arg, format!("{} faces must be square and non-empty, got {height}×{width}", layout.name())));
+                return Err(RokebyError::invalid(
+                    arg,
+                    format!(
+                        "{} faces must be square and non-empty, got {height}×{width}",
+                        layout.name()
+                    ),
+                ));
             }
         }
     }
@@ -473,14 +578,20 @@ fn check_dims(layout: Layout, height: usize, width: usize, channels: usize, arg:
 /// N×3 directions, finite and non-zero.
 pub fn finite_dirs(dirs: &[f32], arg: &str) -> Result<Vec<DVec3>> {
     if dirs.len() % 3 != 0 {
-        return Err(RokebyError::invalid(arg, format!("expected N×3 values, got {}", dirs.len())));
+        return Err(RokebyError::invalid(
+            arg,
+            format!("expected N×3 values, got {}", dirs.len()),
+        ));
     }
     dirs.chunks_exact(3)
         .enumerate()
         .map(|(i, c)| {
             let d = DVec3::new(c[0] as f64, c[1] as f64, c[2] as f64);
             if !d.is_finite() || d.length_squared() < 1e-24 {
-                Err(RokebyError::invalid(arg, format!("direction {i} is zero or not finite")))
+                Err(RokebyError::invalid(
+                    arg,
+                    format!("direction {i} is zero or not finite"),
+                ))
             } else {
                 Ok(d.normalize())
             }

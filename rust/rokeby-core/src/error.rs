@@ -35,13 +35,23 @@ pub enum RokebyError {
 
 impl RokebyError {
     pub fn invalid(arg: impl Into<String>, msg: impl Into<String>) -> Self {
-        RokebyError::InvalidArgument { arg: arg.into(), msg: msg.into() }
+        RokebyError::InvalidArgument {
+            arg: arg.into(),
+            msg: msg.into(),
+        }
     }
     pub fn numerical(what: impl Into<String>, msg: impl Into<String>) -> Self {
-        RokebyError::Numerical { what: what.into(), msg: msg.into() }
+        RokebyError::Numerical {
+            what: what.into(),
+            msg: msg.into(),
+        }
     }
     /// Out of memory for `what` that needs `bytes` (over `limit`, when known).
-    pub fn out_of_memory(what: impl Into<String>, bytes: Option<u128>, limit: Option<u128>) -> Self {
+    pub fn out_of_memory(
+        what: impl Into<String>,
+        bytes: Option<u128>,
+        limit: Option<u128>,
+    ) -> Self {
         let need = match bytes {
             Some(b) => format!("needs {} of memory", human_bytes(b)),
             None => "ran out of memory".into(),
@@ -50,7 +60,10 @@ impl RokebyError {
             Some(l) => format!("{need}, more than the limit of {} (ROKEBY_MAX_ALLOC_BYTES, or the machine's memory)", human_bytes(l)),
             None => format!("{need}: the allocator refused it"),
         };
-        RokebyError::OutOfMemory { what: what.into(), msg }
+        RokebyError::OutOfMemory {
+            what: what.into(),
+            msg,
+        }
     }
     pub fn internal(msg: impl Into<String>) -> Self {
         RokebyError::Internal(msg.into())

@@ -66,7 +66,10 @@ impl Mesh {
     /// `vertices` (V×3 flattened), `faces` (F×3 flattened, any integer type converted to i64).
     pub fn new(vertices: &[f32], faces: &[i64]) -> Result<Self> {
         if vertices.len() % 3 != 0 || faces.len() % 3 != 0 {
-            return Err(RokebyError::invalid("vertices", "vertices and faces must have 3 columns"));
+            return Err(RokebyError::invalid(
+                "vertices",
+                "vertices and faces must have 3 columns",
+            ));
         }
         if vertices.is_empty() {
             return Err(RokebyError::invalid("vertices", "the mesh has no vertices"));
@@ -75,21 +78,41 @@ impl Mesh {
             return Err(RokebyError::invalid("faces", "the mesh has no faces"));
         }
         if let Some(i) = vertices.iter().position(|x| !x.is_finite()) {
-            return Err(RokebyError::invalid("vertices", format!("vertex {} is not finite", i / 3)));
+            return Err(RokebyError::invalid(
+                "vertices",
+                format!("vertex {} is not finite", i / 3),
+            ));
         }
         let nv = vertices.len() / 3;
         if nv >= u32::MAX as usize {
-            return Err(RokebyError::invalid("vertices", format!("{nv} vertices is more than this solver supports (2^32 - 1)")));
+            return Err(RokebyError::invalid(
+                "vertices",
+                format!("{nv} vertices is more than this solver supports (2^32 - 1)"),
+            ));
         }
         if let Some(i) = faces.iter().position(|&x| x < 0 || x as u64 >= nv as u64) {
             return Err(RokebyError::invalid(
                 "faces",
-                format!("face {} refers to vertex {} but the mesh has vertices 0..{}", i / 3, faces[i], nv - 1),
+                format!(
+                    "face {} refers to vertex {} but the mesh has vertices 0..{}",
+                    i / 3,
+                    faces[i],
+                    nv - 1
+                ),
             ));
         }
-        let v = vertices.chunks_exact(3).map(|c| DVec3::new(c[0] as f64, c[1] as f64, c[2] as f64)).collect();
-        let f = faces.chunks_exact(3).map(|c| [c[0] as usize, c[1] as usize, c[2] as usize]).collect();
-        Ok(Mesh { vertices: v, faces: f })
+        let v = vertices
+            .chunks_exact(3)
+            .map(|c| DVec3::new(c[0] as f64, c[1] as f64, c[2] as f64))
+            .collect();
+        let f = faces
+            .chunks_exact(3)
+            .map(|c| [c[0] as usize, c[1] as usize, c[2] as usize])
+            .collect();
+        Ok(Mesh {
+            vertices: v,
+            faces: f,
+        })
     }
 
     pub fn point(&self, p: &SurfacePoint) -> DVec3 {
@@ -130,7 +153,10 @@ impl Graph {
             start[i + 1] += start[i];
         }
         let nbr: Vec<u32> = edges.iter().map(|e| e.1 as u32).collect();
-        let len = edges.iter().map(|&(a, b)| mesh.vertices[a].distance(mesh.vertices[b]) as f32).collect();
+        let len = edges
+            .iter()
+            .map(|&(a, b)| mesh.vertices[a].distance(mesh.vertices[b]) as f32)
+            .collect();
         Graph { start, nbr, len }
     }
 
@@ -153,7 +179,10 @@ impl PartialOrd for HeapItem {
 impl Ord for HeapItem {
     fn cmp(&self, other: &Self) -> Ordering {
         // Min-heap on distance.
-        other.0.total_cmp(&self.0).then_with(|| other.1.cmp(&self.1))
+        other
+            .0
+            .total_cmp(&self.0)
+            .then_with(|| other.1.cmp(&self.1))
     }
 }
 
@@ -215,11 +244,25 @@ pub struct GeodesicSolver {
 /// `off_scale · W + diag`, where W holds one weight per unique edge (i > j) and `diag` the diagonal.
 /// Built from compact per-edge sums rather than per-triangle triplets, to keep the peak memory of
 /// large meshes low.
-fn lower_matrix(n: usize, edges: &[(u32, u32, f64)], off_scale: f64, diag: &[f64]) -> Result<SparseColMat<u32, f64>> {
+fn lower_matrix(
+    n: usize,
+    edges: &[(u32, u32, f64)],
+    off_scale: f64,
+    diag: &[f64],
+) -> Result<SparseColMat<u32, f64>> {
     let mut t: Vec<Triplet<u32, u32, f64>> = Vec::with_capacity(edges.len() + n);
-    t.extend(edges.iter().map(|&(i, j, w)| Triplet::new(i, j, off_scale * w)));
-    t.extend(diag.iter().enumerate().map(|(i, &d)| Triplet::new(i as u32, i as u32, d)));
-    SparseColMat::try_new_from_triplets(n, n, &t).map_err(|e| RokebyError::invalid("mesh", format!("sparse assembly failed: {e:?}")))
+    t.extend(
+        edges
+            .iter()
+            .map(|&(i, j, w)| Triplet::new(i, j, off_scale * w)),
+    );
+    t.extend(
+        diag.iter()
+            .enumerate()
+            .map(|(i, &d)| Triplet::new(i as u32, i as u32, d)),
+    );
+    SparseColMat::try_new_from_triplets(n, n, &t)
+        .map_err(|e| RokebyError::invalid("mesh", format!("sparse assembly failed: {e:?}")))
 }
 
 impl GeodesicSolver {
@@ -252,8 +295,19 @@ impl GeodesicSolver {
             }
             next += 1;
         }
-        let mean_edge = if graph.len.is_empty() { 0.0 } else { graph.len.iter().map(|&x| x as f64).sum::<f64>() / graph.len.len() as f64 };
-        GeodesicSolver { mesh, average_boundary, graph, component, heat: OnceLock::new(), mean_edge }
+        let mean_edge = if graph.len.is_empty() {
+            0.0
+        } else {
+            graph.len.iter().map(|&x| x as f64).sum::<f64>() / graph.len.len() as f64
+        };
+        GeodesicSolver {
+            mesh,
+            average_boundary,
+            graph,
+            component,
+            heat: OnceLock::new(),
+            mean_edge,
+        }
     }
 
     pub fn mesh(&self) -> &Mesh {
@@ -272,7 +326,10 @@ impl GeodesicSolver {
         let mut out = Vec::with_capacity(sets.len());
         for (s, set) in sets.iter().enumerate() {
             if set.is_empty() {
-                return Err(RokebyError::invalid("sources", format!("source set {s} is empty")));
+                return Err(RokebyError::invalid(
+                    "sources",
+                    format!("source set {s} is empty"),
+                ));
             }
             let mut fixed = Vec::with_capacity(set.len());
             for src in set {
@@ -309,7 +366,10 @@ impl GeodesicSolver {
             Method::Dijkstra => sets.par_iter().map(|s| self.dijkstra(s)).collect(),
             Method::Heat => self.heat_method(&sets)?,
         };
-        Ok(rows.into_iter().flat_map(|r| r.into_iter().map(|x| x as f32)).collect())
+        Ok(rows
+            .into_iter()
+            .flat_map(|r| r.into_iter().map(|x| x as f32))
+            .collect())
     }
 
     /// Exact distances from the sources to the vertices of their own triangles (and the 1-ring of
@@ -361,7 +421,10 @@ impl GeodesicSolver {
     }
 
     fn heat_factors(&self) -> Result<&Heat> {
-        self.heat.get_or_init(|| self.build_heat()).as_ref().map_err(|e| e.clone())
+        self.heat
+            .get_or_init(|| self.build_heat())
+            .as_ref()
+            .map_err(|e| e.clone())
     }
 
     /// Cotangent Laplacian L of the intrinsic Delaunay triangulation (positive semi-definite, and
@@ -374,7 +437,10 @@ impl GeodesicSolver {
             .mesh
             .faces
             .iter()
-            .map(|f| [0, 1, 2].map(|k| self.mesh.vertices[f[k]].distance(self.mesh.vertices[f[(k + 1) % 3]])))
+            .map(|f| {
+                [0, 1, 2]
+                    .map(|k| self.mesh.vertices[f[k]].distance(self.mesh.vertices[f[(k + 1) % 3]]))
+            })
             .collect();
         let tri = crate::intrinsic::Intrinsic::delaunay(&self.mesh.faces, lengths);
         let flips = tri.flips;
@@ -394,7 +460,9 @@ impl GeodesicSolver {
             }
             total_area += area;
             // l[k] is the edge from corner k to k+1, so the edge opposite corner k is l[(k+1)%3].
-            let cot = [0, 1, 2].map(|k| crate::intrinsic::cot_opposite(l[(k + 1) % 3], l[k], l[(k + 2) % 3], area));
+            let cot = [0, 1, 2].map(|k| {
+                crate::intrinsic::cot_opposite(l[(k + 1) % 3], l[k], l[(k + 2) % 3], area)
+            });
             for k in 0..3 {
                 mass[f[k]] += area / 3.0;
                 let (j, m) = (f[(k + 1) % 3], f[(k + 2) % 3]);
@@ -404,7 +472,12 @@ impl GeodesicSolver {
                 ldiag[m] += w;
             }
             let p = crate::intrinsic::layout(*l);
-            faces.push(HeatFace { v: f.map(|x| x as u32), l01: p[1].x, p2: p[2], cot });
+            faces.push(HeatFace {
+                v: f.map(|x| x as u32),
+                l01: p[1].x,
+                p2: p[2],
+                cot,
+            });
         }
         drop(tri);
         edges.par_sort_unstable_by(|a, b| (a.0, a.1).cmp(&(b.0, b.1)));
@@ -456,7 +529,8 @@ impl GeodesicSolver {
         // All three matrices share one sparsity pattern: one symbolic factorisation (ordering and
         // elimination tree) serves them all, which saves its memory and time twice over.
         let heat_m = lower_matrix(nv, &edges, t, &heat_diag)?;
-        let symbolic = SymbolicLlt::try_new(heat_m.symbolic(), Side::Lower).map_err(|e| factor_error("symbolic", format!("{e:?}")))?;
+        let symbolic = SymbolicLlt::try_new(heat_m.symbolic(), Side::Lower)
+            .map_err(|e| factor_error("symbolic", format!("{e:?}")))?;
         let factor = |m: SparseColMat<u32, f64>, what: &str| {
             Llt::try_new_with_symbolic(symbolic.clone(), m.as_ref(), Side::Lower)
                 .map_err(|e| factor_error(what, format!("{e:?}")))
@@ -464,19 +538,32 @@ impl GeodesicSolver {
         let heat_dirichlet = if self.average_boundary && boundary.iter().any(|&b| b) {
             // u = 0 on the boundary by a penalty 1e8 times the largest diagonal entry.
             let big = 1e8 * heat_diag.iter().fold(0.0f64, |m, x| m.max(*x)).max(1e-300);
-            let d: Vec<f64> = heat_diag.iter().zip(&boundary).map(|(&x, &b)| if b { x + big } else { x }).collect();
+            let d: Vec<f64> = heat_diag
+                .iter()
+                .zip(&boundary)
+                .map(|(&x, &b)| if b { x + big } else { x })
+                .collect();
             Some(factor(lower_matrix(nv, &edges, t, &d)?, "heat")?)
         } else {
             None
         };
         let heat = factor(heat_m, "heat")?;
         let poisson = factor(lower_matrix(nv, &edges, 1.0, &pois_diag)?, "Poisson")?;
-        Ok(Heat { heat, heat_dirichlet, poisson, faces, flips })
+        Ok(Heat {
+            heat,
+            heat_dirichlet,
+            poisson,
+            faces,
+            flips,
+        })
     }
 
     /// Edge flips the intrinsic Delaunay triangulation needed (None before the first heat query).
     pub fn intrinsic_flips(&self) -> Option<usize> {
-        self.heat.get().and_then(|h| h.as_ref().ok()).map(|h| h.flips)
+        self.heat
+            .get()
+            .and_then(|h| h.as_ref().ok())
+            .map(|h| h.flips)
     }
 
     /// The normalised heat gradient direction X = −∇u/|∇u| of every face (in its 2D layout; zero
@@ -592,13 +679,26 @@ impl GeodesicSolver {
                         Source::Point(p) => self.mesh.point(&p),
                     })
                     .collect();
-                let chord = |v: usize| src_pts.iter().map(|p| p.distance(self.mesh.vertices[v])).fold(f64::INFINITY, f64::min);
+                let chord = |v: usize| {
+                    src_pts
+                        .iter()
+                        .map(|p| p.distance(self.mesh.vertices[v]))
+                        .fold(f64::INFINITY, f64::min)
+                };
                 let (r1, r2) = (NEAR_R1 * self.mean_edge, NEAR_R2 * self.mean_edge);
                 for (fi, hf) in hm.faces.iter().enumerate() {
                     let p = hf.layout();
-                    let cd = [chord(hf.vertex(0)), chord(hf.vertex(1)), chord(hf.vertex(2))];
+                    let cd = [
+                        chord(hf.vertex(0)),
+                        chord(hf.vertex(1)),
+                        chord(hf.vertex(2)),
+                    ];
                     let rmin = cd[0].min(cd[1]).min(cd[2]);
-                    let w_near = if rmin < r2 && r2 > 0.0 { 1.0 - crate::region::smooth_step((rmin - r1) / (r2 - r1)) } else { 0.0 };
+                    let w_near = if rmin < r2 && r2 > 0.0 {
+                        1.0 - crate::region::smooth_step((rmin - r1) / (r2 - r1))
+                    } else {
+                        0.0
+                    };
                     let mut x = dirs[fi];
                     if w_near > 0.0 {
                         let mut gc = glam::DVec2::ZERO;
@@ -639,13 +739,17 @@ impl GeodesicSolver {
             .map(|s| {
                 let set = &sets[s];
                 let mut row: Vec<f64> = (0..nv).map(|i| phi[(i, s)]).collect();
-                let mut shift: std::collections::HashMap<usize, f64> = std::collections::HashMap::new();
+                let mut shift: std::collections::HashMap<usize, f64> =
+                    std::collections::HashMap::new();
                 for src in set {
                     let (c, val) = match *src {
                         Source::Vertex(v) => (self.component[v], row[v]),
                         Source::Point(p) => {
                             let f = self.mesh.faces[p.face];
-                            (self.component[f[0]], (0..3).map(|k| p.bary[k] * row[f[k]]).sum())
+                            (
+                                self.component[f[0]],
+                                (0..3).map(|k| p.bary[k] * row[f[k]]).sum(),
+                            )
                         }
                     };
                     let e = shift.entry(c).or_insert(f64::INFINITY);
@@ -659,7 +763,10 @@ impl GeodesicSolver {
                 }
                 for (v, d) in self.seeds(set) {
                     row[v] = d;
-                    if let Some(Source::Vertex(src)) = set.iter().find(|s| matches!(s, Source::Vertex(x) if *x == v)) {
+                    if let Some(Source::Vertex(src)) = set
+                        .iter()
+                        .find(|s| matches!(s, Source::Vertex(x) if *x == v))
+                    {
                         for (w, l) in self.graph.neighbours(*src) {
                             row[w] = row[w].min(l);
                         }
@@ -677,9 +784,17 @@ impl GeodesicSolver {
 /// `n_vertices`; the result is (rows, points). A vertex whose weight is exactly 0 does not
 /// enter the sum (an unreachable +inf there does not turn the point into NaN); a result that
 /// finite input cannot hold in float32 is an error, not an inf.
-pub fn interpolate(values: &[f32], n_vertices: usize, faces: &[[usize; 3]], points: &[SurfacePoint]) -> Result<Vec<f32>> {
+pub fn interpolate(
+    values: &[f32],
+    n_vertices: usize,
+    faces: &[[usize; 3]],
+    points: &[SurfacePoint],
+) -> Result<Vec<f32>> {
     let rows = values.len() / n_vertices.max(1);
-    let mut out = crate::alloc::with_capacity::<f32>("interpolate output (rows × points)", &[rows, points.len()])?;
+    let mut out = crate::alloc::with_capacity::<f32>(
+        "interpolate output (rows × points)",
+        &[rows, points.len()],
+    )?;
     for r in 0..rows {
         let row = &values[r * n_vertices..(r + 1) * n_vertices];
         for (k, p) in points.iter().enumerate() {
@@ -694,7 +809,10 @@ pub fn interpolate(values: &[f32], n_vertices: usize, faces: &[[usize; 3]], poin
                 }
             }
             if finite_in && v.is_finite() && v.abs() > f32::MAX as f64 {
-                return Err(RokebyError::invalid("values", format!("the value interpolated at point {k} ({v:e}) overflows float32")));
+                return Err(RokebyError::invalid(
+                    "values",
+                    format!("the value interpolated at point {k} ({v:e}) overflows float32"),
+                ));
             }
             out.push(v as f32);
         }
@@ -710,6 +828,9 @@ pub(crate) fn factor_error(what: &str, debug: String) -> RokebyError {
     } else if what == "symbolic" {
         RokebyError::numerical("mesh", format!("symbolic factorisation failed ({debug})"))
     } else {
-        RokebyError::numerical("mesh", format!("the {what} system is not positive definite ({debug})"))
+        RokebyError::numerical(
+            "mesh",
+            format!("the {what} system is not positive definite ({debug})"),
+        )
     }
 }

@@ -74,7 +74,9 @@ impl Intrinsic {
                     let (h1, h2) = (keyed[i].2, keyed[i + 1].2);
                     let (f1, k1, f2, k2) = (h1 / 3, h1 % 3, h2 / 3, h2 % 3);
                     // Consistent orientation: the two halfedges run in opposite directions.
-                    if faces[f1][k1] == faces[f2][(k2 + 1) % 3] && faces[f1][(k1 + 1) % 3] == faces[f2][k2] {
+                    if faces[f1][k1] == faces[f2][(k2 + 1) % 3]
+                        && faces[f1][(k1 + 1) % 3] == faces[f2][k2]
+                    {
                         twin[h1] = h2;
                         twin[h2] = h1;
                     }
@@ -86,7 +88,9 @@ impl Intrinsic {
             let a = area_from_lengths(l[0], l[1], l[2]);
             a > 1e-12 * l.iter().fold(0.0f64, |m, x| m.max(*x)).powi(2)
         };
-        let mut stack: Vec<usize> = (0..3 * nf).filter(|&h| twin[h] != NONE && h < twin[h]).collect();
+        let mut stack: Vec<usize> = (0..3 * nf)
+            .filter(|&h| twin[h] != NONE && h < twin[h])
+            .collect();
         let mut in_stack = vec![false; 3 * nf];
         for &h in &stack {
             in_stack[h] = true;
@@ -158,7 +162,11 @@ impl Intrinsic {
             }
             let _ = (h_bc, h_ca, h_ad, h_db);
         }
-        Intrinsic { faces, lengths, flips }
+        Intrinsic {
+            faces,
+            lengths,
+            flips,
+        }
     }
 }
 
@@ -170,7 +178,12 @@ mod tests {
     fn flips_the_long_diagonal_of_a_thin_rhombus() {
         // Square-ish quad a(0,0) b(2,0) split along a–b with apexes c(1, 0.2) and d(1, -0.2):
         // the edge a–b sees two obtuse angles and must flip to c–d.
-        let pts = [DVec2::new(0.0, 0.0), DVec2::new(2.0, 0.0), DVec2::new(1.0, 0.2), DVec2::new(1.0, -0.2)];
+        let pts = [
+            DVec2::new(0.0, 0.0),
+            DVec2::new(2.0, 0.0),
+            DVec2::new(1.0, 0.2),
+            DVec2::new(1.0, -0.2),
+        ];
         let faces = vec![[0, 1, 2], [1, 0, 3]];
         let len = |f: &[usize; 3]| [0, 1, 2].map(|k| pts[f[k]].distance(pts[f[(k + 1) % 3]]));
         let lengths = faces.iter().map(len).collect();
@@ -178,7 +191,11 @@ mod tests {
         assert_eq!(t.flips, 1);
         let diag = t.lengths[0][2];
         assert!((diag - 0.4).abs() < 1e-12, "new edge c–d has length {diag}");
-        let total: f64 = t.lengths.iter().map(|l| area_from_lengths(l[0], l[1], l[2])).sum();
+        let total: f64 = t
+            .lengths
+            .iter()
+            .map(|l| area_from_lengths(l[0], l[1], l[2]))
+            .sum();
         assert!((total - 0.4).abs() < 1e-12, "area is kept: {total}");
     }
 }

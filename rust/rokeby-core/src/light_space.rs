@@ -43,9 +43,15 @@ impl LightFrame {
     pub fn new(light: Light, vertices: &[DVec3]) -> Result<Self> {
         light.validate()?;
         if vertices.is_empty() {
-            return Err(RokebyError::invalid("vertices", "the caster has no vertices"));
+            return Err(RokebyError::invalid(
+                "vertices",
+                "the caster has no vertices",
+            ));
         }
-        let (mn, mx) = vertices.iter().fold((DVec3::splat(f64::INFINITY), DVec3::splat(f64::NEG_INFINITY)), |(a, b), &p| (a.min(p), b.max(p)));
+        let (mn, mx) = vertices.iter().fold(
+            (DVec3::splat(f64::INFINITY), DVec3::splat(f64::NEG_INFINITY)),
+            |(a, b), &p| (a.min(p), b.max(p)),
+        );
         let centre = (mn + mx) * 0.5;
         let radius = ((mx - mn) * 0.5).length().max(1e-300);
         // The fuzzer found a vertex at 1e300 giving radius = inf and a NaN frame.
@@ -83,7 +89,14 @@ impl LightFrame {
                 if far - near < 1e-9 * far {
                     far = near * 2.0;
                 }
-                Ok(LightFrame { light, origin: l, basis, half: half.max(1e-12), near, far })
+                Ok(LightFrame {
+                    light,
+                    origin: l,
+                    basis,
+                    half: half.max(1e-12),
+                    near,
+                    far,
+                })
             }
             Light::Directional(d) => {
                 let axis = d.normalize();
@@ -101,7 +114,14 @@ impl LightFrame {
                 if far - near < 1e-9 * radius {
                     far = near + radius;
                 }
-                Ok(LightFrame { light, origin, basis, half: half.max(1e-12 * radius), near, far })
+                Ok(LightFrame {
+                    light,
+                    origin,
+                    basis,
+                    half: half.max(1e-12 * radius),
+                    near,
+                    far,
+                })
             }
         }
     }
@@ -110,8 +130,16 @@ impl LightFrame {
     pub fn to_frustum(&self, p: DVec3) -> DVec3 {
         let q = self.basis * (p - self.origin);
         match self.light {
-            Light::Point(_) => DVec3::new(q.x / (q.z * self.half), q.y / (q.z * self.half), self.far / (self.far - self.near) * (1.0 - self.near / q.z)),
-            Light::Directional(_) => DVec3::new(q.x / self.half, q.y / self.half, (q.z - self.near) / (self.far - self.near)),
+            Light::Point(_) => DVec3::new(
+                q.x / (q.z * self.half),
+                q.y / (q.z * self.half),
+                self.far / (self.far - self.near) * (1.0 - self.near / q.z),
+            ),
+            Light::Directional(_) => DVec3::new(
+                q.x / self.half,
+                q.y / self.half,
+                (q.z - self.near) / (self.far - self.near),
+            ),
         }
     }
 
@@ -122,7 +150,11 @@ impl LightFrame {
                 let z = self.near / (1.0 - c.z * (self.far - self.near) / self.far);
                 DVec3::new(c.x * z * self.half, c.y * z * self.half, z)
             }
-            Light::Directional(_) => DVec3::new(c.x * self.half, c.y * self.half, self.near + c.z * (self.far - self.near)),
+            Light::Directional(_) => DVec3::new(
+                c.x * self.half,
+                c.y * self.half,
+                self.near + c.z * (self.far - self.near),
+            ),
         };
         self.basis.transpose() * q + self.origin
     }

@@ -48,23 +48,43 @@ impl Mls2d {
     /// `falloff` is Schaefer's α (weights 1/d^{2α}); 1 is the paper's choice.
     pub fn new(p: Vec<DVec2>, q: Vec<DVec2>, style: MlsStyle, falloff: f64) -> Result<Self> {
         if p.len() != q.len() {
-            return Err(RokebyError::invalid("controls", format!("{} rest points but {} targets", p.len(), q.len())));
+            return Err(RokebyError::invalid(
+                "controls",
+                format!("{} rest points but {} targets", p.len(), q.len()),
+            ));
         }
         if p.is_empty() {
-            return Err(RokebyError::invalid("controls", "at least one control point is needed"));
+            return Err(RokebyError::invalid(
+                "controls",
+                "at least one control point is needed",
+            ));
         }
         if !p.iter().chain(&q).all(|x| x.is_finite()) {
-            return Err(RokebyError::invalid("controls", "control points must be finite"));
+            return Err(RokebyError::invalid(
+                "controls",
+                "control points must be finite",
+            ));
         }
         // The fuzzer found a control point at −1e300: its squared offsets overflow (inf · 0 = NaN
         // in the moment matrices), so coordinates are bounded where squares stay finite.
         if !p.iter().chain(&q).all(|x| x.abs().max_element() <= 1e150) {
-            return Err(RokebyError::invalid("controls", "control point coordinates must be within ±1e150"));
+            return Err(RokebyError::invalid(
+                "controls",
+                "control point coordinates must be within ±1e150",
+            ));
         }
         if !(falloff.is_finite() && falloff > 0.0) {
-            return Err(RokebyError::invalid("falloff", format!("must be positive and finite, got {falloff}")));
+            return Err(RokebyError::invalid(
+                "falloff",
+                format!("must be positive and finite, got {falloff}"),
+            ));
         }
-        Ok(Mls2d { p, q, style, falloff })
+        Ok(Mls2d {
+            p,
+            q,
+            style,
+            falloff,
+        })
     }
 
     /// f(v).
@@ -80,10 +100,23 @@ impl Mls2d {
         // Weights 1/d^{2α} scaled by the nearest one's, (d²_min/d²)^α ∈ (0, 1] (the deformation is
         // invariant to a common factor): the fuzzer found α = 1e30 making every 1/d^{2α} 0 or inf.
         let dmin = d2s.iter().fold(f64::INFINITY, |a, &b| a.min(b));
-        let w: Vec<f64> = d2s.iter().map(|&d2| (dmin / d2).powf(self.falloff)).collect();
+        let w: Vec<f64> = d2s
+            .iter()
+            .map(|&d2| (dmin / d2).powf(self.falloff))
+            .collect();
         let ws: f64 = w.iter().sum();
-        let ps = self.p.iter().zip(&w).fold(DVec2::ZERO, |a, (&x, &wi)| a + x * wi) / ws;
-        let qs = self.q.iter().zip(&w).fold(DVec2::ZERO, |a, (&x, &wi)| a + x * wi) / ws;
+        let ps = self
+            .p
+            .iter()
+            .zip(&w)
+            .fold(DVec2::ZERO, |a, (&x, &wi)| a + x * wi)
+            / ws;
+        let qs = self
+            .q
+            .iter()
+            .zip(&w)
+            .fold(DVec2::ZERO, |a, (&x, &wi)| a + x * wi)
+            / ws;
         let x = v - ps;
         let similarity = || {
             let mut num = DVec2::ZERO; // complex Σ w conj(p̂) q̂
@@ -143,13 +176,24 @@ impl Mls2d {
 /// §5.3: offsets h·sin(f·u) along the boundary normal n = (−t_y, t_x)/|t|, t = v_{i−1} − v_{i+1}
 /// (central differences; one-sided at the ends of an open segment), u the arc length from the
 /// first point (u_{i+1} = u_i + |v_{i+1} − v_i|).
-pub fn sinusoidal_noise(points: &[DVec2], closed: bool, amplitude: f64, frequency: f64) -> Result<Vec<DVec2>> {
+pub fn sinusoidal_noise(
+    points: &[DVec2],
+    closed: bool,
+    amplitude: f64,
+    frequency: f64,
+) -> Result<Vec<DVec2>> {
     if !(amplitude.is_finite() && frequency.is_finite()) {
-        return Err(RokebyError::invalid("noise", "amplitude and frequency must be finite"));
+        return Err(RokebyError::invalid(
+            "noise",
+            "amplitude and frequency must be finite",
+        ));
     }
     // The fuzzer found NaN points passed through (NaN output); they are an error like MLS controls.
     if !points.iter().all(|p| p.is_finite()) {
-        return Err(RokebyError::invalid("points", "boundary points must be finite"));
+        return Err(RokebyError::invalid(
+            "points",
+            "boundary points must be finite",
+        ));
     }
     let m = points.len();
     if m < 2 || amplitude == 0.0 {
@@ -178,7 +222,10 @@ pub fn sinusoidal_noise(points: &[DVec2], closed: bool, amplitude: f64, frequenc
         })
         .collect();
     if !out.iter().all(|p| p.is_finite()) {
-        return Err(RokebyError::invalid("points", "the boundary's coordinates or the noise amplitude overflow f64"));
+        return Err(RokebyError::invalid(
+            "points",
+            "the boundary's coordinates or the noise amplitude overflow f64",
+        ));
     }
     Ok(out)
 }

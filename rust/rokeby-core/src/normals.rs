@@ -40,11 +40,27 @@ impl Frame<'_> {
             return Err(RokebyError::invalid("normals", "the frame is empty"));
         }
         if normals.len() != 3 * px {
-            return Err(RokebyError::invalid("normals", format!("expected {}×{}×3 values, got {}", self.height, self.width, normals.len())));
+            return Err(RokebyError::invalid(
+                "normals",
+                format!(
+                    "expected {}×{}×3 values, got {}",
+                    self.height,
+                    self.width,
+                    normals.len()
+                ),
+            ));
         }
         if let Some(m) = self.mask {
             if m.len() != px {
-                return Err(RokebyError::invalid("mask", format!("expected {}×{} values like the normals, got {}", self.height, self.width, m.len())));
+                return Err(RokebyError::invalid(
+                    "mask",
+                    format!(
+                        "expected {}×{} values like the normals, got {}",
+                        self.height,
+                        self.width,
+                        m.len()
+                    ),
+                ));
             }
         }
         Ok(())
@@ -75,7 +91,9 @@ where
         for x in 0..w {
             let i = y * w + x;
             let n = [normals[3 * i], normals[3 * i + 1], normals[3 * i + 2]];
-            let on = n.iter().all(|v| v.is_finite()) && n[0].abs() + n[1].abs() + n[2].abs() > 0.0 && f.mask.is_none_or(|m| m[i]);
+            let on = n.iter().all(|v| v.is_finite())
+                && n[0].abs() + n[1].abs() + n[2].abs() > 0.0
+                && f.mask.is_none_or(|m| m[i]);
             let r = if on {
                 let e = edit(i, n);
                 if e == n {
@@ -96,7 +114,10 @@ where
 pub fn emboss(normals: &[f32], f: &Frame, beta: f32) -> Result<Vec<f32>> {
     f.check(normals)?;
     if !(beta > 0.0 && beta <= 1.0) {
-        return Err(RokebyError::invalid("beta", format!("must be in (0, 1], got {beta}")));
+        return Err(RokebyError::invalid(
+            "beta",
+            format!("must be in (0, 1], got {beta}"),
+        ));
     }
     Ok(apply(normals, f, |_, n| [n[0], n[1], n[2] * beta]))
 }
@@ -125,10 +146,21 @@ fn gradient(h: &[f32], w: usize, rows: usize, y: usize, x: usize) -> (f32, f32) 
 pub fn bump(normals: &[f32], f: &Frame, height: &[f32], strength: f32) -> Result<Vec<f32>> {
     f.check(normals)?;
     if height.len() != f.width * f.height {
-        return Err(RokebyError::invalid("height", format!("expected {}×{} values like the normals, got {}", f.height, f.width, height.len())));
+        return Err(RokebyError::invalid(
+            "height",
+            format!(
+                "expected {}×{} values like the normals, got {}",
+                f.height,
+                f.width,
+                height.len()
+            ),
+        ));
     }
     if !strength.is_finite() {
-        return Err(RokebyError::invalid("strength", format!("must be finite, got {strength}")));
+        return Err(RokebyError::invalid(
+            "strength",
+            format!("must be finite, got {strength}"),
+        ));
     }
     let (w, rows) = (f.width, f.height);
     Ok(apply(normals, f, |i, n| {
@@ -146,17 +178,35 @@ pub fn bump(normals: &[f32], f: &Frame, height: &[f32], strength: f32) -> Result
 /// are taken every ⌈σ_s / EXACT_SIGMA_S⌉ pixels (still at least 8 taps per σ_s; the
 /// normals stay within about 0.02, a degree, of the whole-window sum), so one pixel costs at most about 33² taps whatever σ_s (σ_s = 50 on a 1080p frame
 /// would otherwise take about 19 minutes). Cancellable between rows ([`crate::cancel`]).
-pub fn bilateral(normals: &[f32], f: &Frame, depth: &[f32], sigma_s: f64, sigma_d: f64) -> Result<Vec<f32>> {
+pub fn bilateral(
+    normals: &[f32],
+    f: &Frame,
+    depth: &[f32],
+    sigma_s: f64,
+    sigma_d: f64,
+) -> Result<Vec<f32>> {
     f.check(normals)?;
     let (w, rows) = (f.width, f.height);
     if depth.len() != w * rows {
-        return Err(RokebyError::invalid("depth", format!("expected {rows}×{w} values like the normals, got {}", depth.len())));
+        return Err(RokebyError::invalid(
+            "depth",
+            format!(
+                "expected {rows}×{w} values like the normals, got {}",
+                depth.len()
+            ),
+        ));
     }
     if !(sigma_s.is_finite() && sigma_s > 0.0) {
-        return Err(RokebyError::invalid("sigma_s", format!("must be positive and finite, got {sigma_s}")));
+        return Err(RokebyError::invalid(
+            "sigma_s",
+            format!("must be positive and finite, got {sigma_s}"),
+        ));
     }
     if !(sigma_d.is_finite() && sigma_d > 0.0) {
-        return Err(RokebyError::invalid("sigma_d", format!("must be positive and finite, got {sigma_d}")));
+        return Err(RokebyError::invalid(
+            "sigma_d",
+            format!("must be positive and finite, got {sigma_d}"),
+        ));
     }
     if sigma_s > MAX_SIGMA_S {
         return Err(RokebyError::invalid("sigma_s", format!("at most {MAX_SIGMA_S} pixels (a window of {0}×{0} pixels around every pixel), got {sigma_s}", 2 * (2.0 * MAX_SIGMA_S).ceil() as usize + 1)));
@@ -166,11 +216,13 @@ pub fn bilateral(normals: &[f32], f: &Frame, depth: &[f32], sigma_s: f64, sigma_
     let r = r / stride * stride; // taps at multiples of the stride, the centre included
     let valid = |i: usize| {
         let n = &normals[3 * i..3 * i + 3];
-        n.iter().all(|v| v.is_finite()) && n[0].abs() + n[1].abs() + n[2].abs() > 0.0 && depth[i].is_finite()
+        n.iter().all(|v| v.is_finite())
+            && n[0].abs() + n[1].abs() + n[2].abs() > 0.0
+            && depth[i].is_finite()
     };
     let side = 2 * r + 1; // the weight table is indexed by pixel offset; only multiples of `stride` are read
-    // The centre weighs 1 exactly (so that a σ_s small enough to underflow 2σ_s² still leaves the
-    // pixel itself, instead of 0/0).
+                          // The centre weighs 1 exactly (so that a σ_s small enough to underflow 2σ_s² still leaves the
+                          // pixel itself, instead of 0/0).
     let ws: Vec<f64> = (0..side * side)
         .map(|k| {
             let (dy, dx) = ((k / side) as f64 - r as f64, (k % side) as f64 - r as f64);
@@ -204,7 +256,8 @@ pub fn bilateral(normals: &[f32], f: &Frame, depth: &[f32], sigma_s: f64, sigma_
                     continue;
                 }
                 let rel = (depth[q] as f64 - dp) / scale / sigma_d;
-                let wt = ws[(dy + r as isize) as usize * side + (dx + r as isize) as usize] * (-0.5 * rel * rel).exp();
+                let wt = ws[(dy + r as isize) as usize * side + (dx + r as isize) as usize]
+                    * (-0.5 * rel * rel).exp();
                 ax += wt * normals[3 * q] as f64;
                 ay += wt * normals[3 * q + 1] as f64;
                 wsum += wt;
@@ -228,18 +281,35 @@ pub const EXACT_SIGMA_S: f64 = 8.0;
 /// feature size `size` pixels, faded by (1 − d/radius)₊² around `center` (x, y in pixels, the
 /// ripple's window). Heights in pixels, within about ±size/4 (lower towards the rim), so that
 /// slopes are about ±0.5 whatever the size; (H×W) row-major, rows top first. Pair with [`bump`].
-pub fn noise_decal(width: usize, height: usize, size: f64, octaves: u32, seed: u32, center: (f64, f64), radius: f64) -> Result<Vec<f32>> {
+pub fn noise_decal(
+    width: usize,
+    height: usize,
+    size: f64,
+    octaves: u32,
+    seed: u32,
+    center: (f64, f64),
+    radius: f64,
+) -> Result<Vec<f32>> {
     if width == 0 || height == 0 {
         return Err(RokebyError::invalid("shape", "the frame is empty"));
     }
     if !(size.is_finite() && size >= 1.0) {
-        return Err(RokebyError::invalid("size", format!("must be at least 1 pixel, got {size}")));
+        return Err(RokebyError::invalid(
+            "size",
+            format!("must be at least 1 pixel, got {size}"),
+        ));
     }
     if !(1..=8).contains(&octaves) {
-        return Err(RokebyError::invalid("octaves", format!("must be 1 to 8, got {octaves}")));
+        return Err(RokebyError::invalid(
+            "octaves",
+            format!("must be 1 to 8, got {octaves}"),
+        ));
     }
     if !(radius.is_finite() && radius > 0.0) {
-        return Err(RokebyError::invalid("radius", format!("must be positive and finite, got {radius}")));
+        return Err(RokebyError::invalid(
+            "radius",
+            format!("must be positive and finite, got {radius}"),
+        ));
     }
     if !(center.0.is_finite() && center.1.is_finite()) {
         return Err(RokebyError::invalid("center", "must be finite"));
@@ -257,7 +327,12 @@ pub fn noise_decal(width: usize, height: usize, size: f64, octaves: u32, seed: u
             let mut sum = 0.0;
             for o in 0..octaves {
                 let f = (1u64 << o) as f64 / size;
-                sum += 0.5f64.powi(o as i32) * gradient_noise(x as f64 * f, y as f64 * f, seed.wrapping_add(o.wrapping_mul(0x9e37_79b9)));
+                sum += 0.5f64.powi(o as i32)
+                    * gradient_noise(
+                        x as f64 * f,
+                        y as f64 * f,
+                        seed.wrapping_add(o.wrapping_mul(0x9e37_79b9)),
+                    );
             }
             *v = (amp * sum * fade * fade) as f32;
         }
@@ -268,7 +343,9 @@ pub fn noise_decal(width: usize, height: usize, size: f64, octaves: u32, seed: u
 /// A 32-bit integer hash of a lattice point (x, y) and a seed (a multiply–xorshift mix).
 #[inline]
 fn lattice_hash(ix: i64, iy: i64, seed: u32) -> u32 {
-    let mut h = (ix as u32).wrapping_mul(0x8da6_b343) ^ (iy as u32).wrapping_mul(0xd816_3841) ^ seed.wrapping_mul(0xcb1a_b31f);
+    let mut h = (ix as u32).wrapping_mul(0x8da6_b343)
+        ^ (iy as u32).wrapping_mul(0xd816_3841)
+        ^ seed.wrapping_mul(0xcb1a_b31f);
     h ^= h >> 16;
     h = h.wrapping_mul(0x7feb_352d);
     h ^= h >> 15;
@@ -283,7 +360,8 @@ fn gradient_noise(x: f64, y: f64, seed: u32) -> f64 {
     let (fx, fy) = (x - x0, y - y0);
     let (ix, iy) = (x0 as i64, y0 as i64);
     let dot = |cx: i64, cy: i64, ox: f64, oy: f64| {
-        let a = lattice_hash(ix + cx, iy + cy, seed) as f64 / 4_294_967_296.0 * std::f64::consts::TAU;
+        let a =
+            lattice_hash(ix + cx, iy + cy, seed) as f64 / 4_294_967_296.0 * std::f64::consts::TAU;
         a.cos() * ox + a.sin() * oy
     };
     let fade = |t: f64| t * t * t * (t * (t * 6.0 - 15.0) + 10.0);
@@ -306,7 +384,10 @@ mod tests {
         let mut d = vec![f32::INFINITY; w * w];
         for y in 0..w {
             for x in 0..w {
-                let (u, v) = ((x as f32 + 0.5) / w as f32 * 2.0 - 1.0, 1.0 - (y as f32 + 0.5) / w as f32 * 2.0);
+                let (u, v) = (
+                    (x as f32 + 0.5) / w as f32 * 2.0 - 1.0,
+                    1.0 - (y as f32 + 0.5) / w as f32 * 2.0,
+                );
                 let s = u * u + v * v;
                 if s < 1.0 {
                     let i = y * w + x;
@@ -323,9 +404,19 @@ mod tests {
         let w = 40;
         let (n, d) = sphere(w);
         let mask: Vec<bool> = (0..w * w).map(|i| i % w < w / 2).collect();
-        let f = Frame { width: w, height: w, mask: Some(&mask) };
-        let h: Vec<f32> = (0..w * w).map(|i| ((i % w) as f32 * 0.3).sin() * 2.0).collect();
-        for out in [emboss(&n, &f, 0.5).unwrap(), bump(&n, &f, &h, 1.0).unwrap(), bilateral(&n, &f, &d, 2.0, 0.02).unwrap()] {
+        let f = Frame {
+            width: w,
+            height: w,
+            mask: Some(&mask),
+        };
+        let h: Vec<f32> = (0..w * w)
+            .map(|i| ((i % w) as f32 * 0.3).sin() * 2.0)
+            .collect();
+        for out in [
+            emboss(&n, &f, 0.5).unwrap(),
+            bump(&n, &f, &h, 1.0).unwrap(),
+            bilateral(&n, &f, &d, 2.0, 0.02).unwrap(),
+        ] {
             for i in 0..w * w {
                 let (a, b) = (&out[3 * i..3 * i + 3], &n[3 * i..3 * i + 3]);
                 let bg = b.iter().all(|&v| v == 0.0);
@@ -338,7 +429,11 @@ mod tests {
             }
         }
         // β = 1 and a flat height change nothing: the input comes back bit for bit.
-        let all = Frame { width: w, height: w, mask: None };
+        let all = Frame {
+            width: w,
+            height: w,
+            mask: None,
+        };
         assert_eq!(emboss(&n, &all, 1.0).unwrap(), n);
         assert_eq!(bump(&n, &all, &vec![3.0; w * w], 2.0).unwrap(), n);
     }
@@ -347,7 +442,11 @@ mod tests {
     fn emboss_and_bump_do_what_they_say() {
         let w = 32;
         let (n, _) = sphere(w);
-        let f = Frame { width: w, height: w, mask: None };
+        let f = Frame {
+            width: w,
+            height: w,
+            mask: None,
+        };
         let e = emboss(&n, &f, 0.25).unwrap();
         let i = (w / 2) * w + w / 4; // left of the centre: n_x < 0
         let (a, b) = (&n[3 * i..3 * i + 3], &e[3 * i..3 * i + 3]);
@@ -371,28 +470,51 @@ mod tests {
         let mut d = vec![0.0f32; w * rows];
         let mut st = 12345u64;
         for i in 0..w * rows {
-            st = st.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+            st = st
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
             let jitter = ((st >> 33) as f32 / (1u64 << 31) as f32 - 0.5) * 0.2;
             let left = i % w < w / 2;
-            let (nx, dep) = if left { (0.5 + jitter, 2.0) } else { (-0.5 + jitter, 8.0) };
+            let (nx, dep) = if left {
+                (0.5 + jitter, 2.0)
+            } else {
+                (-0.5 + jitter, 8.0)
+            };
             n[3 * i..3 * i + 3].copy_from_slice(&unit([nx, 0.0, 0.8]));
             d[i] = dep;
         }
-        let f = Frame { width: w, height: rows, mask: None };
+        let f = Frame {
+            width: w,
+            height: rows,
+            mask: None,
+        };
         let s = bilateral(&n, &f, &d, 3.0, 0.02).unwrap();
         let spread = |a: &[f32], left: bool| {
-            let xs: Vec<f32> = (0..w * rows).filter(|i| (i % w < w / 2) == left).map(|i| a[3 * i]).collect();
+            let xs: Vec<f32> = (0..w * rows)
+                .filter(|i| (i % w < w / 2) == left)
+                .map(|i| a[3 * i])
+                .collect();
             let m = xs.iter().sum::<f32>() / xs.len() as f32;
-            (m, (xs.iter().map(|x| (x - m) * (x - m)).sum::<f32>() / xs.len() as f32).sqrt())
+            (
+                m,
+                (xs.iter().map(|x| (x - m) * (x - m)).sum::<f32>() / xs.len() as f32).sqrt(),
+            )
         };
         for left in [true, false] {
             let (m0, s0) = spread(&n, left);
             let (m1, s1) = spread(&s, left);
             assert!(s1 < 0.3 * s0, "smoothed: {s1} vs {s0}");
-            assert!((m1 - m0).abs() < 0.01, "the depth edge keeps the planes apart: {m1} vs {m0}");
+            assert!(
+                (m1 - m0).abs() < 0.01,
+                "the depth edge keeps the planes apart: {m1} vs {m0}"
+            );
         }
         // Threads do not change the result.
-        let one = rayon::ThreadPoolBuilder::new().num_threads(1).build().unwrap().install(|| bilateral(&n, &f, &d, 3.0, 0.02).unwrap());
+        let one = rayon::ThreadPoolBuilder::new()
+            .num_threads(1)
+            .build()
+            .unwrap()
+            .install(|| bilateral(&n, &f, &d, 3.0, 0.02).unwrap());
         assert_eq!(one, s);
     }
 
@@ -401,9 +523,16 @@ mod tests {
         let (w, h) = (200, 120);
         let c = (100.0, 60.0);
         let a = noise_decal(w, h, 12.0, 3, 7, c, 50.0).unwrap();
-        assert_eq!(a, noise_decal(w, h, 12.0, 3, 7, c, 50.0).unwrap(), "deterministic");
+        assert_eq!(
+            a,
+            noise_decal(w, h, 12.0, 3, 7, c, 50.0).unwrap(),
+            "deterministic"
+        );
         let b = noise_decal(w, h, 12.0, 3, 8, c, 50.0).unwrap();
-        assert!(a.iter().zip(&b).filter(|(x, y)| x != y).count() > 1000, "another seed, another decal");
+        assert!(
+            a.iter().zip(&b).filter(|(x, y)| x != y).count() > 1000,
+            "another seed, another decal"
+        );
         // Zero outside the radius, not zero inside; heights about ±size/4, slopes about ±0.5.
         let mut slopes = Vec::new();
         for y in 1..h - 1 {
@@ -426,10 +555,19 @@ mod tests {
         let mean = inside.iter().map(|v| *v as f64).sum::<f64>() / inside.len() as f64;
         assert!(mean.abs() < 0.5, "about zero-mean: {mean}");
         // Finer size, finer detail: more sign changes along a row through the centre.
-        let changes = |z: &[f32]| (61..139).filter(|&x| (z[60 * w + x] > 0.0) != (z[60 * w + x + 1] > 0.0)).count();
+        let changes = |z: &[f32]| {
+            (61..139)
+                .filter(|&x| (z[60 * w + x] > 0.0) != (z[60 * w + x + 1] > 0.0))
+                .count()
+        };
         let fine = noise_decal(w, h, 4.0, 1, 7, c, 50.0).unwrap();
         let coarse = noise_decal(w, h, 24.0, 1, 7, c, 50.0).unwrap();
-        assert!(changes(&fine) > 2 * changes(&coarse).max(1), "{} vs {}", changes(&fine), changes(&coarse));
+        assert!(
+            changes(&fine) > 2 * changes(&coarse).max(1),
+            "{} vs {}",
+            changes(&fine),
+            changes(&coarse)
+        );
         let err = |r: Result<Vec<f32>>| r.unwrap_err().to_string();
         assert!(err(noise_decal(w, h, 0.5, 3, 1, c, 50.0)).contains("size"));
         assert!(err(noise_decal(w, h, 8.0, 0, 1, c, 50.0)).contains("octaves"));
@@ -441,7 +579,11 @@ mod tests {
     #[test]
     fn bad_arguments_are_named() {
         let (n, d) = sphere(8);
-        let f = Frame { width: 8, height: 8, mask: None };
+        let f = Frame {
+            width: 8,
+            height: 8,
+            mask: None,
+        };
         let err = |r: Result<Vec<f32>>| r.unwrap_err().to_string();
         assert!(err(emboss(&n, &f, 0.0)).contains("beta"));
         assert!(err(emboss(&n, &f, f32::NAN)).contains("beta"));
@@ -463,7 +605,10 @@ mod tests {
                     let l = (a[0] * a[0] + a[1] * a[1] + a[2] * a[2]).sqrt();
                     assert!((l - 1.0).abs() < 1e-5, "σ_s {ss} σ_d {sd}: {a:?}");
                     if ss < 1e-100 {
-                        assert!((a[0] - b[0]).abs() < 1e-6 && (a[1] - b[1]).abs() < 1e-6, "{a:?} vs {b:?}");
+                        assert!(
+                            (a[0] - b[0]).abs() < 1e-6 && (a[1] - b[1]).abs() < 1e-6,
+                            "{a:?} vs {b:?}"
+                        );
                     }
                 }
             }
@@ -474,7 +619,25 @@ mod tests {
         let e = emboss(&inf, &f, 0.5).unwrap();
         assert_eq!(e[3 * 27], f32::INFINITY);
         let short = [true; 3];
-        assert!(err(emboss(&n, &Frame { width: 8, height: 8, mask: Some(&short) }, 0.5)).contains("mask"));
-        assert!(err(emboss(&[], &Frame { width: 0, height: 0, mask: None }, 0.5)).contains("empty"));
+        assert!(err(emboss(
+            &n,
+            &Frame {
+                width: 8,
+                height: 8,
+                mask: Some(&short)
+            },
+            0.5
+        ))
+        .contains("mask"));
+        assert!(err(emboss(
+            &[],
+            &Frame {
+                width: 0,
+                height: 0,
+                mask: None
+            },
+            0.5
+        ))
+        .contains("empty"));
     }
 }

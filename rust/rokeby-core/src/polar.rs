@@ -108,17 +108,37 @@ pub fn svd3(m: &DMat3) -> Svd3 {
     let (a, v) = jacobi_one_sided(m);
     let mut sigma = [a[0].length(), a[1].length(), a[2].length()];
     let mut idx = [0usize, 1, 2];
-    idx.sort_by(|&i, &j| sigma[j].partial_cmp(&sigma[i]).unwrap_or(std::cmp::Ordering::Equal));
+    idx.sort_by(|&i, &j| {
+        sigma[j]
+            .partial_cmp(&sigma[i])
+            .unwrap_or(std::cmp::Ordering::Equal)
+    });
     let u_raw = [a[idx[0]], a[idx[1]], a[idx[2]]];
     let v_sorted = [v[idx[0]], v[idx[1]], v[idx[2]]];
     let s_sorted = [sigma[idx[0]], sigma[idx[1]], sigma[idx[2]]];
     sigma = s_sorted;
     let u = [
-        if sigma[0] > 0.0 { u_raw[0] / sigma[0] } else { DVec3::ZERO },
-        if sigma[1] > 0.0 { u_raw[1] / sigma[1] } else { DVec3::ZERO },
-        if sigma[2] > 0.0 { u_raw[2] / sigma[2] } else { DVec3::ZERO },
+        if sigma[0] > 0.0 {
+            u_raw[0] / sigma[0]
+        } else {
+            DVec3::ZERO
+        },
+        if sigma[1] > 0.0 {
+            u_raw[1] / sigma[1]
+        } else {
+            DVec3::ZERO
+        },
+        if sigma[2] > 0.0 {
+            u_raw[2] / sigma[2]
+        } else {
+            DVec3::ZERO
+        },
     ];
-    Svd3 { u, sigma, v: v_sorted }
+    Svd3 {
+        u,
+        sigma,
+        v: v_sorted,
+    }
 }
 
 fn outer(a: DVec3, b: DVec3) -> DMat3 {
@@ -134,7 +154,9 @@ fn best_twist(axis: DVec3, c: &DMat3) -> DQuat {
     let utcu = u.dot(cu);
     let tr = c.x_axis.x + c.y_axis.y + c.z_axis.z;
     // C_ij = c.col(j)[i]
-    let s = u.x * (c.y_axis.z - c.z_axis.y) + u.y * (c.z_axis.x - c.x_axis.z) + u.z * (c.x_axis.y - c.y_axis.x);
+    let s = u.x * (c.y_axis.z - c.z_axis.y)
+        + u.y * (c.z_axis.x - c.x_axis.z)
+        + u.z * (c.x_axis.y - c.y_axis.x);
     let a = tr - utcu;
     // No preference when B's part that could twist about u is rounding noise relative to B
     // (e.g. every other constraint asks for the same r → e: B ∝ u uᵀ after R₀); an absolute
@@ -213,7 +235,11 @@ struct NewtonTerms {
 fn newton_terms(q: DQuat, m: &DMat3) -> NewtonTerms {
     let s = DMat3::from_quat(q).transpose() * *m;
     // S_ij = s.col(j)[i]
-    let g = DVec3::new(s.y_axis.z - s.z_axis.y, s.z_axis.x - s.x_axis.z, s.x_axis.y - s.y_axis.x);
+    let g = DVec3::new(
+        s.y_axis.z - s.z_axis.y,
+        s.z_axis.x - s.x_axis.z,
+        s.x_axis.y - s.y_axis.x,
+    );
     let tr = s.x_axis.x + s.y_axis.y + s.z_axis.z;
     let h = DMat3::from_diagonal(DVec3::splat(tr)) - (s + s.transpose()) * 0.5;
     let fro2 = s.x_axis.length_squared() + s.y_axis.length_squared() + s.z_axis.length_squared();
@@ -247,7 +273,8 @@ pub enum Iterated {
 /// when the last step was a Newton step with H positive definite — a strict local maximum, which
 /// for tr(Rᵀ M) on SO(3) is the global one — so the caller's SVD fallback handles the rest.
 pub fn ortho_iterative(m: &DMat3, init: DQuat, max_iter: usize) -> Iterated {
-    let scale = (m.x_axis.length_squared() + m.y_axis.length_squared() + m.z_axis.length_squared()).sqrt();
+    let scale =
+        (m.x_axis.length_squared() + m.y_axis.length_squared() + m.z_axis.length_squared()).sqrt();
     if !(scale > 1e-300) || !scale.is_finite() {
         return Iterated::Failed;
     }
@@ -257,7 +284,11 @@ pub fn ortho_iterative(m: &DMat3, init: DQuat, max_iter: usize) -> Iterated {
         // Rank test at (near) the solution: S has eigenvalues (σ₁, σ₂, ±σ₃), so
         // tr(S)² − ‖S‖²_F = 2(σ₁σ₂ ± …) vanishes relative to σ₁² exactly when σ₂ ≈ 0.
         let newton = positive_definite(&t.h, 1e-6 * scale);
-        let omega = if newton { t.h.inverse() * t.g } else { t.g / (t.tr.abs() + 1e-12 * scale) };
+        let omega = if newton {
+            t.h.inverse() * t.g
+        } else {
+            t.g / (t.tr.abs() + 1e-12 * scale)
+        };
         let w2 = omega.length_squared();
         // Quadratic convergence: a Newton step below 1e-4 rad leaves an error of order 1e-8 rad
         // after it is taken, under the float32 resolution of the output (6e-8).
@@ -266,14 +297,20 @@ pub fn ortho_iterative(m: &DMat3, init: DQuat, max_iter: usize) -> Iterated {
                 return Iterated::RankOne;
             }
             let half = omega * 0.5;
-            return Iterated::Optimal(canonical((q * DQuat::from_xyzw(half.x, half.y, half.z, 1.0)).normalize()));
+            return Iterated::Optimal(canonical(
+                (q * DQuat::from_xyzw(half.x, half.y, half.z, 1.0)).normalize(),
+            ));
         }
         if !newton && w2 < 1e-24 {
             // Stationary but not a strict maximum: a saddle, or a rank-deficient optimum.
             return Iterated::RankOne;
         }
         let max_step = std::f64::consts::FRAC_PI_2;
-        let omega = if w2 > max_step * max_step { omega * (max_step / w2.sqrt()) } else { omega };
+        let omega = if w2 > max_step * max_step {
+            omega * (max_step / w2.sqrt())
+        } else {
+            omega
+        };
         let half = omega * 0.5;
         q = (q * DQuat::from_xyzw(half.x, half.y, half.z, 1.0)).normalize();
     }
@@ -296,7 +333,12 @@ fn unit_scale(m: &DMat3) -> DMat3 {
 /// updated. The iterative method falls back to the SVD when its result is not verified optimal
 /// or when M is rank-deficient (where the answer is chosen by rule, not by optimisation).
 /// `tiebreak` is only formed when the rank-1 rule needs it.
-pub fn ortho(m: &DMat3, tiebreak: impl FnOnce() -> Option<DMat3>, method: PolarMethod, warm: &mut DQuat) -> DQuat {
+pub fn ortho(
+    m: &DMat3,
+    tiebreak: impl FnOnce() -> Option<DMat3>,
+    method: PolarMethod,
+    warm: &mut DQuat,
+) -> DQuat {
     let m = &unit_scale(m);
     let tiebreak = || tiebreak().map(|b| unit_scale(&b));
     let q = match method {
@@ -317,7 +359,11 @@ mod tests {
     fn is_rotation(q: DQuat) -> bool {
         let r = DMat3::from_quat(q);
         let i = r.transpose() * r;
-        (i - DMat3::IDENTITY).to_cols_array().iter().all(|x| x.abs() < 1e-10) && (r.determinant() - 1.0).abs() < 1e-10
+        (i - DMat3::IDENTITY)
+            .to_cols_array()
+            .iter()
+            .all(|x| x.abs() < 1e-10)
+            && (r.determinant() - 1.0).abs() < 1e-10
     }
 
     #[test]
@@ -343,7 +389,10 @@ mod tests {
             for s in [1e-300, 1e-160, 1e122, 1e300] {
                 let mut w = DQuat::IDENTITY;
                 let qs = ortho(&(m * s), || None, method, &mut w);
-                assert!(is_rotation(qs) && qs.dot(q).abs() > 1.0 - 1e-12, "{s}: {qs:?} vs {q:?}");
+                assert!(
+                    is_rotation(qs) && qs.dot(q).abs() > 1.0 - 1e-12,
+                    "{s}: {qs:?} vs {q:?}"
+                );
             }
         }
     }
@@ -421,11 +470,22 @@ mod rotation_vector_tests {
             (DVec3::new(0.0, 1.0, 1.0).normalize(), std::f64::consts::PI),
         ] {
             let v = rotation_vector(DQuat::from_axis_angle(axis, angle));
-            assert!((v.length() - angle).abs() < 1e-12, "angle {angle}: |v| = {}", v.length());
+            assert!(
+                (v.length() - angle).abs() < 1e-12,
+                "angle {angle}: |v| = {}",
+                v.length()
+            );
             if angle > 0.0 {
-                assert!((v.normalize() - axis).length() < 1e-9 || (angle - std::f64::consts::PI).abs() < 1e-12);
+                assert!(
+                    (v.normalize() - axis).length() < 1e-9
+                        || (angle - std::f64::consts::PI).abs() < 1e-12
+                );
             }
-            let back = if v.length() > 0.0 { DQuat::from_axis_angle(v.normalize(), v.length()) } else { DQuat::IDENTITY };
+            let back = if v.length() > 0.0 {
+                DQuat::from_axis_angle(v.normalize(), v.length())
+            } else {
+                DQuat::IDENTITY
+            };
             assert!(back.dot(DQuat::from_axis_angle(axis, angle)).abs() > 1.0 - 1e-12);
         }
         // The double cover: q and -q give the same rotation vector.

@@ -64,21 +64,32 @@ pub enum Lobe {
 impl Lobe {
     pub fn phong(sigma: f64) -> Result<Lobe> {
         if !sigma.is_finite() || sigma < 0.0 {
-            return Err(RokebyError::invalid("exponent", format!("Phong exponent σ must be finite and ≥ 0, got {sigma}")));
+            return Err(RokebyError::invalid(
+                "exponent",
+                format!("Phong exponent σ must be finite and ≥ 0, got {sigma}"),
+            ));
         }
         Ok(Lobe::Phong { sigma })
     }
 
     pub fn ggx_roughness(roughness: f64) -> Result<Lobe> {
         if !roughness.is_finite() || !(0.0..=1.0).contains(&roughness) {
-            return Err(RokebyError::invalid("roughness", format!("GGX roughness must be in [0, 1], got {roughness}")));
+            return Err(RokebyError::invalid(
+                "roughness",
+                format!("GGX roughness must be in [0, 1], got {roughness}"),
+            ));
         }
-        Ok(Lobe::Ggx { alpha: roughness * roughness })
+        Ok(Lobe::Ggx {
+            alpha: roughness * roughness,
+        })
     }
 
     pub fn torrance_sparrow(sigma: f64) -> Result<Lobe> {
         if !sigma.is_finite() || sigma < 0.0 {
-            return Err(RokebyError::invalid("sigma", format!("Torrance–Sparrow σ must be finite and ≥ 0, got {sigma}")));
+            return Err(RokebyError::invalid(
+                "sigma",
+                format!("Torrance–Sparrow σ must be finite and ≥ 0, got {sigma}"),
+            ));
         }
         Ok(Lobe::TorranceSparrow { sigma })
     }
@@ -165,7 +176,10 @@ pub struct PrefilterParams {
 
 impl Default for PrefilterParams {
     fn default() -> Self {
-        PrefilterParams { texels_per_radius: 6.0, tail: 1e-5 }
+        PrefilterParams {
+            texels_per_radius: 6.0,
+            tail: 1e-5,
+        }
     }
 }
 
@@ -187,7 +201,13 @@ pub struct Level {
 /// (courtyard.exr down to −1.6e-4), which the seed's sum would also just add.
 fn check_latlong(env: &EnvMap, arg: &str) -> Result<()> {
     if env.layout != Layout::LatLong {
-        return Err(RokebyError::invalid(arg, format!("expected a lat-long map, got {} (convert it first)", env.layout.name())));
+        return Err(RokebyError::invalid(
+            arg,
+            format!(
+                "expected a lat-long map, got {} (convert it first)",
+                env.layout.name()
+            ),
+        ));
     }
     Ok(())
 }
@@ -200,18 +220,27 @@ fn downsample(env: &EnvMap) -> Option<EnvMap> {
     }
     let (h2, w2) = (h / 2, w / 2);
     let mut data = vec![0.0f32; h2 * w2 * c];
-    data.par_chunks_mut(w2 * c).enumerate().for_each(|(i, row)| {
-        let a = latlong_texel_solid_angle(h, w, 2 * i);
-        let b = latlong_texel_solid_angle(h, w, 2 * i + 1);
-        let (wa, wb) = ((a / (2.0 * (a + b))) as f32, (b / (2.0 * (a + b))) as f32);
-        for j in 0..w2 {
-            for ch in 0..c {
-                let p = |ii: usize, jj: usize| env.data[(ii * w + jj) * c + ch];
-                row[j * c + ch] = wa * (p(2 * i, 2 * j) + p(2 * i, 2 * j + 1)) + wb * (p(2 * i + 1, 2 * j) + p(2 * i + 1, 2 * j + 1));
+    data.par_chunks_mut(w2 * c)
+        .enumerate()
+        .for_each(|(i, row)| {
+            let a = latlong_texel_solid_angle(h, w, 2 * i);
+            let b = latlong_texel_solid_angle(h, w, 2 * i + 1);
+            let (wa, wb) = ((a / (2.0 * (a + b))) as f32, (b / (2.0 * (a + b))) as f32);
+            for j in 0..w2 {
+                for ch in 0..c {
+                    let p = |ii: usize, jj: usize| env.data[(ii * w + jj) * c + ch];
+                    row[j * c + ch] = wa * (p(2 * i, 2 * j) + p(2 * i, 2 * j + 1))
+                        + wb * (p(2 * i + 1, 2 * j) + p(2 * i + 1, 2 * j + 1));
+                }
             }
-        }
-    });
-    Some(EnvMap { layout: Layout::LatLong, height: h2, width: w2, channels: c, data })
+        });
+    Some(EnvMap {
+        layout: Layout::LatLong,
+        height: h2,
+        width: w2,
+        channels: c,
+        data,
+    })
 }
 
 /// Bilinear (seam-correct) resampling of a lat-long map to another size with aligned grids.
@@ -220,14 +249,30 @@ fn resample(env: &EnvMap, height: usize, width: usize) -> EnvMap {
         return env.clone();
     }
     let c = env.channels;
-    let (sx, sy) = (env.width as f64 / width as f64, env.height as f64 / height as f64);
+    let (sx, sy) = (
+        env.width as f64 / width as f64,
+        env.height as f64 / height as f64,
+    );
     let mut data = vec![0.0f32; height * width * c];
-    data.par_chunks_mut(width * c).enumerate().for_each(|(i, row)| {
-        for j in 0..width {
-            env.sample_at(0, (j as f64 + 0.5) * sx, (i as f64 + 0.5) * sy, &mut row[j * c..(j + 1) * c]);
-        }
-    });
-    EnvMap { layout: Layout::LatLong, height, width, channels: c, data }
+    data.par_chunks_mut(width * c)
+        .enumerate()
+        .for_each(|(i, row)| {
+            for j in 0..width {
+                env.sample_at(
+                    0,
+                    (j as f64 + 0.5) * sx,
+                    (i as f64 + 0.5) * sy,
+                    &mut row[j * c..(j + 1) * c],
+                );
+            }
+        });
+    EnvMap {
+        layout: Layout::LatLong,
+        height,
+        width,
+        channels: c,
+        data,
+    }
 }
 
 /// Smooth step from 1 (x ≤ 1) to 0 (x ≥ 2), C¹: the ring partition of unity.
@@ -275,60 +320,76 @@ fn ring_pass(src: &EnvMap, lobe: &Lobe, r_in: Option<f64>, r_out: Option<f64>, c
     let lo = r_in.unwrap_or(0.0);
     let hi = r_out.map_or(cut, |r| (2.0 * r).min(cut));
     // (`hi + half` below: the horizon ramp reaches half a texel past c = 0.)
-    let window = |g: f64| r_out.map_or(1.0, |r| falloff(g / r)) - r_in.map_or(0.0, |r| falloff(g / r));
+    let window =
+        |g: f64| r_out.map_or(1.0, |r| falloff(g / r)) - r_in.map_or(0.0, |r| falloff(g / r));
     // Each source row twice in a row, so that any circular shift is one contiguous slice.
     let mut dbl = vec![0.0f32; h * 2 * w * c];
-    dbl.par_chunks_mut(2 * w * c).enumerate().for_each(|(j, d)| {
-        let s = &src.data[j * w * c..(j + 1) * w * c];
-        d[..w * c].copy_from_slice(s);
-        d[w * c..].copy_from_slice(s);
-    });
+    dbl.par_chunks_mut(2 * w * c)
+        .enumerate()
+        .for_each(|(j, d)| {
+            let s = &src.data[j * w * c..(j + 1) * w * c];
+            d[..w * c].copy_from_slice(s);
+            d[w * c..].copy_from_slice(s);
+        });
     let lat = |i: usize| PI * (0.5 - (i as f64 + 0.5) / h as f64);
     let dlat = PI / h as f64;
     let reach = (hi / dlat).ceil() as usize + 1;
     let half = 0.5 * dlat;
     let mut out = vec![0.0f32; h * w * (c + 1)];
-    out.par_chunks_mut(w * (c + 1)).enumerate().for_each(|(i, orow)| {
-        let (si, ci) = lat(i).sin_cos();
-        let mut acc = vec![0.0f32; w * c];
-        let mut den = 0.0f64;
-        for j in i.saturating_sub(reach)..(i + reach + 1).min(h) {
-            let (sj, cj) = lat(j).sin_cos();
-            let omega = latlong_texel_solid_angle(h, w, j);
-            let drow = &dbl[j * 2 * w * c..(j + 1) * 2 * w * c];
-            for dx in 0..=w / 2 {
-                let cosg = (si * sj + ci * cj * (TAU * dx as f64 / w as f64).cos()).clamp(-1.0, 1.0);
-                let g = cosg.acos();
-                if g > hi + half {
-                    break;
-                }
-                if g < lo {
-                    continue;
-                }
-                // The lobe ends at the horizon c = 0 (a step for low Phong exponents): weight a
-                // texel there by the part of it above (a linear ramp over its width).
-                let cover = ((cosg + half) / (2.0 * half)).clamp(0.0, 1.0);
-                let wt = lobe.kernel(cosg.max(1e-12)) * cover * window(g) * omega;
-                if !(wt > 0.0) {
-                    continue;
-                }
-                let wt32 = wt as f32;
-                let other = (w - dx) % w;
-                for o in if other == dx { [dx, usize::MAX] } else { [dx, other] } {
-                    if o == usize::MAX {
+    out.par_chunks_mut(w * (c + 1))
+        .enumerate()
+        .for_each(|(i, orow)| {
+            let (si, ci) = lat(i).sin_cos();
+            let mut acc = vec![0.0f32; w * c];
+            let mut den = 0.0f64;
+            for j in i.saturating_sub(reach)..(i + reach + 1).min(h) {
+                let (sj, cj) = lat(j).sin_cos();
+                let omega = latlong_texel_solid_angle(h, w, j);
+                let drow = &dbl[j * 2 * w * c..(j + 1) * 2 * w * c];
+                for dx in 0..=w / 2 {
+                    let cosg =
+                        (si * sj + ci * cj * (TAU * dx as f64 / w as f64).cos()).clamp(-1.0, 1.0);
+                    let g = cosg.acos();
+                    if g > hi + half {
+                        break;
+                    }
+                    if g < lo {
                         continue;
                     }
-                    den += wt;
-                    axpy(&mut acc, &drow[o * c..(o + w) * c], wt32);
+                    // The lobe ends at the horizon c = 0 (a step for low Phong exponents): weight a
+                    // texel there by the part of it above (a linear ramp over its width).
+                    let cover = ((cosg + half) / (2.0 * half)).clamp(0.0, 1.0);
+                    let wt = lobe.kernel(cosg.max(1e-12)) * cover * window(g) * omega;
+                    if !(wt > 0.0) {
+                        continue;
+                    }
+                    let wt32 = wt as f32;
+                    let other = (w - dx) % w;
+                    for o in if other == dx {
+                        [dx, usize::MAX]
+                    } else {
+                        [dx, other]
+                    } {
+                        if o == usize::MAX {
+                            continue;
+                        }
+                        den += wt;
+                        axpy(&mut acc, &drow[o * c..(o + w) * c], wt32);
+                    }
                 }
             }
-        }
-        for x in 0..w {
-            orow[x * (c + 1)..x * (c + 1) + c].copy_from_slice(&acc[x * c..(x + 1) * c]);
-            orow[x * (c + 1) + c] = den as f32;
-        }
-    });
-    EnvMap { layout: Layout::LatLong, height: h, width: w, channels: c + 1, data: out }
+            for x in 0..w {
+                orow[x * (c + 1)..x * (c + 1) + c].copy_from_slice(&acc[x * c..(x + 1) * c]);
+                orow[x * (c + 1) + c] = den as f32;
+            }
+        });
+    EnvMap {
+        layout: Layout::LatLong,
+        height: h,
+        width: w,
+        channels: c + 1,
+        data: out,
+    }
 }
 
 /// The most lobe parameters [`prefilter`] takes in one call (a roughness ladder has 5–10).
@@ -339,16 +400,31 @@ pub const MAX_LOBES: usize = 256;
 pub fn prefilter(env: &EnvMap, lobes: &[Lobe], params: &PrefilterParams) -> Result<Vec<Level>> {
     check_latlong(env, "image")?;
     if !(params.texels_per_radius.is_finite() && params.texels_per_radius >= 1.0) {
-        return Err(RokebyError::invalid("texels_per_radius", format!("must be ≥ 1, got {}", params.texels_per_radius)));
+        return Err(RokebyError::invalid(
+            "texels_per_radius",
+            format!("must be ≥ 1, got {}", params.texels_per_radius),
+        ));
     }
     if !(params.tail.is_finite() && params.tail > 0.0 && params.tail < 0.5) {
-        return Err(RokebyError::invalid("tail", format!("must be in (0, 0.5), got {}", params.tail)));
+        return Err(RokebyError::invalid(
+            "tail",
+            format!("must be in (0, 0.5), got {}", params.tail),
+        ));
     }
     if lobes.len() > MAX_LOBES {
-        return Err(RokebyError::invalid("params", format!("at most {MAX_LOBES} lobe parameters in one call, got {}", lobes.len())));
+        return Err(RokebyError::invalid(
+            "params",
+            format!(
+                "at most {MAX_LOBES} lobe parameters in one call, got {}",
+                lobes.len()
+            ),
+        ));
     }
     // Every level can be as large as the input: bound the whole result before computing any.
-    crate::alloc::check::<f32>("prefiltered levels (params × image)", &[lobes.len() + 1, env.data.len()])?;
+    crate::alloc::check::<f32>(
+        "prefiltered levels (params × image)",
+        &[lobes.len() + 1, env.data.len()],
+    )?;
     let mut mips = vec![env.clone()];
     while let Some(m) = downsample(mips.last().expect("non-empty")) {
         mips.push(m);
@@ -358,9 +434,18 @@ pub fn prefilter(env: &EnvMap, lobes: &[Lobe], params: &PrefilterParams) -> Resu
     let mut levels = Vec::with_capacity(lobes.len());
     for lobe in lobes {
         crate::cancel::check()?;
-        let (r0, cut) = if lobe.is_mirror() { (0.0, 0.0) } else { lobe.radii(params.tail) };
+        let (r0, cut) = if lobe.is_mirror() {
+            (0.0, 0.0)
+        } else {
+            lobe.radii(params.tail)
+        };
         if lobe.is_mirror() || r0 < 0.5 * texel(0) {
-            levels.push(Level { map: env.clone(), core_radius: r0, cut_radius: cut, rings: 0 });
+            levels.push(Level {
+                map: env.clone(),
+                core_radius: r0,
+                cut_radius: cut,
+                rings: 0,
+            });
             continue;
         }
         // Mip of ring k: the one whose texel is nearest R_k/K in ratio (R_k/texel within
@@ -369,8 +454,16 @@ pub fn prefilter(env: &EnvMap, lobes: &[Lobe], params: &PrefilterParams) -> Resu
         // the result change sharply where a bright source crosses it: such lobes keep at least
         // STEP_ROWS rows (cheap: their outputs are small either way).
         let step = lobe.kernel(1e-9) > 1e-3 * lobe.kernel(1.0);
-        let coarsest = if step { (0..mips.len()).rev().find(|&m| mips[m].height >= STEP_ROWS).unwrap_or(0) } else { mips.len() - 1 };
-        let mip_for = |r: f64| ((r / (kk * texel(0))).log2().round().max(0.0) as usize).min(coarsest);
+        let coarsest = if step {
+            (0..mips.len())
+                .rev()
+                .find(|&m| mips[m].height >= STEP_ROWS)
+                .unwrap_or(0)
+        } else {
+            mips.len() - 1
+        };
+        let mip_for =
+            |r: f64| ((r / (kk * texel(0))).log2().round().max(0.0) as usize).min(coarsest);
         let m0 = mip_for(r0);
         let (h0, w0) = (mips[m0].height, mips[m0].width);
         let mut total: Option<EnvMap> = None;
@@ -385,7 +478,11 @@ pub fn prefilter(env: &EnvMap, lobes: &[Lobe], params: &PrefilterParams) -> Resu
             let ring = resample(&ring, h0, w0);
             match total.as_mut() {
                 None => total = Some(ring),
-                Some(t) => t.data.par_iter_mut().zip(ring.data.par_iter()).for_each(|(a, b)| *a += b),
+                Some(t) => t
+                    .data
+                    .par_iter_mut()
+                    .zip(ring.data.par_iter())
+                    .for_each(|(a, b)| *a += b),
             }
             k += 1;
             if last {
@@ -395,13 +492,26 @@ pub fn prefilter(env: &EnvMap, lobes: &[Lobe], params: &PrefilterParams) -> Resu
         let t = total.expect("at least one ring");
         let c = env.channels;
         let mut data = vec![0.0f32; h0 * w0 * c];
-        data.par_chunks_mut(c).zip(t.data.par_chunks(c + 1)).for_each(|(o, s)| {
-            let den = s[c];
-            for ch in 0..c {
-                o[ch] = if den > 0.0 { s[ch] / den } else { 0.0 };
-            }
+        data.par_chunks_mut(c)
+            .zip(t.data.par_chunks(c + 1))
+            .for_each(|(o, s)| {
+                let den = s[c];
+                for ch in 0..c {
+                    o[ch] = if den > 0.0 { s[ch] / den } else { 0.0 };
+                }
+            });
+        levels.push(Level {
+            map: EnvMap {
+                layout: Layout::LatLong,
+                height: h0,
+                width: w0,
+                channels: c,
+                data,
+            },
+            core_radius: r0,
+            cut_radius: cut,
+            rings: k,
         });
-        levels.push(Level { map: EnvMap { layout: Layout::LatLong, height: h0, width: w0, channels: c, data }, core_radius: r0, cut_radius: cut, rings: k });
     }
     Ok(levels)
 }
@@ -466,7 +576,17 @@ pub fn brute_force(env: &EnvMap, lobe: &Lobe, directions: &[f32]) -> Result<Vec<
 }
 
 /// Â_l of the clamped cosine (Ramamoorthi & Hanrahan 2001, eq. 8) for each of the nine terms.
-pub const A_HAT: [f64; SH_COEFFS] = [PI, 2.0 * PI / 3.0, 2.0 * PI / 3.0, 2.0 * PI / 3.0, PI / 4.0, PI / 4.0, PI / 4.0, PI / 4.0, PI / 4.0];
+pub const A_HAT: [f64; SH_COEFFS] = [
+    PI,
+    2.0 * PI / 3.0,
+    2.0 * PI / 3.0,
+    2.0 * PI / 3.0,
+    PI / 4.0,
+    PI / 4.0,
+    PI / 4.0,
+    PI / 4.0,
+    PI / 4.0,
+];
 
 /// L_lm = Σ L(d) Y_lm(d) Ω over the texels of a lat-long map (exact texel solid angles), per channel.
 pub fn sh_project(env: &EnvMap) -> Result<Vec<[f64; SH_COEFFS]>> {
@@ -515,20 +635,27 @@ pub fn sh_irradiance(coeffs: &[[f64; SH_COEFFS]], n: DVec3, out: &mut [f64]) {
 }
 
 /// The SH irradiance (E/π) as a lat-long map of the given size, and the coefficients L_lm.
-pub fn irradiance_map(env: &EnvMap, height: usize, width: usize) -> Result<(EnvMap, Vec<[f64; SH_COEFFS]>)> {
+pub fn irradiance_map(
+    env: &EnvMap,
+    height: usize,
+    width: usize,
+) -> Result<(EnvMap, Vec<[f64; SH_COEFFS]>)> {
     let coeffs = sh_project(env)?;
     let mut out = EnvMap::zeros(Layout::LatLong, height, width, env.channels)?;
     let c = env.channels;
     let probe = out.clone();
-    out.data.par_chunks_mut(width * c).enumerate().for_each(|(i, row)| {
-        let mut tmp = vec![0.0f64; c];
-        for j in 0..width {
-            sh_irradiance(&coeffs, probe.texel_direction(0, i, j), &mut tmp);
-            for ch in 0..c {
-                row[j * c + ch] = tmp[ch] as f32;
+    out.data
+        .par_chunks_mut(width * c)
+        .enumerate()
+        .for_each(|(i, row)| {
+            let mut tmp = vec![0.0f64; c];
+            for j in 0..width {
+                sh_irradiance(&coeffs, probe.texel_direction(0, i, j), &mut tmp);
+                for ch in 0..c {
+                    row[j * c + ch] = tmp[ch] as f32;
+                }
             }
-        }
-    });
+        });
     Ok((out, coeffs))
 }
 

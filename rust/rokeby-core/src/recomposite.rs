@@ -64,7 +64,12 @@ pub struct Params {
 
 impl Default for Params {
     fn default() -> Self {
-        Params { k_d: 1.0, k_r: 1.0, gamma: 1.0, epsilon: EPSILON }
+        Params {
+            k_d: 1.0,
+            k_r: 1.0,
+            gamma: 1.0,
+            epsilon: EPSILON,
+        }
     }
 }
 
@@ -97,7 +102,14 @@ fn check(name: &str, v: &[f32], want: usize, optional: bool) -> Result<()> {
     if (optional && v.is_empty()) || v.len() == want {
         Ok(())
     } else {
-        Err(RokebyError::invalid(name, format!("expected {want} values{}, got {}", if optional { " or none" } else { "" }, v.len())))
+        Err(RokebyError::invalid(
+            name,
+            format!(
+                "expected {want} values{}, got {}",
+                if optional { " or none" } else { "" },
+                v.len()
+            ),
+        ))
     }
 }
 
@@ -174,7 +186,10 @@ fn validate(b: &Buffers, patches: &[Patch], p: &Params) -> Result<()> {
     check("diffuse_color", b.diffuse_color, 3 * n, true)?;
     check("reflection_color", b.reflection_color, 3 * n, true)?;
     if !(p.gamma > 0.0 && p.gamma.is_finite()) {
-        return Err(RokebyError::invalid("gamma", format!("must be positive and finite, got {}", p.gamma)));
+        return Err(RokebyError::invalid(
+            "gamma",
+            format!("must be positive and finite, got {}", p.gamma),
+        ));
     }
     if !(p.epsilon > 0.0) {
         return Err(RokebyError::invalid("epsilon", "must be positive"));
@@ -182,42 +197,90 @@ fn validate(b: &Buffers, patches: &[Patch], p: &Params) -> Result<()> {
     if !(p.k_d.is_finite() && p.k_r.is_finite()) {
         return Err(RokebyError::invalid("k_d", "k_d and k_r must be finite"));
     }
-    if let Some(e) = patches.iter().filter_map(|q| q.env.as_ref()).find(|e| e.channels != 3) {
-        return Err(RokebyError::invalid("patches", format!("reflection maps must have 3 channels, got {}", e.channels)));
+    if let Some(e) = patches
+        .iter()
+        .filter_map(|q| q.env.as_ref())
+        .find(|e| e.channels != 3)
+    {
+        return Err(RokebyError::invalid(
+            "patches",
+            format!("reflection maps must have 3 channels, got {}", e.channels),
+        ));
     }
     // The fuzzer found an empty (size 0) map panicking in the lookup's clamp.
-    if let Some(e) = patches.iter().filter_map(|q| q.env.as_ref()).find(|e| e.size == 0 || e.data.len() != 2 * e.size * e.size * e.channels) {
-        return Err(RokebyError::invalid("patches", format!("reflection map of size {} holds {} values, expected 2×size×size×3 with size ≥ 1", e.size, e.data.len())));
+    if let Some(e) = patches
+        .iter()
+        .filter_map(|q| q.env.as_ref())
+        .find(|e| e.size == 0 || e.data.len() != 2 * e.size * e.size * e.channels)
+    {
+        return Err(RokebyError::invalid(
+            "patches",
+            format!(
+                "reflection map of size {} holds {} values, expected 2×size×size×3 with size ≥ 1",
+                e.size,
+                e.data.len()
+            ),
+        ));
     }
     Ok(())
 }
 
 /// [`recomposite`] with the AVX2 instantiation allowed (`simd`) or not: both give the same bits
 /// (no FMA contraction, the same operations in the same order).
-fn recomposite_with(b: &Buffers, patches: &[Patch], p: &Params, simd: bool) -> Result<(Vec<f32>, Stats)> {
+fn recomposite_with(
+    b: &Buffers,
+    patches: &[Patch],
+    p: &Params,
+    simd: bool,
+) -> Result<(Vec<f32>, Stats)> {
     let n = b.ids.len();
     validate(b, patches, p)?;
     let f = Frame {
         b,
-        sh: patches.iter().map(|q| q.sh.map(|c| c.map(|ch| ch.map(|x| x as f32))).unwrap_or([[0.0; SH_COEFFS]; 3])).collect(),
-        env_data: patches.iter().map(|q| q.env.as_ref().map_or(&NO_MAP[..], |e| &e.data[..])).collect(),
+        sh: patches
+            .iter()
+            .map(|q| {
+                q.sh.map(|c| c.map(|ch| ch.map(|x| x as f32)))
+                    .unwrap_or([[0.0; SH_COEFFS]; 3])
+            })
+            .collect(),
+        env_data: patches
+            .iter()
+            .map(|q| q.env.as_ref().map_or(&NO_MAP[..], |e| &e.data[..]))
+            .collect(),
         has_env: patches.iter().map(|q| q.env.is_some()).collect(),
-        env_size: patches.iter().map(|q| q.env.as_ref().map_or(1.0, |e| e.size as f32)).collect(),
-        env_n: patches.iter().map(|q| q.env.as_ref().map_or(1, |e| e.size)).collect(),
-        has_content: patches.iter().map(|q| q.sh.is_some() || q.env.is_some()).collect(),
+        env_size: patches
+            .iter()
+            .map(|q| q.env.as_ref().map_or(1.0, |e| e.size as f32))
+            .collect(),
+        env_n: patches
+            .iter()
+            .map(|q| q.env.as_ref().map_or(1, |e| e.size))
+            .collect(),
+        has_content: patches
+            .iter()
+            .map(|q| q.sh.is_some() || q.env.is_some())
+            .collect(),
         k_d: p.k_d as f32,
         k_r: p.k_r as f32,
         unit_material: p.k_d == 1.0 && p.k_r == 1.0,
         inv_gamma: (1.0 / p.gamma) as f32,
         gamma_one: p.gamma == 1.0,
         inv_eps: (1.0 / p.epsilon) as f32,
-        chord_eps: if p.epsilon >= std::f64::consts::PI { f32::INFINITY } else { (2.0 * (0.5 * p.epsilon).sin()) as f32 },
+        chord_eps: if p.epsilon >= std::f64::consts::PI {
+            f32::INFINITY
+        } else {
+            (2.0 * (0.5 * p.epsilon).sin()) as f32
+        },
         view: match b.view.len() == 3 {
             false => View::PerPixel,
             true => unit(b.view).map_or(View::Invalid, |v| View::Constant(to32(v))),
         },
         avx2: simd && avx2_available(),
-        small_maps: patches.iter().filter_map(|q| q.env.as_ref()).all(|e| e.size <= 32767),
+        small_maps: patches
+            .iter()
+            .filter_map(|q| q.env.as_ref())
+            .all(|e| e.size <= 32767),
     };
     // Chunks of rows in parallel; every pixel starts as I (one copy), and only pixels whose normal
     // or material changed run eqs. 3–5 — in f32 (the buffers' precision), in batches: with ñ = n
@@ -230,8 +293,13 @@ fn recomposite_with(b: &Buffers, patches: &[Patch], p: &Params, simd: bool) -> R
         .par_chunks_mut(3 * CHUNK)
         .enumerate()
         // The lane arrays of the batches: one set per rayon job, not per chunk.
-        .map_init(Work::new, |w, (chunk, o)| run_chunk(&f, chunk * CHUNK, o, w))
-        .reduce(Stats::default, |x, y| Stats { masked: x.masked + y.masked, edited: x.edited + y.edited });
+        .map_init(Work::new, |w, (chunk, o)| {
+            run_chunk(&f, chunk * CHUNK, o, w)
+        })
+        .reduce(Stats::default, |x, y| Stats {
+            masked: x.masked + y.masked,
+            edited: x.edited + y.edited,
+        });
     // SAFETY: the chunks cover all 3n elements and each chunk was initialised by its task (a panic
     // there would have unwound past this line, leaving the length 0).
     unsafe { out.set_len(3 * n) };
@@ -325,7 +393,10 @@ fn chunk(f: &Frame, base: usize, o: &mut [MaybeUninit<f32>], w: &mut Work) -> St
             let id = b.ids[base + k];
             let inside = (id >= 0) & ((id as usize) < f.sh.len());
             // Unmodified normal and material: eqs. 3–5 give I exactly; skip the arithmetic.
-            let same = f.unit_material & (nrm[3 * q] == edt[3 * q]) & (nrm[3 * q + 1] == edt[3 * q + 1]) & (nrm[3 * q + 2] == edt[3 * q + 2]);
+            let same = f.unit_material
+                & (nrm[3 * q] == edt[3 * q])
+                & (nrm[3 * q + 1] == edt[3 * q + 1])
+                & (nrm[3 * q + 2] == edt[3 * q + 2]);
             if inside & !same {
                 if f.has_content[id as usize] {
                     todo[m] = k as u32;
@@ -517,7 +588,12 @@ fn unit_lanes(v: &[Lanes; 3], u: &mut [Lanes; 3], ok: &mut [bool; LANES], nb: us
 #[inline(always)]
 fn basis_diff_lanes(n: &[Lanes; 3], e: &[Lanes; 3], dy: &mut [Lanes; SH_COEFFS], nb: usize) {
     let nb = nb.min(LANES);
-    let (c1, c2, c6, c8) = (0.488_602_5_f32, 1.092_548_4_f32, 0.315_391_57_f32, 0.546_274_2_f32);
+    let (c1, c2, c6, c8) = (
+        0.488_602_5_f32,
+        1.092_548_4_f32,
+        0.315_391_57_f32,
+        0.546_274_2_f32,
+    );
     for l in 0..nb {
         let (x, y, z) = (n[0][l], n[1][l], n[2][l]);
         let (xe, ye, ze) = (e[0][l], e[1][l], e[2][l]);
@@ -570,7 +646,9 @@ fn pow_lanes(x: &mut Lanes, p: f64, nb: usize) {
         // next is below 1e-11 of log2 m).
         let t = (m - 1.0) / (m + 1.0);
         let t2 = t * t;
-        let s = 1.0 + t2 * (1.0 / 3.0 + t2 * (1.0 / 5.0 + t2 * (1.0 / 7.0 + t2 * (1.0 / 9.0 + t2 * (1.0 / 11.0)))));
+        let s = 1.0
+            + t2 * (1.0 / 3.0
+                + t2 * (1.0 / 5.0 + t2 * (1.0 / 7.0 + t2 * (1.0 / 9.0 + t2 * (1.0 / 11.0)))));
         let l2 = e as f64 + (2.0 * std::f64::consts::LOG2_E) * (t * s);
         // 2^y = 2^i · e^(f ln 2), i = round(y), |f| ≤ ½: Taylor terms to (f ln 2)^10 (the next
         // is below 3e-13).
@@ -580,7 +658,18 @@ fn pow_lanes(x: &mut Lanes, p: f64, nb: usize) {
         let i = big.to_bits().wrapping_sub(MAGIC.to_bits());
         let w = f * std::f64::consts::LN_2;
         let mut q = 1.0 / 3_628_800.0;
-        for c in [1.0 / 362_880.0, 1.0 / 40_320.0, 1.0 / 5_040.0, 1.0 / 720.0, 1.0 / 120.0, 1.0 / 24.0, 1.0 / 6.0, 0.5, 1.0, 1.0] {
+        for c in [
+            1.0 / 362_880.0,
+            1.0 / 40_320.0,
+            1.0 / 5_040.0,
+            1.0 / 720.0,
+            1.0 / 120.0,
+            1.0 / 24.0,
+            1.0 / 6.0,
+            0.5,
+            1.0,
+            1.0,
+        ] {
             q = c + w * q;
         }
         let scale = f64::from_bits(i.wrapping_add(1023) << 52);
@@ -623,7 +712,10 @@ fn batch(f: &Frame, base: usize, ks: &[u32], o: &mut [f32], st: &mut Stats, w: &
     for l in 0..nb {
         let mut fin = w.ad[l].is_finite() & w.ar[l].is_finite() & w.a[l].is_finite();
         for c in 0..3 {
-            fin &= w.d0[c][l].is_finite() & w.r0[c][l].is_finite() & w.cd[c][l].is_finite() & w.cr[c][l].is_finite();
+            fin &= w.d0[c][l].is_finite()
+                & w.r0[c][l].is_finite()
+                & w.cd[c][l].is_finite()
+                & w.cr[c][l].is_finite();
         }
         w.ok[l] = fin;
     }
@@ -657,14 +749,22 @@ fn batch(f: &Frame, base: usize, ks: &[u32], o: &mut [f32], st: &mut Stats, w: &
     reflect_lanes(&w.vv, &w.ne, &mut w.re, nb);
     let mut short = false;
     for l in 0..nb {
-        let dr = [w.r[0][l] - w.re[0][l], w.r[1][l] - w.re[1][l], w.r[2][l] - w.re[2][l]];
+        let dr = [
+            w.r[0][l] - w.re[0][l],
+            w.r[1][l] - w.re[1][l],
+            w.r[2][l] - w.re[2][l],
+        ];
         w.chord[l] = (dr[0] * dr[0] + dr[1] * dr[1] + dr[2] * dr[2]).sqrt();
         short |= !(w.chord[l] >= f.chord_eps);
     }
     // wgt = v α_R.
     if short {
         for l in 0..nb {
-            let vis = if w.chord[l] >= f.chord_eps { 1.0 } else { 2.0 * (0.5 * w.chord[l]).min(1.0).asin() * f.inv_eps };
+            let vis = if w.chord[l] >= f.chord_eps {
+                1.0
+            } else {
+                2.0 * (0.5 * w.chord[l]).min(1.0).asin() * f.inv_eps
+            };
             w.wgt[l] = vis * w.ar[l];
         }
     } else {
@@ -695,7 +795,12 @@ fn batch(f: &Frame, base: usize, ks: &[u32], o: &mut [f32], st: &mut Stats, w: &
         // `as usize` was; the integer clamps only make the bounds evident.
         // SAFETY: tx, ty are finite and in [0, size − 1], and size < 2^31 (a map holds 6·size²
         // values in memory).
-        let (jt, it) = unsafe { (w.tx[l].to_int_unchecked::<i32>(), w.ty[l].to_int_unchecked::<i32>()) };
+        let (jt, it) = unsafe {
+            (
+                w.tx[l].to_int_unchecked::<i32>(),
+                w.ty[l].to_int_unchecked::<i32>(),
+            )
+        };
         let j0 = jt.max(0).min(last);
         let i0 = it.max(0).min(last);
         let j1 = (j0 + 1).min(last);
@@ -705,7 +810,11 @@ fn batch(f: &Frame, base: usize, ks: &[u32], o: &mut [f32], st: &mut Stats, w: &
         w.fetch[l] &= w.ok[l] & (w.wgt[l] != 0.0);
         // Texel indices when they fit in i32 (below 2n²), else the rows and columns.
         let n = last + 1;
-        let (row0, row1) = if f.small_maps { ((w.face[l] * n + i0) * n, (w.face[l] * n + i1) * n) } else { (0, 0) };
+        let (row0, row1) = if f.small_maps {
+            ((w.face[l] * n + i0) * n, (w.face[l] * n + i1) * n)
+        } else {
+            (0, 0)
+        };
         w.corner[0][l] = if f.small_maps { row0 + j0 } else { i0 };
         w.corner[1][l] = if f.small_maps { row0 + j1 } else { j0 };
         w.corner[2][l] = if f.small_maps { row1 + j0 } else { i1 };
@@ -715,7 +824,11 @@ fn batch(f: &Frame, base: usize, ks: &[u32], o: &mut [f32], st: &mut Stats, w: &
     // last value of each row's pair of texels).
     #[cfg(target_arch = "x86_64")]
     for l in 0..nb {
-        let data = if uniform { f.env_data[id0] } else { f.env_data[w.id[l]] };
+        let data = if uniform {
+            f.env_data[id0]
+        } else {
+            f.env_data[w.id[l]]
+        };
         if f.small_maps {
             for q in [0, 2] {
                 let k = 3 * w.corner[q][l] as usize;
@@ -776,11 +889,21 @@ fn batch(f: &Frame, base: usize, ks: &[u32], o: &mut [f32], st: &mut Stats, w: &
         for l in 0..nb {
             let data = f.env_data[w.id[l]];
             let corner = if f.small_maps {
-                [w.corner[0][l] as usize, w.corner[1][l] as usize, w.corner[2][l] as usize, w.corner[3][l] as usize]
+                [
+                    w.corner[0][l] as usize,
+                    w.corner[1][l] as usize,
+                    w.corner[2][l] as usize,
+                    w.corner[3][l] as usize,
+                ]
             } else {
                 let n = w.last[l] as usize + 1;
                 let face = w.face[l] as usize;
-                let (i0, j0, i1, j1) = (w.corner[0][l] as usize, w.corner[1][l] as usize, w.corner[2][l] as usize, w.corner[3][l] as usize);
+                let (i0, j0, i1, j1) = (
+                    w.corner[0][l] as usize,
+                    w.corner[1][l] as usize,
+                    w.corner[2][l] as usize,
+                    w.corner[3][l] as usize,
+                );
                 let (row0, row1) = ((face * n + i0) * n, (face * n + i1) * n);
                 [row0 + j0, row0 + j1, row1 + j0, row1 + j1]
             };
@@ -891,13 +1014,24 @@ fn opt1(v: &[f32], px: &[usize; LANES], run: Option<usize>, nb: usize, g: &mut L
 /// `ParaboloidMap::lookup`'s face choice and convention (texel centres, coordinates clamped to
 /// the map). Gives (face, x, y) with x, y ∈ [0, size − 1].
 #[inline(always)]
-fn paraboloid_texel_lanes(d: &[Lanes; 3], size: &Lanes, face: &mut [i32; LANES], tx: &mut Lanes, ty: &mut Lanes, nb: usize) {
+fn paraboloid_texel_lanes(
+    d: &[Lanes; 3],
+    size: &Lanes,
+    face: &mut [i32; LANES],
+    tx: &mut Lanes,
+    ty: &mut Lanes,
+    nb: usize,
+) {
     let nb = nb.min(LANES);
     for l in 0..nb {
         let (x, y, z) = (d[0][l], d[1][l], d[2][l]);
         let len = (x * x + y * y + z * z).sqrt();
         let unit = (len > 0.0) & len.is_finite();
-        let (x, y, z) = if unit { (x / len, y / len, z / len) } else { (0.0, 0.0, 1.0) };
+        let (x, y, z) = if unit {
+            (x / len, y / len, z / len)
+        } else {
+            (0.0, 0.0, 1.0)
+        };
         face[l] = i32::from(z < 0.0);
         let k = 1.0 / (1.0 + z.abs());
         let s = size[l];
@@ -950,15 +1084,32 @@ mod tests {
     fn recomposite_scalar(b: &Buffers, patches: &[Patch], p: &Params) -> Result<(Vec<f32>, Stats)> {
         validate(b, patches, p)?;
         // Per-patch constants, once per frame: f32 SH coefficients (channel-major) and flags.
-        let sh32: Vec<Option<[[f32; SH_COEFFS]; 3]>> = patches.iter().map(|q| q.sh.map(|c| c.map(|ch| ch.map(|x| x as f32)))).collect();
+        let sh32: Vec<Option<[[f32; SH_COEFFS]; 3]>> = patches
+            .iter()
+            .map(|q| q.sh.map(|c| c.map(|ch| ch.map(|x| x as f32))))
+            .collect();
         let (k_d, k_r) = (p.k_d as f32, p.k_r as f32);
         let unit_material = p.k_d == 1.0 && p.k_r == 1.0;
         let inv_gamma = (1.0 / p.gamma) as f32;
         let gamma_one = p.gamma == 1.0;
         let inv_eps = (1.0 / p.epsilon) as f32;
-        let chord_eps = if p.epsilon >= std::f64::consts::PI { f32::INFINITY } else { (2.0 * (0.5 * p.epsilon).sin()) as f32 };
-        let const_view = if b.view.len() == 3 { unit(b.view).map(to32) } else { None };
-        let g = |x: f32| if gamma_one { x } else { x.max(0.0).powf(inv_gamma) };
+        let chord_eps = if p.epsilon >= std::f64::consts::PI {
+            f32::INFINITY
+        } else {
+            (2.0 * (0.5 * p.epsilon).sin()) as f32
+        };
+        let const_view = if b.view.len() == 3 {
+            unit(b.view).map(to32)
+        } else {
+            None
+        };
+        let g = |x: f32| {
+            if gamma_one {
+                x
+            } else {
+                x.max(0.0).powf(inv_gamma)
+            }
+        };
         // Rows in parallel; every pixel starts as I (one copy), and only pixels whose normal or
         // material changed run eqs. 3–5 — in f32 (the buffers' precision): with ñ = n the formulas
         // below still give I bit for bit (zero SH difference, zero chord, identical shade and shade0).
@@ -988,18 +1139,38 @@ mod tests {
                         continue;
                     }
                     let opt = |v: &[f32]| if v.is_empty() { 1.0 } else { v[i] };
-                    let col = |v: &[f32]| -> [f32; 3] { if v.is_empty() { [1.0; 3] } else { [v[3 * i], v[3 * i + 1], v[3 * i + 2]] } };
+                    let col = |v: &[f32]| -> [f32; 3] {
+                        if v.is_empty() {
+                            [1.0; 3]
+                        } else {
+                            [v[3 * i], v[3 * i + 1], v[3 * i + 2]]
+                        }
+                    };
                     let d0 = [b.diffuse[3 * i], b.diffuse[3 * i + 1], b.diffuse[3 * i + 2]];
-                    let r0 = [b.reflection[3 * i], b.reflection[3 * i + 1], b.reflection[3 * i + 2]];
+                    let r0 = [
+                        b.reflection[3 * i],
+                        b.reflection[3 * i + 1],
+                        b.reflection[3 * i + 2],
+                    ];
                     let (ad, ar, a) = (opt(b.alpha_d), opt(b.alpha_r), opt(b.alpha));
                     let (cd, cr) = (col(b.diffuse_color), col(b.reflection_color));
-                    let finite = d0.iter().chain(&r0).chain(&cd).chain(&cr).all(|x| x.is_finite()) && ad.is_finite() && ar.is_finite() && a.is_finite();
+                    let finite = d0
+                        .iter()
+                        .chain(&r0)
+                        .chain(&cd)
+                        .chain(&cr)
+                        .all(|x| x.is_finite())
+                        && ad.is_finite()
+                        && ar.is_finite()
+                        && a.is_finite();
                     let vv = match const_view {
                         Some(v) => Some(v),
                         None if b.view.len() == 3 => None,
                         None => unit(&b.view[3 * i..3 * i + 3]).map(to32),
                     };
-                    let (Some(nn), Some(ne), Some(vv)) = (unit(nb).map(to32), unit(eb).map(to32), vv) else {
+                    let (Some(nn), Some(ne), Some(vv)) =
+                        (unit(nb).map(to32), unit(eb).map(to32), vv)
+                    else {
                         st.masked += 1;
                         continue;
                     };
@@ -1036,7 +1207,11 @@ mod tests {
                     let re = reflect32(vv, ne);
                     let dr = [r[0] - re[0], r[1] - re[1], r[2] - re[2]];
                     let chord = (dr[0] * dr[0] + dr[1] * dr[1] + dr[2] * dr[2]).sqrt();
-                    let vis = if chord >= chord_eps { 1.0 } else { 2.0 * (0.5 * chord).min(1.0).asin() * inv_eps };
+                    let vis = if chord >= chord_eps {
+                        1.0
+                    } else {
+                        2.0 * (0.5 * chord).min(1.0).asin() * inv_eps
+                    };
                     let look = match &patch.env {
                         Some(env) if vis * ar != 0.0 => lookup32(env, re),
                         _ => r0,
@@ -1051,7 +1226,10 @@ mod tests {
                 }
                 st
             })
-            .reduce(Stats::default, |x, y| Stats { masked: x.masked + y.masked, edited: x.edited + y.edited });
+            .reduce(Stats::default, |x, y| Stats {
+                masked: x.masked + y.masked,
+                edited: x.edited + y.edited,
+            });
         Ok((out, stats))
     }
 
@@ -1066,7 +1244,17 @@ mod tests {
     fn basis32(n: [f32; 3]) -> [f32; SH_COEFFS] {
         let [x, y, z] = n;
         let (c0, c1, c2) = (0.282_094_8_f32, 0.488_602_5_f32, 1.092_548_4_f32);
-        [c0, c1 * y, c1 * z, c1 * x, c2 * x * y, c2 * y * z, 0.315_391_57 * (3.0 * z * z - 1.0), c2 * x * z, 0.546_274_2 * (x * x - y * y)]
+        [
+            c0,
+            c1 * y,
+            c1 * z,
+            c1 * x,
+            c2 * x * y,
+            c2 * y * z,
+            0.315_391_57 * (3.0 * z * z - 1.0),
+            c2 * x * z,
+            0.546_274_2 * (x * x - y * y),
+        ]
     }
 
     /// `ParaboloidMap::lookup` for 3 channels in f32: the same face choice, texel convention (texel
@@ -1074,7 +1262,11 @@ mod tests {
     #[inline]
     fn lookup32(m: &ParaboloidMap, d: [f32; 3]) -> [f32; 3] {
         let l = (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt();
-        let d = if l > 0.0 && l.is_finite() { [d[0] / l, d[1] / l, d[2] / l] } else { [0.0, 0.0, 1.0] };
+        let d = if l > 0.0 && l.is_finite() {
+            [d[0] / l, d[1] / l, d[2] / l]
+        } else {
+            [0.0, 0.0, 1.0]
+        };
         let face = usize::from(d[2] < 0.0);
         let k = 1.0 / (1.0 + d[2].abs());
         let s = m.size as f32;
@@ -1118,20 +1310,43 @@ mod tests {
         let mut g = Rng(0x9e37_79b9_7f4a_7c15);
         let (w, h) = (97, 43); // 4171 pixels: 4 chunks, the last one partial
         let n = w * h;
-        let map = |g: &mut Rng, size: usize| ParaboloidMap { size, channels: 3, data: (0..2 * size * size * 3).map(|_| g.next()).collect() };
-        let sh = |g: &mut Rng| -> [[f64; SH_COEFFS]; 3] { std::array::from_fn(|_| std::array::from_fn(|_| 2.0 * g.next() as f64 - 1.0)) };
+        let map = |g: &mut Rng, size: usize| ParaboloidMap {
+            size,
+            channels: 3,
+            data: (0..2 * size * size * 3).map(|_| g.next()).collect(),
+        };
+        let sh = |g: &mut Rng| -> [[f64; SH_COEFFS]; 3] {
+            std::array::from_fn(|_| std::array::from_fn(|_| 2.0 * g.next() as f64 - 1.0))
+        };
         let patches = vec![
-            Patch { sh: Some(sh(&mut g)), env: Some(map(&mut g, 16)) },
-            Patch { sh: Some(sh(&mut g)), env: None },
-            Patch { sh: None, env: Some(map(&mut g, 5)) },
-            Patch { sh: None, env: None },
-            Patch { sh: Some(sh(&mut g)), env: Some(map(&mut g, 1)) },
+            Patch {
+                sh: Some(sh(&mut g)),
+                env: Some(map(&mut g, 16)),
+            },
+            Patch {
+                sh: Some(sh(&mut g)),
+                env: None,
+            },
+            Patch {
+                sh: None,
+                env: Some(map(&mut g, 5)),
+            },
+            Patch {
+                sh: None,
+                env: None,
+            },
+            Patch {
+                sh: Some(sh(&mut g)),
+                env: Some(map(&mut g, 1)),
+            },
         ];
         let mut ids = vec![0i32; n];
         let mut normals = vec![0.0f32; 3 * n];
         let mut edited = vec![0.0f32; 3 * n];
         let mut view = vec![0.0f32; 3 * n];
-        let buf = |g: &mut Rng, lo: f32, hi: f32| -> Vec<f32> { (0..3 * n).map(|_| lo + (hi - lo) * g.next()).collect() };
+        let buf = |g: &mut Rng, lo: f32, hi: f32| -> Vec<f32> {
+            (0..3 * n).map(|_| lo + (hi - lo) * g.next()).collect()
+        };
         let mut diffuse = buf(&mut g, -0.1, 2.0);
         let reflection = buf(&mut g, 0.0, 2.0);
         let image = buf(&mut g, 0.0, 3.0);
@@ -1142,7 +1357,11 @@ mod tests {
         let alpha: Vec<f32> = (0..n).map(|_| g.next()).collect();
         for i in 0..n {
             // Runs of one patch (uniform batches) and mixed stretches.
-            ids[i] = if (i / 200) % 3 == 2 { (g.next() * 7.0) as i32 - 1 } else { ((i / 200) % 5) as i32 };
+            ids[i] = if (i / 200) % 3 == 2 {
+                (g.next() * 7.0) as i32 - 1
+            } else {
+                ((i / 200) % 5) as i32
+            };
             let nv = [2.0 * g.next() - 1.0, 2.0 * g.next() - 1.0, 0.2 + g.next()];
             normals[3 * i..3 * i + 3].copy_from_slice(&nv);
             let kind = g.next();
@@ -1153,14 +1372,32 @@ mod tests {
             } else if kind < 0.45 {
                 [2.0 * nv[0], 2.0 * nv[1], 2.0 * nv[2]]
             } else {
-                [nv[0] + g.next() - 0.5, nv[1] - 0.3, nv[2] * (0.2 + g.next())]
+                [
+                    nv[0] + g.next() - 0.5,
+                    nv[1] - 0.3,
+                    nv[2] * (0.2 + g.next()),
+                ]
             };
             edited[3 * i..3 * i + 3].copy_from_slice(&e);
             let vv = [0.3 * (g.next() - 0.5), 0.3 * (g.next() - 0.5), 1.0];
             view[3 * i..3 * i + 3].copy_from_slice(&vv);
         }
         // Non-finite and degenerate inputs.
-        for &(i, what) in &[(5usize, 0), (300, 1), (301, 2), (777, 3), (1500, 4), (2222, 5), (4170, 0), (3001, 6), (2500, 7), (2501, 8), (2502, 9), (2503, 10), (2504, 11)] {
+        for &(i, what) in &[
+            (5usize, 0),
+            (300, 1),
+            (301, 2),
+            (777, 3),
+            (1500, 4),
+            (2222, 5),
+            (4170, 0),
+            (3001, 6),
+            (2500, 7),
+            (2501, 8),
+            (2502, 9),
+            (2503, 10),
+            (2504, 11),
+        ] {
             match what {
                 // Beyond f32 squares (the f64 fallback): accepted.
                 7 => edited[3 * i..3 * i + 3].copy_from_slice(&[3e20, -1e20, 2e19]),
@@ -1203,19 +1440,35 @@ mod tests {
                     diffuse_color: if colours { &dcol[..3 * cut] } else { &[] },
                     reflection_color: if colours { &rcol[..3 * cut] } else { &[] },
                 };
-                let p = Params { k_d, k_r, gamma, epsilon };
+                let p = Params {
+                    k_d,
+                    k_r,
+                    gamma,
+                    epsilon,
+                };
                 let (want, st0) = recomposite_scalar(&b, &patches, &p).unwrap();
                 assert!(st0.edited > 0 && st0.masked > 0, "{st0:?}");
                 let (portable, _) = recomposite_with(&b, &patches, &p, false).unwrap();
                 for simd in [false, true] {
                     let (got, st) = recomposite_with(&b, &patches, &p, simd).unwrap();
-                    assert_eq!((st.edited, st.masked), (st0.edited, st0.masked), "γ {gamma} simd {simd}");
+                    assert_eq!(
+                        (st.edited, st.masked),
+                        (st0.edited, st0.masked),
+                        "γ {gamma} simd {simd}"
+                    );
                     for (i, (x, y)) in got.iter().zip(&want).enumerate() {
                         let d = (*x as f64 - *y as f64).abs() / (1.0 + (*y as f64).abs());
                         worst = worst.max(d);
-                        assert!(d <= 2e-5, "value {i}: {x} vs {y} (γ {gamma}, k_D {k_d}, simd {simd})");
+                        assert!(
+                            d <= 2e-5,
+                            "value {i}: {x} vs {y} (γ {gamma}, k_D {k_d}, simd {simd})"
+                        );
                         assert!(!x.is_nan(), "NaN output at {i}");
-                        assert_eq!(x.to_bits(), portable[i].to_bits(), "value {i}: AVX2 and portable paths differ");
+                        assert_eq!(
+                            x.to_bits(),
+                            portable[i].to_bits(),
+                            "value {i}: AVX2 and portable paths differ"
+                        );
                     }
                 }
                 cases += 1;
@@ -1242,9 +1495,24 @@ mod tests {
         image[10] = f32::NAN;
         image[11] = f32::INFINITY;
         let a: Vec<f32> = (0..n).map(|_| g.next()).collect();
-        let map = ParaboloidMap { size: 8, channels: 3, data: (0..2 * 8 * 8 * 3).map(|_| g.next()).collect() };
-        let sh: [[f64; SH_COEFFS]; 3] = std::array::from_fn(|_| std::array::from_fn(|_| g.next() as f64));
-        let patches = vec![Patch { sh: Some(sh), env: Some(map) }, Patch { sh: Some(sh), env: None }, Patch::default()];
+        let map = ParaboloidMap {
+            size: 8,
+            channels: 3,
+            data: (0..2 * 8 * 8 * 3).map(|_| g.next()).collect(),
+        };
+        let sh: [[f64; SH_COEFFS]; 3] =
+            std::array::from_fn(|_| std::array::from_fn(|_| g.next() as f64));
+        let patches = vec![
+            Patch {
+                sh: Some(sh),
+                env: Some(map),
+            },
+            Patch {
+                sh: Some(sh),
+                env: None,
+            },
+            Patch::default(),
+        ];
         for gamma in [1.0, 2.2] {
             let b = Buffers {
                 ids: &ids,
@@ -1261,9 +1529,23 @@ mod tests {
                 reflection_color: &[],
             };
             for simd in [false, true] {
-                let (out, st) = recomposite_with(&b, &patches, &Params { gamma, ..Params::default() }, simd).unwrap();
+                let (out, st) = recomposite_with(
+                    &b,
+                    &patches,
+                    &Params {
+                        gamma,
+                        ..Params::default()
+                    },
+                    simd,
+                )
+                .unwrap();
                 assert_eq!((st.edited, st.masked), (0, 0));
-                assert!(out.iter().zip(&image).all(|(x, y)| x.to_bits() == y.to_bits()), "γ {gamma} simd {simd}");
+                assert!(
+                    out.iter()
+                        .zip(&image)
+                        .all(|(x, y)| x.to_bits() == y.to_bits()),
+                    "γ {gamma} simd {simd}"
+                );
             }
         }
     }
@@ -1282,7 +1564,20 @@ mod tests {
                     // log-uniform over the positive f32 range (subnormals included) and specials.
                     *v = f32::from_bits((g.next() * 0x7f7f_ffff as f32) as u32);
                     if round == 0 {
-                        *v = [0.0, -0.0, -1.0, f32::NAN, f32::INFINITY, f32::NEG_INFINITY, 1.0, f32::MIN_POSITIVE, 1e-45, f32::MAX, 2.0, 0.5][l % 12];
+                        *v = [
+                            0.0,
+                            -0.0,
+                            -1.0,
+                            f32::NAN,
+                            f32::INFINITY,
+                            f32::NEG_INFINITY,
+                            1.0,
+                            f32::MIN_POSITIVE,
+                            1e-45,
+                            f32::MAX,
+                            2.0,
+                            0.5,
+                        ][l % 12];
                     }
                 }
                 let mut y = x;
@@ -1292,7 +1587,13 @@ mod tests {
                     if want.is_finite() && want > 0.0 && y[l].is_finite() {
                         worst = worst.max(want.to_bits().abs_diff(y[l].to_bits()));
                     } else {
-                        assert_eq!(y[l].to_bits(), want.to_bits(), "{}^{p}: {} vs {want}", x[l], y[l]);
+                        assert_eq!(
+                            y[l].to_bits(),
+                            want.to_bits(),
+                            "{}^{p}: {} vs {want}",
+                            x[l],
+                            y[l]
+                        );
                     }
                 }
             }

@@ -74,7 +74,11 @@ fn texel_solid_angle(size: usize, i: usize, j: usize) -> f64 {
 
 impl ParaboloidMap {
     pub fn new(size: usize, channels: usize) -> Self {
-        ParaboloidMap { size, channels, data: vec![0.0; 2 * size * size * channels] }
+        ParaboloidMap {
+            size,
+            channels,
+            data: vec![0.0; 2 * size * size * channels],
+        }
     }
 
     #[inline]
@@ -99,7 +103,12 @@ impl ParaboloidMap {
         let (fx, fy) = (x - j0 as f64, y - i0 as f64);
         let c = self.channels;
         if c == 3 {
-            let (k00, k01, k10, k11) = (self.idx(face, i0, j0), self.idx(face, i0, j1), self.idx(face, i1, j0), self.idx(face, i1, j1));
+            let (k00, k01, k10, k11) = (
+                self.idx(face, i0, j0),
+                self.idx(face, i0, j1),
+                self.idx(face, i1, j0),
+                self.idx(face, i1, j1),
+            );
             let d = &self.data;
             for ch in 0..3 {
                 let top = d[k00 + ch] as f64 + fx * (d[k01 + ch] as f64 - d[k00 + ch] as f64);
@@ -108,7 +117,12 @@ impl ParaboloidMap {
             }
             return;
         }
-        let taps = [(i0, j0, (1.0 - fx) * (1.0 - fy)), (i0, j1, fx * (1.0 - fy)), (i1, j0, (1.0 - fx) * fy), (i1, j1, fx * fy)];
+        let taps = [
+            (i0, j0, (1.0 - fx) * (1.0 - fy)),
+            (i0, j1, fx * (1.0 - fy)),
+            (i1, j0, (1.0 - fx) * fy),
+            (i1, j1, fx * fy),
+        ];
         for o in out.iter_mut().take(c) {
             *o = 0.0;
         }
@@ -139,7 +153,13 @@ pub struct ReflectionParams {
 
 impl Default for ReflectionParams {
     fn default() -> Self {
-        ReflectionParams { size: 128, max_edge_angle: 0.5, max_depth_jump: 0.05, blur_sigma: 2.0, min_coverage: 0.01 }
+        ReflectionParams {
+            size: 128,
+            max_edge_angle: 0.5,
+            max_depth_jump: 0.05,
+            blur_sigma: 2.0,
+            min_coverage: 0.01,
+        }
     }
 }
 
@@ -167,14 +187,29 @@ pub fn reflect_dirs(normals: &[f32], view: &[f32]) -> Result<Vec<f32>> {
         return Err(RokebyError::invalid("normals", "expected N×3 values"));
     }
     if view.len() != normals.len() && view.len() != 3 {
-        return Err(RokebyError::invalid("view", format!("expected {} values (like normals) or one vector (3), got {}", normals.len(), view.len())));
+        return Err(RokebyError::invalid(
+            "view",
+            format!(
+                "expected {} values (like normals) or one vector (3), got {}",
+                normals.len(),
+                view.len()
+            ),
+        ));
     }
     let mut out = vec![0.0f32; normals.len()];
     out.par_chunks_mut(3).enumerate().for_each(|(p, o)| {
         let n = unit(&normals[3 * p..3 * p + 3]);
-        let vv = if view.len() == 3 { unit(view) } else { unit(&view[3 * p..3 * p + 3]) };
+        let vv = if view.len() == 3 {
+            unit(view)
+        } else {
+            unit(&view[3 * p..3 * p + 3])
+        };
         let finite = normals[3 * p..3 * p + 3].iter().all(|x| x.is_finite())
-            && if view.len() == 3 { view.iter().all(|x| x.is_finite()) } else { view[3 * p..3 * p + 3].iter().all(|x| x.is_finite()) };
+            && if view.len() == 3 {
+                view.iter().all(|x| x.is_finite())
+            } else {
+                view[3 * p..3 * p + 3].iter().all(|x| x.is_finite())
+            };
         let r = match (n, vv) {
             (Some(n), Some(v)) => reflect(v, n),
             _ if finite => DVec3::ZERO,
@@ -216,38 +251,86 @@ fn rectify(r: DVec3) -> Option<DVec3> {
 
 /// Checks the arguments of [`partial`].
 #[allow(clippy::too_many_arguments)]
-fn check_partial_args(width: usize, height: usize, refl: &[f32], values: &[f32], channels: usize, mask: &[f32], depth: &[f32], params: &ReflectionParams) -> Result<()> {
+fn check_partial_args(
+    width: usize,
+    height: usize,
+    refl: &[f32],
+    values: &[f32],
+    channels: usize,
+    mask: &[f32],
+    depth: &[f32],
+    params: &ReflectionParams,
+) -> Result<()> {
     let np = width * height;
     if np == 0 {
         return Err(RokebyError::invalid("image", "empty image"));
     }
     if refl.len() != np * 3 {
-        return Err(RokebyError::invalid("reflected", format!("expected {height}×{width}×3 values, got {}", refl.len())));
+        return Err(RokebyError::invalid(
+            "reflected",
+            format!("expected {height}×{width}×3 values, got {}", refl.len()),
+        ));
     }
     if channels == 0 || values.len() != np * channels {
-        return Err(RokebyError::invalid("values", format!("expected {height}×{width}×{channels} values, got {}", values.len())));
+        return Err(RokebyError::invalid(
+            "values",
+            format!(
+                "expected {height}×{width}×{channels} values, got {}",
+                values.len()
+            ),
+        ));
     }
     if mask.len() != np {
-        return Err(RokebyError::invalid("mask", format!("expected {height}×{width} values, got {}", mask.len())));
+        return Err(RokebyError::invalid(
+            "mask",
+            format!("expected {height}×{width} values, got {}", mask.len()),
+        ));
     }
     if !depth.is_empty() && depth.len() != np {
-        return Err(RokebyError::invalid("depth", format!("expected {height}×{width} values or none, got {}", depth.len())));
+        return Err(RokebyError::invalid(
+            "depth",
+            format!(
+                "expected {height}×{width} values or none, got {}",
+                depth.len()
+            ),
+        ));
     }
     if !(8..=4096).contains(&params.size) {
-        return Err(RokebyError::invalid("size", format!("map size must be in 8..=4096, got {}", params.size)));
+        return Err(RokebyError::invalid(
+            "size",
+            format!("map size must be in 8..=4096, got {}", params.size),
+        ));
     }
     // tests/test_properties_new.py found NaN parameters accepted (blur_sigma = NaN gave a NaN map).
     if !(params.max_edge_angle.is_finite() && params.max_edge_angle > 0.0) {
-        return Err(RokebyError::invalid("max_edge_angle", format!("must be positive and finite (radians), got {}", params.max_edge_angle)));
+        return Err(RokebyError::invalid(
+            "max_edge_angle",
+            format!(
+                "must be positive and finite (radians), got {}",
+                params.max_edge_angle
+            ),
+        ));
     }
     if !(params.max_depth_jump >= 0.0) {
-        return Err(RokebyError::invalid("max_depth_jump", format!("must be ≥ 0, got {}", params.max_depth_jump)));
+        return Err(RokebyError::invalid(
+            "max_depth_jump",
+            format!("must be ≥ 0, got {}", params.max_depth_jump),
+        ));
     }
     if !(params.blur_sigma.is_finite() && params.blur_sigma >= 0.0) {
-        return Err(RokebyError::invalid("blur_sigma", format!("must be ≥ 0 and finite (0 disables the blur), got {}", params.blur_sigma)));
+        return Err(RokebyError::invalid(
+            "blur_sigma",
+            format!(
+                "must be ≥ 0 and finite (0 disables the blur), got {}",
+                params.blur_sigma
+            ),
+        ));
     }
     if !(0.0..=1.0).contains(&params.min_coverage) {
-        return Err(RokebyError::invalid("min_coverage", format!("must be a fraction in [0, 1], got {}", params.min_coverage)));
+        return Err(RokebyError::invalid(
+            "min_coverage",
+            format!("must be a fraction in [0, 1], got {}", params.min_coverage),
+        ));
     }
     Ok(())
 }
@@ -294,7 +377,10 @@ struct Hit {
 /// unit corners `ns`, padded by the sagitta of its longest arc 1 − cos(θ/2) = 1 − √((1 + cos θ)/2).
 #[inline(always)]
 fn tri_box(ns: &[DVec3; 3]) -> [f64; 4] {
-    box_of(ns, fmin(fmin(ns[0].dot(ns[1]), ns[1].dot(ns[2])), ns[2].dot(ns[0])))
+    box_of(
+        ns,
+        fmin(fmin(ns[0].dot(ns[1]), ns[1].dot(ns[2])), ns[2].dot(ns[0])),
+    )
 }
 
 /// [`tri_box`] given the smallest cosine `mind` of the three arcs.
@@ -352,7 +438,15 @@ fn fmax(a: f64, b: f64) -> f64 {
 /// surface: their directions within the edge angle (cos_edge) and, with a depth pass, their
 /// depths within max_depth_jump relative of each other (eq. 2's quads stop at discontinuities).
 #[inline]
-fn no_discontinuity(ra: DVec3, rb: DVec3, depth: &[f32], a: usize, b: usize, cos_edge: f64, max_depth_jump: f64) -> bool {
+fn no_discontinuity(
+    ra: DVec3,
+    rb: DVec3,
+    depth: &[f32],
+    a: usize,
+    b: usize,
+    cos_edge: f64,
+    max_depth_jump: f64,
+) -> bool {
     if ra.dot(rb) < cos_edge {
         return false;
     }
@@ -365,7 +459,16 @@ fn no_discontinuity(ra: DVec3, rb: DVec3, depth: &[f32], a: usize, b: usize, cos
     true
 }
 
-pub fn partial(width: usize, height: usize, refl: &[f32], values: &[f32], channels: usize, mask: &[f32], depth: &[f32], params: &ReflectionParams) -> Result<PartialMap> {
+pub fn partial(
+    width: usize,
+    height: usize,
+    refl: &[f32],
+    values: &[f32],
+    channels: usize,
+    mask: &[f32],
+    depth: &[f32],
+    params: &ReflectionParams,
+) -> Result<PartialMap> {
     check_partial_args(width, height, refl, values, channels, mask, depth, params)?;
     let np = width * height;
     let s = params.size;
@@ -374,25 +477,37 @@ pub fn partial(width: usize, height: usize, refl: &[f32], values: &[f32], channe
     let mut rr = vec![DVec3::ZERO; np];
     let mut nr = vec![DVec3::ZERO; np];
     let mut ok = vec![false; np];
-    rr.par_chunks_mut(width).zip(nr.par_chunks_mut(width)).zip(ok.par_chunks_mut(width)).enumerate().for_each(|(y, ((ro, no), ko))| {
-        for x in 0..width {
-            let p = y * width + x;
-            if !(mask[p] > 0.5) || !values[p * channels..(p + 1) * channels].iter().all(|v| v.is_finite()) {
-                continue;
+    rr.par_chunks_mut(width)
+        .zip(nr.par_chunks_mut(width))
+        .zip(ok.par_chunks_mut(width))
+        .enumerate()
+        .for_each(|(y, ((ro, no), ko))| {
+            for x in 0..width {
+                let p = y * width + x;
+                if !(mask[p] > 0.5)
+                    || !values[p * channels..(p + 1) * channels]
+                        .iter()
+                        .all(|v| v.is_finite())
+                {
+                    continue;
+                }
+                if !depth.is_empty() && !depth[p].is_finite() {
+                    continue;
+                }
+                let Some(r) = unit(&refl[3 * p..3 * p + 3]) else {
+                    continue;
+                };
+                let Some(n) = rectify(r) else { continue };
+                ro[x] = r;
+                no[x] = n;
+                ko[x] = true;
             }
-            if !depth.is_empty() && !depth[p].is_finite() {
-                continue;
-            }
-            let Some(r) = unit(&refl[3 * p..3 * p + 3]) else { continue };
-            let Some(n) = rectify(r) else { continue };
-            ro[x] = r;
-            no[x] = n;
-            ko[x] = true;
-        }
-    });
+        });
     let cos_edge = params.max_edge_angle.cos();
     // Pixels a and b (both valid) are connected: no discontinuity between them.
-    let edge = |a: usize, b: usize| -> bool { no_discontinuity(rr[a], rr[b], depth, a, b, cos_edge, params.max_depth_jump) };
+    let edge = |a: usize, b: usize| -> bool {
+        no_discontinuity(rr[a], rr[b], depth, a, b, cos_edge, params.max_depth_jump)
+    };
     let connected = |a: usize, b: usize| -> bool { ok[a] && ok[b] && edge(a, b) };
     // Per pixel p, the edges to its neighbours without discontinuity (both pixels valid): bit 0 to
     // p + 1, bit 1 to p + W, bit 2 to p + W + 1 (the quads' diagonal).
@@ -404,7 +519,9 @@ pub fn partial(width: usize, height: usize, refl: &[f32], values: &[f32], channe
                 continue;
             }
             let (right, down) = (x + 1 < width, y + 1 < height);
-            *l = (right && connected(p, p + 1)) as u8 | ((down && connected(p, p + width)) as u8) << 1 | ((right && down && connected(p, p + width + 1)) as u8) << 2;
+            *l = (right && connected(p, p + 1)) as u8
+                | ((down && connected(p, p + width)) as u8) << 1
+                | ((right && down && connected(p, p + width + 1)) as u8) << 2;
         }
     });
     // w = (1 − acos(ℓ)/π)^η of a polygon, ℓ the cosine of its longest arc; in log space.
@@ -415,7 +532,9 @@ pub fn partial(width: usize, height: usize, refl: &[f32], values: &[f32], channe
                 l = l.min(rr[vs[a] as usize].dot(rr[vs[b] as usize]));
             }
         }
-        ETA * (1.0 - l.clamp(-1.0, 1.0).acos() / std::f64::consts::PI).max(1e-300).ln()
+        ETA * (1.0 - l.clamp(-1.0, 1.0).acos() / std::f64::consts::PI)
+            .max(1e-300)
+            .ln()
     };
     // Lookup grid of the texel centres' rectified directions q.
     let gt = ((TEXEL_GRID_PER_SIDE * s as f64).ceil() as usize).max(8);
@@ -431,8 +550,14 @@ pub fn partial(width: usize, height: usize, refl: &[f32], values: &[f32], channe
                 if u * u + v * v > 1.0 {
                     continue;
                 }
-                let Some(q) = rectify(uv_to_dir(face, u, v)) else { continue };
-                tex.push(((cell(q.y) * gt + cell(q.x)) as u32, ((face * s + i) * s + j) as u32, q));
+                let Some(q) = rectify(uv_to_dir(face, u, v)) else {
+                    continue;
+                };
+                tex.push((
+                    (cell(q.y) * gt + cell(q.x)) as u32,
+                    ((face * s + i) * s + j) as u32,
+                    q,
+                ));
             }
         }
     }
@@ -457,7 +582,10 @@ pub fn partial(width: usize, height: usize, refl: &[f32], values: &[f32], channe
         cand.clear();
         let (cx0, cx1) = (cell(bx[0]), cell(bx[1]));
         for cy in cell(bx[2])..=cell(bx[3]) {
-            let (k0, k1) = (cell_start[cy * gt + cx0] as usize, cell_start[cy * gt + cx1 + 1] as usize);
+            let (k0, k1) = (
+                cell_start[cy * gt + cx0] as usize,
+                cell_start[cy * gt + cx1 + 1] as usize,
+            );
             for (t, &[qx, qy]) in tex_xy[k0..k1].iter().enumerate() {
                 if qx > bx[1] {
                     break; // the row is sorted by q.x
@@ -471,7 +599,13 @@ pub fn partial(width: usize, height: usize, refl: &[f32], values: &[f32], channe
     };
     // The candidates inside triangle `tv` (in its own box, barycentric coordinates ≥ 0) of the
     // polygon `poly`, whose log weight is computed at the first hit.
-    let tri_hits = |tv: [u32; 3], vs: &[DVec3; 3], bx: &[f64; 4], poly: &[u32], cand: &[u32], logw: &mut Option<f64>, hits: &mut Vec<Hit>| {
+    let tri_hits = |tv: [u32; 3],
+                    vs: &[DVec3; 3],
+                    bx: &[f64; 4],
+                    poly: &[u32],
+                    cand: &[u32],
+                    logw: &mut Option<f64>,
+                    hits: &mut Vec<Hit>| {
         // Dual vectors of the corners (λ = (q·d₀, q·d₁, q·d₂)), when a centre is in the box.
         let mut duals: Option<[DVec3; 3]> = None;
         for &t in cand {
@@ -486,7 +620,11 @@ pub fn partial(width: usize, height: usize, refl: &[f32], values: &[f32], channe
                     [DVec3::ZERO, DVec3::ZERO, DVec3::ZERO]
                 } else {
                     let inv = 1.0 / det;
-                    [vs[1].cross(vs[2]) * inv, vs[2].cross(vs[0]) * inv, vs[0].cross(vs[1]) * inv]
+                    [
+                        vs[1].cross(vs[2]) * inv,
+                        vs[2].cross(vs[0]) * inv,
+                        vs[0].cross(vs[1]) * inv,
+                    ]
                 }
             });
             let q = tex[t as usize].2;
@@ -509,7 +647,11 @@ pub fn partial(width: usize, height: usize, refl: &[f32], values: &[f32], channe
     let tasks: Vec<(usize, Vec<Hit>)> = (0..quad_rows.div_ceil(ROWS_PER_TASK))
         .into_par_iter()
         .map(|task| {
-            let (mut n_tris, mut hits, mut cand) = (0usize, Vec::with_capacity(ROWS_PER_TASK * width / 2), Vec::new());
+            let (mut n_tris, mut hits, mut cand) = (
+                0usize,
+                Vec::with_capacity(ROWS_PER_TASK * width / 2),
+                Vec::new(),
+            );
             for y in task * ROWS_PER_TASK..((task + 1) * ROWS_PER_TASK).min(quad_rows) {
                 for x in 0..width - 1 {
                     let a = y * width + x;
@@ -521,21 +663,52 @@ pub fn partial(width: usize, height: usize, refl: &[f32], values: &[f32], channe
                         // Both triangles (a, b, c), (a, c, d) from the five arcs' cosines; the
                         // union of their boxes selects the candidates of both.
                         let (na, nb, nc, nd) = (nr[a], nr[b], nr[c], nr[d]);
-                        let (ab, bc, ca, cd, da) = (na.dot(nb), nb.dot(nc), nc.dot(na), nc.dot(nd), nd.dot(na));
+                        let (ab, bc, ca, cd, da) =
+                            (na.dot(nb), nb.dot(nc), nc.dot(na), nc.dot(nd), nd.dot(na));
                         let (v1, v2) = ([na, nb, nc], [na, nc, nd]);
                         let b1 = box_of(&v1, fmin(fmin(ab, bc), ca));
                         let b2 = box_of(&v2, fmin(fmin(ca, cd), da));
-                        centres_in(&[fmin(b1[0], b2[0]), fmax(b1[1], b2[1]), fmin(b1[2], b2[2]), fmax(b1[3], b2[3])], &mut cand);
+                        centres_in(
+                            &[
+                                fmin(b1[0], b2[0]),
+                                fmax(b1[1], b2[1]),
+                                fmin(b1[2], b2[2]),
+                                fmax(b1[3], b2[3]),
+                            ],
+                            &mut cand,
+                        );
                         if !cand.is_empty() {
                             let poly = [a as u32, b as u32, c as u32, d as u32];
                             let mut logw = None;
-                            tri_hits([poly[0], poly[1], poly[2]], &v1, &b1, &poly, &cand, &mut logw, &mut hits);
-                            tri_hits([poly[0], poly[2], poly[3]], &v2, &b2, &poly, &cand, &mut logw, &mut hits);
+                            tri_hits(
+                                [poly[0], poly[1], poly[2]],
+                                &v1,
+                                &b1,
+                                &poly,
+                                &cand,
+                                &mut logw,
+                                &mut hits,
+                            );
+                            tri_hits(
+                                [poly[0], poly[2], poly[3]],
+                                &v2,
+                                &b2,
+                                &poly,
+                                &cand,
+                                &mut logw,
+                                &mut hits,
+                            );
                         }
                         continue;
                     }
                     // At most a boundary triangle: the first whole one of these.
-                    let (ab, ad, ac, bc, dc) = (la & 1 != 0, la & 2 != 0, la & 4 != 0, lb & 2 != 0, ld & 1 != 0);
+                    let (ab, ad, ac, bc, dc) = (
+                        la & 1 != 0,
+                        la & 2 != 0,
+                        la & 4 != 0,
+                        lb & 2 != 0,
+                        ld & 1 != 0,
+                    );
                     let tri = if ab && bc && ac {
                         [a, b, c]
                     } else if ab && ad && connected(b, d) {
@@ -565,7 +738,13 @@ pub fn partial(width: usize, height: usize, refl: &[f32], values: &[f32], channe
     let mut positions = ParaboloidMap::new(s, 2);
     let mut covered = vec![false; 2 * s * s];
     if triangles == 0 {
-        return Ok(PartialMap { map, positions, covered, coverage: 0.0, triangles: 0 });
+        return Ok(PartialMap {
+            map,
+            positions,
+            covered,
+            coverage: 0.0,
+            triangles: 0,
+        });
     }
     // Per texel (in `tex` order): [m, den, x, y, acc…]: the online log-sum of eq. 2's weights.
     // The hits come in the polygons' order; each task takes a fixed range of texels and all
@@ -574,43 +753,49 @@ pub fn partial(width: usize, height: usize, refl: &[f32], values: &[f32], channe
     let stride = 4 + ch;
     let mut acc = vec![0.0f64; nt * stride];
     let per_range = nt.div_ceil(rayon::current_num_threads().max(1)).max(1);
-    acc.par_chunks_mut(per_range * stride).enumerate().for_each(|(range, out)| {
-        let t0 = range * per_range;
-        let t1 = t0 + out.len() / stride;
-        for a in out.chunks_exact_mut(stride) {
-            a[0] = f64::NEG_INFINITY;
-        }
-        for h in tasks.iter().flat_map(|t| &t.1) {
-            let t = h.t as usize;
-            if t < t0 || t >= t1 {
-                continue;
+    acc.par_chunks_mut(per_range * stride)
+        .enumerate()
+        .for_each(|(range, out)| {
+            let t0 = range * per_range;
+            let t1 = t0 + out.len() / stride;
+            for a in out.chunks_exact_mut(stride) {
+                a[0] = f64::NEG_INFINITY;
             }
-            let a = &mut out[(t - t0) * stride..(t - t0 + 1) * stride];
-            let (l, lw) = (h.l, h.lw);
-            let sum = l[0] + l[1] + l[2];
-            // Online log-sum of weights: rescale when a larger one appears.
-            if lw > a[0] {
-                let f = if a[0].is_finite() { (a[0] - lw).exp() } else { 0.0 };
-                for x in a[1..].iter_mut() {
-                    *x *= f;
+            for h in tasks.iter().flat_map(|t| &t.1) {
+                let t = h.t as usize;
+                if t < t0 || t >= t1 {
+                    continue;
                 }
-                a[0] = lw;
-            }
-            // exp(0) = 1 exactly: the common case of the largest weight so far.
-            let w = if lw == a[0] { 1.0 } else { (lw - a[0]).exp() };
-            a[1] += w;
-            let ws = w / sum;
-            for (c, &pi) in h.v.iter().enumerate() {
-                let lam = ws * l[c];
-                let p = pi as usize;
-                for cc in 0..ch {
-                    a[4 + cc] += lam * values[p * ch + cc] as f64;
+                let a = &mut out[(t - t0) * stride..(t - t0 + 1) * stride];
+                let (l, lw) = (h.l, h.lw);
+                let sum = l[0] + l[1] + l[2];
+                // Online log-sum of weights: rescale when a larger one appears.
+                if lw > a[0] {
+                    let f = if a[0].is_finite() {
+                        (a[0] - lw).exp()
+                    } else {
+                        0.0
+                    };
+                    for x in a[1..].iter_mut() {
+                        *x *= f;
+                    }
+                    a[0] = lw;
                 }
-                a[2] += lam * (p % width) as f64;
-                a[3] += lam * (p / width) as f64;
+                // exp(0) = 1 exactly: the common case of the largest weight so far.
+                let w = if lw == a[0] { 1.0 } else { (lw - a[0]).exp() };
+                a[1] += w;
+                let ws = w / sum;
+                for (c, &pi) in h.v.iter().enumerate() {
+                    let lam = ws * l[c];
+                    let p = pi as usize;
+                    for cc in 0..ch {
+                        a[4 + cc] += lam * values[p * ch + cc] as f64;
+                    }
+                    a[2] += lam * (p % width) as f64;
+                    a[3] += lam * (p / width) as f64;
+                }
             }
-        }
-    });
+        });
     drop(tasks);
     for (t, a) in tex.iter().zip(acc.chunks_exact(stride)) {
         let den = a[1];
@@ -625,14 +810,29 @@ pub fn partial(width: usize, height: usize, refl: &[f32], values: &[f32], channe
         }
     }
     let coverage = coverage_of(s, &covered);
-    Ok(PartialMap { map, positions, covered, coverage, triangles })
+    Ok(PartialMap {
+        map,
+        positions,
+        covered,
+        coverage,
+        triangles,
+    })
 }
 
 /// The former partial reconstruction (grid of triangles queried per texel), kept as the
 /// reference of the tests.
 #[cfg(test)]
 #[allow(clippy::too_many_arguments)]
-pub(crate) fn partial_reference(width: usize, height: usize, refl: &[f32], values: &[f32], channels: usize, mask: &[f32], depth: &[f32], params: &ReflectionParams) -> Result<PartialMap> {
+pub(crate) fn partial_reference(
+    width: usize,
+    height: usize,
+    refl: &[f32],
+    values: &[f32],
+    channels: usize,
+    mask: &[f32],
+    depth: &[f32],
+    params: &ReflectionParams,
+) -> Result<PartialMap> {
     struct Tri {
         v: [u32; 3],
         logw: f64,
@@ -643,7 +843,11 @@ pub(crate) fn partial_reference(width: usize, height: usize, refl: &[f32], value
     let pix: Vec<Option<(DVec3, DVec3)>> = (0..np)
         .into_par_iter()
         .map(|p| {
-            if !(mask[p] > 0.5) || !values[p * channels..(p + 1) * channels].iter().all(|v| v.is_finite()) {
+            if !(mask[p] > 0.5)
+                || !values[p * channels..(p + 1) * channels]
+                    .iter()
+                    .all(|v| v.is_finite())
+            {
                 return None;
             }
             if !depth.is_empty() && !depth[p].is_finite() {
@@ -656,7 +860,9 @@ pub(crate) fn partial_reference(width: usize, height: usize, refl: &[f32], value
     let cos_edge = params.max_edge_angle.cos();
     let connected = |a: usize, b: usize| -> bool {
         match (pix[a], pix[b]) {
-            (Some((ra, _)), Some((rb, _))) => no_discontinuity(ra, rb, depth, a, b, cos_edge, params.max_depth_jump),
+            (Some((ra, _)), Some((rb, _))) => {
+                no_discontinuity(ra, rb, depth, a, b, cos_edge, params.max_depth_jump)
+            }
             _ => false,
         }
     };
@@ -667,7 +873,9 @@ pub(crate) fn partial_reference(width: usize, height: usize, refl: &[f32], value
                 l = l.min(pix[vs[a]].unwrap().0.dot(pix[vs[b]].unwrap().0));
             }
         }
-        ETA * (1.0 - l.clamp(-1.0, 1.0).acos() / std::f64::consts::PI).max(1e-300).ln()
+        ETA * (1.0 - l.clamp(-1.0, 1.0).acos() / std::f64::consts::PI)
+            .max(1e-300)
+            .ln()
     };
     // Polygons per 2×2 block, rows in parallel.
     let tris: Vec<Tri> = (0..height.saturating_sub(1))
@@ -678,15 +886,34 @@ pub(crate) fn partial_reference(width: usize, height: usize, refl: &[f32], value
                 let a = y * width + x;
                 let (b, c, d) = (a + 1, a + 1 + width, a + width);
                 let ok = [a, b, c, d].map(|p| pix[p].is_some());
-                if ok.iter().all(|&o| o) && connected(a, b) && connected(b, c) && connected(c, d) && connected(d, a) && connected(a, c) {
+                if ok.iter().all(|&o| o)
+                    && connected(a, b)
+                    && connected(b, c)
+                    && connected(c, d)
+                    && connected(d, a)
+                    && connected(a, c)
+                {
                     let lw = log_weight(&[a, b, c, d]);
-                    out.push(Tri { v: [a as u32, b as u32, c as u32], logw: lw });
-                    out.push(Tri { v: [a as u32, c as u32, d as u32], logw: lw });
+                    out.push(Tri {
+                        v: [a as u32, b as u32, c as u32],
+                        logw: lw,
+                    });
+                    out.push(Tri {
+                        v: [a as u32, c as u32, d as u32],
+                        logw: lw,
+                    });
                     continue;
                 }
                 for t in [[a, b, c], [a, b, d], [b, c, d], [a, c, d]] {
-                    if t.iter().all(|&p| pix[p].is_some()) && connected(t[0], t[1]) && connected(t[1], t[2]) && connected(t[2], t[0]) {
-                        out.push(Tri { v: [t[0] as u32, t[1] as u32, t[2] as u32], logw: log_weight(&t) });
+                    if t.iter().all(|&p| pix[p].is_some())
+                        && connected(t[0], t[1])
+                        && connected(t[1], t[2])
+                        && connected(t[2], t[0])
+                    {
+                        out.push(Tri {
+                            v: [t[0] as u32, t[1] as u32, t[2] as u32],
+                            logw: log_weight(&t),
+                        });
                         break;
                     }
                 }
@@ -700,11 +927,18 @@ pub(crate) fn partial_reference(width: usize, height: usize, refl: &[f32], value
     let mut positions = ParaboloidMap::new(s, 2);
     let mut covered = vec![false; 2 * s * s];
     if tris.is_empty() {
-        return Ok(PartialMap { map, positions, covered, coverage: 0.0, triangles: 0 });
+        return Ok(PartialMap {
+            map,
+            positions,
+            covered,
+            coverage: 0.0,
+            triangles: 0,
+        });
     }
     // Grid over (n'_x, n'_y) ∈ [−1, 1]².
     let g = ((tris.len() as f64).sqrt() * 0.5).clamp(8.0, 1024.0) as usize;
-    let cell = |x: f64| -> usize { (((x + 1.0) * 0.5 * g as f64).floor().max(0.0) as usize).min(g - 1) };
+    let cell =
+        |x: f64| -> usize { (((x + 1.0) * 0.5 * g as f64).floor().max(0.0) as usize).min(g - 1) };
     let ranges: Vec<(usize, usize, usize, usize)> = tris
         .par_iter()
         .map(|t| {
@@ -716,8 +950,14 @@ pub(crate) fn partial_reference(width: usize, height: usize, refl: &[f32], value
             let pad = (1.0 - (0.5 * mind.clamp(-1.0, 1.0).acos()).cos()) + 1e-9;
             let xs = ns.map(|n| n.x);
             let ys = ns.map(|n| n.y);
-            let (x0, x1) = (xs.iter().cloned().fold(f64::INFINITY, f64::min) - pad, xs.iter().cloned().fold(f64::NEG_INFINITY, f64::max) + pad);
-            let (y0, y1) = (ys.iter().cloned().fold(f64::INFINITY, f64::min) - pad, ys.iter().cloned().fold(f64::NEG_INFINITY, f64::max) + pad);
+            let (x0, x1) = (
+                xs.iter().cloned().fold(f64::INFINITY, f64::min) - pad,
+                xs.iter().cloned().fold(f64::NEG_INFINITY, f64::max) + pad,
+            );
+            let (y0, y1) = (
+                ys.iter().cloned().fold(f64::INFINITY, f64::min) - pad,
+                ys.iter().cloned().fold(f64::NEG_INFINITY, f64::max) + pad,
+            );
             (cell(x0), cell(x1), cell(y0), cell(y1))
         })
         .collect();
@@ -774,7 +1014,11 @@ pub(crate) fn partial_reference(width: usize, height: usize, refl: &[f32], value
                     if det.abs() < 1e-300 {
                         continue;
                     }
-                    let l = [q.dot(vs[1].cross(vs[2])) / det, vs[0].dot(q.cross(vs[2])) / det, vs[0].dot(vs[1].cross(q)) / det];
+                    let l = [
+                        q.dot(vs[1].cross(vs[2])) / det,
+                        vs[0].dot(q.cross(vs[2])) / det,
+                        vs[0].dot(vs[1].cross(q)) / det,
+                    ];
                     let tol = -1e-12;
                     if l[0] < tol || l[1] < tol || l[2] < tol {
                         continue;
@@ -785,7 +1029,11 @@ pub(crate) fn partial_reference(width: usize, height: usize, refl: &[f32], value
                     }
                     // Online log-sum of weights: rescale when a larger one appears.
                     if t.logw > m {
-                        let f = if m.is_finite() { (m - t.logw).exp() } else { 0.0 };
+                        let f = if m.is_finite() {
+                            (m - t.logw).exp()
+                        } else {
+                            0.0
+                        };
                         den *= f;
                         pos[0] *= f;
                         pos[1] *= f;
@@ -817,7 +1065,13 @@ pub(crate) fn partial_reference(width: usize, height: usize, refl: &[f32], value
             }
         });
     let coverage = coverage_of(s, &covered);
-    Ok(PartialMap { map, positions, covered, coverage, triangles: tris.len() })
+    Ok(PartialMap {
+        map,
+        positions,
+        covered,
+        coverage,
+        triangles: tris.len(),
+    })
 }
 
 /// Taps (texel index in face·size·size numbering, weight) of the bilinear value of `face` at
@@ -835,7 +1089,12 @@ fn disk_taps(s: usize, face: usize, u: f64, v: f64) -> Vec<(usize, f64)> {
         a * a + b * b <= 1.0
     };
     let mut taps: Vec<(usize, f64)> = Vec::with_capacity(4);
-    for (i, j, w) in [(i0, j0, (1.0 - fx) * (1.0 - fy)), (i0, j1, fx * (1.0 - fy)), (i1, j0, (1.0 - fx) * fy), (i1, j1, fx * fy)] {
+    for (i, j, w) in [
+        (i0, j0, (1.0 - fx) * (1.0 - fy)),
+        (i0, j1, fx * (1.0 - fy)),
+        (i1, j0, (1.0 - fx) * fy),
+        (i1, j1, fx * fy),
+    ] {
         if w > 0.0 && inside(i, j) {
             if let Some(t) = taps.iter_mut().find(|t| t.0 == (face * s + i) * s + j) {
                 t.1 += w;
@@ -874,7 +1133,10 @@ fn disk_taps(s: usize, face: usize, u: f64, v: f64) -> Vec<(usize, f64)> {
 pub fn fill_holes(maps: &mut [&mut ParaboloidMap], covered: &[bool]) -> Result<usize> {
     let s = maps[0].size;
     if covered.len() != 2 * s * s || maps.iter().any(|m| m.size != s) {
-        return Err(RokebyError::invalid("covered", "size does not match the map"));
+        return Err(RokebyError::invalid(
+            "covered",
+            "size does not match the map",
+        ));
     }
     let h = 2.0 / s as f64;
     let rho2 = |i: usize, j: usize| {
@@ -903,7 +1165,10 @@ pub fn fill_holes(maps: &mut [&mut ParaboloidMap], covered: &[bool]) -> Result<u
         }
     }
     if !any_known {
-        return Err(RokebyError::invalid("covered", "no texel was recovered: nothing to fill the holes from"));
+        return Err(RokebyError::invalid(
+            "covered",
+            "no texel was recovered: nothing to fill the holes from",
+        ));
     }
     if n_disk == 0 {
         return Ok(0);
@@ -930,9 +1195,20 @@ pub fn fill_holes(maps: &mut [&mut ParaboloidMap], covered: &[bool]) -> Result<u
         let (j0, i0) = (x.floor() as usize, y.floor() as usize);
         let (j1, i1) = ((j0 + 1).min(s - 1), (i0 + 1).min(s - 1));
         let (fx, fy) = (x - j0 as f64, y - i0 as f64);
-        let taps = [(i0, j0, (1.0 - fx) * (1.0 - fy)), (i0, j1, fx * (1.0 - fy)), (i1, j0, (1.0 - fx) * fy), (i1, j1, fx * fy)];
-        if taps.iter().all(|&(i, j, w)| w == 0.0 || rho2(i, j) <= band_r2) {
-            taps.iter().filter(|t| t.2 != 0.0).map(|&(i, j, w)| ((face * s + i) * s + j, w)).collect()
+        let taps = [
+            (i0, j0, (1.0 - fx) * (1.0 - fy)),
+            (i0, j1, fx * (1.0 - fy)),
+            (i1, j0, (1.0 - fx) * fy),
+            (i1, j1, fx * fy),
+        ];
+        if taps
+            .iter()
+            .all(|&(i, j, w)| w == 0.0 || rho2(i, j) <= band_r2)
+        {
+            taps.iter()
+                .filter(|t| t.2 != 0.0)
+                .map(|&(i, j, w)| ((face * s + i) * s + j, w))
+                .collect()
         } else {
             disk_taps(s, face, u, v)
         }
@@ -963,7 +1239,12 @@ pub fn fill_holes(maps: &mut [&mut ParaboloidMap], covered: &[bool]) -> Result<u
                 coef.push((var_id[t] as usize, 4.0));
                 for (di, dj) in [(-1i64, 0i64), (1, 0), (0, -1), (0, 1)] {
                     let (ii, jj) = (i as i64 + di, j as i64 + dj);
-                    if ii >= 0 && jj >= 0 && (ii as usize) < s && (jj as usize) < s && rho2(ii as usize, jj as usize) <= band_r2 {
+                    if ii >= 0
+                        && jj >= 0
+                        && (ii as usize) < s
+                        && (jj as usize) < s
+                        && rho2(ii as usize, jj as usize) <= band_r2
+                    {
                         add((face * s + ii as usize) * s + jj as usize, -1.0, &mut coef);
                     } else {
                         // Beyond the grid (near the axes the band leaves [−1, 1]²): the other
@@ -997,8 +1278,14 @@ pub fn fill_holes(maps: &mut [&mut ParaboloidMap], covered: &[bool]) -> Result<u
             b[(r, k)] = v;
         }
     }
-    let a = SparseColMat::<u32, f64>::try_new_from_triplets(nv, nv, &trip).map_err(|e| RokebyError::invalid("covered", format!("sparse assembly failed: {e:?}")))?;
-    let lu = a.sp_lu().map_err(|e| RokebyError::invalid("covered", format!("hole-filling factorisation failed ({e:?})")))?;
+    let a = SparseColMat::<u32, f64>::try_new_from_triplets(nv, nv, &trip)
+        .map_err(|e| RokebyError::invalid("covered", format!("sparse assembly failed: {e:?}")))?;
+    let lu = a.sp_lu().map_err(|e| {
+        RokebyError::invalid(
+            "covered",
+            format!("hole-filling factorisation failed ({e:?})"),
+        )
+    })?;
     let x = lu.solve(&b);
     for (r, &t) in vars.iter().enumerate() {
         let mut off = 0;
@@ -1018,30 +1305,37 @@ pub fn fill_beyond_equator(m: &mut ParaboloidMap) {
     let s = m.size;
     let c = m.channels;
     let src = m.data.clone();
-    let view = ParaboloidMap { size: s, channels: c, data: src };
-    m.data.par_chunks_mut(s * c).enumerate().for_each(|(row, out)| {
-        let (face, i) = (row / s, row % s);
-        let mut tmp = vec![0.0f64; c];
-        for j in 0..s {
-            let (u, v) = texel_uv(s, i, j);
-            let r2 = u * u + v * v;
-            if r2 <= 1.0 {
-                continue;
-            }
-            let taps = disk_taps(s, 1 - face, u / r2, v / r2);
-            for t in tmp.iter_mut() {
-                *t = 0.0;
-            }
-            for (tt, w) in taps {
+    let view = ParaboloidMap {
+        size: s,
+        channels: c,
+        data: src,
+    };
+    m.data
+        .par_chunks_mut(s * c)
+        .enumerate()
+        .for_each(|(row, out)| {
+            let (face, i) = (row / s, row % s);
+            let mut tmp = vec![0.0f64; c];
+            for j in 0..s {
+                let (u, v) = texel_uv(s, i, j);
+                let r2 = u * u + v * v;
+                if r2 <= 1.0 {
+                    continue;
+                }
+                let taps = disk_taps(s, 1 - face, u / r2, v / r2);
+                for t in tmp.iter_mut() {
+                    *t = 0.0;
+                }
+                for (tt, w) in taps {
+                    for k in 0..c {
+                        tmp[k] += w * view.data[tt * c + k] as f64;
+                    }
+                }
                 for k in 0..c {
-                    tmp[k] += w * view.data[tt * c + k] as f64;
+                    out[j * c + k] = tmp[k] as f32;
                 }
             }
-            for k in 0..c {
-                out[j * c + k] = tmp[k] as f32;
-            }
-        }
-    });
+        });
 }
 
 /// The paper's regularisation: Gaussian blur of `map` with σ per texel driven by the gradient
@@ -1053,7 +1347,11 @@ pub fn fill_beyond_equator(m: &mut ParaboloidMap) {
 /// S×S map is indistinguishable from a box, and uncapped σ = 1e9 never returned) and its
 /// support at S texels each side, so one texel costs at most (2S+1)² taps. Cancellable between
 /// rows ([`crate::cancel`]).
-pub fn regularize(map: &mut ParaboloidMap, positions: &ParaboloidMap, sigma_max: f64) -> Result<usize> {
+pub fn regularize(
+    map: &mut ParaboloidMap,
+    positions: &ParaboloidMap,
+    sigma_max: f64,
+) -> Result<usize> {
     let s = map.size;
     if sigma_max.is_nan() || sigma_max <= 0.0 {
         return Ok(0);
@@ -1082,8 +1380,16 @@ pub fn regularize(map: &mut ParaboloidMap, positions: &ParaboloidMap, sigma_max:
             for (di, dj) in [(1i64, 0i64), (0, 1)] {
                 let (a, b) = (i as i64 + di, j as i64 + dj);
                 let (c, d) = (i as i64 - di, j as i64 - dj);
-                let q1 = if inside(a, b) { Some(pos(f, a as usize, b as usize)) } else { None };
-                let q0 = if inside(c, d) { Some(pos(f, c as usize, d as usize)) } else { None };
+                let q1 = if inside(a, b) {
+                    Some(pos(f, a as usize, b as usize))
+                } else {
+                    None
+                };
+                let q0 = if inside(c, d) {
+                    Some(pos(f, c as usize, d as usize))
+                } else {
+                    None
+                };
                 let (dx, dy) = match (q0, q1) {
                     (Some(a), Some(b)) => ((b.0 - a.0) * 0.5, (b.1 - a.1) * 0.5),
                     (None, Some(b)) => (b.0 - p.0, b.1 - p.1),
@@ -1164,7 +1470,16 @@ pub struct ReflectionEnv {
     pub blurred_texels: usize,
 }
 
-pub fn reconstruct(width: usize, height: usize, refl: &[f32], values: &[f32], channels: usize, mask: &[f32], depth: &[f32], params: &ReflectionParams) -> Result<ReflectionEnv> {
+pub fn reconstruct(
+    width: usize,
+    height: usize,
+    refl: &[f32],
+    values: &[f32],
+    channels: usize,
+    mask: &[f32],
+    depth: &[f32],
+    params: &ReflectionParams,
+) -> Result<ReflectionEnv> {
     let mut p = partial(width, height, refl, values, channels, mask, depth, params)?;
     if p.coverage < params.min_coverage {
         return Err(RokebyError::invalid(
@@ -1180,7 +1495,13 @@ pub fn reconstruct(width: usize, height: usize, refl: &[f32], values: &[f32], ch
     let filled = fill_holes(&mut [&mut p.map, &mut p.positions], &p.covered)?;
     let blurred = regularize(&mut p.map, &p.positions, params.blur_sigma)?;
     fill_beyond_equator(&mut p.map);
-    Ok(ReflectionEnv { map: p.map, coverage: p.coverage, triangles: p.triangles, filled_texels: filled, blurred_texels: blurred })
+    Ok(ReflectionEnv {
+        map: p.map,
+        coverage: p.coverage,
+        triangles: p.triangles,
+        filled_texels: filled,
+        blurred_texels: blurred,
+    })
 }
 
 #[cfg(test)]
@@ -1194,17 +1515,33 @@ mod tests {
         let (mut refl, mut vals, mut mask, mut depth) = (vec![], vec![], vec![], vec![]);
         for i in 0..w {
             for j in 0..w {
-                let (x, y) = ((j as f64 + 0.5) / w as f64 * 2.0 - 1.0, (i as f64 + 0.5) / w as f64 * 2.0 - 1.0);
+                let (x, y) = (
+                    (j as f64 + 0.5) / w as f64 * 2.0 - 1.0,
+                    (i as f64 + 0.5) / w as f64 * 2.0 - 1.0,
+                );
                 let s = x * x + y * y;
                 let inside = s < 0.98 && (i * 7 + j * 3) % 97 != 0;
                 let z = (1.0 - s).max(0.0).sqrt();
                 let pi = std::f64::consts::PI;
-                let n = DVec3::new(x + 0.25 * (9.0 * pi * x).sin() * (5.0 * pi * y).cos(), y + 0.25 * (7.0 * pi * y).cos() * (4.0 * pi * x).sin(), z).normalize();
+                let n = DVec3::new(
+                    x + 0.25 * (9.0 * pi * x).sin() * (5.0 * pi * y).cos(),
+                    y + 0.25 * (7.0 * pi * y).cos() * (4.0 * pi * x).sin(),
+                    z,
+                )
+                .normalize();
                 let r = reflect(DVec3::Z, n);
                 refl.extend([r.x as f32, r.y as f32, r.z as f32]);
-                vals.extend([(0.5 + 0.3 * r.x + 0.2 * r.y * r.z) as f32, (0.4 + 0.1 * (3.0 * r.z).sin()) as f32, (0.3 + 0.2 * r.y) as f32]);
+                vals.extend([
+                    (0.5 + 0.3 * r.x + 0.2 * r.y * r.z) as f32,
+                    (0.4 + 0.1 * (3.0 * r.z).sin()) as f32,
+                    (0.3 + 0.2 * r.y) as f32,
+                ]);
                 mask.push(if inside { 1.0 } else { 0.0 });
-                depth.push(if inside { (5.0 - z) as f32 } else { f32::INFINITY });
+                depth.push(if inside {
+                    (5.0 - z) as f32
+                } else {
+                    f32::INFINITY
+                });
             }
         }
         (refl, vals, mask, depth)
@@ -1215,17 +1552,37 @@ mod tests {
     /// come from precomputed dual vectors) — equal after the f32 store here.
     #[test]
     fn partial_matches_reference() {
-        for (w, size, use_depth) in [(96, 16, true), (160, 32, true), (128, 64, false), (200, 128, true)] {
+        for (w, size, use_depth) in [
+            (96, 16, true),
+            (160, 32, true),
+            (128, 64, false),
+            (200, 128, true),
+        ] {
             let (refl, vals, mask, depth) = bumpy_sphere(w);
             let d: &[f32] = if use_depth { &depth } else { &[] };
-            let params = ReflectionParams { size, ..Default::default() };
+            let params = ReflectionParams {
+                size,
+                ..Default::default()
+            };
             let a = partial(w, w, &refl, &vals, 3, &mask, d, &params).unwrap();
             let b = partial_reference(w, w, &refl, &vals, 3, &mask, d, &params).unwrap();
             assert_eq!(a.triangles, b.triangles);
             assert_eq!(a.covered, b.covered, "w {w} size {size}");
             assert_eq!(a.coverage, b.coverage);
-            let md = a.map.data.iter().zip(&b.map.data).map(|(x, y)| (x - y).abs()).fold(0.0f32, f32::max);
-            let pd = a.positions.data.iter().zip(&b.positions.data).map(|(x, y)| (x - y).abs()).fold(0.0f32, f32::max);
+            let md = a
+                .map
+                .data
+                .iter()
+                .zip(&b.map.data)
+                .map(|(x, y)| (x - y).abs())
+                .fold(0.0f32, f32::max);
+            let pd = a
+                .positions
+                .data
+                .iter()
+                .zip(&b.positions.data)
+                .map(|(x, y)| (x - y).abs())
+                .fold(0.0f32, f32::max);
             assert!(md <= 1e-6, "w {w} size {size}: map differs by {md}");
             assert!(pd <= 1e-3, "w {w} size {size}: positions differ by {pd} px");
             assert!(a.coverage > 0.5);
@@ -1236,9 +1593,15 @@ mod tests {
     fn partial_is_the_same_on_any_thread_count() {
         let w = 160;
         let (refl, vals, mask, depth) = bumpy_sphere(w);
-        let params = ReflectionParams { size: 32, ..Default::default() };
+        let params = ReflectionParams {
+            size: 32,
+            ..Default::default()
+        };
         let run = |t: usize| {
-            let pool = rayon::ThreadPoolBuilder::new().num_threads(t).build().unwrap();
+            let pool = rayon::ThreadPoolBuilder::new()
+                .num_threads(t)
+                .build()
+                .unwrap();
             pool.install(|| partial(w, w, &refl, &vals, 3, &mask, &depth, &params).unwrap())
         };
         let one = run(1);

@@ -40,9 +40,16 @@ pub fn falloff(d: f64, radius: f64, border: f64) -> f64 {
 #[derive(Debug, Clone)]
 pub enum Region {
     /// Centre, outer radius and border width in scene units (may span several objects).
-    Euclidean { center: DVec3, radius: f64, border: f64 },
+    Euclidean {
+        center: DVec3,
+        radius: f64,
+        border: f64,
+    },
     /// a(q) given per evaluated point (geodesic or free-form regions), and a(pₙ) per constraint.
-    PerPoint { values: Vec<f32>, at_constraints: Vec<f32> },
+    PerPoint {
+        values: Vec<f32>,
+        at_constraints: Vec<f32>,
+    },
 }
 
 impl Region {
@@ -52,41 +59,79 @@ impl Region {
             return Err(RokebyError::invalid(name, "center must be finite"));
         }
         if !(radius.is_finite() && radius > 0.0) {
-            return Err(RokebyError::invalid(name, format!("radius must be finite and > 0, got {radius}")));
+            return Err(RokebyError::invalid(
+                name,
+                format!("radius must be finite and > 0, got {radius}"),
+            ));
         }
         if !(border.is_finite() && border >= 0.0) {
-            return Err(RokebyError::invalid(name, format!("border must be finite and >= 0, got {border}")));
+            return Err(RokebyError::invalid(
+                name,
+                format!("border must be finite and >= 0, got {border}"),
+            ));
         }
-        Ok(Region::Euclidean { center: c, radius, border })
+        Ok(Region::Euclidean {
+            center: c,
+            radius,
+            border,
+        })
     }
 
     /// `n_points`/`n_constraints` are the sizes the arrays must have.
-    pub fn per_point(values: Vec<f32>, at_constraints: Vec<f32>, n_points: usize, n_constraints: usize, name: &str) -> Result<Self> {
+    pub fn per_point(
+        values: Vec<f32>,
+        at_constraints: Vec<f32>,
+        n_points: usize,
+        n_constraints: usize,
+        name: &str,
+    ) -> Result<Self> {
         if values.len() != n_points {
             return Err(RokebyError::invalid(
                 name,
-                format!("values has {} entries but there are {} points", values.len(), n_points),
+                format!(
+                    "values has {} entries but there are {} points",
+                    values.len(),
+                    n_points
+                ),
             ));
         }
         if at_constraints.len() != n_constraints {
             return Err(RokebyError::invalid(
                 name,
-                format!("at_constraints has {} entries but there are {} constraints", at_constraints.len(), n_constraints),
+                format!(
+                    "at_constraints has {} entries but there are {} constraints",
+                    at_constraints.len(),
+                    n_constraints
+                ),
             ));
         }
         for (what, arr) in [("values", &values), ("at_constraints", &at_constraints)] {
-            if let Some((i, v)) = arr.iter().enumerate().find(|(_, v)| !(v.is_finite() && (0.0..=1.0).contains(*v))) {
-                return Err(RokebyError::invalid(name, format!("{what}[{i}] = {v} is not in [0, 1]")));
+            if let Some((i, v)) = arr
+                .iter()
+                .enumerate()
+                .find(|(_, v)| !(v.is_finite() && (0.0..=1.0).contains(*v)))
+            {
+                return Err(RokebyError::invalid(
+                    name,
+                    format!("{what}[{i}] = {v} is not in [0, 1]"),
+                ));
             }
         }
-        Ok(Region::PerPoint { values, at_constraints })
+        Ok(Region::PerPoint {
+            values,
+            at_constraints,
+        })
     }
 
     /// a(q) at evaluated point `index` with position `q`.
     #[inline]
     pub fn at_point(&self, index: usize, q: DVec3) -> f64 {
         match self {
-            Region::Euclidean { center, radius, border } => falloff(q.distance(*center), *radius, *border),
+            Region::Euclidean {
+                center,
+                radius,
+                border,
+            } => falloff(q.distance(*center), *radius, *border),
             Region::PerPoint { values, .. } => values[index] as f64,
         }
     }
@@ -94,7 +139,11 @@ impl Region {
     /// a(pₙ) for constraint `k` at `p`.
     pub fn at_constraint(&self, k: usize, p: DVec3) -> f64 {
         match self {
-            Region::Euclidean { center, radius, border } => falloff(p.distance(*center), *radius, *border),
+            Region::Euclidean {
+                center,
+                radius,
+                border,
+            } => falloff(p.distance(*center), *radius, *border),
             Region::PerPoint { at_constraints, .. } => at_constraints[k] as f64,
         }
     }
@@ -122,22 +171,48 @@ mod tests {
 /// components) get 0.
 pub fn geodesic_weights(distances: &[f32], radius: f64, border: f64) -> Result<Vec<f32>> {
     check_radius_border(radius, border)?;
-    Ok(distances.iter().map(|&d| if d.is_finite() { falloff(d as f64, radius, border) as f32 } else { 0.0 }).collect())
+    Ok(distances
+        .iter()
+        .map(|&d| {
+            if d.is_finite() {
+                falloff(d as f64, radius, border) as f32
+            } else {
+                0.0
+            }
+        })
+        .collect())
 }
 
 /// Free-form region (paper §4, a vertex group in Blender): painted weights w ∈ [0, 1], with a
 /// smooth border of `border` width inside the painted area: a(q) = w(q) · smoothstep(d(q)/border),
 /// d(q) being the geodesic distance from q to the nearest unpainted vertex (+inf when every vertex
 /// is painted). Unpainted vertices get 0; a border of 0 gives a = w.
-pub fn freeform_weights(weights: &[f32], distance_to_outside: &[f32], border: f64) -> Result<Vec<f32>> {
+pub fn freeform_weights(
+    weights: &[f32],
+    distance_to_outside: &[f32],
+    border: f64,
+) -> Result<Vec<f32>> {
     if !(border.is_finite() && border >= 0.0) {
-        return Err(RokebyError::invalid("border", format!("must be finite and >= 0, got {border}")));
+        return Err(RokebyError::invalid(
+            "border",
+            format!("must be finite and >= 0, got {border}"),
+        ));
     }
     if weights.len() != distance_to_outside.len() {
-        return Err(RokebyError::invalid("weights", "must have one entry per vertex"));
+        return Err(RokebyError::invalid(
+            "weights",
+            "must have one entry per vertex",
+        ));
     }
-    if let Some((i, w)) = weights.iter().enumerate().find(|(_, w)| !(w.is_finite() && (0.0..=1.0).contains(*w))) {
-        return Err(RokebyError::invalid("weights", format!("weights[{i}] = {w} is not in [0, 1]")));
+    if let Some((i, w)) = weights
+        .iter()
+        .enumerate()
+        .find(|(_, w)| !(w.is_finite() && (0.0..=1.0).contains(*w)))
+    {
+        return Err(RokebyError::invalid(
+            "weights",
+            format!("weights[{i}] = {w} is not in [0, 1]"),
+        ));
     }
     Ok(weights
         .iter()
@@ -156,10 +231,16 @@ pub fn freeform_weights(weights: &[f32], distance_to_outside: &[f32], border: f6
 
 fn check_radius_border(radius: f64, border: f64) -> Result<()> {
     if !(radius.is_finite() && radius > 0.0) {
-        return Err(RokebyError::invalid("radius", format!("must be finite and > 0, got {radius}")));
+        return Err(RokebyError::invalid(
+            "radius",
+            format!("must be finite and > 0, got {radius}"),
+        ));
     }
     if !(border.is_finite() && border >= 0.0) {
-        return Err(RokebyError::invalid("border", format!("must be finite and >= 0, got {border}")));
+        return Err(RokebyError::invalid(
+            "border",
+            format!("must be finite and >= 0, got {border}"),
+        ));
     }
     Ok(())
 }

@@ -34,7 +34,13 @@ pub fn to_float(p: [u8; 4]) -> [f32; 3] {
 /// format's range, about 1.7e38, saturate).
 #[inline]
 pub fn from_float(c: [f32; 3]) -> [u8; 4] {
-    let c = c.map(|x| if x.is_finite() && x > 0.0 { x as f64 } else { 0.0 });
+    let c = c.map(|x| {
+        if x.is_finite() && x > 0.0 {
+            x as f64
+        } else {
+            0.0
+        }
+    });
     let v = c[0].max(c[1]).max(c[2]);
     if v < 1e-32 {
         return [0; 4];
@@ -70,7 +76,9 @@ pub fn decode(bytes: &[u8]) -> Result<(usize, usize, Vec<f32>)> {
         while pos < bytes.len() && bytes[pos] != b'\n' {
             pos += 1;
             if pos - start > 4096 {
-                return Err(bad("header line longer than 4096 bytes: not a Radiance .hdr file"));
+                return Err(bad(
+                    "header line longer than 4096 bytes: not a Radiance .hdr file",
+                ));
             }
         }
         if pos >= bytes.len() {
@@ -81,8 +89,13 @@ pub fn decode(bytes: &[u8]) -> Result<(usize, usize, Vec<f32>)> {
         Ok(s)
     };
     if !bytes.starts_with(b"#?") {
-        let head: String = String::from_utf8_lossy(&bytes[..bytes.len().min(16)]).chars().filter(|c| !c.is_control()).collect();
-        return Err(bad(format!("not a Radiance .hdr file (it starts {head:?}, expected \"#?RADIANCE\")")));
+        let head: String = String::from_utf8_lossy(&bytes[..bytes.len().min(16)])
+            .chars()
+            .filter(|c| !c.is_control())
+            .collect();
+        return Err(bad(format!(
+            "not a Radiance .hdr file (it starts {head:?}, expected \"#?RADIANCE\")"
+        )));
     }
     line()?;
     loop {
@@ -92,27 +105,41 @@ pub fn decode(bytes: &[u8]) -> Result<(usize, usize, Vec<f32>)> {
         }
         if let Some(f) = l.strip_prefix("FORMAT=") {
             if f.trim() != "32-bit_rle_rgbe" {
-                return Err(bad(format!("pixel format {:?} is not supported (only 32-bit_rle_rgbe)", f.trim())));
+                return Err(bad(format!(
+                    "pixel format {:?} is not supported (only 32-bit_rle_rgbe)",
+                    f.trim()
+                )));
             }
         }
     }
     let res = line()?;
     let t: Vec<&str> = res.split_whitespace().collect();
-    let (h, w) = match t.as_slice() {
-        ["-Y", h, "+X", w] => (h.parse::<usize>().ok(), w.parse::<usize>().ok()),
-        _ => return Err(bad(format!("resolution line {res:?}: only the standard orientation \"-Y H +X W\" is supported"))),
-    };
+    let (h, w) =
+        match t.as_slice() {
+            ["-Y", h, "+X", w] => (h.parse::<usize>().ok(), w.parse::<usize>().ok()),
+            _ => return Err(bad(format!(
+                "resolution line {res:?}: only the standard orientation \"-Y H +X W\" is supported"
+            ))),
+        };
     let (Some(h), Some(w)) = (h, w) else {
-        return Err(bad(format!("resolution line {res:?} does not hold two sizes")));
+        return Err(bad(format!(
+            "resolution line {res:?} does not hold two sizes"
+        )));
     };
     if h == 0 || w == 0 || h > 1 << 16 || w > 1 << 16 {
-        return Err(bad(format!("image of {w}×{h} pixels: sizes must be 1 to 65536")));
+        return Err(bad(format!(
+            "image of {w}×{h} pixels: sizes must be 1 to 65536"
+        )));
     }
     // Bound what the file can ask for before allocating: every scanline takes at least
     // `min_line` bytes (new RLE: a 4-byte header and at most 127 pixels per 2-byte run in each of
     // the 4 planes; flat: 4 bytes a pixel; old-style RLE is refused below), so a short file that
     // declares a huge image is refused here instead of allocating for it.
-    let min_line = if (8..=0x7fff).contains(&w) { 4 + 8 * w.div_ceil(127) } else { 4 * w };
+    let min_line = if (8..=0x7fff).contains(&w) {
+        4 + 8 * w.div_ceil(127)
+    } else {
+        4 * w
+    };
     let have = bytes.len().saturating_sub(pos);
     if (have as u128) < (h as u128) * (min_line as u128) {
         return Err(bad(format!(
@@ -124,11 +151,17 @@ pub fn decode(bytes: &[u8]) -> Result<(usize, usize, Vec<f32>)> {
     let mut row = vec![0u8; 4 * w];
     for y in 0..h {
         let rest = &bytes[pos.min(bytes.len())..];
-        let new_rle = (8..=0x7fff).contains(&w) && rest.len() >= 4 && rest[0] == 2 && rest[1] == 2 && rest[2] & 0x80 == 0;
+        let new_rle = (8..=0x7fff).contains(&w)
+            && rest.len() >= 4
+            && rest[0] == 2
+            && rest[1] == 2
+            && rest[2] & 0x80 == 0;
         if new_rle {
             let rw = ((rest[2] as usize) << 8) | rest[3] as usize;
             if rw != w {
-                return Err(bad(format!("scanline {y} says it is {rw} pixels wide, the image is {w}")));
+                return Err(bad(format!(
+                    "scanline {y} says it is {rw} pixels wide, the image is {w}"
+                )));
             }
             pos += 4;
             for plane in 0..4 {
@@ -145,7 +178,9 @@ pub fn decode(bytes: &[u8]) -> Result<(usize, usize, Vec<f32>)> {
                         };
                         pos += 1;
                         if n > w - x {
-                            return Err(bad(format!("scanline {y}: a run goes past the image's width")));
+                            return Err(bad(format!(
+                                "scanline {y}: a run goes past the image's width"
+                            )));
                         }
                         for k in 0..n {
                             row[4 * (x + k) + plane] = v;
@@ -154,7 +189,9 @@ pub fn decode(bytes: &[u8]) -> Result<(usize, usize, Vec<f32>)> {
                     } else {
                         let n = count as usize;
                         if n == 0 || n > w - x {
-                            return Err(bad(format!("scanline {y}: a literal run of {n} bytes does not fit the width")));
+                            return Err(bad(format!(
+                                "scanline {y}: a literal run of {n} bytes does not fit the width"
+                            )));
                         }
                         let Some(lit) = bytes.get(pos..pos + n) else {
                             return Err(bad(format!("the file ends in scanline {y}")));
@@ -171,7 +208,10 @@ pub fn decode(bytes: &[u8]) -> Result<(usize, usize, Vec<f32>)> {
             let Some(flat) = bytes.get(pos..pos + 4 * w) else {
                 return Err(bad(format!("the file ends in scanline {y}")));
             };
-            if flat.chunks_exact(4).any(|p| p[0] == 1 && p[1] == 1 && p[2] == 1) {
+            if flat
+                .chunks_exact(4)
+                .any(|p| p[0] == 1 && p[1] == 1 && p[2] == 1)
+            {
                 return Err(bad("old-style run-length encoding (1 1 1 n pixels) is not supported: re-save the file (e.g. from Blender)"));
             }
             row.copy_from_slice(flat);
@@ -189,16 +229,36 @@ pub fn decode(bytes: &[u8]) -> Result<(usize, usize, Vec<f32>)> {
 /// scanlines (flat ones where the width is outside 8..=32767, as the format requires).
 pub fn encode(h: usize, w: usize, rgb: &[f32]) -> Result<Vec<u8>> {
     if h == 0 || w == 0 || h > 1 << 16 || w > 1 << 16 {
-        return Err(RokebyError::invalid("pixels", format!("image of {w}×{h} pixels: sizes must be 1 to 65536")));
+        return Err(RokebyError::invalid(
+            "pixels",
+            format!("image of {w}×{h} pixels: sizes must be 1 to 65536"),
+        ));
     }
     if rgb.len() != h * w * 3 {
-        return Err(RokebyError::invalid("pixels", format!("expected {} values for {w}×{h} RGB, got {}", h * w * 3, rgb.len())));
+        return Err(RokebyError::invalid(
+            "pixels",
+            format!(
+                "expected {} values for {w}×{h} RGB, got {}",
+                h * w * 3,
+                rgb.len()
+            ),
+        ));
     }
-    let mut out = format!("#?RADIANCE\n# Made with Rokeby\nFORMAT=32-bit_rle_rgbe\n\n-Y {h} +X {w}\n").into_bytes();
+    let mut out =
+        format!("#?RADIANCE\n# Made with Rokeby\nFORMAT=32-bit_rle_rgbe\n\n-Y {h} +X {w}\n")
+            .into_bytes();
     out.reserve(h * w * 4);
     let mut plane = vec![0u8; w];
     for y in 0..h {
-        let px: Vec<[u8; 4]> = (0..w).map(|x| from_float([rgb[3 * (y * w + x)], rgb[3 * (y * w + x) + 1], rgb[3 * (y * w + x) + 2]])).collect();
+        let px: Vec<[u8; 4]> = (0..w)
+            .map(|x| {
+                from_float([
+                    rgb[3 * (y * w + x)],
+                    rgb[3 * (y * w + x) + 1],
+                    rgb[3 * (y * w + x) + 2],
+                ])
+            })
+            .collect();
         if !(8..=0x7fff).contains(&w) {
             out.extend(px.iter().flatten());
             continue;
@@ -223,7 +283,10 @@ fn rle_plane(p: &[u8], out: &mut Vec<u8>) {
         let mut run_len = 0;
         while run_start < p.len() {
             run_len = 1;
-            while run_start + run_len < p.len() && run_len < 127 && p[run_start + run_len] == p[run_start] {
+            while run_start + run_len < p.len()
+                && run_len < 127
+                && p[run_start + run_len] == p[run_start]
+            {
                 run_len += 1;
             }
             if run_len >= 4 {
@@ -281,7 +344,12 @@ mod tests {
                 let m = (0..3).map(|c| px[3 * p + c]).fold(0.0f32, f32::max);
                 for c in 0..3 {
                     // one shared exponent, rounded mantissas: within ½ unit ≤ 1/256 of the pixel's largest
-                    assert!((back[3 * p + c] - px[3 * p + c]).abs() <= m / 256.0 * 1.0001 + 1e-38, "{h}x{w} pixel {p}: {} vs {}", back[3 * p + c], px[3 * p + c]);
+                    assert!(
+                        (back[3 * p + c] - px[3 * p + c]).abs() <= m / 256.0 * 1.0001 + 1e-38,
+                        "{h}x{w} pixel {p}: {} vs {}",
+                        back[3 * p + c],
+                        px[3 * p + c]
+                    );
                 }
             }
         }
@@ -314,14 +382,27 @@ mod tests {
         let good = encode(3, 20, &vec![0.3f32; 3 * 20 * 3]).unwrap();
         let cases: Vec<(Vec<u8>, &str)> = vec![
             (b"P6\n3 3\n255\n".to_vec(), "not a Radiance"),
-            (b"#?RADIANCE\nFORMAT=32-bit_rle_xyze\n\n-Y 1 +X 1\n\0\0\0\0".to_vec(), "xyze"),
+            (
+                b"#?RADIANCE\nFORMAT=32-bit_rle_xyze\n\n-Y 1 +X 1\n\0\0\0\0".to_vec(),
+                "xyze",
+            ),
             (b"#?RADIANCE\n\n+Y 1 +X 1\n\0\0\0\0".to_vec(), "orientation"),
             (b"#?RADIANCE\n\n-Y 0 +X 1\n".to_vec(), "sizes"),
-            (b"#?RADIANCE\n\n-Y 1 +X 2\n\x01\x01\x01\x05\0\0\0\0".to_vec(), "old-style"),
+            (
+                b"#?RADIANCE\n\n-Y 1 +X 2\n\x01\x01\x01\x05\0\0\0\0".to_vec(),
+                "old-style",
+            ),
             (good[..good.len() - 5].to_vec(), "truncated"),
             // 53 bytes declaring 65536×65536 (issue 24: allocated 51.5 GB and aborted)
-            (b"#?RADIANCE\nFORMAT=32-bit_rle_rgbe\n\n-Y 65536 +X 65536\n\x02\x02\x01\x00".to_vec(), "declares 65536×65536"),
-            (b"#?RADIANCE\nFORMAT=32-bit_rle_rgbe".to_vec(), "ends inside its header"),
+            (
+                b"#?RADIANCE\nFORMAT=32-bit_rle_rgbe\n\n-Y 65536 +X 65536\n\x02\x02\x01\x00"
+                    .to_vec(),
+                "declares 65536×65536",
+            ),
+            (
+                b"#?RADIANCE\nFORMAT=32-bit_rle_rgbe".to_vec(),
+                "ends inside its header",
+            ),
         ];
         for (bytes, want) in cases {
             let e = decode(&bytes).unwrap_err().to_string();

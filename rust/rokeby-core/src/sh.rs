@@ -66,8 +66,15 @@ pub fn eval_many(coeffs: &[[f64; SH_COEFFS]], normals: &[f32]) -> Result<Vec<f32
         return Err(RokebyError::invalid("normals", "expected N×3 values"));
     }
     let ch = coeffs.len();
-    if let Some((c, _)) = coeffs.iter().enumerate().find(|(_, r)| r.iter().any(|x| !x.is_finite())) {
-        return Err(RokebyError::invalid("coeffs", format!("row {c} is not finite")));
+    if let Some((c, _)) = coeffs
+        .iter()
+        .enumerate()
+        .find(|(_, r)| r.iter().any(|x| !x.is_finite()))
+    {
+        return Err(RokebyError::invalid(
+            "coeffs",
+            format!("row {c} is not finite"),
+        ));
     }
     let n = normals.len() / 3;
     let mut out = crate::alloc::filled("normals × channels", &[n, ch], 0.0f32)?;
@@ -75,13 +82,19 @@ pub fn eval_many(coeffs: &[[f64; SH_COEFFS]], normals: &[f32]) -> Result<Vec<f32
         let v = [nr[0] as f64, nr[1] as f64, nr[2] as f64];
         let l = (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt();
         if !(l.is_finite() && l > 1e-30) {
-            return Err(RokebyError::invalid("normals", format!("normal {i} is zero or not finite: it has no direction")));
+            return Err(RokebyError::invalid(
+                "normals",
+                format!("normal {i} is zero or not finite: it has no direction"),
+            ));
         }
         let u = v.map(|x| x / l);
         for c in 0..ch {
             let d = eval(&coeffs[c], u);
             if d.abs() > f32::MAX as f64 {
-                return Err(RokebyError::invalid("coeffs", format!("D(n) of channel {c} at normal {i} ({d:e}) overflows float32")));
+                return Err(RokebyError::invalid(
+                    "coeffs",
+                    format!("D(n) of channel {c} at normal {i} ({d:e}) overflows float32"),
+                ));
             }
             out[i * ch + c] = d as f32;
         }
@@ -123,7 +136,10 @@ pub struct ShFit {
 #[cfg(test)]
 fn unit_normals(normals: &[f32], arg: &str) -> Result<Vec<[f64; 3]>> {
     if normals.len() % 3 != 0 {
-        return Err(RokebyError::invalid(arg, format!("expected N×3 values, got {}", normals.len())));
+        return Err(RokebyError::invalid(
+            arg,
+            format!("expected N×3 values, got {}", normals.len()),
+        ));
     }
     normals
         .chunks_exact(3)
@@ -132,7 +148,10 @@ fn unit_normals(normals: &[f32], arg: &str) -> Result<Vec<[f64; 3]>> {
             let v = [c[0] as f64, c[1] as f64, c[2] as f64];
             let l = (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt();
             if !l.is_finite() || l < 1e-12 {
-                Err(RokebyError::invalid(arg, format!("normal {i} is zero or not finite")))
+                Err(RokebyError::invalid(
+                    arg,
+                    format!("normal {i} is zero or not finite"),
+                ))
             } else {
                 Ok([v[0] / l, v[1] / l, v[2] / l])
             }
@@ -208,7 +227,11 @@ fn basis_lanes(normals: &[f32], p0: usize, m: usize) -> [[f64; LANES]; SH_COEFFS
 /// accumulated in f64 in LANES independent lanes (summed at the chunk's end). Compiled twice, for
 /// x86-64 and for AVX2 (picked at run time): the same IEEE operations in the same order (no FMA),
 /// so the same bits either way.
-fn normal_equations_chunk(normals: &[f32], values: &[f32], channels: usize) -> (Vec<f64>, Vec<f64>) {
+fn normal_equations_chunk(
+    normals: &[f32],
+    values: &[f32],
+    channels: usize,
+) -> (Vec<f64>, Vec<f64>) {
     #[cfg(target_arch = "x86_64")]
     if std::arch::is_x86_feature_detected!("avx2") {
         // SAFETY: the CPU has AVX2 (checked just above).
@@ -219,12 +242,20 @@ fn normal_equations_chunk(normals: &[f32], values: &[f32], channels: usize) -> (
 
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2")]
-unsafe fn normal_equations_chunk_avx2(normals: &[f32], values: &[f32], channels: usize) -> (Vec<f64>, Vec<f64>) {
+unsafe fn normal_equations_chunk_avx2(
+    normals: &[f32],
+    values: &[f32],
+    channels: usize,
+) -> (Vec<f64>, Vec<f64>) {
     normal_equations_chunk_any(normals, values, channels)
 }
 
 #[inline(always)]
-fn normal_equations_chunk_any(normals: &[f32], values: &[f32], channels: usize) -> (Vec<f64>, Vec<f64>) {
+fn normal_equations_chunk_any(
+    normals: &[f32],
+    values: &[f32],
+    channels: usize,
+) -> (Vec<f64>, Vec<f64>) {
     let n = normals.len() / 3;
     let mut h = [[0.0f64; LANES]; 45];
     let mut g = vec![[0.0f64; LANES]; SH_COEFFS * channels];
@@ -243,7 +274,11 @@ fn normal_equations_chunk_any(normals: &[f32], values: &[f32], channels: usize) 
         }
         for (c, vc) in v.iter_mut().enumerate() {
             for l in 0..LANES {
-                vc[l] = if l < m { values[(p0 + l) * channels + c] as f64 } else { 0.0 };
+                vc[l] = if l < m {
+                    values[(p0 + l) * channels + c] as f64
+                } else {
+                    0.0
+                };
             }
         }
         for (k, &(i, j)) in PAIRS.iter().enumerate() {
@@ -293,35 +328,76 @@ pub fn fit(normals: &[f32], values: &[f32], channels: usize, method: Fit) -> Res
 /// standard deviations leaves the noise in the residual and keeps the constraint for what it is
 /// meant for, occlusion (which darkens pixels by more than the noise). `tolerance`: empty (all
 /// zero) or one value per channel; only [`Fit::Constrained`] takes a non-zero one.
-pub fn fit_with_tolerance(normals: &[f32], values: &[f32], channels: usize, method: Fit, tolerance: &[f64]) -> Result<ShFit> {
+pub fn fit_with_tolerance(
+    normals: &[f32],
+    values: &[f32],
+    channels: usize,
+    method: Fit,
+    tolerance: &[f64],
+) -> Result<ShFit> {
     if channels == 0 {
         return Err(RokebyError::invalid("values", "need at least one channel"));
     }
     if normals.len() % 3 != 0 {
-        return Err(RokebyError::invalid("normals", format!("expected N×3 values, got {}", normals.len())));
+        return Err(RokebyError::invalid(
+            "normals",
+            format!("expected N×3 values, got {}", normals.len()),
+        ));
     }
     if let Some(i) = first_bad(normals, 3, |c| unit_row(c).is_none()) {
-        return Err(RokebyError::invalid("normals", format!("normal {i} is zero or not finite")));
+        return Err(RokebyError::invalid(
+            "normals",
+            format!("normal {i} is zero or not finite"),
+        ));
     }
     let n = normals.len() / 3;
     if n == 0 {
         return Err(RokebyError::invalid("normals", "no pixels to fit"));
     }
     if values.len() != n * channels {
-        return Err(RokebyError::invalid("values", format!("expected {n}×{channels} values (one row per normal), got {}", values.len())));
+        return Err(RokebyError::invalid(
+            "values",
+            format!(
+                "expected {n}×{channels} values (one row per normal), got {}",
+                values.len()
+            ),
+        ));
     }
     if let Some(i) = first_bad(values, 1, |v| !v[0].is_finite()) {
-        return Err(RokebyError::invalid("values", format!("value {} of pixel {} is not finite", i % channels, i / channels)));
+        return Err(RokebyError::invalid(
+            "values",
+            format!(
+                "value {} of pixel {} is not finite",
+                i % channels,
+                i / channels
+            ),
+        ));
     }
     if !tolerance.is_empty() && tolerance.len() != channels {
-        return Err(RokebyError::invalid("tolerance", format!("expected one value per channel ({channels}), got {}", tolerance.len())));
+        return Err(RokebyError::invalid(
+            "tolerance",
+            format!(
+                "expected one value per channel ({channels}), got {}",
+                tolerance.len()
+            ),
+        ));
     }
     if let Some(t) = tolerance.iter().find(|t| !(t.is_finite() && **t >= 0.0)) {
-        return Err(RokebyError::invalid("tolerance", format!("must be finite and ≥ 0, got {t}")));
+        return Err(RokebyError::invalid(
+            "tolerance",
+            format!("must be finite and ≥ 0, got {t}"),
+        ));
     }
-    let slack: Vec<f64> = if tolerance.is_empty() { vec![0.0; channels] } else { tolerance.to_vec() };
+    let slack: Vec<f64> = if tolerance.is_empty() {
+        vec![0.0; channels]
+    } else {
+        tolerance.to_vec()
+    };
     if method == Fit::LeastSquares && slack.iter().any(|&t| t > 0.0) {
-        return Err(RokebyError::invalid("tolerance", "only the constrained fit (qp) has constraints to relax"));
+        return Err(RokebyError::invalid(
+            "tolerance",
+            "only the constrained fit (qp) has constraints to relax",
+        ));
     }
     // Hessian H = AᵀA (+ ridge), shared by all channels, and g = Aᵀb per channel; f64.
     let parts: Vec<(Vec<f64>, Vec<f64>)> = normals
@@ -348,7 +424,8 @@ pub fn fit_with_tolerance(normals: &[f32], values: &[f32], channels: usize, meth
     for i in 0..SH_COEFFS {
         h[i][i] += 1e-9 * trace / SH_COEFFS as f64;
     }
-    let chol = Chol::new(&h).ok_or_else(|| RokebyError::invalid("normals", "normal equations are singular"))?;
+    let chol = Chol::new(&h)
+        .ok_or_else(|| RokebyError::invalid("normals", "normal equations are singular"))?;
     let x0: Vec<[f64; SH_COEFFS]> = (0..channels)
         .map(|c| {
             let mut g = [0.0; SH_COEFFS];
@@ -373,7 +450,14 @@ pub fn fit_with_tolerance(normals: &[f32], values: &[f32], channels: usize, meth
 
 /// One chunk of [`residual_pass`] (chunk index `ci`), dispatched like [`normal_equations_chunk`].
 #[allow(clippy::type_complexity)]
-fn residual_chunk(ci: usize, nc: &[f32], vc: &[f32], channels: usize, x: &[[f64; SH_COEFFS]], watch: &[(usize, f64, f64)]) -> (Vec<(f64, f64)>, Vec<Vec<(u32, f64)>>) {
+fn residual_chunk(
+    ci: usize,
+    nc: &[f32],
+    vc: &[f32],
+    channels: usize,
+    x: &[[f64; SH_COEFFS]],
+    watch: &[(usize, f64, f64)],
+) -> (Vec<(f64, f64)>, Vec<Vec<(u32, f64)>>) {
     #[cfg(target_arch = "x86_64")]
     if std::arch::is_x86_feature_detected!("avx2") {
         // SAFETY: the CPU has AVX2 (checked just above).
@@ -385,13 +469,27 @@ fn residual_chunk(ci: usize, nc: &[f32], vc: &[f32], channels: usize, x: &[[f64;
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2")]
 #[allow(clippy::type_complexity)]
-unsafe fn residual_chunk_avx2(ci: usize, nc: &[f32], vc: &[f32], channels: usize, x: &[[f64; SH_COEFFS]], watch: &[(usize, f64, f64)]) -> (Vec<(f64, f64)>, Vec<Vec<(u32, f64)>>) {
+unsafe fn residual_chunk_avx2(
+    ci: usize,
+    nc: &[f32],
+    vc: &[f32],
+    channels: usize,
+    x: &[[f64; SH_COEFFS]],
+    watch: &[(usize, f64, f64)],
+) -> (Vec<(f64, f64)>, Vec<Vec<(u32, f64)>>) {
     residual_chunk_any(ci, nc, vc, channels, x, watch)
 }
 
 #[inline(always)]
 #[allow(clippy::type_complexity)]
-fn residual_chunk_any(ci: usize, nc: &[f32], vc: &[f32], channels: usize, x: &[[f64; SH_COEFFS]], watch: &[(usize, f64, f64)]) -> (Vec<(f64, f64)>, Vec<Vec<(u32, f64)>>) {
+fn residual_chunk_any(
+    ci: usize,
+    nc: &[f32],
+    vc: &[f32],
+    channels: usize,
+    x: &[[f64; SH_COEFFS]],
+    watch: &[(usize, f64, f64)],
+) -> (Vec<(f64, f64)>, Vec<Vec<(u32, f64)>>) {
     let n = nc.len() / 3;
     let mut mx = vec![[f64::NEG_INFINITY; LANES]; channels];
     let mut ss = vec![[0.0f64; LANES]; channels];
@@ -434,7 +532,14 @@ fn residual_chunk_any(ci: usize, nc: &[f32], vc: &[f32], channels: usize, x: &[[
         }
         p0 += LANES;
     }
-    let st = (0..channels).map(|c| (mx[c].iter().fold(f64::NEG_INFINITY, |a, &b| a.max(b)), ss[c].iter().sum())).collect();
+    let st = (0..channels)
+        .map(|c| {
+            (
+                mx[c].iter().fold(f64::NEG_INFINITY, |a, &b| a.max(b)),
+                ss[c].iter().sum(),
+            )
+        })
+        .collect();
     (st, viol)
 }
 
@@ -443,7 +548,13 @@ fn residual_chunk_any(ci: usize, nc: &[f32], vc: &[f32], channels: usize, x: &[[
 /// the pixels whose slack D(n) − (D0 − τ) is below θ (index, slack), in pixel order. The slack
 /// is the one [GI83] computes (`GiState::run`: dot9(a, x) − b with b = D0 − τ), bit for bit.
 #[allow(clippy::type_complexity)]
-fn residual_pass(normals: &[f32], values: &[f32], channels: usize, x: &[[f64; SH_COEFFS]], watch: &[(usize, f64, f64)]) -> (Vec<(f64, f64)>, Vec<Vec<(u32, f64)>>) {
+fn residual_pass(
+    normals: &[f32],
+    values: &[f32],
+    channels: usize,
+    x: &[[f64; SH_COEFFS]],
+    watch: &[(usize, f64, f64)],
+) -> (Vec<(f64, f64)>, Vec<Vec<(u32, f64)>>) {
     let parts: Vec<(Vec<(f64, f64)>, Vec<Vec<(u32, f64)>>)> = normals
         .par_chunks(3 * CHUNK)
         .zip(values.par_chunks(channels * CHUNK))
@@ -482,11 +593,21 @@ const SCREEN_BATCH: usize = 512;
 /// running [GI83] on all N constraints at once, at two or three passes over the pixels instead of
 /// one per step.
 #[allow(clippy::type_complexity)]
-fn qp_screened(chol: &Chol, normals: &[f32], values: &[f32], channels: usize, x0: Vec<[f64; SH_COEFFS]>, slack: &[f64]) -> Result<(Vec<[f64; SH_COEFFS]>, Vec<usize>, Vec<(f64, f64)>)> {
+fn qp_screened(
+    chol: &Chol,
+    normals: &[f32],
+    values: &[f32],
+    channels: usize,
+    x0: Vec<[f64; SH_COEFFS]>,
+    slack: &[f64],
+) -> Result<(Vec<[f64; SH_COEFFS]>, Vec<usize>, Vec<(f64, f64)>)> {
     let n = normals.len() / 3;
     let tols: Vec<f64> = (0..channels)
         .map(|c| {
-            let scale = (0..n).map(|i| values[i * channels + c].abs() as f64).fold(0.0f64, f64::max).max(1e-30);
+            let scale = (0..n)
+                .map(|i| values[i * channels + c].abs() as f64)
+                .fold(0.0f64, f64::max)
+                .max(1e-30);
             1e-12 * scale
         })
         .collect();
@@ -541,7 +662,9 @@ fn qp_screened(chol: &Chol, normals: &[f32], values: &[f32], channels: usize, x0
                         (sl < -tols[c]).then_some((p, sl))
                     })
                     .collect();
-                if add_most_violated(&mut v, c, normals, values, channels, slack, &mut rows, &mut rhs) {
+                if add_most_violated(
+                    &mut v, c, normals, values, channels, slack, &mut rows, &mut rhs,
+                ) {
                     dirty.push(c);
                 }
             }
@@ -559,7 +682,9 @@ fn qp_screened(chol: &Chol, normals: &[f32], values: &[f32], channels: usize, x0
             let mut v: Vec<(u32, f64)> = l.iter().copied().filter(|e| e.1 < -tols[c]).collect();
             // Candidates worth keeping only while they are few; otherwise full passes, as before.
             cand[c] = (l.len() <= n / 8).then(|| l.into_iter().map(|e| e.0).collect());
-            if add_most_violated(&mut v, c, normals, values, channels, slack, &mut rows, &mut rhs) {
+            if add_most_violated(
+                &mut v, c, normals, values, channels, slack, &mut rows, &mut rhs,
+            ) {
                 dirty.push(c);
                 still.push(c);
             }
@@ -579,7 +704,16 @@ const CANDIDATE_MARGIN: f64 = 1e9;
 /// Adds the most violated `SCREEN_BATCH` of the (pixel, slack) list `v` to channel c's working
 /// set, in pixel order (ties by pixel index); whether there was any.
 #[allow(clippy::too_many_arguments)]
-fn add_most_violated(v: &mut Vec<(u32, f64)>, c: usize, normals: &[f32], values: &[f32], channels: usize, slack: &[f64], rows: &mut [Vec<[f64; SH_COEFFS]>], rhs: &mut [Vec<f64>]) -> bool {
+fn add_most_violated(
+    v: &mut Vec<(u32, f64)>,
+    c: usize,
+    normals: &[f32],
+    values: &[f32],
+    channels: usize,
+    slack: &[f64],
+    rows: &mut [Vec<[f64; SH_COEFFS]>],
+    rhs: &mut [Vec<f64>],
+) -> bool {
     if v.is_empty() {
         return false;
     }
@@ -590,7 +724,9 @@ fn add_most_violated(v: &mut Vec<(u32, f64)>, c: usize, normals: &[f32], values:
     v.sort_unstable_by_key(|e| e.0);
     for &(p, _) in v.iter() {
         let p = p as usize;
-        rows[c].push(basis(unit_row(&normals[3 * p..3 * p + 3]).expect("validated")));
+        rows[c].push(basis(
+            unit_row(&normals[3 * p..3 * p + 3]).expect("validated"),
+        ));
         rhs[c].push(values[p * channels + c] as f64 - slack[c]);
     }
     true
@@ -607,13 +743,25 @@ struct GiState {
 
 impl GiState {
     fn new(x: [f64; SH_COEFFS]) -> Self {
-        GiState { x, active: Vec::new(), lambda: Vec::new(), steps: 0 }
+        GiState {
+            x,
+            active: Vec::new(),
+            lambda: Vec::new(),
+            steps: 0,
+        }
     }
 
     /// Goldfarb–Idnani dual active-set method for
     ///   min ½ cᵀHc − gᵀc   s.t.  aᵢᵀc ≥ bᵢ  (the rows given),
     /// continued from the current state until no given constraint is violated beyond `tol`.
-    fn run(&mut self, chol: &Chol, a: &[[f64; SH_COEFFS]], b: &[f64], tol: f64, max_steps: usize) -> Result<()> {
+    fn run(
+        &mut self,
+        chol: &Chol,
+        a: &[[f64; SH_COEFFS]],
+        b: &[f64],
+        tol: f64,
+        max_steps: usize,
+    ) -> Result<()> {
         let (x, active, lambda) = (&mut self.x, &mut self.active, &mut self.lambda);
         loop {
             // Most violated constraint (the first of equal ones).
@@ -634,7 +782,10 @@ impl GiState {
             loop {
                 self.steps += 1;
                 if self.steps > max_steps {
-                    return Err(RokebyError::invalid("values", "constrained SH fit did not converge"));
+                    return Err(RokebyError::invalid(
+                        "values",
+                        "constrained SH fit did not converge",
+                    ));
                 }
                 // z = H⁻¹n − H⁻¹N r,  r = (NᵀH⁻¹N)⁻¹ NᵀH⁻¹n.
                 let hn = chol.solve(&np);
@@ -646,9 +797,13 @@ impl GiState {
                     for (k, &j) in active.iter().enumerate() {
                         hcols[k] = chol.solve(&a[j]);
                     }
-                    let m: Vec<Vec<f64>> = (0..q).map(|i| (0..q).map(|k| dot9(&a[active[i]], &hcols[k])).collect()).collect();
+                    let m: Vec<Vec<f64>> = (0..q)
+                        .map(|i| (0..q).map(|k| dot9(&a[active[i]], &hcols[k])).collect())
+                        .collect();
                     let rhs: Vec<f64> = (0..q).map(|i| dot9(&a[active[i]], &hn)).collect();
-                    let sol = solve_small(m, rhs).ok_or_else(|| RokebyError::invalid("values", "constrained SH fit: degenerate active set"))?;
+                    let sol = solve_small(m, rhs).ok_or_else(|| {
+                        RokebyError::invalid("values", "constrained SH fit: degenerate active set")
+                    })?;
                     r[..q].copy_from_slice(&sol);
                     for k in 0..q {
                         for d in 0..SH_COEFFS {
@@ -670,9 +825,16 @@ impl GiState {
                 }
                 let zn = dot9(&z, &np);
                 let s_now = dot9(&np, x) - b[p];
-                let t2 = if zn > 1e-14 * dot9(&np, &np) { -s_now / zn } else { f64::INFINITY };
+                let t2 = if zn > 1e-14 * dot9(&np, &np) {
+                    -s_now / zn
+                } else {
+                    f64::INFINITY
+                };
                 if !t1.is_finite() && !t2.is_finite() {
-                    return Err(RokebyError::invalid("values", "constrained SH fit is infeasible"));
+                    return Err(RokebyError::invalid(
+                        "values",
+                        "constrained SH fit is infeasible",
+                    ));
                 }
                 if !t2.is_finite() {
                     // Constraint p is linearly dependent on the active set: move multipliers only.
@@ -707,13 +869,24 @@ impl GiState {
 /// The former fit, kept as the reference of the tests: the N×9 matrix A stored, [GI83] on all N
 /// constraints with a full pass per step.
 #[cfg(test)]
-pub(crate) fn fit_reference(normals: &[f32], values: &[f32], channels: usize, method: Fit) -> Result<ShFit> {
+pub(crate) fn fit_reference(
+    normals: &[f32],
+    values: &[f32],
+    channels: usize,
+    method: Fit,
+) -> Result<ShFit> {
     fit_reference_tolerance(normals, values, channels, method, &[])
 }
 
 /// [`fit_reference`] with the constraints D(n) ≥ D0 − τ_c (`tolerance` empty: τ = 0).
 #[cfg(test)]
-pub(crate) fn fit_reference_tolerance(normals: &[f32], values: &[f32], channels: usize, method: Fit, tolerance: &[f64]) -> Result<ShFit> {
+pub(crate) fn fit_reference_tolerance(
+    normals: &[f32],
+    values: &[f32],
+    channels: usize,
+    method: Fit,
+    tolerance: &[f64],
+) -> Result<ShFit> {
     if channels == 0 {
         return Err(RokebyError::invalid("values", "need at least one channel"));
     }
@@ -723,10 +896,23 @@ pub(crate) fn fit_reference_tolerance(normals: &[f32], values: &[f32], channels:
         return Err(RokebyError::invalid("normals", "no pixels to fit"));
     }
     if values.len() != n * channels {
-        return Err(RokebyError::invalid("values", format!("expected {n}×{channels} values (one row per normal), got {}", values.len())));
+        return Err(RokebyError::invalid(
+            "values",
+            format!(
+                "expected {n}×{channels} values (one row per normal), got {}",
+                values.len()
+            ),
+        ));
     }
     if let Some(i) = values.iter().position(|v| !v.is_finite()) {
-        return Err(RokebyError::invalid("values", format!("value {} of pixel {} is not finite", i % channels, i / channels)));
+        return Err(RokebyError::invalid(
+            "values",
+            format!(
+                "value {} of pixel {} is not finite",
+                i % channels,
+                i / channels
+            ),
+        ));
     }
     let a: Vec<[f64; SH_COEFFS]> = ns.par_iter().map(|&v| basis(v)).collect();
     // Hessian H = AᵀA (+ ridge), shared by all channels; accumulated in f64.
@@ -743,14 +929,17 @@ pub(crate) fn fit_reference_tolerance(normals: &[f32], values: &[f32], channels:
             }
             h
         })
-        .reduce(|| [[0.0; SH_COEFFS]; SH_COEFFS], |mut x, y| {
-            for i in 0..SH_COEFFS {
-                for j in 0..SH_COEFFS {
-                    x[i][j] += y[i][j];
+        .reduce(
+            || [[0.0; SH_COEFFS]; SH_COEFFS],
+            |mut x, y| {
+                for i in 0..SH_COEFFS {
+                    for j in 0..SH_COEFFS {
+                        x[i][j] += y[i][j];
+                    }
                 }
-            }
-            x
-        });
+                x
+            },
+        );
     let trace: f64 = (0..SH_COEFFS).map(|i| h[i][i]).sum();
     for i in 0..SH_COEFFS {
         for j in 0..i {
@@ -758,7 +947,8 @@ pub(crate) fn fit_reference_tolerance(normals: &[f32], values: &[f32], channels:
         }
         h[i][i] += 1e-9 * trace / SH_COEFFS as f64;
     }
-    let chol = Chol::new(&h).ok_or_else(|| RokebyError::invalid("normals", "normal equations are singular"))?;
+    let chol = Chol::new(&h)
+        .ok_or_else(|| RokebyError::invalid("normals", "normal equations are singular"))?;
     let per_channel: Vec<Result<([f64; SH_COEFFS], usize)>> = (0..channels)
         .into_par_iter()
         .map(|c| {
@@ -780,7 +970,12 @@ pub(crate) fn fit_reference_tolerance(normals: &[f32], values: &[f32], channels:
             }
         })
         .collect();
-    let mut out = ShFit { coeffs: vec![], max_residual: vec![], rms_residual: vec![], iterations: vec![] };
+    let mut out = ShFit {
+        coeffs: vec![],
+        max_residual: vec![],
+        rms_residual: vec![],
+        iterations: vec![],
+    };
     for (c, r) in per_channel.into_iter().enumerate() {
         let (x, it) = r?;
         let (mx, ss) = a
@@ -790,7 +985,10 @@ pub(crate) fn fit_reference_tolerance(normals: &[f32], values: &[f32], channels:
                 let d = values[i * channels + c] as f64 - dot9(row, &x);
                 (d, d * d)
             })
-            .reduce(|| (f64::NEG_INFINITY, 0.0), |p, q| (p.0.max(q.0), p.1 + q.1));
+            .reduce(
+                || (f64::NEG_INFINITY, 0.0),
+                |p, q| (p.0.max(q.0), p.1 + q.1),
+            );
         out.coeffs.push(x);
         out.max_residual.push(mx);
         out.rms_residual.push((ss / n as f64).sqrt());
@@ -889,7 +1087,12 @@ fn solve_small(mut m: Vec<Vec<f64>>, mut b: Vec<f64>) -> Option<Vec<f64>> {
 /// started at the unconstrained optimum x0 = H⁻¹g. Returns the optimum and the number of steps.
 /// The former solver (a full pass over all N constraints per step), the tests' reference.
 #[cfg(test)]
-fn goldfarb_idnani(chol: &Chol, mut x: [f64; SH_COEFFS], a: &[[f64; SH_COEFFS]], b: &[f64]) -> Result<([f64; SH_COEFFS], usize)> {
+fn goldfarb_idnani(
+    chol: &Chol,
+    mut x: [f64; SH_COEFFS],
+    a: &[[f64; SH_COEFFS]],
+    b: &[f64],
+) -> Result<([f64; SH_COEFFS], usize)> {
     let scale = b.iter().fold(0.0f64, |m, v| m.max(v.abs())).max(1e-30);
     let tol = 1e-12 * scale;
     let mut active: Vec<usize> = Vec::new();
@@ -903,7 +1106,10 @@ fn goldfarb_idnani(chol: &Chol, mut x: [f64; SH_COEFFS], a: &[[f64; SH_COEFFS]],
             .zip(b.par_iter())
             .enumerate()
             .map(|(i, (r, &bi))| (i, dot9(r, &x) - bi))
-            .reduce(|| (usize::MAX, f64::INFINITY), |u, v| if v.1 < u.1 { v } else { u });
+            .reduce(
+                || (usize::MAX, f64::INFINITY),
+                |u, v| if v.1 < u.1 { v } else { u },
+            );
         if p == usize::MAX || sp >= -tol {
             return Ok((x, steps));
         }
@@ -912,7 +1118,10 @@ fn goldfarb_idnani(chol: &Chol, mut x: [f64; SH_COEFFS], a: &[[f64; SH_COEFFS]],
         loop {
             steps += 1;
             if steps > max_steps {
-                return Err(RokebyError::invalid("values", "constrained SH fit did not converge"));
+                return Err(RokebyError::invalid(
+                    "values",
+                    "constrained SH fit did not converge",
+                ));
             }
             // z = H⁻¹n − H⁻¹N r,  r = (NᵀH⁻¹N)⁻¹ NᵀH⁻¹n.
             let hn = chol.solve(&np);
@@ -920,10 +1129,15 @@ fn goldfarb_idnani(chol: &Chol, mut x: [f64; SH_COEFFS], a: &[[f64; SH_COEFFS]],
             let mut r = vec![0.0; q];
             let mut z = hn;
             if q > 0 {
-                let hcols: Vec<[f64; SH_COEFFS]> = active.iter().map(|&j| chol.solve(&a[j])).collect();
-                let m: Vec<Vec<f64>> = (0..q).map(|i| (0..q).map(|k| dot9(&a[active[i]], &hcols[k])).collect()).collect();
+                let hcols: Vec<[f64; SH_COEFFS]> =
+                    active.iter().map(|&j| chol.solve(&a[j])).collect();
+                let m: Vec<Vec<f64>> = (0..q)
+                    .map(|i| (0..q).map(|k| dot9(&a[active[i]], &hcols[k])).collect())
+                    .collect();
                 let rhs: Vec<f64> = (0..q).map(|i| dot9(&a[active[i]], &hn)).collect();
-                r = solve_small(m, rhs).ok_or_else(|| RokebyError::invalid("values", "constrained SH fit: degenerate active set"))?;
+                r = solve_small(m, rhs).ok_or_else(|| {
+                    RokebyError::invalid("values", "constrained SH fit: degenerate active set")
+                })?;
                 for k in 0..q {
                     for d in 0..SH_COEFFS {
                         z[d] -= hcols[k][d] * r[k];
@@ -944,9 +1158,16 @@ fn goldfarb_idnani(chol: &Chol, mut x: [f64; SH_COEFFS], a: &[[f64; SH_COEFFS]],
             }
             let zn = dot9(&z, &np);
             let s_now = dot9(&np, &x) - b[p];
-            let t2 = if zn > 1e-14 * dot9(&np, &np) { -s_now / zn } else { f64::INFINITY };
+            let t2 = if zn > 1e-14 * dot9(&np, &np) {
+                -s_now / zn
+            } else {
+                f64::INFINITY
+            };
             if !t1.is_finite() && !t2.is_finite() {
-                return Err(RokebyError::invalid("values", "constrained SH fit is infeasible"));
+                return Err(RokebyError::invalid(
+                    "values",
+                    "constrained SH fit is infeasible",
+                ));
             }
             if !t2.is_finite() {
                 // Constraint p is linearly dependent on the active set: move multipliers only.
@@ -992,7 +1213,11 @@ mod tests {
 
     /// N random normals (not unit, as the fit normalises them) and C channels of D0: a known SH
     /// environment, `occl` of the pixels darkened (occlusion), plus noise of amplitude `noise`.
-    const TRUTH: [[f64; SH_COEFFS]; 3] = [[1.2, 0.3, 0.5, -0.2, 0.1, 0.05, 0.15, -0.05, 0.04], [1.0, 0.2, 0.45, -0.1, 0.05, 0.02, 0.1, -0.04, 0.03], [0.9, 0.1, 0.4, 0.0, 0.02, 0.01, 0.08, -0.02, 0.02]];
+    const TRUTH: [[f64; SH_COEFFS]; 3] = [
+        [1.2, 0.3, 0.5, -0.2, 0.1, 0.05, 0.15, -0.05, 0.04],
+        [1.0, 0.2, 0.45, -0.1, 0.05, 0.02, 0.1, -0.04, 0.03],
+        [0.9, 0.1, 0.4, 0.0, 0.02, 0.01, 0.08, -0.02, 0.02],
+    ];
 
     fn scene(n: usize, channels: usize, occl: f64, noise: f64, seed: u64) -> (Vec<f32>, Vec<f32>) {
         let mut st = seed;
@@ -1041,12 +1266,27 @@ mod tests {
         let tau = [0.06; 3];
         let tol = fit_with_tolerance(&ns, &vs, 3, Fit::Constrained, &tau).unwrap();
         for c in 0..3 {
-            let (e_qp, e_ls, e_tol) = (error_vs_truth(&qp, c), error_vs_truth(&ls, c), error_vs_truth(&tol, c));
+            let (e_qp, e_ls, e_tol) = (
+                error_vs_truth(&qp, c),
+                error_vs_truth(&ls, c),
+                error_vs_truth(&tol, c),
+            );
             // The plain QP sits on the noise peaks (+0.06 everywhere), LS on the occlusion's average
             // darkening; the tolerant QP on neither.
-            assert!(e_tol < 0.25 * e_qp && e_tol < 0.25 * e_ls, "ch {c}: tolerant {e_tol} qp {e_qp} ls {e_ls}");
-            assert!(tol.max_residual[c] <= tau[c] + 1e-9, "D0 − D(n) ≤ τ: {}", tol.max_residual[c]);
-            assert!(tol.max_residual[c] > 0.5 * tau[c], "the tolerance is used: {}", tol.max_residual[c]);
+            assert!(
+                e_tol < 0.25 * e_qp && e_tol < 0.25 * e_ls,
+                "ch {c}: tolerant {e_tol} qp {e_qp} ls {e_ls}"
+            );
+            assert!(
+                tol.max_residual[c] <= tau[c] + 1e-9,
+                "D0 − D(n) ≤ τ: {}",
+                tol.max_residual[c]
+            );
+            assert!(
+                tol.max_residual[c] > 0.5 * tau[c],
+                "the tolerance is used: {}",
+                tol.max_residual[c]
+            );
         }
         // An independent check of middle τs: the former solver (`fit_reference`: the N×9 matrix
         // stored, one Goldfarb–Idnani run over all N constraints, no screening) with b − τ.
@@ -1056,7 +1296,12 @@ mod tests {
             for c in 0..3 {
                 let scale = refq.coeffs[c].iter().fold(1.0f64, |s, x| s.max(x.abs()));
                 for k in 0..SH_COEFFS {
-                    assert!((mid.coeffs[c][k] - refq.coeffs[c][k]).abs() <= 1e-9 * scale, "τ {t:?} ch {c} k {k}: {} vs {}", mid.coeffs[c][k], refq.coeffs[c][k]);
+                    assert!(
+                        (mid.coeffs[c][k] - refq.coeffs[c][k]).abs() <= 1e-9 * scale,
+                        "τ {t:?} ch {c} k {k}: {} vs {}",
+                        mid.coeffs[c][k],
+                        refq.coeffs[c][k]
+                    );
                 }
                 assert!((mid.max_residual[c] - refq.max_residual[c]).abs() <= 1e-9 * scale);
                 assert!(mid.max_residual[c] <= t[c] + 1e-9);
@@ -1068,17 +1313,34 @@ mod tests {
         let loose = fit_with_tolerance(&ns, &vs, 3, Fit::Constrained, &[10.0; 3]).unwrap();
         assert_eq!(loose.coeffs, ls.coeffs);
         assert_eq!(loose.iterations, vec![0; 3]);
-        for (t, msg) in [(vec![0.1; 2], "one value per channel"), (vec![0.1, -0.1, 0.1], "≥ 0"), (vec![0.1, f64::NAN, 0.1], "≥ 0")] {
-            let e = fit_with_tolerance(&ns, &vs, 3, Fit::Constrained, &t).unwrap_err().to_string();
+        for (t, msg) in [
+            (vec![0.1; 2], "one value per channel"),
+            (vec![0.1, -0.1, 0.1], "≥ 0"),
+            (vec![0.1, f64::NAN, 0.1], "≥ 0"),
+        ] {
+            let e = fit_with_tolerance(&ns, &vs, 3, Fit::Constrained, &t)
+                .unwrap_err()
+                .to_string();
             assert!(e.contains("tolerance") && e.contains(msg), "{e}");
         }
-        let e = fit_with_tolerance(&ns, &vs, 3, Fit::LeastSquares, &tau).unwrap_err().to_string();
-        assert!(e.contains("tolerance") && e.contains("only the constrained fit"), "{e}");
+        let e = fit_with_tolerance(&ns, &vs, 3, Fit::LeastSquares, &tau)
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("tolerance") && e.contains("only the constrained fit"),
+            "{e}"
+        );
     }
 
     #[test]
     fn fast_fit_matches_reference() {
-        for (n, ch, occl, noise, seed) in [(1, 1, 0.0, 0.0, 1), (7, 2, 0.3, 0.01, 2), (9000, 3, 0.2, 0.01, 3), (20_000, 1, 0.5, 0.002, 4), (CHUNK + 3, 4, 0.2, 0.05, 5)] {
+        for (n, ch, occl, noise, seed) in [
+            (1, 1, 0.0, 0.0, 1),
+            (7, 2, 0.3, 0.01, 2),
+            (9000, 3, 0.2, 0.01, 3),
+            (20_000, 1, 0.5, 0.002, 4),
+            (CHUNK + 3, 4, 0.2, 0.05, 5),
+        ] {
             let (ns, vs) = scene(n, ch, occl, noise, seed);
             for m in [Fit::LeastSquares, Fit::Constrained] {
                 let a = fit(&ns, &vs, ch, m).unwrap();
@@ -1089,12 +1351,21 @@ mod tests {
                         // n = 1, 7: under-determined, the ridge picks the solution; rounding of
                         // the tiny ridge system is amplified there.
                         let tol = if n < 9 { 1e-6 } else { 1e-9 };
-                        assert!((a.coeffs[c][k] - b.coeffs[c][k]).abs() <= tol * scale, "n {n} {m:?} ch {c} k {k}: {} vs {}", a.coeffs[c][k], b.coeffs[c][k]);
+                        assert!(
+                            (a.coeffs[c][k] - b.coeffs[c][k]).abs() <= tol * scale,
+                            "n {n} {m:?} ch {c} k {k}: {} vs {}",
+                            a.coeffs[c][k],
+                            b.coeffs[c][k]
+                        );
                     }
                     assert!((a.max_residual[c] - b.max_residual[c]).abs() <= 1e-9 * scale);
                     assert!((a.rms_residual[c] - b.rms_residual[c]).abs() <= 1e-9 * scale);
                     if m == Fit::Constrained {
-                        assert!(a.max_residual[c] <= 1e-12 * 3.0, "QP residual {}", a.max_residual[c]);
+                        assert!(
+                            a.max_residual[c] <= 1e-12 * 3.0,
+                            "QP residual {}",
+                            a.max_residual[c]
+                        );
                     }
                 }
             }
@@ -1105,8 +1376,16 @@ mod tests {
     fn fit_is_the_same_on_any_thread_count() {
         let (ns, vs) = scene(50_000, 3, 0.2, 0.01, 9);
         let run = |t: usize| {
-            let pool = rayon::ThreadPoolBuilder::new().num_threads(t).build().unwrap();
-            pool.install(|| (fit(&ns, &vs, 3, Fit::LeastSquares).unwrap(), fit(&ns, &vs, 3, Fit::Constrained).unwrap()))
+            let pool = rayon::ThreadPoolBuilder::new()
+                .num_threads(t)
+                .build()
+                .unwrap();
+            pool.install(|| {
+                (
+                    fit(&ns, &vs, 3, Fit::LeastSquares).unwrap(),
+                    fit(&ns, &vs, 3, Fit::Constrained).unwrap(),
+                )
+            })
         };
         let (l1, q1) = run(1);
         for t in [2, 3, 5] {
@@ -1125,17 +1404,29 @@ mod tests {
     /// stationarity H c − Aᵀb = Σ λᵢ aᵢ over the active set with λ ≥ 0, complementary slackness.
     #[test]
     fn qp_satisfies_kkt_with_many_active_constraints() {
-        for (n, occl, noise, seed) in [(5000, 0.3, 0.0, 11), (20_000, 0.2, 0.0, 12), (20_000, 0.2, 1e-3, 13)] {
+        for (n, occl, noise, seed) in [
+            (5000, 0.3, 0.0, 11),
+            (20_000, 0.2, 0.0, 12),
+            (20_000, 0.2, 1e-3, 13),
+        ] {
             let (ns, vs) = scene(n, 1, occl, noise, seed);
             let f = fit(&ns, &vs, 1, Fit::Constrained).unwrap();
             let r = fit_reference(&ns, &vs, 1, Fit::Constrained).unwrap();
             let x = f.coeffs[0];
             // The same optimum as the former solver (unique: H is positive definite).
             for k in 0..SH_COEFFS {
-                assert!((x[k] - r.coeffs[0][k]).abs() < 1e-9, "k {k}: {} vs {}", x[k], r.coeffs[0][k]);
+                assert!(
+                    (x[k] - r.coeffs[0][k]).abs() < 1e-9,
+                    "k {k}: {} vs {}",
+                    x[k],
+                    r.coeffs[0][k]
+                );
             }
             // Rebuild H, g and the slacks.
-            let rows: Vec<[f64; SH_COEFFS]> = ns.chunks_exact(3).map(|c| basis(unit_row(c).unwrap())).collect();
+            let rows: Vec<[f64; SH_COEFFS]> = ns
+                .chunks_exact(3)
+                .map(|c| basis(unit_row(c).unwrap()))
+                .collect();
             let b: Vec<f64> = vs.iter().map(|&v| v as f64).collect();
             let mut h = [[0.0f64; SH_COEFFS]; SH_COEFFS];
             let mut g = [0.0f64; SH_COEFFS];
@@ -1151,16 +1442,32 @@ mod tests {
             for i in 0..SH_COEFFS {
                 h[i][i] += 1e-9 * trace / SH_COEFFS as f64;
             }
-            let slack: Vec<f64> = rows.iter().zip(&b).map(|(a, &bi)| dot9(a, &x) - bi).collect();
+            let slack: Vec<f64> = rows
+                .iter()
+                .zip(&b)
+                .map(|(a, &bi)| dot9(a, &x) - bi)
+                .collect();
             let scale = b.iter().fold(0.0f64, |m, v| m.max(v.abs()));
-            assert!(slack.iter().all(|&s| s >= -1e-12 * scale), "primal feasibility");
-            let act: Vec<usize> = (0..n).filter(|&i| slack[i].abs() <= 1e-10 * scale).collect();
+            assert!(
+                slack.iter().all(|&s| s >= -1e-12 * scale),
+                "primal feasibility"
+            );
+            let act: Vec<usize> = (0..n)
+                .filter(|&i| slack[i].abs() <= 1e-10 * scale)
+                .collect();
             // Nine unknowns: at most nine independent active constraints; the noise-free cases
             // have hundreds within f32 rounding of the bound (D0 is stored in f32).
-            assert!(act.len() >= 7, "expected many active constraints, got {}", act.len());
+            assert!(
+                act.len() >= 7,
+                "expected many active constraints, got {}",
+                act.len()
+            );
             if noise == 0.0 {
                 let near = slack.iter().filter(|&&s| s <= 1e-6 * scale).count();
-                assert!(near >= 100, "expected hundreds of nearly active constraints, got {near}");
+                assert!(
+                    near >= 100,
+                    "expected hundreds of nearly active constraints, got {near}"
+                );
             }
             // grad = H x − g must be a non-negative combination of the active rows: solve the
             // NNLS min ‖Σ λᵢ aᵢ − grad‖ (λ ≥ 0) by projected coordinate descent.
@@ -1188,7 +1495,11 @@ mod tests {
                 }
             }
             let rn = dot9(&res, &res).sqrt();
-            assert!(rn <= 1e-6 * gn, "stationarity: ‖H x − g − Aᵀλ‖ = {rn:e} of ‖H x − g‖ = {gn:e} ({} active)", act.len());
+            assert!(
+                rn <= 1e-6 * gn,
+                "stationarity: ‖H x − g − Aᵀλ‖ = {rn:e} of ‖H x − g‖ = {gn:e} ({} active)",
+                act.len()
+            );
             // Complementary slackness holds by construction (λ only on slack ≈ 0); λ ≥ 0 too.
             assert!(lam.iter().all(|&l| l >= 0.0));
         }
@@ -1216,7 +1527,13 @@ mod tests {
     fn timing() {
         let (ns, vs) = scene(201_756, 3, 0.2, 0.01, 7);
         for m in [Fit::LeastSquares, Fit::Constrained] {
-            for (name, f) in [("new", fit as fn(&[f32], &[f32], usize, Fit) -> Result<ShFit>), ("ref", fit_reference)] {
+            for (name, f) in [
+                (
+                    "new",
+                    fit as fn(&[f32], &[f32], usize, Fit) -> Result<ShFit>,
+                ),
+                ("ref", fit_reference),
+            ] {
                 let mut ts = vec![];
                 for _ in 0..7 {
                     let t = cpu_ms();
@@ -1224,7 +1541,10 @@ mod tests {
                     ts.push(cpu_ms() - t);
                 }
                 ts.sort_by(f64::total_cmp);
-                eprintln!("{m:?} {name}: {:.2} ms cpu (median of 7; min {:.2})", ts[3], ts[0]);
+                eprintln!(
+                    "{m:?} {name}: {:.2} ms cpu (median of 7; min {:.2})",
+                    ts[3], ts[0]
+                );
             }
         }
     }

@@ -106,7 +106,10 @@ pub fn far_point_as_directional(light: Light, vertices: &[DVec3]) -> Light {
     if vertices.is_empty() {
         return light;
     }
-    let (mn, mx) = vertices.iter().fold((DVec3::splat(f64::INFINITY), DVec3::splat(f64::NEG_INFINITY)), |(a, b), &p| (a.min(p), b.max(p)));
+    let (mn, mx) = vertices.iter().fold(
+        (DVec3::splat(f64::INFINITY), DVec3::splat(f64::NEG_INFINITY)),
+        |(a, b), &p| (a.min(p), b.max(p)),
+    );
     let centre = (mn + mx) * 0.5;
     let radius = ((mx - mn) * 0.5).length();
     // Componentwise first: |c − l| can overflow to inf for |l| near f64::MAX; the scaled
@@ -129,39 +132,75 @@ impl ShadowEditor {
     /// `receiver_faces` F×3 flat; may be several objects merged). Errors: an open or non-manifold
     /// caster, a light inside the caster's bounds, no receiver under the light (no handle of an
     /// active loop lands on a receiver).
-    pub fn new(caster: ClosedMesh, receiver_vertices: &[f32], receiver_faces: &[i64], light: Light, min_loop_vertices: usize, w_z: f64, constraint_weight: f64) -> Result<Self> {
+    pub fn new(
+        caster: ClosedMesh,
+        receiver_vertices: &[f32],
+        receiver_faces: &[i64],
+        light: Light,
+        min_loop_vertices: usize,
+        w_z: f64,
+        constraint_weight: f64,
+    ) -> Result<Self> {
         light.validate()?;
         let light = far_point_as_directional(light, &caster.vertices);
         if receiver_vertices.len() % 3 != 0 {
-            return Err(RokebyError::invalid("receiver_vertices", format!("expected N×3 coordinates, got {} values", receiver_vertices.len())));
+            return Err(RokebyError::invalid(
+                "receiver_vertices",
+                format!(
+                    "expected N×3 coordinates, got {} values",
+                    receiver_vertices.len()
+                ),
+            ));
         }
         if receiver_faces.len() % 3 != 0 {
-            return Err(RokebyError::invalid("receiver_faces", format!("expected F×3 indices, got {} values", receiver_faces.len())));
+            return Err(RokebyError::invalid(
+                "receiver_faces",
+                format!("expected F×3 indices, got {} values", receiver_faces.len()),
+            ));
         }
         // Bounds that keep the solve meaningful in f64: 1/w_z scales light-space depth, and the
         // constraint weight enters the normal equations squared (w² beside Laplacian entries ~1;
         // beyond 1e6 the Laplacian rows drown in rounding, below 1e-6 the handles are ignored).
         if !(w_z.is_finite() && (1e-6..=1e6).contains(&w_z)) {
-            return Err(RokebyError::invalid("w_z", format!("must be finite and in [1e-6, 1e6], got {w_z}")));
+            return Err(RokebyError::invalid(
+                "w_z",
+                format!("must be finite and in [1e-6, 1e6], got {w_z}"),
+            ));
         }
         if !(constraint_weight.is_finite() && (1e-6..=1e6).contains(&constraint_weight)) {
-            return Err(RokebyError::invalid("constraint_weight", format!("must be finite and in [1e-6, 1e6], got {constraint_weight}")));
+            return Err(RokebyError::invalid(
+                "constraint_weight",
+                format!("must be finite and in [1e-6, 1e6], got {constraint_weight}"),
+            ));
         }
         let nrv = receiver_vertices.len() / 3;
         if let Some(i) = receiver_vertices.iter().position(|x| !x.is_finite()) {
-            return Err(RokebyError::invalid("receiver_vertices", format!("vertex {} has a non-finite coordinate", i / 3)));
+            return Err(RokebyError::invalid(
+                "receiver_vertices",
+                format!("vertex {} has a non-finite coordinate", i / 3),
+            ));
         }
-        let rv: Vec<DVec3> = receiver_vertices.chunks_exact(3).map(|c| DVec3::new(c[0] as f64, c[1] as f64, c[2] as f64)).collect();
+        let rv: Vec<DVec3> = receiver_vertices
+            .chunks_exact(3)
+            .map(|c| DVec3::new(c[0] as f64, c[1] as f64, c[2] as f64))
+            .collect();
         let mut tris = Vec::with_capacity(receiver_faces.len() / 3 + caster.faces.len());
         for (fi, c) in receiver_faces.chunks_exact(3).enumerate() {
             if let Some(&x) = c.iter().find(|&&x| x < 0 || x as usize >= nrv) {
-                return Err(RokebyError::invalid("receiver_faces", format!("face {fi} has vertex index {x} outside 0..{nrv}")));
+                return Err(RokebyError::invalid(
+                    "receiver_faces",
+                    format!("face {fi} has vertex index {x} outside 0..{nrv}"),
+                ));
             }
             tris.push([rv[c[0] as usize], rv[c[1] as usize], rv[c[2] as usize]]);
         }
         let num_receiver_faces = tris.len();
         for f in &caster.faces {
-            tris.push([caster.vertices[f[0] as usize], caster.vertices[f[1] as usize], caster.vertices[f[2] as usize]]);
+            tris.push([
+                caster.vertices[f[0] as usize],
+                caster.vertices[f[1] as usize],
+                caster.vertices[f[2] as usize],
+            ]);
         }
         let frame = LightFrame::new(light, &caster.vertices)?;
         let bvh = Bvh::new(tris, "receivers")?;
@@ -186,8 +225,19 @@ impl ShadowEditor {
             }
         }
         let loops = silhouettes(&caster, &light)?;
-        let active: Vec<bool> = loops.iter().map(|l| l.len() >= min_loop_vertices.max(3)).collect();
-        let rest: Vec<Vec<DVec3>> = loops.iter().map(|l| l.vertices.iter().map(|s| frame.to_frustum(s.position)).collect()).collect();
+        let active: Vec<bool> = loops
+            .iter()
+            .map(|l| l.len() >= min_loop_vertices.max(3))
+            .collect();
+        let rest: Vec<Vec<DVec3>> = loops
+            .iter()
+            .map(|l| {
+                l.vertices
+                    .iter()
+                    .map(|s| frame.to_frustum(s.position))
+                    .collect()
+            })
+            .collect();
         let zeros: Vec<Vec<DVec2>> = loops.iter().map(|l| vec![DVec2::ZERO; l.len()]).collect();
         let ed = ShadowEditor {
             caster,
@@ -249,7 +299,10 @@ impl ShadowEditor {
 
     fn check_loop(&self, k: usize) -> Result<()> {
         if k >= self.loops.len() {
-            return Err(RokebyError::invalid("loop", format!("loop {k} does not exist ({} loops)", self.loops.len())));
+            return Err(RokebyError::invalid(
+                "loop",
+                format!("loop {k} does not exist ({} loops)", self.loops.len()),
+            ));
         }
         Ok(())
     }
@@ -257,34 +310,66 @@ impl ShadowEditor {
     /// The current (edited, not necessarily committed) silhouette vertices of loop `k`.
     pub fn silhouette(&self, k: usize) -> Result<Vec<DVec3>> {
         self.check_loop(k)?;
-        Ok(self.rest[k].iter().zip(&self.current[k]).map(|(r, d)| self.frame.from_frustum(DVec3::new(r.x + d.x, r.y + d.y, r.z))).collect())
+        Ok(self.rest[k]
+            .iter()
+            .zip(&self.current[k])
+            .map(|(r, d)| {
+                self.frame
+                    .from_frustum(DVec3::new(r.x + d.x, r.y + d.y, r.z))
+            })
+            .collect())
     }
 
     /// One shadow ray (§4.2) from `from` for the silhouette vertex on caster edge (b, f).
     fn cast_one(&self, from: DVec3, b: u32, f: u32) -> Handle {
         let dir = self.frame.light.ray_dir(from);
         let nr = self.num_receiver_faces;
-        let near = |v: u32| &self.vf_faces[self.vf_start[v as usize] as usize..self.vf_start[v as usize + 1] as usize];
+        let near = |v: u32| {
+            &self.vf_faces
+                [self.vf_start[v as usize] as usize..self.vf_start[v as usize + 1] as usize]
+        };
         let (nb, nf) = (near(b), near(f));
-        let skip = |t: usize| t >= nr && {
-            let c = (t - nr) as u32;
-            nb.contains(&c) || nf.contains(&c)
+        let skip = |t: usize| {
+            t >= nr && {
+                let c = (t - nr) as u32;
+                nb.contains(&c) || nf.contains(&c)
+            }
         };
         let mut origin = from;
         for _ in 0..MAX_BACK_FACE_RAYS {
-            match self.bvh.intersect_filtered(origin, dir, self.t_min, f64::INFINITY, &skip) {
+            match self
+                .bvh
+                .intersect_filtered(origin, dir, self.t_min, f64::INFINITY, &skip)
+            {
                 None => break,
-                Some(Hit { t, tri, back_facing, .. }) => {
+                Some(Hit {
+                    t,
+                    tri,
+                    back_facing,
+                    ..
+                }) => {
                     let p = origin + dir * t;
                     if back_facing {
                         origin = p;
                         continue;
                     }
-                    return Handle { position: p, triangle: tri as i64, hit: true, on_caster: tri >= nr, occluded: false };
+                    return Handle {
+                        position: p,
+                        triangle: tri as i64,
+                        hit: true,
+                        on_caster: tri >= nr,
+                        occluded: false,
+                    };
                 }
             }
         }
-        Handle { position: origin, triangle: -1, hit: false, on_caster: false, occluded: false }
+        Handle {
+            position: origin,
+            triangle: -1,
+            hit: false,
+            on_caster: false,
+            occluded: false,
+        }
     }
 
     fn cast_handles(&self, points: &[DVec3], k: usize, eye: Option<DVec3>) -> Vec<Handle> {
@@ -322,14 +407,23 @@ impl ShadowEditor {
         let n = self.loops[k].len();
         for (name, i) in [("fixed", a), ("fixed", b), ("moved", m)] {
             if i >= n {
-                return Err(RokebyError::invalid(name, format!("index {i} is outside loop {k} ({n} vertices)")));
+                return Err(RokebyError::invalid(
+                    name,
+                    format!("index {i} is outside loop {k} ({n} vertices)"),
+                ));
             }
         }
         if a == b {
-            return Err(RokebyError::invalid("fixed", "the two fixed ends must differ"));
+            return Err(RokebyError::invalid(
+                "fixed",
+                "the two fixed ends must differ",
+            ));
         }
         if m == a || m == b {
-            return Err(RokebyError::invalid("moved", "the dragged vertex must lie strictly between the fixed ends"));
+            return Err(RokebyError::invalid(
+                "moved",
+                "the dragged vertex must lie strictly between the fixed ends",
+            ));
         }
         let walk = |from: usize, to: usize| -> Vec<usize> {
             let mut v = vec![from];
@@ -354,22 +448,42 @@ impl ShadowEditor {
         self.check_loop(d.loop_index)?;
         let k = d.loop_index;
         if !self.active[k] {
-            return Err(RokebyError::invalid("loop", format!("loop {k} has {} vertices, fewer than the threshold: it is not editable", self.loops[k].len())));
+            return Err(RokebyError::invalid(
+                "loop",
+                format!(
+                    "loop {k} has {} vertices, fewer than the threshold: it is not editable",
+                    self.loops[k].len()
+                ),
+            ));
         }
         if !d.target.is_finite() {
             return Err(RokebyError::invalid("target", "must be finite"));
         }
         let seg = self.segment(k, d.fixed.0, d.fixed.1, d.moved)?;
         let rest = &self.rest[k];
-        let cur: Vec<DVec2> = rest.iter().zip(&self.committed[k]).map(|(r, c)| DVec2::new(r.x + c.x, r.y + c.y)).collect();
-        let a3 = self.frame.from_frustum(DVec3::new(cur[d.moved].x, cur[d.moved].y, rest[d.moved].z));
+        let cur: Vec<DVec2> = rest
+            .iter()
+            .zip(&self.committed[k])
+            .map(|(r, c)| DVec2::new(r.x + c.x, r.y + c.y))
+            .collect();
+        let a3 =
+            self.frame
+                .from_frustum(DVec3::new(cur[d.moved].x, cur[d.moved].y, rest[d.moved].z));
         let f = self.frame.drag_target(a3, d.target);
         let f2 = self.frame.to_frustum(f).truncate();
         if !f2.is_finite() {
-            return Err(RokebyError::invalid("target", "the dragged point has no position in the light's frustum (behind the light?)"));
+            return Err(RokebyError::invalid(
+                "target",
+                "the dragged point has no position in the light's frustum (behind the light?)",
+            ));
         }
         let (i0, i1) = (seg[0], *seg.last().expect("segment has ends"));
-        let mls = Mls2d::new(vec![cur[i0], cur[i1], cur[d.moved]], vec![cur[i0], cur[i1], f2], d.style, d.mls_alpha)?;
+        let mls = Mls2d::new(
+            vec![cur[i0], cur[i1], cur[d.moved]],
+            vec![cur[i0], cur[i1], f2],
+            d.style,
+            d.mls_alpha,
+        )?;
         let pts: Vec<DVec2> = seg.iter().map(|&i| cur[i]).collect();
         let mut moved = mls.deform_all(&pts);
         if d.noise_amplitude != 0.0 {
@@ -385,7 +499,12 @@ impl ShadowEditor {
         }
         // The fuzzer found drags (1e30 targets, 1e300 noise, w_z = 1e30) whose silhouette left f64:
         // an error that changes nothing, not NaN points.
-        let overflow = || RokebyError::invalid("drag", "the dragged boundary overflows f64 (target, noise amplitude or weights too large)");
+        let overflow = || {
+            RokebyError::invalid(
+                "drag",
+                "the dragged boundary overflows f64 (target, noise amplitude or weights too large)",
+            )
+        };
         if !f.is_finite() || !new.iter().all(|p| p.is_finite()) {
             return Err(overflow());
         }
@@ -398,7 +517,12 @@ impl ShadowEditor {
             }
         };
         let handles = self.cast_handles(&silhouette, k, None);
-        Ok(DragResult { silhouette, handles, segment: seg, moved_to: f })
+        Ok(DragResult {
+            silhouette,
+            handles,
+            segment: seg,
+            moved_to: f,
+        })
     }
 
     /// Makes the current state the base of the next drag (mouse release).
@@ -431,10 +555,21 @@ impl ShadowEditor {
             let mut cons = Vec::new();
             for (l, &a) in self.loops.iter().zip(&self.active) {
                 if a {
-                    cons.extend(l.vertices.iter().map(|s| EdgePoint { back: s.back, front: s.front, alpha: s.alpha }));
+                    cons.extend(l.vertices.iter().map(|s| EdgePoint {
+                        back: s.back,
+                        front: s.front,
+                        alpha: s.alpha,
+                    }));
                 }
             }
-            self.solver = Some(ShadowMeshSolver::new(self.frame, &self.caster.vertices, &self.caster.faces, cons, self.w_z, self.constraint_weight)?);
+            self.solver = Some(ShadowMeshSolver::new(
+                self.frame,
+                &self.caster.vertices,
+                &self.caster.faces,
+                cons,
+                self.w_z,
+                self.constraint_weight,
+            )?);
         }
         Ok(())
     }
@@ -443,7 +578,13 @@ impl ShadowEditor {
     /// silhouettes follow the edited boundaries.
     pub fn shadow_mesh(&mut self) -> Result<Vec<DVec3>> {
         self.factor()?;
-        let deltas: Vec<DVec2> = self.current.iter().zip(&self.active).filter(|(_, &a)| a).flat_map(|(d, _)| d.iter().copied()).collect();
+        let deltas: Vec<DVec2> = self
+            .current
+            .iter()
+            .zip(&self.active)
+            .filter(|(_, &a)| a)
+            .flat_map(|(d, _)| d.iter().copied())
+            .collect();
         self.solver.as_ref().expect("factored").solve(&deltas)
     }
 }

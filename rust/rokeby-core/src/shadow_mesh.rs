@@ -80,12 +80,25 @@ pub struct ShadowMeshSolver {
 impl ShadowMeshSolver {
     /// Factors the system for the caster (`vertices`, `faces`) and the silhouette vertices that
     /// constrain it. `w_z` > 0, `constraint_weight` > 0 (relative; see the constants).
-    pub fn new(frame: LightFrame, vertices: &[DVec3], faces: &[[u32; 3]], constraints: Vec<EdgePoint>, w_z: f64, constraint_weight: f64) -> Result<Self> {
+    pub fn new(
+        frame: LightFrame,
+        vertices: &[DVec3],
+        faces: &[[u32; 3]],
+        constraints: Vec<EdgePoint>,
+        w_z: f64,
+        constraint_weight: f64,
+    ) -> Result<Self> {
         if !(w_z.is_finite() && w_z > 0.0) {
-            return Err(RokebyError::invalid("w_z", format!("must be positive and finite, got {w_z}")));
+            return Err(RokebyError::invalid(
+                "w_z",
+                format!("must be positive and finite, got {w_z}"),
+            ));
         }
         if !(constraint_weight.is_finite() && constraint_weight > 0.0) {
-            return Err(RokebyError::invalid("constraint_weight", format!("must be positive and finite, got {constraint_weight}")));
+            return Err(RokebyError::invalid(
+                "constraint_weight",
+                format!("must be positive and finite, got {constraint_weight}"),
+            ));
         }
         let n = vertices.len();
         for (k, c) in constraints.iter().enumerate() {
@@ -94,9 +107,15 @@ impl ShadowMeshSolver {
             }
         }
         let scale = DVec3::new(1.0, 1.0, 1.0 / w_z);
-        let rest: Vec<DVec3> = vertices.iter().map(|&p| frame.to_frustum(p) * scale).collect();
+        let rest: Vec<DVec3> = vertices
+            .iter()
+            .map(|&p| frame.to_frustum(p) * scale)
+            .collect();
         if let Some(i) = rest.iter().position(|p| !p.is_finite()) {
-            return Err(RokebyError::invalid("vertices", format!("vertex {i} has no finite position in the light's frustum")));
+            return Err(RokebyError::invalid(
+                "vertices",
+                format!("vertex {i} has no finite position in the light's frustum"),
+            ));
         }
         // Cotangent weights on the light-space positions (the space the editing happens in).
         let edges = cotangent_weights(&rest, faces);
@@ -139,7 +158,11 @@ impl ShadowMeshSolver {
                 trip.push(Triplet::new(i as u32, j, acc[j as usize]));
             }
         }
-        let mean_diag = if n > 0 { (diag_sum / n as f64).max(1e-300) } else { 1.0 };
+        let mean_diag = if n > 0 {
+            (diag_sum / n as f64).max(1e-300)
+        } else {
+            1.0
+        };
         let lambda2 = constraint_weight * constraint_weight * mean_diag;
         let eps2 = ANCHOR_WEIGHT * ANCHOR_WEIGHT * mean_diag;
         for c in &constraints {
@@ -153,11 +176,24 @@ impl ShadowMeshSolver {
         for i in 0..n as u32 {
             trip.push(Triplet::new(i, i, eps2));
         }
-        let m = SparseColMat::try_new_from_triplets(n, n, &trip).map_err(|e| RokebyError::invalid("faces", format!("sparse assembly failed: {e:?}")))?;
-        let symbolic = SymbolicLlt::try_new(m.symbolic(), Side::Lower).map_err(|e| RokebyError::invalid("faces", format!("symbolic factorisation failed ({e:?})")))?;
+        let m = SparseColMat::try_new_from_triplets(n, n, &trip)
+            .map_err(|e| RokebyError::invalid("faces", format!("sparse assembly failed: {e:?}")))?;
+        let symbolic = SymbolicLlt::try_new(m.symbolic(), Side::Lower).map_err(|e| {
+            RokebyError::invalid("faces", format!("symbolic factorisation failed ({e:?})"))
+        })?;
         let llt = Llt::try_new_with_symbolic(symbolic, m.as_ref(), Side::Lower)
             .map_err(|e| RokebyError::invalid("faces", format!("the shadow-mesh system is not positive definite ({e:?}); is the caster degenerate?")))?;
-        let mut s = ShadowMeshSolver { frame, w_z, rest, lap, constraints, lambda2, eps2, llt, rhs_rest: Mat::zeros(n, 3) };
+        let mut s = ShadowMeshSolver {
+            frame,
+            w_z,
+            rest,
+            lap,
+            constraints,
+            lambda2,
+            eps2,
+            llt,
+            rhs_rest: Mat::zeros(n, 3),
+        };
         s.rhs_rest = s.rhs(&vec![DVec2::ZERO; s.constraints.len()]);
         Ok(s)
     }
@@ -174,9 +210,19 @@ impl ShadowMeshSolver {
         let n = self.rest.len();
         let mut r = Mat::<f64>::zeros(n, 3);
         // δ = L P, then Lᵀδ = L δ.
-        let delta: Vec<DVec3> = self.lap.iter().map(|row| row.iter().fold(DVec3::ZERO, |a, &(j, w)| a + self.rest[j as usize] * w)).collect();
+        let delta: Vec<DVec3> = self
+            .lap
+            .iter()
+            .map(|row| {
+                row.iter()
+                    .fold(DVec3::ZERO, |a, &(j, w)| a + self.rest[j as usize] * w)
+            })
+            .collect();
         for (i, row) in self.lap.iter().enumerate() {
-            let v = row.iter().fold(DVec3::ZERO, |a, &(j, w)| a + delta[j as usize] * w) + self.rest[i] * self.eps2;
+            let v = row
+                .iter()
+                .fold(DVec3::ZERO, |a, &(j, w)| a + delta[j as usize] * w)
+                + self.rest[i] * self.eps2;
             r[(i, 0)] = v.x;
             r[(i, 1)] = v.y;
             r[(i, 2)] = v.z;
@@ -198,15 +244,31 @@ impl ShadowMeshSolver {
     /// constraint, in frustum (x, y) units).
     pub fn solve(&self, deltas: &[DVec2]) -> Result<Vec<DVec3>> {
         if deltas.len() != self.constraints.len() {
-            return Err(RokebyError::invalid("deltas", format!("expected {} offsets (one per silhouette constraint), got {}", self.constraints.len(), deltas.len())));
+            return Err(RokebyError::invalid(
+                "deltas",
+                format!(
+                    "expected {} offsets (one per silhouette constraint), got {}",
+                    self.constraints.len(),
+                    deltas.len()
+                ),
+            ));
         }
         if !deltas.iter().all(|d| d.is_finite()) {
             return Err(RokebyError::invalid("deltas", "offsets must be finite"));
         }
-        let mut x = if deltas.iter().all(|d| *d == DVec2::ZERO) { self.rhs_rest.clone() } else { self.rhs(deltas) };
+        let mut x = if deltas.iter().all(|d| *d == DVec2::ZERO) {
+            self.rhs_rest.clone()
+        } else {
+            self.rhs(deltas)
+        };
         self.llt.solve_in_place(x.as_mut());
         let inv = DVec3::new(1.0, 1.0, self.w_z);
-        let out: Vec<DVec3> = (0..self.rest.len()).map(|i| self.frame.from_frustum(DVec3::new(x[(i, 0)], x[(i, 1)], x[(i, 2)]) * inv)).collect();
+        let out: Vec<DVec3> = (0..self.rest.len())
+            .map(|i| {
+                self.frame
+                    .from_frustum(DVec3::new(x[(i, 0)], x[(i, 1)], x[(i, 2)]) * inv)
+            })
+            .collect();
         // An error, not NaN vertices: the fuzzer found w_z = weight = 1e30 with a drag of 1e300
         // noise overflowing the solve.
         if let Some(i) = out.iter().position(|p| !p.is_finite()) {
@@ -220,11 +282,17 @@ impl ShadowMeshSolver {
 /// directions are normalised, opposite half-spaces give 0, β = 0 gives no falloff.
 pub fn falloff(l_initial: DVec3, l_current: DVec3, beta: f64) -> Result<f64> {
     if !(beta.is_finite() && beta >= 0.0) {
-        return Err(RokebyError::invalid("beta", format!("must be ≥ 0 and finite, got {beta}")));
+        return Err(RokebyError::invalid(
+            "beta",
+            format!("must be ≥ 0 and finite, got {beta}"),
+        ));
     }
     let (a, b) = (l_initial.normalize_or_zero(), l_current.normalize_or_zero());
     if a == DVec3::ZERO || b == DVec3::ZERO {
-        return Err(RokebyError::invalid("light", "light directions must be non-zero and finite"));
+        return Err(RokebyError::invalid(
+            "light",
+            "light directions must be non-zero and finite",
+        ));
     }
     if beta == 0.0 {
         return Ok(1.0);

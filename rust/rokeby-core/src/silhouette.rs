@@ -74,31 +74,52 @@ impl ClosedMesh {
     /// face normals are averaged.
     pub fn new(vertices: &[f32], faces: &[i64], normals: Option<&[f32]>) -> Result<Self> {
         if vertices.len() % 3 != 0 {
-            return Err(RokebyError::invalid("vertices", format!("expected N×3 coordinates, got {} values", vertices.len())));
+            return Err(RokebyError::invalid(
+                "vertices",
+                format!("expected N×3 coordinates, got {} values", vertices.len()),
+            ));
         }
         if faces.len() % 3 != 0 {
-            return Err(RokebyError::invalid("faces", format!("expected F×3 indices, got {} values", faces.len())));
+            return Err(RokebyError::invalid(
+                "faces",
+                format!("expected F×3 indices, got {} values", faces.len()),
+            ));
         }
         let nv = vertices.len() / 3;
         if nv >= u32::MAX as usize {
-            return Err(RokebyError::invalid("vertices", format!("{nv} vertices is more than supported")));
+            return Err(RokebyError::invalid(
+                "vertices",
+                format!("{nv} vertices is more than supported"),
+            ));
         }
         if faces.is_empty() {
             return Err(RokebyError::invalid("faces", "the caster has no faces"));
         }
         if let Some(i) = vertices.iter().position(|x| !x.is_finite()) {
-            return Err(RokebyError::invalid("vertices", format!("vertex {} has a non-finite coordinate", i / 3)));
+            return Err(RokebyError::invalid(
+                "vertices",
+                format!("vertex {} has a non-finite coordinate", i / 3),
+            ));
         }
-        let verts: Vec<DVec3> = vertices.chunks_exact(3).map(|c| DVec3::new(c[0] as f64, c[1] as f64, c[2] as f64)).collect();
+        let verts: Vec<DVec3> = vertices
+            .chunks_exact(3)
+            .map(|c| DVec3::new(c[0] as f64, c[1] as f64, c[2] as f64))
+            .collect();
         let mut fs = Vec::with_capacity(faces.len() / 3);
         for (fi, c) in faces.chunks_exact(3).enumerate() {
             for &x in c {
                 if x < 0 || x as usize >= nv {
-                    return Err(RokebyError::invalid("faces", format!("face {fi} has vertex index {x} outside 0..{nv}")));
+                    return Err(RokebyError::invalid(
+                        "faces",
+                        format!("face {fi} has vertex index {x} outside 0..{nv}"),
+                    ));
                 }
             }
             if c[0] == c[1] || c[1] == c[2] || c[0] == c[2] {
-                return Err(RokebyError::invalid("faces", format!("face {fi} repeats a vertex ({}, {}, {})", c[0], c[1], c[2])));
+                return Err(RokebyError::invalid(
+                    "faces",
+                    format!("face {fi} repeats a vertex ({}, {}, {})", c[0], c[1], c[2]),
+                ));
             }
             fs.push([c[0] as u32, c[1] as u32, c[2] as u32]);
         }
@@ -115,9 +136,15 @@ impl ClosedMesh {
                 }
             }
         }
-        let open = directed.keys().filter(|&&(a, b)| !directed.contains_key(&(b, a))).count();
+        let open = directed
+            .keys()
+            .filter(|&&(a, b)| !directed.contains_key(&(b, a)))
+            .count();
         if open > 0 {
-            let &(a, b) = directed.keys().find(|&&(a, b)| !directed.contains_key(&(b, a))).expect("counted");
+            let &(a, b) = directed
+                .keys()
+                .find(|&&(a, b)| !directed.contains_key(&(b, a)))
+                .expect("counted");
             return Err(RokebyError::invalid(
                 "faces",
                 format!("the caster must be a closed mesh: {open} boundary edges (e.g. ({a}, {b})); close the holes or use a solid caster"),
@@ -126,13 +153,22 @@ impl ClosedMesh {
         let normals = match normals {
             Some(n) => {
                 if n.len() != vertices.len() {
-                    return Err(RokebyError::invalid("normals", format!("expected {nv}×3 values (one normal per vertex), got {}", n.len())));
+                    return Err(RokebyError::invalid(
+                        "normals",
+                        format!(
+                            "expected {nv}×3 values (one normal per vertex), got {}",
+                            n.len()
+                        ),
+                    ));
                 }
                 let mut out = Vec::with_capacity(nv);
                 for (i, c) in n.chunks_exact(3).enumerate() {
                     let v = DVec3::new(c[0] as f64, c[1] as f64, c[2] as f64);
                     if !v.is_finite() || v.length_squared() == 0.0 {
-                        return Err(RokebyError::invalid("normals", format!("normal {i} is zero or not finite")));
+                        return Err(RokebyError::invalid(
+                            "normals",
+                            format!("normal {i} is zero or not finite"),
+                        ));
                     }
                     out.push(v.normalize());
                 }
@@ -140,12 +176,19 @@ impl ClosedMesh {
             }
             None => vertex_normals(&verts, &fs),
         };
-        Ok(ClosedMesh { vertices: verts, faces: fs, normals })
+        Ok(ClosedMesh {
+            vertices: verts,
+            faces: fs,
+            normals,
+        })
     }
 
     /// Axis-aligned bounds of the vertices.
     pub fn bounds(&self) -> (DVec3, DVec3) {
-        self.vertices.iter().fold((DVec3::splat(f64::INFINITY), DVec3::splat(f64::NEG_INFINITY)), |(a, b), &p| (a.min(p), b.max(p)))
+        self.vertices.iter().fold(
+            (DVec3::splat(f64::INFINITY), DVec3::splat(f64::NEG_INFINITY)),
+            |(a, b), &p| (a.min(p), b.max(p)),
+        )
     }
 }
 
@@ -215,24 +258,44 @@ pub fn silhouettes(mesh: &ClosedMesh, light: &Light) -> Result<Vec<SilhouetteLoo
     light.validate()?;
     let v = &mesh.vertices;
     let n = &mesh.normals;
-    let front: Vec<bool> = v.iter().zip(n).map(|(&p, &nn)| nn.dot(light.to_light(p)) > 0.0).collect();
+    let front: Vec<bool> = v
+        .iter()
+        .zip(n)
+        .map(|(&p, &nn)| nn.dot(light.to_light(p)) > 0.0)
+        .collect();
     // Silhouette vertex per sign-changing undirected edge.
     let mut index: HashMap<(u32, u32), u32> = HashMap::new();
     let mut pts: Vec<SilhouetteVertex> = Vec::new();
     let mut next: Vec<u32> = Vec::new();
-    let mut point_of = |a: u32, b: u32, pts: &mut Vec<SilhouetteVertex>, next: &mut Vec<u32>| -> u32 {
-        let key = (a.min(b), a.max(b));
-        *index.entry(key).or_insert_with(|| {
-            let (vb, vf) = if front[a as usize] { (b, a) } else { (a, b) };
-            let alpha = silhouette_alpha(light, v[vb as usize], n[vb as usize], v[vf as usize], n[vf as usize]);
-            let position = v[vb as usize] * (1.0 - alpha) + v[vf as usize] * alpha;
-            pts.push(SilhouetteVertex { back: vb, front: vf, alpha, position });
-            next.push(u32::MAX);
-            (pts.len() - 1) as u32
-        })
-    };
+    let mut point_of =
+        |a: u32, b: u32, pts: &mut Vec<SilhouetteVertex>, next: &mut Vec<u32>| -> u32 {
+            let key = (a.min(b), a.max(b));
+            *index.entry(key).or_insert_with(|| {
+                let (vb, vf) = if front[a as usize] { (b, a) } else { (a, b) };
+                let alpha = silhouette_alpha(
+                    light,
+                    v[vb as usize],
+                    n[vb as usize],
+                    v[vf as usize],
+                    n[vf as usize],
+                );
+                let position = v[vb as usize] * (1.0 - alpha) + v[vf as usize] * alpha;
+                pts.push(SilhouetteVertex {
+                    back: vb,
+                    front: vf,
+                    alpha,
+                    position,
+                });
+                next.push(u32::MAX);
+                (pts.len() - 1) as u32
+            })
+        };
     for f in &mesh.faces {
-        let s = [front[f[0] as usize], front[f[1] as usize], front[f[2] as usize]];
+        let s = [
+            front[f[0] as usize],
+            front[f[1] as usize],
+            front[f[2] as usize],
+        ];
         if s[0] == s[1] && s[1] == s[2] {
             continue;
         }
@@ -264,7 +327,10 @@ pub fn silhouettes(mesh: &ClosedMesh, light: &Light) -> Result<Vec<SilhouetteLoo
         loop {
             if seen[i] {
                 if i != s0 {
-                    return Err(RokebyError::invalid("faces", "silhouette chaining failed: the caster is not a closed oriented manifold"));
+                    return Err(RokebyError::invalid(
+                        "faces",
+                        "silhouette chaining failed: the caster is not a closed oriented manifold",
+                    ));
                 }
                 break;
             }
@@ -272,15 +338,28 @@ pub fn silhouettes(mesh: &ClosedMesh, light: &Light) -> Result<Vec<SilhouetteLoo
             verts.push(pts[i]);
             let nx = next[i];
             if nx == u32::MAX {
-                return Err(RokebyError::invalid("faces", "silhouette chaining failed: the caster is not a closed oriented manifold"));
+                return Err(RokebyError::invalid(
+                    "faces",
+                    "silhouette chaining failed: the caster is not a closed oriented manifold",
+                ));
             }
             i = nx as usize;
         }
         let m = verts.len();
-        let length = (0..m).map(|k| (verts[(k + 1) % m].position - verts[k].position).length()).sum();
-        loops.push(SilhouetteLoop { vertices: verts, length });
+        let length = (0..m)
+            .map(|k| (verts[(k + 1) % m].position - verts[k].position).length())
+            .sum();
+        loops.push(SilhouetteLoop {
+            vertices: verts,
+            length,
+        });
     }
     // Longest first: the loops an artist edits.
-    loops.sort_by(|a, b| b.vertices.len().cmp(&a.vertices.len()).then(b.length.total_cmp(&a.length)));
+    loops.sort_by(|a, b| {
+        b.vertices
+            .len()
+            .cmp(&a.vertices.len())
+            .then(b.length.total_cmp(&a.length))
+    });
     Ok(loops)
 }

@@ -104,7 +104,11 @@ proptest! {
 fn qp_is_a_local_minimum() {
     let ns = as_fit(&fib_sphere(400));
     let c = [0.8, 0.1, 0.3, -0.2, 0.05, 0.0, 0.1, -0.05, 0.02];
-    let vals: Vec<f32> = ns.iter().enumerate().map(|(i, &n)| (sh::eval(&c, n) - if i % 7 == 0 { 0.3 } else { 0.0 }) as f32).collect();
+    let vals: Vec<f32> = ns
+        .iter()
+        .enumerate()
+        .map(|(i, &n)| (sh::eval(&c, n) - if i % 7 == 0 { 0.3 } else { 0.0 }) as f32)
+        .collect();
     let qp = sh::fit(&flat(&ns), &vals, 1, Fit::Constrained).unwrap();
     let obj = |co: &[f64; SH_COEFFS]| -> (f64, f64) {
         let mut s = 0.0;
@@ -146,7 +150,11 @@ fn sh_bad_input_is_an_error() {
 
 /// A smooth environment with some detail.
 fn env(r: DVec3) -> [f64; 3] {
-    [0.5 + 0.3 * r.x + 0.2 * r.y * r.z, 0.4 + 0.1 * (3.0 * r.z).sin() + 0.1 * r.x * r.y, 0.3 + 0.2 * r.y]
+    [
+        0.5 + 0.3 * r.x + 0.2 * r.y * r.z,
+        0.4 + 0.1 * (3.0 * r.z).sin() + 0.1 * r.x * r.y,
+        0.3 + 0.2 * r.y,
+    ]
 }
 
 /// An orthographic image of a unit sphere: screen-space normals, reflected directions, R0.
@@ -179,7 +187,10 @@ fn sphere_image(w: usize) -> (Vec<f32>, Vec<f32>, Vec<f32>, Vec<f32>) {
 fn partial_map_reproduces_known_environment() {
     let w = 200;
     let (_n, refl, vals, mask) = sphere_image(w);
-    let params = ReflectionParams { size: 64, ..Default::default() };
+    let params = ReflectionParams {
+        size: 64,
+        ..Default::default()
+    };
     let pm = reconstruct::partial(w, w, &refl, &vals, 3, &mask, &[], &params).unwrap();
     assert!(pm.coverage > 0.8, "coverage {}", pm.coverage);
     let s = params.size;
@@ -224,7 +235,10 @@ fn masked_pixels_do_not_contribute() {
             vals[3 * p] = 100.0;
         }
     }
-    let params = ReflectionParams { size: 48, ..Default::default() };
+    let params = ReflectionParams {
+        size: 48,
+        ..Default::default()
+    };
     let pm = reconstruct::partial(w, w, &refl, &vals, 3, &mask, &[], &params).unwrap();
     assert!(pm.coverage > 0.2);
     assert!(pm.map.data.iter().step_by(3).all(|&v| v < 2.0));
@@ -277,8 +291,14 @@ fn hole_filling_reproduces_harmonic_function() {
     }
     let filled = reconstruct::fill_holes(&mut [&mut map], &covered).unwrap();
     assert_eq!(filled, holes.len());
-    let worst = holes.iter().map(|&(t, v)| (map.data[t] as f64 - v).abs()).fold(0.0, f64::max);
-    eprintln!("hole filling: worst error {worst:.2e} over {} texels", holes.len());
+    let worst = holes
+        .iter()
+        .map(|&(t, v)| (map.data[t] as f64 - v).abs())
+        .fold(0.0, f64::max);
+    eprintln!(
+        "hole filling: worst error {worst:.2e} over {} texels",
+        holes.len()
+    );
     // A non-harmonic fill (e.g. constant 0 or the mean) is off by ~0.1 here.
     assert!(worst < 1e-3, "worst {worst}");
     // Nothing known: an error, not a panic.
@@ -292,7 +312,10 @@ fn hole_filling_reproduces_harmonic_function() {
 fn reconstruct_sphere_and_refuse_small_coverage() {
     let w = 160;
     let (_n, refl, vals, mask) = sphere_image(w);
-    let params = ReflectionParams { size: 64, ..Default::default() };
+    let params = ReflectionParams {
+        size: 64,
+        ..Default::default()
+    };
     let env_map = reconstruct::reconstruct(w, w, &refl, &vals, 3, &mask, &[], &params).unwrap();
     let mut out = [0.0; 3];
     let mut worst = 0.0f64;
@@ -320,7 +343,19 @@ fn reconstruct_sphere_and_refuse_small_coverage() {
     assert!(e.to_string().contains("min_coverage"), "{e}");
 }
 
-fn random_scene(w: usize, h: usize, seed: u64) -> (Vec<i32>, Vec<f32>, Vec<f32>, Vec<f32>, Vec<f32>, Vec<f32>, Vec<f32>) {
+fn random_scene(
+    w: usize,
+    h: usize,
+    seed: u64,
+) -> (
+    Vec<i32>,
+    Vec<f32>,
+    Vec<f32>,
+    Vec<f32>,
+    Vec<f32>,
+    Vec<f32>,
+    Vec<f32>,
+) {
     let mut state = seed | 1;
     let mut rnd = || {
         state ^= state << 13;
@@ -330,11 +365,14 @@ fn random_scene(w: usize, h: usize, seed: u64) -> (Vec<i32>, Vec<f32>, Vec<f32>,
     };
     let n = w * h;
     let ids: Vec<i32> = (0..n).map(|_| (rnd() * 3.0) as i32 - 1).collect();
-    let normals: Vec<f32> = (0..n).flat_map(|_| {
-        let d = DVec3::new(rnd() - 0.5, rnd() - 0.5, rnd() + 0.1).normalize();
-        [d.x as f32, d.y as f32, d.z as f32]
-    }).collect();
-    let mut v3 = |k: usize, s: f64, o: f64| -> Vec<f32> { (0..k).map(|_| (o + s * rnd()) as f32).collect() };
+    let normals: Vec<f32> = (0..n)
+        .flat_map(|_| {
+            let d = DVec3::new(rnd() - 0.5, rnd() - 0.5, rnd() + 0.1).normalize();
+            [d.x as f32, d.y as f32, d.z as f32]
+        })
+        .collect();
+    let mut v3 =
+        |k: usize, s: f64, o: f64| -> Vec<f32> { (0..k).map(|_| (o + s * rnd()) as f32).collect() };
     let diffuse = v3(3 * n, 1.0, -0.05);
     let refl = v3(3 * n, 2.0, 0.0);
     let ad = v3(n, 1.0, 0.0);
@@ -349,7 +387,16 @@ fn patches() -> Vec<Patch> {
         *v = ((k * 7919) % 97) as f32 / 50.0;
     }
     let sh1 = [[0.9, 0.1, 0.3, -0.2, 0.05, 0.0, 0.1, -0.05, 0.02]; 3];
-    vec![Patch { sh: Some(sh1), env: Some(env.clone()) }, Patch { sh: None, env: Some(env) }]
+    vec![
+        Patch {
+            sh: Some(sh1),
+            env: Some(env.clone()),
+        },
+        Patch {
+            sh: None,
+            env: Some(env),
+        },
+    ]
 }
 
 /// Eqs. 3–5 with unmodified normals give I back bit for bit — also when ñ is a rescaled copy of n
@@ -362,7 +409,11 @@ fn identity_recompositing_is_exact() {
     let scaled: Vec<f32> = normals.iter().map(|x| 2.0 * x).collect();
     let alpha: Vec<f32> = (0..w * h).map(|i| (i % 5) as f32 / 4.0).collect();
     let col: Vec<f32> = (0..3 * w * h).map(|i| (i % 11) as f32 / 10.0).collect();
-    for (edited, gamma, colours) in [(&normals, 1.0, false), (&scaled, 1.0, false), (&scaled, 2.2, true)] {
+    for (edited, gamma, colours) in [
+        (&normals, 1.0, false),
+        (&scaled, 1.0, false),
+        (&scaled, 2.2, true),
+    ] {
         let b = Buffers {
             ids: &ids,
             normals: &normals,
@@ -377,9 +428,22 @@ fn identity_recompositing_is_exact() {
             diffuse_color: if colours { &col } else { &[] },
             reflection_color: if colours { &col } else { &[] },
         };
-        let (out, st) = recomposite::recomposite(&b, &patches(), &Params { gamma, ..Default::default() }).unwrap();
+        let (out, st) = recomposite::recomposite(
+            &b,
+            &patches(),
+            &Params {
+                gamma,
+                ..Default::default()
+            },
+        )
+        .unwrap();
         assert_eq!(st.masked, 0);
-        assert!(out.iter().zip(&img).all(|(a, b)| a.to_bits() == b.to_bits()), "not bit-exact (gamma {gamma})");
+        assert!(
+            out.iter()
+                .zip(&img)
+                .all(|(a, b)| a.to_bits() == b.to_bits()),
+            "not bit-exact (gamma {gamma})"
+        );
     }
 }
 
@@ -396,8 +460,23 @@ fn recompositing_edits_locally_and_continuously() {
         tiny[3 * p] += 1e-6;
     }
     let mk = |e: &[f32]| {
-        let b = Buffers { ids: &ids, normals: &normals, edited: e, view: &[0.0, 0.0, 1.0], diffuse: &diffuse, reflection: &refl, alpha_d: &ad, alpha_r: &ar, alpha: &[], image: &img, diffuse_color: &[], reflection_color: &[] };
-        recomposite::recomposite(&b, &patches(), &Params::default()).unwrap().0
+        let b = Buffers {
+            ids: &ids,
+            normals: &normals,
+            edited: e,
+            view: &[0.0, 0.0, 1.0],
+            diffuse: &diffuse,
+            reflection: &refl,
+            alpha_d: &ad,
+            alpha_r: &ar,
+            alpha: &[],
+            image: &img,
+            diffuse_color: &[],
+            reflection_color: &[],
+        };
+        recomposite::recomposite(&b, &patches(), &Params::default())
+            .unwrap()
+            .0
     };
     let out = mk(&edited);
     let mut changed = 0;
@@ -411,18 +490,48 @@ fn recompositing_edits_locally_and_continuously() {
     }
     assert!(changed > w * h / 4, "{changed}");
     let out_tiny = mk(&tiny);
-    let worst = out_tiny.iter().zip(&img).map(|(a, b)| (a - b).abs()).fold(0.0f32, f32::max);
+    let worst = out_tiny
+        .iter()
+        .zip(&img)
+        .map(|(a, b)| (a - b).abs())
+        .fold(0.0f32, f32::max);
     assert!(worst < 1e-3, "tiny edit moved a pixel by {worst}");
     // NaN shading in one pixel: returned as I, counted.
     let mut d2 = diffuse.clone();
     let p = (0..w * h / 2).find(|&p| ids[p] == 0).unwrap();
     d2[3 * p] = f32::NAN;
-    let b = Buffers { ids: &ids, normals: &normals, edited: &edited, view: &[0.0, 0.0, 1.0], diffuse: &d2, reflection: &refl, alpha_d: &ad, alpha_r: &ar, alpha: &[], image: &img, diffuse_color: &[], reflection_color: &[] };
+    let b = Buffers {
+        ids: &ids,
+        normals: &normals,
+        edited: &edited,
+        view: &[0.0, 0.0, 1.0],
+        diffuse: &d2,
+        reflection: &refl,
+        alpha_d: &ad,
+        alpha_r: &ar,
+        alpha: &[],
+        image: &img,
+        diffuse_color: &[],
+        reflection_color: &[],
+    };
     let (o2, st) = recomposite::recomposite(&b, &patches(), &Params::default()).unwrap();
     assert_eq!(st.masked, 1);
     assert_eq!(&o2[3 * p..3 * p + 3], &img[3 * p..3 * p + 3]);
     // Wrong sizes: errors naming the argument.
-    let b = Buffers { ids: &ids, normals: &normals[3..], edited: &edited, view: &[0.0, 0.0, 1.0], diffuse: &diffuse, reflection: &refl, alpha_d: &ad, alpha_r: &ar, alpha: &[], image: &img, diffuse_color: &[], reflection_color: &[] };
+    let b = Buffers {
+        ids: &ids,
+        normals: &normals[3..],
+        edited: &edited,
+        view: &[0.0, 0.0, 1.0],
+        diffuse: &diffuse,
+        reflection: &refl,
+        alpha_d: &ad,
+        alpha_r: &ar,
+        alpha: &[],
+        image: &img,
+        diffuse_color: &[],
+        reflection_color: &[],
+    };
     let e = recomposite::recomposite(&b, &patches(), &Params::default()).unwrap_err();
     assert!(e.to_string().starts_with("normals:"), "{e}");
 }

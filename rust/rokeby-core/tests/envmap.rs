@@ -5,7 +5,12 @@ use glam::DVec3;
 use proptest::prelude::*;
 use rokeby_core::envmap::{self, EnvMap, Layout};
 
-const LAYOUTS: [Layout; 4] = [Layout::LatLong, Layout::Cube, Layout::Sphere, Layout::Paraboloid];
+const LAYOUTS: [Layout; 4] = [
+    Layout::LatLong,
+    Layout::Cube,
+    Layout::Sphere,
+    Layout::Paraboloid,
+];
 
 fn dims(layout: Layout, n: usize) -> (usize, usize) {
     match layout {
@@ -192,7 +197,10 @@ fn conversions_round_trip() {
                 }
             }
         }
-        assert!(worst < 6e-3, "latlong → {layout:?} → latlong: worst error {worst}");
+        assert!(
+            worst < 6e-3,
+            "latlong → {layout:?} → latlong: worst error {worst}"
+        );
     }
 }
 
@@ -210,7 +218,9 @@ fn bad_input_is_an_error() {
     assert!(m.sample_many(&[0.0, 0.0, 0.0]).is_err());
     assert!(m.sample_many(&[1.0, f32::INFINITY, 0.0]).is_err());
     assert!(m.convert(Layout::Cube, 8, 8, 0).is_err());
-    let e = m.convert(Layout::Cube, 1_000_000, 1_000_000, 1).unwrap_err();
+    let e = m
+        .convert(Layout::Cube, 1_000_000, 1_000_000, 1)
+        .unwrap_err();
     assert!(e.to_string().contains("4 GiB"), "{e}");
     assert!(EnvMap::zeros(Layout::LatLong, usize::MAX / 2, 4, 3).is_err());
 }

@@ -10,7 +10,9 @@ use rokeby_core::polar::PolarMethod;
 use rokeby_core::region::Region;
 
 fn quats(out: &[f32]) -> Vec<DQuat> {
-    out.chunks_exact(4).map(|c| DQuat::from_xyzw(c[0] as f64, c[1] as f64, c[2] as f64, c[3] as f64)).collect()
+    out.chunks_exact(4)
+        .map(|c| DQuat::from_xyzw(c[0] as f64, c[1] as f64, c[2] as f64, c[3] as f64))
+        .collect()
 }
 
 /// Angle of the rotation between a and b, accurate for tiny angles (acos near 1 is not).
@@ -20,17 +22,28 @@ fn angle(a: DQuat, b: DQuat) -> f64 {
 }
 
 fn dir_angle(a: DVec3, b: DVec3) -> f64 {
-    a.normalize().cross(b.normalize()).length().atan2(a.normalize().dot(b.normalize()))
+    a.normalize()
+        .cross(b.normalize())
+        .length()
+        .atan2(a.normalize().dot(b.normalize()))
 }
 
 fn rows(cs: &[(DVec3, DVec3, DVec3)]) -> Vec<f32> {
-    cs.iter().flat_map(|(p, r, e)| [p.x, p.y, p.z, r.x, r.y, r.z, e.x, e.y, e.z].map(|x| x as f32)).collect()
+    cs.iter()
+        .flat_map(|(p, r, e)| [p.x, p.y, p.z, r.x, r.y, r.z, e.x, e.y, e.z].map(|x| x as f32))
+        .collect()
 }
 
 fn field_at(cs: &[(DVec3, DVec3, DVec3)], pts: &[DVec3], polar: PolarMethod) -> Vec<DQuat> {
     let f = Field::new(&rows(cs), vec![]).unwrap();
-    let flat: Vec<f32> = pts.iter().flat_map(|p| [p.x as f32, p.y as f32, p.z as f32]).collect();
-    quats(&f.rotation_field(&flat, Distances::Euclidean, None, polar).unwrap())
+    let flat: Vec<f32> = pts
+        .iter()
+        .flat_map(|p| [p.x as f32, p.y as f32, p.z as f32])
+        .collect();
+    quats(
+        &f.rotation_field(&flat, Distances::Euclidean, None, polar)
+            .unwrap(),
+    )
 }
 
 fn unit_vec() -> impl Strategy<Value = DVec3> {
@@ -45,9 +58,14 @@ fn point() -> impl Strategy<Value = DVec3> {
 
 /// Constraints with well-separated points (the paper's use; coincident ones are tested apart).
 fn constraints(max: usize) -> impl Strategy<Value = Vec<(DVec3, DVec3, DVec3)>> {
-    prop::collection::vec((point(), unit_vec(), unit_vec()), 1..=max).prop_filter("separated points", |cs| {
-        cs.iter().enumerate().all(|(i, a)| cs.iter().skip(i + 1).all(|b| a.0.distance(b.0) > 0.05))
-    })
+    prop::collection::vec((point(), unit_vec(), unit_vec()), 1..=max).prop_filter(
+        "separated points",
+        |cs| {
+            cs.iter()
+                .enumerate()
+                .all(|(i, a)| cs.iter().skip(i + 1).all(|b| a.0.distance(b.0) > 0.05))
+        },
+    )
 }
 
 proptest! {
@@ -128,7 +146,14 @@ proptest! {
 #[test]
 fn no_constraints_is_identity() {
     let f = Field::new(&[], vec![]).unwrap();
-    let out = f.rotation_field(&[0.0, 1.0, 2.0], Distances::Euclidean, None, PolarMethod::Svd).unwrap();
+    let out = f
+        .rotation_field(
+            &[0.0, 1.0, 2.0],
+            Distances::Euclidean,
+            None,
+            PolarMethod::Svd,
+        )
+        .unwrap();
     assert_eq!(out, vec![0.0, 0.0, 0.0, 1.0]);
 }
 
@@ -136,7 +161,11 @@ fn no_constraints_is_identity() {
 fn antiparallel_edit_is_a_half_turn_everywhere() {
     let r = DVec3::new(0.0, 0.6, 0.8);
     let cs = [(DVec3::ZERO, r, -r)];
-    for q in field_at(&cs, &[DVec3::ZERO, DVec3::ONE, DVec3::new(5.0, -3.0, 1.0)], PolarMethod::Svd) {
+    for q in field_at(
+        &cs,
+        &[DVec3::ZERO, DVec3::ONE, DVec3::new(5.0, -3.0, 1.0)],
+        PolarMethod::Svd,
+    ) {
         assert!((q * r + r).length() < 1e-6);
         assert!((q.w).abs() < 1e-6, "a half turn has w = 0");
     }
@@ -146,7 +175,11 @@ fn antiparallel_edit_is_a_half_turn_everywhere() {
 fn single_constraint_is_the_smallest_rotation() {
     let r = DVec3::Z;
     let e = DVec3::new(0.0, 1.0, 1.0).normalize();
-    let qs = field_at(&[(DVec3::ZERO, r, e)], &[DVec3::new(3.0, 1.0, 0.0)], PolarMethod::Iterative);
+    let qs = field_at(
+        &[(DVec3::ZERO, r, e)],
+        &[DVec3::new(3.0, 1.0, 0.0)],
+        PolarMethod::Iterative,
+    );
     let expect = DQuat::from_rotation_arc(r, e);
     assert!(angle(qs[0], expect) < 1e-6);
 }
@@ -175,7 +208,12 @@ fn thousand_constraints_and_all_at_one_point() {
         let e = DVec3::new(0.2, t.cos(), 1.0).normalize();
         cs.push((p, r, e));
     }
-    let pts: Vec<DVec3> = cs.iter().step_by(97).map(|c| c.0).chain([DVec3::new(0.3, 0.3, 0.3)]).collect();
+    let pts: Vec<DVec3> = cs
+        .iter()
+        .step_by(97)
+        .map(|c| c.0)
+        .chain([DVec3::new(0.3, 0.3, 0.3)])
+        .collect();
     let qs = field_at(&cs, &pts, PolarMethod::Svd);
     for (q, c) in qs.iter().zip(cs.iter().step_by(97)) {
         assert!(dir_angle(*q * c.1, c.2) < 1e-4);
@@ -183,7 +221,11 @@ fn thousand_constraints_and_all_at_one_point() {
     assert!(qs.iter().all(|q| q.is_finite()));
     // All constraints at one point: the field is ortho of their plain sum, everywhere.
     let same: Vec<_> = cs.iter().map(|c| (DVec3::ONE, c.1, c.2)).collect();
-    let qs = field_at(&same, &[DVec3::ONE, DVec3::ZERO, DVec3::splat(-7.0)], PolarMethod::Svd);
+    let qs = field_at(
+        &same,
+        &[DVec3::ONE, DVec3::ZERO, DVec3::splat(-7.0)],
+        PolarMethod::Svd,
+    );
     assert!(angle(qs[0], qs[1]) < 1e-5 && angle(qs[1], qs[2]) < 1e-5);
 }
 
@@ -194,8 +236,13 @@ fn regions_localise_the_edit() {
     let c = rows(&[(DVec3::ZERO, r, e), (DVec3::new(10.0, 0.0, 0.0), r, -r)]);
     let region = Region::euclidean([0.0, 0.0, 0.0], 1.0, 0.5, "regions[0]").unwrap();
     let f = Field::new(&c, vec![region]).unwrap();
-    let pts = [0.0f32, 0.0, 0.0, 0.75, 0.0, 0.0, 2.0, 0.0, 0.0, 10.0, 0.0, 0.0];
-    let qs = quats(&f.rotation_field(&pts, Distances::Euclidean, None, PolarMethod::Svd).unwrap());
+    let pts = [
+        0.0f32, 0.0, 0.0, 0.75, 0.0, 0.0, 2.0, 0.0, 0.0, 10.0, 0.0, 0.0,
+    ];
+    let qs = quats(
+        &f.rotation_field(&pts, Distances::Euclidean, None, PolarMethod::Svd)
+            .unwrap(),
+    );
     // Inside: only the first constraint (the second is outside every region and acts nowhere).
     assert!(angle(qs[0], DQuat::from_rotation_arc(r, e)) < 1e-6);
     // In the border: part of the way.
@@ -211,7 +258,10 @@ fn empty_region_changes_nothing_and_overlaps_blend() {
     let r = DVec3::Z;
     let e1 = DVec3::new(0.0, 0.5, 1.0).normalize();
     let e2 = DVec3::new(0.5, 0.0, 1.0).normalize();
-    let c = rows(&[(DVec3::new(-0.5, 0.0, 0.0), r, e1), (DVec3::new(0.5, 0.0, 0.0), r, e2)]);
+    let c = rows(&[
+        (DVec3::new(-0.5, 0.0, 0.0), r, e1),
+        (DVec3::new(0.5, 0.0, 0.0), r, e2),
+    ]);
     let regions = vec![
         Region::euclidean([-0.5, 0.0, 0.0], 0.8, 0.0, "a").unwrap(), // holds constraint 0 only
         Region::euclidean([0.5, 0.0, 0.0], 0.8, 0.0, "b").unwrap(),  // holds constraint 1 only
@@ -219,8 +269,14 @@ fn empty_region_changes_nothing_and_overlaps_blend() {
     ];
     let f = Field::new(&c, regions).unwrap();
     let pts = [0.0f32, 0.0, 0.0, 0.0, 5.0, 0.0, -0.9, 0.0, 0.0];
-    let qs = quats(&f.rotation_field(&pts, Distances::Euclidean, None, PolarMethod::Svd).unwrap());
-    let (q1, q2) = (DQuat::from_rotation_arc(r, e1), DQuat::from_rotation_arc(r, e2));
+    let qs = quats(
+        &f.rotation_field(&pts, Distances::Euclidean, None, PolarMethod::Svd)
+            .unwrap(),
+    );
+    let (q1, q2) = (
+        DQuat::from_rotation_arc(r, e1),
+        DQuat::from_rotation_arc(r, e2),
+    );
     // At the overlap both regions have a = 1: the edit is between the two.
     assert!(angle(qs[0], q1) > 0.05 && angle(qs[0], q2) > 0.05);
     assert!((angle(qs[0], q1) - angle(qs[0], q2)).abs() < 1e-6);
@@ -239,17 +295,40 @@ fn geodesic_distances_infinite_means_unreachable() {
     let f = Field::new(&c, vec![]).unwrap();
     // two points; the first constraint cannot reach point 1, neither reaches... nothing.
     let d = [0.5f32, f32::INFINITY, 0.5, 0.25];
-    let qs = quats(&f.rotation_field(&[0.0, 0.0, 0.0, 1.0, 1.0, 1.0], Distances::Given(&d), None, PolarMethod::Svd).unwrap());
+    let qs = quats(
+        &f.rotation_field(
+            &[0.0, 0.0, 0.0, 1.0, 1.0, 1.0],
+            Distances::Given(&d),
+            None,
+            PolarMethod::Svd,
+        )
+        .unwrap(),
+    );
     assert!(angle(qs[1], DQuat::from_rotation_arc(r, e2)) < 1e-6);
     let bad = [f32::NAN, 1.0, 1.0, 1.0];
-    assert!(f.rotation_field(&[0.0, 0.0, 0.0, 1.0, 1.0, 1.0], Distances::Given(&bad), None, PolarMethod::Svd).is_err());
+    assert!(f
+        .rotation_field(
+            &[0.0, 0.0, 0.0, 1.0, 1.0, 1.0],
+            Distances::Given(&bad),
+            None,
+            PolarMethod::Svd
+        )
+        .is_err());
 }
 
 #[test]
 fn per_pixel_matches_per_point() {
     let cs = [
-        (DVec3::new(0.0, 0.0, 0.0), DVec3::new(0.0, 0.3, 1.0).normalize(), DVec3::new(0.2, 0.3, 1.0).normalize()),
-        (DVec3::new(1.0, 0.0, 0.0), DVec3::new(0.1, -0.3, 1.0).normalize(), DVec3::new(-0.4, 0.0, 1.0).normalize()),
+        (
+            DVec3::new(0.0, 0.0, 0.0),
+            DVec3::new(0.0, 0.3, 1.0).normalize(),
+            DVec3::new(0.2, 0.3, 1.0).normalize(),
+        ),
+        (
+            DVec3::new(1.0, 0.0, 0.0),
+            DVec3::new(0.1, -0.3, 1.0).normalize(),
+            DVec3::new(-0.4, 0.0, 1.0).normalize(),
+        ),
     ];
     let f = Field::new(&rows(&cs), vec![]).unwrap();
     let eye = [0.5, -3.0, 2.0];
@@ -261,13 +340,26 @@ fn per_pixel_matches_per_point() {
         nrm.extend_from_slice(&[0.0, 0.1, 1.0]);
     }
     for polar in [PolarMethod::Svd, PolarMethod::Iterative] {
-        let dirs = f.edited_directions(&pos, &nrm, eye, Distances::Euclidean, polar, 10).unwrap();
-        let rots = quats(&f.rotation_field(&pos, Distances::Euclidean, None, PolarMethod::Svd).unwrap());
+        let dirs = f
+            .edited_directions(&pos, &nrm, eye, Distances::Euclidean, polar, 10)
+            .unwrap();
+        let rots = quats(
+            &f.rotation_field(&pos, Distances::Euclidean, None, PolarMethod::Svd)
+                .unwrap(),
+        );
         for i in 0..50 {
-            let q = DVec3::new(pos[3 * i] as f64, pos[3 * i + 1] as f64, pos[3 * i + 2] as f64);
+            let q = DVec3::new(
+                pos[3 * i] as f64,
+                pos[3 * i + 1] as f64,
+                pos[3 * i + 2] as f64,
+            );
             let n = DVec3::new(0.0, 0.1, 1.0);
             let r = rokeby_core::field::reflect_dir(q, n, DVec3::from_array(eye)).unwrap();
-            let e = DVec3::new(dirs[3 * i] as f64, dirs[3 * i + 1] as f64, dirs[3 * i + 2] as f64);
+            let e = DVec3::new(
+                dirs[3 * i] as f64,
+                dirs[3 * i + 1] as f64,
+                dirs[3 * i + 2] as f64,
+            );
             assert!(dir_angle(rots[i] * r, e) < 1e-5);
         }
     }
@@ -280,16 +372,44 @@ fn bad_constraints_are_errors_not_panics() {
     let nan_p = [f32::NAN, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 1.0];
     assert!(Field::new(&nan_p, vec![]).is_err());
     let f = Field::new(&[0.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 1.0, 0.0], vec![]).unwrap();
-    assert!(f.rotation_field(&[f32::INFINITY, 0.0, 0.0], Distances::Euclidean, None, PolarMethod::Svd).is_err());
-    assert!(f.rotation_field(&[], Distances::Euclidean, None, PolarMethod::Svd).is_err());
-    assert!(f.edited_directions(&[0.0, 0.0, 0.0], &[0.0, 0.0, 0.0], [0.0, 0.0, 1.0], Distances::Euclidean, PolarMethod::Svd, 1).is_err());
-    assert!(f.edited_directions(&[0.0, 0.0, 1.0], &[0.0, 0.0, 1.0], [0.0, 0.0, 1.0], Distances::Euclidean, PolarMethod::Svd, 1).is_err());
+    assert!(f
+        .rotation_field(
+            &[f32::INFINITY, 0.0, 0.0],
+            Distances::Euclidean,
+            None,
+            PolarMethod::Svd
+        )
+        .is_err());
+    assert!(f
+        .rotation_field(&[], Distances::Euclidean, None, PolarMethod::Svd)
+        .is_err());
+    assert!(f
+        .edited_directions(
+            &[0.0, 0.0, 0.0],
+            &[0.0, 0.0, 0.0],
+            [0.0, 0.0, 1.0],
+            Distances::Euclidean,
+            PolarMethod::Svd,
+            1
+        )
+        .is_err());
+    assert!(f
+        .edited_directions(
+            &[0.0, 0.0, 1.0],
+            &[0.0, 0.0, 1.0],
+            [0.0, 0.0, 1.0],
+            Distances::Euclidean,
+            PolarMethod::Svd,
+            1
+        )
+        .is_err());
 }
 
 // --- eq. 7 in closed form for renderers (FieldOutput::ViewBlend + view_blend) -------------------
 
 fn rotation() -> impl Strategy<Value = DQuat> {
-    (unit_vec(), 0.0f64..std::f64::consts::PI).prop_map(|(axis, angle)| DQuat::from_axis_angle(axis, angle))
+    (unit_vec(), 0.0f64..std::f64::consts::PI)
+        .prop_map(|(axis, angle)| DQuat::from_axis_angle(axis, angle))
 }
 
 proptest! {
@@ -348,7 +468,12 @@ fn view_blend_ends_and_bad_input() {
     assert!(dir_angle(rokeby_core::field::view_blend(rot, 0.0, r), r) < 1e-12);
     assert!(dir_angle(rokeby_core::field::view_blend(DQuat::IDENTITY, 0.5, r), r) < 1e-12);
     assert!(rokeby_core::field::view_blend_directions(&[0.0; 6], &[0.0; 6], false).is_err());
-    assert!(rokeby_core::field::view_blend_directions(&[0.0, 0.0, 0.0, 1.0, f32::NAN, 0.0], &[0.0, 0.0, 1.0], false).is_err());
+    assert!(rokeby_core::field::view_blend_directions(
+        &[0.0, 0.0, 0.0, 1.0, f32::NAN, 0.0],
+        &[0.0, 0.0, 1.0],
+        false
+    )
+    .is_err());
 }
 
 proptest! {
@@ -379,20 +504,39 @@ fn view_blend_render_rows_keep_each_polygon_in_one_hemisphere() {
     let parts: Vec<f32> = [q, -DQuat::from_axis_angle(DVec3::Z, 3.1)]
         .iter()
         .enumerate()
-        .flat_map(|(i, q)| [q.x as f32, q.y as f32, q.z as f32, q.w as f32, 0.5, 0.25 + i as f32])
+        .flat_map(|(i, q)| {
+            [
+                q.x as f32,
+                q.y as f32,
+                q.z as f32,
+                q.w as f32,
+                0.5,
+                0.25 + i as f32,
+            ]
+        })
         .collect();
     // One triangle (0, 1, 1) whose first corner is vertex 0: the quaternions straddle the seam.
     let r = rows_of(&parts, &[0, 1, 1], &[0, 0, 0], false).unwrap();
     assert!(r.per_corner && r.xyz.len() == 9);
     for c in 0..3 {
-        let v = r.xyz[3 * c] * r.xyz[0] + r.xyz[3 * c + 1] * r.xyz[1] + r.xyz[3 * c + 2] * r.xyz[2] + r.wa[3 * c] * r.wa[0];
+        let v = r.xyz[3 * c] * r.xyz[0]
+            + r.xyz[3 * c + 1] * r.xyz[1]
+            + r.xyz[3 * c + 2] * r.xyz[2]
+            + r.wa[3 * c] * r.wa[0];
         assert!(v > 0.0, "corner {c} in the other hemisphere");
         assert_eq!(r.wa[3 * c + 1], 0.5);
     }
     let ramp = rows_of(&parts, &[0, 1], &[0, 0], true).unwrap();
-    assert_eq!((ramp.wa[1], ramp.wa[2], ramp.wa[4], ramp.wa[5]), (-1.0, 0.25, -1.0, 1.25));
+    assert_eq!(
+        (ramp.wa[1], ramp.wa[2], ramp.wa[4], ramp.wa[5]),
+        (-1.0, 0.25, -1.0, 1.25)
+    );
     // Without a seam the rows are per vertex.
-    let same: Vec<f32> = parts[..6].iter().chain(parts[..6].iter()).copied().collect();
+    let same: Vec<f32> = parts[..6]
+        .iter()
+        .chain(parts[..6].iter())
+        .copied()
+        .collect();
     let r = rows_of(&same, &[0, 1, 1], &[0, 0, 0], false).unwrap();
     assert!(!r.per_corner && r.xyz.len() == 6);
     assert!(rows_of(&parts, &[0, 2], &[0, 0], false).is_err());

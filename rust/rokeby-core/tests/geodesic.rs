@@ -54,14 +54,24 @@ fn flat_grid_is_euclidean() {
     let (v, f) = grid(n, |x, y| DVec3::new(x, y, 0.0));
     let s = solver(&v, &f);
     let src = 40 * n + 40; // centre
-    let want: Vec<f64> = v.chunks(3).map(|c| ((c[0] as f64 - 0.5).powi(2) + (c[1] as f64 - 0.5).powi(2)).sqrt()).collect();
-    let heat = s.distances(&[vec![Source::Vertex(src)]], Method::Heat).unwrap();
-    let dij = s.distances(&[vec![Source::Vertex(src)]], Method::Dijkstra).unwrap();
+    let want: Vec<f64> = v
+        .chunks(3)
+        .map(|c| ((c[0] as f64 - 0.5).powi(2) + (c[1] as f64 - 0.5).powi(2)).sqrt())
+        .collect();
+    let heat = s
+        .distances(&[vec![Source::Vertex(src)]], Method::Heat)
+        .unwrap();
+    let dij = s
+        .distances(&[vec![Source::Vertex(src)]], Method::Dijkstra)
+        .unwrap();
     let (hm, hx) = rel_err(&heat, &want, 2.0 / (n - 1) as f64);
     let (dm, _) = rel_err(&dij, &want, 2.0 / (n - 1) as f64);
     println!("flat: heat mean {hm:.4} max {hx:.4}; dijkstra mean {dm:.4}");
     assert!(hm < 0.01, "heat mean relative error {hm}");
-    assert!(dm > hm, "edge paths over-estimate: {dm} should exceed the heat method's {hm}");
+    assert!(
+        dm > hm,
+        "edge paths over-estimate: {dm} should exceed the heat method's {hm}"
+    );
     // Dijkstra never under-estimates.
     assert!(dij.iter().zip(&want).all(|(g, w)| *g as f64 >= w - 1e-6));
 }
@@ -85,7 +95,9 @@ fn cylinder_unrolls() {
             ((x - 0.5).powi(2) + (y - 0.5).powi(2)).sqrt()
         })
         .collect();
-    let heat = s.distances(&[vec![Source::Vertex(src)]], Method::Heat).unwrap();
+    let heat = s
+        .distances(&[vec![Source::Vertex(src)]], Method::Heat)
+        .unwrap();
     let (hm, hx) = rel_err(&heat, &want, 2.0 / (n - 1) as f64);
     println!("cylinder: heat mean {hm:.4} max {hx:.4}");
     assert!(hm < 0.01);
@@ -100,7 +112,11 @@ fn sphere_great_circles() {
         let th = std::f64::consts::PI * i as f64 / rings as f64;
         for j in 0..segs {
             let ph = 2.0 * std::f64::consts::PI * j as f64 / segs as f64;
-            v.extend_from_slice(&[(th.sin() * ph.cos()) as f32, (th.sin() * ph.sin()) as f32, th.cos() as f32]);
+            v.extend_from_slice(&[
+                (th.sin() * ph.cos()) as f32,
+                (th.sin() * ph.sin()) as f32,
+                th.cos() as f32,
+            ]);
         }
     }
     v.extend_from_slice(&[0.0, 0.0, -1.0]);
@@ -113,11 +129,21 @@ fn sphere_great_circles() {
     }
     for i in 1..rings - 1 {
         for j in 0..segs {
-            f.extend_from_slice(&[idx(i, j), idx(i + 1, j), idx(i + 1, j + 1), idx(i, j), idx(i + 1, j + 1), idx(i, j + 1)]);
+            f.extend_from_slice(&[
+                idx(i, j),
+                idx(i + 1, j),
+                idx(i + 1, j + 1),
+                idx(i, j),
+                idx(i + 1, j + 1),
+                idx(i, j + 1),
+            ]);
         }
     }
     let s = solver(&v, &f);
-    let want: Vec<f64> = v.chunks(3).map(|c| (c[2] as f64).clamp(-1.0, 1.0).acos()).collect();
+    let want: Vec<f64> = v
+        .chunks(3)
+        .map(|c| (c[2] as f64).clamp(-1.0, 1.0).acos())
+        .collect();
     for method in [Method::Heat, Method::Dijkstra] {
         let d = s.distances(&[vec![Source::Vertex(0)]], method).unwrap();
         let (m, x) = rel_err(&d, &want, 0.1);
@@ -138,16 +164,34 @@ fn surface_point_source_mid_triangle() {
     let m = s.mesh();
     let p = m.point(&SurfacePoint { face: 0, bary });
     for method in [Method::Heat, Method::Dijkstra] {
-        let d = s.distances(&[vec![Source::Point(SurfacePoint { face: 0, bary })]], method).unwrap();
+        let d = s
+            .distances(
+                &[vec![Source::Point(SurfacePoint { face: 0, bary })]],
+                method,
+            )
+            .unwrap();
         for &vi in &m.faces[0] {
-            assert!((d[vi] as f64 - p.distance(m.vertices[vi])).abs() < 1e-6, "exact inside the source triangle");
+            assert!(
+                (d[vi] as f64 - p.distance(m.vertices[vi])).abs() < 1e-6,
+                "exact inside the source triangle"
+            );
         }
         let far = n * n - 1;
         let want = p.distance(m.vertices[far]);
         let tol = if method == Method::Heat { 0.02 } else { 0.1 };
-        assert!(((d[far] as f64) - want).abs() / want < tol, "{method:?}: {} vs {want}", d[far]);
+        assert!(
+            ((d[far] as f64) - want).abs() / want < tol,
+            "{method:?}: {} vs {want}",
+            d[far]
+        );
         // Interpolated at the source itself: close to 0.
-        let at = rokeby_core::geodesic::interpolate(&d, m.vertices.len(), &m.faces, &[SurfacePoint { face: 0, bary }]).unwrap();
+        let at = rokeby_core::geodesic::interpolate(
+            &d,
+            m.vertices.len(),
+            &m.faces,
+            &[SurfacePoint { face: 0, bary }],
+        )
+        .unwrap();
         assert!(at[0] < 0.02);
     }
 }
@@ -157,13 +201,27 @@ fn several_sources_give_the_nearest() {
     let n = 21;
     let (v, f) = grid(n, |x, y| DVec3::new(x, y, 0.0));
     let s = solver(&v, &f);
-    let a = s.distances(&[vec![Source::Vertex(0)]], Method::Dijkstra).unwrap();
-    let b = s.distances(&[vec![Source::Vertex(n * n - 1)]], Method::Dijkstra).unwrap();
-    let both = s.distances(&[vec![Source::Vertex(0), Source::Vertex(n * n - 1)]], Method::Dijkstra).unwrap();
+    let a = s
+        .distances(&[vec![Source::Vertex(0)]], Method::Dijkstra)
+        .unwrap();
+    let b = s
+        .distances(&[vec![Source::Vertex(n * n - 1)]], Method::Dijkstra)
+        .unwrap();
+    let both = s
+        .distances(
+            &[vec![Source::Vertex(0), Source::Vertex(n * n - 1)]],
+            Method::Dijkstra,
+        )
+        .unwrap();
     for i in 0..n * n {
         assert_eq!(both[i], a[i].min(b[i]));
     }
-    let hb = s.distances(&[vec![Source::Vertex(0), Source::Vertex(n * n - 1)]], Method::Heat).unwrap();
+    let hb = s
+        .distances(
+            &[vec![Source::Vertex(0), Source::Vertex(n * n - 1)]],
+            Method::Heat,
+        )
+        .unwrap();
     assert!(hb[0] == 0.0 && hb[n * n - 1] == 0.0);
     assert!(s.is_factored());
 }
@@ -171,13 +229,19 @@ fn several_sources_give_the_nearest() {
 #[test]
 fn disconnected_and_unreferenced_vertices_are_unreachable() {
     // Two separate triangles plus an unreferenced vertex.
-    let v = [0.0f32, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 5.0, 0.0, 0.0, 6.0, 0.0, 0.0, 5.0, 1.0, 0.0, 9.0, 9.0, 9.0];
+    let v = [
+        0.0f32, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 5.0, 0.0, 0.0, 6.0, 0.0, 0.0, 5.0, 1.0,
+        0.0, 9.0, 9.0, 9.0,
+    ];
     let f = [0i64, 1, 2, 3, 4, 5];
     let s = solver(&v, &f);
     for method in [Method::Heat, Method::Dijkstra] {
         let d = s.distances(&[vec![Source::Vertex(0)]], method).unwrap();
         assert!(d[..3].iter().all(|x| x.is_finite()));
-        assert!(d[3..].iter().all(|x| *x == f32::INFINITY), "{method:?}: {d:?}");
+        assert!(
+            d[3..].iter().all(|x| *x == f32::INFINITY),
+            "{method:?}: {d:?}"
+        );
         assert!(d.iter().all(|x| !x.is_nan()));
     }
 }
@@ -205,14 +269,30 @@ fn bad_input_is_an_error() {
     assert!(Mesh::new(&[0.0, 0.0, 0.0], &[]).is_err());
     assert!(Mesh::new(&[0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0, 0.0], &[0, 1, 3]).is_err());
     assert!(Mesh::new(&[0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0, 0.0], &[0, -1, 2]).is_err());
-    assert!(Mesh::new(&[f32::NAN, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0, 0.0], &[0, 1, 2]).is_err());
+    assert!(Mesh::new(
+        &[f32::NAN, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0, 0.0],
+        &[0, 1, 2]
+    )
+    .is_err());
     let s = solver(&[0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0, 0.0], &[0, 1, 2]);
-    assert!(s.distances(&[vec![Source::Vertex(3)]], Method::Dijkstra).is_err());
+    assert!(s
+        .distances(&[vec![Source::Vertex(3)]], Method::Dijkstra)
+        .is_err());
     assert!(s.distances(&[vec![]], Method::Dijkstra).is_err());
-    let bad = SurfacePoint { face: 1, bary: [1.0, 0.0, 0.0] };
-    assert!(s.distances(&[vec![Source::Point(bad)]], Method::Heat).is_err());
-    let nan = SurfacePoint { face: 0, bary: [f64::NAN, 0.0, 0.0] };
-    assert!(s.distances(&[vec![Source::Point(nan)]], Method::Heat).is_err());
+    let bad = SurfacePoint {
+        face: 1,
+        bary: [1.0, 0.0, 0.0],
+    };
+    assert!(s
+        .distances(&[vec![Source::Point(bad)]], Method::Heat)
+        .is_err());
+    let nan = SurfacePoint {
+        face: 0,
+        bary: [f64::NAN, 0.0, 0.0],
+    };
+    assert!(s
+        .distances(&[vec![Source::Point(nan)]], Method::Heat)
+        .is_err());
 }
 
 #[test]
@@ -235,7 +315,9 @@ fn long_strip_far_end_is_right() {
         }
     }
     let s = solver(&v, &f);
-    let d = s.distances(&[vec![Source::Vertex(0)]], Method::Heat).unwrap();
+    let d = s
+        .distances(&[vec![Source::Vertex(0)]], Method::Heat)
+        .unwrap();
     for i in [100usize, 500, 1000, 1500] {
         let got = d[i] as f64;
         assert!((got - i as f64).abs() / (i as f64) < 0.02, "at {i}: {got}");

@@ -18,7 +18,10 @@ static CANCELLABLE: Mutex<()> = Mutex::new(());
 #[test]
 fn an_unreachable_vertex_with_zero_weight_does_not_poison_the_point() {
     let faces = [[0usize, 1, 2]];
-    let at_edge = [SurfacePoint { face: 0, bary: [0.5, 0.5, 0.0] }];
+    let at_edge = [SurfacePoint {
+        face: 0,
+        bary: [0.5, 0.5, 0.0],
+    }];
     let v = interpolate(&[1.0, 3.0, f32::INFINITY], 3, &faces, &at_edge).unwrap();
     assert_eq!(v, vec![2.0]);
 }
@@ -26,7 +29,10 @@ fn an_unreachable_vertex_with_zero_weight_does_not_poison_the_point() {
 #[test]
 fn interpolation_that_overflows_float32_is_an_error() {
     let faces = [[0usize, 1, 2]];
-    let p = [SurfacePoint { face: 0, bary: [0.6, 0.6, -0.2] }];
+    let p = [SurfacePoint {
+        face: 0,
+        bary: [0.6, 0.6, -0.2],
+    }];
     let e = interpolate(&[3e38, 3e38, 0.0], 3, &faces, &p).unwrap_err();
     assert!(e.to_string().starts_with("values:"), "{e}");
 }
@@ -46,7 +52,10 @@ fn huge_outputs_are_out_of_memory_not_aborts() {
 fn sh_eval_refuses_zero_normals_instead_of_nan() {
     let c = [[1.0f64; 9]];
     let e = sh::eval_many(&c, &[0.0, 0.0, 1.0, 0.0, 0.0, 0.0]).unwrap_err();
-    assert_eq!(e.to_string(), "normals: normal 1 is zero or not finite: it has no direction");
+    assert_eq!(
+        e.to_string(),
+        "normals: normal 1 is zero or not finite: it has no direction"
+    );
     let ok = sh::eval_many(&c, &[0.0, 0.0, 2.0]).unwrap();
     assert!(ok.iter().all(|x| x.is_finite()));
 }
@@ -67,14 +76,29 @@ fn noisy_map(s: usize) -> (ParaboloidMap, ParaboloidMap) {
     let mut pos = vec![0.0f32; 2 * s * s * 2];
     let mut x = 12345u64;
     for (k, d) in data.iter_mut().enumerate() {
-        x = x.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+        x = x
+            .wrapping_mul(6364136223846793005)
+            .wrapping_add(1442695040888963407);
         *d = ((x >> 33) % 1000) as f32 / 1000.0 + (k % 7) as f32;
     }
     for (k, p) in pos.iter_mut().enumerate() {
-        x = x.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+        x = x
+            .wrapping_mul(6364136223846793005)
+            .wrapping_add(1442695040888963407);
         *p = ((x >> 33) % 1000) as f32 / 100.0 * ((k / 2) % 3) as f32;
     }
-    (ParaboloidMap { size: s, channels: 3, data }, ParaboloidMap { size: s, channels: 2, data: pos })
+    (
+        ParaboloidMap {
+            size: s,
+            channels: 3,
+            data,
+        },
+        ParaboloidMap {
+            size: s,
+            channels: 2,
+            data: pos,
+        },
+    )
 }
 
 #[test]
@@ -94,7 +118,15 @@ fn a_huge_blur_sigma_is_clipped_to_the_map_and_returns() {
 }
 
 /// The whole-window sum of `normals::bilateral`'s documented formula, for one pixel.
-fn bilateral_full(n: &[f32], d: &[f32], w: usize, h: usize, i: usize, sigma_s: f64, sigma_d: f64) -> [f64; 2] {
+fn bilateral_full(
+    n: &[f32],
+    d: &[f32],
+    w: usize,
+    h: usize,
+    i: usize,
+    sigma_s: f64,
+    sigma_d: f64,
+) -> [f64; 2] {
     let r = ((2.0 * sigma_s).ceil() as isize).max(1);
     let (y, x) = ((i / w) as isize, (i % w) as isize);
     let dp = d[i] as f64;
@@ -107,7 +139,8 @@ fn bilateral_full(n: &[f32], d: &[f32], w: usize, h: usize, i: usize, sigma_s: f
             }
             let q = yy as usize * w + xx as usize;
             let rel = (d[q] as f64 - dp) / dp.abs().max(1e-6) / sigma_d;
-            let wt = (-((dx * dx + dy * dy) as f64) / (2.0 * sigma_s * sigma_s)).exp() * (-0.5 * rel * rel).exp();
+            let wt = (-((dx * dx + dy * dy) as f64) / (2.0 * sigma_s * sigma_s)).exp()
+                * (-0.5 * rel * rel).exp();
             ax += wt * n[3 * q] as f64;
             ay += wt * n[3 * q + 1] as f64;
             ws += wt;
@@ -130,16 +163,26 @@ fn a_wide_bilateral_window_is_sampled_and_stays_close_to_the_full_sum() {
             d[i] = 5.0 + 0.01 * x as f32;
         }
     }
-    let f = Frame { width: w, height: h, mask: None };
+    let f = Frame {
+        width: w,
+        height: h,
+        mask: None,
+    };
     for sigma in [normals::EXACT_SIGMA_S, 12.0, 20.0] {
         let out = normals::bilateral(&n, &f, &d, sigma, 0.05).unwrap();
         let mut worst = 0.0f64;
         for i in (0..w * h).step_by(37) {
             let want = bilateral_full(&n, &d, w, h, i, sigma, 0.05);
-            worst = worst.max((out[3 * i] as f64 - want[0]).abs()).max((out[3 * i + 1] as f64 - want[1]).abs());
+            worst = worst
+                .max((out[3 * i] as f64 - want[0]).abs())
+                .max((out[3 * i + 1] as f64 - want[1]).abs());
         }
         // whole windows are the formula; sampled ones stay within about a degree of it
-        let tol = if sigma <= normals::EXACT_SIGMA_S { 1e-6 } else { 0.02 };
+        let tol = if sigma <= normals::EXACT_SIGMA_S {
+            1e-6
+        } else {
+            0.02
+        };
         assert!(worst < tol, "σ_s = {sigma}: off the full window by {worst}");
     }
     let t = Instant::now();
@@ -152,8 +195,18 @@ fn a_wide_bilateral_window_is_sampled_and_stays_close_to_the_full_sum() {
 fn too_many_prefilter_lobes_are_refused_before_computing() {
     let _g = CANCELLABLE.lock().unwrap_or_else(|e| e.into_inner());
     let env = EnvMap::new(Layout::LatLong, 8, 16, 3, vec![0.5; 8 * 16 * 3], "image").unwrap();
-    let lobes: Vec<Lobe> = (0..20_000).map(|i| Lobe::ggx_roughness((i % 10) as f64 / 10.0).unwrap()).collect();
-    let e = prefilter::prefilter(&env, &lobes, &PrefilterParams { texels_per_radius: 6.0, tail: 1e-5 }).unwrap_err();
+    let lobes: Vec<Lobe> = (0..20_000)
+        .map(|i| Lobe::ggx_roughness((i % 10) as f64 / 10.0).unwrap())
+        .collect();
+    let e = prefilter::prefilter(
+        &env,
+        &lobes,
+        &PrefilterParams {
+            texels_per_radius: 6.0,
+            tail: 1e-5,
+        },
+    )
+    .unwrap_err();
     assert!(e.to_string().starts_with("params: at most"), "{e}");
 }
 

@@ -21,14 +21,26 @@ fn latlong(h: usize, f: impl Fn(DVec3) -> [f32; 3]) -> EnvMap {
 /// an HDR-like test.
 fn sky(d: DVec3) -> [f32; 3] {
     let sun = DVec3::new(0.3, -0.5, 0.6).normalize();
-    let mut s = if d.dot(sun) > (3.0f64.to_radians()).cos() { 500.0 } else { 0.0 };
+    let mut s = if d.dot(sun) > (3.0f64.to_radians()).cos() {
+        500.0
+    } else {
+        0.0
+    };
     // and a small lamp 4° from the north pole, where lat-long rows are decimated in φ
     let lamp = DVec3::new(4.0f64.to_radians().sin(), 0.0, 4.0f64.to_radians().cos());
     if d.dot(lamp) > (2.0f64.to_radians()).cos() {
         s += 200.0;
     }
-    let base = if d.z > 0.0 { 0.6 + 0.4 * d.z } else { 0.1 + 0.05 * d.x };
-    [(base + s) as f32, (base * 0.9 + 0.8 * s) as f32, (base * 1.2 + 0.5 * s) as f32]
+    let base = if d.z > 0.0 {
+        0.6 + 0.4 * d.z
+    } else {
+        0.1 + 0.05 * d.x
+    };
+    [
+        (base + s) as f32,
+        (base * 0.9 + 0.8 * s) as f32,
+        (base * 1.2 + 0.5 * s) as f32,
+    ]
 }
 
 /// Fibonacci-sphere directions.
@@ -83,7 +95,10 @@ fn constant_environment_stays_constant() {
 #[test]
 fn sh_irradiance_is_exact_for_order_two_lighting() {
     let f = |d: DVec3| {
-        let v = 1.0 + 0.3 * d.x - 0.2 * d.y + 0.5 * d.z + 0.4 * d.x * d.z + 0.3 * (d.x * d.x - d.y * d.y);
+        let v = 1.0 + 0.3 * d.x - 0.2 * d.y
+            + 0.5 * d.z
+            + 0.4 * d.x * d.z
+            + 0.3 * (d.x * d.x - d.y * d.y);
         [v as f32, (2.0 - d.z) as f32, (1.0 + d.x * d.y) as f32]
     };
     let env = latlong(256, f);
@@ -92,10 +107,18 @@ fn sh_irradiance_is_exact_for_order_two_lighting() {
     let brute = prefilter::brute_force_irradiance(&env, &ns).unwrap();
     let mut out = [0.0f64; 3];
     for (k, n) in ns.chunks(3).enumerate() {
-        prefilter::sh_irradiance(&coeffs, DVec3::new(n[0] as f64, n[1] as f64, n[2] as f64), &mut out);
+        prefilter::sh_irradiance(
+            &coeffs,
+            DVec3::new(n[0] as f64, n[1] as f64, n[2] as f64),
+            &mut out,
+        );
         for c in 0..3 {
             let b = brute[3 * k + c];
-            assert!((out[c] - b).abs() < 2e-4 * b.abs().max(1.0), "normal {k} channel {c}: SH {} vs brute {b}", out[c]);
+            assert!(
+                (out[c] - b).abs() < 2e-4 * b.abs().max(1.0),
+                "normal {k} channel {c}: SH {} vs brute {b}",
+                out[c]
+            );
         }
     }
 }
@@ -111,7 +134,11 @@ fn sh_irradiance_of_a_sun_sky() {
     let (mut se, mut sb) = (0.0, 0.0);
     let mut out = [0.0f64; 3];
     for (k, n) in ns.chunks(3).enumerate() {
-        prefilter::sh_irradiance(&coeffs, DVec3::new(n[0] as f64, n[1] as f64, n[2] as f64), &mut out);
+        prefilter::sh_irradiance(
+            &coeffs,
+            DVec3::new(n[0] as f64, n[1] as f64, n[2] as f64),
+            &mut out,
+        );
         se += (out[0] - brute[3 * k]).abs();
         sb += brute[3 * k];
     }
@@ -133,7 +160,9 @@ fn prefilter_matches_brute_force() {
         let mut ds = vec![];
         let mut fast = vec![];
         for k in 0..360 {
-            seed = seed.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+            seed = seed
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
             // 300 anywhere, 60 in the three rows at each pole (where rows are decimated in φ)
             let t = if k < 300 {
                 (seed >> 33) as usize % (h * w)
@@ -154,13 +183,18 @@ fn prefilter_matches_brute_force() {
             worst = worst.max(e / brute[k]);
         }
         let mean = se / sb;
-        eprintln!("{lobe:?}: mean relative error {mean:.2e}, worst {worst:.2e}, rings {}, {}×{}", lv.rings, lv.map.height, lv.map.width);
+        eprintln!(
+            "{lobe:?}: mean relative error {mean:.2e}, worst {worst:.2e}, rings {}, {}×{}",
+            lv.rings, lv.map.height, lv.map.width
+        );
         if lobe.is_mirror() || lv.rings == 0 {
             if mean >= 1e-6 {
                 bad.push(format!("{lobe:?}: a mirror level must copy the input"));
             }
         } else if !(mean < 0.02 && worst < 0.15) {
-            bad.push(format!("{lobe:?}: mean relative error {mean}, worst {worst}"));
+            bad.push(format!(
+                "{lobe:?}: mean relative error {mean}, worst {worst}"
+            ));
         }
     }
     assert!(bad.is_empty(), "{bad:#?}");
@@ -175,7 +209,9 @@ fn phong_normalisation() {
         let mut s = 0.0;
         for i in 0..n {
             let g = (i as f64 + 0.5) / n as f64 * std::f64::consts::FRAC_PI_2;
-            s += Lobe::phong(sigma).unwrap().kernel(g.cos()) * g.sin() * std::f64::consts::FRAC_PI_2 / n as f64;
+            s +=
+                Lobe::phong(sigma).unwrap().kernel(g.cos()) * g.sin() * std::f64::consts::FRAC_PI_2
+                    / n as f64;
         }
         let total = (1.0 + sigma) / (2.0 * std::f64::consts::PI) * std::f64::consts::TAU * s;
         assert!((total - 1.0).abs() < 1e-3, "σ = {sigma}: {total}");
@@ -186,12 +222,23 @@ fn phong_normalisation() {
 fn bad_parameters_are_errors() {
     assert!(Lobe::phong(-1.0).unwrap_err().to_string().contains("≥ 0"));
     assert!(Lobe::phong(f64::NAN).is_err());
-    assert!(Lobe::ggx_roughness(1.5).unwrap_err().to_string().contains("[0, 1]"));
+    assert!(Lobe::ggx_roughness(1.5)
+        .unwrap_err()
+        .to_string()
+        .contains("[0, 1]"));
     assert!(Lobe::ggx_roughness(-0.1).is_err());
     assert!(Lobe::torrance_sparrow(-0.2).is_err());
     let cube = EnvMap::zeros(Layout::Cube, 8, 8, 3).unwrap();
     let e = prefilter::sh_project(&cube).unwrap_err();
     assert!(e.to_string().contains("lat-long"), "{e}");
     let env = latlong(8, |_| [1.0, 1.0, 1.0]);
-    assert!(prefilter::prefilter(&env, &[Lobe::phong(4.0).unwrap()], &PrefilterParams { texels_per_radius: 0.0, tail: 1e-5 }).is_err());
+    assert!(prefilter::prefilter(
+        &env,
+        &[Lobe::phong(4.0).unwrap()],
+        &PrefilterParams {
+            texels_per_radius: 0.0,
+            tail: 1e-5
+        }
+    )
+    .is_err());
 }

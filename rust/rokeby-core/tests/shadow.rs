@@ -30,32 +30,54 @@ fn sphere(c: DVec3, r: f64, lat: usize, lon: usize) -> (Vec<f32>, Vec<i64>) {
     }
     for i in 1..lat - 1 {
         for j in 0..lon {
-            let (a, b, cc, d) = (ring(i, j), ring(i, j + 1), ring(i + 1, j), ring(i + 1, j + 1));
+            let (a, b, cc, d) = (
+                ring(i, j),
+                ring(i, j + 1),
+                ring(i + 1, j),
+                ring(i + 1, j + 1),
+            );
             f.extend_from_slice(&[a, cc, d, a, d, b]);
         }
     }
     for j in 0..lon {
         f.extend_from_slice(&[south, ring(lat - 1, j + 1), ring(lat - 1, j)]);
     }
-    let vf = v.iter().flat_map(|p| [p.x as f32, p.y as f32, p.z as f32]).collect();
+    let vf = v
+        .iter()
+        .flat_map(|p| [p.x as f32, p.y as f32, p.z as f32])
+        .collect();
     (vf, f)
 }
 
 /// A square ground plane z = `z` of half-size `h`, facing +z.
 fn plane(z: f32, h: f32) -> (Vec<f32>, Vec<i64>) {
-    (vec![-h, -h, z, h, -h, z, h, h, z, -h, h, z], vec![0, 1, 2, 0, 2, 3])
+    (
+        vec![-h, -h, z, h, -h, z, h, h, z, -h, h, z],
+        vec![0, 1, 2, 0, 2, 3],
+    )
 }
 
 fn signed_volume(v: &[f32], f: &[i64]) -> f64 {
-    let p = |i: i64| DVec3::new(v[3 * i as usize] as f64, v[3 * i as usize + 1] as f64, v[3 * i as usize + 2] as f64);
-    f.chunks_exact(3).map(|t| p(t[0]).dot(p(t[1]).cross(p(t[2]))) / 6.0).sum()
+    let p = |i: i64| {
+        DVec3::new(
+            v[3 * i as usize] as f64,
+            v[3 * i as usize + 1] as f64,
+            v[3 * i as usize + 2] as f64,
+        )
+    };
+    f.chunks_exact(3)
+        .map(|t| p(t[0]).dot(p(t[1]).cross(p(t[2]))) / 6.0)
+        .sum()
 }
 
 #[test]
 fn sphere_silhouette_is_the_tangent_circle() {
     let (c, r) = (DVec3::new(0.3, -0.2, 1.5), 0.5);
     let (v, f) = sphere(c, r, 64, 128);
-    assert!(signed_volume(&v, &f) > 0.0, "test sphere must be outward oriented");
+    assert!(
+        signed_volume(&v, &f) > 0.0,
+        "test sphere must be outward oriented"
+    );
     let mesh = ClosedMesh::new(&v, &f, None).unwrap();
     let l = c + DVec3::new(0.4, 0.2, 3.0);
     let loops = silhouettes(&mesh, &Light::Point(l)).unwrap();
@@ -74,7 +96,11 @@ fn sphere_silhouette_is_the_tangent_circle() {
         assert!((radial - rho).abs() < 2e-3 * r, "radius {radial} vs {rho}");
     }
     let want = 2.0 * std::f64::consts::PI * rho;
-    assert!((loops[0].length - want).abs() < 5e-3 * want, "length {} vs {want}", loops[0].length);
+    assert!(
+        (loops[0].length - want).abs() < 5e-3 * want,
+        "length {} vs {want}",
+        loops[0].length
+    );
     // Ends of each edge face opposite ways.
     for s in &loops[0].vertices {
         let g = |i: u32| mesh.normals[i as usize].dot(l - mesh.vertices[i as usize]);
@@ -104,12 +130,18 @@ fn silhouette_loop_is_connected_and_oriented() {
         let a = l.vertices[k];
         let b = l.vertices[(k + 1) % n];
         let ea = [a.back, a.front];
-        assert!(ea.contains(&b.back) || ea.contains(&b.front), "vertices {k} and {} are not in one face", (k + 1) % n);
+        assert!(
+            ea.contains(&b.back) || ea.contains(&b.front),
+            "vertices {k} and {} are not in one face",
+            (k + 1) % n
+        );
     }
 }
 
 fn lcg(seed: &mut u64) -> f64 {
-    *seed = seed.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+    *seed = seed
+        .wrapping_mul(6364136223846793005)
+        .wrapping_add(1442695040888963407);
     ((*seed >> 11) as f64) / ((1u64 << 53) as f64)
 }
 
@@ -266,7 +298,11 @@ fn sinusoidal_noise_offsets_along_the_normal() {
         let u = i as f64 * 0.1;
         // t = v_{i−1} − v_{i+1} = (−0.2, 0) → n = (0, −1).
         assert!((b.x - a.x).abs() < 1e-12);
-        assert!((b.y - (-0.2 * (3.0 * u).sin())).abs() < 1e-12, "{i}: {}", b.y);
+        assert!(
+            (b.y - (-0.2 * (3.0 * u).sin())).abs() < 1e-12,
+            "{i}: {}",
+            b.y
+        );
     }
     assert!(sinusoidal_noise(&pts, false, f64::NAN, 1.0).is_err());
 }
@@ -288,7 +324,10 @@ fn scene(lat: usize, lon: usize) -> (ShadowEditor, DVec3) {
     let (pv, pf) = plane(0.0, 20.0);
     let l = DVec3::new(0.2, 0.1, 5.0);
     let mesh = ClosedMesh::new(&v, &f, None).unwrap();
-    (ShadowEditor::new(mesh, &pv, &pf, Light::Point(l), 20, 2.5, 10.0).unwrap(), l)
+    (
+        ShadowEditor::new(mesh, &pv, &pf, Light::Point(l), 20, 2.5, 10.0).unwrap(),
+        l,
+    )
 }
 
 #[test]
@@ -301,7 +340,11 @@ fn handles_are_the_projected_silhouette() {
         // The ray l → a meets z = 0 at l + (a − l)·l.z/(l.z − a.z).
         let a = s.position;
         let want = l + (a - l) * (l.z / (l.z - a.z));
-        assert!((h.position - want).length() < 1e-9, "{:?} vs {want:?}", h.position);
+        assert!(
+            (h.position - want).length() < 1e-9,
+            "{:?} vs {want:?}",
+            h.position
+        );
     }
     // An eye below the plane sees none of them; one above sees those not behind the sphere.
     let hidden = ed.handles(0, Some(DVec3::new(0.0, 0.0, -3.0))).unwrap();
@@ -309,7 +352,11 @@ fn handles_are_the_projected_silhouette() {
     let eye = DVec3::new(1.0, 0.0, 4.0);
     let seen = ed.handles(0, Some(eye)).unwrap();
     let occ = seen.iter().filter(|h| h.occluded).count();
-    assert!(occ > 0 && occ < seen.len(), "{occ} of {} occluded", seen.len());
+    assert!(
+        occ > 0 && occ < seen.len(),
+        "{occ} of {} occluded",
+        seen.len()
+    );
     // Against the analytic sphere, away from grazing lines of sight.
     let c = DVec3::new(0.0, 0.0, 1.5);
     for h in &seen {
@@ -317,7 +364,11 @@ fn handles_are_the_projected_silhouette() {
         let t = ((c - eye).dot(d) / d.length_squared()).clamp(0.0, 1.0);
         let dist = (eye + d * t - c).length();
         if (dist - 0.5).abs() > 0.02 {
-            assert_eq!(h.occluded, dist < 0.5, "line of sight passes {dist} from the centre");
+            assert_eq!(
+                h.occluded,
+                dist < 0.5,
+                "line of sight passes {dist} from the centre"
+            );
         }
     }
 }
@@ -359,7 +410,11 @@ fn dragging_a_handle_moves_the_boundary_and_the_shadow_mesh_follows() {
     let (d, e) = drag_radially(&mut ed, l, 0, 1.3);
     let r = ed.drag(&d).unwrap();
     // The dragged handle lands where the cursor is (a plane receiver: exactly).
-    assert!((r.handles[0].position - e).length() < 1e-9, "{:?} vs {e:?}", r.handles[0].position);
+    assert!(
+        (r.handles[0].position - e).length() < 1e-9,
+        "{:?} vs {e:?}",
+        r.handles[0].position
+    );
     // Handles outside the segment do not move.
     for k in 0..n {
         if !r.segment.contains(&k) {
@@ -370,14 +425,34 @@ fn dragging_a_handle_moves_the_boundary_and_the_shadow_mesh_follows() {
     // The shadow mesh's own silhouette from the same light casts its shadow edge through e.
     let sm = ed.shadow_mesh().unwrap();
     let c = ed.caster();
-    let flat: Vec<f32> = sm.iter().flat_map(|p| [p.x as f32, p.y as f32, p.z as f32]).collect();
-    let faces: Vec<i64> = c.faces.iter().flat_map(|f| f.iter().map(|&x| x as i64)).collect();
+    let flat: Vec<f32> = sm
+        .iter()
+        .flat_map(|p| [p.x as f32, p.y as f32, p.z as f32])
+        .collect();
+    let faces: Vec<i64> = c
+        .faces
+        .iter()
+        .flat_map(|f| f.iter().map(|&x| x as i64))
+        .collect();
     let smesh = ClosedMesh::new(&flat, &faces, None).unwrap();
     let loops = silhouettes(&smesh, &Light::Point(l)).unwrap();
-    let shadow: Vec<DVec3> = loops[0].positions().iter().map(|&a| l + (a - l) * (l.z / (l.z - a.z))).collect();
-    let dist = |p: DVec3| shadow.iter().map(|q| (*q - p).length()).fold(f64::INFINITY, f64::min);
+    let shadow: Vec<DVec3> = loops[0]
+        .positions()
+        .iter()
+        .map(|&a| l + (a - l) * (l.z / (l.z - a.z)))
+        .collect();
+    let dist = |p: DVec3| {
+        shadow
+            .iter()
+            .map(|q| (*q - p).length())
+            .fold(f64::INFINITY, f64::min)
+    };
     let moved = (e - before[0].position).length();
-    assert!(dist(e) < 0.15 * moved, "shadow-mesh boundary {} from the dragged point (moved {moved})", dist(e));
+    assert!(
+        dist(e) < 0.15 * moved,
+        "shadow-mesh boundary {} from the dragged point (moved {moved})",
+        dist(e)
+    );
     // The far side of the shadow stays.
     let far = before[n / 2].position;
     assert!(dist(far) < 0.05 * moved, "far side moved by {}", dist(far));
@@ -393,11 +468,18 @@ fn shrinking_takes_the_second_ray_through_back_faces() {
     // f is inside the sphere: its first hit is a back face, the second ray reaches the plane.
     let h = r.handles[0];
     assert!(h.hit && !h.on_caster);
-    assert!((h.position - e).length() < 1e-9, "{:?} vs {e:?}", h.position);
+    assert!(
+        (h.position - e).length() < 1e-9,
+        "{:?} vs {e:?}",
+        h.position
+    );
     // cancel() restores the rest state.
     ed.cancel();
     let out = ed.shadow_mesh().unwrap();
-    assert!(out.iter().zip(&ed.caster().vertices).all(|(a, b)| (*a - *b).length() < 1e-9));
+    assert!(out
+        .iter()
+        .zip(&ed.caster().vertices)
+        .all(|(a, b)| (*a - *b).length() < 1e-9));
 }
 
 #[test]
@@ -414,7 +496,9 @@ fn noise_and_styles_keep_the_fixed_ends() {
         for &k in [d.fixed.0, d.fixed.1].iter() {
             assert!((r.silhouette[k] - rest[k]).length() < 1e-9);
         }
-        let changed = (0..n).filter(|&k| (r.silhouette[k] - rest[k]).length() > 1e-6).count();
+        let changed = (0..n)
+            .filter(|&k| (r.silhouette[k] - rest[k]).length() > 1e-6)
+            .count();
         assert!(changed > 3 && changed < n, "{style:?}: {changed}");
     }
 }
@@ -429,28 +513,135 @@ fn bad_inputs_are_errors() {
     // Flipped face: inconsistent orientation.
     let mut g = f.clone();
     g.swap(0, 1);
-    assert!(ClosedMesh::new(&v, &g, None).unwrap_err().to_string().contains("oriented"));
+    assert!(ClosedMesh::new(&v, &g, None)
+        .unwrap_err()
+        .to_string()
+        .contains("oriented"));
     assert!(ClosedMesh::new(&v, &[0, 1, 999], None).is_err());
     let mesh = ClosedMesh::new(&v, &f, None).unwrap();
     // A light inside the caster's bounds.
-    let e = ShadowEditor::new(mesh.clone(), &pv, &pf, Light::Point(DVec3::new(0.0, 0.0, 1.6)), 3, 2.5, 10.0).err().unwrap().to_string();
+    let e = ShadowEditor::new(
+        mesh.clone(),
+        &pv,
+        &pf,
+        Light::Point(DVec3::new(0.0, 0.0, 1.6)),
+        3,
+        2.5,
+        10.0,
+    )
+    .err()
+    .unwrap()
+    .to_string();
     assert!(e.contains("inside the caster's bounding box"), "{e}");
     // No receiver under the light (the plane is above the sphere, the light below it).
-    let e = ShadowEditor::new(mesh.clone(), &pv, &pf, Light::Point(DVec3::new(0.0, 0.0, 0.5)), 3, 2.5, 10.0).err().unwrap().to_string();
+    let e = ShadowEditor::new(
+        mesh.clone(),
+        &pv,
+        &pf,
+        Light::Point(DVec3::new(0.0, 0.0, 0.5)),
+        3,
+        2.5,
+        10.0,
+    )
+    .err()
+    .unwrap()
+    .to_string();
     assert!(e.contains("no receiver under the light"), "{e}");
-    let e = ShadowEditor::new(mesh.clone(), &[], &[], Light::Point(DVec3::new(0.0, 0.0, 5.0)), 3, 2.5, 10.0).err().unwrap().to_string();
+    let e = ShadowEditor::new(
+        mesh.clone(),
+        &[],
+        &[],
+        Light::Point(DVec3::new(0.0, 0.0, 5.0)),
+        3,
+        2.5,
+        10.0,
+    )
+    .err()
+    .unwrap()
+    .to_string();
     assert!(e.contains("no receiver under the light"), "{e}");
-    assert!(ShadowEditor::new(mesh.clone(), &pv, &pf, Light::Point(DVec3::new(f64::NAN, 0.0, 5.0)), 3, 2.5, 10.0).is_err());
-    assert!(ShadowEditor::new(mesh.clone(), &pv, &pf, Light::Point(DVec3::new(0.0, 0.0, 5.0)), 3, -1.0, 10.0).is_err());
-    let e = ShadowEditor::new(mesh.clone(), &pv, &pf, Light::Point(DVec3::new(0.0, 0.0, 5.0)), 10_000, 2.5, 10.0).err().unwrap().to_string();
+    assert!(ShadowEditor::new(
+        mesh.clone(),
+        &pv,
+        &pf,
+        Light::Point(DVec3::new(f64::NAN, 0.0, 5.0)),
+        3,
+        2.5,
+        10.0
+    )
+    .is_err());
+    assert!(ShadowEditor::new(
+        mesh.clone(),
+        &pv,
+        &pf,
+        Light::Point(DVec3::new(0.0, 0.0, 5.0)),
+        3,
+        -1.0,
+        10.0
+    )
+    .is_err());
+    let e = ShadowEditor::new(
+        mesh.clone(),
+        &pv,
+        &pf,
+        Light::Point(DVec3::new(0.0, 0.0, 5.0)),
+        10_000,
+        2.5,
+        10.0,
+    )
+    .err()
+    .unwrap()
+    .to_string();
     assert!(e.contains("no silhouette loop"), "{e}");
-    let mut ed = ShadowEditor::new(mesh, &pv, &pf, Light::Point(DVec3::new(0.0, 0.0, 5.0)), 3, 2.5, 10.0).unwrap();
-    let d = Drag { loop_index: 0, fixed: (0, 0), moved: 1, target: DVec3::ZERO, style: MlsStyle::Rigid, mls_alpha: 1.0, noise_amplitude: 0.0, noise_frequency: 0.0 };
+    let mut ed = ShadowEditor::new(
+        mesh,
+        &pv,
+        &pf,
+        Light::Point(DVec3::new(0.0, 0.0, 5.0)),
+        3,
+        2.5,
+        10.0,
+    )
+    .unwrap();
+    let d = Drag {
+        loop_index: 0,
+        fixed: (0, 0),
+        moved: 1,
+        target: DVec3::ZERO,
+        style: MlsStyle::Rigid,
+        mls_alpha: 1.0,
+        noise_amplitude: 0.0,
+        noise_frequency: 0.0,
+    };
     assert!(ed.drag(&d).is_err());
-    assert!(ed.drag(&Drag { fixed: (0, 4), moved: 4, ..d }).is_err());
-    assert!(ed.drag(&Drag { loop_index: 7, fixed: (0, 4), ..d }).is_err());
-    assert!(ed.drag(&Drag { fixed: (0, 4), moved: 9999, ..d }).is_err());
-    assert!(ed.drag(&Drag { fixed: (0, 4), target: DVec3::NAN, ..d }).is_err());
+    assert!(ed
+        .drag(&Drag {
+            fixed: (0, 4),
+            moved: 4,
+            ..d
+        })
+        .is_err());
+    assert!(ed
+        .drag(&Drag {
+            loop_index: 7,
+            fixed: (0, 4),
+            ..d
+        })
+        .is_err());
+    assert!(ed
+        .drag(&Drag {
+            fixed: (0, 4),
+            moved: 9999,
+            ..d
+        })
+        .is_err());
+    assert!(ed
+        .drag(&Drag {
+            fixed: (0, 4),
+            target: DVec3::NAN,
+            ..d
+        })
+        .is_err());
     assert!(ed.handles(9, None).is_err());
 }
 
@@ -463,27 +654,75 @@ fn far_point_lights_are_directional() {
     let (pv, pf) = plane(0.0, 20.0);
     let mesh = ClosedMesh::new(&v, &f, None).unwrap();
     let c = DVec3::new(0.0, 0.0, 1.5);
-    let sun = ShadowEditor::new(mesh.clone(), &pv, &pf, Light::Directional(DVec3::new(0.0, 0.0, -1.0)), 20, 2.5, 10.0).unwrap();
+    let sun = ShadowEditor::new(
+        mesh.clone(),
+        &pv,
+        &pf,
+        Light::Directional(DVec3::new(0.0, 0.0, -1.0)),
+        20,
+        2.5,
+        10.0,
+    )
+    .unwrap();
     for far in [1e12, 1e30, 1e300] {
-        let mut ed = ShadowEditor::new(mesh.clone(), &pv, &pf, Light::Point(c + DVec3::new(0.0, 0.0, far)), 20, 2.5, 10.0).unwrap();
+        let mut ed = ShadowEditor::new(
+            mesh.clone(),
+            &pv,
+            &pf,
+            Light::Point(c + DVec3::new(0.0, 0.0, far)),
+            20,
+            2.5,
+            10.0,
+        )
+        .unwrap();
         assert!(matches!(ed.frame().light, Light::Directional(_)), "{far}");
         let (a, b) = (ed.handles(0, None).unwrap(), sun.handles(0, None).unwrap());
         assert_eq!(a.len(), b.len());
         for (x, y) in a.iter().zip(&b) {
-            assert!((x.position - y.position).length() < 1e-9, "{far}: {:?} vs {:?}", x.position, y.position);
+            assert!(
+                (x.position - y.position).length() < 1e-9,
+                "{far}: {:?} vs {:?}",
+                x.position,
+                y.position
+            );
         }
         let n = a.len();
         let e = DVec3::new(a[0].position.x * 1.3, a[0].position.y * 1.3, 0.0);
-        let d = Drag { loop_index: 0, fixed: ((n - n / 6) % n, n / 6), moved: 0, target: e, style: MlsStyle::Affine, mls_alpha: 1.0, noise_amplitude: 0.0, noise_frequency: 0.0 };
+        let d = Drag {
+            loop_index: 0,
+            fixed: ((n - n / 6) % n, n / 6),
+            moved: 0,
+            target: e,
+            style: MlsStyle::Affine,
+            mls_alpha: 1.0,
+            noise_amplitude: 0.0,
+            noise_frequency: 0.0,
+        };
         let r = ed.drag(&d).unwrap();
         assert!((r.handles[0].position - e).length() < 1e-9);
         ed.commit();
         let sm = ed.shadow_mesh().unwrap();
         assert!(sm.iter().all(|p| p.is_finite()));
-        let moved = sm.iter().zip(&ed.caster().vertices).map(|(p, q)| (*p - *q).length()).fold(0.0, f64::max);
-        assert!(moved > 0.05 && moved < 1.0, "{far}: the shadow mesh moved by {moved}");
+        let moved = sm
+            .iter()
+            .zip(&ed.caster().vertices)
+            .map(|(p, q)| (*p - *q).length())
+            .fold(0.0, f64::max);
+        assert!(
+            moved > 0.05 && moved < 1.0,
+            "{far}: the shadow mesh moved by {moved}"
+        );
     }
-    let near = ShadowEditor::new(mesh.clone(), &pv, &pf, Light::Point(c + DVec3::new(0.0, 0.0, 1e5)), 20, 2.5, 10.0).unwrap();
+    let near = ShadowEditor::new(
+        mesh.clone(),
+        &pv,
+        &pf,
+        Light::Point(c + DVec3::new(0.0, 0.0, 1e5)),
+        20,
+        2.5,
+        10.0,
+    )
+    .unwrap();
     assert!(matches!(near.frame().light, Light::Point(_)));
 }
 
@@ -495,8 +734,16 @@ fn extreme_solver_weights_are_bounded() {
     let (pv, pf) = plane(0.0, 20.0);
     let mesh = ClosedMesh::new(&v, &f, None).unwrap();
     let l = Light::Point(DVec3::new(0.2, 0.1, 5.0));
-    for (wz, cw, name) in [(2.5, 1e7, "constraint_weight"), (2.5, 1e-7, "constraint_weight"), (1e7, 10.0, "w_z"), (1e-300, 10.0, "w_z")] {
-        let e = ShadowEditor::new(mesh.clone(), &pv, &pf, l, 20, wz, cw).err().unwrap().to_string();
+    for (wz, cw, name) in [
+        (2.5, 1e7, "constraint_weight"),
+        (2.5, 1e-7, "constraint_weight"),
+        (1e7, 10.0, "w_z"),
+        (1e-300, 10.0, "w_z"),
+    ] {
+        let e = ShadowEditor::new(mesh.clone(), &pv, &pf, l, 20, wz, cw)
+            .err()
+            .unwrap()
+            .to_string();
         assert!(e.contains(name) && e.contains("[1e-6, 1e6]"), "{e}");
     }
     for (wz, cw) in [(1e-6, 1e6), (1e6, 1e-6), (1e6, 1e6), (1e-6, 1e-6)] {
@@ -504,7 +751,16 @@ fn extreme_solver_weights_are_bounded() {
         let n = ed.loops()[0].len();
         let h = ed.handles(0, None).unwrap();
         let e = h[0].position + (h[0].position - DVec3::new(0.2, 0.1, 0.0)) * 0.3;
-        let d = Drag { loop_index: 0, fixed: ((n - n / 6) % n, n / 6), moved: 0, target: DVec3::new(e.x, e.y, 0.0), style: MlsStyle::Affine, mls_alpha: 1.0, noise_amplitude: 0.0, noise_frequency: 0.0 };
+        let d = Drag {
+            loop_index: 0,
+            fixed: ((n - n / 6) % n, n / 6),
+            moved: 0,
+            target: DVec3::new(e.x, e.y, 0.0),
+            style: MlsStyle::Affine,
+            mls_alpha: 1.0,
+            noise_amplitude: 0.0,
+            noise_frequency: 0.0,
+        };
         ed.drag(&d).unwrap();
         ed.commit();
         let sm = ed.shadow_mesh().unwrap();

@@ -14,19 +14,33 @@ use rokeby_core::recomposite::{self as core_recomposite, Buffers, Params, Patch}
 use rokeby_core::reconstruct::{self, ParaboloidMap, ReflectionParams};
 use rokeby_core::sh::{self, Fit, SH_COEFFS};
 
-fn array_f32<'py>(py: Python<'py>, shape: &[usize], data: Vec<f32>) -> PyResult<Bound<'py, PyArrayDyn<f32>>> {
-    let arr = ArrayD::from_shape_vec(IxDyn(shape), data).map_err(|e| PyRuntimeError::new_err(e.to_string()))?;
+fn array_f32<'py>(
+    py: Python<'py>,
+    shape: &[usize],
+    data: Vec<f32>,
+) -> PyResult<Bound<'py, PyArrayDyn<f32>>> {
+    let arr = ArrayD::from_shape_vec(IxDyn(shape), data)
+        .map_err(|e| PyRuntimeError::new_err(e.to_string()))?;
     Ok(arr.into_pyarray(py))
 }
 
-fn array_f64<'py>(py: Python<'py>, shape: &[usize], data: Vec<f64>) -> PyResult<Bound<'py, PyArrayDyn<f64>>> {
-    let arr = ArrayD::from_shape_vec(IxDyn(shape), data).map_err(|e| PyRuntimeError::new_err(e.to_string()))?;
+fn array_f64<'py>(
+    py: Python<'py>,
+    shape: &[usize],
+    data: Vec<f64>,
+) -> PyResult<Bound<'py, PyArrayDyn<f64>>> {
+    let arr = ArrayD::from_shape_vec(IxDyn(shape), data)
+        .map_err(|e| PyRuntimeError::new_err(e.to_string()))?;
     Ok(arr.into_pyarray(py))
 }
 
 /// A float array, or a boolean one read as 0/1 (masks).
 fn mask_array<'py>(obj: &Bound<'py, PyAny>, name: &str) -> PyResult<F32Array<'py>> {
-    let kind: String = obj.getattr("dtype").and_then(|d| d.getattr("kind")).and_then(|k| k.extract()).unwrap_or_default();
+    let kind: String = obj
+        .getattr("dtype")
+        .and_then(|d| d.getattr("kind"))
+        .and_then(|k| k.extract())
+        .unwrap_or_default();
     if kind == "b" {
         return f32_array(&obj.call_method1("astype", ("float32",))?, name);
     }
@@ -34,39 +48,69 @@ fn mask_array<'py>(obj: &Bound<'py, PyAny>, name: &str) -> PyResult<F32Array<'py
 }
 
 /// An (H, W, 3) array; `hw` fixes H, W when already known.
-fn image3<'py>(obj: &Bound<'py, PyAny>, name: &str, hw: Option<(usize, usize)>) -> PyResult<(F32Array<'py>, usize, usize)> {
+fn image3<'py>(
+    obj: &Bound<'py, PyAny>,
+    name: &str,
+    hw: Option<(usize, usize)>,
+) -> PyResult<(F32Array<'py>, usize, usize)> {
     let a = f32_array(obj, name)?;
     let s = a.shape();
     if s.len() != 3 || s[2] != 3 {
-        return Err(PyValueError::new_err(format!("{name}: expected shape (H, W, 3), got {}", shape_str(&s))));
+        return Err(PyValueError::new_err(format!(
+            "{name}: expected shape (H, W, 3), got {}",
+            shape_str(&s)
+        )));
     }
     if let Some((h, w)) = hw {
         if (s[0], s[1]) != (h, w) {
-            return Err(PyValueError::new_err(format!("{name}: expected shape ({h}, {w}, 3) like the other passes, got {}", shape_str(&s))));
+            return Err(PyValueError::new_err(format!(
+                "{name}: expected shape ({h}, {w}, 3) like the other passes, got {}",
+                shape_str(&s)
+            )));
         }
     }
     Ok((a, s[0], s[1]))
 }
 
 /// An (H, W) array, or None when `obj` is None.
-fn image1<'py>(obj: Option<&Bound<'py, PyAny>>, name: &str, h: usize, w: usize) -> PyResult<Option<F32Array<'py>>> {
+fn image1<'py>(
+    obj: Option<&Bound<'py, PyAny>>,
+    name: &str,
+    h: usize,
+    w: usize,
+) -> PyResult<Option<F32Array<'py>>> {
     let Some(obj) = obj else { return Ok(None) };
     if obj.is_none() {
         return Ok(None);
     }
     let a = mask_array(obj, name)?;
     if a.shape() != [h, w] {
-        return Err(PyValueError::new_err(format!("{name}: expected shape ({h}, {w}) like the other passes, got {}", shape_str(&a.shape()))));
+        return Err(PyValueError::new_err(format!(
+            "{name}: expected shape ({h}, {w}) like the other passes, got {}",
+            shape_str(&a.shape())
+        )));
     }
     Ok(Some(a))
 }
 
 /// A required (H, W) array: None is refused by name (not a panic).
-fn required1<'py>(obj: &Bound<'py, PyAny>, name: &str, h: usize, w: usize) -> PyResult<F32Array<'py>> {
-    image1(Some(obj), name, h, w)?.ok_or_else(|| PyValueError::new_err(format!("{name}: expected an ({h}, {w}) array, got None")))
+fn required1<'py>(
+    obj: &Bound<'py, PyAny>,
+    name: &str,
+    h: usize,
+    w: usize,
+) -> PyResult<F32Array<'py>> {
+    image1(Some(obj), name, h, w)?.ok_or_else(|| {
+        PyValueError::new_err(format!("{name}: expected an ({h}, {w}) array, got None"))
+    })
 }
 
-fn opt_image3<'py>(obj: Option<&Bound<'py, PyAny>>, name: &str, h: usize, w: usize) -> PyResult<Option<F32Array<'py>>> {
+fn opt_image3<'py>(
+    obj: Option<&Bound<'py, PyAny>>,
+    name: &str,
+    h: usize,
+    w: usize,
+) -> PyResult<Option<F32Array<'py>>> {
     match obj {
         Some(o) if !o.is_none() => Ok(Some(image3(o, name, Some((h, w)))?.0)),
         _ => Ok(None),
@@ -74,7 +118,11 @@ fn opt_image3<'py>(obj: Option<&Bound<'py, PyAny>>, name: &str, h: usize, w: usi
 }
 
 fn parse_fit(method: &str) -> PyResult<Fit> {
-    Fit::parse(method).ok_or_else(|| PyValueError::new_err(format!("method: unknown fit {method:?} (expected 'qp'/'constrained' or 'ls'/'least_squares')")))
+    Fit::parse(method).ok_or_else(|| {
+        PyValueError::new_err(format!(
+            "method: unknown fit {method:?} (expected 'qp'/'constrained' or 'ls'/'least_squares')"
+        ))
+    })
 }
 
 /// Order-2 SH fit (eq. 1) of D0 over the pixels of one patch.
@@ -86,13 +134,23 @@ fn parse_fit(method: &str) -> PyResult<Fit> {
 /// "iterations": (C,), "pixels", "masked"}.
 #[pyfunction]
 #[pyo3(signature = (normals, values, method = "qp", tolerance = None))]
-pub fn sh_fit<'py>(py: Python<'py>, normals: &Bound<'py, PyAny>, values: &Bound<'py, PyAny>, method: &str, tolerance: Option<&Bound<'py, PyAny>>) -> PyResult<Bound<'py, PyDict>> {
+pub fn sh_fit<'py>(
+    py: Python<'py>,
+    normals: &Bound<'py, PyAny>,
+    values: &Bound<'py, PyAny>,
+    method: &str,
+    tolerance: Option<&Bound<'py, PyAny>>,
+) -> PyResult<Bound<'py, PyDict>> {
     let fit = parse_fit(method)?;
     let tolerance: Vec<f64> = match tolerance {
         None => Vec::new(),
         Some(t) => {
             let np = py.import("numpy")?;
-            let a = np.call_method1("asarray", (t, "float64")).map_err(|e| PyValueError::new_err(format!("tolerance: expected a number or one per channel ({e})")))?;
+            let a = np.call_method1("asarray", (t, "float64")).map_err(|e| {
+                PyValueError::new_err(format!(
+                    "tolerance: expected a number or one per channel ({e})"
+                ))
+            })?;
             let ndim: usize = a.getattr("ndim")?.extract()?;
             if ndim > 1 {
                 return Err(PyValueError::new_err(format!("tolerance: expected a number or one per channel, got an array of {ndim} dimensions")));
@@ -104,7 +162,10 @@ pub fn sh_fit<'py>(py: Python<'py>, normals: &Bound<'py, PyAny>, values: &Bound<
     let v = f32_array(values, "values")?;
     let ns = n.shape();
     if ns.len() != 2 || ns[1] != 3 {
-        return Err(PyValueError::new_err(format!("normals: expected shape (N, 3), got {}", shape_str(&ns))));
+        return Err(PyValueError::new_err(format!(
+            "normals: expected shape (N, 3), got {}",
+            shape_str(&ns)
+        )));
     }
     let vs = v.shape();
     let channels = match vs.len() {
@@ -113,19 +174,29 @@ pub fn sh_fit<'py>(py: Python<'py>, normals: &Bound<'py, PyAny>, values: &Bound<
         _ => 0,
     };
     if channels == 0 || vs[0] != ns[0] {
-        return Err(PyValueError::new_err(format!("values: expected shape ({}, C) (one row per normal), got {}", ns[0], shape_str(&vs))));
+        return Err(PyValueError::new_err(format!(
+            "values: expected shape ({}, C) (one row per normal), got {}",
+            ns[0],
+            shape_str(&vs)
+        )));
     }
     let (nsl, vsl) = (n.slice(), v.slice());
     let usable = |i: usize| {
         let nr = &nsl[3 * i..3 * i + 3];
         let l2 = nr.iter().map(|x| (*x as f64) * (*x as f64)).sum::<f64>();
-        nr.iter().chain(&vsl[channels * i..channels * (i + 1)]).all(|x| x.is_finite()) && l2 > 1e-24
+        nr.iter()
+            .chain(&vsl[channels * i..channels * (i + 1)])
+            .all(|x| x.is_finite())
+            && l2 > 1e-24
     };
     // One pass counts the unusable rows; a filtered copy is made only when there are some (a
     // render's patch usually has none, and the copy cost a third of the least-squares fit).
     let masked = py.detach(|| (0..ns[0]).filter(|&i| !usable(i)).count());
     if masked == ns[0] {
-        return Err(PyValueError::new_err(format!("normals: no usable pixel ({masked} of {} have a non-finite or zero normal or value)", ns[0])));
+        return Err(PyValueError::new_err(format!(
+            "normals: no usable pixel ({masked} of {} have a non-finite or zero normal or value)",
+            ns[0]
+        )));
     }
     let (keep_n, keep_v): (std::borrow::Cow<[f32]>, std::borrow::Cow<[f32]>) = if masked == 0 {
         (nsl.into(), vsl.into())
@@ -141,15 +212,28 @@ pub fn sh_fit<'py>(py: Python<'py>, normals: &Bound<'py, PyAny>, values: &Bound<
         })
     };
     let pixels = ns[0] - masked;
-    let tolerance = if tolerance.len() == 1 && channels > 1 { vec![tolerance[0]; channels] } else { tolerance };
-    let r = run_detached(py, || sh::fit_with_tolerance(&keep_n, &keep_v, channels, fit, &tolerance))?;
+    let tolerance = if tolerance.len() == 1 && channels > 1 {
+        vec![tolerance[0]; channels]
+    } else {
+        tolerance
+    };
+    let r = run_detached(py, || {
+        sh::fit_with_tolerance(&keep_n, &keep_v, channels, fit, &tolerance)
+    })?;
     // The arrays are read in place (no copy): the caller must not write them while the call runs.
     // Validated rows that changed under the fit would surface here as non-finite coefficients.
     if r.coeffs.iter().flatten().any(|x| !x.is_finite()) {
         return Err(PyValueError::new_err("normals/values: the fit is not finite; were the arrays written by another thread during the call?"));
     }
     let d = PyDict::new(py);
-    d.set_item("coeffs", array_f64(py, &[channels, SH_COEFFS], r.coeffs.iter().flatten().copied().collect())?)?;
+    d.set_item(
+        "coeffs",
+        array_f64(
+            py,
+            &[channels, SH_COEFFS],
+            r.coeffs.iter().flatten().copied().collect(),
+        )?,
+    )?;
     d.set_item("max_residual", array_f64(py, &[channels], r.max_residual)?)?;
     d.set_item("rms_residual", array_f64(py, &[channels], r.rms_residual)?)?;
     d.set_item("iterations", r.iterations)?;
@@ -160,22 +244,37 @@ pub fn sh_fit<'py>(py: Python<'py>, normals: &Bound<'py, PyAny>, values: &Bound<
 
 /// D(n) for SH coefficients (C, 9) at normals (..., 3): (..., C).
 #[pyfunction]
-pub fn sh_eval<'py>(py: Python<'py>, coeffs: &Bound<'py, PyAny>, normals: &Bound<'py, PyAny>) -> PyResult<Bound<'py, PyArrayDyn<f32>>> {
+pub fn sh_eval<'py>(
+    py: Python<'py>,
+    coeffs: &Bound<'py, PyAny>,
+    normals: &Bound<'py, PyAny>,
+) -> PyResult<Bound<'py, PyArrayDyn<f32>>> {
     let c = f32_array(coeffs, "coeffs")?;
     let cs = c.shape();
     if cs.len() != 2 || cs[1] != SH_COEFFS {
-        return Err(PyValueError::new_err(format!("coeffs: expected shape (C, 9), got {}", shape_str(&cs))));
+        return Err(PyValueError::new_err(format!(
+            "coeffs: expected shape (C, 9), got {}",
+            shape_str(&cs)
+        )));
     }
     let n = f32_array(normals, "normals")?;
     let ns = n.shape();
     if ns.last() != Some(&3) {
-        return Err(PyValueError::new_err(format!("normals: expected shape (..., 3), got {}", shape_str(&ns))));
+        return Err(PyValueError::new_err(format!(
+            "normals: expected shape (..., 3), got {}",
+            shape_str(&ns)
+        )));
     }
     // Coefficients come in float64 from sh_fit; re-read them at full precision.
     let co: Vec<[f64; SH_COEFFS]> = {
         let np = py.import("numpy")?;
-        let a64: Vec<f64> = np.call_method1("asarray", (coeffs, "float64"))?.call_method0("ravel")?.extract()?;
-        a64.chunks_exact(SH_COEFFS).map(|r| r.try_into().unwrap()).collect()
+        let a64: Vec<f64> = np
+            .call_method1("asarray", (coeffs, "float64"))?
+            .call_method0("ravel")?
+            .extract()?;
+        a64.chunks_exact(SH_COEFFS)
+            .map(|r| r.try_into().unwrap())
+            .collect()
     };
     let nsl = n.slice();
     let out = run_detached(py, || sh::eval_many(&co, nsl))?;
@@ -186,11 +285,18 @@ pub fn sh_eval<'py>(py: Python<'py>, coeffs: &Bound<'py, PyAny>, normals: &Bound
 
 /// r = 2(n·v)n − v for normals (H, W, 3) and view vectors (H, W, 3) or (3,) (surface → eye).
 #[pyfunction]
-pub fn reflect_dirs<'py>(py: Python<'py>, normals: &Bound<'py, PyAny>, view: &Bound<'py, PyAny>) -> PyResult<Bound<'py, PyArrayDyn<f32>>> {
+pub fn reflect_dirs<'py>(
+    py: Python<'py>,
+    normals: &Bound<'py, PyAny>,
+    view: &Bound<'py, PyAny>,
+) -> PyResult<Bound<'py, PyArrayDyn<f32>>> {
     let (n, h, w) = image3(normals, "normals", None)?;
     let v = f32_array(view, "view")?;
     if v.shape() != [3] && v.shape() != [h, w, 3] {
-        return Err(PyValueError::new_err(format!("view: expected shape (3,) or ({h}, {w}, 3), got {}", shape_str(&v.shape()))));
+        return Err(PyValueError::new_err(format!(
+            "view: expected shape (3,) or ({h}, {w}, 3), got {}",
+            shape_str(&v.shape())
+        )));
     }
     let (ns, vs) = (n.slice(), v.slice());
     let out = run_detached(py, || reconstruct::reflect_dirs(ns, vs))?;
@@ -201,12 +307,21 @@ fn map_from(obj: &Bound<'_, PyAny>, name: &str) -> PyResult<ParaboloidMap> {
     let a = f32_array(obj, name)?;
     let s = a.shape();
     if s.len() != 4 || s[0] != 2 || s[1] != s[2] || s[1] < 2 {
-        return Err(PyValueError::new_err(format!("{name}: expected a dual-paraboloid map of shape (2, S, S, C), got {}", shape_str(&s))));
+        return Err(PyValueError::new_err(format!(
+            "{name}: expected a dual-paraboloid map of shape (2, S, S, C), got {}",
+            shape_str(&s)
+        )));
     }
     if let Some(i) = a.slice().iter().position(|x| !x.is_finite()) {
-        return Err(PyValueError::new_err(format!("{name}: value {i} is not finite")));
+        return Err(PyValueError::new_err(format!(
+            "{name}: value {i} is not finite"
+        )));
     }
-    Ok(ParaboloidMap { size: s[1], channels: s[3], data: a.slice().to_vec() })
+    Ok(ParaboloidMap {
+        size: s[1],
+        channels: s[3],
+        data: a.slice().to_vec(),
+    })
 }
 
 /// Reflection environment of one patch (§3.2): partial reconstruction (eq. 2), hole filling and
@@ -237,9 +352,17 @@ pub fn reflection_env<'py>(
     let m = required1(mask, "mask", h, w)?;
     let d = image1(depth, "depth", h, w)?;
     if stage != "full" && stage != "partial" {
-        return Err(PyValueError::new_err(format!("stage: expected 'full' or 'partial', got {stage:?}")));
+        return Err(PyValueError::new_err(format!(
+            "stage: expected 'full' or 'partial', got {stage:?}"
+        )));
     }
-    let params = ReflectionParams { size, max_edge_angle, max_depth_jump, blur_sigma, min_coverage };
+    let params = ReflectionParams {
+        size,
+        max_edge_angle,
+        max_depth_jump,
+        blur_sigma,
+        min_coverage,
+    };
     let (rs, vs, ms) = (r.slice(), v.slice(), m.slice());
     let ds: &[f32] = d.as_ref().map(|a| a.slice()).unwrap_or(&[]);
     let partial_only = stage == "partial";
@@ -275,7 +398,10 @@ pub fn reflection_env<'py>(
     out.set_item("map", array_f32(py, &[2, s, s, 3], map.data)?)?;
     let cov: Vec<f32> = covered.iter().map(|&c| if c { 1.0 } else { 0.0 }).collect();
     let np = py.import("numpy")?;
-    out.set_item("covered", array_f32(py, &[2, s, s], cov)?.call_method1("astype", (np.getattr("bool_")?,))?)?;
+    out.set_item(
+        "covered",
+        array_f32(py, &[2, s, s], cov)?.call_method1("astype", (np.getattr("bool_")?,))?,
+    )?;
     out.set_item("coverage", coverage)?;
     out.set_item("triangles", tris)?;
     out.set_item("filled_texels", filled)?;
@@ -286,12 +412,19 @@ pub fn reflection_env<'py>(
 /// Harmonic hole filling of a dual-paraboloid map (2, S, S, C) where `covered` (2, S, S) is
 /// false; covered texels are Dirichlet values. Returns the filled map.
 #[pyfunction]
-pub fn fill_holes<'py>(py: Python<'py>, map: &Bound<'py, PyAny>, covered: &Bound<'py, PyAny>) -> PyResult<Bound<'py, PyArrayDyn<f32>>> {
+pub fn fill_holes<'py>(
+    py: Python<'py>,
+    map: &Bound<'py, PyAny>,
+    covered: &Bound<'py, PyAny>,
+) -> PyResult<Bound<'py, PyArrayDyn<f32>>> {
     let mut m = map_from(map, "map")?;
     let c = mask_array(covered, "covered")?;
     let s = m.size;
     if c.shape() != [2, s, s] {
-        return Err(PyValueError::new_err(format!("covered: expected shape (2, {s}, {s}) like map, got {}", shape_str(&c.shape()))));
+        return Err(PyValueError::new_err(format!(
+            "covered: expected shape (2, {s}, {s}) like map, got {}",
+            shape_str(&c.shape())
+        )));
     }
     let cov: Vec<bool> = c.slice().iter().map(|&x| x > 0.5).collect();
     let ch = m.channels;
@@ -305,12 +438,19 @@ pub fn fill_holes<'py>(py: Python<'py>, map: &Bound<'py, PyAny>, covered: &Bound
 
 /// Bilinear lookups of a dual-paraboloid map (2, S, S, C) in directions (..., 3): (..., C).
 #[pyfunction]
-pub fn envmap_lookup<'py>(py: Python<'py>, map: &Bound<'py, PyAny>, dirs: &Bound<'py, PyAny>) -> PyResult<Bound<'py, PyArrayDyn<f32>>> {
+pub fn envmap_lookup<'py>(
+    py: Python<'py>,
+    map: &Bound<'py, PyAny>,
+    dirs: &Bound<'py, PyAny>,
+) -> PyResult<Bound<'py, PyArrayDyn<f32>>> {
     let m = map_from(map, "map")?;
     let d = f32_array(dirs, "dirs")?;
     let ds = d.shape();
     if ds.last() != Some(&3) {
-        return Err(PyValueError::new_err(format!("dirs: expected shape (..., 3), got {}", shape_str(&ds))));
+        return Err(PyValueError::new_err(format!(
+            "dirs: expected shape (..., 3), got {}",
+            shape_str(&ds)
+        )));
     }
     let dsl = d.slice();
     let ch = m.channels;
@@ -318,7 +458,10 @@ pub fn envmap_lookup<'py>(py: Python<'py>, map: &Bound<'py, PyAny>, dirs: &Bound
         let mut out = vec![0.0f32; dsl.len() / 3 * ch];
         let mut tmp = vec![0.0f64; ch];
         for (i, r) in dsl.chunks_exact(3).enumerate() {
-            m.lookup(glam::DVec3::new(r[0] as f64, r[1] as f64, r[2] as f64), &mut tmp);
+            m.lookup(
+                glam::DVec3::new(r[0] as f64, r[1] as f64, r[2] as f64),
+                &mut tmp,
+            );
             for c in 0..ch {
                 out[i * ch + c] = tmp[c] as f32;
             }
@@ -331,7 +474,11 @@ pub fn envmap_lookup<'py>(py: Python<'py>, map: &Bound<'py, PyAny>, dirs: &Bound
 }
 
 fn parse_patches(obj: &Bound<'_, PyAny>) -> PyResult<Vec<Patch>> {
-    let list = obj.cast::<PyList>().map_err(|_| PyTypeError::new_err("patches: must be a list of dicts {'sh': (3, 9) or None, 'env': (2, S, S, 3) or None}"))?;
+    let list = obj.cast::<PyList>().map_err(|_| {
+        PyTypeError::new_err(
+            "patches: must be a list of dicts {'sh': (3, 9) or None, 'env': (2, S, S, 3) or None}",
+        )
+    })?;
     let np = obj.py().import("numpy")?;
     let mut out = Vec::with_capacity(list.len());
     for (k, item) in list.iter().enumerate() {
@@ -340,14 +487,22 @@ fn parse_patches(obj: &Bound<'_, PyAny>) -> PyResult<Vec<Patch>> {
             out.push(Patch::default());
             continue;
         }
-        let d = item.cast::<PyDict>().map_err(|_| PyTypeError::new_err(format!("{name}: must be a dict or None")))?;
+        let d = item
+            .cast::<PyDict>()
+            .map_err(|_| PyTypeError::new_err(format!("{name}: must be a dict or None")))?;
         let mut p = Patch::default();
         if let Some(s) = d.get_item("sh")? {
             if !s.is_none() {
-                let a: Vec<f64> = np.call_method1("asarray", (&s, "float64"))?.call_method0("ravel")?.extract()?;
+                let a: Vec<f64> = np
+                    .call_method1("asarray", (&s, "float64"))?
+                    .call_method0("ravel")?
+                    .extract()?;
                 let shape: Vec<usize> = np.call_method1("shape", (&s,))?.extract()?;
                 if shape != [3, SH_COEFFS] || a.iter().any(|x| !x.is_finite()) {
-                    return Err(PyValueError::new_err(format!("{name}.sh: expected finite coefficients of shape (3, 9), got {}", shape_str(&shape))));
+                    return Err(PyValueError::new_err(format!(
+                        "{name}.sh: expected finite coefficients of shape (3, 9), got {}",
+                        shape_str(&shape)
+                    )));
                 }
                 let mut c = [[0.0; SH_COEFFS]; 3];
                 for ch in 0..3 {
@@ -360,7 +515,10 @@ fn parse_patches(obj: &Bound<'_, PyAny>) -> PyResult<Vec<Patch>> {
             if !e.is_none() {
                 let m = map_from(&e, &format!("{name}.env"))?;
                 if m.channels != 3 {
-                    return Err(PyValueError::new_err(format!("{name}.env: expected 3 channels, got {}", m.channels)));
+                    return Err(PyValueError::new_err(format!(
+                        "{name}.env: expected 3 channels, got {}",
+                        m.channels
+                    )));
                 }
                 p.env = Some(m);
             }
@@ -405,22 +563,45 @@ pub fn recomposite<'py>(
         Ok(a) if a.readonly().is_c_contiguous() => {
             let ro = a.readonly();
             if ro.shape() != [h, w] {
-                return Err(PyValueError::new_err(format!("ids: expected shape ({h}, {w}) like normals, got {}", shape_str(ro.shape()))));
+                return Err(PyValueError::new_err(format!(
+                    "ids: expected shape ({h}, {w}) like normals, got {}",
+                    shape_str(ro.shape())
+                )));
             }
-            ro.as_slice().map_err(|e| PyRuntimeError::new_err(e.to_string()))?.iter().map(|&x| x.max(-1)).collect()
+            ro.as_slice()
+                .map_err(|e| PyRuntimeError::new_err(e.to_string()))?
+                .iter()
+                .map(|&x| x.max(-1))
+                .collect()
         }
         _ => {
             let id_arr = f32_array(ids, "ids")?;
             if id_arr.shape() != [h, w] {
-                return Err(PyValueError::new_err(format!("ids: expected shape ({h}, {w}) like normals, got {}", shape_str(&id_arr.shape()))));
+                return Err(PyValueError::new_err(format!(
+                    "ids: expected shape ({h}, {w}) like normals, got {}",
+                    shape_str(&id_arr.shape())
+                )));
             }
-            id_arr.slice().iter().map(|&x| if x.is_finite() && x >= 0.0 { x as i32 } else { -1 }).collect()
+            id_arr
+                .slice()
+                .iter()
+                .map(|&x| {
+                    if x.is_finite() && x >= 0.0 {
+                        x as i32
+                    } else {
+                        -1
+                    }
+                })
+                .collect()
         }
     };
     let (e, _, _) = image3(edited_normals, "edited_normals", Some((h, w)))?;
     let v = f32_array(view, "view")?;
     if v.shape() != [3] && v.shape() != [h, w, 3] {
-        return Err(PyValueError::new_err(format!("view: expected shape (3,) or ({h}, {w}, 3), got {}", shape_str(&v.shape()))));
+        return Err(PyValueError::new_err(format!(
+            "view: expected shape (3,) or ({h}, {w}, 3), got {}",
+            shape_str(&v.shape())
+        )));
     }
     let (dd, _, _) = image3(diffuse, "diffuse", Some((h, w)))?;
     let (rr, _, _) = image3(reflection, "reflection", Some((h, w)))?;
@@ -452,7 +633,12 @@ pub fn recomposite<'py>(
         diffuse_color: dcv,
         reflection_color: rcv,
     };
-    let params = Params { k_d, k_r, gamma, epsilon };
+    let params = Params {
+        k_d,
+        k_r,
+        gamma,
+        epsilon,
+    };
     let (out, st) = run_detached(py, || core_recomposite::recomposite(&bufs, &pts, &params))?;
     let stats = PyDict::new(py);
     stats.set_item("edited", st.edited)?;
@@ -469,23 +655,55 @@ fn edit_mask(mask: Option<&Bound<'_, PyAny>>, h: usize, w: usize) -> PyResult<Op
 /// masked-out and unchanged pixels keep their input bits. Returns (H, W, 3) float32.
 #[pyfunction]
 #[pyo3(signature = (normals, beta, mask = None))]
-pub fn normals_emboss<'py>(py: Python<'py>, normals: &Bound<'py, PyAny>, beta: f32, mask: Option<&Bound<'py, PyAny>>) -> PyResult<Bound<'py, PyArrayDyn<f32>>> {
+pub fn normals_emboss<'py>(
+    py: Python<'py>,
+    normals: &Bound<'py, PyAny>,
+    beta: f32,
+    mask: Option<&Bound<'py, PyAny>>,
+) -> PyResult<Bound<'py, PyArrayDyn<f32>>> {
     let (n, h, w) = image3(normals, "normals", None)?;
     let m = edit_mask(mask, h, w)?;
     let ns = n.slice();
-    let out = run_detached(py, || normals::emboss(ns, &normals::Frame { width: w, height: h, mask: m.as_deref() }, beta))?;
+    let out = run_detached(py, || {
+        normals::emboss(
+            ns,
+            &normals::Frame {
+                width: w,
+                height: h,
+                mask: m.as_deref(),
+            },
+            beta,
+        )
+    })?;
     array_f32(py, &[h, w, 3], out)
 }
 
 /// Bump mapping: ñ = normalize(n − strength ∇height), ∇h = (∂h/∂col, −∂h/∂row, 0); height (H, W).
 #[pyfunction]
 #[pyo3(signature = (normals, height, strength = 1.0, mask = None))]
-pub fn normals_bump<'py>(py: Python<'py>, normals: &Bound<'py, PyAny>, height: &Bound<'py, PyAny>, strength: f32, mask: Option<&Bound<'py, PyAny>>) -> PyResult<Bound<'py, PyArrayDyn<f32>>> {
+pub fn normals_bump<'py>(
+    py: Python<'py>,
+    normals: &Bound<'py, PyAny>,
+    height: &Bound<'py, PyAny>,
+    strength: f32,
+    mask: Option<&Bound<'py, PyAny>>,
+) -> PyResult<Bound<'py, PyArrayDyn<f32>>> {
     let (n, h, w) = image3(normals, "normals", None)?;
     let hh = required1(height, "height", h, w)?;
     let m = edit_mask(mask, h, w)?;
     let (ns, hs) = (n.slice(), hh.slice());
-    let out = run_detached(py, || normals::bump(ns, &normals::Frame { width: w, height: h, mask: m.as_deref() }, hs, strength))?;
+    let out = run_detached(py, || {
+        normals::bump(
+            ns,
+            &normals::Frame {
+                width: w,
+                height: h,
+                mask: m.as_deref(),
+            },
+            hs,
+            strength,
+        )
+    })?;
     array_f32(py, &[h, w, 3], out)
 }
 
@@ -493,12 +711,31 @@ pub fn normals_bump<'py>(py: Python<'py>, normals: &Bound<'py, PyAny>, height: &
 /// the relative depth difference; n_z = √(1 − |n̄|²).
 #[pyfunction]
 #[pyo3(signature = (normals, depth, sigma_s = 3.0, sigma_d = 0.02, mask = None))]
-pub fn normals_bilateral<'py>(py: Python<'py>, normals: &Bound<'py, PyAny>, depth: &Bound<'py, PyAny>, sigma_s: f64, sigma_d: f64, mask: Option<&Bound<'py, PyAny>>) -> PyResult<Bound<'py, PyArrayDyn<f32>>> {
+pub fn normals_bilateral<'py>(
+    py: Python<'py>,
+    normals: &Bound<'py, PyAny>,
+    depth: &Bound<'py, PyAny>,
+    sigma_s: f64,
+    sigma_d: f64,
+    mask: Option<&Bound<'py, PyAny>>,
+) -> PyResult<Bound<'py, PyArrayDyn<f32>>> {
     let (n, h, w) = image3(normals, "normals", None)?;
     let d = required1(depth, "depth", h, w)?;
     let m = edit_mask(mask, h, w)?;
     let (ns, ds) = (n.slice(), d.slice());
-    let out = run_cancellable(py, || normals::bilateral(ns, &normals::Frame { width: w, height: h, mask: m.as_deref() }, ds, sigma_s, sigma_d))?;
+    let out = run_cancellable(py, || {
+        normals::bilateral(
+            ns,
+            &normals::Frame {
+                width: w,
+                height: h,
+                mask: m.as_deref(),
+            },
+            ds,
+            sigma_s,
+            sigma_d,
+        )
+    })?;
     array_f32(py, &[h, w, 3], out)
 }
 
@@ -507,8 +744,19 @@ pub fn normals_bilateral<'py>(py: Python<'py>, normals: &Bound<'py, PyAny>, dept
 #[pyfunction]
 #[pyo3(signature = (height, width, size, octaves, seed, center, radius))]
 #[allow(clippy::too_many_arguments)]
-pub fn normals_noise_decal<'py>(py: Python<'py>, height: usize, width: usize, size: f64, octaves: u32, seed: u32, center: (f64, f64), radius: f64) -> PyResult<Bound<'py, PyArrayDyn<f32>>> {
-    let out = run_detached(py, || normals::noise_decal(width, height, size, octaves, seed, center, radius))?;
+pub fn normals_noise_decal<'py>(
+    py: Python<'py>,
+    height: usize,
+    width: usize,
+    size: f64,
+    octaves: u32,
+    seed: u32,
+    center: (f64, f64),
+    radius: f64,
+) -> PyResult<Bound<'py, PyArrayDyn<f32>>> {
+    let out = run_detached(py, || {
+        normals::noise_decal(width, height, size, octaves, seed, center, radius)
+    })?;
     array_f32(py, &[height, width], out)
 }
 

@@ -17,18 +17,32 @@ use rokeby_core::envmap::{EnvMap, Layout};
 use rokeby_core::prefilter::{self, Lobe, PrefilterParams, A_HAT};
 use rokeby_core::sh::SH_COEFFS;
 
-fn array_f32<'py>(py: Python<'py>, shape: &[usize], data: Vec<f32>) -> PyResult<Bound<'py, PyArrayDyn<f32>>> {
-    let arr = ArrayD::from_shape_vec(IxDyn(shape), data).map_err(|e| PyRuntimeError::new_err(e.to_string()))?;
+fn array_f32<'py>(
+    py: Python<'py>,
+    shape: &[usize],
+    data: Vec<f32>,
+) -> PyResult<Bound<'py, PyArrayDyn<f32>>> {
+    let arr = ArrayD::from_shape_vec(IxDyn(shape), data)
+        .map_err(|e| PyRuntimeError::new_err(e.to_string()))?;
     Ok(arr.into_pyarray(py))
 }
 
-fn array_f64<'py>(py: Python<'py>, shape: &[usize], data: Vec<f64>) -> PyResult<Bound<'py, PyArrayDyn<f64>>> {
-    let arr = ArrayD::from_shape_vec(IxDyn(shape), data).map_err(|e| PyRuntimeError::new_err(e.to_string()))?;
+fn array_f64<'py>(
+    py: Python<'py>,
+    shape: &[usize],
+    data: Vec<f64>,
+) -> PyResult<Bound<'py, PyArrayDyn<f64>>> {
+    let arr = ArrayD::from_shape_vec(IxDyn(shape), data)
+        .map_err(|e| PyRuntimeError::new_err(e.to_string()))?;
     Ok(arr.into_pyarray(py))
 }
 
 fn parse_layout(name: &str, arg: &str) -> PyResult<Layout> {
-    Layout::parse(name).ok_or_else(|| PyValueError::new_err(format!("{arg}: unknown layout {name:?} (expected 'latlong', 'cube', 'sphere' or 'paraboloid')")))
+    Layout::parse(name).ok_or_else(|| {
+        PyValueError::new_err(format!(
+            "{arg}: unknown layout {name:?} (expected 'latlong', 'cube', 'sphere' or 'paraboloid')"
+        ))
+    })
 }
 
 /// The shape a map of `layout` has in numpy.
@@ -46,20 +60,33 @@ fn env_from(obj: &Bound<'_, PyAny>, layout: Layout, arg: &str) -> PyResult<EnvMa
     let (h, w, c) = match layout {
         Layout::LatLong | Layout::Sphere => {
             if s.len() != 3 {
-                let want = if layout == Layout::LatLong { "(H, W, C)" } else { "(S, S, C)" };
-                return Err(PyValueError::new_err(format!("{arg}: a {} map must have shape {want}, got {}", layout.name(), shape_str(&s))));
+                let want = if layout == Layout::LatLong {
+                    "(H, W, C)"
+                } else {
+                    "(S, S, C)"
+                };
+                return Err(PyValueError::new_err(format!(
+                    "{arg}: a {} map must have shape {want}, got {}",
+                    layout.name(),
+                    shape_str(&s)
+                )));
             }
             (s[0], s[1], s[2])
         }
         Layout::Cube | Layout::Paraboloid => {
             let f = layout.faces();
             if s.len() != 4 || s[0] != f {
-                return Err(PyValueError::new_err(format!("{arg}: a {} map must have shape ({f}, S, S, C), got {}", layout.name(), shape_str(&s))));
+                return Err(PyValueError::new_err(format!(
+                    "{arg}: a {} map must have shape ({f}, S, S, C), got {}",
+                    layout.name(),
+                    shape_str(&s)
+                )));
             }
             (s[1], s[2], s[3])
         }
     };
-    EnvMap::new(layout, h, w, c, a.slice().to_vec(), arg).map_err(|e| PyValueError::new_err(e.to_string()))
+    EnvMap::new(layout, h, w, c, a.slice().to_vec(), arg)
+        .map_err(|e| PyValueError::new_err(e.to_string()))
 }
 
 fn out_array<'py>(py: Python<'py>, m: EnvMap) -> PyResult<Bound<'py, PyArrayDyn<f32>>> {
@@ -72,7 +99,10 @@ fn directions(obj: &Bound<'_, PyAny>, arg: &str) -> PyResult<(Vec<f32>, Vec<usiz
     let a = f32_array(obj, arg)?;
     let s = a.shape();
     if s.is_empty() || s[s.len() - 1] != 3 {
-        return Err(PyValueError::new_err(format!("{arg}: expected shape (..., 3), got {}", shape_str(&s))));
+        return Err(PyValueError::new_err(format!(
+            "{arg}: expected shape (..., 3), got {}",
+            shape_str(&s)
+        )));
     }
     Ok((a.slice().to_vec(), s[..s.len() - 1].to_vec()))
 }
@@ -83,7 +113,11 @@ fn parse_lobe(kind: &str, p: f64, arg: &str) -> PyResult<Lobe> {
         "phong" => Lobe::phong(p),
         "ggx" => Lobe::ggx_roughness(p),
         "torrance_sparrow" | "torrance-sparrow" | "ts" => Lobe::torrance_sparrow(p),
-        _ => return Err(PyValueError::new_err(format!("lobe: unknown lobe {kind:?} (expected 'phong', 'ggx' or 'torrance_sparrow')"))),
+        _ => {
+            return Err(PyValueError::new_err(format!(
+                "lobe: unknown lobe {kind:?} (expected 'phong', 'ggx' or 'torrance_sparrow')"
+            )))
+        }
     };
     r.map_err(|e| PyValueError::new_err(format!("{arg}: {e}")))
 }
@@ -92,14 +126,27 @@ fn parse_lobe(kind: &str, p: f64, arg: &str) -> PyResult<Lobe> {
 /// or face size; each texel averages `supersample`² bilinear lookups.
 #[pyfunction]
 #[pyo3(signature = (image, layout_in, layout_out, size, supersample = 1))]
-pub fn env_convert<'py>(py: Python<'py>, image: &Bound<'py, PyAny>, layout_in: &str, layout_out: &str, size: usize, supersample: usize) -> PyResult<Bound<'py, PyArrayDyn<f32>>> {
+pub fn env_convert<'py>(
+    py: Python<'py>,
+    image: &Bound<'py, PyAny>,
+    layout_in: &str,
+    layout_out: &str,
+    size: usize,
+    supersample: usize,
+) -> PyResult<Bound<'py, PyArrayDyn<f32>>> {
     let li = parse_layout(layout_in, "layout_in")?;
     let lo = parse_layout(layout_out, "layout_out")?;
     let env = env_from(image, li, "image")?;
     if size < 2 {
-        return Err(PyValueError::new_err(format!("size: must be ≥ 2, got {size}")));
+        return Err(PyValueError::new_err(format!(
+            "size: must be ≥ 2, got {size}"
+        )));
     }
-    let (h, w) = if lo == Layout::LatLong { (size, size.saturating_mul(2)) } else { (size, size) };
+    let (h, w) = if lo == Layout::LatLong {
+        (size, size.saturating_mul(2))
+    } else {
+        (size, size)
+    };
     let out = run_detached(py, || env.convert(lo, h, w, supersample))?;
     out_array(py, out)
 }
@@ -107,7 +154,12 @@ pub fn env_convert<'py>(py: Python<'py>, image: &Bound<'py, PyAny>, layout_in: &
 /// Bilinear, seam-correct lookups: (..., 3) directions → (..., C).
 #[pyfunction]
 #[pyo3(signature = (image, layout, directions))]
-pub fn env_sample<'py>(py: Python<'py>, image: &Bound<'py, PyAny>, layout: &str, directions: &Bound<'py, PyAny>) -> PyResult<Bound<'py, PyArrayDyn<f32>>> {
+pub fn env_sample<'py>(
+    py: Python<'py>,
+    image: &Bound<'py, PyAny>,
+    layout: &str,
+    directions: &Bound<'py, PyAny>,
+) -> PyResult<Bound<'py, PyArrayDyn<f32>>> {
     let env = env_from(image, parse_layout(layout, "layout")?, "image")?;
     let (d, lead) = self::directions(directions, "directions")?;
     let out = run_detached(py, || env.sample_many(&d))?;
@@ -121,13 +173,29 @@ pub fn env_sample<'py>(py: Python<'py>, image: &Bound<'py, PyAny>, layout: &str,
 /// resolution (the input's for sharp lobes, a coarser mip for rough ones).
 #[pyfunction]
 #[pyo3(signature = (image, lobe, params, texels_per_radius = 6.0, tail = 1e-5))]
-pub fn env_prefilter<'py>(py: Python<'py>, image: &Bound<'py, PyAny>, lobe: &str, params: Vec<f64>, texels_per_radius: f64, tail: f64) -> PyResult<Bound<'py, PyList>> {
+pub fn env_prefilter<'py>(
+    py: Python<'py>,
+    image: &Bound<'py, PyAny>,
+    lobe: &str,
+    params: Vec<f64>,
+    texels_per_radius: f64,
+    tail: f64,
+) -> PyResult<Bound<'py, PyList>> {
     let env = env_from(image, Layout::LatLong, "image")?;
     if params.is_empty() {
-        return Err(PyValueError::new_err("params: need at least one lobe parameter"));
+        return Err(PyValueError::new_err(
+            "params: need at least one lobe parameter",
+        ));
     }
-    let lobes = params.iter().enumerate().map(|(i, &p)| parse_lobe(lobe, p, &format!("params[{i}]"))).collect::<PyResult<Vec<_>>>()?;
-    let pp = PrefilterParams { texels_per_radius, tail };
+    let lobes = params
+        .iter()
+        .enumerate()
+        .map(|(i, &p)| parse_lobe(lobe, p, &format!("params[{i}]")))
+        .collect::<PyResult<Vec<_>>>()?;
+    let pp = PrefilterParams {
+        texels_per_radius,
+        tail,
+    };
     let levels = run_cancellable(py, || prefilter::prefilter(&env, &lobes, &pp))?;
     let out = PyList::empty(py);
     for lv in levels {
@@ -141,15 +209,26 @@ pub fn env_prefilter<'py>(py: Python<'py>, image: &Bound<'py, PyAny>, lobe: &str
 /// 'image': (size, 2·size, C) lat-long map of E(n)/π}.
 #[pyfunction]
 #[pyo3(signature = (image, size = 32))]
-pub fn env_irradiance<'py>(py: Python<'py>, image: &Bound<'py, PyAny>, size: usize) -> PyResult<Bound<'py, PyDict>> {
+pub fn env_irradiance<'py>(
+    py: Python<'py>,
+    image: &Bound<'py, PyAny>,
+    size: usize,
+) -> PyResult<Bound<'py, PyDict>> {
     let env = env_from(image, Layout::LatLong, "image")?;
     if size < 2 {
-        return Err(PyValueError::new_err(format!("size: must be ≥ 2, got {size}")));
+        return Err(PyValueError::new_err(format!(
+            "size: must be ≥ 2, got {size}"
+        )));
     }
-    let (map, coeffs) = run_cancellable(py, || prefilter::irradiance_map(&env, size, size.saturating_mul(2)))?;
+    let (map, coeffs) = run_cancellable(py, || {
+        prefilter::irradiance_map(&env, size, size.saturating_mul(2))
+    })?;
     let c = coeffs.len();
     let flat: Vec<f64> = coeffs.iter().flatten().copied().collect();
-    let irr: Vec<f64> = coeffs.iter().flat_map(|cf| (0..SH_COEFFS).map(move |k| cf[k] * A_HAT[k] / std::f64::consts::PI)).collect();
+    let irr: Vec<f64> = coeffs
+        .iter()
+        .flat_map(|cf| (0..SH_COEFFS).map(move |k| cf[k] * A_HAT[k] / std::f64::consts::PI))
+        .collect();
     let d = PyDict::new(py);
     d.set_item("coeffs", array_f64(py, &[c, SH_COEFFS], flat)?)?;
     d.set_item("irradiance_coeffs", array_f64(py, &[c, SH_COEFFS], irr)?)?;
@@ -162,12 +241,20 @@ pub fn env_irradiance<'py>(py: Python<'py>, image: &Bound<'py, PyAny>, size: usi
 /// (normalised as the prefiltered maps are), or 'lambert' for E(n)/π. (..., 3) → (..., C) float64.
 #[pyfunction]
 #[pyo3(signature = (image, lobe, directions, param = 0.0))]
-pub fn env_reference<'py>(py: Python<'py>, image: &Bound<'py, PyAny>, lobe: &str, directions: &Bound<'py, PyAny>, param: f64) -> PyResult<Bound<'py, PyArrayDyn<f64>>> {
+pub fn env_reference<'py>(
+    py: Python<'py>,
+    image: &Bound<'py, PyAny>,
+    lobe: &str,
+    directions: &Bound<'py, PyAny>,
+    param: f64,
+) -> PyResult<Bound<'py, PyArrayDyn<f64>>> {
     let env = env_from(image, Layout::LatLong, "image")?;
     let (d, lead) = self::directions(directions, "directions")?;
     // Checked here so that a zero or non-finite direction is reported as `directions` (the core's
     // irradiance reference calls them "normals"); found by tests/test_properties_new.py.
-    run_detached(py, || rokeby_core::envmap::finite_dirs(&d, "directions").map(|_| ()))?;
+    run_detached(py, || {
+        rokeby_core::envmap::finite_dirs(&d, "directions").map(|_| ())
+    })?;
     let out = if lobe.eq_ignore_ascii_case("lambert") {
         run_detached(py, || prefilter::brute_force_irradiance(&env, &d))?
     } else {
@@ -190,15 +277,25 @@ pub fn rgbe_decode<'py>(py: Python<'py>, data: &[u8]) -> PyResult<Bound<'py, PyA
 /// The bytes of a Radiance RGBE (.hdr) file of (H, W, 3) float pixels (row 0 at the top;
 /// run-length encoded scanlines). Negative values are written as 0; NaN/inf are refused.
 #[pyfunction]
-pub fn rgbe_encode<'py>(py: Python<'py>, pixels: &Bound<'py, PyAny>) -> PyResult<Bound<'py, PyBytes>> {
+pub fn rgbe_encode<'py>(
+    py: Python<'py>,
+    pixels: &Bound<'py, PyAny>,
+) -> PyResult<Bound<'py, PyBytes>> {
     let a = f32_array(pixels, "pixels")?;
     let shape = a.shape();
     if shape.len() != 3 || shape[2] != 3 {
-        return Err(PyValueError::new_err(format!("pixels: expected shape (H, W, 3), got {}", shape_str(&shape))));
+        return Err(PyValueError::new_err(format!(
+            "pixels: expected shape (H, W, 3), got {}",
+            shape_str(&shape)
+        )));
     }
     let sl = a.slice();
     if let Some(i) = sl.iter().position(|x| !x.is_finite()) {
-        return Err(PyValueError::new_err(format!("pixels: value {} at pixel {} is not finite", sl[i], i / 3)));
+        return Err(PyValueError::new_err(format!(
+            "pixels: value {} at pixel {} is not finite",
+            sl[i],
+            i / 3
+        )));
     }
     let bytes = run_detached(py, || rokeby_core::rgbe::encode(shape[0], shape[1], sl))?;
     Ok(PyBytes::new(py, &bytes))

@@ -7,17 +7,24 @@
 //! cancelled → `KeyboardInterrupt`, internal bug or panic → `RuntimeError`.
 
 use numpy::ndarray::{ArrayD, IxDyn};
-use numpy::{IntoPyArray, PyArrayDyn, PyArrayMethods, PyReadonlyArrayDyn, PyUntypedArray, PyUntypedArrayMethods};
-use pyo3::exceptions::{PyKeyboardInterrupt, PyMemoryError, PyRuntimeError, PyTypeError, PyValueError};
+use numpy::{
+    IntoPyArray, PyArrayDyn, PyArrayMethods, PyReadonlyArrayDyn, PyUntypedArray,
+    PyUntypedArrayMethods,
+};
+use pyo3::exceptions::{
+    PyKeyboardInterrupt, PyMemoryError, PyRuntimeError, PyTypeError, PyValueError,
+};
 use pyo3::prelude::*;
 use pyo3::types::{PyDict, PyList, PyTuple};
 use rokeby_core::field::{output_width, Distances, Field, FieldOutput};
-use rokeby_core::geodesic::{self, GeodesicSolver as CoreSolver, Mesh, Method, Source, SurfacePoint};
-use std::sync::Arc;
+use rokeby_core::geodesic::{
+    self, GeodesicSolver as CoreSolver, Mesh, Method, Source, SurfacePoint,
+};
 use rokeby_core::polar::{self, PolarMethod};
 use rokeby_core::region::Region;
 use rokeby_core::RokebyError;
 use std::panic::{catch_unwind, AssertUnwindSafe};
+use std::sync::Arc;
 
 mod compositing;
 mod environment;
@@ -60,11 +67,21 @@ fn f32_array<'py>(obj: &Bound<'py, PyAny>, name: &str) -> PyResult<F32Array<'py>
         obj.clone()
     } else {
         let np = py.import("numpy")?;
-        np.call_method1("asarray", (obj,)).map_err(|e| PyTypeError::new_err(format!("{name}: cannot be read as an array ({e})")))?
+        np.call_method1("asarray", (obj,)).map_err(|e| {
+            PyTypeError::new_err(format!("{name}: cannot be read as an array ({e})"))
+        })?
     };
     // Integers are exact coordinates (`center=[0, 0, 1]`); bool, complex and objects are not.
-    let kind: String = arr.getattr("dtype").and_then(|d| d.getattr("kind")).and_then(|k| k.extract()).unwrap_or_default();
-    let arr = if kind == "i" || kind == "u" { arr.call_method1("astype", ("float64",))? } else { arr };
+    let kind: String = arr
+        .getattr("dtype")
+        .and_then(|d| d.getattr("kind"))
+        .and_then(|k| k.extract())
+        .unwrap_or_default();
+    let arr = if kind == "i" || kind == "u" {
+        arr.call_method1("astype", ("float64",))?
+    } else {
+        arr
+    };
     if let Ok(a) = arr.cast::<PyArrayDyn<f32>>() {
         let ro = a.readonly();
         // Borrow only C-ordered data: `as_slice` also accepts Fortran order, whose flat layout
@@ -73,12 +90,18 @@ fn f32_array<'py>(obj: &Bound<'py, PyAny>, name: &str) -> PyResult<F32Array<'py>
             return Ok(F32Array::Borrowed(ro));
         }
         let shape = ro.shape().to_vec();
-        return Ok(F32Array::Owned(ro.as_array().iter().copied().collect(), shape));
+        return Ok(F32Array::Owned(
+            ro.as_array().iter().copied().collect(),
+            shape,
+        ));
     }
     if let Ok(a) = arr.cast::<PyArrayDyn<f64>>() {
         let ro = a.readonly();
         let shape = ro.shape().to_vec();
-        return Ok(F32Array::Owned(ro.as_array().iter().map(|&x| x as f32).collect(), shape));
+        return Ok(F32Array::Owned(
+            ro.as_array().iter().map(|&x| x as f32).collect(),
+            shape,
+        ));
     }
     let dtype = match arr.cast::<PyUntypedArray>() {
         Ok(u) => u.dtype().str()?.to_string(),
@@ -111,11 +134,16 @@ fn panic_err(p: Box<dyn std::any::Any + Send>) -> PyErr {
         .map(|s| s.to_string())
         .or_else(|| p.downcast_ref::<String>().cloned())
         .unwrap_or_else(|| "unknown".into());
-    PyRuntimeError::new_err(format!("rokeby_native internal error (please report): {msg}"))
+    PyRuntimeError::new_err(format!(
+        "rokeby_native internal error (please report): {msg}"
+    ))
 }
 
 /// Runs `f` without the GIL; a panic (a bug) becomes RuntimeError instead of crossing into Python.
-fn run_detached<T: Send, F: FnOnce() -> Result<T, RokebyError> + Send>(py: Python<'_>, f: F) -> PyResult<T> {
+fn run_detached<T: Send, F: FnOnce() -> Result<T, RokebyError> + Send>(
+    py: Python<'_>,
+    f: F,
+) -> PyResult<T> {
     let res = py.detach(|| catch_unwind(AssertUnwindSafe(f)));
     match res {
         Ok(Ok(v)) => Ok(v),
@@ -128,7 +156,10 @@ fn run_detached<T: Send, F: FnOnce() -> Result<T, RokebyError> + Send>(py: Pytho
 /// runs on a worker thread while this thread, every 50 ms, takes the GIL back to let Python run
 /// its signal handlers; Ctrl-C (KeyboardInterrupt) or `rokeby_native.cancel()` from another
 /// thread stops the work at its next row and the call raises.
-pub(crate) fn run_cancellable<T: Send, F: FnOnce() -> Result<T, RokebyError> + Send>(py: Python<'_>, f: F) -> PyResult<T> {
+pub(crate) fn run_cancellable<T: Send, F: FnOnce() -> Result<T, RokebyError> + Send>(
+    py: Python<'_>,
+    f: F,
+) -> PyResult<T> {
     use std::sync::mpsc;
     use std::time::Duration;
     rokeby_core::cancel::reset();
@@ -180,13 +211,20 @@ fn cancel() {
 }
 
 fn parse_polar(name: &str) -> PyResult<PolarMethod> {
-    PolarMethod::parse(name).ok_or_else(|| PyValueError::new_err(format!("polar: unknown method {name:?} (expected 'exact'/'svd' or 'fast'/'iterative')")))
+    PolarMethod::parse(name).ok_or_else(|| {
+        PyValueError::new_err(format!(
+            "polar: unknown method {name:?} (expected 'exact'/'svd' or 'fast'/'iterative')"
+        ))
+    })
 }
 
 fn parse_vec3(obj: &Bound<'_, PyAny>, name: &str) -> PyResult<[f64; 3]> {
     let a = f32_array(obj, name)?;
     if a.shape() != [3] {
-        return Err(PyValueError::new_err(format!("{name}: expected shape (3,), got {}", shape_str(&a.shape()))));
+        return Err(PyValueError::new_err(format!(
+            "{name}: expected shape (3,), got {}",
+            shape_str(&a.shape())
+        )));
     }
     let s = a.slice();
     Ok([s[0] as f64, s[1] as f64, s[2] as f64])
@@ -205,20 +243,31 @@ fn parse_constraints(obj: &Bound<'_, PyAny>) -> PyResult<Vec<f32>> {
 }
 
 fn dict_get<'py>(d: &Bound<'py, PyDict>, key: &str, name: &str) -> PyResult<Bound<'py, PyAny>> {
-    d.get_item(key)?.ok_or_else(|| PyValueError::new_err(format!("{name}: missing key {key:?}")))
+    d.get_item(key)?
+        .ok_or_else(|| PyValueError::new_err(format!("{name}: missing key {key:?}")))
 }
 
 fn dict_f64(d: &Bound<'_, PyDict>, key: &str, name: &str, default: Option<f64>) -> PyResult<f64> {
     match d.get_item(key)? {
-        Some(v) => v.extract::<f64>().map_err(|_| PyTypeError::new_err(format!("{name}: {key} must be a number"))),
-        None => default.ok_or_else(|| PyValueError::new_err(format!("{name}: missing key {key:?}"))),
+        Some(v) => v
+            .extract::<f64>()
+            .map_err(|_| PyTypeError::new_err(format!("{name}: {key} must be a number"))),
+        None => {
+            default.ok_or_else(|| PyValueError::new_err(format!("{name}: missing key {key:?}")))
+        }
     }
 }
 
 /// regions: a list of dicts, {"kind": "euclidean", "center", "radius", "border"} or
 /// {"kind": "weights", "values" (one per point), "at_constraints" (one per constraint)}.
-fn parse_regions(obj: Option<&Bound<'_, PyAny>>, n_points: usize, n_constraints: usize) -> PyResult<Vec<Region>> {
-    let Some(obj) = obj else { return Ok(Vec::new()) };
+fn parse_regions(
+    obj: Option<&Bound<'_, PyAny>>,
+    n_points: usize,
+    n_constraints: usize,
+) -> PyResult<Vec<Region>> {
+    let Some(obj) = obj else {
+        return Ok(Vec::new());
+    };
     if obj.is_none() {
         return Ok(Vec::new());
     }
@@ -232,8 +281,12 @@ fn parse_regions(obj: Option<&Bound<'_, PyAny>>, n_points: usize, n_constraints:
     let mut out = Vec::with_capacity(items.len());
     for (j, item) in items.iter().enumerate() {
         let name = format!("regions[{j}]");
-        let d = item.cast::<PyDict>().map_err(|_| PyTypeError::new_err(format!("{name}: must be a dict")))?;
-        let kind: String = dict_get(d, "kind", &name)?.extract().map_err(|_| PyTypeError::new_err(format!("{name}: kind must be a string")))?;
+        let d = item
+            .cast::<PyDict>()
+            .map_err(|_| PyTypeError::new_err(format!("{name}: must be a dict")))?;
+        let kind: String = dict_get(d, "kind", &name)?
+            .extract()
+            .map_err(|_| PyTypeError::new_err(format!("{name}: kind must be a string")))?;
         match kind.as_str() {
             "euclidean" => {
                 let center = parse_vec3(&dict_get(d, "center", &name)?, &format!("{name}.center"))?;
@@ -243,13 +296,25 @@ fn parse_regions(obj: Option<&Bound<'_, PyAny>>, n_points: usize, n_constraints:
             }
             "weights" => {
                 let values = f32_array(&dict_get(d, "values", &name)?, &format!("{name}.values"))?;
-                let at_c = f32_array(&dict_get(d, "at_constraints", &name)?, &format!("{name}.at_constraints"))?;
+                let at_c = f32_array(
+                    &dict_get(d, "at_constraints", &name)?,
+                    &format!("{name}.at_constraints"),
+                )?;
                 out.push(
-                    Region::per_point(values.slice().to_vec(), at_c.slice().to_vec(), n_points, n_constraints, &name).map_err(core_err)?,
+                    Region::per_point(
+                        values.slice().to_vec(),
+                        at_c.slice().to_vec(),
+                        n_points,
+                        n_constraints,
+                        &name,
+                    )
+                    .map_err(core_err)?,
                 );
             }
             other => {
-                return Err(PyValueError::new_err(format!("{name}: unknown kind {other:?} (expected 'euclidean' or 'weights')")));
+                return Err(PyValueError::new_err(format!(
+                    "{name}: unknown kind {other:?} (expected 'euclidean' or 'weights')"
+                )));
             }
         }
     }
@@ -257,7 +322,11 @@ fn parse_regions(obj: Option<&Bound<'_, PyAny>>, n_points: usize, n_constraints:
 }
 
 /// distances: (K, *lead) where lead is the shape of the points without the last axis.
-fn parse_distances<'py>(obj: Option<&Bound<'py, PyAny>>, k: usize, lead: &[usize]) -> PyResult<Option<F32Array<'py>>> {
+fn parse_distances<'py>(
+    obj: Option<&Bound<'py, PyAny>>,
+    k: usize,
+    lead: &[usize],
+) -> PyResult<Option<F32Array<'py>>> {
     let Some(obj) = obj else { return Ok(None) };
     if obj.is_none() {
         return Ok(None);
@@ -303,13 +372,18 @@ fn rotation_field<'py>(
         "quaternion" => FieldOutput::Quaternion,
         "rotation_vector" => FieldOutput::RotationVector,
         "view_blend" => FieldOutput::ViewBlend,
-        other => return Err(PyValueError::new_err(format!("output: expected \"quaternion\", \"rotation_vector\" or \"view_blend\", got {other:?}"))),
+        other => return Err(PyValueError::new_err(format!(
+            "output: expected \"quaternion\", \"rotation_vector\" or \"view_blend\", got {other:?}"
+        ))),
     };
     let width = output_width(output);
     let pts = f32_array(points, "points")?;
     let shape = pts.shape();
     if shape.len() != 2 || shape[1] != 3 {
-        return Err(PyValueError::new_err(format!("points: expected shape (N, 3), got {}", shape_str(&shape))));
+        return Err(PyValueError::new_err(format!(
+            "points: expected shape (N, 3), got {}",
+            shape_str(&shape)
+        )));
     }
     let n = shape[0];
     if n == 0 {
@@ -319,17 +393,30 @@ fn rotation_field<'py>(
     let k = rows.len() / 9;
     let dist = parse_distances(distances, k, &shape[..1])?;
     let regs = parse_regions(regions, n, k)?;
-    let nrm = match (normals.filter(|o| !o.is_none()), eye.filter(|o| !o.is_none())) {
+    let nrm = match (
+        normals.filter(|o| !o.is_none()),
+        eye.filter(|o| !o.is_none()),
+    ) {
         (Some(nm), Some(ey)) => {
             let a = f32_array(nm, "normals")?;
             if a.shape() != shape {
-                return Err(PyValueError::new_err(format!("normals: expected shape {}, got {}", shape_str(&shape), shape_str(&a.shape()))));
+                return Err(PyValueError::new_err(format!(
+                    "normals: expected shape {}, got {}",
+                    shape_str(&shape),
+                    shape_str(&a.shape())
+                )));
             }
             Some((a, parse_vec3(ey, "eye")?))
         }
         (None, None) => None,
-        (Some(_), None) => return Err(PyValueError::new_err("eye: required when normals are given")),
-        (None, Some(_)) => return Err(PyValueError::new_err("normals: required when eye is given")),
+        (Some(_), None) => {
+            return Err(PyValueError::new_err(
+                "eye: required when normals are given",
+            ))
+        }
+        (None, Some(_)) => {
+            return Err(PyValueError::new_err("normals: required when eye is given"))
+        }
     };
     let field = Field::new(&rows, regs).map_err(core_err)?;
     let p = pts.slice();
@@ -339,7 +426,8 @@ fn rotation_field<'py>(
     };
     let view = nrm.as_ref().map(|(a, e)| (a.slice(), *e));
     let out = run_detached(py, || field.rotation_field_as(p, d, view, method, output))?;
-    let arr = ArrayD::from_shape_vec(IxDyn(&[n, width]), out).map_err(|e| PyRuntimeError::new_err(e.to_string()))?;
+    let arr = ArrayD::from_shape_vec(IxDyn(&[n, width]), out)
+        .map_err(|e| PyRuntimeError::new_err(e.to_string()))?;
     Ok(arr.into_pyarray(py))
 }
 
@@ -351,16 +439,26 @@ fn rotation_field<'py>(
 /// weight is a, or smooth_step(u) with ramp=True (a field with one Euclidean region).
 #[pyfunction]
 #[pyo3(signature = (parts, directions, *, ramp=false))]
-fn view_blend<'py>(py: Python<'py>, parts: &Bound<'py, PyAny>, directions: &Bound<'py, PyAny>, ramp: bool) -> PyResult<Bound<'py, PyArrayDyn<f32>>> {
+fn view_blend<'py>(
+    py: Python<'py>,
+    parts: &Bound<'py, PyAny>,
+    directions: &Bound<'py, PyAny>,
+    ramp: bool,
+) -> PyResult<Bound<'py, PyArrayDyn<f32>>> {
     let pa = parts_array(parts)?;
     let da = f32_array(directions, "directions")?;
     let (ps, ds) = (pa.shape(), da.shape());
     if ds.len() != 2 || ds[1] != 3 || ds[0] != ps[0] {
-        return Err(PyValueError::new_err(format!("directions: expected shape ({}, 3), got {}", ps[0], shape_str(&ds))));
+        return Err(PyValueError::new_err(format!(
+            "directions: expected shape ({}, 3), got {}",
+            ps[0],
+            shape_str(&ds)
+        )));
     }
     let (p, d) = (pa.slice(), da.slice());
     let out = run_detached(py, || rokeby_core::field::view_blend_directions(p, d, ramp))?;
-    let arr = ArrayD::from_shape_vec(IxDyn(&[ps[0], 3]), out).map_err(|e| PyRuntimeError::new_err(e.to_string()))?;
+    let arr = ArrayD::from_shape_vec(IxDyn(&[ps[0], 3]), out)
+        .map_err(|e| PyRuntimeError::new_err(e.to_string()))?;
     Ok(arr.into_pyarray(py))
 }
 
@@ -368,7 +466,10 @@ fn parts_array<'py>(parts: &Bound<'py, PyAny>) -> PyResult<F32Array<'py>> {
     let pa = f32_array(parts, "parts")?;
     let ps = pa.shape();
     if ps.len() != 2 || ps[1] != 6 {
-        return Err(PyValueError::new_err(format!("parts: expected shape (N, 6), got {}", shape_str(&ps))));
+        return Err(PyValueError::new_err(format!(
+            "parts: expected shape (N, 6), got {}",
+            shape_str(&ps)
+        )));
     }
     Ok(pa)
 }
@@ -382,48 +483,89 @@ fn parts_array<'py>(parts: &Bound<'py, PyAny>) -> PyResult<F32Array<'py>> {
 #[pyfunction]
 #[pyo3(signature = (parts, corner_vert, first_vert, *, ramp=false))]
 #[allow(clippy::type_complexity)]
-fn view_blend_render_rows<'py>(py: Python<'py>, parts: &Bound<'py, PyAny>, corner_vert: &Bound<'py, PyAny>, first_vert: &Bound<'py, PyAny>, ramp: bool) -> PyResult<(bool, Bound<'py, PyArrayDyn<f32>>, Bound<'py, PyArrayDyn<f32>>)> {
+fn view_blend_render_rows<'py>(
+    py: Python<'py>,
+    parts: &Bound<'py, PyAny>,
+    corner_vert: &Bound<'py, PyAny>,
+    first_vert: &Bound<'py, PyAny>,
+    ramp: bool,
+) -> PyResult<(
+    bool,
+    Bound<'py, PyArrayDyn<f32>>,
+    Bound<'py, PyArrayDyn<f32>>,
+)> {
     let pa = parts_array(parts)?;
     // Contiguous int64 index arrays (what the add-on keeps per mesh) are read in place; others
     // are converted.
-    let borrowed = |a: &Bound<'py, PyAny>| a.cast::<PyArrayDyn<i64>>().ok().map(|x| x.readonly()).filter(|r| r.is_c_contiguous() && r.ndim() == 1);
+    let borrowed = |a: &Bound<'py, PyAny>| {
+        a.cast::<PyArrayDyn<i64>>()
+            .ok()
+            .map(|x| x.readonly())
+            .filter(|r| r.is_c_contiguous() && r.ndim() == 1)
+    };
     let (cb, fb) = (borrowed(corner_vert), borrowed(first_vert));
-    let owned_c = if cb.is_none() { Some(i64_array(corner_vert, "corner_vert")?) } else { None };
-    let owned_f = if fb.is_none() { Some(i64_array(first_vert, "first_vert")?) } else { None };
-    for (what, shape) in [("corner_vert", owned_c.as_ref().map(|o| o.1.clone())), ("first_vert", owned_f.as_ref().map(|o| o.1.clone()))] {
+    let owned_c = if cb.is_none() {
+        Some(i64_array(corner_vert, "corner_vert")?)
+    } else {
+        None
+    };
+    let owned_f = if fb.is_none() {
+        Some(i64_array(first_vert, "first_vert")?)
+    } else {
+        None
+    };
+    for (what, shape) in [
+        ("corner_vert", owned_c.as_ref().map(|o| o.1.clone())),
+        ("first_vert", owned_f.as_ref().map(|o| o.1.clone())),
+    ] {
         if let Some(sh) = shape {
             if sh.len() != 1 {
-                return Err(PyValueError::new_err(format!("{what}: expected shape (C,), got {}", shape_str(&sh))));
+                return Err(PyValueError::new_err(format!(
+                    "{what}: expected shape (C,), got {}",
+                    shape_str(&sh)
+                )));
             }
         }
     }
     let cv: &[i64] = match (&cb, &owned_c) {
-        (Some(r), _) => r.as_slice().map_err(|e| PyRuntimeError::new_err(e.to_string()))?,
+        (Some(r), _) => r
+            .as_slice()
+            .map_err(|e| PyRuntimeError::new_err(e.to_string()))?,
         (None, Some(o)) => &o.0,
         _ => return Err(PyRuntimeError::new_err("internal: corner_vert unread")),
     };
     let fv: &[i64] = match (&fb, &owned_f) {
-        (Some(r), _) => r.as_slice().map_err(|e| PyRuntimeError::new_err(e.to_string()))?,
+        (Some(r), _) => r
+            .as_slice()
+            .map_err(|e| PyRuntimeError::new_err(e.to_string()))?,
         (None, Some(o)) => &o.0,
         _ => return Err(PyRuntimeError::new_err("internal: first_vert unread")),
     };
     let p = pa.slice();
-    let r = run_detached(py, || rokeby_core::field::view_blend_render_rows(p, cv, fv, ramp))?;
+    let r = run_detached(py, || {
+        rokeby_core::field::view_blend_render_rows(p, cv, fv, ramp)
+    })?;
     let rows = r.xyz.len() / 3;
-    let a = ArrayD::from_shape_vec(IxDyn(&[rows, 3]), r.xyz).map_err(|e| PyRuntimeError::new_err(e.to_string()))?;
-    let b = ArrayD::from_shape_vec(IxDyn(&[rows, 3]), r.wa).map_err(|e| PyRuntimeError::new_err(e.to_string()))?;
+    let a = ArrayD::from_shape_vec(IxDyn(&[rows, 3]), r.xyz)
+        .map_err(|e| PyRuntimeError::new_err(e.to_string()))?;
+    let b = ArrayD::from_shape_vec(IxDyn(&[rows, 3]), r.wa)
+        .map_err(|e| PyRuntimeError::new_err(e.to_string()))?;
     Ok((r.per_corner, a.into_pyarray(py), b.into_pyarray(py)))
 }
 
 /// view_blend_rotation_vectors(parts) -> (N, 3) float32: the view-independent field
 /// ortho(a R + (1 − a) I) of each point's parts as rotation vectors (axis × angle).
 #[pyfunction]
-fn view_blend_rotation_vectors<'py>(py: Python<'py>, parts: &Bound<'py, PyAny>) -> PyResult<Bound<'py, PyArrayDyn<f32>>> {
+fn view_blend_rotation_vectors<'py>(
+    py: Python<'py>,
+    parts: &Bound<'py, PyAny>,
+) -> PyResult<Bound<'py, PyArrayDyn<f32>>> {
     let pa = parts_array(parts)?;
     let n = pa.shape()[0];
     let p = pa.slice();
     let out = run_detached(py, || rokeby_core::field::view_blend_rotation_vectors(p))?;
-    let arr = ArrayD::from_shape_vec(IxDyn(&[n, 3]), out).map_err(|e| PyRuntimeError::new_err(e.to_string()))?;
+    let arr = ArrayD::from_shape_vec(IxDyn(&[n, 3]), out)
+        .map_err(|e| PyRuntimeError::new_err(e.to_string()))?;
     Ok(arr.into_pyarray(py))
 }
 
@@ -450,16 +592,26 @@ fn edited_directions<'py>(
     let pos = f32_array(positions, "positions")?;
     let shape = pos.shape();
     if shape.is_empty() || shape[shape.len() - 1] != 3 {
-        return Err(PyValueError::new_err(format!("positions: expected shape (..., 3), got {}", shape_str(&shape))));
+        return Err(PyValueError::new_err(format!(
+            "positions: expected shape (..., 3), got {}",
+            shape_str(&shape)
+        )));
     }
     let lead = &shape[..shape.len() - 1];
     let n: usize = lead.iter().product();
     if n == 0 {
-        return Err(PyValueError::new_err(format!("positions: is empty (shape {})", shape_str(&shape))));
+        return Err(PyValueError::new_err(format!(
+            "positions: is empty (shape {})",
+            shape_str(&shape)
+        )));
     }
     let nrm = f32_array(normals, "normals")?;
     if nrm.shape() != shape {
-        return Err(PyValueError::new_err(format!("normals: expected shape {} like positions, got {}", shape_str(&shape), shape_str(&nrm.shape()))));
+        return Err(PyValueError::new_err(format!(
+            "normals: expected shape {} like positions, got {}",
+            shape_str(&shape),
+            shape_str(&nrm.shape())
+        )));
     }
     let eye = parse_vec3(eye, "eye")?;
     let rows = parse_constraints(constraints)?;
@@ -467,14 +619,21 @@ fn edited_directions<'py>(
     let dist = parse_distances(distances, k, lead)?;
     let regs = parse_regions(regions, n, k)?;
     let field = Field::new(&rows, regs).map_err(core_err)?;
-    let row_len = if lead.len() >= 2 { lead[lead.len() - 1] } else { 4096 };
+    let row_len = if lead.len() >= 2 {
+        lead[lead.len() - 1]
+    } else {
+        4096
+    };
     let (p, nm) = (pos.slice(), nrm.slice());
     let d = match &dist {
         Some(a) => Distances::Given(a.slice()),
         None => Distances::Euclidean,
     };
-    let out = run_detached(py, || field.edited_directions(p, nm, eye, d, method, row_len))?;
-    let arr = ArrayD::from_shape_vec(IxDyn(&shape), out).map_err(|e| PyRuntimeError::new_err(e.to_string()))?;
+    let out = run_detached(py, || {
+        field.edited_directions(p, nm, eye, d, method, row_len)
+    })?;
+    let arr = ArrayD::from_shape_vec(IxDyn(&shape), out)
+        .map_err(|e| PyRuntimeError::new_err(e.to_string()))?;
     Ok(arr.into_pyarray(py))
 }
 
@@ -483,16 +642,26 @@ fn edited_directions<'py>(
 /// for tests and benchmarks of the polar methods.
 #[pyfunction]
 #[pyo3(signature = (matrices, method="exact"))]
-fn ortho<'py>(py: Python<'py>, matrices: &Bound<'py, PyAny>, method: &str) -> PyResult<Bound<'py, PyArrayDyn<f32>>> {
+fn ortho<'py>(
+    py: Python<'py>,
+    matrices: &Bound<'py, PyAny>,
+    method: &str,
+) -> PyResult<Bound<'py, PyArrayDyn<f32>>> {
     let method = parse_polar(method)?;
     let m = f32_array(matrices, "matrices")?;
     let shape = m.shape();
     if shape.len() < 2 || shape[shape.len() - 1] != 3 || shape[shape.len() - 2] != 3 {
-        return Err(PyValueError::new_err(format!("matrices: expected shape (..., 3, 3), got {}", shape_str(&shape))));
+        return Err(PyValueError::new_err(format!(
+            "matrices: expected shape (..., 3, 3), got {}",
+            shape_str(&shape)
+        )));
     }
     let s = m.slice();
     if let Some(i) = s.iter().position(|x| !x.is_finite()) {
-        return Err(PyValueError::new_err(format!("matrices: matrix {} has a non-finite entry", i / 9)));
+        return Err(PyValueError::new_err(format!(
+            "matrices: matrix {} has a non-finite entry",
+            i / 9
+        )));
     }
     let out = run_detached(py, || {
         let mut warm = glam::DQuat::IDENTITY;
@@ -500,7 +669,15 @@ fn ortho<'py>(py: Python<'py>, matrices: &Bound<'py, PyAny>, method: &str) -> Py
         for c in s.chunks_exact(9) {
             // Row-major numpy (i, j) → column-major glam.
             let mat = glam::DMat3::from_cols_array(&[
-                c[0] as f64, c[3] as f64, c[6] as f64, c[1] as f64, c[4] as f64, c[7] as f64, c[2] as f64, c[5] as f64, c[8] as f64,
+                c[0] as f64,
+                c[3] as f64,
+                c[6] as f64,
+                c[1] as f64,
+                c[4] as f64,
+                c[7] as f64,
+                c[2] as f64,
+                c[5] as f64,
+                c[8] as f64,
             ]);
             let q = polar::canonical(polar::ortho(&mat, || None, method, &mut warm));
             out.extend_from_slice(&[q.x as f32, q.y as f32, q.z as f32, q.w as f32]);
@@ -509,7 +686,8 @@ fn ortho<'py>(py: Python<'py>, matrices: &Bound<'py, PyAny>, method: &str) -> Py
     })?;
     let mut oshape = shape[..shape.len() - 2].to_vec();
     oshape.push(4);
-    let arr = ArrayD::from_shape_vec(IxDyn(&oshape), out).map_err(|e| PyRuntimeError::new_err(e.to_string()))?;
+    let arr = ArrayD::from_shape_vec(IxDyn(&oshape), out)
+        .map_err(|e| PyRuntimeError::new_err(e.to_string()))?;
     Ok(arr.into_pyarray(py))
 }
 
@@ -519,15 +697,30 @@ fn i64_array(obj: &Bound<'_, PyAny>, name: &str) -> PyResult<(Vec<i64>, Vec<usiz
     let arr: Bound<'_, PyAny> = if obj.cast::<PyUntypedArray>().is_ok() {
         obj.clone()
     } else {
-        py.import("numpy")?.call_method1("asarray", (obj,)).map_err(|e| PyTypeError::new_err(format!("{name}: cannot be read as an array ({e})")))?
+        py.import("numpy")?
+            .call_method1("asarray", (obj,))
+            .map_err(|e| {
+                PyTypeError::new_err(format!("{name}: cannot be read as an array ({e})"))
+            })?
     };
-    let kind: String = arr.getattr("dtype").and_then(|d| d.getattr("kind")).and_then(|k| k.extract()).unwrap_or_default();
+    let kind: String = arr
+        .getattr("dtype")
+        .and_then(|d| d.getattr("kind"))
+        .and_then(|k| k.extract())
+        .unwrap_or_default();
     if kind != "i" && kind != "u" {
-        let dtype = arr.getattr("dtype").map(|d| d.to_string()).unwrap_or_else(|_| "?".into());
-        return Err(PyTypeError::new_err(format!("{name}: must be an array of integers, got dtype {dtype}")));
+        let dtype = arr
+            .getattr("dtype")
+            .map(|d| d.to_string())
+            .unwrap_or_else(|_| "?".into());
+        return Err(PyTypeError::new_err(format!(
+            "{name}: must be an array of integers, got dtype {dtype}"
+        )));
     }
     let arr = arr.call_method1("astype", ("int64",))?;
-    let a = arr.cast::<PyArrayDyn<i64>>().map_err(|_| PyTypeError::new_err(format!("{name}: must be an integer array")))?;
+    let a = arr
+        .cast::<PyArrayDyn<i64>>()
+        .map_err(|_| PyTypeError::new_err(format!("{name}: must be an integer array")))?;
     let ro = a.readonly();
     // The contiguous copy astype made is read as one slice (iterating a dynamic-dimension view
     // element by element cost ~40 ns per index: 16 ms for the corners of a 100k-vertex mirror).
@@ -542,11 +735,17 @@ fn parse_mesh(vertices: &Bound<'_, PyAny>, faces: &Bound<'_, PyAny>) -> PyResult
     let v = f32_array(vertices, "vertices")?;
     let vs = v.shape();
     if vs.len() != 2 || vs[1] != 3 {
-        return Err(PyValueError::new_err(format!("vertices: expected shape (V, 3), got {}", shape_str(&vs))));
+        return Err(PyValueError::new_err(format!(
+            "vertices: expected shape (V, 3), got {}",
+            shape_str(&vs)
+        )));
     }
     let (f, fs) = i64_array(faces, "faces")?;
     if fs.len() != 2 || fs[1] != 3 {
-        return Err(PyValueError::new_err(format!("faces: expected shape (F, 3) of vertex indices, got {}", shape_str(&fs))));
+        return Err(PyValueError::new_err(format!(
+            "faces: expected shape (F, 3) of vertex indices, got {}",
+            shape_str(&fs)
+        )));
     }
     Mesh::new(v.slice(), &f).map_err(core_err)
 }
@@ -556,13 +755,18 @@ fn parse_point(item: &Bound<'_, PyAny>) -> Option<SurfacePoint> {
     if t.1.len() != 3 || t.0 < 0 {
         return None;
     }
-    Some(SurfacePoint { face: t.0 as usize, bary: [t.1[0], t.1[1], t.1[2]] })
+    Some(SurfacePoint {
+        face: t.0 as usize,
+        bary: [t.1[0], t.1[1], t.1[2]],
+    })
 }
 
 fn parse_one_source(item: &Bound<'_, PyAny>, k: usize) -> PyResult<Source> {
     if let Ok(v) = item.extract::<i64>() {
         if v < 0 {
-            return Err(PyValueError::new_err(format!("sources: source {k}: vertex index {v} is negative")));
+            return Err(PyValueError::new_err(format!(
+                "sources: source {k}: vertex index {v} is negative"
+            )));
         }
         return Ok(Source::Vertex(v as usize));
     }
@@ -582,18 +786,32 @@ fn parse_sources(obj: &Bound<'_, PyAny>) -> PyResult<Vec<Vec<Source>>> {
     if obj.cast::<PyUntypedArray>().is_ok() {
         let (idx, shape) = i64_array(obj, "sources")?;
         if shape.len() > 1 {
-            return Err(PyValueError::new_err(format!("sources: an index array must be 1-D, got {}", shape_str(&shape))));
+            return Err(PyValueError::new_err(format!(
+                "sources: an index array must be 1-D, got {}",
+                shape_str(&shape)
+            )));
         }
         return idx
             .into_iter()
             .enumerate()
-            .map(|(k, v)| if v < 0 { Err(PyValueError::new_err(format!("sources: source {k}: vertex index {v} is negative"))) } else { Ok(vec![Source::Vertex(v as usize)]) })
+            .map(|(k, v)| {
+                if v < 0 {
+                    Err(PyValueError::new_err(format!(
+                        "sources: source {k}: vertex index {v} is negative"
+                    )))
+                } else {
+                    Ok(vec![Source::Vertex(v as usize)])
+                }
+            })
             .collect();
     }
     if obj.extract::<i64>().is_ok() || parse_point(obj).is_some() {
         return Ok(vec![vec![parse_one_source(obj, 0)?]]);
     }
-    let items: Vec<Bound<'_, PyAny>> = obj.try_iter().map_err(|_| PyTypeError::new_err("sources: must be a list of sources"))?.collect::<PyResult<_>>()?;
+    let items: Vec<Bound<'_, PyAny>> = obj
+        .try_iter()
+        .map_err(|_| PyTypeError::new_err("sources: must be a list of sources"))?
+        .collect::<PyResult<_>>()?;
     if items.is_empty() {
         return Err(PyValueError::new_err("sources: is empty"));
     }
@@ -603,7 +821,10 @@ fn parse_sources(obj: &Bound<'_, PyAny>) -> PyResult<Vec<Vec<Source>>> {
             sets.push(vec![parse_one_source(item, k)?]);
         } else if let Ok(inner) = item.try_iter() {
             let members: Vec<Bound<'_, PyAny>> = inner.collect::<PyResult<_>>()?;
-            let set = members.iter().map(|m| parse_one_source(m, k)).collect::<PyResult<Vec<_>>>()?;
+            let set = members
+                .iter()
+                .map(|m| parse_one_source(m, k))
+                .collect::<PyResult<Vec<_>>>()?;
             sets.push(set);
         } else {
             return Err(PyTypeError::new_err(format!("sources: source {k} must be a vertex index, (face, (b0, b1, b2)) or a list of those")));
@@ -613,14 +834,24 @@ fn parse_sources(obj: &Bound<'_, PyAny>) -> PyResult<Vec<Vec<Source>>> {
 }
 
 fn parse_method(name: &str) -> PyResult<Method> {
-    Method::parse(name).ok_or_else(|| PyValueError::new_err(format!("method: unknown method {name:?} (expected 'heat' or 'dijkstra')")))
+    Method::parse(name).ok_or_else(|| {
+        PyValueError::new_err(format!(
+            "method: unknown method {name:?} (expected 'heat' or 'dijkstra')"
+        ))
+    })
 }
 
-fn distances_array<'py>(py: Python<'py>, solver: &CoreSolver, sets: Vec<Vec<Source>>, method: Method) -> PyResult<Bound<'py, PyArrayDyn<f32>>> {
+fn distances_array<'py>(
+    py: Python<'py>,
+    solver: &CoreSolver,
+    sets: Vec<Vec<Source>>,
+    method: Method,
+) -> PyResult<Bound<'py, PyArrayDyn<f32>>> {
     let nv = solver.mesh().vertices.len();
     let ns = sets.len();
     let out = run_detached(py, || solver.distances(&sets, method))?;
-    let arr = ArrayD::from_shape_vec(IxDyn(&[ns, nv]), out).map_err(|e| PyRuntimeError::new_err(e.to_string()))?;
+    let arr = ArrayD::from_shape_vec(IxDyn(&[ns, nv]), out)
+        .map_err(|e| PyRuntimeError::new_err(e.to_string()))?;
     Ok(arr.into_pyarray(py))
 }
 
@@ -631,7 +862,13 @@ fn distances_array<'py>(py: Python<'py>, solver: &CoreSolver, sets: Vec<Vec<Sour
 /// GeodesicSolver, which keeps the heat method's factorisation.
 #[pyfunction]
 #[pyo3(signature = (vertices, faces, sources, *, method="heat"))]
-fn geodesic_distances<'py>(py: Python<'py>, vertices: &Bound<'py, PyAny>, faces: &Bound<'py, PyAny>, sources: &Bound<'py, PyAny>, method: &str) -> PyResult<Bound<'py, PyArrayDyn<f32>>> {
+fn geodesic_distances<'py>(
+    py: Python<'py>,
+    vertices: &Bound<'py, PyAny>,
+    faces: &Bound<'py, PyAny>,
+    sources: &Bound<'py, PyAny>,
+    method: &str,
+) -> PyResult<Bound<'py, PyArrayDyn<f32>>> {
     let method = parse_method(method)?;
     let mesh = parse_mesh(vertices, faces)?;
     let sets = parse_sources(sources)?;
@@ -654,20 +891,38 @@ struct PyGeodesicSolver {
 impl PyGeodesicSolver {
     #[new]
     #[pyo3(signature = (vertices, faces, *, boundary="average"))]
-    fn new(py: Python<'_>, vertices: &Bound<'_, PyAny>, faces: &Bound<'_, PyAny>, boundary: &str) -> PyResult<Self> {
+    fn new(
+        py: Python<'_>,
+        vertices: &Bound<'_, PyAny>,
+        faces: &Bound<'_, PyAny>,
+        boundary: &str,
+    ) -> PyResult<Self> {
         let average = match boundary {
             "average" => true,
             "neumann" => false,
-            other => return Err(PyValueError::new_err(format!("boundary: unknown condition {other:?} (expected 'average' or 'neumann')"))),
+            other => {
+                return Err(PyValueError::new_err(format!(
+                    "boundary: unknown condition {other:?} (expected 'average' or 'neumann')"
+                )))
+            }
         };
         let mesh = parse_mesh(vertices, faces)?;
-        let inner = run_detached(py, move || Ok(CoreSolver::with_boundary_averaging(mesh, average)))?;
-        Ok(PyGeodesicSolver { inner: Arc::new(inner) })
+        let inner = run_detached(py, move || {
+            Ok(CoreSolver::with_boundary_averaging(mesh, average))
+        })?;
+        Ok(PyGeodesicSolver {
+            inner: Arc::new(inner),
+        })
     }
 
     /// distances(sources, method="heat") -> (S, V) float32
     #[pyo3(signature = (sources, method="heat"))]
-    fn distances<'py>(&self, py: Python<'py>, sources: &Bound<'py, PyAny>, method: &str) -> PyResult<Bound<'py, PyArrayDyn<f32>>> {
+    fn distances<'py>(
+        &self,
+        py: Python<'py>,
+        sources: &Bound<'py, PyAny>,
+        method: &str,
+    ) -> PyResult<Bound<'py, PyArrayDyn<f32>>> {
         let method = parse_method(method)?;
         let sets = parse_sources(sources)?;
         distances_array(py, &self.inner, sets, method)
@@ -679,7 +934,14 @@ impl PyGeodesicSolver {
     /// index or (face, (b0, b1, b2))) measured over the surface, a smooth step to 0 at `radius`,
     /// and 0 on other connected components. Pass it to rotation_field as a "weights" region.
     #[pyo3(signature = (centre, radius, border=0.0, method="heat"))]
-    fn geodesic_region<'py>(&self, py: Python<'py>, centre: &Bound<'py, PyAny>, radius: f64, border: f64, method: &str) -> PyResult<Bound<'py, PyArrayDyn<f32>>> {
+    fn geodesic_region<'py>(
+        &self,
+        py: Python<'py>,
+        centre: &Bound<'py, PyAny>,
+        radius: f64,
+        border: f64,
+        method: &str,
+    ) -> PyResult<Bound<'py, PyArrayDyn<f32>>> {
         let method = parse_method(method)?;
         let src = parse_one_source(centre, 0)?;
         let solver = self.inner.clone();
@@ -696,18 +958,36 @@ impl PyGeodesicSolver {
     /// vertices get 0; inside, the weight fades in over `border` (geodesic distance from the nearest
     /// unpainted vertex).
     #[pyo3(signature = (weights, border=0.0, method="heat"))]
-    fn freeform_region<'py>(&self, py: Python<'py>, weights: &Bound<'py, PyAny>, border: f64, method: &str) -> PyResult<Bound<'py, PyArrayDyn<f32>>> {
+    fn freeform_region<'py>(
+        &self,
+        py: Python<'py>,
+        weights: &Bound<'py, PyAny>,
+        border: f64,
+        method: &str,
+    ) -> PyResult<Bound<'py, PyArrayDyn<f32>>> {
         let method = parse_method(method)?;
         let w = f32_array(weights, "weights")?;
         let nv = self.inner.mesh().vertices.len();
         if w.shape() != [nv] {
-            return Err(PyValueError::new_err(format!("weights: expected shape ({nv},), one per vertex, got {}", shape_str(&w.shape()))));
+            return Err(PyValueError::new_err(format!(
+                "weights: expected shape ({nv},), one per vertex, got {}",
+                shape_str(&w.shape())
+            )));
         }
         let w = w.slice().to_vec();
         let solver = self.inner.clone();
         let a = run_detached(py, move || {
-            let outside: Vec<Source> = w.iter().enumerate().filter(|(_, &x)| !(x > 0.0)).map(|(i, _)| Source::Vertex(i)).collect();
-            let d = if outside.is_empty() || border == 0.0 { vec![f32::INFINITY; w.len()] } else { solver.distances(&[outside], method)? };
+            let outside: Vec<Source> = w
+                .iter()
+                .enumerate()
+                .filter(|(_, &x)| !(x > 0.0))
+                .map(|(i, _)| Source::Vertex(i))
+                .collect();
+            let d = if outside.is_empty() || border == 0.0 {
+                vec![f32::INFINITY; w.len()]
+            } else {
+                solver.distances(&[outside], method)?
+            };
             rokeby_core::region::freeform_weights(&w, &d, border)
         })?;
         Ok(numpy::PyArray1::from_vec(py, a).to_dyn().clone())
@@ -741,47 +1021,85 @@ impl PyGeodesicSolver {
 /// Per-vertex values (S, V) (e.g. distance fields) at surface points given by face indices (P,)
 /// and barycentric coordinates (P, 3), by linear interpolation (paper §6.2).
 #[pyfunction]
-fn interpolate<'py>(py: Python<'py>, values: &Bound<'py, PyAny>, faces: &Bound<'py, PyAny>, face_index: &Bound<'py, PyAny>, bary: &Bound<'py, PyAny>) -> PyResult<Bound<'py, PyArrayDyn<f32>>> {
+fn interpolate<'py>(
+    py: Python<'py>,
+    values: &Bound<'py, PyAny>,
+    faces: &Bound<'py, PyAny>,
+    face_index: &Bound<'py, PyAny>,
+    bary: &Bound<'py, PyAny>,
+) -> PyResult<Bound<'py, PyArrayDyn<f32>>> {
     let vals = f32_array(values, "values")?;
     let vshape = vals.shape();
     let (rows, nv) = match vshape.len() {
         1 => (1, vshape[0]),
         2 => (vshape[0], vshape[1]),
-        _ => return Err(PyValueError::new_err(format!("values: expected shape (V,) or (S, V), got {}", shape_str(&vshape)))),
+        _ => {
+            return Err(PyValueError::new_err(format!(
+                "values: expected shape (V,) or (S, V), got {}",
+                shape_str(&vshape)
+            )))
+        }
     };
     if vals.slice().iter().any(|x| x.is_nan()) {
         return Err(PyValueError::new_err("values: contains NaN"));
     }
     let (f, fs) = i64_array(faces, "faces")?;
     if fs.len() != 2 || fs[1] != 3 {
-        return Err(PyValueError::new_err(format!("faces: expected shape (F, 3), got {}", shape_str(&fs))));
+        return Err(PyValueError::new_err(format!(
+            "faces: expected shape (F, 3), got {}",
+            shape_str(&fs)
+        )));
     }
     if let Some(i) = f.iter().position(|&x| x < 0 || x as u64 >= nv as u64) {
-        return Err(PyValueError::new_err(format!("faces: face {} refers to vertex {} but values has {} vertices", i / 3, f[i], nv)));
+        return Err(PyValueError::new_err(format!(
+            "faces: face {} refers to vertex {} but values has {} vertices",
+            i / 3,
+            f[i],
+            nv
+        )));
     }
     let (fi, fis) = i64_array(face_index, "face_index")?;
     if fis.len() != 1 {
-        return Err(PyValueError::new_err(format!("face_index: expected shape (P,), got {}", shape_str(&fis))));
+        return Err(PyValueError::new_err(format!(
+            "face_index: expected shape (P,), got {}",
+            shape_str(&fis)
+        )));
     }
     let b = f32_array(bary, "bary")?;
     if b.shape() != [fi.len(), 3] {
-        return Err(PyValueError::new_err(format!("bary: expected shape ({}, 3), got {}", fi.len(), shape_str(&b.shape()))));
+        return Err(PyValueError::new_err(format!(
+            "bary: expected shape ({}, 3), got {}",
+            fi.len(),
+            shape_str(&b.shape())
+        )));
     }
     let nf = fs[0];
-    let faces3: Vec<[usize; 3]> = f.chunks_exact(3).map(|c| [c[0] as usize, c[1] as usize, c[2] as usize]).collect();
+    let faces3: Vec<[usize; 3]> = f
+        .chunks_exact(3)
+        .map(|c| [c[0] as usize, c[1] as usize, c[2] as usize])
+        .collect();
     let mut pts = Vec::with_capacity(fi.len());
     for (k, (&face, bc)) in fi.iter().zip(b.slice().chunks_exact(3)).enumerate() {
         if face < 0 || face as usize >= nf {
-            return Err(PyValueError::new_err(format!("face_index: entry {k} = {face} is out of range (0..{})", nf.saturating_sub(1))));
+            return Err(PyValueError::new_err(format!(
+                "face_index: entry {k} = {face} is out of range (0..{})",
+                nf.saturating_sub(1)
+            )));
         }
         if bc.iter().any(|x| !x.is_finite()) {
-            return Err(PyValueError::new_err(format!("bary: row {k} is not finite")));
+            return Err(PyValueError::new_err(format!(
+                "bary: row {k} is not finite"
+            )));
         }
-        pts.push(SurfacePoint { face: face as usize, bary: [bc[0] as f64, bc[1] as f64, bc[2] as f64] });
+        pts.push(SurfacePoint {
+            face: face as usize,
+            bary: [bc[0] as f64, bc[1] as f64, bc[2] as f64],
+        });
     }
     let v = vals.slice();
     let out = run_detached(py, || geodesic::interpolate(v, nv, &faces3, &pts))?;
-    let arr = ArrayD::from_shape_vec(IxDyn(&[rows, pts.len()]), out).map_err(|e| PyRuntimeError::new_err(e.to_string()))?;
+    let arr = ArrayD::from_shape_vec(IxDyn(&[rows, pts.len()]), out)
+        .map_err(|e| PyRuntimeError::new_err(e.to_string()))?;
     Ok(arr.into_pyarray(py))
 }
 

@@ -15,36 +15,63 @@ use rokeby_core::shadow_mesh::falloff;
 use rokeby_core::silhouette::{silhouettes, ClosedMesh, Light, SilhouetteLoop};
 use std::sync::Mutex;
 
-fn arr<'py, T: numpy::Element>(py: Python<'py>, shape: &[usize], data: Vec<T>) -> PyResult<Bound<'py, PyArrayDyn<T>>> {
-    let a = ArrayD::from_shape_vec(IxDyn(shape), data).map_err(|e| PyRuntimeError::new_err(e.to_string()))?;
+fn arr<'py, T: numpy::Element>(
+    py: Python<'py>,
+    shape: &[usize],
+    data: Vec<T>,
+) -> PyResult<Bound<'py, PyArrayDyn<T>>> {
+    let a = ArrayD::from_shape_vec(IxDyn(shape), data)
+        .map_err(|e| PyRuntimeError::new_err(e.to_string()))?;
     Ok(a.into_pyarray(py))
 }
 
 fn points<'py>(py: Python<'py>, p: &[DVec3]) -> PyResult<Bound<'py, PyArrayDyn<f32>>> {
-    arr(py, &[p.len(), 3], p.iter().flat_map(|v| [v.x as f32, v.y as f32, v.z as f32]).collect())
+    arr(
+        py,
+        &[p.len(), 3],
+        p.iter()
+            .flat_map(|v| [v.x as f32, v.y as f32, v.z as f32])
+            .collect(),
+    )
 }
 
 /// A loop or vertex index: negative ones are a ValueError naming the argument (as a usize
 /// parameter they were an OverflowError that named nothing; found by tests/test_properties_new.py).
 fn index(i: i64, name: &str) -> PyResult<usize> {
-    usize::try_from(i).map_err(|_| PyValueError::new_err(format!("{name}: must be a non-negative index, got {i}")))
+    usize::try_from(i).map_err(|_| {
+        PyValueError::new_err(format!("{name}: must be a non-negative index, got {i}"))
+    })
 }
 
 /// (N, 3) float vertices and (F, 3) integer faces, flattened.
-fn mesh_arrays(vertices: &Bound<'_, PyAny>, faces: &Bound<'_, PyAny>, vname: &str, fname: &str) -> PyResult<(Vec<f32>, Vec<i64>)> {
+fn mesh_arrays(
+    vertices: &Bound<'_, PyAny>,
+    faces: &Bound<'_, PyAny>,
+    vname: &str,
+    fname: &str,
+) -> PyResult<(Vec<f32>, Vec<i64>)> {
     let v = f32_array(vertices, vname)?;
     let vs = v.shape();
     if vs.len() != 2 || vs[1] != 3 {
-        return Err(PyValueError::new_err(format!("{vname}: expected shape (V, 3), got {}", shape_str(&vs))));
+        return Err(PyValueError::new_err(format!(
+            "{vname}: expected shape (V, 3), got {}",
+            shape_str(&vs)
+        )));
     }
     let (f, fs) = i64_array(faces, fname)?;
     if fs.len() != 2 || fs[1] != 3 {
-        return Err(PyValueError::new_err(format!("{fname}: expected shape (F, 3) of vertex indices (triangulate first), got {}", shape_str(&fs))));
+        return Err(PyValueError::new_err(format!(
+            "{fname}: expected shape (F, 3) of vertex indices (triangulate first), got {}",
+            shape_str(&fs)
+        )));
     }
     Ok((v.slice().to_vec(), f))
 }
 
-fn parse_light(position: Option<&Bound<'_, PyAny>>, direction: Option<&Bound<'_, PyAny>>) -> PyResult<Light> {
+fn parse_light(
+    position: Option<&Bound<'_, PyAny>>,
+    direction: Option<&Bound<'_, PyAny>>,
+) -> PyResult<Light> {
     match (position.filter(|o| !o.is_none()), direction.filter(|o| !o.is_none())) {
         (Some(p), None) => {
             let l = parse_vec3(p, "light_position")?;
@@ -58,13 +85,21 @@ fn parse_light(position: Option<&Bound<'_, PyAny>>, direction: Option<&Bound<'_,
     }
 }
 
-fn caster(vertices: &Bound<'_, PyAny>, faces: &Bound<'_, PyAny>, normals: Option<&Bound<'_, PyAny>>) -> PyResult<ClosedMesh> {
+fn caster(
+    vertices: &Bound<'_, PyAny>,
+    faces: &Bound<'_, PyAny>,
+    normals: Option<&Bound<'_, PyAny>>,
+) -> PyResult<ClosedMesh> {
     let (v, f) = mesh_arrays(vertices, faces, "vertices", "faces")?;
     let n = match normals.filter(|o| !o.is_none()) {
         Some(o) => {
             let a = f32_array(o, "normals")?;
             if a.shape() != [v.len() / 3, 3] {
-                return Err(PyValueError::new_err(format!("normals: expected shape ({}, 3) like vertices, got {}", v.len() / 3, shape_str(&a.shape()))));
+                return Err(PyValueError::new_err(format!(
+                    "normals: expected shape ({}, 3) like vertices, got {}",
+                    v.len() / 3,
+                    shape_str(&a.shape())
+                )));
             }
             Some(a.slice().to_vec())
         }
@@ -73,12 +108,30 @@ fn caster(vertices: &Bound<'_, PyAny>, faces: &Bound<'_, PyAny>, normals: Option
     ClosedMesh::new(&v, &f, n.as_deref()).map_err(core_err)
 }
 
-fn loop_dict<'py>(py: Python<'py>, l: &SilhouetteLoop, current: Option<Vec<DVec3>>, active: bool) -> PyResult<Bound<'py, PyDict>> {
+fn loop_dict<'py>(
+    py: Python<'py>,
+    l: &SilhouetteLoop,
+    current: Option<Vec<DVec3>>,
+    active: bool,
+) -> PyResult<Bound<'py, PyDict>> {
     let d = PyDict::new(py);
     let pts = current.unwrap_or_else(|| l.positions());
     d.set_item("points", points(py, &pts)?)?;
-    d.set_item("edges", arr(py, &[l.len(), 2], l.vertices.iter().flat_map(|s| [s.back as i64, s.front as i64]).collect())?)?;
-    d.set_item("alpha", arr(py, &[l.len()], l.vertices.iter().map(|s| s.alpha).collect())?)?;
+    d.set_item(
+        "edges",
+        arr(
+            py,
+            &[l.len(), 2],
+            l.vertices
+                .iter()
+                .flat_map(|s| [s.back as i64, s.front as i64])
+                .collect(),
+        )?,
+    )?;
+    d.set_item(
+        "alpha",
+        arr(py, &[l.len()], l.vertices.iter().map(|s| s.alpha).collect())?,
+    )?;
     d.set_item("length", l.length)?;
     d.set_item("active", active)?;
     Ok(d)
@@ -87,11 +140,23 @@ fn loop_dict<'py>(py: Python<'py>, l: &SilhouetteLoop, current: Option<Vec<DVec3
 fn handles_dict<'py>(py: Python<'py>, hs: &[Handle]) -> PyResult<Bound<'py, PyDict>> {
     let d = PyDict::new(py);
     let n = hs.len();
-    d.set_item("points", points(py, &hs.iter().map(|h| h.position).collect::<Vec<_>>())?)?;
-    d.set_item("triangle", arr(py, &[n], hs.iter().map(|h| h.triangle).collect())?)?;
+    d.set_item(
+        "points",
+        points(py, &hs.iter().map(|h| h.position).collect::<Vec<_>>())?,
+    )?;
+    d.set_item(
+        "triangle",
+        arr(py, &[n], hs.iter().map(|h| h.triangle).collect())?,
+    )?;
     d.set_item("hit", arr(py, &[n], hs.iter().map(|h| h.hit).collect())?)?;
-    d.set_item("on_caster", arr(py, &[n], hs.iter().map(|h| h.on_caster).collect())?)?;
-    d.set_item("occluded", arr(py, &[n], hs.iter().map(|h| h.occluded).collect())?)?;
+    d.set_item(
+        "on_caster",
+        arr(py, &[n], hs.iter().map(|h| h.on_caster).collect())?,
+    )?;
+    d.set_item(
+        "occluded",
+        arr(py, &[n], hs.iter().map(|h| h.occluded).collect())?,
+    )?;
     Ok(d)
 }
 
@@ -121,7 +186,11 @@ pub fn shadow_silhouettes<'py>(
 /// shadow_falloff(l_initial, l_current, beta) → (l_initial · l_current)^β (§6.2), directions
 /// normalised, 0 for opposite half-spaces.
 #[pyfunction]
-pub fn shadow_falloff(l_initial: &Bound<'_, PyAny>, l_current: &Bound<'_, PyAny>, beta: f64) -> PyResult<f64> {
+pub fn shadow_falloff(
+    l_initial: &Bound<'_, PyAny>,
+    l_current: &Bound<'_, PyAny>,
+    beta: f64,
+) -> PyResult<f64> {
     let a = DVec3::from_array(parse_vec3(l_initial, "l_initial")?);
     let b = DVec3::from_array(parse_vec3(l_current, "l_current")?);
     falloff(a, b, beta).map_err(core_err)
@@ -140,7 +209,11 @@ pub struct PyShadowEditor {
 }
 
 impl PyShadowEditor {
-    fn with<T: Send, F: FnOnce(&mut CoreEditor) -> rokeby_core::Result<T> + Send>(&self, py: Python<'_>, f: F) -> PyResult<T> {
+    fn with<T: Send, F: FnOnce(&mut CoreEditor) -> rokeby_core::Result<T> + Send>(
+        &self,
+        py: Python<'_>,
+        f: F,
+    ) -> PyResult<T> {
         run_detached(py, || {
             let mut g = self.inner.lock().unwrap_or_else(|p| p.into_inner());
             f(&mut g)
@@ -168,27 +241,54 @@ impl PyShadowEditor {
     ) -> PyResult<Self> {
         let light = parse_light(light_position, light_direction)?;
         let mesh = caster(vertices, faces, normals)?;
-        let (rv, rf) = mesh_arrays(receiver_vertices, receiver_faces, "receiver_vertices", "receiver_faces")?;
-        let ed = run_detached(py, move || CoreEditor::new(mesh, &rv, &rf, light, min_loop_vertices, w_z, constraint_weight))?;
-        Ok(PyShadowEditor { inner: Mutex::new(ed) })
+        let (rv, rf) = mesh_arrays(
+            receiver_vertices,
+            receiver_faces,
+            "receiver_vertices",
+            "receiver_faces",
+        )?;
+        let ed = run_detached(py, move || {
+            CoreEditor::new(
+                mesh,
+                &rv,
+                &rf,
+                light,
+                min_loop_vertices,
+                w_z,
+                constraint_weight,
+            )
+        })?;
+        Ok(PyShadowEditor {
+            inner: Mutex::new(ed),
+        })
     }
 
     /// Number of silhouette loops.
     #[getter]
     fn num_loops(&self) -> usize {
-        self.inner.lock().unwrap_or_else(|p| p.into_inner()).loops().len()
+        self.inner
+            .lock()
+            .unwrap_or_else(|p| p.into_inner())
+            .loops()
+            .len()
     }
 
     /// Number of receiver triangles (caster triangles follow them in `triangle` indices).
     #[getter]
     fn num_receiver_faces(&self) -> usize {
-        self.inner.lock().unwrap_or_else(|p| p.into_inner()).num_receiver_faces()
+        self.inner
+            .lock()
+            .unwrap_or_else(|p| p.into_inner())
+            .num_receiver_faces()
     }
 
     /// Whether the shadow-mesh system has been factored.
     #[getter]
     fn factored(&self) -> bool {
-        self.inner.lock().unwrap_or_else(|p| p.into_inner()).factored()
+        self.inner
+            .lock()
+            .unwrap_or_else(|p| p.into_inner())
+            .factored()
     }
 
     /// The silhouette loops (longest first) with their current, edited points; `active` is False
@@ -206,7 +306,12 @@ impl PyShadowEditor {
     /// Shadow handles of loop `loop` (dict: points, triangle, hit, on_caster, occluded); `eye`
     /// (3,) flags the handles hidden from it.
     #[pyo3(signature = (r#loop, eye=None))]
-    fn handles<'py>(&self, py: Python<'py>, r#loop: i64, eye: Option<&Bound<'py, PyAny>>) -> PyResult<Bound<'py, PyDict>> {
+    fn handles<'py>(
+        &self,
+        py: Python<'py>,
+        r#loop: i64,
+        eye: Option<&Bound<'py, PyAny>>,
+    ) -> PyResult<Bound<'py, PyDict>> {
         let r#loop = index(r#loop, "loop")?;
         let eye = match eye.filter(|o| !o.is_none()) {
             Some(e) => Some(DVec3::from_array(parse_vec3(e, "eye")?)),
@@ -237,24 +342,57 @@ impl PyShadowEditor {
         let fixed = (index(fixed.0, "fixed")?, index(fixed.1, "fixed")?);
         let style = MlsStyle::parse(style).ok_or_else(|| PyValueError::new_err(format!("style: unknown deformation style {style:?} (expected 'affine', 'similarity' or 'rigid')")))?;
         let target = DVec3::from_array(parse_vec3(target, "target")?);
-        let d = Drag { loop_index: r#loop, fixed, moved, target, style, mls_alpha, noise_amplitude, noise_frequency };
+        let d = Drag {
+            loop_index: r#loop,
+            fixed,
+            moved,
+            target,
+            style,
+            mls_alpha,
+            noise_amplitude,
+            noise_frequency,
+        };
         let r = self.with(py, move |ed| ed.drag(&d))?;
         let out = PyDict::new(py);
         out.set_item("silhouette", points(py, &r.silhouette)?)?;
         out.set_item("handles", handles_dict(py, &r.handles)?)?;
-        out.set_item("segment", arr(py, &[r.segment.len()], r.segment.iter().map(|&i| i as i64).collect())?)?;
-        out.set_item("moved_to", arr(py, &[3], vec![r.moved_to.x as f32, r.moved_to.y as f32, r.moved_to.z as f32])?)?;
+        out.set_item(
+            "segment",
+            arr(
+                py,
+                &[r.segment.len()],
+                r.segment.iter().map(|&i| i as i64).collect(),
+            )?,
+        )?;
+        out.set_item(
+            "moved_to",
+            arr(
+                py,
+                &[3],
+                vec![
+                    r.moved_to.x as f32,
+                    r.moved_to.y as f32,
+                    r.moved_to.z as f32,
+                ],
+            )?,
+        )?;
         Ok(out)
     }
 
     /// Mouse release: the current state becomes the base of the next drag.
     fn commit(&self) {
-        self.inner.lock().unwrap_or_else(|p| p.into_inner()).commit();
+        self.inner
+            .lock()
+            .unwrap_or_else(|p| p.into_inner())
+            .commit();
     }
 
     /// Drops the uncommitted drag.
     fn cancel(&self) {
-        self.inner.lock().unwrap_or_else(|p| p.into_inner()).cancel();
+        self.inner
+            .lock()
+            .unwrap_or_else(|p| p.into_inner())
+            .cancel();
     }
 
     /// Forgets every edit.
