@@ -208,6 +208,22 @@ def test_deleted_group_warns_naming_it_and_the_status_says_what_renders_show():
     assert _angle(api.field(ball)[outside]).min() > 0.01
     stored = api.stored_field(ball)
     np.testing.assert_allclose(evaluate.quaternions(stored), api.field(ball), atol=1e-5)
+    assert not [m for m in ball.modifiers if m.name.startswith(evaluate.VG_MODIFIER_PREFIX)]  # its reader went
+
+
+def test_choosing_another_group_in_the_sidebar_reads_that_group():
+    ball, patch = _ball()
+    co = np.array([v.co for v in ball.data.vertices])
+    core = np.flatnonzero(co[:, 1] < -0.9)  # a smaller patch around the constraint
+    ball.vertex_groups.new(name="Core").add(core.tolist(), 1.0, "REPLACE")
+    ball.rokeby.regions[0].vertex_group = "Core"  # what the sidebar's search field sets
+    rep = api.evaluate()["Ball"]
+    assert rep.status == "OK", rep.summary()
+    q = api.field(ball)
+    ring = np.setdiff1d(patch, core)
+    far = ring[co[ring, 1] > -0.75]  # in Patch, well outside Core and its border
+    assert _angle(q[core]).max() > 0.05 and _angle(q[far]).max() < 1e-6
+    assert evaluate.find_reader(ball, "Core") is not None and evaluate.find_reader(ball, "Patch") is None
 
 
 # --- problem 4: geodesic distances on a mesh of several pieces ----------------------------------

@@ -94,9 +94,13 @@ class MirrorReport:
     # Geodesic distances: (pieces of the mesh no constraint reaches over the surface, pieces).
     unreached_pieces: "tuple | None" = None
 
+    # Messages that do not change the status (see note()).
+    notes: list = field(default_factory=list)
+
     def note(self, text: str):
         """A message that does not change the status (a documented rule at work, not a problem)."""
         self.messages.append(text)
+        self.notes.append(text)
 
     def warn(self, text: str):
         self.messages.append(text)
@@ -422,7 +426,7 @@ def ensure_reader(obj, group: str, renamed_from: "str | None" = None) -> "str | 
             obj.data.attributes.remove(baked)
             why = f"the reader modifier of vertex group '{group}' was applied, which froze its weights; it was added again so the region follows the painting"
         else:
-            why = f"the reader modifier of vertex group '{group}' was missing; it was added again"
+            why = f"vertex group '{group}' had no reader modifier; it was added"
         mod = obj.modifiers.new(VG_MODIFIER_PREFIX + group, "NODES")
         mod.node_group = vertex_group_reader()
         mod.show_in_editmode = False
@@ -485,7 +489,7 @@ def sync_freeform_regions(obj) -> list:
     evaluated again before the weights can be read (empty: the weights can be read now)."""
     s = obj.rokeby
     free = [rg for rg in s.regions if rg.kind == "FREEFORM"]
-    if not free:
+    if not free and not _readers(obj):
         return []
     names = [vg.name for vg in obj.vertex_groups]
     snapshot = _group_names(obj)
@@ -509,8 +513,13 @@ def sync_freeform_regions(obj) -> list:
         why = ensure_reader(obj, group, renamed.get(group))
         if why is not None:
             changes.append(why)
-    # Readers no region uses are left to remove_region: removing a modifier here would free data
-    # the evaluated mesh at hand still refers to (and one reading a deleted group reads nothing).
+    # Readers no region uses any more (the group was deleted, the region changed kind or group)
+    # go; like every change here, the mirror is then pending (nothing of the evaluated mesh at
+    # hand is touched again: it may refer to the removed modifier).
+    unused = [mod for mod in _readers(obj) if mod.get(_reader_ids(mod).get("Vertex Group", ""), None) not in used]
+    if unused:
+        changes.append("removed the reader modifier" + ("s " if len(unused) > 1 else " ") + ", ".join(f"'{m.name}'" for m in unused) + " that no free-form region uses")
+        drop_unused_readers(obj, used)
     if free:
         remember_groups(obj)
     return changes
@@ -1292,7 +1301,8 @@ def _defer_estimate(obj, state, args):
         if rep is not None and rep.status != "ERROR":
             rep.interpolation_error = est
             base = [m for m in rep.messages if not (m.startswith("the mesh is too coarse") or " the edited reflection points below the surface" in m)]
-            rep.messages, rep.status = base, ("DISABLED" if rep.status == "DISABLED" else "OK" if not base else rep.status)
+            warned = [m for m in base if m not in rep.notes]
+            rep.messages, rep.status = base, ("DISABLED" if rep.status == "DISABLED" else "OK" if not warned else rep.status)
             for msg in st.field_notes:
                 rep.warn(msg)
         import bpy  # noqa: PLC0415
@@ -1395,7 +1405,7 @@ def evaluate_mirror(obj, scene, depsgraph, *, force=False, reread_geometry=False
             kept.recomputed = False
             # Same field, but the warnings describe the scene as it is now (e.g. a deleted light
             # whose highlight handle stayed where it was).
-            kept.messages, kept.status = list(report.messages), report.status
+            kept.messages, kept.status, kept.notes = list(report.messages), report.status, list(report.notes)
             if state.reach_note is not None:
                 kept.note(state.reach_note)
             for msg in state.field_notes:
