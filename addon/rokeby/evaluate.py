@@ -1534,11 +1534,13 @@ def evaluate_scene(scene, depsgraph, *, force=False, geometry_changed=None, all_
     for ob in mirrors_of(scene):
         reread = all_geometry or ob in changed or (ob.type == "MESH" and ob.data in changed)
         out[ob.name] = evaluate_mirror(ob, scene, depsgraph, force=force, reread_geometry=reread, interactive=interactive)
-    pending = [ob for ob in mirrors_of(scene) if ob.name in out and out[ob.name].pending]
+    pending = [name for name, rep in out.items() if rep.pending]
     if settle and pending:
         depsgraph.update()  # our own handlers are guarded against re-entrance (handlers._busy)
-        for ob in pending:
-            out[ob.name] = evaluate_mirror(ob, scene, depsgraph, force=force, reread_geometry=True, interactive=interactive)
+        for name in pending:
+            ob = scene.objects.get(name)
+            if ob is not None:
+                out[name] = evaluate_mirror(ob, scene, depsgraph, force=force, reread_geometry=True, interactive=interactive)
     # Forget objects that no longer exist.
     import bpy  # noqa: PLC0415
 
