@@ -479,52 +479,18 @@ def remove_constraint(mirror, index: int, *, delete_handles: bool = True, scene=
     _remove_objects(doomed)
 
 
-def _vertex_group_reader():
-    """The Geometry Nodes group that copies a vertex group into a float point attribute, so the
-    evaluator reads painted weights with foreach_get instead of a loop over vertices."""
-    import bpy  # noqa: PLC0415
-
-    ng = bpy.data.node_groups.get(_ev.VG_NODE_GROUP)
-    if ng is not None and ng.bl_idname == "GeometryNodeTree" and ng.library is None:
-        return ng
-    ng = bpy.data.node_groups.new(_ev.VG_NODE_GROUP, "GeometryNodeTree")
-    ng.interface.new_socket("Geometry", in_out="INPUT", socket_type="NodeSocketGeometry")
-    ng.interface.new_socket("Vertex Group", in_out="INPUT", socket_type="NodeSocketString")
-    ng.interface.new_socket("Attribute", in_out="INPUT", socket_type="NodeSocketString")
-    ng.interface.new_socket("Geometry", in_out="OUTPUT", socket_type="NodeSocketGeometry")
-    gi = ng.nodes.new("NodeGroupInput")
-    go = ng.nodes.new("NodeGroupOutput")
-    named = ng.nodes.new("GeometryNodeInputNamedAttribute")
-    named.data_type = "FLOAT"
-    store = ng.nodes.new("GeometryNodeStoreNamedAttribute")
-    store.data_type = "FLOAT"
-    store.domain = "POINT"
-    ng.links.new(gi.outputs["Geometry"], store.inputs["Geometry"])
-    ng.links.new(gi.outputs["Vertex Group"], named.inputs["Name"])
-    ng.links.new(gi.outputs["Attribute"], store.inputs["Name"])
-    ng.links.new(named.outputs["Attribute"], store.inputs["Value"])
-    ng.links.new(store.outputs["Geometry"], go.inputs["Geometry"])
-    return ng
+# The reader modifier of free-form regions lives with the region code (rokeby.evaluate), which
+# keeps it live: remade when applied or removed, repointed when the vertex group is renamed.
+_vertex_group_reader = _ev.vertex_group_reader
 
 
 def _ensure_reader(mirror, group):
-    name = _ev.VG_MODIFIER_PREFIX + group
-    mod = mirror.modifiers.get(name)
-    if mod is None:
-        mod = mirror.modifiers.new(name, "NODES")
-        mod.node_group = _vertex_group_reader()
-        mod.show_in_editmode = False
-    ids = {item.name: item.identifier for item in mod.node_group.interface.items_tree if getattr(item, "in_out", "") == "INPUT"}
-    mod[ids["Vertex Group"]] = group
-    mod[ids["Attribute"]] = _ev.REGION_ATTRIBUTE_PREFIX + group
-    return mod
+    _ev.ensure_reader(mirror, group)
+    return _ev.find_reader(mirror, group)
 
 
 def _drop_unused_readers(mirror):
-    used = {rg.vertex_group for rg in mirror.rokeby.regions if rg.kind == "FREEFORM"}
-    for mod in list(mirror.modifiers):
-        if mod.name.startswith(_ev.VG_MODIFIER_PREFIX) and mod.name[len(_ev.VG_MODIFIER_PREFIX):] not in used:
-            mirror.modifiers.remove(mod)
+    _ev.drop_unused_readers(mirror)
 
 
 def add_region(mirror, kind: str = "EUCLIDEAN", *, center=None, radius: float = 1.0, border: float = 0.25, vertex_group: str = "", name: str = "", scene=None):
@@ -551,8 +517,13 @@ def add_region(mirror, kind: str = "EUCLIDEAN", *, center=None, radius: float = 
     try:
         centre_ob = None
         if kind == "FREEFORM":
-            if not vertex_group or mirror.vertex_groups.get(vertex_group) is None:
-                raise RokebyError(f"vertex_group: mirror '{mirror.name}' has no vertex group '{vertex_group}'")
+            have = ", ".join(f"'{vg.name}'" for vg in mirror.vertex_groups)
+            if not isinstance(vertex_group, str) or not vertex_group:
+                raise RokebyError(
+                    f"vertex_group: a free-form region needs the name of a vertex group of mirror '{mirror.name}' "
+                    + (f"(it has {have})" if have else "(it has none: paint one first, e.g. in Weight Paint mode)"))
+            if mirror.vertex_groups.get(vertex_group) is None:
+                raise RokebyError(f"vertex_group: mirror '{mirror.name}' has no vertex group '{vertex_group}'" + (f" (it has {have})" if have else " (it has none)"))
         elif isinstance(center, bpy.types.Object):
             centre_ob = center
         else:
@@ -577,6 +548,9 @@ def add_region(mirror, kind: str = "EUCLIDEAN", *, center=None, radius: float = 
         item.radius = float(radius)
         item.border = float(border)
         item.vertex_group = vertex_group
+        if kind == "FREEFORM":
+            item.vertex_group_index = mirror.vertex_groups.find(vertex_group)
+            _ev.remember_groups(mirror)
         item.center = centre_ob
         mirror.rokeby.active_region = len(mirror.rokeby.regions) - 1
     except Exception:

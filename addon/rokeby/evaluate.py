@@ -88,6 +88,19 @@ class MirrorReport:
     render_note: str = ""
     # Estimated render-vs-preview difference between vertices, degrees: (99th percentile, max).
     interpolation_error: "tuple | None" = None
+    # A free-form region's reader modifier was (re)made or repointed: the weights are read at the
+    # next evaluation of the mesh; until then the previous field stays (the status says why).
+    pending: bool = False
+    # Geodesic distances: (pieces of the mesh no constraint reaches over the surface, pieces).
+    unreached_pieces: "tuple | None" = None
+
+    # Messages that do not change the status (see note()).
+    notes: list = field(default_factory=list)
+
+    def note(self, text: str):
+        """A message that does not change the status (a documented rule at work, not a problem)."""
+        self.messages.append(text)
+        self.notes.append(text)
 
     def warn(self, text: str):
         self.messages.append(text)
@@ -110,6 +123,7 @@ class _Geometry:
         self.source = source  # "evaluated" or "base"
         self.size = float(np.linalg.norm(vertices.max(0) - vertices.min(0))) if len(vertices) else 0.0
         self.region_weights: dict[str, np.ndarray] = {}
+        self.region_problems: dict[str, str] = {}  # vertex group → why it could not be read
         self.bvh = None
         self._poly_start = None
         self.edges = None  # mesh_edges(triangles), made on first use
@@ -162,6 +176,10 @@ class _State:
         self.estimate_time = -1e9
         self.estimate_args = None
         self.corner_topology = None
+        # Geodesic metric: (geometry version, piece label per vertex), and the status line about
+        # pieces no constraint reaches (kept with the report while nothing changes).
+        self.pieces = None
+        self.reach_note: "str | None" = None
 
 
 _STATE: dict[int, _State] = {}
@@ -302,22 +320,209 @@ def read_geometry(obj, depsgraph, mirror_matrix: np.ndarray, freeform_groups=())
     v, n = to_world(co, nrm, mirror_matrix, f"mirror '{obj.name}'")
     geo = _Geometry(v, n, tri.reshape(-1, 3), tri_poly, source)
     for group in freeform_groups:
-        geo.region_weights[group] = _vertex_group_weights(obj, me, group, source)
+        # A group that cannot be read is the region's problem (a warning naming the group, the
+        # region left out), not the mirror's: the other regions and constraints still evaluate.
+        try:
+            geo.region_weights[group] = _vertex_group_weights(obj, me, group)
+        except RokebyError as exc:
+            geo.region_problems[group] = str(exc)
     return geo
 
 
-def _vertex_group_weights(obj, me, group: str, source: str) -> np.ndarray:
+def _vertex_group_weights(obj, me, group: str) -> np.ndarray:
     """Per-vertex weights of a vertex group, read without a Python loop: the reader modifier
     (a Geometry Nodes 'Store Named Attribute') copies the group into a float point attribute of
-    the evaluated mesh."""
+    the evaluated mesh. Only a live, enabled reader counts: a copy of the weights baked into the
+    mesh (the reader applied, Convert ▸ Mesh) would no longer follow the painting."""
     if obj.vertex_groups.get(group) is None:
-        raise RokebyError(f"free-form region: mirror '{obj.name}' has no vertex group '{group}'")
+        raise RokebyError(f"vertex group '{group}' was deleted (or renamed while the add-on could not follow)")
+    mod = find_reader(obj, group)
+    if mod is None:
+        raise RokebyError(f"vertex group '{group}' has no reader modifier '{VG_MODIFIER_PREFIX}{group}'")
+    if not mod.show_viewport:
+        raise RokebyError(f"the reader modifier '{mod.name}' of vertex group '{group}' is disabled in the viewport; enable it")
     attr = me.attributes.get(REGION_ATTRIBUTE_PREFIX + group)
     if attr is None or attr.domain != "POINT" or attr.data_type != "FLOAT":
-        raise RokebyError(f"free-form region '{group}': its reader modifier '{VG_MODIFIER_PREFIX}{group}' is missing or disabled")
+        raise RokebyError(f"the reader modifier '{mod.name}' of vertex group '{group}' gave no weights (is a modifier above it removing them?)")
     w = np.empty(len(me.vertices), dtype=np.float32)
     attr.data.foreach_get("value", w)
     return np.clip(np.nan_to_num(w, nan=0.0), 0.0, 1.0)
+
+
+# --- free-form regions: the painted vertex group, followed through renames ----------------------
+# Vertex groups have no pointer, so a region stores its group's name (what the sidebar shows)
+# and index, and the mirror the names of all its groups as of the last update
+# (``vertex_group_names``, JSON). A name that disappeared while the group count stayed the same
+# and another name, new to the list, took its index, is a rename: the region follows it. Anything
+# else (a deleted group, groups added and removed at once) leaves the name as it is, and the
+# region warns naming it.
+
+
+def _reader_tree(ng) -> bool:
+    return ng is not None and ng.bl_idname == "GeometryNodeTree" and ng.name.split(".")[0] == VG_NODE_GROUP
+
+
+def vertex_group_reader():
+    """The Geometry Nodes group that copies a vertex group into a float point attribute, so the
+    evaluator reads painted weights with foreach_get instead of a loop over vertices."""
+    import bpy  # noqa: PLC0415
+
+    ng = bpy.data.node_groups.get(VG_NODE_GROUP)
+    if ng is not None and ng.bl_idname == "GeometryNodeTree" and ng.library is None:
+        return ng
+    ng = bpy.data.node_groups.new(VG_NODE_GROUP, "GeometryNodeTree")
+    ng.interface.new_socket("Geometry", in_out="INPUT", socket_type="NodeSocketGeometry")
+    ng.interface.new_socket("Vertex Group", in_out="INPUT", socket_type="NodeSocketString")
+    ng.interface.new_socket("Attribute", in_out="INPUT", socket_type="NodeSocketString")
+    ng.interface.new_socket("Geometry", in_out="OUTPUT", socket_type="NodeSocketGeometry")
+    gi = ng.nodes.new("NodeGroupInput")
+    go = ng.nodes.new("NodeGroupOutput")
+    named = ng.nodes.new("GeometryNodeInputNamedAttribute")
+    named.data_type = "FLOAT"
+    store = ng.nodes.new("GeometryNodeStoreNamedAttribute")
+    store.data_type = "FLOAT"
+    store.domain = "POINT"
+    ng.links.new(gi.outputs["Geometry"], store.inputs["Geometry"])
+    ng.links.new(gi.outputs["Vertex Group"], named.inputs["Name"])
+    ng.links.new(gi.outputs["Attribute"], store.inputs["Name"])
+    ng.links.new(named.outputs["Attribute"], store.inputs["Value"])
+    ng.links.new(store.outputs["Geometry"], go.inputs["Geometry"])
+    return ng
+
+
+def _reader_ids(mod) -> dict:
+    return {item.name: item.identifier for item in mod.node_group.interface.items_tree if getattr(item, "in_out", "") == "INPUT"}
+
+
+def find_reader(obj, group: str):
+    """The reader modifier of ``group`` on ``obj`` (found by what it reads, not by its name,
+    which Blender may have shortened), or None."""
+    for mod in obj.modifiers:
+        if mod.type == "NODES" and _reader_tree(mod.node_group):
+            ident = _reader_ids(mod).get("Vertex Group")
+            if ident is not None and mod.get(ident) == group:
+                return mod
+    return None
+
+
+def _readers(obj) -> list:
+    return [mod for mod in obj.modifiers if mod.type == "NODES" and _reader_tree(mod.node_group)]
+
+
+def ensure_reader(obj, group: str, renamed_from: "str | None" = None) -> "str | None":
+    """Make sure ``group`` has a live reader modifier: made when missing (a reader that was
+    applied, e.g. by Convert ▸ Mesh, leaves a baked copy of the weights in the mesh: it is
+    removed), repointed after a rename. Returns what changed when the evaluated mesh must be
+    evaluated again before the weights can be read (None: nothing)."""
+    attribute = REGION_ATTRIBUTE_PREFIX + group
+    mod = find_reader(obj, group)
+    why = None
+    if mod is None and renamed_from is not None:
+        mod = find_reader(obj, renamed_from)
+        why = f"vertex group '{renamed_from}' was renamed to '{group}'; its free-form region follows it"
+    if mod is None:
+        baked = obj.data.attributes.get(attribute)
+        if baked is not None:
+            obj.data.attributes.remove(baked)
+            why = f"the reader modifier of vertex group '{group}' was applied, which froze its weights; it was added again so the region follows the painting"
+        else:
+            why = f"vertex group '{group}' had no reader modifier; it was added"
+        mod = obj.modifiers.new(VG_MODIFIER_PREFIX + group, "NODES")
+        mod.node_group = vertex_group_reader()
+        mod.show_in_editmode = False
+    ids = _reader_ids(mod)
+    if mod.get(ids["Vertex Group"]) != group or mod.get(ids["Attribute"]) != attribute:
+        mod[ids["Vertex Group"]] = group
+        mod[ids["Attribute"]] = attribute
+        why = why or f"the reader modifier of vertex group '{group}' was repointed"
+    if renamed_from is not None and mod.name.startswith(VG_MODIFIER_PREFIX):
+        mod.name = VG_MODIFIER_PREFIX + group
+    if why is not None:
+        obj.update_tag()
+    return why
+
+
+def drop_unused_readers(obj, used=None):
+    """Remove the reader modifiers of groups no free-form region uses (and their copies)."""
+    if used is None:
+        used = {rg.vertex_group for rg in obj.rokeby.regions if rg.kind == "FREEFORM" and rg.vertex_group}
+    seen = set()
+    for mod in _readers(obj):
+        group = mod.get(_reader_ids(mod).get("Vertex Group", ""), None)
+        if group not in used or group in seen:
+            obj.modifiers.remove(mod)
+        else:
+            seen.add(group)
+
+
+def _renamed(old: str, index: int, names: list, snapshot: "list | None") -> "str | None":
+    """The new name of group ``old`` (at ``index`` at the last update) when it was renamed, else None."""
+    if snapshot is None or not 0 <= index < len(names) or len(names) != len(snapshot) or snapshot[index] != old:
+        return None
+    new = names[index]
+    return new if new not in snapshot else None
+
+
+def _group_names(obj) -> "list | None":
+    import json  # noqa: PLC0415
+
+    raw = obj.rokeby.vertex_group_names
+    try:
+        names = json.loads(raw) if raw else None
+    except ValueError:
+        return None
+    return names if isinstance(names, list) else None
+
+
+def remember_groups(obj):
+    """Store the names of ``obj``'s vertex groups as they are now (what rename detection compares with)."""
+    import json  # noqa: PLC0415
+
+    now = json.dumps([vg.name for vg in obj.vertex_groups])
+    if obj.rokeby.vertex_group_names != now:
+        obj.rokeby.vertex_group_names = now
+
+
+def sync_freeform_regions(obj) -> list:
+    """Free-form regions follow their vertex group: renames are followed (see above) and every
+    used group gets a live reader modifier. Returns what changed that needs the mirror's mesh
+    evaluated again before the weights can be read (empty: the weights can be read now)."""
+    s = obj.rokeby
+    free = [rg for rg in s.regions if rg.kind == "FREEFORM"]
+    if not free and not _readers(obj):
+        return []
+    names = [vg.name for vg in obj.vertex_groups]
+    snapshot = _group_names(obj)
+    changes, renamed = [], {}
+    for rg in free:
+        old = rg.vertex_group
+        if not old:
+            continue
+        if old in names:
+            index = names.index(old)
+        else:
+            new = _renamed(old, rg.vertex_group_index, names, snapshot)
+            if new is None:
+                continue  # the region warns naming the group (_region_inputs)
+            rg.vertex_group, index = new, names.index(new)
+            renamed[new] = old
+        if rg.vertex_group_index != index:
+            rg.vertex_group_index = index
+    used = {rg.vertex_group for rg in free if rg.vertex_group in names}
+    for group in sorted(used):
+        why = ensure_reader(obj, group, renamed.get(group))
+        if why is not None:
+            changes.append(why)
+    # Readers no region uses any more (the group was deleted, the region changed kind or group)
+    # go; like every change here, the mirror is then pending (nothing of the evaluated mesh at
+    # hand is touched again: it may refer to the removed modifier).
+    unused = [mod for mod in _readers(obj) if mod.get(_reader_ids(mod).get("Vertex Group", ""), None) not in used]
+    if unused:
+        changes.append("removed the reader modifier" + ("s " if len(unused) > 1 else " ") + ", ".join(f"'{m.name}'" for m in unused) + " that no free-form region uses")
+        drop_unused_readers(obj, used)
+    if free:
+        remember_groups(obj)
+    return changes
 
 
 def _bvh(geo: _Geometry):
@@ -523,11 +728,12 @@ def _region_inputs(obj, scene, depsgraph, geo, mirror_matrix, report):
                 raise RokebyError(f"{label}: radius and border must be finite and >= 0")
             if rg.kind == "FREEFORM":
                 if not rg.vertex_group:
-                    raise RokebyError(f"{label}: no vertex group chosen")
+                    raise RokebyError(f"{label}: no vertex group chosen (Regions ▸ Vertex group); the region is left out")
                 if obj.vertex_groups.get(rg.vertex_group) is None:
-                    raise RokebyError(f"{label}: vertex group '{rg.vertex_group}' was deleted or renamed")
+                    raise RokebyError(f"{label}: vertex group '{rg.vertex_group}' was deleted; the region is left out until you choose a group")
                 if rg.vertex_group not in geo.region_weights:
-                    raise RokebyError(f"{label}: vertex group '{rg.vertex_group}' could not be read")
+                    why = geo.region_problems.get(rg.vertex_group, f"vertex group '{rg.vertex_group}' could not be read")
+                    raise RokebyError(f"{label}: {why}; the region is left out")
                 specs.append(("FREEFORM", rg.vertex_group, border))
                 continue
             if not object_in_scene(rg.center, scene):
@@ -584,6 +790,119 @@ def _geodesic_distances(state: _State, geo: _Geometry, points, method: str, time
     if len(state.distance_cache) > 4 * max(len(points), 8):
         state.distance_cache = {k: v for k, v in state.distance_cache.items() if k in used}
     return out
+
+
+# --- geodesic distances on meshes of several pieces ----------------------------------------------
+# Geodesic distances do not cross gaps: a vertex on a piece (connected component) of the mesh that
+# no constraint is on is at +inf from every constraint. Rokeby's rule, the same for any number of
+# constraints K: where no constraint of a group (all constraints, or the constraints of one
+# region) reaches a vertex over the surface, that group blends its constraints there by
+# straight-line (Euclidean) distance, exactly as with Distance: Euclidean. With K = 1 that is the
+# constant rotation the one constraint gives everywhere (what the core did already); with K >= 2
+# the unreached pieces no longer fall back to no edit. Pieces that some constraints reach keep
+# their geodesic blend of those.
+
+
+def _region_falloff(d: np.ndarray, radius: float, border: float) -> np.ndarray:
+    """rokeby_core's region falloff (1 in the core, a smooth step over the border, 0 outside)."""
+    border = min(border, radius)
+    inner = radius - border
+    out = np.zeros(np.shape(d), dtype=np.float64)
+    inside = d < radius
+    core = inside & (d <= inner)
+    out[core] = 1.0
+    edge = inside & ~core
+    t = np.clip((d[edge] - inner) / border, 0.0, 1.0) if edge.any() else np.zeros(0)
+    out[edge] = 1.0 - t * t * (3.0 - 2.0 * t)
+    return out
+
+
+def constraint_groups(rows: np.ndarray, regions=None) -> list:
+    """The constraints that blend together (index arrays), as the core forms them: all of them
+    without regions, else per region those at which the region's weight is above 0."""
+    k = len(rows)
+    if not regions:
+        return [np.arange(k)] if k else []
+    p = np.asarray(rows, dtype=np.float64)[:, :3]
+    groups = []
+    for reg in regions:
+        if reg["kind"] == "euclidean":
+            a = _region_falloff(np.linalg.norm(p - np.asarray(reg["center"], dtype=np.float64), axis=1), float(reg["radius"]), float(reg["border"]))
+        else:
+            a = np.asarray(reg["at_constraints"], dtype=np.float64)
+        members = np.flatnonzero(a > 0.0)
+        if len(members):
+            groups.append(members)
+    return groups
+
+
+def unreached_fallback(distances: np.ndarray, rows: np.ndarray, vertices: np.ndarray, regions=None) -> np.ndarray:
+    """(K, V) geodesic distances with Rokeby's rule for unreached pieces applied (see above):
+    where no constraint of a group reaches a vertex, its constraints' distances there become
+    straight-line distances. A constraint in several groups keeps +inf where one of them is
+    reached (it must not enter that group's geodesic blend). Returns a new array when anything
+    changed (the cached distances are never modified)."""
+    d = np.asarray(distances, dtype=np.float32)
+    unreached = ~np.isfinite(d)
+    if not unreached.any() or not len(rows):
+        return d
+    allow = np.zeros_like(unreached)
+    first = np.ones(len(rows), dtype=bool)
+    for g in constraint_groups(rows, regions):
+        nobody = unreached[g].all(axis=0)
+        allow[g] = np.where(first[g][:, None], nobody[None, :], allow[g] & nobody[None, :])
+        first[g] = False
+    fallback = unreached & allow
+    if not fallback.any():
+        return d
+    out = d.copy()
+    cols = np.flatnonzero(fallback.any(axis=0))
+    p = np.asarray(rows, dtype=np.float64)[:, :3]
+    v = np.asarray(vertices, dtype=np.float64)
+    for n in np.flatnonzero(fallback.any(axis=1)):
+        c = cols[fallback[n, cols]]
+        out[n, c] = np.linalg.norm(v[c] - p[n], axis=1)
+    return out
+
+
+def mesh_pieces(triangles: np.ndarray, n_vertices: int) -> np.ndarray:
+    """Connected component (piece) of each vertex over the triangles' edges, labelled by its
+    smallest vertex index; -1 for vertices in no triangle. Union by hooking roots to the smaller
+    label and pointer jumping: a few numpy passes, no Python loop over vertices."""
+    lab = np.arange(n_vertices, dtype=np.int64)
+    tri = np.asarray(triangles, dtype=np.int64)
+    if len(tri):
+        a = tri.ravel()
+        b = tri[:, [1, 2, 0]].ravel()
+        while True:
+            la, lb = lab[a], lab[b]
+            diff = la != lb
+            if not diff.any():
+                break
+            lo, hi = np.minimum(la[diff], lb[diff]), np.maximum(la[diff], lb[diff])
+            np.minimum.at(lab, hi, lo)
+            while True:
+                nxt = lab[lab]
+                if np.array_equal(nxt, lab):
+                    break
+                lab = nxt
+    used = np.zeros(n_vertices, dtype=bool)
+    used[tri.ravel()] = True
+    return np.where(used, lab, -1)
+
+
+def _unreached_pieces(state, geo, distances) -> "tuple | None":
+    """(pieces no constraint reaches over the surface, pieces of the mesh), or None when every
+    piece is reached."""
+    nobody = ~np.isfinite(distances).any(axis=0)
+    if not nobody.any():
+        return None
+    if state.pieces is None or state.pieces[0] != state.geometry_version:
+        state.pieces = (state.geometry_version, mesh_pieces(geo.triangles, len(geo.vertices)))
+    labels = state.pieces[1]
+    total = len(np.unique(labels[labels >= 0]))
+    hit = labels[nobody & (labels >= 0)]
+    return int(len(np.unique(hit))), int(total)
 
 
 def _regions_for_native(state, geo, specs, points, method, timer):
@@ -982,7 +1301,8 @@ def _defer_estimate(obj, state, args):
         if rep is not None and rep.status != "ERROR":
             rep.interpolation_error = est
             base = [m for m in rep.messages if not (m.startswith("the mesh is too coarse") or " the edited reflection points below the surface" in m)]
-            rep.messages, rep.status = base, ("DISABLED" if rep.status == "DISABLED" else "OK" if not base else rep.status)
+            warned = [m for m in base if m not in rep.notes]
+            rep.messages, rep.status = base, ("DISABLED" if rep.status == "DISABLED" else "OK" if not warned else rep.status)
             for msg in st.field_notes:
                 rep.warn(msg)
         import bpy  # noqa: PLC0415
@@ -1022,6 +1342,17 @@ def evaluate_mirror(obj, scene, depsgraph, *, force=False, reread_geometry=False
             # Edit Mode writes its own mesh back on exit; the field follows when it does.
             report.warn("paused while the mirror is in Edit Mode")
             _DIRTY.add(uid)
+            state.report = report
+            return report
+        changes = sync_freeform_regions(obj)
+        if changes:
+            # The reader's weights are in the next evaluation of the mesh; the ones at hand are
+            # stale, so nothing is computed now and the previous field stays, as the status says.
+            _DIRTY.add(uid)
+            state.fingerprint = None
+            for msg in changes:
+                report.warn(f"{msg}; the field follows at the next update (until then renders show the previous one)")
+            report.pending = True
             state.report = report
             return report
         mirror_matrix = _finite_matrix(obj.evaluated_get(depsgraph).matrix_world, f"mirror '{name}'")
@@ -1074,7 +1405,9 @@ def evaluate_mirror(obj, scene, depsgraph, *, force=False, reread_geometry=False
             kept.recomputed = False
             # Same field, but the warnings describe the scene as it is now (e.g. a deleted light
             # whose highlight handle stayed where it was).
-            kept.messages, kept.status = list(report.messages), report.status
+            kept.messages, kept.status, kept.notes = list(report.messages), report.status, list(report.notes)
+            if state.reach_note is not None:
+                kept.note(state.reach_note)
             for msg in state.field_notes:
                 kept.warn(msg)
             kept.eye = report.eye
@@ -1087,17 +1420,25 @@ def evaluate_mirror(obj, scene, depsgraph, *, force=False, reread_geometry=False
             # One query for both kinds: the per-point cache keeps every current constraint's solve.
             distances = _geodesic_distances(state, geo, points + t_points, method, timer)
             if np.all(np.isinf(distances)):
-                report.warn("no constraint reaches this mesh over its surface")
+                report.warn("no constraint reaches this mesh over its surface; it takes the field of straight-line distances")
+            report.unreached_pieces = _unreached_pieces(state, geo, distances)
+        state.reach_note = None
+        if report.unreached_pieces is not None:
+            n, total = report.unreached_pieces
+            state.reach_note = (
+                f"{n} of {total} pieces of the mesh have no constraint on them: geodesic distances do not cross gaps, "
+                "so there the constraints blend by straight-line distance")
+            report.note(state.reach_note)
         old = state.field_fingerprints
         transfer = geo.source == "transfer"
         target = carrier_of(obj) if transfer else obj
         stored = target is not None and _has_attribute(target, ATTRIBUTE) and _has_render_attribute(target)
         if force or old.get(ATTRIBUTE) != fp_reflection or not stored:
             kwargs = {"polar": polar}
-            if distances is not None and len(rows):
-                kwargs["distances"] = distances[: len(rows)]
             if specs:
                 kwargs["regions"] = _regions_for_native(state, geo, specs, points, method, timer)
+            if distances is not None and len(rows):
+                kwargs["distances"] = unreached_fallback(distances[: len(rows)], rows, geo.vertices, kwargs.get("regions"))
             # One field for the preview and the render: the parts of eq. 7 that do not depend on
             # the view, blended towards r rᵀ per shading point by the render nodes.
             parts = timer(native.rotation_field, geo.vertices, rows, output="view_blend", **kwargs)
@@ -1142,10 +1483,10 @@ def evaluate_mirror(obj, scene, depsgraph, *, force=False, reread_geometry=False
             remove_attribute(obj, REFRACTION_ATTRIBUTE)
         elif force or old.get(REFRACTION_ATTRIBUTE) != fp_refraction or not _has_attribute(obj, REFRACTION_ATTRIBUTE):
             kwargs = {"polar": polar}
-            if distances is not None:
-                kwargs["distances"] = distances[len(rows):]
             if specs:
                 kwargs["regions"] = _regions_for_native(state, geo, specs, t_points, method, timer)
+            if distances is not None:
+                kwargs["distances"] = unreached_fallback(distances[len(rows):], t_rows, geo.vertices, kwargs.get("regions"))
             tv = timer(native.rotation_field, geo.vertices, t_rows, output="rotation_vector", **kwargs)
             write_attribute(obj, tv, REFRACTION_ATTRIBUTE)
             state.refractions = tv
@@ -1179,15 +1520,27 @@ def mirrors_of(scene) -> list:
     return [ob for ob in scene.objects if ob.rokeby.is_mirror]
 
 
-def evaluate_scene(scene, depsgraph, *, force=False, geometry_changed=None, all_geometry=False, interactive=False) -> dict:
+def evaluate_scene(scene, depsgraph, *, force=False, geometry_changed=None, all_geometry=False, interactive=False, settle=True) -> dict:
     """Evaluate every mirror of ``scene``; ``geometry_changed``: original IDs Blender reported
     with new geometry (their meshes are re-read), ``all_geometry``: re-read every mirror's mesh
-    (a frame change can deform any of them); ``interactive``: see ``evaluate_mirror``."""
+    (a frame change can deform any of them); ``interactive``: see ``evaluate_mirror``;
+    ``settle``: when a mirror is pending (a free-form region's reader modifier was remade or
+    repointed), update ``depsgraph`` and evaluate it again at once, so the status never describes
+    weights older than the painting. Blender would re-evaluate the tagged mesh after the
+    depsgraph handler anyway, but without calling the handlers again, so the field would wait
+    for the next edit."""
     out = {}
     changed = geometry_changed or set()
     for ob in mirrors_of(scene):
         reread = all_geometry or ob in changed or (ob.type == "MESH" and ob.data in changed)
         out[ob.name] = evaluate_mirror(ob, scene, depsgraph, force=force, reread_geometry=reread, interactive=interactive)
+    pending = [name for name, rep in out.items() if rep.pending]
+    if settle and pending:
+        depsgraph.update()  # our own handlers are guarded against re-entrance (handlers._busy)
+        for name in pending:
+            ob = scene.objects.get(name)
+            if ob is not None:
+                out[name] = evaluate_mirror(ob, scene, depsgraph, force=force, reread_geometry=True, interactive=interactive)
     # Forget objects that no longer exist.
     import bpy  # noqa: PLC0415
 

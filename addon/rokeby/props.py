@@ -174,7 +174,10 @@ class RokebyRegion(PropertyGroup):
         subtype="DISTANCE",
         update=_touch,
     )
-    vertex_group: StringProperty(name="Vertex group", description="Painted weights of a free-form region", update=_touch)
+    vertex_group: StringProperty(name="Vertex group", description="Painted weights of a free-form region (followed when the group is renamed)", update=_touch)
+    # Where the group was at the last update: with the mirror's vertex_group_names, how a rename
+    # is told from a deletion (vertex groups have no pointer). -1: not known yet.
+    vertex_group_index: IntProperty(name="Vertex group index", default=-1, options={"HIDDEN"})
 
 
 class RokebyMirror(PropertyGroup):
@@ -208,6 +211,9 @@ class RokebyMirror(PropertyGroup):
         update=_touch,
     )
     data_version: IntProperty(name="Data version", default=0, options={"HIDDEN"})
+    # The names of the object's vertex groups at the last update (JSON list), kept while it has
+    # free-form regions: a rename shows as one name replaced at the same index.
+    vertex_group_names: StringProperty(name="Vertex group names", options={"HIDDEN"})
     field_carrier: PointerProperty(
         type=bpy.types.Object,
         name="Field carrier",
