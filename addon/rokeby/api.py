@@ -574,19 +574,28 @@ def remove_region(mirror, index: int, *, delete_center: bool = True, scene=None)
     _ev.mark_dirty(mirror)
 
 
+def _other_mirrors_of_mesh(mirror) -> list:
+    """The other mirrors using ``mirror``'s mesh (Alt+D copies, Ctrl+L ▸ Link Object Data)."""
+    import bpy  # noqa: PLC0415
+
+    me = mirror.data
+    if me is None or not _ev.shares_mesh(mirror):
+        return []
+    return [ob for ob in bpy.data.objects if ob != mirror and ob.data == me and ob.rokeby.is_mirror]
+
+
 def remove_mirror(mirror, *, scene=None):
-    """Stop editing ``mirror``: its constraints, regions, handles and field attribute go."""
+    """Stop editing ``mirror``: its constraints, regions, handles and field go. The field of
+    another mirror is never touched: a mesh shared with other mirrors keeps its attributes (it
+    holds no field of this one: that lives in this mirror's own carrier, removed here)."""
     scene = _scene(scene)
     _require_mirror(mirror)
     while len(mirror.rokeby.constraints):
         remove_constraint(mirror, len(mirror.rokeby.constraints) - 1, scene=scene)
     while len(mirror.rokeby.regions):
         remove_region(mirror, len(mirror.rokeby.regions) - 1, scene=scene)
-    attr = mirror.data.attributes.get(ATTRIBUTE)
-    if attr is not None:
-        mirror.data.attributes.remove(attr)
-    _ev.remove_attribute(mirror, _ev.REFRACTION_ATTRIBUTE)
-    _ev.remove_render_attribute(mirror)
+    if not _other_mirrors_of_mesh(mirror):
+        _ev.strip_field(mirror.data)
     _ev.remove_carrier(mirror)
     mirror.rokeby.is_mirror = False
     from . import rendering  # noqa: PLC0415
@@ -630,8 +639,8 @@ def field(mirror) -> "np.ndarray | None":
 
 def stored_field(mirror) -> "np.ndarray | None":
     """The rotation vectors stored for ``mirror`` (the view-independent form, eq. 7 towards I): per
-    vertex of its mesh, or of its evaluated mesh when a modifier changes the vertex count (then
-    held by its field carrier)."""
+    vertex of its mesh, or of its evaluated mesh when a modifier changes the vertex count or the
+    mesh is shared with other objects (then held by its own field carrier)."""
     carrier = _ev.carrier_of(mirror)
     return _ev.read_attribute(carrier if carrier is not None else mirror)
 
@@ -644,8 +653,10 @@ def refraction_field(mirror) -> "np.ndarray | None":
 
 def stored_refraction(mirror) -> "np.ndarray | None":
     """The rotation vectors (V, 3) of the refraction field stored in the mesh attribute
-    ``rokeby_refraction`` (None when the mirror has no refraction constraint)."""
-    return _ev.read_attribute(mirror, _ev.REFRACTION_ATTRIBUTE)
+    ``rokeby_refraction``, or in the mirror's field carrier as for ``stored_field`` (None when
+    the mirror has no refraction constraint)."""
+    carrier = _ev.carrier_of(mirror)
+    return _ev.read_attribute(carrier if carrier is not None else mirror, _ev.REFRACTION_ATTRIBUTE)
 
 
 def set_ior(mirror, ior: float):

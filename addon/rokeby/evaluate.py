@@ -20,6 +20,13 @@ recomputed; ``stats()`` counts both cases. Geodesic distances are cached per con
 point, and the geodesic solver (with its factorisation) per mesh, so a handle move costs one solve
 for the handle that moved.
 
+Shared meshes (Alt+D copies, Ctrl+L ▸ Link Object Data): a mesh used by more than one object
+holds no field. Each mirror using it writes its field to a carrier of its own ("Rokeby field:
+<mirror>", owned by that mirror) that its "Rokeby field" modifier copies onto its evaluated mesh,
+so one mirror's edit never overwrites another's and removing one never deletes another's
+(``shares_mesh``, ``ensure_carrier``). Copies of a mirror get handles of their own
+(rokeby.duplicates).
+
 Nothing here raises into Blender's handlers: a mirror that cannot be evaluated gets an ERROR
 report (shown in the sidebar) and keeps its previous attribute values; every other mirror still
 evaluates. Values are checked to be finite before they are written.
@@ -127,6 +134,7 @@ class _Geometry:
         self.bvh = None
         self._poly_start = None
         self.edges = None  # mesh_edges(triangles), made on first use
+        self.shared = False  # the mesh had other users when read (see shares_mesh)
 
     def triangles_of_polygon(self, poly: int) -> range:
         if self._poly_start is None:
@@ -294,14 +302,23 @@ def to_world(co, nrm, matrix, what: str):
     return v.astype(np.float32), n.astype(np.float32)
 
 
+def shares_mesh(obj) -> bool:
+    """Whether ``obj``'s mesh is used by other objects too (Alt+D, Ctrl+L ▸ Link Object Data):
+    its field then lives in a carrier of its own, never in the shared mesh."""
+    me = obj.data
+    return me is not None and me.users - int(me.use_fake_user) > 1
+
+
 def read_geometry(obj, depsgraph, mirror_matrix: np.ndarray, freeform_groups=()) -> _Geometry:
     """The mirror's mesh in world space: always the evaluated mesh (modifiers, shape keys,
     armatures), the surface the render shows. When a modifier changes the vertex count
-    (Subdivision), source is "transfer": the field goes to a carrier mesh of that topology,
-    which the 'Rokeby field' modifier at the end of the stack copies onto the evaluated mesh."""
+    (Subdivision), or the mesh is shared with other objects, source is "transfer": the field goes
+    to the mirror's own carrier mesh of that topology, which the 'Rokeby field' modifier at the
+    end of the stack copies onto the evaluated mesh."""
     ob_eval = obj.evaluated_get(depsgraph)
     me = ob_eval.data
-    source = "evaluated" if len(me.vertices) == len(obj.data.vertices) else "transfer"
+    shared = shares_mesh(obj)
+    source = "evaluated" if len(me.vertices) == len(obj.data.vertices) and not shared else "transfer"
     nv = len(me.vertices)
     if nv == 0 or len(me.polygons) == 0:
         raise RokebyError(f"mirror '{obj.name}' has no faces")
@@ -319,6 +336,7 @@ def read_geometry(obj, depsgraph, mirror_matrix: np.ndarray, freeform_groups=())
     me.loop_triangle_polygons.foreach_get("value", tri_poly)
     v, n = to_world(co, nrm, mirror_matrix, f"mirror '{obj.name}'")
     geo = _Geometry(v, n, tri.reshape(-1, 3), tri_poly, source)
+    geo.shared = shared
     for group in freeform_groups:
         # A group that cannot be read is the region's problem (a warning naming the group, the
         # region left out), not the mirror's: the other regions and constraints still evaluate.
@@ -665,6 +683,10 @@ def _constraint_inputs(obj, scene, depsgraph, geo, mirror_matrix, report, kind="
                 raise RokebyError(f"{label}: its green ({'transmitted' if refraction else 'reflected'}) handle was deleted")
             if getattr(c, "light_name", "") and green.parent is None:
                 report.warn(f"{label}: the light '{c.light_name}' its green handle followed was deleted or unparented; the handle stays where it is")
+            kept_on = shrinkwrap_target(red)
+            if kept_on is not None and kept_on != obj:
+                report.warn(f"{label}: red handle '{red.name}' is kept on '{kept_on.name}' (its Shrinkwrap), not on this mirror; "
+                            "give this mirror its own constraint, or set the Shrinkwrap's target to it")
             red_m = _finite_matrix(red.evaluated_get(depsgraph).matrix_world, f"{label}: red handle '{red.name}'")
             green_m = _finite_matrix(green.evaluated_get(depsgraph).matrix_world, f"{label}: green handle '{green.name}'")
             eye = np.array(eye_now if from_camera else c.eye, dtype=np.float64)
@@ -702,6 +724,18 @@ def _constraint_inputs(obj, scene, depsgraph, geo, mirror_matrix, report, kind="
         except RokebyError as exc:
             report.warn(str(exc))
     return (np.array(rows, dtype=np.float32).reshape(-1, 9), points)
+
+
+SHRINKWRAP_NAME = "Rokeby: stay on mirror"
+
+
+def shrinkwrap_target(handle):
+    """The object a handle's "Rokeby: stay on mirror" Shrinkwrap keeps it on (None: it has none,
+    or no target)."""
+    for con in handle.constraints:
+        if con.type == "SHRINKWRAP" and con.name.startswith(SHRINKWRAP_NAME):
+            return con.target
+    return None
 
 
 def _transmitted(incident, normal, ior, label):
@@ -1128,22 +1162,62 @@ def _interpolation_error(geo, parts, eye, rows, kwargs, timer, ramp=False):
 CARRIER_PREFIX = "Rokeby field: "
 TRANSFER_GROUP = "Rokeby Field Transfer"
 TRANSFER_MODIFIER = "Rokeby field"
-TRANSFER_VERSION = 1
+# 2: the refraction field is copied too (zeros, read as the identity, where the carrier has none).
+TRANSFER_VERSION = 2
+FIELD_ATTRIBUTES = (ATTRIBUTE, RENDER_ATTRIBUTE, RENDER_ATTRIBUTE_WA, REFRACTION_ATTRIBUTE)
 
 
 def carrier_of(obj):
-    """The carrier object of ``obj`` (a mesh of the evaluated topology holding the field), or None."""
+    """The carrier object of ``obj`` (a mesh of the evaluated topology holding its field), or
+    None. A carrier owned by another mirror (``obj`` is a Shift+D or Alt+D copy of it) is not
+    ``obj``'s: it gets its own. (Carriers saved before owners existed are claimed at load time,
+    ``claim_carriers``.)"""
     c = getattr(obj.rokeby, "field_carrier", None)
     try:
-        return c if c is not None and c.type == "MESH" else None
+        if c is None or c.type != "MESH":
+            return None
+        owner = c.parent
+        return c if owner is None or owner == obj else None
     except ReferenceError:
         return None
 
 
+def strip_field(me) -> bool:
+    """Remove the field attributes from the mesh ``me`` (a shared mesh holds none: each mirror
+    using it carries its own); returns whether there were any."""
+    if me is None or me.library is not None:
+        return False
+    found = [a for a in (me.attributes.get(name) for name in FIELD_ATTRIBUTES) if a is not None]
+    for attr in found:
+        me.attributes.remove(attr)
+    if found:
+        me.update()
+    return bool(found)
+
+
+def claim_carriers():
+    """Load-time migration: a carrier saved without an owner (before copies were handled) is
+    claimed by the mirror it is named after, else by the first mirror pointing at it; the others
+    (copies that shared it) get their own at their next evaluation."""
+    import bpy  # noqa: PLC0415
+
+    users: dict = {}
+    for ob in bpy.data.objects:
+        s = getattr(ob, "rokeby", None)
+        c = s.field_carrier if s is not None else None
+        if c is not None and ob.library is None and c.library is None and c.parent is None:
+            users.setdefault(c.name, (c, []))[1].append(ob)
+    for c, obs in users.values():
+        named = [o for o in obs if c.name == CARRIER_PREFIX + o.name]
+        c.parent = (named or obs)[0]
+
+
 def _transfer_group():
-    """"Rokeby Field Transfer": copies the render rows and the rotation vectors of the Source
-    object's mesh onto the modified geometry, by index (the carrier has the same topology), on
-    face corners (a point attribute of the carrier adapts to its corners)."""
+    """"Rokeby Field Transfer": copies the render rows and the rotation vectors (reflection and
+    refraction) of the Source object's mesh onto the modified geometry, by index (the carrier has
+    the same topology), on face corners (a point attribute of the carrier adapts to its corners).
+    An attribute the carrier lacks arrives as zeros, which the render nodes read as a missing
+    one: the identity."""
     import bpy  # noqa: PLC0415
 
     ng = bpy.data.node_groups.get(TRANSFER_GROUP)
@@ -1161,7 +1235,7 @@ def _transfer_group():
     ng.links.new(gin.outputs["Source"], info.inputs["Object"])
     index = ng.nodes.new("GeometryNodeInputIndex")
     geometry = gin.outputs["Geometry"]
-    for name, domain in ((RENDER_ATTRIBUTE, "CORNER"), (RENDER_ATTRIBUTE_WA, "CORNER"), (ATTRIBUTE, "POINT")):
+    for name, domain in ((RENDER_ATTRIBUTE, "CORNER"), (RENDER_ATTRIBUTE_WA, "CORNER"), (ATTRIBUTE, "POINT"), (REFRACTION_ATTRIBUTE, "POINT")):
         read = ng.nodes.new("GeometryNodeInputNamedAttribute")
         read.data_type = "FLOAT_VECTOR"
         read.inputs["Name"].default_value = name
@@ -1183,7 +1257,8 @@ def _transfer_group():
 
 def ensure_carrier(obj, depsgraph):
     """The carrier of ``obj`` with the evaluated mesh's topology (rebuilt when it changes), and
-    the 'Rokeby field' modifier at the end of the stack reading it."""
+    the 'Rokeby field' modifier at the end of the stack reading it. A copy of a mirror gets a
+    carrier of its own (one owned by another mirror is left to it)."""
     import bpy  # noqa: PLC0415
 
     ob_eval = obj.evaluated_get(depsgraph)
@@ -1194,12 +1269,15 @@ def ensure_carrier(obj, depsgraph):
         mesh.name = CARRIER_PREFIX + obj.name
         if carrier is None:
             carrier = bpy.data.objects.new(CARRIER_PREFIX + obj.name, mesh)  # in no scene: never drawn
+            carrier.parent = obj
         else:
             old = carrier.data
             carrier.data = mesh
             if old.users == 0:
                 bpy.data.meshes.remove(old)
         obj.rokeby.field_carrier = carrier
+    if carrier.parent is None:
+        carrier.parent = obj
     mod = obj.modifiers.get(TRANSFER_MODIFIER)
     if mod is None or mod.type != "NODES":
         mod = obj.modifiers.new(TRANSFER_MODIFIER, "NODES")
@@ -1223,6 +1301,8 @@ def remove_carrier(obj) -> bool:
         obj.modifiers.remove(mod)
         found = True
     carrier = carrier_of(obj)
+    if carrier is None and obj.rokeby.field_carrier is not None:
+        obj.rokeby.field_carrier = None  # another mirror's (this one is its copy): left to it
     if carrier is not None:
         mesh = carrier.data
         obj.rokeby.field_carrier = None
@@ -1358,7 +1438,8 @@ def evaluate_mirror(obj, scene, depsgraph, *, force=False, reread_geometry=False
         mirror_matrix = _finite_matrix(obj.evaluated_get(depsgraph).matrix_world, f"mirror '{name}'")
         groups = sorted({rg.vertex_group for rg in settings.regions if rg.enabled and rg.kind == "FREEFORM" and rg.vertex_group})
         geo = state.geometry
-        if geo is None or reread_geometry or force or uid in _DIRTY or not np.array_equal(getattr(geo, "matrix", None), mirror_matrix):
+        if (geo is None or reread_geometry or force or uid in _DIRTY or geo.shared != shares_mesh(obj)
+                or not np.array_equal(getattr(geo, "matrix", None), mirror_matrix)):
             _DIRTY.discard(uid)
             try:
                 new = read_geometry(obj, depsgraph, mirror_matrix, groups)
@@ -1401,6 +1482,8 @@ def evaluate_mirror(obj, scene, depsgraph, *, force=False, reread_geometry=False
         fp = fp_reflection + fp_refraction
         if fp == state.fingerprint and not force and state.report is not None and state.report.status != "ERROR":
             _STATS["skipped"] += 1
+            if geo.shared:
+                strip_field(obj.data)  # e.g. left by this mirror before its mesh was linked to another object
             kept = state.report
             kept.recomputed = False
             # Same field, but the warnings describe the scene as it is now (e.g. a deleted light
@@ -1477,20 +1560,27 @@ def evaluate_mirror(obj, scene, depsgraph, *, force=False, reread_geometry=False
             report.interpolation_error = state.report.interpolation_error
             for msg in state.field_notes:
                 report.warn(msg)
+        # The refraction field goes where the reflection field went (the mirror's own carrier when
+        # the mesh is shared or its vertex count changes).
+        target = (carrier_of(obj) or ensure_carrier(obj, depsgraph)) if transfer else obj
         if not len(t_rows):
             old.pop(REFRACTION_ATTRIBUTE, None)
             state.refractions = None
-            remove_attribute(obj, REFRACTION_ATTRIBUTE)
-        elif force or old.get(REFRACTION_ATTRIBUTE) != fp_refraction or not _has_attribute(obj, REFRACTION_ATTRIBUTE):
+            remove_attribute(target, REFRACTION_ATTRIBUTE)
+        elif force or old.get(REFRACTION_ATTRIBUTE) != fp_refraction or not _has_attribute(target, REFRACTION_ATTRIBUTE):
             kwargs = {"polar": polar}
             if specs:
                 kwargs["regions"] = _regions_for_native(state, geo, specs, t_points, method, timer)
             if distances is not None:
                 kwargs["distances"] = unreached_fallback(distances[len(rows):], t_rows, geo.vertices, kwargs.get("regions"))
             tv = timer(native.rotation_field, geo.vertices, t_rows, output="rotation_vector", **kwargs)
-            write_attribute(obj, tv, REFRACTION_ATTRIBUTE)
+            write_attribute(target, tv, REFRACTION_ATTRIBUTE)
             state.refractions = tv
             old[REFRACTION_ATTRIBUTE] = fp_refraction
+        if transfer and geo.shared:
+            # Every object using a shared mesh carries its own field: none stays in the mesh,
+            # where it would render on objects that are not (or no longer) this mirror.
+            strip_field(obj.data)
         state.fingerprint = fp
         report.recomputed = True
         if not settings.enabled:
@@ -1531,7 +1621,13 @@ def evaluate_scene(scene, depsgraph, *, force=False, geometry_changed=None, all_
     for the next edit."""
     out = {}
     changed = geometry_changed or set()
-    for ob in mirrors_of(scene):
+    mirrors = mirrors_of(scene)
+    from . import duplicates  # noqa: PLC0415
+
+    # Shift+D / Alt+D copies get handles of their own before anything reads them.
+    if duplicates.separate_copies(mirrors):
+        depsgraph.update()  # the new handles are evaluated (their Shrinkwrap, their parent)
+    for ob in mirrors:
         reread = all_geometry or ob in changed or (ob.type == "MESH" and ob.data in changed)
         out[ob.name] = evaluate_mirror(ob, scene, depsgraph, force=force, reread_geometry=reread, interactive=interactive)
     pending = [name for name, rep in out.items() if rep.pending]

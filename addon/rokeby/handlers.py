@@ -149,6 +149,7 @@ def migrate_file():
     had installed the render nodes (then they stay in sync)."""
     from .props import DATA_VERSION  # noqa: PLC0415
 
+    evaluate.claim_carriers()  # carriers saved before they had an owner (Shift+D copies shared one)
     for ob in bpy.data.objects:
         s = getattr(ob, "rokeby", None)
         if s is None or not s.is_mirror or s.data_version >= DATA_VERSION or ob.library is not None:
