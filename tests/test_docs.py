@@ -33,7 +33,7 @@ DOCS = [ROOT / "README.md", *sorted((ROOT / "docs").glob("*.md"))]
 PYTHON = {"python", "py", "python3"}
 FENCE = re.compile(r"^(?P<indent>[ \t]*)(?P<fence>`{3,}|~{3,})(?P<info>[^`]*)$")
 MARKER = re.compile(r"^<!--\s*not run\s*:\s*(?P<reason>.*?)\s*-->$")
-ANY_MARKER = re.compile(r"<!--\s*not run\b", re.IGNORECASE)
+ANY_MARKER = re.compile(r"^\s*<!--\s*not run\b", re.IGNORECASE)  # a marker line (not one quoted in `code`)
 LOOKS_LIKE_PYTHON = re.compile(r"^\s*(import \w|from [\w.]+ import |>>> )")
 PER_FILE_TIMEOUT = 600
 
@@ -102,7 +102,7 @@ def extract(path: Path):
                             "(it then runs, or needs a '<!-- not run: reason -->' marker) or ```text")
         i = j + 1
     for k, ln in enumerate(lines):
-        if ANY_MARKER.search(ln) and k not in used_markers:
+        if ANY_MARKER.match(ln) and k not in used_markers:
             problems.append(f"{rel}:{k + 1}: a 'not run' marker that is not right before a ```python block "
                             "(or not of the form '<!-- not run: reason -->')")
     return tuple(blocks), tuple(problems)
@@ -173,13 +173,15 @@ def test_the_marker_rules_catch_mistakes(tmp_path, monkeypatch):
     monkeypatch.setattr(sys.modules[__name__], "ROOT", tmp_path)
     doc = tmp_path / "x.md"
     doc.write_text("text\n\n<!-- not run: needs a GPU -->\n```python\nimport gpu\n```\n\n- item\n\n  ```python\n  x = 1\n  ```\n\n"
-                   "<!-- not run: -->\n```python\ny = 2\n```\n\n<!-- not run: stray -->\n\n```sh\nls\n```\n\n```\nimport os\n```\n")
+                   "<!-- not run: -->\n```python\ny = 2\n```\n\n<!-- not run: stray -->\n\n```sh\nls\n```\n\n```\nimport os\n```\n"
+                   "Mark with `<!-- not run: reason -->`.\n")
     blocks, problems = extract.__wrapped__(doc)
     assert [(b.index, b.line, b.code, b.skip) for b in blocks] == [
         (1, 5, "import gpu\n", "needs a GPU"), (2, 11, "x = 1\n", None), (3, 16, "y = 2\n", "")]
     assert any("x.md:14: a 'not run' marker without a reason" in p for p in problems), problems
     assert any("x.md:19: a 'not run' marker that is not right before" in p for p in problems), problems
     assert any("x.md:25: an untagged code block that looks like Python" in p for p in problems), problems
+    assert len(problems) == 3, problems  # a marker quoted in `code` is no marker
 
 
 # --- python -m rokeby.composite: missing files ------------------------------------------------------

@@ -176,3 +176,39 @@ def test_start_refuses_a_twin_light_and_a_shadow_mesh(tmp_path):
         shadow.start(ball, twin)
     with pytest.raises(shadow.ShadowEditError, match="is the shadow mesh of 'Ball'"):
         shadow.start(ob, lamp)
+
+
+def test_a_session_survives_renames_and_derived_parts_follow_the_names(tmp_path):
+    sc, ball, lamp, ob, twin, edited = _edited(tmp_path)
+    s = shadow.start(ball, lamp, None, min_loop_vertices=10)
+    ball.name, lamp.name = "Orb", "Key"  # during the session
+    assert (s.caster, s.light) == ("Orb", "Key")
+    h = s.handles(0)["points"].astype(np.float64)
+    n, m = len(h), int(np.argmax(h[:, 0]))
+    c = h.mean(axis=0)
+    s.drag(0, ((m - n // 5) % n, (m + n // 5) % n), m, c + (h[m] - c) * 1.35)
+    s.commit()
+    ob2, twin2 = shadow.apply(s)
+    assert (ob2, twin2) == (ob, twin)  # the same parts, found by pointer, renamed after their owners
+    assert ob.name == "Orb" + shadow.SHADOW_SUFFIX and twin.name == "Key" + shadow.TWIN_SUFFIX
+    assert sorted(c.name for c in bpy.data.collections if shadow.LINKING_TAG in c) == sorted(
+        shadow._collection_name("Key", r) for r in shadow._OURS)
+    assert {o.name for o in bpy.data.objects if o.rokeby_shadow.role != "NONE"} == {ob.name, twin.name}
+    _settle(sc)
+    np.testing.assert_allclose(ts._render(bpy, sc, tmp_path / "reapplied.png"), edited, atol=1e-6)
+
+
+def test_a_copied_light_gets_its_own_linking_and_the_twin_stays(tmp_path):
+    sc, ball, lamp, ob, twin, edited = _edited(tmp_path)
+    copy = lamp.copy()  # what Shift+D does to the object: custom properties and linking come along
+    sc.collection.objects.link(copy)
+    assert copy.rokeby_shadow.twin == twin and copy.light_linking.receiver_collection is not None
+    _settle(sc)
+    _settle(sc)
+    assert shadow.repair(sc) == []
+    assert copy.rokeby_shadow.twin is None and not copy.rokeby_shadow.linking_saved
+    assert copy.light_linking.receiver_collection is None and copy.light_linking.blocker_collection is None
+    assert lamp.rokeby_shadow.twin == twin and twin.rokeby_shadow.light == lamp
+    bpy.data.objects.remove(copy, do_unlink=True)
+    _settle(sc)
+    np.testing.assert_allclose(ts._render(bpy, sc, tmp_path / "after_copy.png"), edited, atol=1e-6)

@@ -209,6 +209,27 @@ def _is_light(ob) -> bool:
     return _in_scene(ob) and ob.type == "LIGHT"
 
 
+def _stored(o) -> bool:
+    """Whether ``o`` has ever had shadow links written (their ID property group exists). Cheap (no
+    RNA access), so the handlers' pass over every object stays as fast as a custom-property test."""
+    if _system_properties():
+        props = o.bl_system_properties_get()
+        return props is not None and "rokeby_shadow" in props
+    return "rokeby_shadow" in o
+
+
+_SYSTEM_PROPERTIES: list = [None]
+
+
+def _system_properties() -> bool:
+    """Blender 5 keeps registered properties apart from custom ones (``bl_system_properties_get``)."""
+    if _SYSTEM_PROPERTIES[0] is None:
+        import bpy  # noqa: PLC0415
+
+        _SYSTEM_PROPERTIES[0] = hasattr(bpy.types.ID, "bl_system_properties_get")
+    return _SYSTEM_PROPERTIES[0]
+
+
 def _parts():
     """(shadow meshes, twin lights, lights holding links) in the file: one pass over the objects."""
     import bpy  # noqa: PLC0415
@@ -216,7 +237,9 @@ def _parts():
     meshes, twins, lights = [], [], []
     if not _registered():
         return meshes, twins, lights
-    for o in bpy.data.objects:
+    objects = bpy.data.objects
+    stored = [o for o in objects if "rokeby_shadow" in o] if not _system_properties() else [o for o in objects if _stored(o)]
+    for o in stored:
         links = o.rokeby_shadow
         role = links.role
         if role == "SHADOW_MESH":
