@@ -168,6 +168,26 @@ def test_a_light_deleted_with_x_switches_the_edit_off(tmp_path):
     assert not ob.visible_shadow and lamp.rokeby_shadow.twin is None
     assert lamp.light_linking.receiver_collection is None and not [o for o in bpy.data.objects if o.rokeby_shadow.role == "TWIN"]
     assert shadow.repair(sc) == []
+    # Nothing of ours keeps the deleted ball: Blender purges it like any object nothing uses.
+    assert ob.rokeby_shadow.caster is None and ball.users == 0
+
+
+def test_an_edit_whose_caster_left_the_scene_comes_back_with_it(tmp_path):
+    sc, ball, lamp, ob, twin, edited = _edited(tmp_path)
+    props = bpy.data.collections.new("Props")
+    props.objects.link(ball)
+    sc.collection.objects.unlink(ball)
+    sc.collection.children.link(props)
+    _settle(sc)
+    np.testing.assert_allclose(ts._render(bpy, sc, tmp_path / "moved.png"), edited, atol=1e-6)
+    sc.collection.children.unlink(props)  # the caster is in no scene now, but not deleted
+    _settle(sc)
+    assert not ob.visible_shadow and ob.rokeby_shadow.caster == ball
+    sc.collection.children.link(props)
+    _settle(sc)
+    _settle(sc)
+    assert ob.visible_shadow and shadow.repair(sc) == []
+    np.testing.assert_allclose(ts._render(bpy, sc, tmp_path / "back.png"), edited, atol=1e-6)
 
 
 def test_start_refuses_a_twin_light_and_a_shadow_mesh(tmp_path):

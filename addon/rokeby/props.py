@@ -272,6 +272,7 @@ class RokebyShadowLinks(PropertyGroup):
     blockers_caster: PointerProperty(type=bpy.types.Collection, name="Blockers (caster)")
     receivers_edited: PointerProperty(type=bpy.types.Collection, name="Receivers (edited)")
     blockers_edited: PointerProperty(type=bpy.types.Collection, name="Blockers (edited)")
+    switched_off: BoolProperty(name="Switched off", description="Shadow mesh hidden from shadow rays while its caster or light is gone", default=False, options={"HIDDEN"})
     linking_saved: BoolProperty(name="Own linking stored", default=False, options={"HIDDEN"})
     receivers_before: PointerProperty(type=bpy.types.Collection, name="Own receivers", description="The light's receiver collection before its first shadow edit")
     blockers_before: PointerProperty(type=bpy.types.Collection, name="Own blockers", description="The light's blocker collection before its first shadow edit")

@@ -79,7 +79,7 @@ class ShadowSession:
     editor: object
     caster_uid: int
     light_uid: int
-    receivers: list
+    receivers: list  # session ids of the receivers
     light_vector: np.ndarray
     rest_world: np.ndarray
     matrix_world: np.ndarray
@@ -163,7 +163,7 @@ def start(caster, light, receivers=None, *, scene=None, min_loop_vertices: int =
         lv = m[:3, 3] - kw["light_position"]
     # Light direction in the caster's local frame (§6.2: relative changes of object and light).
     lv_local = np.linalg.solve(m[:3, :3], lv)
-    return ShadowSession(ed, caster.session_uid, light.session_uid, [o.name for o in receivers], lv_local / np.linalg.norm(lv_local),
+    return ShadowSession(ed, caster.session_uid, light.session_uid, [o.session_uid for o in receivers], lv_local / np.linalg.norm(lv_local),
                          np.asarray(cm.vertices, np.float64), m)
 
 
@@ -203,6 +203,11 @@ def _in_scene(ob) -> bool:
         return len(ob.users_scene) > 0
     except ReferenceError:
         return False
+
+
+def _only_in_linking_collections(ob) -> bool:
+    """Whether ``ob`` is in no collection but the linking ones (an object deleted with X is)."""
+    return all(LINKING_TAG in c for c in ob.users_collection)
 
 
 def _is_light(ob) -> bool:
@@ -439,7 +444,9 @@ def repair(scene=None) -> list[str]:
 
     * caster or light gone (removed, or deleted with X and so in no scene): the shadow mesh is kept
       (undo or a new edit can use it) but hidden from shadow rays, and the linking is taken down,
-      so the remaining lights shade as without the edit;
+      so the remaining lights shade as without the edit; an object deleted with X is no longer
+      pointed to (Blender purges it, as any object nothing uses), one only in collections that
+      left the scene is, and the edit comes back when it does;
     * shadow mesh gone: the twin and the linking go, the light's own linking comes back;
     * twin light or a linking collection gone: made again from the shadow mesh;
     * a copy of a light (Shift+D) that carried the links along gets its own linking back.
@@ -455,8 +462,18 @@ def repair(scene=None) -> list[str]:
         if missing is not None:
             if ob.visible_shadow:
                 ob.visible_shadow = False
+                links.switched_off = True
                 msgs.append(f"'{ob.name}': its {missing} is gone; it no longer casts shadows (undo brings it back)")
+            for attr in ("caster", "light"):
+                # Deleted with X but kept in bpy.data by our own references: let Blender purge it,
+                # as it does an object nothing uses.
+                o = getattr(links, attr)
+                if o is not None and not _in_scene(o) and _only_in_linking_collections(o):
+                    setattr(links, attr, None)
             continue
+        if links.switched_off:  # its caster and light are back (a collection linked to the scene again)
+            ob.visible_shadow, links.switched_off = True, False
+            msgs.append(f"'{ob.name}': its caster and light are back; it casts the edited shadow again")
         if light not in live:
             live.append(light)
     for light in live:
