@@ -8,7 +8,9 @@ render farm can run a sequence as independent tasks).
 
 ``in.exr`` is a Blender multilayer EXR rendered after ``rokeby.compositing.setup_passes``. The
 output is an RGB EXR of the recomposited image. Edits apply in that order: smoothing, emboss,
-ripple, noise, bump. ``--objects 1,3`` limits them to those object pass indices. A sequence:
+ripple, noise, bump. ``--objects 1,3`` limits them to those object pass indices. Exit status 0,
+or 2 with one line naming what is wrong (a missing or unreadable file, a missing output folder, a
+bad edit, a backend that cannot start); the files are checked before any work. A sequence:
 
     for f in frames/*.exr; do python -m rokeby.composite "$f" "out/$(basename "$f")" --emboss 0.6; done
 """
