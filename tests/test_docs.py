@@ -35,7 +35,7 @@ FENCE = re.compile(r"^(?P<indent>[ \t]*)(?P<fence>`{3,}|~{3,})(?P<info>[^`]*)$")
 MARKER = re.compile(r"^<!--\s*not run\s*:\s*(?P<reason>.*?)\s*-->$")
 ANY_MARKER = re.compile(r"^\s*<!--\s*not run\b", re.IGNORECASE)  # a marker line (not one quoted in `code`)
 LOOKS_LIKE_PYTHON = re.compile(r"^\s*(import \w|from [\w.]+ import |>>> )")
-PER_FILE_TIMEOUT = 600
+PER_FILE_TIMEOUT = 300
 
 
 @dataclass(frozen=True)

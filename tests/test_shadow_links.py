@@ -232,3 +232,39 @@ def test_a_copied_light_gets_its_own_linking_and_the_twin_stays(tmp_path):
     bpy.data.objects.remove(copy, do_unlink=True)
     _settle(sc)
     np.testing.assert_allclose(ts._render(bpy, sc, tmp_path / "after_copy.png"), edited, atol=1e-6)
+
+
+def test_a_twin_deleted_with_x_is_made_again(tmp_path):
+    sc, ball, lamp, ob, twin, edited = _edited(tmp_path)
+    with bpy.context.temp_override(selected_objects=[twin], active_object=twin):
+        bpy.ops.object.delete()
+    _settle(sc)
+    _settle(sc)
+    assert shadow.repair(sc) == []
+    new_twin = lamp.rokeby_shadow.twin
+    assert new_twin is not None and new_twin.users_scene and new_twin.rokeby_shadow.light == lamp
+    assert [o for o in bpy.data.objects if o.rokeby_shadow.role == "TWIN"] == [new_twin]
+    np.testing.assert_allclose(ts._render(bpy, sc, tmp_path / "twin_again.png"), edited, atol=1e-6)
+
+
+def test_an_edit_from_a_copied_light_leaves_the_original_whole(tmp_path):
+    """A light copied with its links, then an edit from the copy: each light has its own twin and
+    linking collections, and the original's still hold its caster and shadow mesh."""
+    sc, ball, lamp, ob, twin, edited = _edited(tmp_path)
+    copy = lamp.copy()
+    sc.collection.objects.link(copy)
+    copy.location.x += 0.5
+    bpy.ops.mesh.primitive_uv_sphere_add(radius=0.3, location=(-1.2, 1.2, 1.0))
+    other = bpy.context.object
+    s = shadow.start(other, copy, [bpy.data.objects["Ground"]], min_loop_vertices=6)
+    h = s.handles(0)["points"].astype(np.float64)
+    n, c = len(h), h.mean(axis=0)
+    s.drag(0, ((n - n // 5) % n, n // 5), 0, c + (h[0] - c) * 1.3)
+    s.commit()
+    _ob2, twin2 = shadow.apply(s)
+    assert twin2 != twin and lamp.rokeby_shadow.twin == twin and copy.rokeby_shadow.twin == twin2
+    colls = {a: getattr(lamp.rokeby_shadow, a) for a in shadow._COLLECTION_ATTRS}
+    assert not {getattr(copy.rokeby_shadow, a) for a in shadow._COLLECTION_ATTRS} & set(colls.values())
+    assert ball.name in colls["receivers_caster"].objects and ob.name in colls["blockers_caster"].objects
+    _settle(sc)
+    assert shadow.repair(sc) == []

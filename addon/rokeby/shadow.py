@@ -315,6 +315,8 @@ def _link(light, meshes=None):
 
     ll = light.light_linking
     links = light.rokeby_shadow
+    if links.twin is not None and not _owns_twin(light):
+        _unlink(light)  # links copied along with the light (Shift+D): start from the copy's own linking
     if not links.linking_saved:
         ours = lambda c: c is not None and LINKING_TAG in c  # noqa: E731
         links.receivers_before = None if ours(ll.receiver_collection) else ll.receiver_collection
@@ -365,12 +367,12 @@ def _remove_collections(colls) -> None:
 
 
 def _remove_twin(twin) -> None:
-    """Deletes a twin light and the linking collections it uses."""
+    """Deletes a twin light; the linking collections it used go with it unless its light still uses
+    them (for a new twin): ``_collect_orphan_collections`` removes those nothing uses."""
     import bpy  # noqa: PLC0415
 
-    colls = [twin.light_linking.receiver_collection, twin.light_linking.blocker_collection]
     bpy.data.objects.remove(twin, do_unlink=True)
-    _remove_collections(colls)
+    _collect_orphan_collections()
 
 
 def _unlink(light) -> None:
