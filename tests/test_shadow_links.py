@@ -268,3 +268,18 @@ def test_an_edit_from_a_copied_light_leaves_the_original_whole(tmp_path):
     assert ball.name in colls["receivers_caster"].objects and ob.name in colls["blockers_caster"].objects
     _settle(sc)
     assert shadow.repair(sc) == []
+
+
+def test_edit_shadow_boundaries_picks_the_light_not_its_twin(tmp_path):
+    sc, ball, lamp, ob, twin, edited = _edited(tmp_path)
+    from rokeby import shadow_ui
+
+    for o in sc.objects:
+        o.select_set(False)
+    bpy.context.view_layer.objects.active = ball
+    assert bpy.ops.rokeby.shadow_start(min_loop_vertices=10) == {"FINISHED"}  # two lights: the light and its twin
+    sess = shadow_ui.session(sc)
+    assert (sess.caster, sess.light) == ("Ball", "Lamp")
+    sc.name = "Renamed scene"  # sessions belong to the scene, not to its name
+    assert shadow_ui.session(sc) is sess
+    assert bpy.ops.rokeby.shadow_stop() == {"FINISHED"} and shadow_ui.session(sc) is None
