@@ -154,7 +154,7 @@ def test_a_file_saved_with_names_migrates_and_keeps_its_shadow(tmp_path):
     assert not [c for c in bpy.data.collections if " · " in c.name]
 
 
-def test_a_light_deleted_with_x_switches_the_edit_off(tmp_path):
+def test_a_caster_deleted_with_x_switches_the_edit_off(tmp_path):
     """Delete (X) keeps an object in bpy.data while something still uses it (here the linking
     collections hold the caster): an object in no scene is gone for the edit."""
     sc, ball, lamp, ob, twin, edited = _edited(tmp_path)
