@@ -44,9 +44,9 @@ def main():
     bpy.context.view_layer.update()
     from rokeby import shadow_ui
 
-    shadow_ui._SESSIONS[scene.name] = api.start_shadow_edit(caster, lamp, [ground], min_loop_vertices=8)
+    shadow_ui._SESSIONS[shadow_ui._key(scene)] = api.start_shadow_edit(caster, lamp, [ground], min_loop_vertices=8)
     shadow_ui._refresh(scene, eye=tuple(eye))
-    shadow_lines = len(shadow_ui._OVERLAY[scene.name]["lines"])
+    shadow_lines = len(shadow_ui._OVERLAY[shadow_ui._key(scene)]["lines"])
 
     # Create Blender's GPU context: one tiny EEVEE render.
     from bpy_process import gpu_context

@@ -46,7 +46,7 @@ def _edited(tmp_path):
 
 
 def _twins():
-    return [o.name for o in bpy.data.objects if "rokeby_twin_of" in o]
+    return [o.name for o in bpy.data.objects if o.rokeby_shadow.role == "TWIN"]
 
 
 def _draw_shadow_panel():

@@ -124,7 +124,10 @@ SIZE = 96
 
 def _blender_scene(light_type="POINT"):
     bpy = pytest.importorskip("bpy")
+    import rokeby
+
     bpy.ops.wm.read_factory_settings(use_empty=True)
+    rokeby.register()  # shadow edits keep their links in obj.rokeby_shadow (idempotent)
     sc = bpy.context.scene
     sc.render.engine = "CYCLES"
     sc.cycles.device = "CPU"

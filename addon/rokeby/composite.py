@@ -8,7 +8,9 @@ render farm can run a sequence as independent tasks).
 
 ``in.exr`` is a Blender multilayer EXR rendered after ``rokeby.compositing.setup_passes``. The
 output is an RGB EXR of the recomposited image. Edits apply in that order: smoothing, emboss,
-ripple, noise, bump. ``--objects 1,3`` limits them to those object pass indices. A sequence:
+ripple, noise, bump. ``--objects 1,3`` limits them to those object pass indices. Exit status 0,
+or 2 with one line naming what is wrong (a missing or unreadable file, a missing output folder, a
+bad edit, a backend that cannot start); the files are checked before any work. A sequence:
 
     for f in frames/*.exr; do python -m rokeby.composite "$f" "out/$(basename "$f")" --emboss 0.6; done
 """
@@ -17,6 +19,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import sys
 import time
 
@@ -34,21 +37,38 @@ def _pair(text: str) -> tuple[float, float]:
 
 
 def _read_height(path: str, shape) -> np.ndarray:
-    if path.endswith(".npy"):
-        h = np.load(path)
-    else:
-        import OpenEXR
+    try:
+        if path.endswith(".npy"):
+            h = np.load(path)
+        else:
+            import OpenEXR
 
-        with OpenEXR.File(path) as f:
-            ch = f.parts[0].channels
-            key = next(iter(ch))
-            h = np.asarray(ch[key].pixels, np.float32)
+            with OpenEXR.File(path) as f:
+                ch = f.parts[0].channels
+                key = next(iter(ch))
+                h = np.asarray(ch[key].pixels, np.float32)
+    except (OSError, RuntimeError, ValueError, StopIteration) as exc:  # unreadable, not an EXR, no channel
+        raise C.CompositingError(f"--bump: cannot read the height image {path}: {exc}") from None
     h = np.asarray(h, np.float32)
     if h.ndim == 3:
         h = h[..., :3].mean(-1)
-    if h.shape != tuple(shape):
-        raise SystemExit(f"--bump: height image {path} is {h.shape[1]}×{h.shape[0]}, the frame is {shape[1]}×{shape[0]}")
+    if h.ndim != 2 or h.shape != tuple(shape):
+        size = "×".join(str(v) for v in h.shape[::-1])
+        raise C.CompositingError(f"--bump: height image {path} is {size}, the frame is {shape[1]}×{shape[0]}")
     return h
+
+
+def _missing_files(a) -> str | None:
+    """The first input file that does not exist, or output folder that does not, as one line."""
+    for flag, path in (("input", a.input), ("--bump", a.bump)):
+        if path is not None and not os.path.isfile(path):
+            return f"{flag}: no such file: {path}"
+    for flag, path in (("output", a.output), ("--report", a.report)):
+        if path is not None:
+            folder = os.path.dirname(os.path.abspath(path))
+            if not os.path.isdir(folder):
+                return f"{flag}: the folder {folder} does not exist"
+    return None
 
 
 def main(argv=None) -> int:
@@ -84,6 +104,11 @@ def main(argv=None) -> int:
                          "or through Blender's gpu module (blender_gpu: bpy in this process; its context costs one tiny EEVEE render)")
     ap.add_argument("--report", metavar="JSON", help="write per-patch reconstruction report and timings")
     a = ap.parse_args(argv)
+    # Files are checked before the (slow) reconstruction: a missing one is one line and status 2.
+    problem = _missing_files(a)
+    if problem is not None:
+        print(f"rokeby.composite: {problem}", file=sys.stderr)
+        return 2
 
     t0 = time.perf_counter()
     try:
@@ -135,7 +160,11 @@ def main(argv=None) -> int:
         print(f"rokeby.composite: --backend {a.backend}: {exc}", file=sys.stderr)
         return 2
     t_comp = time.perf_counter()
-    C.write_exr(a.output, out, p.header)
+    try:
+        C.write_exr(a.output, out, p.header)
+    except (OSError, RuntimeError) as exc:  # a read-only folder, a full disk
+        print(f"rokeby.composite: output: cannot write {a.output}: {exc}", file=sys.stderr)
+        return 2
     t_end = time.perf_counter()
     if a.report:
         rep = {
@@ -145,8 +174,12 @@ def main(argv=None) -> int:
             "seconds": {"read": t_read - t0, "reconstruct": t_rec - t_read, "edit": t_edit - t_rec,
                         "recomposite": t_comp - t_edit, "write": t_end - t_comp, **rec.timings},
         }
-        with open(a.report, "w") as f:
-            json.dump(rep, f, indent=1, default=str)
+        try:
+            with open(a.report, "w") as f:
+                json.dump(rep, f, indent=1, default=str)
+        except OSError as exc:
+            print(f"rokeby.composite: --report: cannot write {a.report}: {exc}", file=sys.stderr)
+            return 2
     return 0
 
 

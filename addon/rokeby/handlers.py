@@ -146,7 +146,8 @@ def on_load(*_args):
 def migrate_file():
     """Mirrors saved before their data version 1 keep their meaning: constraints stay seen
     from the views they were made from, and final renders show the edit only where the artist
-    had installed the render nodes (then they stay in sync)."""
+    had installed the render nodes (then they stay in sync). Shadow edits that named their
+    caster, light and twin get pointers (``shadow.migrate``)."""
     from .props import DATA_VERSION  # noqa: PLC0415
 
     evaluate.claim_carriers()  # carriers saved before they had an owner (Shift+D copies shared one)
@@ -159,6 +160,9 @@ def migrate_file():
         s.render_edits = any(rendering.installed(m) for m in mats)
         s.freeze_eye_set = True
         s.data_version = DATA_VERSION
+    # Shadow edits saved with names (before shadow data version 1) get pointers.
+    for msg in shadow.migrate():
+        print(f"Rokeby: migrated {msg}")
 
 
 @persistent

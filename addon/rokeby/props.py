@@ -252,16 +252,51 @@ class RokebyMirror(PropertyGroup):
     map_capture_seconds: FloatProperty(name="Capture time", subtype="TIME_ABSOLUTE", unit="TIME_ABSOLUTE", min=0.0)
 
 
-classes = (RokebyMaterialRef, RokebyImageRef, RokebyConstraint, RokebyRegion, RokebyMirror)
+# --- Shadow edits (rokeby.shadow): links between objects, by pointer -------------------------------
+# Renaming a caster, a light or anything derived keeps every link; a new object under an old
+# name takes nothing over. Files saved before this (names in custom properties) are migrated at
+# load (shadow.migrate, called by handlers.migrate_file).
+SHADOW_DATA_VERSION = 1
+SHADOW_ROLES = [
+    ("NONE", "None", "Not a part of a shadow edit (lights that have edits keep their links here too)", 0),
+    ("SHADOW_MESH", "Shadow mesh", "The edited copy of a caster, seen by shadow rays only", 1),
+    ("TWIN", "Twin light", "The light's twin that lights everything but the casters, blocked by the shadow meshes", 2),
+]
+
+
+class RokebyShadowLinks(PropertyGroup):
+    """What a shadow edit links (``obj.rokeby_shadow``). On a shadow mesh: its caster and light.
+    On a twin light: the light it twins. On a light with edits: its twin, the four linking
+    collections, and the light's own linking from before the first edit."""
+
+    role: EnumProperty(name="Role", items=SHADOW_ROLES, default="NONE", options={"HIDDEN"})
+    data_version: IntProperty(name="Shadow data version", default=0, options={"HIDDEN"})
+    caster: PointerProperty(type=bpy.types.Object, name="Caster", description="The object whose shadow this shadow mesh edits")
+    light: PointerProperty(type=bpy.types.Object, name="Light", description="The light the edit was made from (on a twin: the light it twins)")
+    twin: PointerProperty(type=bpy.types.Object, name="Twin light", description="Lights everything but the casters, blocked by the shadow meshes")
+    receivers_caster: PointerProperty(type=bpy.types.Collection, name="Receivers (caster)")
+    blockers_caster: PointerProperty(type=bpy.types.Collection, name="Blockers (caster)")
+    receivers_edited: PointerProperty(type=bpy.types.Collection, name="Receivers (edited)")
+    blockers_edited: PointerProperty(type=bpy.types.Collection, name="Blockers (edited)")
+    switched_off: BoolProperty(name="Switched off", description="Shadow mesh hidden from shadow rays while its caster or light is gone", default=False, options={"HIDDEN"})
+    linking_saved: BoolProperty(name="Own linking stored", default=False, options={"HIDDEN"})
+    receivers_before: PointerProperty(type=bpy.types.Collection, name="Own receivers", description="The light's receiver collection before its first shadow edit")
+    blockers_before: PointerProperty(type=bpy.types.Collection, name="Own blockers", description="The light's blocker collection before its first shadow edit")
+
+
+classes = (RokebyMaterialRef, RokebyImageRef, RokebyConstraint, RokebyRegion, RokebyMirror, RokebyShadowLinks)
 
 
 def register():
     for cls in classes:
         bpy.utils.register_class(cls)
     bpy.types.Object.rokeby = PointerProperty(type=RokebyMirror, name="Rokeby")
+    bpy.types.Object.rokeby_shadow = PointerProperty(type=RokebyShadowLinks, name="Rokeby shadow edit")
 
 
 def unregister():
+    if hasattr(bpy.types.Object, "rokeby_shadow"):
+        del bpy.types.Object.rokeby_shadow
     if hasattr(bpy.types.Object, "rokeby"):
         del bpy.types.Object.rokeby
     for cls in reversed(classes):

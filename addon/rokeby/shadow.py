@@ -14,6 +14,10 @@ needs (evaluated meshes in world space, read with foreach_get) and the result ba
   everything else but the original caster. So receivers show the edited shadow and the caster
   shows no self-shadow artefacts from the shadow mesh.
 
+The parts of an edit refer to each other by pointer (``obj.rokeby_shadow``, props.RokebyShadowLinks):
+the shadow mesh to its caster and light, the light to its twin and linking collections, the twin to
+its light. Renaming anything keeps the edit; files that stored names are migrated at load (:func:`migrate`).
+
 Edits are made at the current frame in world space. The shadow mesh stores them as local
 displacements of the caster's rest vertices (world displacement rotated by the inverse object
 matrix); with an armature this is exact for edits made in the rest pose and approximate for
@@ -61,18 +65,45 @@ def _merged(meshes) -> tuple[np.ndarray, np.ndarray]:
     return np.concatenate(vs), np.concatenate(fs)
 
 
+def _object_by_uid(uid: int):
+    import bpy  # noqa: PLC0415
+
+    return next((o for o in bpy.data.objects if o.session_uid == uid), None)
+
+
 @dataclass
 class ShadowSession:
-    """One editing session: the native editor and what it was made from."""
+    """One editing session: the native editor and what it was made from. The caster and the light
+    are held by Blender's session id, so renaming either during a session changes nothing."""
 
     editor: object
-    caster: str
-    light: str
-    receivers: list
+    caster_uid: int
+    light_uid: int
+    receivers: list  # session ids of the receivers
     light_vector: np.ndarray
     rest_world: np.ndarray
     matrix_world: np.ndarray
     history: list = field(default_factory=list)
+
+    def caster_object(self):
+        """The caster (None once it is deleted)."""
+        return _object_by_uid(self.caster_uid)
+
+    def light_object(self):
+        """The light (None once it is deleted)."""
+        return _object_by_uid(self.light_uid)
+
+    @property
+    def caster(self) -> str:
+        """The caster's current name ("" once it is deleted)."""
+        ob = self.caster_object()
+        return "" if ob is None else ob.name
+
+    @property
+    def light(self) -> str:
+        """The light's current name ("" once it is deleted)."""
+        ob = self.light_object()
+        return "" if ob is None else ob.name
 
     def loops(self):
         return self.editor.loops()
@@ -104,9 +135,16 @@ def start(caster, light, receivers=None, *, scene=None, min_loop_vertices: int =
     if caster is None or caster.type != "MESH":
         raise ShadowEditError(f"caster: {getattr(caster, 'name', caster)!r} is not a mesh object")
     kw = light_arguments(light)
+    if _role(caster) == "SHADOW_MESH":
+        owner = caster.rokeby_shadow.caster
+        raise ShadowEditError(f"caster: '{caster.name}' is the shadow mesh of "
+                              f"{repr(owner.name) if owner is not None else 'a deleted caster'}; edit from the caster itself")
+    if _role(light) == "TWIN":
+        owner = light.rokeby_shadow.light
+        raise ShadowEditError(f"light: '{light.name}' is the twin of {repr(owner.name) if owner is not None else 'a deleted light'} "
+                              "made for edited shadows; edit from that light")
     if receivers is None:
-        receivers = [o for o in sc.objects if o.type == "MESH" and o is not caster and not o.name.endswith(SHADOW_SUFFIX)
-                     and o.visible_get()]
+        receivers = [o for o in sc.objects if o.type == "MESH" and o != caster and _role(o) != "SHADOW_MESH" and o.visible_get()]
     vl = sc.view_layers[0] if bpy.context.view_layer is None else bpy.context.view_layer
     vl.update()
     dg = bpy.context.evaluated_depsgraph_get()
@@ -125,16 +163,109 @@ def start(caster, light, receivers=None, *, scene=None, min_loop_vertices: int =
         lv = m[:3, 3] - kw["light_position"]
     # Light direction in the caster's local frame (§6.2: relative changes of object and light).
     lv_local = np.linalg.solve(m[:3, :3], lv)
-    return ShadowSession(ed, caster.name, light.name, [o.name for o in receivers], lv_local / np.linalg.norm(lv_local),
+    return ShadowSession(ed, caster.session_uid, light.session_uid, [o.session_uid for o in receivers], lv_local / np.linalg.norm(lv_local),
                          np.asarray(cm.vertices, np.float64), m)
 
 
-def _linking_collection(name: str):
+# --- Links between the parts of an edit (props.RokebyShadowLinks, ``obj.rokeby_shadow``) -----------
+# Every link is a pointer, so renaming the caster, the light or a derived part keeps the edit, and
+# an object made later under an old name takes nothing over. Names of derived parts (shadow mesh,
+# twin, collections) follow their owner's name when the edit is applied or its linking made again.
+
+LINKING_TAG = "rokeby_shadow_linking"  # on the four linking collections: which role (they are ours)
+_COLLECTION_ATTRS = ("receivers_caster", "blockers_caster", "receivers_edited", "blockers_edited")
+
+
+def _registered() -> bool:
     import bpy  # noqa: PLC0415
 
-    c = bpy.data.collections.get(name)
+    return hasattr(bpy.types.Object, "rokeby_shadow")
+
+
+def _require_registered() -> None:
+    if not _registered():
+        raise ShadowEditError("the Rokeby add-on is not registered: call rokeby.register() first (in Blender: enable the add-on)")
+
+
+def _role(ob) -> str:
+    """'SHADOW_MESH', 'TWIN' or 'NONE'."""
+    if ob is None or not _registered():
+        return "NONE"
+    return ob.rokeby_shadow.role
+
+
+def _in_scene(ob) -> bool:
+    """Whether ``ob`` exists for the artist: it is in some scene. An object deleted with X but kept
+    in ``bpy.data`` by a reference (one of these links, a linking collection) counts as gone."""
+    if ob is None:
+        return False
+    try:
+        return len(ob.users_scene) > 0
+    except ReferenceError:
+        return False
+
+
+def _only_in_linking_collections(ob) -> bool:
+    """Whether ``ob`` is in no collection but the linking ones (an object deleted with X is)."""
+    return all(LINKING_TAG in c for c in ob.users_collection)
+
+
+def _is_light(ob) -> bool:
+    return _in_scene(ob) and ob.type == "LIGHT"
+
+
+def _stored(o) -> bool:
+    """Whether ``o`` has ever had shadow links written (their ID property group exists). Cheap (no
+    RNA access), so the handlers' pass over every object stays as fast as a custom-property test."""
+    if _system_properties():
+        props = o.bl_system_properties_get()
+        return props is not None and "rokeby_shadow" in props
+    return "rokeby_shadow" in o
+
+
+_SYSTEM_PROPERTIES: list = [None]
+
+
+def _system_properties() -> bool:
+    """Blender 5 keeps registered properties apart from custom ones (``bl_system_properties_get``)."""
+    if _SYSTEM_PROPERTIES[0] is None:
+        import bpy  # noqa: PLC0415
+
+        _SYSTEM_PROPERTIES[0] = hasattr(bpy.types.ID, "bl_system_properties_get")
+    return _SYSTEM_PROPERTIES[0]
+
+
+def _parts():
+    """(shadow meshes, twin lights, lights holding links) in the file: one pass over the objects."""
+    import bpy  # noqa: PLC0415
+
+    meshes, twins, lights = [], [], []
+    if not _registered():
+        return meshes, twins, lights
+    objects = bpy.data.objects
+    stored = [o for o in objects if "rokeby_shadow" in o] if not _system_properties() else [o for o in objects if _stored(o)]
+    for o in stored:
+        links = o.rokeby_shadow
+        role = links.role
+        if role == "SHADOW_MESH":
+            meshes.append(o)
+        elif role == "TWIN":
+            twins.append(o)
+        elif o.type == "LIGHT" and (links.linking_saved or links.twin is not None):
+            lights.append(o)
+    return meshes, twins, lights
+
+
+def _linking_collection(existing, name: str, role: str):
+    """``existing`` (or a new collection called ``name``), emptied and tagged as ours."""
+    import bpy  # noqa: PLC0415
+
+    c = existing
     if c is None:
         c = bpy.data.collections.new(name)
+    elif not c.name.startswith(name):
+        c.name = name
+    c[LINKING_TAG] = role
     for o in list(c.objects):
         c.objects.unlink(o)
     return c
@@ -155,49 +286,64 @@ def _collection_name(light_name: str, role: str) -> str:
     return f"{light_name} · {role}"
 
 
-def _edits_of(light_name: str):
-    """(caster, shadow mesh) of every shadow edit made from the light named ``light_name`` whose
-    caster still exists."""
-    import bpy  # noqa: PLC0415
-
+def _edits_of(light, meshes=None):
+    """(caster, shadow mesh) of every shadow edit made from ``light`` whose caster still exists."""
+    if light is None:
+        return []
+    meshes = _parts()[0] if meshes is None else meshes
     out = []
-    for ob in _shadow_meshes():
-        caster = bpy.data.objects.get(str(ob["rokeby_shadow_of"]))
-        if str(ob["rokeby_light"]) == light_name and caster is not None:
-            out.append((caster, ob))
+    for ob in meshes:
+        links = ob.rokeby_shadow
+        if links.light == light and _in_scene(links.caster):
+            out.append((links.caster, ob))
     return out
 
 
-def _link(light):
+def _owns_twin(light) -> bool:
+    twin = light.rokeby_shadow.twin
+    return twin is not None and twin.rokeby_shadow.role == "TWIN" and twin.rokeby_shadow.light == light
+
+
+def _link(light, meshes=None):
     """The light and shadow linking of the edits made from ``light`` (made again whenever a part
     of it is missing): ``light`` lights only the casters, blocked by everything but the shadow
     meshes; a twin of the light (same light data, parented with an identity offset so it follows
     every move) lights every other object, blocked by everything but the casters. The light's own
-    linking before the first edit is remembered on it (``rokeby_linking_before``) so
-    :func:`remove` restores it."""
+    linking before the first edit is remembered on it (``rokeby_shadow.receivers_before`` /
+    ``blockers_before``) so :func:`remove` restores it."""
     import bpy  # noqa: PLC0415
 
     ll = light.light_linking
-    if "rokeby_linking_before" not in light:
-        ours = lambda c: c is not None and c.name.startswith(light.name + " · ") and c.name.rsplit(" · ", 1)[1] in _OURS  # noqa: E731
-        light["rokeby_linking_before"] = [
-            "" if c is None or ours(c) else c.name for c in (ll.receiver_collection, ll.blocker_collection)
-        ]
+    links = light.rokeby_shadow
+    if links.twin is not None and not _owns_twin(light):
+        _unlink(light)  # links copied along with the light (Shift+D): start from the copy's own linking
+    if not links.linking_saved:
+        ours = lambda c: c is not None and LINKING_TAG in c  # noqa: E731
+        links.receivers_before = None if ours(ll.receiver_collection) else ll.receiver_collection
+        links.blockers_before = None if ours(ll.blocker_collection) else ll.blocker_collection
+        links.linking_saved = True
     twin_name = light.name + TWIN_SUFFIX
-    twin = bpy.data.objects.get(twin_name)
-    if twin is None:
+    twin = links.twin
+    if not (_in_scene(twin) and _owns_twin(light)):
         twin = bpy.data.objects.new(twin_name, light.data)
         for c in light.users_collection:
             c.objects.link(twin)
-    twin["rokeby_twin_of"] = light.name
+        links.twin = twin
+    elif not twin.name.startswith(twin_name):
+        twin.name = twin_name
+    if twin.data != light.data:
+        twin.data = light.data
+    tl = twin.rokeby_shadow
+    tl.role, tl.light, tl.data_version = "TWIN", light, _data_version()
     twin.parent = light
     twin.matrix_parent_inverse.identity()
     twin.location, twin.rotation_mode, twin.rotation_euler, twin.scale = (0.0, 0.0, 0.0), "XYZ", (0.0, 0.0, 0.0), (1.0, 1.0, 1.0)
-    edits = _edits_of(light.name)
-    recv_a = _linking_collection(_collection_name(light.name, RECEIVERS_CASTER))
-    block_a = _linking_collection(_collection_name(light.name, BLOCKERS_CASTER))
-    recv_b = _linking_collection(_collection_name(light.name, RECEIVERS_EDITED))
-    block_b = _linking_collection(_collection_name(light.name, BLOCKERS_EDITED))
+    edits = _edits_of(light, meshes)
+    recv_a, block_a, recv_b, block_b = (
+        _linking_collection(getattr(links, attr), _collection_name(light.name, role), role)
+        for attr, role in zip(_COLLECTION_ATTRS, _OURS)
+    )
+    links.receivers_caster, links.blockers_caster, links.receivers_edited, links.blockers_edited = recv_a, block_a, recv_b, block_b
     for caster, shadow_object in edits:
         _set_state(recv_a, caster, "INCLUDE")
         _set_state(block_a, shadow_object, "EXCLUDE")
@@ -208,40 +354,68 @@ def _link(light):
     return twin
 
 
-def _unlink(light_name: str) -> None:
-    """Takes an edit's linking down: the twin and the four collections go, the light (if it is
-    still there) gets back the linking it had before the first edit."""
+def _remove_collections(colls) -> None:
     import bpy  # noqa: PLC0415
 
-    light = bpy.data.objects.get(light_name)
-    if light is not None and light.type == "LIGHT":
-        before = list(light.get("rokeby_linking_before", ["", ""]))
-        ll = light.light_linking
-        ll.receiver_collection = bpy.data.collections.get(before[0]) if before[0] else None
-        ll.blocker_collection = bpy.data.collections.get(before[1]) if before[1] else None
-        if "rokeby_linking_before" in light:
-            del light["rokeby_linking_before"]
-    for ob in [o for o in bpy.data.objects if o.get("rokeby_twin_of") == light_name]:
-        bpy.data.objects.remove(ob, do_unlink=True)
-    for role in _OURS:
-        c = bpy.data.collections.get(_collection_name(light_name, role))
-        if c is not None:
+    for c in colls:
+        try:
+            ours = c is not None and LINKING_TAG in c
+        except ReferenceError:  # already removed (listed twice)
+            continue
+        if ours:
             bpy.data.collections.remove(c)
 
 
-def _shadow_meshes():
+def _remove_twin(twin) -> None:
+    """Deletes a twin light; the linking collections it used go with it unless its light still uses
+    them (for a new twin): ``_collect_orphan_collections`` removes those nothing uses."""
     import bpy  # noqa: PLC0415
 
-    return [o for o in bpy.data.objects if "rokeby_shadow_of" in o and "rokeby_light" in o]
+    bpy.data.objects.remove(twin, do_unlink=True)
+    _collect_orphan_collections()
+
+
+def _unlink(light) -> None:
+    """Takes the linking of ``light``'s edits down: the light gets back the linking it had before
+    the first edit and forgets its links; its twin and the four collections go (unless the links
+    are a copy's, made by duplicating the light: the original keeps its twin and collections)."""
+    links = light.rokeby_shadow
+    owner = _owns_twin(light)
+    colls = [getattr(links, a) for a in _COLLECTION_ATTRS]
+    twin = links.twin
+    if links.linking_saved:
+        ll = light.light_linking
+        ll.receiver_collection, ll.blocker_collection = links.receivers_before, links.blockers_before
+    links.twin = None
+    links.linking_saved = False
+    links.receivers_before = links.blockers_before = None
+    for a in _COLLECTION_ATTRS:
+        setattr(links, a, None)
+    if owner:
+        _remove_twin(twin)
+        _remove_collections(colls)
+
+
+def _collect_orphan_collections() -> None:
+    """Linking collections nothing uses any more (their light and twin are gone) are removed."""
+    import bpy  # noqa: PLC0415
+
+    _remove_collections([c for c in bpy.data.collections if c.users == 0 and LINKING_TAG in c])
+
+
+def _data_version() -> int:
+    from .props import SHADOW_DATA_VERSION  # noqa: PLC0415
+
+    return SHADOW_DATA_VERSION
 
 
 def shadow_mesh_of(obj):
     """The shadow-mesh object of ``obj`` (a caster, or a shadow mesh itself), or None."""
-    if obj is None:
+    if obj is None or not _registered():
         return None
-    if "rokeby_shadow_of" in obj:
+    if obj.rokeby_shadow.role == "SHADOW_MESH":
         return obj
-    return next((o for o in _shadow_meshes() if o["rokeby_shadow_of"] == obj.name), None)
+    return next((o for o in _parts()[0] if o.rokeby_shadow.caster == obj), None)
 
 
 def remove(obj) -> None:
@@ -253,63 +427,137 @@ def remove(obj) -> None:
     ob = shadow_mesh_of(obj)
     if ob is None:
         raise ShadowEditError(f"{getattr(obj, 'name', obj)!r} has no shadow edit")
-    light_name = str(ob["rokeby_light"])
+    light = ob.rokeby_shadow.light
     me = ob.data
     bpy.data.objects.remove(ob, do_unlink=True)
     if me is not None and me.users == 0:
         bpy.data.meshes.remove(me)
-    light = bpy.data.objects.get(light_name)
-    if _edits_of(light_name) and light is not None and light.type == "LIGHT":
-        _link(light)  # other casters' edits from the same light stay
-    else:
-        _unlink(light_name)
+    if light is not None:
+        if _edits_of(light) and _is_light(light):
+            _link(light)  # other casters' edits from the same light stay
+        else:
+            _unlink(light)
+    _collect_orphan_collections()
 
 
 def repair(scene=None) -> list[str]:
     """Keeps shadow edits whole when an artist deletes something they use (called by the
     handlers; writes only when something is broken, so the update it causes settles):
 
-    * caster or light gone: the shadow mesh is kept (undo or a new light can use it) but hidden
-      from shadow rays, and the linking is taken down, so the remaining lights shade as without
-      the edit;
+    * caster or light gone (removed, or deleted with X and so in no scene): the shadow mesh is kept
+      (undo or a new edit can use it) but hidden from shadow rays, and the linking is taken down,
+      so the remaining lights shade as without the edit; an object deleted with X is no longer
+      pointed to (Blender purges it, as any object nothing uses), one only in collections that
+      left the scene is, and the edit comes back when it does;
     * shadow mesh gone: the twin and the linking go, the light's own linking comes back;
-    * twin light or a linking collection gone: made again from the shadow mesh.
+    * twin light or a linking collection gone: made again from the shadow mesh;
+    * a copy of a light (Shift+D) that carried the links along gets its own linking back.
 
-    Returns one message per repair."""
-    import bpy  # noqa: PLC0415
-
+    Renames change nothing: every link is a pointer. Returns one message per repair."""
     msgs = []
-    live = set()
-    for ob in _shadow_meshes():
-        caster = bpy.data.objects.get(str(ob["rokeby_shadow_of"]))
-        light = bpy.data.objects.get(str(ob["rokeby_light"]))
-        missing = "caster" if caster is None else ("light" if light is None or light.type != "LIGHT" else None)
+    meshes, twins, lights = _parts()
+    live = []
+    for ob in meshes:
+        links = ob.rokeby_shadow
+        caster, light = links.caster, links.light
+        missing = "caster" if not _in_scene(caster) else ("light" if not _is_light(light) else None)
         if missing is not None:
             if ob.visible_shadow:
                 ob.visible_shadow = False
+                links.switched_off = True
                 msgs.append(f"'{ob.name}': its {missing} is gone; it no longer casts shadows (undo brings it back)")
+            for attr in ("caster", "light"):
+                # Deleted with X but kept in bpy.data by our own references: let Blender purge it,
+                # as it does an object nothing uses.
+                o = getattr(links, attr)
+                if o is not None and not _in_scene(o) and _only_in_linking_collections(o):
+                    setattr(links, attr, None)
             continue
-        live.add(light.name)
-    for name in sorted(live):
-        light = bpy.data.objects[name]
-        twin = bpy.data.objects.get(name + TWIN_SUFFIX)
-        colls = [bpy.data.collections.get(_collection_name(name, r)) for r in _OURS]
+        if links.switched_off:  # its caster and light are back (a collection linked to the scene again)
+            ob.visible_shadow, links.switched_off = True, False
+            msgs.append(f"'{ob.name}': its caster and light are back; it casts the edited shadow again")
+        if light not in live:
+            live.append(light)
+    for light in live:
+        links = light.rokeby_shadow
+        twin = links.twin
+        colls = [getattr(links, a) for a in _COLLECTION_ATTRS]
         ll = light.light_linking
-        edits = _edits_of(name)
-        whole = (twin is not None and twin.get("rokeby_twin_of") == name and twin.parent == light and None not in colls
+        edits = _edits_of(light, meshes)
+        whole = (_in_scene(twin) and _owns_twin(light) and twin.parent == light and None not in colls
                  and ll.receiver_collection == colls[0] and ll.blocker_collection == colls[1]
                  and twin.light_linking.receiver_collection == colls[2] and twin.light_linking.blocker_collection == colls[3]
                  and all(c.name in colls[0].objects and s.name in colls[1].objects for c, s in edits))
         if not whole:
-            _link(light)
-            msgs.append(f"'{name}': the twin light or linking of its shadow edit was missing and is made again")
-    for twin in [o for o in bpy.data.objects if "rokeby_twin_of" in o]:
-        name = str(twin["rokeby_twin_of"])
-        if name not in live:
-            _unlink(name)
+            _link(light, meshes)
+            msgs.append(f"'{light.name}': the twin light or linking of its shadow edit was missing and is made again")
+    for light in lights:
+        if light not in live:
+            copy = not _owns_twin(light)
+            _unlink(light)
+            msgs.append(f"'{light.name}': " + ("a copy of a light with shadow edits; it gets its own linking back" if copy
+                                                 else "its shadow edit is gone; the twin light and the linking are removed"))
+    for twin in twins:
+        try:
+            light = twin.rokeby_shadow.light
+        except ReferenceError:
+            continue  # removed with its light above
+        if light is None or light not in live or light.rokeby_shadow.twin != twin:
+            name = light.name if light is not None else "a deleted light"
+            _remove_twin(twin)
             msgs.append(f"'{name}': its shadow edit is gone; the twin light and the linking are removed")
-    if msgs and scene is not None:
-        scene.view_layers[0].update()
+    if msgs:
+        _collect_orphan_collections()
+        if scene is not None:
+            scene.view_layers[0].update()
+    return msgs
+
+
+def migrate() -> list[str]:
+    """Files saved before shadow data version 1 named the parts of an edit (custom properties
+    ``rokeby_shadow_of``, ``rokeby_light`` on the shadow mesh, ``rokeby_twin_of`` on the twin,
+    ``rokeby_linking_before`` on the light; linking collections called '<light> · <role>'): those
+    names become pointers, resolved once, at load (handlers.migrate_file). Returns one message per
+    migrated part."""
+    import bpy  # noqa: PLC0415
+
+    if not _registered():
+        return []
+    objs, colls = bpy.data.objects, bpy.data.collections
+    version = _data_version()
+    msgs = []
+    local = [o for o in objs if o.library is None]
+    for ob in local:
+        if "rokeby_shadow_of" in ob and "rokeby_light" in ob:
+            links = ob.rokeby_shadow
+            caster, light = objs.get(str(ob["rokeby_shadow_of"])), objs.get(str(ob["rokeby_light"]))
+            links.role, links.caster, links.light, links.data_version = "SHADOW_MESH", caster, light, version
+            del ob["rokeby_shadow_of"], ob["rokeby_light"]
+            msgs.append(f"'{ob.name}': shadow mesh of {caster.name if caster else None!r} from {light.name if light else None!r}")
+    for ob in local:
+        if "rokeby_twin_of" in ob:
+            light = objs.get(str(ob["rokeby_twin_of"]))
+            light = light if light is not None and light.type == "LIGHT" else None
+            t = ob.rokeby_shadow
+            t.role, t.light, t.data_version = "TWIN", light, version
+            if light is not None and light.rokeby_shadow.twin is None:
+                light.rokeby_shadow.twin = ob
+            del ob["rokeby_twin_of"]
+            msgs.append(f"'{ob.name}': twin of {light.name if light else None!r}")
+    for ob in local:
+        if "rokeby_linking_before" in ob:
+            before = [str(n) for n in ob["rokeby_linking_before"]] + ["", ""]
+            links = ob.rokeby_shadow
+            links.linking_saved = True
+            links.receivers_before = colls.get(before[0]) if before[0] else None
+            links.blockers_before = colls.get(before[1]) if before[1] else None
+            for attr, role in zip(_COLLECTION_ATTRS, _OURS):
+                c = colls.get(_collection_name(ob.name, role))
+                if c is not None and c.library is None:
+                    c[LINKING_TAG] = role
+                    setattr(links, attr, c)
+            del ob["rokeby_linking_before"]
+            msgs.append(f"'{ob.name}': linking of its shadow edits")
     return msgs
 
 
@@ -327,10 +575,11 @@ def apply(session: ShadowSession, *, scene=None, falloff_beta: float = 0.0):
     if not (np.isfinite(beta) and beta >= 0.0):
         raise ShadowEditError(f"falloff_beta: must be finite and >= 0, got {falloff_beta}")
 
+    _require_registered()
     sc = scene if scene is not None else bpy.context.scene
-    caster = bpy.data.objects.get(session.caster)
-    light = bpy.data.objects.get(session.light)
-    if caster is None or light is None:
+    caster = session.caster_object()
+    light = session.light_object()
+    if not _in_scene(caster) or not _is_light(light):
         raise ShadowEditError("the caster or the light of this session no longer exists")
     world = np.asarray(session.shadow_mesh(), dtype=np.float64)
     if world.shape != session.rest_world.shape:
@@ -345,13 +594,18 @@ def apply(session: ShadowSession, *, scene=None, falloff_beta: float = 0.0):
     rest = np.empty(n * 3, np.float32)
     me.vertices.foreach_get("co", rest)
     name = caster.name + SHADOW_SUFFIX
-    ob = bpy.data.objects.get(name)
+    ob = shadow_mesh_of(caster)
+    previous_light = None
     if ob is None:
         ob = bpy.data.objects.new(name, me.copy())
         for c in caster.users_collection:
             c.objects.link(ob)
-    elif ob.data.users == 1 and len(ob.data.vertices) != n:
-        ob.data = me.copy()
+    else:
+        previous_light = ob.rokeby_shadow.light
+        if not ob.name.startswith(name):
+            ob.name = name
+        if ob.data.users == 1 and len(ob.data.vertices) != n:
+            ob.data = me.copy()
     # The edit lives in a shape key on the caster's rest shape, so the falloff of §6.2 can blend
     # between original (0) and shadow mesh (1) without touching the mesh again.
     ob.data.vertices.foreach_set("co", rest)
@@ -384,12 +638,19 @@ def apply(session: ShadowSession, *, scene=None, falloff_beta: float = 0.0):
     ob.visible_shadow = True
     ob.hide_select = False
     ob.display_type = "WIRE"
-    ob["rokeby_shadow_of"] = caster.name
+    links = ob.rokeby_shadow
+    links.role, links.caster, links.light, links.data_version = "SHADOW_MESH", caster, light, _data_version()
     ob["rokeby_light_initial"] = list(map(float, session.light_vector))
-    ob["rokeby_light"] = light.name
     ob["rokeby_falloff_beta"] = beta
 
     twin = _link(light)
+    if previous_light is not None and previous_light != light:
+        # The caster's edit moved to another light: the previous one keeps its other edits' linking.
+        if _edits_of(previous_light) and _is_light(previous_light):
+            _link(previous_light)
+        else:
+            _unlink(previous_light)
+        _collect_orphan_collections()
     sc.view_layers[0].update()
     return ob, twin
 
@@ -397,13 +658,12 @@ def apply(session: ShadowSession, *, scene=None, falloff_beta: float = 0.0):
 def falloff_factor(shadow_object, light, beta: float, *, caster=None) -> float:
     """(l_initial · l_current)^β (§6.2; β = 0: no falloff) for the light's current position
     relative to the caster, without writing anything."""
-    import bpy  # noqa: PLC0415
 
-    if shadow_object is None or "rokeby_shadow_of" not in shadow_object:
+    if _role(shadow_object) != "SHADOW_MESH":
         raise ShadowEditError(f"{getattr(shadow_object, 'name', shadow_object)!r} is not a Rokeby shadow mesh")
-    caster = caster if caster is not None else bpy.data.objects.get(shadow_object["rokeby_shadow_of"])
+    caster = caster if caster is not None else shadow_object.rokeby_shadow.caster
     if caster is None:
-        raise ShadowEditError(f"the caster '{shadow_object['rokeby_shadow_of']}' of this shadow mesh no longer exists")
+        raise ShadowEditError(f"the caster of '{shadow_object.name}' no longer exists")
     kw = light_arguments(light)
     m = np.array(caster.matrix_world, dtype=np.float64)
     lv = kw.get("light_direction")
@@ -426,13 +686,12 @@ def sync_falloffs(scene) -> int:
     called by the add-on's depsgraph and frame-change handlers. Writes only values that changed
     (so the write itself settles); returns how many it wrote. Shadow meshes whose light or caster
     is gone keep their value."""
-    import bpy  # noqa: PLC0415
 
     written = 0
-    for ob in scene.objects:
-        if "rokeby_shadow_of" not in ob or "rokeby_light" not in ob:
+    for ob in _parts()[0]:
+        if scene.objects.get(ob.name) != ob:
             continue
-        light = bpy.data.objects.get(str(ob["rokeby_light"]))
+        light = ob.rokeby_shadow.light
         keys = ob.data.shape_keys
         if light is None or light.type != "LIGHT" or keys is None or EDIT_KEY not in keys.key_blocks:
             continue

@@ -25,9 +25,14 @@ INACTIVE = (0.5, 0.5, 0.5, 1.0)
 STYLES = [("affine", "Affine", ""), ("similarity", "Similarity", ""), ("rigid", "Rigid", "")]
 
 
+def _key(scene):
+    """Sessions and overlays belong to a scene by its session id, so renaming it keeps them."""
+    return scene.session_uid
+
+
 def session(scene):
     """The scene's current shadow-editing session (or None)."""
-    return _SESSIONS.get(scene.name)
+    return _SESSIONS.get(_key(scene))
 
 
 def overlay_geometry(sess, eye=None) -> dict:
@@ -62,14 +67,14 @@ def _refresh(scene, eye=None):
     if eye is None and scene.camera is not None:
         eye = tuple(scene.camera.matrix_world.translation)
     sess = session(scene)
-    _OVERLAY[scene.name] = overlay_geometry(sess, eye) if sess is not None else None
+    _OVERLAY[_key(scene)] = overlay_geometry(sess, eye) if sess is not None else None
     for area in getattr(bpy.context.screen, "areas", ()) if bpy.context.screen else ():
         if area.type == "VIEW_3D":
             area.tag_redraw()
 
 
 def _draw():
-    geo = _OVERLAY.get(bpy.context.scene.name)
+    geo = _OVERLAY.get(_key(bpy.context.scene))
     if not geo or len(geo["lines"]) == 0:
         return
     import gpu  # noqa: PLC0415 - only while drawing
@@ -96,7 +101,9 @@ def _light(context, name: str):
         if ob is None or ob.type != "LIGHT":
             raise shadow.ShadowEditError(f"light: no light object named {name!r}")
         return ob
-    lights = [o for o in context.selected_objects if o.type == "LIGHT"] or [o for o in context.scene.objects if o.type == "LIGHT"]
+    # Twin lights made for edited shadows are never what the artist means.
+    ok = lambda o: o.type == "LIGHT" and shadow._role(o) != "TWIN"  # noqa: E731
+    lights = [o for o in context.selected_objects if ok(o)] or [o for o in context.scene.objects if ok(o)]
     if len(lights) != 1:
         raise shadow.ShadowEditError(f"light: select one light (found {len(lights)}) or name it")
     return lights[0]
@@ -120,7 +127,7 @@ class ROKEBY_OT_shadow_start(bpy.types.Operator):
         except shadow.ShadowEditError as exc:
             self.report({"ERROR"}, f"Rokeby: {exc}")
             return {"CANCELLED"}
-        _SESSIONS[context.scene.name] = sess
+        _SESSIONS[_key(context.scene)] = sess
         _ensure_overlay()
         _refresh(context.scene)
         n = len(sess.loops())
@@ -250,7 +257,7 @@ class ROKEBY_OT_shadow_stop(bpy.types.Operator):
     bl_label = "Stop Shadow Editing"
 
     def execute(self, context):
-        _SESSIONS.pop(context.scene.name, None)
+        _SESSIONS.pop(_key(context.scene), None)
         _refresh(context.scene)
         return {"FINISHED"}
 
