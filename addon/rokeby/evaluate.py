@@ -107,7 +107,8 @@ class _Geometry:
         self.normals = normals
         self.triangles = triangles
         self.tri_poly = tri_poly  # polygon of each loop triangle (sorted), for closest-point lookups
-        self.source = source  # "evaluated" or "base"
+        self.source = source  # "evaluated" or "transfer" (see read_geometry)
+        self.local = None  # object-space positions (V, 3) float32, for the surface BVH
         self.size = float(np.linalg.norm(vertices.max(0) - vertices.min(0))) if len(vertices) else 0.0
         self.region_weights: dict[str, np.ndarray] = {}
         self.bvh = None
@@ -162,6 +163,8 @@ class _State:
         self.estimate_time = -1e9
         self.estimate_args = None
         self.corner_topology = None
+        # What the mirror's own mesh data held when api.evaluate last looked (mesh_fingerprint).
+        self.mesh_fingerprint: bytes | None = None
 
 
 _STATE: dict[int, _State] = {}
@@ -301,6 +304,7 @@ def read_geometry(obj, depsgraph, mirror_matrix: np.ndarray, freeform_groups=())
     me.loop_triangle_polygons.foreach_get("value", tri_poly)
     v, n = to_world(co, nrm, mirror_matrix, f"mirror '{obj.name}'")
     geo = _Geometry(v, n, tri.reshape(-1, 3), tri_poly, source)
+    geo.local = co.reshape(-1, 3)
     for group in freeform_groups:
         geo.region_weights[group] = _vertex_group_weights(obj, me, group, source)
     return geo
@@ -321,10 +325,15 @@ def _vertex_group_weights(obj, me, group: str, source: str) -> np.ndarray:
 
 
 def _bvh(geo: _Geometry):
+    """A BVH over the triangles of ``geo`` in object space (kept while the local positions and
+    triangles are unchanged, also across transforms), built from the copied arrays: surface
+    queries never touch Blender's evaluated mesh, which another handler's ID removal in the same
+    update can free under us (issue 24)."""
     if geo.bvh is None:
         from mathutils.bvhtree import BVHTree  # noqa: PLC0415
 
-        geo.bvh = BVHTree.FromPolygons(geo.vertices.tolist(), geo.triangles.tolist(), all_triangles=True)
+        pts = geo.local if geo.local is not None else geo.vertices
+        geo.bvh = BVHTree.FromPolygons(pts.tolist(), geo.triangles.tolist(), all_triangles=True)
     return geo.bvh
 
 
@@ -354,20 +363,20 @@ def project_to_surface(obj, depsgraph, geo: _Geometry, world_point, mirror_matri
     """The surface point of the mirror nearest ``world_point``: triangle, barycentric coordinates
     and the interpolated vertex normal (the normal the renderers shade with)."""
     x = np.asarray(world_point, dtype=np.float64)
-    if geo.source in ("evaluated", "transfer"):
-        ob_eval = obj.evaluated_get(depsgraph)
+    if not np.all(np.isfinite(x)):
+        raise RokebyError(f"mirror '{getattr(obj, 'name', '?')}': the point to project is not finite")
+    if geo.local is not None:
         inv = np.linalg.inv(mirror_matrix)
-        local = inv[:3, :3] @ x + inv[:3, 3]
-        ok, _loc, _n, poly = ob_eval.closest_point_on_mesh(local.tolist())
-        if not ok:
-            raise RokebyError(f"mirror '{obj.name}': no surface point found")
-        candidates = geo.triangles_of_polygon(poly)
-        if len(candidates) == 0:
-            raise RokebyError(f"mirror '{obj.name}': the surface point's polygon {poly} has no triangles")
+        query = inv[:3, :3] @ x + inv[:3, 3]
     else:
-        loc, _n, tri_index, _d = _bvh(geo).find_nearest(x.tolist())
-        if tri_index is None:
-            raise RokebyError(f"mirror '{obj.name}': no surface point found")
+        query = x
+    _loc, _n, tri_index, _d = _bvh(geo).find_nearest(query.tolist())
+    if tri_index is None:
+        raise RokebyError(f"mirror '{getattr(obj, 'name', '?')}': no surface point found")
+    # The nearest triangle in object space, and its neighbours of the same polygon (in world
+    # space the nearest may differ under a non-uniform scale).
+    candidates = geo.triangles_of_polygon(int(geo.tri_poly[tri_index])) if len(geo.tri_poly) > tri_index else [tri_index]
+    if len(candidates) == 0:
         candidates = [tri_index]
     best = None
     for t in candidates:
@@ -1041,6 +1050,9 @@ def evaluate_mirror(obj, scene, depsgraph, *, force=False, reread_geometry=False
                 state.region_cache.clear()
             else:
                 new.bvh, new._poly_start, new.edges = geo.bvh, geo._poly_start, geo.edges
+            if new.bvh is None and geo is not None and geo.bvh is not None and geo.local is not None \
+                    and np.array_equal(geo.local, new.local) and np.array_equal(geo.triangles, new.triangles):
+                new.bvh = geo.bvh  # moved, not reshaped: the object-space BVH still holds
             state.geometry = geo = new
         report.vertices = len(geo.vertices)
         report.field_mesh = geo.source
@@ -1173,6 +1185,52 @@ def evaluate_mirror(obj, scene, depsgraph, *, force=False, reread_geometry=False
     report.python_ms = (time.perf_counter() - t0) * 1e3 - report.native_ms
     state.report = report
     return report
+
+
+def mesh_fingerprint(obj) -> bytes:
+    """A cheap digest of ``obj``'s own mesh data (positions, corners, polygons, shape keys): a
+    script that edits them (``foreach_set``, ``bmesh.to_mesh``) tags nothing that the API sees."""
+    me = obj.data
+    h = hashlib.blake2b(digest_size=16)
+    nv, nl, npoly = len(me.vertices), len(me.loops), len(me.polygons)
+    h.update(repr((me.session_uid, nv, nl, npoly)).encode())
+    co = np.empty(nv * 3, np.float32)
+    me.vertices.foreach_get("co", co)
+    h.update(co.tobytes())
+    idx = np.empty(nl, np.int32)
+    me.loops.foreach_get("vertex_index", idx)
+    h.update(idx.tobytes())
+    start = np.empty(npoly, np.int32)
+    me.polygons.foreach_get("loop_start", start)
+    h.update(start.tobytes())
+    keys = me.shape_keys
+    if keys is not None:
+        for kb in keys.key_blocks:
+            kco = np.empty(len(kb.data) * 3, np.float32)
+            kb.data.foreach_get("co", kco)
+            h.update(kb.name.encode() + kco.tobytes())
+    return h.digest()
+
+
+def edited_meshes(scene) -> set:
+    """Mirrors of ``scene`` whose mesh data changed since the last call (or were never seen):
+    their meshes are tagged so the next depsgraph update re-evaluates them from the edited data,
+    and the caller re-reads their geometry. For ``rokeby.api.evaluate``, which runs with the
+    handlers suspended and so never sees Blender's geometry updates."""
+    out = set()
+    for ob in mirrors_of(scene):
+        try:
+            if ob.type != "MESH" or ob.mode == "EDIT" or ob.library is not None or ob.data.library is not None:
+                continue
+            fp = mesh_fingerprint(ob)
+        except (AttributeError, ReferenceError):
+            continue
+        state = _STATE.setdefault(ob.session_uid, _State())
+        if state.mesh_fingerprint != fp:
+            ob.data.update_tag()
+            state.mesh_fingerprint = fp
+            out.add(ob)
+    return out
 
 
 def mirrors_of(scene) -> list:
