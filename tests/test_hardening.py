@@ -264,3 +264,248 @@ def test_evaluate_after_a_script_edits_the_mesh_matches_a_fresh_evaluation(how):
     np.testing.assert_allclose(edited, fresh, atol=1e-5)
     # Nothing changed since: no recomputation.
     assert not api.evaluate()[mirror.name].recomputed
+
+
+# --- 5. no inf into Blender data or files from finite-but-huge input ----------------------------
+
+
+@pytest.fixture(scope="module")
+def frame_exr(tmp_path_factory):
+    """A small valid multilayer EXR with the passes of setup_passes (a tiny Cycles render, as
+    tests/test_compositing.py makes them), and its passes."""
+    from rokeby import compositing as C
+    from test_compositing import _scene
+
+    sc = _scene()
+    sc.render.resolution_x, sc.render.resolution_y = 32, 24
+    sc.cycles.samples = 4
+    path = tmp_path_factory.mktemp("hardening") / "frame.exr"
+    return path, C.render_passes(sc, str(path))
+
+
+def _cli(*args):
+    return subprocess.run([sys.executable, "-m", "rokeby.composite", *map(str, args)], capture_output=True, text=True,
+                          cwd=ROOT / "addon", timeout=300)
+
+
+def _one_clean_line(r):
+    """Exit 2, no traceback, and the problem in one 'rokeby.composite:' line (warnings about the
+    patches may come before it, each one line)."""
+    lines = r.stderr.strip().splitlines()
+    assert r.returncode == 2, (r.returncode, r.stderr[-2000:])
+    assert "Traceback" not in r.stderr and lines and all(ln.startswith("rokeby.composite: ") for ln in lines), r.stderr[-2000:]
+    return lines[-1]
+
+
+@pytest.mark.parametrize("flag", ["--kd", "--kr"])
+def test_composite_with_a_huge_intensity_writes_no_inf(frame_exr, tmp_path, flag):
+    """Old main: exit 0 and an EXR with inf pixels."""
+    from rokeby import compositing as C
+
+    path, p = frame_exr
+    out = tmp_path / "out.exr"
+    line = _one_clean_line(_cli(path, out, "--emboss", "0.5", flag, "1e300"))
+    assert ("k_d" if flag == "--kd" else "k_r") in line and "1e+300" in line
+    assert not out.exists()
+    # The API says the same, naming the argument; a value at the bound gives finite pixels.
+    rec = C.reconstruct(p, warn=False)
+    with pytest.raises(ValueError, match="k_d: must be finite and at most"):
+        C.recomposite(p, rec, rec.normals, k_d=1e300)
+    img, _ = C.recomposite(p, rec, rec.normals, k_d=C.MAX_K)
+    assert np.isfinite(img[np.isfinite(p.image)]).all()
+
+
+def _painted_ball():
+    from rokeby import appearance
+
+    bpy.ops.wm.read_factory_settings(use_empty=True)
+    bpy.ops.mesh.primitive_uv_sphere_add(segments=24, ring_count=12)
+    ball = bpy.context.object
+    mat = bpy.data.materials.new("Paint")
+    mat.use_nodes = True
+    ball.data.materials.append(mat)
+    appearance.setup(ball)
+    return ball, appearance
+
+
+def test_painting_a_huge_colour_is_refused_and_writes_nothing():
+    """Old main: 1e39 is a finite Python float, accepted, and written as inf into
+    rokeby_base_color."""
+    ball, appearance = _painted_ball()
+    before = appearance.read(ball, "diffuse").copy()
+    for value in ((1e39, 0.0, 0.0), (3e38, 3e38, 3e38)):
+        with pytest.raises(ValueError, match="value: a diffuse colour"):
+            appearance.paint(ball, "diffuse", (0.0, 0.0, 1.0), radius=0.5, value=value)
+    np.testing.assert_array_equal(appearance.read(ball, "diffuse"), before)
+    with pytest.raises(ValueError, match="value: a tint"):
+        appearance.set_global(ball.active_material, "diffuse", (1e39, 1.0, 1.0))
+    # At the bound: painted, finite.
+    got = appearance.paint(ball, "diffuse", (0.0, 0.0, 1.0), radius=0.5, value=(appearance.MAX_COLOR, 0.0, 0.0))
+    assert np.isfinite(got).all() and got[:, 0].max() > 1.0
+
+
+def test_shadow_noise_amplitude_that_overflows_is_refused_and_writes_nothing():
+    """Old main: the drag is accepted and apply writes inf into the shadow shape key."""
+    from test_shadow import _blender_scene
+
+    from rokeby import shadow
+
+    bpy_, sc, ball, lamp, ground = _blender_scene()
+    s = api.start_shadow_edit(ball, lamp, [ground], min_loop_vertices=10)
+    h = s.handles(0)["points"].astype(np.float64)
+    n, c, m = len(h), h.mean(axis=0), int(np.argmax(h[:, 0]))
+    fixed, target = ((m - n // 5) % n, (m + n // 5) % n), c + (h[m] - c) * 1.35
+    with pytest.raises(ValueError, match="noise_amplitude: must be finite"):
+        s.drag(0, fixed, m, target, noise_amplitude=1e39, noise_frequency=3.0)
+    # Past the API check (the native editor directly): apply still refuses to write inf.
+    s.editor.drag(0, fixed, m, target, noise_amplitude=1e39, noise_frequency=3.0)
+    s.commit()
+    names = set(bpy.data.objects.keys())
+    with pytest.raises(shadow.ShadowEditError, match="non-finite"):
+        api.apply_shadow_edit(s)
+    assert set(bpy.data.objects.keys()) == names
+    # A large but sane amplitude works and stays finite.
+    s2 = api.start_shadow_edit(ball, lamp, [ground], min_loop_vertices=10)
+    s2.drag(0, fixed, m, target, noise_amplitude=0.05, noise_frequency=3.0)
+    s2.commit()
+    ob, _twin = api.apply_shadow_edit(s2)
+    key = ob.data.shape_keys.key_blocks[shadow.EDIT_KEY]
+    co = np.empty(3 * len(key.data), np.float32)
+    key.data.foreach_get("co", co)
+    assert np.isfinite(co).all()
+
+
+# --- 6. bad EXR files and bad flags -------------------------------------------------------------
+
+
+def _corrupted(src: bytes, tmp_path):
+    out = {}
+    for frac in (0.0, 0.05, 0.3, 0.7, 0.95, 0.999):
+        out[f"truncated to {frac:.1%}"] = src[: int(len(src) * frac)]
+    rng = np.random.default_rng(24)
+    for k in range(6):
+        b = bytearray(src)
+        lo = 0 if k < 3 else len(b) // 2  # the header and offset table, then the pixel data
+        for i in rng.integers(lo, len(b), 8 * (k + 1)):
+            b[i] ^= 1 << int(rng.integers(0, 8))
+        out[f"bit flips {k}"] = bytes(b)
+    paths = {}
+    for name, data in out.items():
+        p = tmp_path / (name.replace(" ", "_").replace("%", "pc") + ".exr")
+        p.write_bytes(data)
+        paths[name] = p
+    return paths
+
+
+def test_truncated_and_corrupted_exrs_give_a_clear_error(frame_exr, tmp_path):
+    """Old main: a bare IndexError (API) and a traceback with exit 1 (CLI)."""
+    from rokeby import compositing as C
+
+    path, _p = frame_exr
+    refused = 0
+    for name, bad in _corrupted(path.read_bytes(), tmp_path).items():
+        try:
+            C.read_exr(str(bad))
+        except C.CompositingError as exc:
+            refused += 1
+            assert str(bad) in str(exc), (name, exc)
+        # (a flip inside compressed pixel data may still read: then it is a valid file)
+        out = tmp_path / "out.exr"
+        r = _cli(bad, out, "--emboss", "0.5")
+        if r.returncode != 0:
+            line = _one_clean_line(r)
+            assert str(bad) in line, (name, line)
+            assert not out.exists()
+        else:
+            assert "Traceback" not in r.stderr
+            out.unlink()
+    assert refused >= 7  # every truncation and the header flips
+
+
+BAD_FLAGS = [
+    (["--kd", "nan"], "k_d"), (["--env-size", "-5"], "env_size"), (["--env-size", "0"], "env_size"),
+    (["--env-size", "100000000"], "env_size"), (["--objects", "a,b"], "--objects"), (["--kd", "x"], "--kd"),
+    (["--ripple", "1", "--ripple-wavelength", "0"], "wavelength"), (["--ripple", "1", "--ripple-radius", "-1"], "radius"),
+    (["--ripple", "1", "--ripple-center", "nan,nan"], "center"), (["--noise", "1", "--noise-radius", "nan"], "radius"),
+    (["--noise", "1", "--noise-octaves", "1000000"], "octaves"), (["--layer", "Nope"], "Nope"),
+    (["--fit", "svd"], "--fit"), (["--backend", "cuda"], "--backend"),
+]
+
+
+@pytest.mark.parametrize("args,word", BAD_FLAGS, ids=[" ".join(a) for a, _w in BAD_FLAGS])
+def test_bad_flags_exit_2_with_one_line(frame_exr, tmp_path, args, word):
+    """Old main: several of these print a traceback and exit 1 (or write an image and exit 0)."""
+    path, _p = frame_exr
+    out = tmp_path / "out.exr"
+    line = _one_clean_line(_cli(path, out, *args))
+    assert word in line, line
+    assert not out.exists()
+
+
+def test_unwritable_output_and_report_exit_2_with_one_line(frame_exr, tmp_path):
+    path, _p = frame_exr
+    line = _one_clean_line(_cli(path, tmp_path / "no" / "such" / "dir" / "out.exr"))
+    assert "cannot write" in line
+    line = _one_clean_line(_cli(path, tmp_path / "out.exr", "--report", tmp_path / "no" / "r.json"))
+    assert "r.json" in line
+
+
+# --- 7. appearance.setup and texture links on the Principled inputs ---------------------------
+
+
+def _snapshot(mat):
+    nt = mat.node_tree
+    nodes = sorted((n.name, n.bl_idname) for n in nt.nodes)
+    links = sorted((ln.from_node.name, ln.from_socket.identifier, ln.to_node.name, ln.to_socket.identifier) for ln in nt.links)
+    values = {}
+    for n in nt.nodes:
+        for s in n.inputs:
+            if hasattr(s, "default_value"):
+                v = s.default_value
+                values[(n.name, s.identifier)] = tuple(v) if hasattr(v, "__len__") else v
+    return nodes, links, values
+
+
+def _textured_ball():
+    from rokeby import appearance
+
+    bpy.ops.wm.read_factory_settings(use_empty=True)
+    bpy.ops.mesh.primitive_uv_sphere_add(segments=24, ring_count=12)
+    ball = bpy.context.object
+    mat = bpy.data.materials.new("Textured")
+    mat.use_nodes = True
+    nt = mat.node_tree
+    bsdf = nt.nodes["Principled BSDF"]
+    tex = nt.nodes.new("ShaderNodeTexChecker")
+    tex.name = "Checker"
+    nt.links.new(tex.outputs["Color"], bsdf.inputs["Base Color"])
+    rough = nt.nodes.new("ShaderNodeTexNoise")
+    rough.name = "Noise"
+    nt.links.new(rough.outputs["Fac"], bsdf.inputs["Roughness"])
+    ball.data.materials.append(mat)
+    return ball, mat, appearance
+
+
+def test_setup_keeps_texture_links_unless_told_and_remove_puts_them_back():
+    """Old main: setup silently replaces the Checker and Noise links (no error, no way back)."""
+    ball, mat, appearance = _textured_ball()
+    original = _snapshot(mat)
+    attrs = set(ball.data.attributes.keys())
+    with pytest.raises(ValueError) as exc:
+        appearance.setup(ball)
+    msg = str(exc.value)
+    assert "Base Color (from 'Checker')" in msg and "Roughness (from 'Noise')" in msg and "linked='REPLACE'" in msg
+    assert _snapshot(mat) == original and set(ball.data.attributes.keys()) == attrs
+    # Told to: the painted values take the inputs over, and remove() restores the material exactly.
+    appearance.setup(ball, linked="REPLACE")
+    bsdf = mat.node_tree.nodes["Principled BSDF"]
+    assert bsdf.inputs["Base Color"].links[0].from_node.name == "rokeby_global_diffuse"
+    appearance.paint(ball, "roughness", (0.0, 0.0, 1.0), radius=0.5, value=0.9)
+    appearance.remove(ball)
+    assert _snapshot(mat) == original
+    # A material without links: setup and remove also round-trip; the painted data stays.
+    ball2, _ = _painted_ball()
+    mat2 = ball2.active_material
+    appearance.remove(ball2)
+    assert "rokeby_roughness" in ball2.data.attributes
+    assert not [n for n in mat2.node_tree.nodes if n.name.startswith("rokeby_")]

@@ -644,9 +644,12 @@ def evaluate(scene=None, frame=None, *, force: bool = False) -> "dict[str, Mirro
             if not np.isfinite(f) or abs(f) > _MAX_FRAME:
                 raise RokebyError(f"frame: must be finite and within ±{_MAX_FRAME}, got {frame}")
             whole = int(np.floor(f))
-            # Already there (e.g. a frame_change_post handler asking for the current frame):
-            # no frame_set, which would run the frame-change handlers again and recurse.
-            if scene.frame_current != whole or abs(float(scene.frame_subframe) - (f - whole)) > 1e-6:
+            if scene.frame_current == whole and abs(float(scene.frame_subframe) - (f - whole)) <= 1e-6:
+                # Already there (e.g. a frame_change_post handler asking for the current frame):
+                # no frame_set, which would run the frame-change handlers again and recurse.
+                # Setting the frame re-applies its animation in the depsgraph update below.
+                scene.frame_current = whole
+            else:
                 if _SETTING_FRAME:
                     raise RokebyError(f"frame: evaluate(frame={frame}) was called while evaluate is changing the frame "
                                       "(from a frame-change handler?); call evaluate() without a frame there")
