@@ -415,7 +415,7 @@ def set_global(mat, param: str, value) -> None:
         node.inputs[7].default_value = tuple(float(x) for x in v)
     else:
         if not (isinstance(value, (int, float)) and math.isfinite(value) and 0 <= value <= MAX_COLOR):
-            raise ValueError(f"value: a global scale must be in [0, {MAX_COLOR:g}], got {value!r}")
+            raise ValueError(f"value: a global scale must be finite and ≥ 0 (at most {MAX_COLOR:g}), got {value!r}")
         node.inputs[1].default_value = float(value)
 
 
