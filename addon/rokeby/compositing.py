@@ -856,8 +856,10 @@ def _check_k(k_d, k_r) -> None:
 def _check_output(out, image) -> None:
     """Never inf/NaN out of finite input: a pixel that is finite in the rendered image must be
     finite in the recomposited one."""
-    img = out[0] if isinstance(out, tuple) else out
-    bad = ~np.isfinite(np.asarray(img)[..., :3]) & np.isfinite(np.asarray(image)[..., :3])
+    img = np.asarray(out[0] if isinstance(out, tuple) else out)[..., :3]
+    if np.isfinite(img).all():  # the common case: one pass
+        return
+    bad = ~np.isfinite(img) & np.isfinite(np.asarray(image)[..., :3])
     if bad.any():
         raise CompositingError(f"the recomposited image has {int(bad.any(-1).sum())} non-finite pixels where the render is "
                                "finite (k_d, k_r or the edit too large for float32?); nothing was written")
