@@ -70,7 +70,7 @@ def main(argv=None) -> int:
     or value, an unwritable output or a resource limit (issue 24: never a traceback for those)."""
     try:
         return _main(argv)
-    except (C.CompositingError, ValueError, TypeError, OSError, MemoryError) as exc:
+    except (C.CompositingError, ValueError, OSError, MemoryError) as exc:
         what = "out of memory" if isinstance(exc, MemoryError) else " ".join(str(exc).split())
         print(f"rokeby.composite: {what or type(exc).__name__}", file=sys.stderr)
         return 2
@@ -109,7 +109,10 @@ def _main(argv) -> int:
                          "or through Blender's gpu module (blender_gpu: bpy in this process; its context costs one tiny EEVEE render)")
     ap.add_argument("--report", metavar="JSON", help="write per-patch reconstruction report and timings")
     a = ap.parse_args(argv)
-    C._check_k(a.kd, a.kr)  # before any work: a bad --kd/--kr is named as such
+    try:  # before any work, named by its flag
+        C._check_k(a.kd, a.kr)
+    except C.CompositingError as exc:
+        ap.error(f"argument {'--kd' if str(exc).startswith('k_d') else '--kr'}: {exc}")
 
     t0 = time.perf_counter()
     try:
