@@ -284,8 +284,9 @@ def frame_exr(tmp_path_factory):
 
 
 def _cli(*args):
+    # From the folder holding the rokeby package under test (python -m puts it first on sys.path).
     return subprocess.run([sys.executable, "-m", "rokeby.composite", *map(str, args)], capture_output=True, text=True,
-                          cwd=ROOT / "addon", timeout=300)
+                          cwd=Path(rokeby.__file__).resolve().parents[1], timeout=300)
 
 
 def _one_clean_line(r):
