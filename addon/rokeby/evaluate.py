@@ -108,7 +108,10 @@ class _Geometry:
         self.triangles = triangles
         self.tri_poly = tri_poly  # polygon of each loop triangle (sorted), for closest-point lookups
         self.source = source  # "evaluated" or "transfer" (see read_geometry)
-        self.local = None  # object-space positions (V, 3) float32, for the surface BVH
+        self.local = None  # object-space positions (V, 3) float32, for the surface queries
+        self.uses = 0  # evaluations that used this shape (a BVH pays off from the second on)
+        self.queries = 0  # surface queries answered by nearest_triangle
+        self.max_edge = None  # longest triangle edge in object space, for nearest_triangle
         self.size = float(np.linalg.norm(vertices.max(0) - vertices.min(0))) if len(vertices) else 0.0
         self.region_weights: dict[str, np.ndarray] = {}
         self.bvh = None
@@ -337,6 +340,52 @@ def _bvh(geo: _Geometry):
     return geo.bvh
 
 
+# Surface queries on a new shape answered without a BVH; beyond them the BVH is built.
+NUMPY_QUERIES = 16
+
+
+def nearest_triangle(geo: _Geometry, query) -> int:
+    """Index of a triangle of ``geo`` nearest the object-space point ``query``, with numpy and no
+    acceleration structure (O(V + T) per query, about 2 ms at 100k vertices): for a shape that is
+    queried once or twice (a deforming mirror on a frame change), where building a BVH would
+    cost far more. The nearest surface point lies in a triangle with a vertex within d + L of
+    the query (d: distance to the nearest vertex, L: the longest edge), so only those are
+    measured exactly."""
+    pts = geo.local if geo.local is not None else geo.vertices
+    tri = geo.triangles
+    x = np.asarray(query, np.float64)
+    d2 = np.einsum("ij,ij->i", pts - x.astype(np.float32), pts - x.astype(np.float32)).astype(np.float64)
+    if geo.max_edge is None:
+        a, b, c = (pts[tri[:, k]] for k in range(3))
+        geo.max_edge = float(np.sqrt(max(np.einsum("ij,ij->i", b - a, b - a).max(), np.einsum("ij,ij->i", c - b, c - b).max(),
+                                         np.einsum("ij,ij->i", a - c, a - c).max()))) if len(tri) else 0.0
+    reach = float(np.sqrt(d2.min())) + geo.max_edge
+    near = d2 <= reach * reach * (1.0 + 1e-6) + 1e-30
+    cand = np.flatnonzero(near[tri].any(axis=1))
+    if len(cand) == 0:
+        cand = np.arange(len(tri))
+    a, b, c = (pts[tri[cand, k]].astype(np.float64) for k in range(3))
+    best = np.full(len(cand), np.inf)
+    # The three edges (segments), then the interior (projection onto the plane, when inside).
+    for p0, p1 in ((a, b), (b, c), (c, a)):
+        e = p1 - p0
+        ee = np.einsum("ij,ij->i", e, e)
+        t = np.clip(np.einsum("ij,ij->i", x - p0, e) / np.maximum(ee, 1e-300), 0.0, 1.0)
+        q = p0 + t[:, None] * e
+        best = np.minimum(best, np.einsum("ij,ij->i", x - q, x - q))
+    n = np.cross(b - a, c - a)
+    nn = np.einsum("ij,ij->i", n, n)
+    ok = nn > 1e-300
+    h = np.einsum("ij,ij->i", x - a, n) / np.where(ok, nn, 1.0)
+    p = x - h[:, None] * n
+    inside = ok.copy()
+    for p0, p1 in ((a, b), (b, c), (c, a)):
+        inside &= np.einsum("ij,ij->i", np.cross(p1 - p0, p - p0), n) >= 0.0
+    plane = h * h * nn
+    best = np.where(inside, np.minimum(best, plane), best)
+    return int(cand[int(np.argmin(best))])
+
+
 def _barycentric(p, a, b, c) -> np.ndarray:
     v0, v1, v2 = b - a, c - a, p - a
     d00, d01, d11 = v0 @ v0, v0 @ v1, v1 @ v1
@@ -370,7 +419,11 @@ def project_to_surface(obj, depsgraph, geo: _Geometry, world_point, mirror_matri
         query = inv[:3, :3] @ x + inv[:3, 3]
     else:
         query = x
-    _loc, _n, tri_index, _d = _bvh(geo).find_nearest(query.tolist())
+    if geo.bvh is None and geo.uses < 2 and geo.queries < NUMPY_QUERIES:
+        geo.queries += 1
+        tri_index = nearest_triangle(geo, query)  # a new shape: no BVH yet (see nearest_triangle)
+    else:
+        _loc, _n, tri_index, _d = _bvh(geo).find_nearest(query.tolist())
     if tri_index is None:
         raise RokebyError(f"mirror '{getattr(obj, 'name', '?')}': no surface point found")
     # The nearest triangle in object space, and its neighbours of the same polygon (in world
@@ -1050,10 +1103,13 @@ def evaluate_mirror(obj, scene, depsgraph, *, force=False, reread_geometry=False
                 state.region_cache.clear()
             else:
                 new.bvh, new._poly_start, new.edges = geo.bvh, geo._poly_start, geo.edges
-            if new.bvh is None and geo is not None and geo.bvh is not None and geo.local is not None \
+                new.uses, new.max_edge = geo.uses, geo.max_edge
+            if new.bvh is None and geo is not None and geo.local is not None \
                     and np.array_equal(geo.local, new.local) and np.array_equal(geo.triangles, new.triangles):
-                new.bvh = geo.bvh  # moved, not reshaped: the object-space BVH still holds
+                # moved, not reshaped: the object-space BVH (or the count towards one) still holds
+                new.bvh, new.uses, new.max_edge = geo.bvh, geo.uses, geo.max_edge
             state.geometry = geo = new
+        geo.uses += 1
         report.vertices = len(geo.vertices)
         report.field_mesh = geo.source
         eye_now, report.eye = render_eye(obj, scene, depsgraph, geo.size)
