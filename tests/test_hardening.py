@@ -77,6 +77,7 @@ def test_frame_change_handler_asking_for_the_current_frame_does_not_recurse():
         except Exception as exc:  # noqa: BLE001 - recorded, asserted below
             errors.append(f"{type(exc).__name__}: {exc}")
 
+    mine = [wants_fresh_field]
     bpy.app.handlers.frame_change_post.append(wants_fresh_field)
     try:
         bpy.context.scene.frame_set(12)
@@ -89,11 +90,14 @@ def test_frame_change_handler_asking_for_the_current_frame_does_not_recurse():
         # A handler asking for ANOTHER frame while evaluate changes the frame gets a clear
         # error (it would recurse), not a RecursionError.
         bpy.app.handlers.frame_change_post.remove(wants_fresh_field)
-        bpy.app.handlers.frame_change_post.append(lambda scene, dg=None: _other_frame(scene, errors))
+        mine.append(lambda scene, dg=None: _other_frame(scene, errors))
+        bpy.app.handlers.frame_change_post.append(mine[-1])
         api.evaluate(frame=7)
         assert len(errors) == 1 and "frame" in errors[0] and "RecursionError" not in errors[0], errors
-    finally:
-        bpy.app.handlers.frame_change_post.clear()
+    finally:  # only this test's handlers: Rokeby's own stay registered
+        for fn in mine:
+            while fn in bpy.app.handlers.frame_change_post:
+                bpy.app.handlers.frame_change_post.remove(fn)
     # The fields the handler got are those of the frames it asked for.
     for frame, status, got in fields:
         assert status != "ERROR"
