@@ -373,8 +373,10 @@ def test_save_and_reload_keep_the_map_and_the_mode(chrome_ball, tmp_path):
     ball.rokeby.render_mode = "REFLECTION_MAP"
     cached = _pixels(api.capture_reflection_map(ball, resolution=64, samples=2))
     img = reflmap.image_for(ball)
-    assert img.packed_file is None and img.filepath == "//rokeby_maps/Ball.exr"
-    assert sorted(os.listdir(tmp_path / "rokeby_maps")) == ["Ball.exr", "Ball_r0.25.exr", "Ball_r0.5.exr", "Ball_r1.exr"]
+    stem = f"Ball-{ball.rokeby.map_id}"  # the name, and an id unique where names are not (issue 24)
+    assert len(ball.rokeby.map_id) == reflmap.ID_CHARS
+    assert img.packed_file is None and img.filepath == f"//rokeby_maps/{stem}.exr"
+    assert sorted(os.listdir(tmp_path / "rokeby_maps")) == [f"{stem}.exr", f"{stem}_r0.25.exr", f"{stem}_r0.5.exr", f"{stem}_r1.exr"]
     assert api.install_render_nodes(ball) == 1
     bpy.ops.wm.save_mainfile()
     bpy.ops.wm.open_mainfile(filepath=path)

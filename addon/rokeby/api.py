@@ -604,22 +604,48 @@ def remove_mirror(mirror, *, scene=None):
     rendering.sync_scene(scene)
 
 
+# Re-entrance guard of evaluate(frame=...): set while its frame_set runs the frame handlers.
+_SETTING_FRAME = False
+# Blender's frame range (MAXFRAME).
+_MAX_FRAME = 1048574
+
+
 def evaluate(scene=None, frame=None, *, force: bool = False) -> "dict[str, MirrorReport]":
     """Bring every mirror of ``scene`` up to date (at ``frame`` when given, which may be
     fractional) and return a report per mirror. Only mirrors whose inputs changed are recomputed,
     unless ``force``. Never raises for a bad mirror: its report says what is wrong."""
     from . import handlers  # noqa: PLC0415
 
+    global _SETTING_FRAME
     scene = _scene(scene)
     with handlers.suspended():
         if frame is not None:
-            f = float(frame)
-            if not np.isfinite(f):
-                raise RokebyError(f"frame: must be finite, got {frame}")
+            try:
+                f = float(frame)
+            except (TypeError, ValueError):
+                raise TypeError(f"frame: expected a number, got {frame!r}") from None
+            if not np.isfinite(f) or abs(f) > _MAX_FRAME:
+                raise RokebyError(f"frame: must be finite and within ±{_MAX_FRAME}, got {frame}")
             whole = int(np.floor(f))
-            scene.frame_set(whole, subframe=f - whole)
+            if scene.frame_current == whole and abs(float(scene.frame_subframe) - (f - whole)) <= 1e-6:
+                # Already there (e.g. a frame_change_post handler asking for the current frame):
+                # no frame_set, which would run the frame-change handlers again and recurse.
+                # Setting the frame re-applies its animation in the depsgraph update below.
+                scene.frame_current = whole
+            else:
+                if _SETTING_FRAME:
+                    raise RokebyError(f"frame: evaluate(frame={frame}) was called while evaluate is changing the frame "
+                                      "(from a frame-change handler?); call evaluate() without a frame there")
+                _SETTING_FRAME = True
+                try:
+                    scene.frame_set(whole, subframe=f - whole)
+                finally:
+                    _SETTING_FRAME = False
+        # Meshes a script edited since the last look (foreach_set, bmesh.to_mesh) are re-read:
+        # with the handlers suspended, nothing else tells the evaluator.
+        edited = _ev.edited_meshes(scene)
         dg = _depsgraph(scene)
-        reports = _ev.evaluate_scene(scene, dg, force=force, all_geometry=frame is not None)
+        reports = _ev.evaluate_scene(scene, dg, force=force, geometry_changed=edited, all_geometry=frame is not None)
         from . import rendering  # noqa: PLC0415
 
         # Final renders follow: render nodes in every edited material (see rokeby.rendering).

@@ -43,6 +43,9 @@ PARAMS = {
     "anisotropic_rotation": ("rokeby_anisotropic_rotation", "Anisotropic Rotation", 0.0, (0.0, 1.0)),
     "metallic": ("rokeby_metallic", "Metallic", 0.0, (0.0, 1.0)),
 }
+# Largest colour component a brush or tint accepts: room for HDR albedo tricks, far from float32's
+# overflow (3.4e38), so no painted or blended value can become inf in the attribute or image.
+MAX_COLOR = 1e4
 # Fraser's brush names on top of the parameters.
 BRUSHES = {"sharpen": ("roughness", "SUBTRACT"), "blur": ("roughness", "ADD"), "stretch": ("anisotropic", "ADD")}
 NODE_PREFIX = "rokeby_"
@@ -66,20 +69,50 @@ def _check_mesh(obj):
         raise ValueError(f"obj: '{obj.name}' has no vertices to paint")
 
 
-def setup(obj, material=None, target: str = "POINT", resolution: int = 1024, uv_map: str | None = None):
+# What setup does with a painted Principled input that another node (a texture) already drives.
+LINKED = ("REFUSE", "REPLACE")
+# Custom property on a rokeby_global_<param> node: [node name, output identifier] of the link it
+# replaced (setup(linked='REPLACE')), put back by remove().
+REPLACED_KEY = "rokeby_replaced_link"
+
+
+def _foreign_links(bsdf) -> list:
+    """(param, socket name, link) of each painted Principled input driven by a node that is not
+    Rokeby's."""
+    out = []
+    for param, (_attr_name, socket_name, _d, _r) in PARAMS.items():
+        sock = bsdf.inputs[socket_name]
+        if sock.is_linked:
+            link = sock.links[0]
+            if not link.from_node.name.startswith(NODE_PREFIX):
+                out.append((param, socket_name, link))
+    return out
+
+
+def setup(obj, material=None, target: str = "POINT", resolution: int = 1024, uv_map: str | None = None,
+          linked: str = "REFUSE"):
     """Creates the attributes (filled with the material's current values) and wires them into the
     Principled BSDF of ``material`` (default: the object's active material; a new one if none).
     Idempotent: existing attributes and nodes are kept. Returns the material.
 
     ``target``: 'POINT' (per-point attributes, the default) or 'TEXTURE': an image per parameter
     (``resolution``², float, on the UV map ``uv_map``, default the active one) filled from the
-    attributes and read through the UV map in place of them (see :func:`setup_texture`)."""
+    attributes and read through the UV map in place of them (see :func:`setup_texture`).
+
+    ``linked``: what to do when a painted input (Base Color, Roughness, …) is driven by another
+    node, e.g. an Image Texture. 'REFUSE' (default): a ValueError naming the inputs and their
+    nodes, nothing changed. 'REPLACE': the painted values take those inputs over (they start
+    from the inputs' unlinked values); the replaced links are recorded and :func:`remove` puts
+    them back (the texture nodes stay in the material, unlinked, meanwhile)."""
     import bpy
 
     _check_mesh(obj)
     target = str(target).upper()
     if target not in ("POINT", "TEXTURE"):
         raise ValueError(f"target: expected 'POINT' or 'TEXTURE', got {target!r}")
+    linked = str(linked).upper()
+    if linked not in LINKED:
+        raise ValueError(f"linked: expected 'REFUSE' or 'REPLACE', got {linked!r}")
     if target == "TEXTURE":
         _check_texture_args(obj, resolution, uv_map)  # before anything changes
     mat = material if material is not None else obj.active_material
@@ -87,11 +120,21 @@ def setup(obj, material=None, target: str = "POINT", resolution: int = 1024, uv_
         mat = bpy.data.materials.new(f"{obj.name} Painted")
         mat.use_nodes = True
         obj.data.materials.append(mat)
+    had_nodes = mat.use_nodes
     if not mat.use_nodes:
         mat.use_nodes = True
     bsdf = _principled(mat)
     if bsdf is None:
+        mat.use_nodes = had_nodes
         raise ValueError(f"material: '{mat.name}' has no Principled BSDF to paint into")
+    foreign = _foreign_links(bsdf)
+    if foreign and linked == "REFUSE":
+        mat.use_nodes = had_nodes
+        what = ", ".join(f"{sock} (from '{link.from_node.name}')" for _p, sock, link in foreign)
+        raise ValueError(f"material: in '{mat.name}', {what} {'is' if len(foreign) == 1 else 'are'} driven by other nodes, "
+                         "which painting would replace; nothing was changed. Unlink them, or call "
+                         "setup(..., linked='REPLACE') (appearance.remove puts the links back)")
+    replaced = {param: [link.from_node.name, link.from_socket.identifier] for param, _s, link in foreign}
     nt = mat.node_tree
     me = obj.data
     n = len(me.vertices)
@@ -140,6 +183,8 @@ def setup(obj, material=None, target: str = "POINT", resolution: int = 1024, uv_
                 out = glob.outputs[0]
             glob.name = glob.label = NODE_PREFIX + "global_" + param
             glob.location = (bsdf.location.x - 250, node_attr.location.y)
+            if param in replaced:
+                glob[REPLACED_KEY] = replaced[param]
             nt.links.new(out, sock)
     if target == "TEXTURE":
         setup_texture(obj, resolution, uv_map, mat)
@@ -169,7 +214,17 @@ def read(obj, param) -> np.ndarray:
     return v
 
 
+def _finite32(values, what: str) -> np.ndarray:
+    """``values`` as float32, refused (nothing written) when any is NaN or overflows to inf."""
+    with np.errstate(over="ignore", invalid="ignore"):
+        out = np.ascontiguousarray(values, np.float32)
+    if not np.isfinite(out).all():
+        raise ValueError(f"{what}: the stroke would write non-finite values; nothing was painted")
+    return out
+
+
 def _write(obj, param, values):
+    values = _finite32(values, "value")
     a = _attr(obj, param)
     a.data.foreach_set("color" if param == "diffuse" else "value", np.ascontiguousarray(values, np.float32).ravel())
     obj.data.update()
@@ -240,8 +295,8 @@ def paint(obj, brush: str, centres, radius: float, value=None, strength: float =
         v = np.asarray(value, np.float64).ravel()
         if v.size == 3:
             v = np.append(v, 1.0)
-        if v.size != 4 or not np.isfinite(v).all() or (v < 0).any():
-            raise ValueError(f"value: a diffuse colour is 3 or 4 finite values ≥ 0, got {value!r}")
+        if v.size != 4 or not np.isfinite(v).all() or (v < 0).any() or (v > MAX_COLOR).any():
+            raise ValueError(f"value: a diffuse colour is 3 or 4 finite values in [0, {MAX_COLOR:g}], got {value!r}")
         target = v
     else:
         if not (isinstance(value, (int, float)) and math.isfinite(value)):
@@ -355,12 +410,12 @@ def set_global(mat, param: str, value) -> None:
         v = np.asarray(value, np.float64).ravel()
         if v.size == 3:
             v = np.append(v, 1.0)
-        if v.size != 4 or not np.isfinite(v).all() or (v < 0).any():
-            raise ValueError(f"value: a tint is 3 or 4 finite values ≥ 0, got {value!r}")
+        if v.size != 4 or not np.isfinite(v).all() or (v < 0).any() or (v > MAX_COLOR).any():
+            raise ValueError(f"value: a tint is 3 or 4 finite values in [0, {MAX_COLOR:g}], got {value!r}")
         node.inputs[7].default_value = tuple(float(x) for x in v)
     else:
-        if not (isinstance(value, (int, float)) and math.isfinite(value) and value >= 0):
-            raise ValueError(f"value: a global scale must be finite and ≥ 0, got {value!r}")
+        if not (isinstance(value, (int, float)) and math.isfinite(value) and 0 <= value <= MAX_COLOR):
+            raise ValueError(f"value: a global scale must be finite and ≥ 0 (at most {MAX_COLOR:g}), got {value!r}")
         node.inputs[1].default_value = float(value)
 
 
@@ -480,6 +535,39 @@ def remove_texture(obj, material=None, delete_images: bool = True) -> None:
             else:
                 nt.links.new(attr.outputs["Fac"], glob.inputs[0])
     nodes.remove(nodes[NODE_PREFIX + "uv"])
+
+
+def remove(obj, material=None, delete_attributes: bool = False) -> None:
+    """Undoes :func:`setup` on ``material`` (default: the active one): every Rokeby node goes
+    (texture target included), the links ``setup(linked='REPLACE')`` replaced come back, so the
+    material is as it was before. The painted attributes stay on the mesh (setup again reuses
+    them) unless ``delete_attributes``."""
+    _check_mesh(obj)
+    mat = material if material is not None else obj.active_material
+    nodes = mat.node_tree.nodes if mat is not None and mat.node_tree is not None else None
+    if nodes is None or not any(nodes.get(NODE_PREFIX + "global_" + p) is not None for p in PARAMS):
+        raise ValueError(f"material: '{getattr(mat, 'name', mat)}' is not set up for painting")
+    if nodes.get(NODE_PREFIX + "uv") is not None:
+        remove_texture(obj, mat)
+    bsdf = _principled(mat)
+    nt = mat.node_tree
+    for param, (attr, socket_name, _d, _r) in PARAMS.items():
+        glob = nodes.get(NODE_PREFIX + "global_" + param)
+        rec = list(glob.get(REPLACED_KEY, [])) if glob is not None else []
+        for name in (NODE_PREFIX + "global_" + param, NODE_PREFIX + param):
+            node = nodes.get(name)
+            if node is not None:
+                nodes.remove(node)
+        if len(rec) == 2 and bsdf is not None:
+            src = nodes.get(rec[0])
+            out = next((o for o in src.outputs if o.identifier == rec[1]), None) if src is not None else None
+            if out is not None:
+                nt.links.new(out, bsdf.inputs[socket_name])
+        if delete_attributes and obj.data.attributes.get(attr) is not None:
+            obj.data.attributes.remove(obj.data.attributes[attr])
+    tan = nodes.get(NODE_PREFIX + "tangent")
+    if tan is not None:
+        nodes.remove(tan)
 
 
 def target(obj) -> str:
@@ -665,6 +753,7 @@ def _paint_texture(obj, img, param, c, radius, strength, mode, target):
         else:
             px[rows, :3] = v[:, None]
     if touched:
+        _finite32(px, "value")
         img.pixels.foreach_set(px.ravel())
         img.update()
         _ensure_save_handler()  # a file reopened in a new session: the next save packs this

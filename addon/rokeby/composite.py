@@ -69,10 +69,33 @@ def _missing_files(a) -> str | None:
             if not os.path.isdir(folder):
                 return f"{flag}: the folder {folder} does not exist"
     return None
+class _Parser(argparse.ArgumentParser):
+    """Bad flags: one line naming the problem, exit 2 (argparse's usage block goes to --help)."""
+
+    def error(self, message):
+        self.exit(2, f"rokeby.composite: {message} (see --help)\n")
+
+
+def _indices(text: str) -> list[int]:
+    try:
+        return [int(v) for v in text.split(",")]
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected comma-separated object pass indices, got {text!r}") from None
 
 
 def main(argv=None) -> int:
-    ap = argparse.ArgumentParser(prog="python -m rokeby.composite", description=__doc__.split("\n\n")[0])
+    """The tool: 0 on success; 2 with one line on stderr naming the problem for a bad file, flag
+    or value, an unwritable output or a resource limit (issue 24: never a traceback for those)."""
+    try:
+        return _main(argv)
+    except (C.CompositingError, ValueError, OSError, MemoryError) as exc:
+        what = "out of memory" if isinstance(exc, MemoryError) else " ".join(str(exc).split())
+        print(f"rokeby.composite: {what or type(exc).__name__}", file=sys.stderr)
+        return 2
+
+
+def _main(argv) -> int:
+    ap = _Parser(prog="python -m rokeby.composite", description=__doc__.split("\n\n")[0])
     ap.add_argument("input", help="Blender multilayer EXR with the passes of setup_passes")
     ap.add_argument("output", help="recomposited RGB EXR")
     ap.add_argument("--layer", help="view layer (default: the first in the file)")
@@ -91,7 +114,7 @@ def main(argv=None) -> int:
     ap.add_argument("--bump-strength", type=float, default=1.0)
     ap.add_argument("--smooth", type=float, metavar="SIGMA_PX", help="cross-bilateral smoothing of normals with depth")
     ap.add_argument("--smooth-depth", type=float, default=0.02, metavar="REL", help="depth range kernel σ (relative)")
-    ap.add_argument("--objects", help="comma-separated object pass indices to edit (default: all)")
+    ap.add_argument("--objects", type=_indices, help="comma-separated object pass indices to edit (default: all)")
     ap.add_argument("--fit", choices=("qp", "ls"), default="qp", help="diffuse SH fit (default: the QP)")
     ap.add_argument("--noise-tolerance", type=float, default=0.0, metavar="KAPPA",
                     help="the QP's constraint D(n) >= D0 - KAPPA*sigma, sigma the pixel noise of the diffuse pass "
@@ -109,6 +132,10 @@ def main(argv=None) -> int:
     if problem is not None:
         print(f"rokeby.composite: {problem}", file=sys.stderr)
         return 2
+    try:  # before any work, named by its flag
+        C._check_k(a.kd, a.kr)
+    except C.CompositingError as exc:
+        ap.error(f"argument {'--kd' if str(exc).startswith('k_d') else '--kr'}: {exc}")
 
     t0 = time.perf_counter()
     try:
@@ -131,7 +158,7 @@ def main(argv=None) -> int:
     t_rec = time.perf_counter()
     mask = rec.ids >= 0
     if a.objects:
-        wanted = {int(v) for v in a.objects.split(",")}
+        wanted = set(a.objects)
         mask &= np.isin(np.rint(p.index_ob).astype(int), sorted(wanted))
     n = rec.normals
     try:

@@ -28,7 +28,10 @@ there, and the report (and a RuntimeWarning) says so.
 
 from __future__ import annotations
 
+import contextlib
 import math
+import os
+import sys
 import time
 import warnings
 import weakref
@@ -251,10 +254,61 @@ def _layer_channels(part_channels: dict, layer: str | None):
 
 
 def read_exr(path: str, layer: str | None = None) -> Passes:
-    """Reads a Blender multilayer EXR (one view layer, default the first) into ``Passes``."""
+    """Reads a Blender multilayer EXR (one view layer, default the first) into ``Passes``. A file
+    that is not a readable EXR (truncated, corrupted) is a ``CompositingError`` naming it; a
+    missing or unreadable one stays an ``OSError``."""
+    said: list[str] = []
+    try:
+        with _library_output(said):
+            return _read_exr(path, layer)
+    except (CompositingError, OSError, MemoryError) as exc:
+        if said and isinstance(exc, CompositingError) and not isinstance(exc, MissingPasses):
+            raise CompositingError(f"{exc} ({said[0]})") from None
+        raise
+    except Exception as exc:  # noqa: BLE001 - OpenEXR's reader fails in many ways on a bad file
+        why = said[0] if said else f"{type(exc).__name__}: {exc}"
+        raise CompositingError(f"{path}: not a readable multilayer EXR (truncated or corrupted?): {why}") from None
+    finally:
+        if said and sys.exc_info()[0] is None:
+            print("\n".join(said), file=sys.stderr)  # a file that did read: its warnings are not hidden
+
+
+@contextlib.contextmanager
+def _library_output(lines: list):
+    """OpenEXR's C++ library prints its complaints about a bad file itself, on stdout and stderr:
+    they are collected into ``lines`` (the complaint, without the path it repeats), so that a
+    bad file ends in one clear error instead of a screenful of library messages."""
+    import tempfile
+
+    try:
+        sys.stdout.flush()
+        sys.stderr.flush()
+        saved = [(fd, os.dup(fd)) for fd in (1, 2)]
+    except (OSError, ValueError, AttributeError):  # no real file descriptors: nothing to collect
+        yield lines
+        return
+    with tempfile.TemporaryFile() as tmp:
+        for fd, _old in saved:
+            os.dup2(tmp.fileno(), fd)
+        try:
+            yield lines
+        finally:
+            for fd, old in saved:
+                os.dup2(old, fd)
+                os.close(old)
+            tmp.seek(0)
+            for ln in tmp.read().decode("utf-8", "replace").splitlines():
+                ln = ln.strip()
+                if ln and ln not in lines:
+                    lines.append(ln.split(": ", 1)[1] if ln.startswith("/") and ": " in ln else ln)
+
+
+def _read_exr(path: str, layer: str | None) -> Passes:
     import OpenEXR
 
     with OpenEXR.File(str(path), separate_channels=False) as f:
+        if not f.parts:
+            raise CompositingError(f"{path}: not a readable multilayer EXR (truncated or corrupted?): it has no image parts")
         part = f.parts[0]
         chans = part.channels
         layer = _layer_channels(chans, layer)
@@ -300,7 +354,10 @@ def write_exr(path: str, image: np.ndarray, header: dict | None = None) -> None:
         if isinstance(v, str) and k not in ("File", "Date"):
             hdr[k] = v
     with OpenEXR.File(hdr, {"RGB": np.ascontiguousarray(image[..., :3], np.float32)}) as f:
-        f.write(str(path))
+        try:
+            f.write(str(path))
+        except RuntimeError as exc:  # OpenEXR's "Cannot open image file": a path problem, not a bug
+            raise OSError(f"{path}: cannot write the EXR: {exc}") from None
 
 
 # --- screen space -------------------------------------------------------------------------------
@@ -416,6 +473,10 @@ def pixel_noise(values: np.ndarray, mask: np.ndarray) -> np.ndarray:
     return 1.4826 * np.median(np.abs(d), axis=0) / np.sqrt(2.0)
 
 
+# The reflection maps' texels per paraboloid face the native core accepts (reflection_env's size).
+ENV_SIZES = (8, 4096)
+
+
 def reconstruct(p: Passes, *, method: str = "qp", env_size: int = 128, min_pixels: int = 64,
                 min_coverage: float = 0.01, blur_sigma: float = 2.0, occlusion_threshold: float = 0.5,
                 noise_tolerance: float = 0.0, warn: bool = True) -> Reconstruction:
@@ -427,6 +488,8 @@ def reconstruct(p: Passes, *, method: str = "qp", env_size: int = 128, min_pixel
     paper's QP (κ = 0) rises to the noisiest pixel; κ ≈ 2 leaves the noise to the residual."""
     import time
 
+    if isinstance(env_size, bool) or not isinstance(env_size, (int, np.integer)) or not ENV_SIZES[0] <= env_size <= ENV_SIZES[1]:
+        raise CompositingError(f"env_size: texels per paraboloid face must be a whole number from {ENV_SIZES[0]} to {ENV_SIZES[1]}, got {env_size!r}")
     if not (math.isfinite(noise_tolerance) and noise_tolerance >= 0):
         raise CompositingError(f"noise_tolerance: must be finite and ≥ 0 (in noise standard deviations), got {noise_tolerance}")
     if noise_tolerance > 0 and method != "qp":
@@ -550,6 +613,7 @@ class RecompositeSession:
                 changed = ("rk_edited",)  # the backend uploads all if it drew another frame since
             t1 = time.perf_counter()
             out = self._backend().draw(self._frame, changed)
+        _check_output(out, self._args[6])
         t2 = time.perf_counter()
         self.timings = {"check": t1 - t0, "recomposite": t2 - t1, "total": t2 - t0}
         return out
@@ -776,10 +840,29 @@ class RecompositeFrame:
                                    f"{device}'s texture size {max_size}")
 
 
+# Largest |k_D|, |k_R| (intensity factors of eq. 5): far beyond any useful edit, small enough that
+# no finite rendered value times it overflows float32 in practice (the output is checked as well).
+MAX_K = 1e4
+
+
 def _check_k(k_d, k_r) -> None:
     for name, x in (("k_d", k_d), ("k_r", k_r)):
-        if not math.isfinite(x):
-            raise CompositingError(f"{name}: k_d and k_r must be finite, got {x}")
+        if isinstance(x, bool) or not isinstance(x, (int, float, np.integer, np.floating)):
+            raise TypeError(f"{name}: expected a number, got {x!r}")
+        if not (math.isfinite(x) and abs(x) <= MAX_K):
+            raise CompositingError(f"{name}: must be finite and at most {MAX_K:g} in size, got {x}")
+
+
+def _check_output(out, image) -> None:
+    """Never inf/NaN out of finite input: a pixel that is finite in the rendered image must be
+    finite in the recomposited one."""
+    img = np.asarray(out[0] if isinstance(out, tuple) else out)[..., :3]
+    if np.isfinite(img).all():  # the common case: one pass
+        return
+    bad = ~np.isfinite(img) & np.isfinite(np.asarray(image)[..., :3])
+    if bad.any():
+        raise CompositingError(f"the recomposited image has {int(bad.any(-1).sum())} non-finite pixels where the render is "
+                               "finite (k_d, k_r or the edit too large for float32?); nothing was written")
 
 
 def recomposite_frame(ids, normals, edited_normals, view, diffuse, reflection, image, patches, alpha_d=None,
@@ -1026,11 +1109,26 @@ def emboss(normals: np.ndarray, beta: float, mask=None) -> np.ndarray:
     return _native_edit(native.module().normals_emboss, normals, beta, mask)
 
 
+def _decal_place(shape, center, radius):
+    """(row, col, radius) of a decal: the frame's centre and 0.35·min(H, W) by default; given
+    ones must be finite (and the radius positive)."""
+    h, w = shape
+    cy, cx = (h / 2, w / 2) if center is None else (float(center[0]), float(center[1]))
+    if not (math.isfinite(cy) and math.isfinite(cx)):
+        raise CompositingError(f"center: must be finite pixel coordinates, got {center!r}")
+    if radius is None:
+        radius = 0.35 * min(h, w)
+    elif not (math.isfinite(radius) and radius > 0):
+        raise CompositingError(f"radius: must be positive and finite (pixels), got {radius}")
+    return cy, cx, float(radius)
+
+
 def ripple(shape, center=None, wavelength: float = 24.0, radius: float | None = None) -> np.ndarray:
     """The paper's fading 2D ripple height field (pixels): cos(2π d/λ)·(1 − d/radius)₊²."""
     h, w = shape
-    cy, cx = center if center is not None else (h / 2, w / 2)
-    radius = radius or 0.35 * min(h, w)
+    cy, cx, radius = _decal_place(shape, center, radius)
+    if not (math.isfinite(wavelength) and wavelength > 0):
+        raise CompositingError(f"wavelength: must be positive and finite (pixels), got {wavelength}")
     yy, xx = np.mgrid[0:h, 0:w].astype(np.float32)
     d = np.hypot(yy - cy, xx - cx)
     return (np.cos(2 * math.pi * d / wavelength) * np.clip(1 - d / radius, 0, None) ** 2).astype(np.float32)
@@ -1043,8 +1141,7 @@ def noise_decal(shape, size: float = 16.0, octaves: int = 3, seed: int = 0, cent
     ((row, col) pixels; default the frame's centre, radius 0.35·min(H, W)). Heights in pixels,
     within about ±size/4, so that ``bump(n, noise_decal(...), s)`` tilts normals alike at any size."""
     h, w = shape
-    cy, cx = center if center is not None else (h / 2, w / 2)
-    radius = radius or 0.35 * min(h, w)
+    cy, cx, radius = _decal_place(shape, center, radius)
     if not (isinstance(seed, (int, np.integer)) and 0 <= seed < 2 ** 32):
         raise CompositingError(f"seed: expected an integer in [0, 2^32), got {seed!r}")
     if not (isinstance(octaves, (int, np.integer)) and 1 <= octaves <= 8):

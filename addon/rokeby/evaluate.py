@@ -127,7 +127,11 @@ class _Geometry:
         self.normals = normals
         self.triangles = triangles
         self.tri_poly = tri_poly  # polygon of each loop triangle (sorted), for closest-point lookups
-        self.source = source  # "evaluated" or "base"
+        self.source = source  # "evaluated" or "transfer" (see read_geometry)
+        self.local = None  # object-space positions (V, 3) float32, for the surface queries
+        self.uses = 0  # evaluations that used this shape (a BVH pays off from the second on)
+        self.queries = 0  # surface queries answered by nearest_triangle
+        self.max_edge = None  # longest triangle edge in object space, for nearest_triangle
         self.size = float(np.linalg.norm(vertices.max(0) - vertices.min(0))) if len(vertices) else 0.0
         self.region_weights: dict[str, np.ndarray] = {}
         self.region_problems: dict[str, str] = {}  # vertex group → why it could not be read
@@ -188,6 +192,8 @@ class _State:
         # pieces no constraint reaches (kept with the report while nothing changes).
         self.pieces = None
         self.reach_note: "str | None" = None
+        # What the mirror's own mesh data held when api.evaluate last looked (mesh_fingerprint).
+        self.mesh_fingerprint: bytes | None = None
 
 
 _STATE: dict[int, _State] = {}
@@ -337,6 +343,7 @@ def read_geometry(obj, depsgraph, mirror_matrix: np.ndarray, freeform_groups=())
     v, n = to_world(co, nrm, mirror_matrix, f"mirror '{obj.name}'")
     geo = _Geometry(v, n, tri.reshape(-1, 3), tri_poly, source)
     geo.shared = shared
+    geo.local = co.reshape(-1, 3)
     for group in freeform_groups:
         # A group that cannot be read is the region's problem (a warning naming the group, the
         # region left out), not the mirror's: the other regions and constraints still evaluate.
@@ -544,11 +551,62 @@ def sync_freeform_regions(obj) -> list:
 
 
 def _bvh(geo: _Geometry):
+    """A BVH over the triangles of ``geo`` in object space (kept while the local positions and
+    triangles are unchanged, also across transforms), built from the copied arrays: surface
+    queries never touch Blender's evaluated mesh, which another handler's ID removal in the same
+    update can free under us (issue 24)."""
     if geo.bvh is None:
         from mathutils.bvhtree import BVHTree  # noqa: PLC0415
 
-        geo.bvh = BVHTree.FromPolygons(geo.vertices.tolist(), geo.triangles.tolist(), all_triangles=True)
+        pts = geo.local if geo.local is not None else geo.vertices
+        geo.bvh = BVHTree.FromPolygons(pts.tolist(), geo.triangles.tolist(), all_triangles=True)
     return geo.bvh
+
+
+# Surface queries on a new shape answered without a BVH; beyond them the BVH is built.
+NUMPY_QUERIES = 16
+
+
+def nearest_triangle(geo: _Geometry, query) -> int:
+    """Index of a triangle of ``geo`` nearest the object-space point ``query``, with numpy and no
+    acceleration structure (O(V + T) per query, about 2 ms at 100k vertices): for a shape that is
+    queried once or twice (a deforming mirror on a frame change), where building a BVH would
+    cost far more. The nearest surface point lies in a triangle with a vertex within d + L of
+    the query (d: distance to the nearest vertex, L: the longest edge), so only those are
+    measured exactly."""
+    pts = geo.local if geo.local is not None else geo.vertices
+    tri = geo.triangles
+    x = np.asarray(query, np.float64)
+    d2 = np.einsum("ij,ij->i", pts - x.astype(np.float32), pts - x.astype(np.float32)).astype(np.float64)
+    if geo.max_edge is None:
+        a, b, c = (pts[tri[:, k]] for k in range(3))
+        geo.max_edge = float(np.sqrt(max(np.einsum("ij,ij->i", b - a, b - a).max(), np.einsum("ij,ij->i", c - b, c - b).max(),
+                                         np.einsum("ij,ij->i", a - c, a - c).max()))) if len(tri) else 0.0
+    reach = float(np.sqrt(d2.min())) + geo.max_edge
+    near = d2 <= reach * reach * (1.0 + 1e-6) + 1e-30
+    cand = np.flatnonzero(near[tri].any(axis=1))
+    if len(cand) == 0:
+        cand = np.arange(len(tri))
+    a, b, c = (pts[tri[cand, k]].astype(np.float64) for k in range(3))
+    best = np.full(len(cand), np.inf)
+    # The three edges (segments), then the interior (projection onto the plane, when inside).
+    for p0, p1 in ((a, b), (b, c), (c, a)):
+        e = p1 - p0
+        ee = np.einsum("ij,ij->i", e, e)
+        t = np.clip(np.einsum("ij,ij->i", x - p0, e) / np.maximum(ee, 1e-300), 0.0, 1.0)
+        q = p0 + t[:, None] * e
+        best = np.minimum(best, np.einsum("ij,ij->i", x - q, x - q))
+    n = np.cross(b - a, c - a)
+    nn = np.einsum("ij,ij->i", n, n)
+    ok = nn > 1e-300
+    h = np.einsum("ij,ij->i", x - a, n) / np.where(ok, nn, 1.0)
+    p = x - h[:, None] * n
+    inside = ok.copy()
+    for p0, p1 in ((a, b), (b, c), (c, a)):
+        inside &= np.einsum("ij,ij->i", np.cross(p1 - p0, p - p0), n) >= 0.0
+    plane = h * h * nn
+    best = np.where(inside, np.minimum(best, plane), best)
+    return int(cand[int(np.argmin(best))])
 
 
 def _barycentric(p, a, b, c) -> np.ndarray:
@@ -577,20 +635,24 @@ def project_to_surface(obj, depsgraph, geo: _Geometry, world_point, mirror_matri
     """The surface point of the mirror nearest ``world_point``: triangle, barycentric coordinates
     and the interpolated vertex normal (the normal the renderers shade with)."""
     x = np.asarray(world_point, dtype=np.float64)
-    if geo.source in ("evaluated", "transfer"):
-        ob_eval = obj.evaluated_get(depsgraph)
+    if not np.all(np.isfinite(x)):
+        raise RokebyError(f"mirror '{getattr(obj, 'name', '?')}': the point to project is not finite")
+    if geo.local is not None:
         inv = np.linalg.inv(mirror_matrix)
-        local = inv[:3, :3] @ x + inv[:3, 3]
-        ok, _loc, _n, poly = ob_eval.closest_point_on_mesh(local.tolist())
-        if not ok:
-            raise RokebyError(f"mirror '{obj.name}': no surface point found")
-        candidates = geo.triangles_of_polygon(poly)
-        if len(candidates) == 0:
-            raise RokebyError(f"mirror '{obj.name}': the surface point's polygon {poly} has no triangles")
+        query = inv[:3, :3] @ x + inv[:3, 3]
     else:
-        loc, _n, tri_index, _d = _bvh(geo).find_nearest(x.tolist())
-        if tri_index is None:
-            raise RokebyError(f"mirror '{obj.name}': no surface point found")
+        query = x
+    if geo.bvh is None and geo.uses < 2 and geo.queries < NUMPY_QUERIES:
+        geo.queries += 1
+        tri_index = nearest_triangle(geo, query)  # a new shape: no BVH yet (see nearest_triangle)
+    else:
+        _loc, _n, tri_index, _d = _bvh(geo).find_nearest(query.tolist())
+    if tri_index is None:
+        raise RokebyError(f"mirror '{getattr(obj, 'name', '?')}': no surface point found")
+    # The nearest triangle in object space, and its neighbours of the same polygon (in world
+    # space the nearest may differ under a non-uniform scale).
+    candidates = geo.triangles_of_polygon(int(geo.tri_poly[tri_index])) if len(geo.tri_poly) > tri_index else [tri_index]
+    if len(candidates) == 0:
         candidates = [tri_index]
     best = None
     for t in candidates:
@@ -1453,7 +1515,13 @@ def evaluate_mirror(obj, scene, depsgraph, *, force=False, reread_geometry=False
                 state.region_cache.clear()
             else:
                 new.bvh, new._poly_start, new.edges = geo.bvh, geo._poly_start, geo.edges
+                new.uses, new.max_edge = geo.uses, geo.max_edge
+            if new.bvh is None and geo is not None and geo.local is not None \
+                    and np.array_equal(geo.local, new.local) and np.array_equal(geo.triangles, new.triangles):
+                # moved, not reshaped: the object-space BVH (or the count towards one) still holds
+                new.bvh, new.uses, new.max_edge = geo.bvh, geo.uses, geo.max_edge
             state.geometry = geo = new
+        geo.uses += 1
         report.vertices = len(geo.vertices)
         report.field_mesh = geo.source
         eye_now, report.eye = render_eye(obj, scene, depsgraph, geo.size)
@@ -1604,6 +1672,52 @@ def evaluate_mirror(obj, scene, depsgraph, *, force=False, reread_geometry=False
     report.python_ms = (time.perf_counter() - t0) * 1e3 - report.native_ms
     state.report = report
     return report
+
+
+def mesh_fingerprint(obj) -> bytes:
+    """A cheap digest of ``obj``'s own mesh data (positions, corners, polygons, shape keys): a
+    script that edits them (``foreach_set``, ``bmesh.to_mesh``) tags nothing that the API sees."""
+    me = obj.data
+    h = hashlib.blake2b(digest_size=16)
+    nv, nl, npoly = len(me.vertices), len(me.loops), len(me.polygons)
+    h.update(repr((me.session_uid, nv, nl, npoly)).encode())
+    co = np.empty(nv * 3, np.float32)
+    me.vertices.foreach_get("co", co)
+    h.update(co.tobytes())
+    idx = np.empty(nl, np.int32)
+    me.loops.foreach_get("vertex_index", idx)
+    h.update(idx.tobytes())
+    start = np.empty(npoly, np.int32)
+    me.polygons.foreach_get("loop_start", start)
+    h.update(start.tobytes())
+    keys = me.shape_keys
+    if keys is not None:
+        for kb in keys.key_blocks:
+            kco = np.empty(len(kb.data) * 3, np.float32)
+            kb.data.foreach_get("co", kco)
+            h.update(kb.name.encode() + kco.tobytes())
+    return h.digest()
+
+
+def edited_meshes(scene) -> set:
+    """Mirrors of ``scene`` whose mesh data changed since the last call (or were never seen):
+    their meshes are tagged so the next depsgraph update re-evaluates them from the edited data,
+    and the caller re-reads their geometry. For ``rokeby.api.evaluate``, which runs with the
+    handlers suspended and so never sees Blender's geometry updates."""
+    out = set()
+    for ob in mirrors_of(scene):
+        try:
+            if ob.type != "MESH" or ob.mode == "EDIT" or ob.library is not None or ob.data.library is not None:
+                continue
+            fp = mesh_fingerprint(ob)
+        except (AttributeError, ReferenceError):
+            continue
+        state = _STATE.setdefault(ob.session_uid, _State())
+        if state.mesh_fingerprint != fp:
+            ob.data.update_tag()
+            state.mesh_fingerprint = fp
+            out.add(ob)
+    return out
 
 
 def mirrors_of(scene) -> list:

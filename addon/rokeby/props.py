@@ -249,6 +249,9 @@ class RokebyMirror(PropertyGroup):
     map_image: PointerProperty(type=bpy.types.Image, name="Reflection map", description="The captured lat-long panorama (Blender's equirectangular convention)")
     map_levels: CollectionProperty(type=RokebyImageRef, name="Blurred levels")
     map_fingerprint: StringProperty(name="Captured scene", options={"HIDDEN"})
+    # Stable per-mirror id in the map's file names (rokeby.reflmap.map_stem): unique where names
+    # are not (``Ball.L`` / ``Ball_L``); a copy that inherits it gets its own on its first capture.
+    map_id: StringProperty(name="Map id", options={"HIDDEN"})
     map_capture_seconds: FloatProperty(name="Capture time", subtype="TIME_ABSOLUTE", unit="TIME_ABSOLUTE", min=0.0)
 
 

@@ -38,6 +38,7 @@ import os
 import shutil
 import tempfile
 import time
+import uuid
 
 import numpy as np
 
@@ -53,6 +54,9 @@ DEFAULT_SAMPLES = 32
 # the two nearest levels.
 ROUGHNESS_LEVELS = (0.0, 0.25, 0.5, 1.0)
 CACHE_DIR = "//rokeby_maps/"
+# File names in the cache: <sanitised mirror name, at most STEM_CHARS>-<map id, ID_CHARS hex>.exr
+STEM_CHARS = 40
+ID_CHARS = 12
 STORAGES = ("AUTO", "FILE", "PACK")
 SHARED_GROUP = "Rokeby Reflection Map"
 MIRROR_GROUP_PREFIX = "Rokeby Reflection Map: "
@@ -165,11 +169,78 @@ def image_name(mirror, level: int = 0) -> str:
     return base if level == 0 else f"{base} r{ROUGHNESS_LEVELS[level]:g}"
 
 
-def _file_name(mirror, level: int) -> str:
+def _safe(name: str) -> str:
+    """``name`` with everything but ASCII letters, digits, '-' and '_' replaced by '_', at most
+    STEM_CHARS long: no separators, dots or drive letters can reach a path."""
+    return "".join(ch if (ch.isascii() and ch.isalnum()) or ch in "-_" else "_" for ch in name)[:STEM_CHARS] or "map"
+
+
+def _others_with(mirror, attr: str, value) -> list:
     import bpy  # noqa: PLC0415
 
-    stem = bpy.path.clean_name(mirror.name)
+    out = []
+    for ob in bpy.data.objects:
+        s = getattr(ob, "rokeby", None)
+        if ob != mirror and s is not None and s.is_mirror and value and getattr(s, attr) == value:
+            out.append(ob)
+    return out
+
+
+def map_id(mirror) -> str:
+    """The id in ``mirror``'s map file names: its stored ``map_id``, or a new one when it has
+    none or shares it with another object (a Shift+D copy inherits it: whichever of the two is
+    captured next gets its own, so neither overwrites the other's files). Not stored here:
+    ``capture`` stores it once the capture succeeded."""
+    mid = mirror.rokeby.map_id
+    if not mid or _others_with(mirror, "map_id", mid):
+        taken = {getattr(ob, "rokeby", None) and ob.rokeby.map_id for ob in _all_objects()}
+        while True:
+            mid = uuid.uuid4().hex[:ID_CHARS]
+            if mid not in taken:
+                break
+    return mid
+
+
+def _all_objects():
+    import bpy  # noqa: PLC0415
+
+    return bpy.data.objects
+
+
+def map_stem(mirror, mid: str | None = None) -> str:
+    """File stem of ``mirror``'s maps: its sanitised name (for people) and its map id (for
+    uniqueness), e.g. ``Ball_L-3f2a9c01d4e7``."""
+    return f"{_safe(mirror.name)}-{mid or map_id(mirror)}"
+
+
+def _file_name(mirror, level: int, mid: str | None = None) -> str:
+    stem = map_stem(mirror, mid)
     return f"{stem}.exr" if level == 0 else f"{stem}_r{ROUGHNESS_LEVELS[level]:g}.exr"
+
+
+def _inside_cache(filepath: str) -> str:
+    """The absolute path of ``filepath`` (a //-relative path), refused unless it lies inside
+    the cache folder."""
+    import bpy  # noqa: PLC0415
+
+    absolute = os.path.realpath(bpy.path.abspath(filepath))
+    root = os.path.realpath(bpy.path.abspath(CACHE_DIR))
+    if os.path.commonpath([absolute, root]) != root or absolute == root:
+        raise RokebyError(f"capture: the map file '{filepath}' would lie outside {CACHE_DIR}")
+    return absolute
+
+
+def _owned(mirror, img):
+    """``img`` if no other mirror uses it as its map (a copy's inherited pointer), else None."""
+    if img is None:
+        return None
+    for ob in _all_objects():
+        s = getattr(ob, "rokeby", None)
+        if ob == mirror or s is None or not s.is_mirror:
+            continue
+        if s.map_image == img or any(ref.image == img for ref in s.map_levels):
+            return None
+    return img
 
 
 def capture_origin(mirror, depsgraph=None) -> np.ndarray:
@@ -403,6 +474,11 @@ def capture(mirror, *, resolution=None, samples=None, storage: str = "AUTO", sce
     storage = _storage(storage)
     if scene.objects.get(mirror.name) != mirror:
         raise RokebyError(f"mirror: '{mirror.name}' is not in scene '{scene.name}'")
+    mid = map_id(mirror)
+    paths = [CACHE_DIR + _file_name(mirror, k, mid) for k in range(len(ROUGHNESS_LEVELS))]
+    if storage == "FILE":
+        for path in paths:
+            _inside_cache(path)
     origin = capture_origin(mirror)
     t0 = time.perf_counter()
     px = _render_panorama(scene, mirror, origin, width, int(samples))
@@ -413,9 +489,11 @@ def capture(mirror, *, resolution=None, samples=None, storage: str = "AUTO", sce
     images = []
     old_levels = [ref.image for ref in s.map_levels]
     for k, level in enumerate(levels):
-        old = s.map_image if k == 0 else (old_levels[k - 1] if k - 1 < len(old_levels) else None)
-        old = old or bpy.data.images.get(image_name(mirror, k))
-        images.append(_store(image_name(mirror, k), level, storage, CACHE_DIR + _file_name(mirror, k), old))
+        # Images another mirror uses (a copy's inherited pointers) are left to it, never replaced.
+        old = _owned(mirror, s.map_image if k == 0 else (old_levels[k - 1] if k - 1 < len(old_levels) else None))
+        old = old or _owned(mirror, bpy.data.images.get(image_name(mirror, k)))
+        images.append(_store(image_name(mirror, k), level, storage, paths[k], old))
+    s.map_id = mid
     s.map_image = images[0]
     s.map_levels.clear()
     for img in images[1:]:

@@ -69,6 +69,9 @@ def _object_by_uid(uid: int):
     import bpy  # noqa: PLC0415
 
     return next((o for o in bpy.data.objects if o.session_uid == uid), None)
+# Bound of the drag parameters (noise amplitude and frequency, MLS alpha): far beyond any useful
+# edit, far below what overflows float32 positions.
+MAX_DRAG_PARAMETER = 1e6
 
 
 @dataclass
@@ -112,7 +115,17 @@ class ShadowSession:
         return self.editor.handles(loop, eye)
 
     def drag(self, loop: int, fixed, moved: int, target, **kwargs):
-        """One drag step (receiver point ``target`` under the cursor), relative to the last commit."""
+        """One drag step (receiver point ``target`` under the cursor), relative to the last commit.
+        Numbers that would overflow the shadow mesh's float32 positions are refused (ValueError
+        naming the argument): |noise_amplitude|, |noise_frequency| and |mls_alpha| at most
+        MAX_DRAG_PARAMETER, the target finite."""
+        for name in ("noise_amplitude", "noise_frequency", "mls_alpha"):
+            if name in kwargs:
+                x = kwargs[name]
+                if isinstance(x, bool) or not isinstance(x, (int, float, np.integer, np.floating)):
+                    raise TypeError(f"{name}: expected a number, got {x!r}")
+                if not (np.isfinite(x) and abs(x) <= MAX_DRAG_PARAMETER):
+                    raise ValueError(f"{name}: must be finite and at most {MAX_DRAG_PARAMETER:g} in size, got {x!r}")
         return self.editor.drag(loop, tuple(int(i) for i in fixed), int(moved), np.asarray(target, dtype=np.float64), **kwargs)
 
     def commit(self):
@@ -586,6 +599,10 @@ def apply(session: ShadowSession, *, scene=None, falloff_beta: float = 0.0):
         raise ShadowEditError("the caster's vertex count changed since the session started; start a new one")
     disp = world - session.rest_world
     local = np.linalg.solve(session.matrix_world[:3, :3], disp.T).T
+    with np.errstate(over="ignore", invalid="ignore"):
+        if not (np.isfinite(world).all() and np.isfinite(local.astype(np.float32)).all()):
+            raise ShadowEditError("the edited shadow mesh has non-finite or float32-overflowing positions (a drag too large?); "
+                                  "nothing was written: undo the drag (cancel) and drag again")
     me = caster.data
     n = len(me.vertices)
     if n != len(world):
