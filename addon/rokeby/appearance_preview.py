@@ -376,7 +376,7 @@ def _draw():
     if rv3d is None:
         return
     try:
-        settings = getattr(ctx.window_manager, "rokeby_appearance_brush", None)
+        settings = getattr(ctx.scene, "rokeby_appearance_brush", None)
         draw_view(ctx.scene, rv3d, ctx.visible_objects, settings.preview_model if settings is not None else "PRINCIPLED",
                   ctx.evaluated_depsgraph_get())
         last_error = None

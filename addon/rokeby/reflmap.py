@@ -53,6 +53,15 @@ DEFAULT_SAMPLES = 32
 # the two nearest levels.
 ROUGHNESS_LEVELS = (0.0, 0.25, 0.5, 1.0)
 CACHE_DIR = "//rokeby_maps/"
+
+
+def cache_dir() -> str:
+    """Where FILE storage writes maps: the add-on preferences' Reflection Map Cache folder when set
+    (a machine-level choice), else ``CACHE_DIR`` next to the .blend."""
+    from . import prefs  # noqa: PLC0415
+
+    folder = prefs.get().cache_folder
+    return folder.rstrip("/\\") + "/" if folder else CACHE_DIR
 STORAGES = ("AUTO", "FILE", "PACK")
 SHARED_GROUP = "Rokeby Reflection Map"
 MIRROR_GROUP_PREFIX = "Rokeby Reflection Map: "
@@ -214,10 +223,11 @@ def _storage(storage: str) -> str:
 
     if storage not in STORAGES:
         raise RokebyError(f"storage: '{storage}' is not one of {list(STORAGES)}")
+    relative = cache_dir().startswith("//")
     if storage == "AUTO":
-        return "FILE" if bpy.data.filepath else "PACK"
-    if storage == "FILE" and not bpy.data.filepath:
-        raise RokebyError(f"storage: 'FILE' writes the map to {CACHE_DIR} next to the .blend, but this file has never been saved: save it first, or use storage='PACK'")
+        return "FILE" if bpy.data.filepath or not relative else "PACK"
+    if storage == "FILE" and relative and not bpy.data.filepath:
+        raise RokebyError(f"storage: 'FILE' writes the map to {cache_dir()} next to the .blend, but this file has never been saved: save it first, or use storage='PACK'")
     return storage
 
 
@@ -415,7 +425,7 @@ def capture(mirror, *, resolution=None, samples=None, storage: str = "AUTO", sce
     for k, level in enumerate(levels):
         old = s.map_image if k == 0 else (old_levels[k - 1] if k - 1 < len(old_levels) else None)
         old = old or bpy.data.images.get(image_name(mirror, k))
-        images.append(_store(image_name(mirror, k), level, storage, CACHE_DIR + _file_name(mirror, k), old))
+        images.append(_store(image_name(mirror, k), level, storage, cache_dir() + _file_name(mirror, k), old))
     s.map_image = images[0]
     s.map_levels.clear()
     for img in images[1:]:
