@@ -210,7 +210,7 @@ def _message_strings(path: Path):
 
 
 def test_no_message_names_an_api_function():
-    pattern = re.compile(r"(?<![\w.])(" + "|".join(sorted(map(re.escape, _api_names()), key=len, reverse=True)) + r")(?![\w])")
+    pattern = re.compile(r"(?<!\w)(" + "|".join(sorted(map(re.escape, _api_names()), key=len, reverse=True)) + r")(?![\w])")
     hits = []
     for path in sorted(ADDON.glob("*.py")):
         if path.name in ("demo.py", "composite.py"):  # a demo script's printout, the command line's help

@@ -212,8 +212,8 @@ def paint(obj, brush: str, centres, radius: float, value=None, strength: float =
         raise ValueError(f"brush: unknown brush {brush!r} (expected one of {', '.join(list(PARAMS) + list(BRUSHES))})")
     if img is None and param in missing_images(obj):
         raise ValueError(f"obj: the painted {param!r} image of material '{obj.active_material.name}' is gone (deleted?): undo, "
-                         "or set the texture target up again (rokeby.appearance.setup(obj, target='TEXTURE')) to make it "
-                         "from the per-point values")
+                         "or click Make Missing Images (Appearance Painting panel) to make it again from the per-point "
+                         "values")
     mode = (mode or default_mode).upper()
     if mode not in ("MIX", "ADD", "SUBTRACT"):
         raise ValueError(f"mode: expected 'MIX', 'ADD' or 'SUBTRACT', got {mode!r}")
