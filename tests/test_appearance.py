@@ -122,7 +122,7 @@ def test_painted_roughness_renders_only_where_painted(ball, tmp_path, engine):
 
 
 def test_bad_input_gives_clear_errors(ball):
-    with pytest.raises(ValueError, match="call rokeby.appearance.setup"):
+    with pytest.raises(ValueError, match="click Set Up Appearance Painting first"):
         appearance.paint(ball, "roughness", [0, 0, 1], radius=0.5, value=0.5)
     appearance.setup(ball)
     with pytest.raises(ValueError, match="radius: must be a positive finite number, got -1"):
@@ -226,7 +226,7 @@ def test_modal_brush_paints_where_the_mouse_ray_hits(ball):
         rv3d = types.SimpleNamespace(view_matrix=view, perspective_matrix=proj @ view, is_perspective=True, view_perspective="PERSP")
         redraws = []
         ctx = types.SimpleNamespace(region=types.SimpleNamespace(width=size, height=size), region_data=rv3d, active_object=ball,
-                                    evaluated_depsgraph_get=bpy.context.evaluated_depsgraph_get, window_manager=bpy.context.window_manager,
+                                    evaluated_depsgraph_get=bpy.context.evaluated_depsgraph_get, window_manager=bpy.context.window_manager, scene=bpy.context.scene,
                                     workspace=types.SimpleNamespace(status_text_set=lambda _t: None),
                                     area=types.SimpleNamespace(type="VIEW_3D", tag_redraw=lambda: redraws.append(1)))
         reports = []
