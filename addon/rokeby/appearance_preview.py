@@ -371,9 +371,11 @@ def _draw():
     global last_error
     import bpy
 
+    from . import prefs
+
     ctx = bpy.context
     rv3d = ctx.region_data
-    if rv3d is None:
+    if rv3d is None or not prefs.get(ctx).gpu_viewport_preview:  # the machine's opt-out (add-on preferences)
         return
     try:
         settings = getattr(ctx.scene, "rokeby_appearance_brush", None)
