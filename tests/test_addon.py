@@ -116,7 +116,7 @@ def test_mesh_arrays_reports_bad_objects():
     bpy.ops.wm.read_factory_settings(use_empty=True)
     empty = bpy.data.objects.new("Handle", None)
     bpy.context.scene.collection.objects.link(empty)
-    with pytest.raises(ValueError, match="'Handle' is a EMPTY, not a mesh"):
+    with pytest.raises(ValueError, match="'Handle' is an empty, not a mesh"):
         api.mesh_arrays(empty)
     me = bpy.data.meshes.new("Loose")
     me.from_pydata([(0, 0, 0), (1, 0, 0)], [(0, 1)], [])

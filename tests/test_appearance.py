@@ -122,7 +122,7 @@ def test_painted_roughness_renders_only_where_painted(ball, tmp_path, engine):
 
 
 def test_bad_input_gives_clear_errors(ball):
-    with pytest.raises(ValueError, match="call rokeby.appearance.setup"):
+    with pytest.raises(ValueError, match="click Set Up Appearance Painting first"):
         appearance.paint(ball, "roughness", [0, 0, 1], radius=0.5, value=0.5)
     appearance.setup(ball)
     with pytest.raises(ValueError, match="radius: must be a positive finite number, got -1"):
@@ -142,7 +142,7 @@ def test_bad_input_gives_clear_errors(ball):
     with pytest.raises(ValueError, match="a global scale must be finite and ≥ 0"):
         appearance.set_global(ball.active_material, "specular", -1)
     lamp = bpy.data.objects.new("Lamp", bpy.data.lights.new("Lamp", "POINT"))
-    with pytest.raises(ValueError, match="is a LIGHT, not a mesh"):
+    with pytest.raises(ValueError, match="is a light, not a mesh"):
         appearance.setup(lamp)
     other = bpy.data.materials.new("Emit")
     other.use_nodes = True
@@ -182,7 +182,7 @@ def test_operators_paint_through_the_registered_add_on(ball):
         bpy.context.view_layer.objects.active = ball
         assert not bpy.ops.rokeby.appearance_paint.poll()  # not set up yet
         assert bpy.ops.rokeby.appearance_setup() == {"FINISHED"}
-        s = bpy.context.window_manager.rokeby_appearance_brush
+        s = bpy.context.scene.rokeby_appearance_brush
         s.brush, s.radius, s.strength, s.value = "blur", 0.5, 1.0, 0.6
         p = _points(ball)
         pole = int(np.argmax(p[:, 0]))
@@ -216,7 +216,7 @@ def test_modal_brush_paints_where_the_mouse_ray_hits(ball):
     try:
         bpy.context.view_layer.objects.active = ball
         assert bpy.ops.rokeby.appearance_setup() == {"FINISHED"}
-        s = bpy.context.window_manager.rokeby_appearance_brush
+        s = bpy.context.scene.rokeby_appearance_brush
         s.brush, s.radius, s.strength, s.value = "roughness", 0.2, 1.0, 0.9
         before = appearance.read(ball, "roughness").copy()
         size, f, d = 200, 2.0, 5.0  # region pixels; focal length (NDC); eye at y = −5
@@ -226,7 +226,7 @@ def test_modal_brush_paints_where_the_mouse_ray_hits(ball):
         rv3d = types.SimpleNamespace(view_matrix=view, perspective_matrix=proj @ view, is_perspective=True, view_perspective="PERSP")
         redraws = []
         ctx = types.SimpleNamespace(region=types.SimpleNamespace(width=size, height=size), region_data=rv3d, active_object=ball,
-                                    evaluated_depsgraph_get=bpy.context.evaluated_depsgraph_get, window_manager=bpy.context.window_manager,
+                                    evaluated_depsgraph_get=bpy.context.evaluated_depsgraph_get, window_manager=bpy.context.window_manager, scene=bpy.context.scene,
                                     workspace=types.SimpleNamespace(status_text_set=lambda _t: None),
                                     area=types.SimpleNamespace(type="VIEW_3D", tag_redraw=lambda: redraws.append(1)))
         reports = []

@@ -242,7 +242,7 @@ def test_operators_choose_the_texture_target(ball):
     rokeby.register()
     try:
         bpy.context.view_layer.objects.active = ball
-        s = bpy.context.window_manager.rokeby_appearance_brush
+        s = bpy.context.scene.rokeby_appearance_brush
         assert s.target == "POINT"
         s.target, s.resolution = "TEXTURE", 64
         assert bpy.ops.rokeby.appearance_setup() == {"FINISHED"}

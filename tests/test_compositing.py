@@ -286,7 +286,7 @@ def test_missing_passes_are_named(tmp_path):
     with pytest.raises(C.MissingPasses) as exc:
         C.read_exr(str(tmp_path / "few.exr"))
     assert "DiffDir" in exc.value.missing and "rokeby_reflocc" in exc.value.missing and "Normal" not in exc.value.missing
-    assert "setup_passes" in str(exc.value)
+    assert "Set Up Compositing Passes" in str(exc.value)
 
 
 def test_mismatched_pass_sizes_are_refused(rendered):

@@ -443,9 +443,7 @@ def test_bad_input_gives_clear_errors(encoded_room, monkeypatch):
 
 
 def test_operator_and_sidebar(encoded_room):
-    from test_scene import _Layout
-
-    from rokeby.ui import ROKEBY_PT_main
+    from test_scene import draw_sidebar
 
     ball, mat, _enc = encoded_room
     ball.rokeby.render_mode = "REFLECTION_MAP"
@@ -455,7 +453,7 @@ def test_operator_and_sidebar(encoded_room):
 
     def draw():
         log = []
-        ROKEBY_PT_main.draw(type("P", (), {"layout": _Layout(log)})(), bpy.context)
+        draw_sidebar(log)
         return log
 
     log = draw()

@@ -397,6 +397,24 @@ class _Layout:
     def operator_menu_enum(self, idname, prop, **k):
         return self.operator(idname)
 
+    def separator(self, **k):
+        pass
+
+    def menu(self, idname, **k):
+        assert hasattr(bpy.types, idname), idname
+        self.log.append(("menu", idname))
+
+
+def draw_sidebar(panel_log):
+    """Draws the sidebar's mirror panel and each sub-panel whose poll passes (as Blender does)
+    into ``panel_log``."""
+    from rokeby.ui import MIRROR_PANELS
+
+    for cls in MIRROR_PANELS:
+        if getattr(cls, "bl_parent_id", None) and not cls.poll(bpy.context):
+            continue
+        cls.draw(type("P", (), {"layout": _Layout(panel_log)})(), bpy.context)
+
 
 class _OpProps:
     def __init__(self, idname):
@@ -410,8 +428,6 @@ class _OpProps:
 
 
 def test_sidebar_panel_draws_every_state():
-    from rokeby.ui import ROKEBY_PT_main
-
     mirror, _ = make_fixtures.keyframed_spot(SHARED)
     mirror.rokeby.metric = "GEODESIC"
     mirror.rokeby.all_materials = False
@@ -423,8 +439,7 @@ def test_sidebar_panel_draws_every_state():
     for active in (mirror, mirror.rokeby.constraints[1].surface_handle, bpy.data.objects["Floor"], None):
         bpy.context.view_layer.objects.active = active
         log = []
-        panel = type("P", (), {"layout": _Layout(log)})()
-        ROKEBY_PT_main.draw(panel, bpy.context)
+        draw_sidebar(log)
         ctx_states.append(log)
     texts = [t for kind, t in ctx_states[0] if kind == "label"]
     assert any("Mirror: Spot" in t for t in texts)

@@ -221,6 +221,7 @@ CASES = {
     "region_add": (_with_mirror, lambda b: bpy.ops.rokeby.region_add(mirror=b.name, kind="FREEFORM", vertex_group="Patch")),
     "region_remove": (_with_mirror, lambda b: bpy.ops.rokeby.region_remove(mirror=b.name, index=0)),
     "freeze": (_with_mirror, lambda b: bpy.ops.rokeby.freeze(mirror=b.name, action="FREEZE")),
+    "distance_set": (_with_mirror, lambda b: bpy.ops.rokeby.distance_set(mirror=b.name, metric="GEODESIC")),
     "material_toggle": (_with_mirror, lambda b: bpy.ops.rokeby.material_toggle(mirror=b.name, material="Glass")),
     # Installing is automatic now (a mirror with a constraint renders its edit): the operator's
     # undoable change is taking the nodes out (Edit Final Renders off).
@@ -280,7 +281,7 @@ def test_undo_and_redo_of_texture_strokes(scene):
 
     _with_painting(scene, "TEXTURE")
     stroke = [{"name": "", "location": (0.0, -1.0, 0.0)}]
-    wm = bpy.context.window_manager.rokeby_appearance_brush
+    wm = bpy.context.scene.rokeby_appearance_brush
     wm.brush, wm.value, wm.radius, wm.strength = "roughness", 0.9, 0.5, 1.0
     values = []
     for v in (0.9, 0.05):
@@ -304,6 +305,7 @@ NOT_COVERED = {
     "shadow_start": "a shadow-editing session lives outside the file (no scene data changes until Apply)",
     "shadow_drag": "moves a handle of the session, outside the file; Apply is the undoable step",
     "shadow_stop": "ends the session; the scene's data does not change",
+    "composite_sequence": "writes recomposited frames to files outside the .blend (tests/test_interface.py)",
 }
 
 

@@ -21,9 +21,10 @@ def is_registered() -> bool:
 
 
 def _modules():
-    from . import appearance_ui, compositing_ui, handlers, operators, props, shadow_ui, ui, viewport
+    from . import appearance_ui, compositing_ui, handlers, operators, prefs, props, shadow_ui, ui, viewport
 
-    return (props, operators, ui, handlers, viewport, appearance_ui, compositing_ui, shadow_ui)
+    # ui after every module with operators: its menus name them all.
+    return (prefs, props, operators, handlers, viewport, appearance_ui, compositing_ui, shadow_ui, ui)
 
 
 def register():

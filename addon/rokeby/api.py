@@ -14,7 +14,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from . import native
+from . import native, words
 
 __all__ = [
     "reflect",
@@ -142,7 +142,7 @@ def mesh_arrays(obj, depsgraph=None, *, world: bool = True) -> MeshArrays:
     if obj is None:
         raise ValueError("obj: is None")
     if obj.type != "MESH":
-        raise ValueError(f"obj: '{obj.name}' is a {obj.type}, not a mesh")
+        raise ValueError(f"obj: '{obj.name}' is {words.kind(obj.type)}, not a mesh")
     dg = depsgraph if depsgraph is not None else bpy.context.evaluated_depsgraph_get()
     ob_eval = obj.evaluated_get(dg)
     me = ob_eval.to_mesh()
@@ -267,7 +267,7 @@ def _check_mirror(obj):
     except ReferenceError:
         raise RokebyError("mirror: the object was deleted") from None
     if kind != "MESH":
-        raise RokebyError(f"mirror: '{name}' is a {kind.lower()}, not a mesh")
+        raise RokebyError(f"mirror: '{name}' is {words.kind(kind)}, not a mesh")
     if len(obj.data.polygons) == 0:
         raise RokebyError(f"mirror: '{name}' has no faces")
     if obj.library is not None or obj.data.library is not None:
@@ -278,7 +278,7 @@ def _check_mirror(obj):
 def _require_mirror(obj):
     _check_mirror(obj)
     if not obj.rokeby.is_mirror:
-        raise RokebyError(f"mirror: '{obj.name}' is not a Rokeby mirror (use add_mirror first)")
+        raise RokebyError(f"mirror: '{obj.name}' is not a Rokeby mirror: make it one with Add Mirror (Object ▸ Rokeby ▸ Add Mirror)")
     return obj
 
 

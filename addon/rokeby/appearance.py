@@ -34,6 +34,8 @@ import math
 
 import numpy as np
 
+from . import words
+
 # brush → (attribute, Principled input, default when the material has no value, clamp range)
 PARAMS = {
     "diffuse": ("rokeby_base_color", "Base Color", (0.8, 0.8, 0.8, 1.0), (0.0, 1.0)),
@@ -64,7 +66,7 @@ def _check_mesh(obj):
     if obj is None:
         raise ValueError("obj: is None")
     if obj.type != "MESH":
-        raise ValueError(f"obj: '{obj.name}' is a {obj.type}, not a mesh")
+        raise ValueError(f"obj: '{obj.name}' is {words.kind(obj.type)}, not a mesh")
     if len(obj.data.vertices) == 0:
         raise ValueError(f"obj: '{obj.name}' has no vertices to paint")
 
@@ -197,7 +199,7 @@ def _attr(obj, param):
     attr = PARAMS[param][0]
     a = obj.data.attributes.get(attr)
     if a is None:
-        raise ValueError(f"obj: '{obj.name}' has no attribute {attr!r}: call rokeby.appearance.setup(obj) first")
+        raise ValueError(f"obj: '{obj.name}' has no attribute {attr!r}: click Set Up Appearance Painting first (Rokeby ▸ Appearance Painting)")
     return a
 
 
@@ -265,8 +267,8 @@ def paint(obj, brush: str, centres, radius: float, value=None, strength: float =
         raise ValueError(f"brush: unknown brush {brush!r} (expected one of {', '.join(list(PARAMS) + list(BRUSHES))})")
     if img is None and param in missing_images(obj):
         raise ValueError(f"obj: the painted {param!r} image of material '{obj.active_material.name}' is gone (deleted?): undo, "
-                         "or set the texture target up again (rokeby.appearance.setup(obj, target='TEXTURE')) to make it "
-                         "from the per-point values")
+                         "or click Make Missing Images (Appearance Painting panel) to make it again from the per-point "
+                         "values")
     mode = (mode or default_mode).upper()
     if mode not in ("MIX", "ADD", "SUBTRACT"):
         raise ValueError(f"mode: expected 'MIX', 'ADD' or 'SUBTRACT', got {mode!r}")
@@ -378,7 +380,7 @@ def _stretch_direction(obj, pts, m, path, first, radius, strength, idx):
     mat = obj.active_material
     tan = mat.node_tree.nodes.get(NODE_PREFIX + "tangent") if mat is not None and mat.use_nodes else None
     if tan is None or not tan.outputs["Tangent"].is_linked:
-        raise ValueError("brush: 'stretch' directions are relative to the radial tangent that setup() wires; this material's Tangent input is driven by something else")
+        raise ValueError("brush: 'stretch' directions are relative to the radial tangent that Set Up Appearance Painting wires; this material's Tangent input is driven by something else")
     t, b, _ = _radial_tangent_frame(obj, m, idx)
     all_rho = read(obj, "anisotropic_rotation").astype(np.float64)
     rho = all_rho[idx]
@@ -405,7 +407,7 @@ def set_global(mat, param: str, value) -> None:
         raise ValueError(f"param: unknown parameter {param!r} (expected one of {', '.join(PARAMS)})")
     node = mat.node_tree.nodes.get(NODE_PREFIX + "global_" + param) if mat is not None and mat.use_nodes else None
     if node is None:
-        raise ValueError(f"material: '{getattr(mat, 'name', mat)}' is not set up for painting: call rokeby.appearance.setup(obj) first")
+        raise ValueError(f"material: '{getattr(mat, 'name', mat)}' is not set up for painting: click Set Up Appearance Painting first (Rokeby ▸ Appearance Painting)")
     if param == "diffuse":
         v = np.asarray(value, np.float64).ravel()
         if v.size == 3:
@@ -459,7 +461,7 @@ def setup_texture(obj, resolution: int = 1024, uv_map: str | None = None, materi
     mat = material if material is not None else obj.active_material
     nodes = mat.node_tree.nodes if mat is not None and mat.use_nodes else None
     if nodes is None or nodes.get(NODE_PREFIX + "global_roughness") is None:
-        raise ValueError(f"material: '{getattr(mat, 'name', mat)}' is not set up for painting: call rokeby.appearance.setup(obj) first")
+        raise ValueError(f"material: '{getattr(mat, 'name', mat)}' is not set up for painting: click Set Up Appearance Painting first (Rokeby ▸ Appearance Painting)")
     nt = mat.node_tree
     uv_name = uv_map if uv_map is not None else obj.data.uv_layers.active.name
     uvn = nodes.get(NODE_PREFIX + "uv")
@@ -608,7 +610,7 @@ def _raster(obj, uv_name: str, res: int) -> dict:
     resolution and the positions/UVs/triangles' contents."""
     me = obj.data
     if uv_name not in me.uv_layers:
-        raise ValueError(f"obj: '{obj.name}' has no UV map {uv_name!r}, which its texture target reads (restore it, or remove_texture())")
+        raise ValueError(f"obj: '{obj.name}' has no UV map {uv_name!r}, which its texture target reads (restore it, or click Back to Per-Point Attributes)")
     n = len(me.vertices)
     co = np.empty(3 * n, np.float32)
     me.attributes["position"].data.foreach_get("vector", co)
@@ -703,7 +705,7 @@ def read_texture(obj, param) -> np.ndarray:
         raise ValueError(f"param: unknown parameter {param!r} (expected one of {', '.join(PARAMS)})")
     img = _texture_image(obj, param)
     if img is None:
-        raise ValueError(f"obj: '{obj.name}' has no texture target for {param!r}: call rokeby.appearance.setup(obj, target='TEXTURE') first")
+        raise ValueError(f"obj: '{obj.name}' has no texture target for {param!r}: set the Target to Image Texture and click Set Up Appearance Painting first")
     w, h = img.size
     px = np.empty(w * h * 4, np.float32)
     img.pixels.foreach_get(px)
@@ -872,7 +874,7 @@ def _stretch_direction_texture(obj, path, first, radius, strength):
     mat = obj.active_material
     tan = mat.node_tree.nodes.get(NODE_PREFIX + "tangent")
     if tan is None or not tan.outputs["Tangent"].is_linked:
-        raise ValueError("brush: 'stretch' directions are relative to the radial tangent that setup() wires; this material's Tangent input is driven by something else")
+        raise ValueError("brush: 'stretch' directions are relative to the radial tangent that Set Up Appearance Painting wires; this material's Tangent input is driven by something else")
     img = _texture_image(obj, "anisotropic_rotation")
     if img is None:
         raise ValueError(f"obj: '{obj.name}' has no texture for 'anisotropic_rotation'")

@@ -371,12 +371,14 @@ def _draw():
     global last_error
     import bpy
 
+    from . import prefs
+
     ctx = bpy.context
     rv3d = ctx.region_data
-    if rv3d is None:
+    if rv3d is None or not prefs.get(ctx).gpu_viewport_preview:  # the machine's opt-out (add-on preferences)
         return
     try:
-        settings = getattr(ctx.window_manager, "rokeby_appearance_brush", None)
+        settings = getattr(ctx.scene, "rokeby_appearance_brush", None)
         draw_view(ctx.scene, rv3d, ctx.visible_objects, settings.preview_model if settings is not None else "PRINCIPLED",
                   ctx.evaluated_depsgraph_get())
         last_error = None

@@ -2,7 +2,8 @@
 operator that paints strokes on it in the viewport (modal: the mouse is ray-cast onto the object
 and each step is one dab of :func:`rokeby.appearance.paint`; exec: a stroke given as points, for
 scripts and tests), the brush settings, and a sidebar panel with Fraser's global sliders (the
-material's ``rokeby_global_*`` node values). While the brush runs, a circle of its radius follows
+material's ``rokeby_global_*`` node values), split into sub-panels (Brush, Global Sliders). The
+brush settings are the scene's (``scene.rokeby_appearance_brush``: saved in the .blend). While the brush runs, a circle of its radius follows
 the mouse on the surface (a POST_VIEW handler, added and removed by the operator). ``gpu`` is
 touched only inside that draw handler, so it registers in background mode."""
 
@@ -11,7 +12,7 @@ from __future__ import annotations
 import bpy
 from bpy.props import CollectionProperty, EnumProperty, FloatProperty, FloatVectorProperty, IntProperty, PointerProperty
 
-from . import appearance
+from . import appearance, words
 
 _BRUSH_ITEMS = [
     ("diffuse", "Diffuse", "Paint the diffuse colour"),
@@ -64,7 +65,31 @@ def _redraw_views(context):
 
 
 def _settings(context):
-    return context.window_manager.rokeby_appearance_brush
+    """The brush settings: the scene's, saved with the .blend."""
+    return context.scene.rokeby_appearance_brush
+
+
+def _fail(cls, message: str) -> bool:
+    cls.poll_message_set(message)
+    return False
+
+
+def _poll_mesh(cls, context) -> bool:
+    ob = context.active_object
+    if ob is None:
+        return _fail(cls, "Select the mesh to paint")
+    if ob.type != "MESH":
+        return _fail(cls, f"'{ob.name}' is {words.kind(ob.type)}: select the mesh to paint")
+    return True
+
+
+def _poll_painted(cls, context) -> bool:
+    if not _poll_mesh(cls, context):
+        return False
+    ob = context.active_object
+    if appearance.PARAMS["roughness"][0] not in ob.data.attributes:
+        return _fail(cls, f"'{ob.name}' is not set up for painting: click Set Up Appearance Painting first")
+    return True
 
 
 def _dab(settings, obj, points, previous=None, pack=True):
@@ -84,7 +109,7 @@ class ROKEBY_OT_appearance_setup(bpy.types.Operator):
 
     @classmethod
     def poll(cls, context):
-        return context.active_object is not None and context.active_object.type == "MESH"
+        return _poll_mesh(cls, context)
 
     def execute(self, context):
         s = _settings(context)
@@ -106,8 +131,11 @@ class ROKEBY_OT_appearance_texture_remove(bpy.types.Operator):
 
     @classmethod
     def poll(cls, context):
-        ob = context.active_object
-        return ob is not None and ob.type == "MESH" and appearance.target(ob) == "TEXTURE"
+        if not _poll_mesh(cls, context):
+            return False
+        if appearance.target(context.active_object) != "TEXTURE":
+            return _fail(cls, f"'{context.active_object.name}' is painted per point already (no image textures to remove)")
+        return True
 
     def execute(self, context):
         try:
@@ -130,8 +158,7 @@ class ROKEBY_OT_appearance_paint(bpy.types.Operator):
 
     @classmethod
     def poll(cls, context):
-        ob = context.active_object
-        return ob is not None and ob.type == "MESH" and appearance.PARAMS["roughness"][0] in ob.data.attributes
+        return _poll_painted(cls, context)
 
     def execute(self, context):
         if len(self.stroke) == 0:
@@ -276,6 +303,14 @@ class ROKEBY_OT_appearance_preview(bpy.types.Operator):
     bl_idname = "rokeby.appearance_preview"
     bl_label = "Preview Under the World"
 
+    @classmethod
+    def poll(cls, context):
+        from . import appearance_preview, prefs
+
+        if not appearance_preview.enabled() and not prefs.get(context).gpu_viewport_preview:
+            return _fail(cls, "GPU viewport previews are switched off in Rokeby's add-on preferences")
+        return True
+
     def execute(self, context):
         from . import appearance_preview
 
@@ -287,12 +322,15 @@ class ROKEBY_OT_appearance_preview(bpy.types.Operator):
 
 
 class ROKEBY_PT_appearance(bpy.types.Panel):
+    """Set up painting on the active mesh (target: per-point attributes or image textures)."""
+
     bl_label = "Appearance Painting"
     bl_idname = "ROKEBY_PT_appearance"
     bl_space_type = "VIEW_3D"
     bl_region_type = "UI"
     bl_category = "Rokeby"
     bl_options = {"DEFAULT_CLOSED"}
+    bl_order = 20
 
     def draw(self, context):
         layout = self.layout
@@ -310,8 +348,6 @@ class ROKEBY_PT_appearance(bpy.types.Panel):
                     col.label(text="This mesh has no UV map", icon="ERROR")
             if appearance.PARAMS["roughness"][0] not in ob.data.attributes or s.target == "TEXTURE":
                 layout.operator(ROKEBY_OT_appearance_setup.bl_idname)
-            if appearance.PARAMS["roughness"][0] not in ob.data.attributes:
-                return
         else:
             img = appearance._texture_image(ob, "roughness")
             layout.label(text=f"Target: images {img.size[0]}² on UV map '{ob.active_material.node_tree.nodes[appearance.NODE_PREFIX + 'uv'].uv_map}'" if img else "Target: images", icon="IMAGE_DATA")
@@ -323,6 +359,30 @@ class ROKEBY_PT_appearance(bpy.types.Panel):
                 col.prop(s, "target")
                 col.prop(s, "resolution")
                 col.operator(ROKEBY_OT_appearance_setup.bl_idname, text="Make Missing Images")
+
+
+class _PaintedSubPanel:
+    bl_space_type = "VIEW_3D"
+    bl_region_type = "UI"
+    bl_category = "Rokeby"
+    bl_parent_id = "ROKEBY_PT_appearance"
+
+    @classmethod
+    def poll(cls, context):
+        ob = context.active_object
+        return ob is not None and ob.type == "MESH" and appearance.PARAMS["roughness"][0] in ob.data.attributes
+
+
+class ROKEBY_PT_appearance_brush(_PaintedSubPanel, bpy.types.Panel):
+    """The brush and the viewport preview."""
+
+    bl_label = "Brush"
+    bl_idname = "ROKEBY_PT_appearance_brush"
+    bl_order = 0
+
+    def draw(self, context):
+        layout = self.layout
+        s = _settings(context)
         col = layout.column(align=True)
         col.prop(s, "brush")
         col.prop(s, "radius")
@@ -337,23 +397,43 @@ class ROKEBY_PT_appearance(bpy.types.Panel):
             layout.prop(s, "preview_model")
         if on and appearance_preview.last_error:
             layout.label(text=appearance_preview.last_error, icon="ERROR")
-        mat = ob.active_material
+
+
+class ROKEBY_PT_appearance_sliders(_PaintedSubPanel, bpy.types.Panel):
+    """Fraser's global sliders: the material's ``rokeby_global_*`` node values."""
+
+    bl_label = "Global Sliders"
+    bl_idname = "ROKEBY_PT_appearance_sliders"
+    bl_options = {"DEFAULT_CLOSED"}
+    bl_order = 1
+
+    def draw(self, context):
+        layout = self.layout
+        mat = context.active_object.active_material
         nodes = mat.node_tree.nodes if mat is not None and mat.use_nodes else {}
-        box = layout.box()
-        box.label(text="Global sliders")
+        col = layout.column()
         for param in appearance.PARAMS:
             node = nodes.get(appearance.NODE_PREFIX + "global_" + param)
             if node is not None:
-                box.prop(node.inputs[7 if param == "diffuse" else 1], "default_value", text=param.replace("_", " ").title())
+                col.prop(node.inputs[7 if param == "diffuse" else 1], "default_value", text=_SLIDER_NAMES.get(param, param))
 
 
-_CLASSES = (RokebyStrokePoint, RokebyAppearanceBrush, ROKEBY_OT_appearance_setup, ROKEBY_OT_appearance_texture_remove, ROKEBY_OT_appearance_paint, ROKEBY_OT_appearance_preview, ROKEBY_PT_appearance)
+# Slider labels as words (the parameter names title-cased would read "Anisotropic_Rotation").
+_SLIDER_NAMES = {"diffuse": "Diffuse", "specular": "Specular", "roughness": "Roughness", "metallic": "Metallic",
+                 "anisotropic": "Anisotropy", "anisotropic_rotation": "Anisotropic Rotation"}
+
+# The painting panels, parent first.
+PANELS = (ROKEBY_PT_appearance, ROKEBY_PT_appearance_brush, ROKEBY_PT_appearance_sliders)
+
+
+_CLASSES = (RokebyStrokePoint, RokebyAppearanceBrush, ROKEBY_OT_appearance_setup, ROKEBY_OT_appearance_texture_remove, ROKEBY_OT_appearance_paint, ROKEBY_OT_appearance_preview, *PANELS)
 
 
 def register():
     for c in _CLASSES:
         bpy.utils.register_class(c)
-    bpy.types.WindowManager.rokeby_appearance_brush = PointerProperty(type=RokebyAppearanceBrush)
+    # On the Scene, so the brush is saved with the .blend (a WindowManager property is not).
+    bpy.types.Scene.rokeby_appearance_brush = PointerProperty(type=RokebyAppearanceBrush, name="Rokeby Appearance Brush")
 
 
 def unregister():
@@ -361,8 +441,8 @@ def unregister():
 
     appearance_preview.enable(False)
     show_cursor(None)
-    if hasattr(bpy.types.WindowManager, "rokeby_appearance_brush"):
-        del bpy.types.WindowManager.rokeby_appearance_brush
+    if hasattr(bpy.types.Scene, "rokeby_appearance_brush"):
+        del bpy.types.Scene.rokeby_appearance_brush
     for c in reversed(_CLASSES):
         if getattr(c, "is_registered", False):
             bpy.utils.unregister_class(c)

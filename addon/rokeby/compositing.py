@@ -82,7 +82,7 @@ class MissingPasses(CompositingError):
         where = f" in {path}" if path else ""
         super().__init__(
             f"missing render passes{where}: {', '.join(self.missing)} "
-            "(call rokeby.compositing.setup_passes(scene) before rendering)"
+            "(click Set Up Compositing Passes, View Layer properties ▸ Rokeby Compositing, before rendering)"
         )
 
 

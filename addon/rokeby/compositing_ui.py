@@ -1,15 +1,23 @@
 """Operators and a View Layer panel for compositing-stage shape editing (``rokeby.compositing``):
-set up the render passes, and render → reconstruct → edit normals → show the recomposited frame
-as a new image."""
+set up the render passes (reporting every render setting that changes), render → reconstruct →
+edit normals → show the recomposited frame as a new image, and recomposite a whole EXR sequence
+with one edit (the entry point for a user who installed only the extension: no checkout, no
+``python -m rokeby.composite``; in background mode ``blender -b --python-expr``, see
+docs/compositing.md)."""
 
 from __future__ import annotations
 
+import glob
 import os
+import re
 import tempfile
 
 import bpy
+import numpy as np
 
 from . import compositing as comp
+from . import prefs
+from .progress import Progress
 
 EDITS = [
     ("EMBOSS", "Emboss", "n_z → β n_z (amount = β in (0, 1])"),
@@ -31,6 +39,49 @@ BACKENDS = [
 ]
 
 
+def _fail(cls, message: str) -> bool:
+    cls.poll_message_set(message)
+    return False
+
+
+def _settings_snapshot(scene, view_layer) -> dict:
+    """The render settings Set Up Compositing Passes may change, as (label, value) by key."""
+    st = scene.render.image_settings
+    out = {}
+    rna = st.bl_rna.properties["file_format"]
+    out[("output", "file_format")] = next((item.name for item in rna.enum_items if item.identifier == st.file_format), st.file_format)
+    out[("output", "color_depth")] = f"{st.color_depth}-bit"
+    for prop in view_layer.bl_rna.properties:
+        if prop.identifier.startswith("use_pass_"):
+            out[("pass", prop.name)] = bool(getattr(view_layer, prop.identifier))
+    out[("aovs",)] = tuple(a.name for a in view_layer.aovs)
+    out[("object indices",)] = {o.name: o.pass_index for o in scene.objects if o.type == "MESH"}
+    out[("material indices",)] = {m.name: (m.pass_index, m.use_nodes, len(m.node_tree.nodes) if m.node_tree else 0) for m in bpy.data.materials}
+    return out
+
+
+def describe_changes(before: dict, after: dict) -> list[str]:
+    """Sentences naming each render setting that differs between two ``_settings_snapshot``s."""
+    lines = []
+    names = {"file_format": "Output file format", "color_depth": "Output colour depth"}
+    for key in (("output", "file_format"), ("output", "color_depth")):
+        if before[key] != after[key]:
+            lines.append(f"{names[key[1]]} switched to {after[key]} (was {before[key]})")
+    enabled = [key[1] for key in after if key[0] == "pass" and after[key] and not before.get(key)]
+    if enabled:
+        lines.append(f"Passes enabled on view layer: {', '.join(enabled)}")
+    added = [a for a in after[("aovs",)] if a not in before[("aovs",)]]
+    if added:
+        lines.append(f"Shader AOVs added: {', '.join(added)}")
+    obs = [n for n, i in after[("object indices",)].items() if before[("object indices",)].get(n) != i]
+    if obs:
+        lines.append(f"Pass index given to {len(obs)} object(s): {', '.join(obs[:6])}{' …' if len(obs) > 6 else ''}")
+    mats = [n for n, v in after[("material indices",)].items() if before[("material indices",)].get(n) != v]
+    if mats:
+        lines.append(f"Material pass index and AOV output nodes set in {len(mats)} material(s): {', '.join(mats[:6])}{' …' if len(mats) > 6 else ''}")
+    return lines
+
+
 class ROKEBY_OT_composite_setup_passes(bpy.types.Operator):
     """Enable the render passes and AOVs that compositing-stage shape editing needs"""
 
@@ -38,9 +89,23 @@ class ROKEBY_OT_composite_setup_passes(bpy.types.Operator):
     bl_label = "Set Up Compositing Passes"
     bl_options = {"REGISTER", "UNDO"}
 
+    @classmethod
+    def poll(cls, context):
+        if context.scene is None or context.view_layer is None:
+            return _fail(cls, "Needs a scene and a view layer to set the passes up on")
+        return True
+
     def execute(self, context):
-        names = comp.setup_passes(context.scene, context.view_layer)
-        self.report({"INFO"}, f"Rokeby: {len(names)} passes enabled on view layer '{context.view_layer.name}'")
+        before = _settings_snapshot(context.scene, context.view_layer)
+        comp.setup_passes(context.scene, context.view_layer)
+        changes = describe_changes(before, _settings_snapshot(context.scene, context.view_layer))
+        for line in changes:  # every change in the Info log (Ctrl+Z undoes them all)
+            self.report({"INFO"}, f"Rokeby: {line}")
+        if changes:
+            self.report({"INFO"}, f"Rokeby: {len(changes)} render setting change(s) on '{context.view_layer.name}' "
+                                  "(listed in the Info editor; Ctrl+Z undoes them)")
+        else:
+            self.report({"INFO"}, f"Rokeby: the passes of '{context.view_layer.name}' were already set up; nothing changed")
         return {"FINISHED"}
 
 
@@ -48,13 +113,15 @@ MAX_SMOOTH_SIGMA = 50.0  # rokeby_core::normals::MAX_SIGMA_S: the smoothing's la
 LAST_EXR = "rokeby_composite_exr"  # scene custom property: the EXR the last Render and Recomposite wrote
 
 
-def _edit_args(op) -> dict:
-    """The operator's edit as ``rokeby.api`` takes it, with the knob clamped to what each edit accepts."""
+def _edit_args(op, context=None) -> dict:
+    """The operator's edit as ``rokeby.api`` takes it, with the knob clamped to what each edit
+    accepts; the backend is the add-on preferences' default unless the operator was given one."""
     edit = op.edit.lower()
     amount = {"emboss": min(max(op.amount, 1e-3), 1.0),
               "smooth": min(max(op.amount, 0.5), MAX_SMOOTH_SIGMA)}.get(edit, op.amount)
+    backend = op.backend if op.properties.is_property_set("backend") else prefs.get(context).compositing_backend
     return {"edit": edit, "amount": amount, "k_d": op.k_d, "k_r": op.k_r, "image_name": op.image_name,
-            "backend": "blender_gpu" if op.backend == "GPU" else "cpu", "fit": "ls" if op.fit == "LS" else "qp",
+            "backend": "blender_gpu" if backend == "GPU" else "cpu", "fit": "ls" if op.fit == "LS" else "qp",
             "noise_tolerance": op.noise_tolerance if op.fit == "QP_TOLERANT" else 0.0}
 
 
@@ -64,7 +131,8 @@ class _EditProps:
     k_d: bpy.props.FloatProperty(name="Diffuse k_D", default=1.0, min=0.0)
     k_r: bpy.props.FloatProperty(name="Reflection k_R", default=1.0, min=0.0)
     image_name: bpy.props.StringProperty(name="Image", default="Rokeby Recomposited")
-    backend: bpy.props.EnumProperty(name="Backend", items=BACKENDS, default="CPU")
+    backend: bpy.props.EnumProperty(name="Backend", items=BACKENDS, default="CPU",
+                                    description="Where eqs. 3–5 run (default: the add-on preferences' Default Compositing Backend)")
     fit: bpy.props.EnumProperty(name="Diffuse Fit", items=FITS, default="QP")
     noise_tolerance: bpy.props.FloatProperty(name="Noise Tolerance", default=3.0, min=0.0, soft_max=6.0,
                                              description="κ of the noise-tolerant QP, in standard deviations of the pixel noise")
@@ -81,12 +149,20 @@ class ROKEBY_OT_composite_render(_EditProps, bpy.types.Operator):
     filepath: bpy.props.StringProperty(name="EXR", default="", subtype="FILE_PATH",
                                        description="Where the multilayer EXR goes (default: a temporary file)")
 
+    @classmethod
+    def poll(cls, context):
+        if context.scene is None or context.scene.camera is None:
+            return _fail(cls, "The scene has no camera: Render and Recomposite renders from the scene camera")
+        return True
+
     def execute(self, context):
         from . import api  # noqa: PLC0415
 
         path = bpy.path.abspath(self.filepath) if self.filepath else os.path.join(tempfile.gettempdir(), "rokeby_composite.exr")
         try:
-            img, reports = api.recomposite_render(path, scene=context.scene, warn=False, **_edit_args(self))
+            with Progress(context, 1) as progress:  # render, reconstruct, recomposite: seconds
+                img, reports = api.recomposite_render(path, scene=context.scene, warn=False, **_edit_args(self, context))
+                progress.step()
         except (comp.CompositingError, api.RokebyError, ValueError, RuntimeError) as exc:
             self.report({"ERROR"}, f"Rokeby: {exc}")
             return {"CANCELLED"}
@@ -110,15 +186,29 @@ class ROKEBY_OT_composite_edit(_EditProps, bpy.types.Operator):
                                        description="A multilayer EXR rendered with the compositing passes "
                                                    "(default: the last Render and Recomposite of this scene)")
 
+    @classmethod
+    def poll(cls, context):
+        if context.scene is None:
+            return _fail(cls, "Needs a scene")
+        return True
+
+    def invoke(self, context, event):
+        if not self.filepath and not context.scene.get(LAST_EXR, ""):  # nothing rendered yet: pick an EXR
+            context.window_manager.fileselect_add(self)
+            return {"RUNNING_MODAL"}
+        return self.execute(context)
+
     def execute(self, context):
         from . import api  # noqa: PLC0415
 
         path = bpy.path.abspath(self.filepath) if self.filepath else context.scene.get(LAST_EXR, "")
         if not path:
-            self.report({"ERROR"}, "Rokeby: no rendered frame to edit: run Render and Recomposite first, or pick an EXR")
+            self.report({"ERROR"}, "Rokeby: no rendered frame to edit: click Render and Recomposite first, or pick an EXR")
             return {"CANCELLED"}
         try:
-            img, stats = api.recomposite_exr(path, warn=False, **_edit_args(self))
+            with Progress(context, 1) as progress:  # the first edit of a frame reads and reconstructs it
+                img, stats = api.recomposite_exr(path, warn=False, **_edit_args(self, context))
+                progress.step()
         except (comp.CompositingError, api.RokebyError, ValueError, RuntimeError) as exc:
             self.report({"ERROR"}, f"Rokeby: {exc}")
             return {"CANCELLED"}
@@ -127,6 +217,108 @@ class ROKEBY_OT_composite_edit(_EditProps, bpy.types.Operator):
         ms = 1e3 * (stats["edit_s"] + stats["recomposite_s"] + stats["show_s"])
         self.report({"INFO"}, f"Rokeby: image '{img.name}': {stats['edited']} pixels recomposited in {ms:.0f} ms"
                               + ("" if stats["reused"] else f" (reading and reconstructing the frame: {stats['open_s']:.1f} s)"))
+        return {"FINISHED"}
+
+
+def sequence_frames(directory: str, pattern: str = "*.exr") -> list[str]:
+    """The frames of a sequence, in frame order: files in ``directory`` matching ``pattern``, a
+    glob ('*.exr', 'shot_*.exr') or a frame-number pattern with '#' for each digit
+    ('shot_####.exr'). Numbers sort by value (frame_2 before frame_10)."""
+    directory = bpy.path.abspath(directory) if directory else directory
+    if not directory or not os.path.isdir(directory):
+        raise comp.CompositingError(f"folder: {directory!r} is not a folder")
+    if "#" in pattern:
+        regex = re.compile("^" + re.sub(r"#+", lambda m: rf"\d{{{len(m.group())}}}", re.escape(pattern).replace(r"\#", "#")) + "$")
+        names = [n for n in os.listdir(directory) if regex.match(n)]
+    else:
+        names = [os.path.basename(f) for f in glob.glob(os.path.join(glob.escape(directory), pattern))]
+    key = lambda n: [int(s) if s.isdigit() else s for s in re.split(r"(\d+)", n)]  # noqa: E731
+    return [os.path.join(directory, n) for n in sorted(names, key=key) if os.path.isfile(os.path.join(directory, n))]
+
+
+def _image_rgb(img) -> np.ndarray:
+    """(H, W, 3) float32 of a Blender float image, top row first (as ``compositing.write_exr`` takes it)."""
+    w, h = img.size
+    px = np.empty(w * h * 4, np.float32)
+    img.pixels.foreach_get(px)
+    return px.reshape(h, w, 4)[::-1, :, :3]
+
+
+class ROKEBY_OT_composite_sequence(_EditProps, bpy.types.Operator):
+    """Recomposite every frame of an EXR sequence (rendered with the compositing passes) with the
+    same edit and write each to the output folder. Frames whose output exists are skipped, so a
+    run that stopped (a bad frame, a crash) resumes where it left off"""
+
+    bl_idname = "rokeby.composite_sequence"
+    bl_label = "Recomposite EXR Sequence"
+    bl_options = {"REGISTER"}
+
+    directory: bpy.props.StringProperty(name="Folder", subtype="DIR_PATH",
+                                        description="Folder of multilayer EXR frames rendered with the compositing passes")
+    pattern: bpy.props.StringProperty(name="Frames", default="*.exr",
+                                      description="Which files of the folder are frames: a glob (*.exr) or '#' per frame digit (shot_####.exr)")
+    output_directory: bpy.props.StringProperty(name="Output Folder", subtype="DIR_PATH", default="",
+                                               description="Where the recomposited frames go, under the input's file names "
+                                                           "(default: a 'recomposited' folder inside the input folder)")
+    skip_existing: bpy.props.BoolProperty(name="Skip Frames Done", default=True,
+                                          description="Keep frames already written to the output folder (resume a stopped run)")
+    filter_glob: bpy.props.StringProperty(default="*.exr", options={"HIDDEN"})
+
+    @classmethod
+    def poll(cls, context):
+        if context.scene is None:
+            return _fail(cls, "Needs a scene")
+        return True
+
+    def invoke(self, context, event):
+        if not self.directory:
+            context.window_manager.fileselect_add(self)  # pick the folder of frames
+            return {"RUNNING_MODAL"}
+        return self.execute(context)
+
+    def execute(self, context):
+        from . import api  # noqa: PLC0415
+
+        try:
+            frames = sequence_frames(self.directory, self.pattern)
+        except comp.CompositingError as exc:
+            self.report({"ERROR"}, f"Rokeby: {exc}")
+            return {"CANCELLED"}
+        if not frames:
+            self.report({"ERROR"}, f"Rokeby: no frames matching '{self.pattern}' in {self.directory}")
+            return {"CANCELLED"}
+        src = os.path.dirname(frames[0])
+        out_dir = bpy.path.abspath(self.output_directory) if self.output_directory else os.path.join(src, "recomposited")
+        if os.path.realpath(out_dir) == os.path.realpath(src):
+            self.report({"ERROR"}, "Rokeby: the Output Folder must differ from the input folder (the frames would be overwritten)")
+            return {"CANCELLED"}
+        args = _edit_args(self, context)
+        os.makedirs(out_dir, exist_ok=True)
+        done, skipped, failed = [], [], []
+        with Progress(context, len(frames)) as progress:
+            for path in frames:
+                out = os.path.join(out_dir, os.path.basename(path))
+                if self.skip_existing and os.path.exists(out):
+                    skipped.append(path)
+                    progress.step()
+                    continue
+                try:
+                    img, _stats = api.recomposite_exr(path, warn=False, **args)
+                    partial = out + ".partial.exr"  # written whole, then renamed: a crash leaves no half frame
+                    comp.write_exr(partial, _image_rgb(img))
+                    os.replace(partial, out)
+                    done.append(path)
+                except (comp.CompositingError, api.RokebyError, ValueError, RuntimeError, OSError) as exc:
+                    failed.append(f"{os.path.basename(path)}: {exc}")
+                progress.step()
+        comp.close_render()  # the last frame's passes: let go of their memory
+        summary = (f"Rokeby: {len(done)} frame(s) recomposited into {out_dir}"
+                   + (f", {len(skipped)} already done (skipped)" if skipped else ""))
+        if failed:
+            self.report({"ERROR"}, f"{summary}; {len(failed)} failed (run again to retry them, frames done are skipped): "
+                                   + "; ".join(failed[:3]) + (" …" if len(failed) > 3 else ""))
+            return {"FINISHED"} if done else {"CANCELLED"}
+        self.report({"INFO"}, summary)
         return {"FINISHED"}
 
 
@@ -141,9 +333,12 @@ class ROKEBY_PT_compositing(bpy.types.Panel):
         col.operator(ROKEBY_OT_composite_setup_passes.bl_idname, icon="RENDERLAYERS")
         col.operator(ROKEBY_OT_composite_render.bl_idname, icon="RENDER_STILL")
         col.operator(ROKEBY_OT_composite_edit.bl_idname, icon="IMAGE")
+        col.separator()
+        col.operator(ROKEBY_OT_composite_sequence.bl_idname, icon="SEQUENCE")
 
 
-CLASSES = (ROKEBY_OT_composite_setup_passes, ROKEBY_OT_composite_render, ROKEBY_OT_composite_edit, ROKEBY_PT_compositing)
+CLASSES = (ROKEBY_OT_composite_setup_passes, ROKEBY_OT_composite_render, ROKEBY_OT_composite_edit,
+           ROKEBY_OT_composite_sequence, ROKEBY_PT_compositing)
 
 
 def register():

@@ -40,7 +40,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from . import native
+from . import native, words
 
 ATTRIBUTE = "rokeby_rotation"
 # What final renders read (rokeby.shading): the field's view-independent parts per vertex (per
@@ -1478,7 +1478,7 @@ def evaluate_mirror(obj, scene, depsgraph, *, force=False, reread_geometry=False
     state = _STATE.setdefault(uid, _State())
     try:
         if obj.type != "MESH":
-            raise RokebyError(f"mirror '{name}' is a {obj.type.lower()}, not a mesh")
+            raise RokebyError(f"mirror '{name}' is {words.kind(obj.type)}, not a mesh")
         settings = obj.rokeby
         if obj.mode == "EDIT":
             # Edit Mode writes its own mesh back on exit; the field follows when it does.

@@ -27,13 +27,25 @@ def version() -> str:
     return _native.__version__ if _native is not None else "not installed"
 
 
+def is_extension() -> bool:
+    """Whether the add-on runs as a Blender extension (installed from the zip: its package is
+    ``bl_ext.<repository>.rokeby``) rather than from a checkout."""
+    return (__package__ or "").startswith("bl_ext.")
+
+
+def missing_hint() -> str:
+    """What to do when the native core did not load, for the way the add-on is installed: an
+    extension user has no checkout and no `make`."""
+    if is_extension():
+        return ("The extension's native wheel (rokeby_native) failed to load: reinstall Rokeby from a zip made for "
+                "this platform and Blender version (Edit ▸ Preferences ▸ Get Extensions), then restart Blender")
+    return "Build it: run `make` in the Rokeby checkout, or install the extension zip, which bundles its wheel"
+
+
 def module():
-    """The ``rokeby_native`` module, or a clear error saying how to build it."""
+    """The ``rokeby_native`` module, or a clear error saying how to get it."""
     if _native is None:
-        raise NativeUnavailable(
-            "Rokeby's native core (rokeby_native) is not installed: run `make` in the Rokeby "
-            f"checkout, or install the extension zip that bundles its wheel ({IMPORT_ERROR})"
-        )
+        raise NativeUnavailable(f"Rokeby's native core (rokeby_native) is not available. {missing_hint()} ({IMPORT_ERROR})")
     return _native
 
 

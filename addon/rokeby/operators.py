@@ -2,6 +2,10 @@
 
 Every operator reports problems in Blender's status bar/info log (``self.report``) and cancels
 without changing the scene when the API refuses (the API validates before it creates anything).
+Every operator has a ``poll`` that greys its button and menu entry out where it cannot run and
+says why (``poll_message_set``, in the words of the buttons). Operators that act on a mirror take
+it from the active object (a handle or region centre stands for its mirror); from a script,
+``mirror=`` names it, and they are then available whenever the scene has a mirror.
 """
 
 from __future__ import annotations
@@ -10,9 +14,10 @@ import bpy
 import numpy as np
 from bpy.props import BoolProperty, EnumProperty, FloatProperty, FloatVectorProperty, IntProperty, StringProperty
 
-from . import api
+from . import api, evaluate, words
 from .evaluate import RokebyError
-from .props import CONSTRAINT_KINDS, REGION_KINDS
+from .progress import Progress
+from .props import CONSTRAINT_KINDS, METRICS, REGION_KINDS
 
 UNDO = {"REGISTER", "UNDO"}
 
@@ -28,6 +33,28 @@ def _mirror(context, name: str = ""):
         raise RokebyError("no active object: select a mirror")
     # A selected handle or region centre stands for its mirror.
     return api.mirror_of(ob, context.scene) or ob
+
+
+def _fail(cls, message: str) -> bool:
+    """A poll's refusal: ``message`` is what the greyed-out button's tooltip says."""
+    cls.poll_message_set(message)
+    return False
+
+
+def poll_mirror(cls, context):
+    """The mirror an operator acts on, for its ``poll``: the active object's mirror; True where
+    none is active but the scene has a mirror (a script names it with ``mirror=``); False, with
+    the reason set, where there is no mirror to act on."""
+    scene = context.scene
+    ob = context.active_object
+    m = api.mirror_of(ob, scene) if ob is not None and scene is not None else None
+    if m is not None:
+        return m
+    if scene is not None and evaluate.mirrors_of(scene):
+        return True
+    if ob is not None and ob.type == "MESH":
+        return _fail(cls, f"'{ob.name}' is not a Rokeby mirror: click Add Mirror first")
+    return _fail(cls, "There is no Rokeby mirror in this scene: select a mesh and click Add Mirror")
 
 
 class _Op:
@@ -46,6 +73,19 @@ class _Op:
         """The ``index`` property, or ``active`` when it is left at -1."""
         return self.index if self.index >= 0 else active
 
+    @classmethod
+    def poll(cls, context):
+        return bool(poll_mirror(cls, context))
+
+
+def _poll_constraints(cls, context, what: str) -> bool:
+    m = poll_mirror(cls, context)
+    if m is True or not m:
+        return bool(m)
+    if not len(m.rokeby.constraints):
+        return _fail(cls, f"'{m.name}' has no constraints {what}: add one with Add Reflection Constraint")
+    return True
+
 
 class ROKEBY_OT_mirror_add(_Op, bpy.types.Operator):
     """Make the active mesh a Rokeby mirror whose reflections can be edited"""
@@ -55,6 +95,21 @@ class ROKEBY_OT_mirror_add(_Op, bpy.types.Operator):
     bl_options = UNDO
 
     mirror: StringProperty(name="Mirror", description="Object name (default: the active object)")
+
+    @classmethod
+    def poll(cls, context):
+        ob = context.active_object
+        if ob is None:
+            return _fail(cls, "Select a mesh to make it a mirror")
+        if ob.type != "MESH":
+            return _fail(cls, f"'{ob.name}' is {words.kind(ob.type)}: select a mesh to make it a mirror")
+        if ob.rokeby.is_mirror:
+            return _fail(cls, f"'{ob.name}' is already a Rokeby mirror")
+        if ob.library is not None or ob.data.library is not None:
+            return _fail(cls, f"'{ob.name}' is linked from a library: make it local first (Object ▸ Relations ▸ Make Local)")
+        if len(ob.data.polygons) == 0:
+            return _fail(cls, f"'{ob.name}' has no faces to reflect in")
+        return True
 
     def run(self, context, mirror):
         api.add_mirror(mirror)
@@ -167,6 +222,14 @@ class ROKEBY_OT_highlight_add(_Op, bpy.types.Operator):
     mirror: StringProperty(name="Mirror", description="Object name (default: the active object's mirror)")
     light: StringProperty(name="Light", description="Light object (default: the selected light)")
 
+    @classmethod
+    def poll(cls, context):
+        if not poll_mirror(cls, context):
+            return False
+        if not any(ob.type == "LIGHT" for ob in context.scene.objects):
+            return _fail(cls, "There is no light in this scene: a highlight constraint follows a light")
+        return True
+
     def run(self, context, mirror):
         light = bpy.data.objects.get(self.light) if self.light else None
         if light is None:
@@ -187,6 +250,10 @@ class ROKEBY_OT_constraint_remove(_Op, bpy.types.Operator):
     mirror: StringProperty(name="Mirror")
     index: IntProperty(name="Index", default=-1, description="Constraint index (default: the active one)")
 
+    @classmethod
+    def poll(cls, context):
+        return _poll_constraints(cls, context, "to remove")
+
     def run(self, context, mirror):
         api.remove_constraint(mirror, self.index_or(mirror.rokeby.active_constraint), scene=context.scene)
 
@@ -200,6 +267,10 @@ class ROKEBY_OT_constraint_select(_Op, bpy.types.Operator):
 
     mirror: StringProperty(name="Mirror")
     index: IntProperty(name="Index", default=-1)
+
+    @classmethod
+    def poll(cls, context):
+        return _poll_constraints(cls, context, "whose handles to select")
 
     def run(self, context, mirror):
         s = mirror.rokeby
@@ -249,6 +320,15 @@ class ROKEBY_OT_region_remove(_Op, bpy.types.Operator):
     mirror: StringProperty(name="Mirror")
     index: IntProperty(name="Index", default=-1)
 
+    @classmethod
+    def poll(cls, context):
+        m = poll_mirror(cls, context)
+        if m is True or not m:
+            return bool(m)
+        if not len(m.rokeby.regions):
+            return _fail(cls, f"'{m.name}' has no regions to remove")
+        return True
+
     def run(self, context, mirror):
         api.remove_region(mirror, self.index_or(mirror.rokeby.active_region), scene=context.scene)
 
@@ -265,7 +345,9 @@ class ROKEBY_OT_return_to_view(_Op, bpy.types.Operator):
 
     @classmethod
     def poll(cls, context):
-        return getattr(context, "region_data", None) is not None and hasattr(context.region_data, "view_rotation")
+        if getattr(context, "region_data", None) is None or not hasattr(context.region_data, "view_rotation"):
+            return _fail(cls, "Only in a 3D View: it moves the view to where the constraint was made from")
+        return _poll_constraints(cls, context, "to return to")
 
     def run(self, context, mirror):
         v = api.constraint_view(mirror, self.index_or(mirror.rokeby.active_constraint))
@@ -297,6 +379,27 @@ class ROKEBY_OT_freeze(_Op, bpy.types.Operator):
         api.freeze(mirror, frozen, eye=None if eye is None else tuple(eye))
 
 
+class ROKEBY_OT_distance_set(_Op, bpy.types.Operator):
+    """Measure the mirror's weights by straight-line (Euclidean) or over-the-surface (geodesic) distance, and recompute its field now, with progress in the status bar (geodesic distances take a second on large meshes)"""
+
+    bl_idname = "rokeby.distance_set"
+    bl_label = "Set Distance"
+    bl_options = UNDO
+
+    mirror: StringProperty(name="Mirror")
+    metric: EnumProperty(name="Distance", items=[(m[0], m[1], m[2], i) for i, m in enumerate(METRICS)], default="GEODESIC")
+
+    def run(self, context, mirror):
+        api._require_mirror(mirror)
+        with Progress(context, 2) as progress:
+            mirror.rokeby.metric = self.metric
+            progress.step()
+            rep = api.evaluate(context.scene).get(mirror.name)
+            progress.step()
+        if rep is not None and rep.status == "ERROR":
+            self.report({"WARNING"}, f"Rokeby: {rep.summary()}")
+
+
 class ROKEBY_OT_material_toggle(_Op, bpy.types.Operator):
     """Edit or stop editing the reflections of this material of the mirror"""
 
@@ -305,13 +408,22 @@ class ROKEBY_OT_material_toggle(_Op, bpy.types.Operator):
     bl_options = UNDO
 
     mirror: StringProperty(name="Mirror")
-    material: StringProperty(name="Material")
+    material: StringProperty(name="Material", description="Material name (default: the mirror's active material)")
+
+    @classmethod
+    def poll(cls, context):
+        m = poll_mirror(cls, context)
+        if m is True or not m:
+            return bool(m)
+        if not any(slot.material for slot in m.material_slots):
+            return _fail(cls, f"'{m.name}' has no materials")
+        return True
 
     def run(self, context, mirror):
         edited = api.edited_materials(mirror)
-        mat = bpy.data.materials.get(self.material)
+        mat = bpy.data.materials.get(self.material) if self.material else mirror.active_material
         if mat is None:
-            raise RokebyError(f"material: no material named '{self.material}'")
+            raise RokebyError(f"material: no material named '{self.material}'" if self.material else f"'{mirror.name}' has no active material")
         edited = [x for x in edited if x != mat] if mat in edited else edited + [mat]
         api.set_edited_materials(mirror, edited)
 
@@ -350,7 +462,9 @@ class ROKEBY_OT_reflection_map(_Op, bpy.types.Operator):
         if self.action == "CLEAR":
             reflmap.clear(mirror)
             return
-        img = api.capture_reflection_map(mirror, scene=context.scene)
+        with Progress(context, 1) as progress:
+            img = api.capture_reflection_map(mirror, scene=context.scene)
+            progress.step()
         where = "packed in the .blend" if img.packed_file else img.filepath
         self.report({"INFO"}, f"Rokeby: {img.size[0]}×{img.size[1]} map of '{mirror.name}' in {mirror.rokeby.map_capture_seconds:.1f} s ({where})")
 
@@ -364,6 +478,15 @@ class ROKEBY_OT_ior_from_material(_Op, bpy.types.Operator):
 
     mirror: StringProperty(name="Mirror")
     material: StringProperty(name="Material", description="Material name (default: the mirror's edited materials, in order)")
+
+    @classmethod
+    def poll(cls, context):
+        m = poll_mirror(cls, context)
+        if m is True or not m:
+            return bool(m)
+        if not any(slot.material for slot in m.material_slots):
+            return _fail(cls, f"'{m.name}' has no material to take the IOR from")
+        return True
 
     def run(self, context, mirror):
         mat = None
@@ -383,6 +506,12 @@ class ROKEBY_OT_update(bpy.types.Operator):
     bl_options = {"REGISTER"}
 
     force: BoolProperty(name="Force", default=True, description="Recompute even if nothing changed")
+
+    @classmethod
+    def poll(cls, context):
+        if context.scene is None or not evaluate.mirrors_of(context.scene):
+            return _fail(cls, "There is no Rokeby mirror in this scene to update")
+        return True
 
     def execute(self, context):
         reports = api.evaluate(context.scene, force=self.force)
@@ -405,6 +534,7 @@ classes = (
     ROKEBY_OT_region_remove,
     ROKEBY_OT_return_to_view,
     ROKEBY_OT_freeze,
+    ROKEBY_OT_distance_set,
     ROKEBY_OT_material_toggle,
     ROKEBY_OT_render_nodes,
     ROKEBY_OT_reflection_map,

@@ -57,6 +57,15 @@ CACHE_DIR = "//rokeby_maps/"
 # File names in the cache: <sanitised mirror name, at most STEM_CHARS>-<map id, ID_CHARS hex>.exr
 STEM_CHARS = 40
 ID_CHARS = 12
+
+
+def cache_dir() -> str:
+    """Where FILE storage writes maps: the add-on preferences' Reflection Map Cache folder when set
+    (a machine-level choice), else ``CACHE_DIR`` next to the .blend."""
+    from . import prefs  # noqa: PLC0415
+
+    folder = prefs.get().cache_folder
+    return folder.rstrip("/\\") + "/" if folder else CACHE_DIR
 STORAGES = ("AUTO", "FILE", "PACK")
 SHARED_GROUP = "Rokeby Reflection Map"
 MIRROR_GROUP_PREFIX = "Rokeby Reflection Map: "
@@ -224,9 +233,9 @@ def _inside_cache(filepath: str) -> str:
     import bpy  # noqa: PLC0415
 
     absolute = os.path.realpath(bpy.path.abspath(filepath))
-    root = os.path.realpath(bpy.path.abspath(CACHE_DIR))
+    root = os.path.realpath(bpy.path.abspath(cache_dir()))
     if os.path.commonpath([absolute, root]) != root or absolute == root:
-        raise RokebyError(f"capture: the map file '{filepath}' would lie outside {CACHE_DIR}")
+        raise RokebyError(f"capture: the map file '{filepath}' would lie outside {cache_dir()}")
     return absolute
 
 
@@ -285,10 +294,11 @@ def _storage(storage: str) -> str:
 
     if storage not in STORAGES:
         raise RokebyError(f"storage: '{storage}' is not one of {list(STORAGES)}")
+    relative = cache_dir().startswith("//")
     if storage == "AUTO":
-        return "FILE" if bpy.data.filepath else "PACK"
-    if storage == "FILE" and not bpy.data.filepath:
-        raise RokebyError(f"storage: 'FILE' writes the map to {CACHE_DIR} next to the .blend, but this file has never been saved: save it first, or use storage='PACK'")
+        return "FILE" if bpy.data.filepath or not relative else "PACK"
+    if storage == "FILE" and relative and not bpy.data.filepath:
+        raise RokebyError(f"storage: 'FILE' writes the map to {cache_dir()} next to the .blend, but this file has never been saved: save it first, or use storage='PACK'")
     return storage
 
 
@@ -475,7 +485,7 @@ def capture(mirror, *, resolution=None, samples=None, storage: str = "AUTO", sce
     if scene.objects.get(mirror.name) != mirror:
         raise RokebyError(f"mirror: '{mirror.name}' is not in scene '{scene.name}'")
     mid = map_id(mirror)
-    paths = [CACHE_DIR + _file_name(mirror, k, mid) for k in range(len(ROUGHNESS_LEVELS))]
+    paths = [cache_dir() + _file_name(mirror, k, mid) for k in range(len(ROUGHNESS_LEVELS))]
     if storage == "FILE":
         for path in paths:
             _inside_cache(path)

@@ -69,7 +69,7 @@ def install(mirror) -> int:
     refracted = sum(refraction.install(mat) for mat in mats)
     if mirror.rokeby.render_mode == "REFLECTION_MAP":
         if reflmap.image_for(mirror) is None:
-            raise RokebyError(f"mirror '{mirror.name}' is in reflection-map mode but has no map: capture one first (capture_reflection_map)")
+            raise RokebyError(f"mirror '{mirror.name}' is in reflection-map mode but has no map: capture one first (Capture Map in the mirror's Render panel)")
         for mat in mats:
             shading.uninstall(mat)
         return refracted + sum(reflmap.install(mat, mirror) for mat in mats)

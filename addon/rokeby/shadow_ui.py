@@ -14,7 +14,7 @@ from __future__ import annotations
 import bpy
 import numpy as np
 
-from . import shadow
+from . import shadow, words
 
 _SESSIONS: dict = {}
 _OVERLAY: dict = {}
@@ -109,6 +109,17 @@ def _light(context, name: str):
     return lights[0]
 
 
+def _fail(cls, message: str) -> bool:
+    cls.poll_message_set(message)
+    return False
+
+
+def _poll_session(cls, context) -> bool:
+    if context.scene is None or session(context.scene) is None:
+        return _fail(cls, "No shadow edit is running: click Edit Shadow Boundaries first (with the caster active)")
+    return True
+
+
 class ROKEBY_OT_shadow_start(bpy.types.Operator):
     """Start editing the shadow of the active mesh from a light: show its shadow boundaries"""
 
@@ -119,6 +130,17 @@ class ROKEBY_OT_shadow_start(bpy.types.Operator):
     light: bpy.props.StringProperty(name="Light", default="", description="Light object (default: the selected or only light)")
     min_loop_vertices: bpy.props.IntProperty(name="Shortest loop", default=20, min=3, description="Loops with fewer silhouette vertices are grey and not editable")
     w_z: bpy.props.FloatProperty(name="w_z", default=2.5, min=0.01, description="Reach of the shadow mesh's deformation along the light (paper §6.1)")
+
+    @classmethod
+    def poll(cls, context):
+        ob = context.active_object
+        if ob is None:
+            return _fail(cls, "Select the mesh whose shadow you edit (the caster)")
+        if ob.type != "MESH":
+            return _fail(cls, f"'{ob.name}' is {words.kind(ob.type)}, not a mesh: select the mesh whose shadow you edit")
+        if not any(o.type == "LIGHT" for o in context.scene.objects):
+            return _fail(cls, "There is no light in this scene: a shadow edit needs the light that casts it")
+        return True
 
     def execute(self, context):
         try:
@@ -151,6 +173,10 @@ class ROKEBY_OT_shadow_drag(bpy.types.Operator):
     segment: bpy.props.FloatProperty(name="Segment", default=0.2, min=0.02, max=0.49, description="Fixed ends this fraction of the loop away on either side (interactive drags)")
     noise_amplitude: bpy.props.FloatProperty(name="Noise amplitude", default=0.0)
     noise_frequency: bpy.props.FloatProperty(name="Noise frequency", default=0.0)
+
+    @classmethod
+    def poll(cls, context):
+        return _poll_session(cls, context)
 
     def _drag(self, sess):
         return sess.drag(self.loop, tuple(self.fixed), self.moved, tuple(self.target), style=self.style,
@@ -236,6 +262,10 @@ class ROKEBY_OT_shadow_apply(bpy.types.Operator):
     bl_label = "Apply Shadow Edit"
     bl_options = {"REGISTER", "UNDO"}
 
+    @classmethod
+    def poll(cls, context):
+        return _poll_session(cls, context)
+
     def execute(self, context):
         sess = session(context.scene)
         if sess is None:
@@ -256,6 +286,10 @@ class ROKEBY_OT_shadow_stop(bpy.types.Operator):
     bl_idname = "rokeby.shadow_stop"
     bl_label = "Stop Shadow Editing"
 
+    @classmethod
+    def poll(cls, context):
+        return _poll_session(cls, context)
+
     def execute(self, context):
         _SESSIONS.pop(_key(context.scene), None)
         _refresh(context.scene)
@@ -272,7 +306,9 @@ class ROKEBY_OT_shadow_remove(bpy.types.Operator):
 
     @classmethod
     def poll(cls, context):
-        return shadow.shadow_mesh_of(context.active_object) is not None
+        if shadow.shadow_mesh_of(context.active_object) is None:
+            return _fail(cls, "The active object has no shadow edit: select its caster or its shadow mesh")
+        return True
 
     def execute(self, context):
         try:
@@ -289,6 +325,8 @@ class ROKEBY_PT_shadow(bpy.types.Panel):
     bl_space_type = "VIEW_3D"
     bl_region_type = "UI"
     bl_category = "Rokeby"
+    bl_options = {"DEFAULT_CLOSED"}
+    bl_order = 10
 
     def draw(self, context):
         col = self.layout.column()

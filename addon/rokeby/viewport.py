@@ -324,8 +324,12 @@ def _draw_callback():
     global _last_error
     try:
         context = bpy.context
-        wm = context.window_manager
-        if wm is None or not getattr(wm, "rokeby_viewport_preview", False):
+        scene = context.scene
+        if scene is None or not getattr(scene, "rokeby_viewport_preview", False):
+            return
+        from . import prefs  # noqa: PLC0415
+
+        if not prefs.get(context).gpu_viewport_preview:  # the machine's opt-out (add-on preferences)
             return
         rv3d, region = context.region_data, context.region
         if rv3d is None or region is None or context.scene is None:
@@ -360,9 +364,11 @@ def _redraw(self, context):
 
 def register():
     global _handle
-    bpy.types.WindowManager.rokeby_viewport_preview = bpy.props.BoolProperty(
+    # On the Scene, so the switch is saved with the .blend (a WindowManager property is not).
+    bpy.types.Scene.rokeby_viewport_preview = bpy.props.BoolProperty(
         name="Viewport Preview",
-        description="Draw edited reflections live in the 3D viewport (per-pixel field on the GPU, with handles and region borders)",
+        description="Draw edited reflections live in the 3D viewport (per-pixel field on the GPU, with handles and region borders; "
+                    "the add-on's preferences can switch GPU previews off for this machine)",
         default=False,
         update=_redraw,
     )
@@ -384,7 +390,7 @@ def unregister():
     if _handle is not None:
         bpy.types.SpaceView3D.draw_handler_remove(_handle, "WINDOW")
         _handle = None
-    if hasattr(bpy.types.WindowManager, "rokeby_viewport_preview"):
-        del bpy.types.WindowManager.rokeby_viewport_preview
+    if hasattr(bpy.types.Scene, "rokeby_viewport_preview"):
+        del bpy.types.Scene.rokeby_viewport_preview
     free()
     _last_error = None
