@@ -230,9 +230,9 @@ def _unlink(light_name: str) -> None:
 
 
 def _shadow_meshes():
-    import bpy  # noqa: PLC0415
+    from . import registry  # noqa: PLC0415 - what the add-on owns: no pass over every object
 
-    return [o for o in bpy.data.objects if "rokeby_shadow_of" in o and "rokeby_light" in o]
+    return [o for o in registry.shadow_objects() if "rokeby_shadow_of" in o and "rokeby_light" in o]
 
 
 def shadow_mesh_of(obj):
@@ -303,7 +303,9 @@ def repair(scene=None) -> list[str]:
         if not whole:
             _link(light)
             msgs.append(f"'{name}': the twin light or linking of its shadow edit was missing and is made again")
-    for twin in [o for o in bpy.data.objects if "rokeby_twin_of" in o]:
+    from . import registry  # noqa: PLC0415
+
+    for twin in [o for o in registry.shadow_objects() if "rokeby_twin_of" in o]:
         name = str(twin["rokeby_twin_of"])
         if name not in live:
             _unlink(name)
@@ -429,9 +431,7 @@ def sync_falloffs(scene) -> int:
     import bpy  # noqa: PLC0415
 
     written = 0
-    for ob in scene.objects:
-        if "rokeby_shadow_of" not in ob or "rokeby_light" not in ob:
-            continue
+    for ob in _shadow_meshes():
         light = bpy.data.objects.get(str(ob["rokeby_light"]))
         keys = ob.data.shape_keys
         if light is None or light.type != "LIGHT" or keys is None or EDIT_KEY not in keys.key_blocks:
