@@ -55,8 +55,13 @@ def _run(scene, depsgraph, materials=(), **kwargs):
     try:
         # Deletions first: handles deleted with X are released, a deleted mirror's leftovers go.
         found = registry.mirrors()
-        for msg in registry.tidy(found):
+        tidied = registry.tidy(found)
+        for msg in tidied:
             print(f"Rokeby: {msg}")
+        if tidied:
+            # Objects were removed: the evaluated state must follow before it is read (the
+            # update this causes finds the handlers busy).
+            depsgraph.view_layer.update()
         reports = evaluate.evaluate_scene(scene, depsgraph, **kwargs)
         registry.refresh()
         # F12 shows the edit with no extra step: render nodes follow mirrors and materials.

@@ -42,7 +42,7 @@ _shadow: dict = {}  # session_uid -> shadow mesh or twin light
 _count = -1  # len(bpy.data.objects) at the last rebuild
 _stale = True
 _members: dict = {}  # scene session_uid -> frozenset of mirror uids in that scene
-_records: dict = {}  # mirror uid -> (mirror, what it uses: dict of lists)
+_records: dict = {}  # mirror uid -> (its name, what it uses: dict of lists)
 _counts = None  # object uid -> how many Rokeby pointers use it (None: recount)
 _STATS = {"rebuilds": 0, "scanned": 0, "released": 0, "removed": 0}
 
@@ -232,7 +232,7 @@ def refresh(found=None) -> None:
     pointers_changed()
     for m in mirrors() if found is None else found:
         try:
-            _records[m.session_uid] = (m, _uses(m))
+            _records[m.session_uid] = (m.name, _uses(m))
         except ReferenceError:
             continue
 
@@ -297,16 +297,12 @@ def tidy(found=None) -> list:
             present = set()
         leftovers = {"objects": [], "carrier": [], "materials": []}
         for uid in gone:
-            mirror, uses = _records.pop(uid)
+            name, uses = _records.pop(uid)
             if uid in present:
                 continue  # not deleted: Remove Mirror (which cleans up itself) or is_mirror unset
             for key, items in uses.items():
                 leftovers[key].extend(items)
-            try:
-                name = mirror.name
-            except ReferenceError:
-                name = "a deleted mirror"
-            msgs.append(f"{name}: deleted; what only it used is removed")
+            msgs.append(f"'{name}' was deleted: the handles, centres and render nodes only it used are removed")
         if any(leftovers.values()):
             release(found, **leftovers)
     return msgs
