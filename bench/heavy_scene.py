@@ -15,7 +15,7 @@ each figure is the median over the rounds of the median of ``--steps`` updates. 
 own CPU time (``time.thread_time``, its share of the update) is measured too, which is steadier
 on a shared machine.
 
-    python bench/heavy_scene.py [--json OUT] [--sizes 3000 10000] [--rounds 5] [--steps 15]
+    python bench/heavy_scene.py [--json OUT] [--sizes 3000 10000] [--rounds 3] [--steps 12]
 """
 
 from __future__ import annotations
@@ -151,7 +151,7 @@ def measure(n: int, rounds: int, steps: int) -> dict:
         return {"disabled_ms": statistics.median(off), enabled_label + "_ms": statistics.median(on),
                 enabled_label + "_handler_ms": statistics.median(hon)}
 
-    row = {"objects": n}
+    row = {"objects": n, "rounds": rounds, "steps": steps}
     rokeby.register()
     row.update(phase("no_data"))
     rokeby.register()
@@ -176,8 +176,8 @@ def main():
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--json", default=None)
     ap.add_argument("--sizes", type=int, nargs="+", default=[3000, 10000])
-    ap.add_argument("--rounds", type=int, default=5)
-    ap.add_argument("--steps", type=int, default=15)
+    ap.add_argument("--rounds", type=int, default=3)
+    ap.add_argument("--steps", type=int, default=12)
     args = ap.parse_args()
     rows = [measure(n, args.rounds, args.steps) for n in args.sizes]
     for r in rows:

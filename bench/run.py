@@ -506,7 +506,7 @@ def heavy_section(emit):
     emit()
     emit("bench/heavy_scene.py: N small cubes sharing one mesh; one of them moves and `view_layer.update()` is timed")
     emit("(Blender's whole depsgraph update with every handler). Disabled (unregistered) and enabled runs alternate in")
-    emit('5 rounds of 15 updates; medians. "Handler": the CPU time of the add-on\'s own depsgraph handler, steadier on a shared')
+    emit(f'{rows[0]["rounds"]} rounds of {rows[0]["steps"]} updates; medians. "Handler": the CPU time of the add-on\'s own depsgraph handler, steadier on a shared')
     emit("machine. One mirror: a 482-vertex sphere with 2 constraints and a region, unrelated to the object that moves")
     emit('(it is still re-checked every update, which costs the same at any N); "handle move": an update that moves its')
     emit("green handle (the field is recomputed). Goal (issue 18): no Rokeby data within 5% of disabled; with one mirror,")
