@@ -1265,12 +1265,17 @@ def strip_field(me) -> bool:
     using it carries its own); returns whether there were any."""
     if me is None or me.library is not None:
         return False
-    found = [a for a in (me.attributes.get(name) for name in FIELD_ATTRIBUTES) if a is not None]
-    for attr in found:
-        me.attributes.remove(attr)
+    found = False
+    for name in FIELD_ATTRIBUTES:
+        # Looked up anew each time: removing an attribute invalidates Python references to the
+        # others (a list of them removed the wrong ones and left rokeby_render_rotation behind).
+        attr = me.attributes.get(name)
+        if attr is not None:
+            me.attributes.remove(attr)
+            found = True
     if found:
         me.update()
-    return bool(found)
+    return found
 
 
 def claim_carriers():
