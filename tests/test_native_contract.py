@@ -227,3 +227,15 @@ def test_interpolate_overflow_near_float_max_is_a_value_error():
         rn.interpolate(values, FACE, np.zeros(1, np.int64), np.array([[0.5, 0.5, 0.5]], np.float32))
     ok = rn.interpolate(values, FACE, np.zeros(1, np.int64), np.array([[1 / 3, 1 / 3, 1 / 3]], np.float32))
     assert np.isfinite(ok).all()
+
+
+@pytest.mark.xfail(strict=True, reason="native: float64 arrays are cast to float32 without a range check "
+                   "(rokeby-py f32_array), so a finite 1e300 becomes inf and reflect_dirs returns NaN")
+def test_float64_beyond_float32_range_is_refused():
+    n = np.array([[[1e300, 0.0, 1.0]]])  # finite float64
+    try:
+        r = rn.reflect_dirs(n, np.array([0.0, 0.0, 1.0]))
+    except ValueError as e:
+        assert "normals" in str(e)
+    else:
+        assert np.isfinite(r).all(), r
