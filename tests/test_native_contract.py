@@ -239,3 +239,32 @@ def test_float64_beyond_float32_range_is_refused():
         assert "normals" in str(e)
     else:
         assert np.isfinite(r).all(), r
+
+
+@pytest.mark.xfail(strict=True, reason="native: normals_bump with a huge finite strength (3e38) returns NaN normals "
+                   "(n − strength·∇h overflows float32 before normalising; strength=1e30 gives zero vectors)")
+def test_normals_bump_with_a_huge_strength_is_refused_or_finite():
+    n = np.array([[[0, 0, 1], [0, 0, 1]]], np.float32)
+    h = np.array([[2, 0]], np.float32)
+    try:
+        out = rn.normals_bump(n, h, strength=3e38)
+    except ValueError as e:
+        assert "strength" in str(e)
+    else:
+        assert np.isfinite(out).all(), out
+        np.testing.assert_allclose(np.linalg.norm(out, axis=-1), 1, atol=1e-5)
+
+
+@pytest.mark.xfail(strict=True, reason="native: recomposite with a small positive gamma (1e-3, 1e-45) returns -inf "
+                   "pixels: the gamma power overflows and is not checked")
+def test_recomposite_with_a_tiny_gamma_is_refused_or_finite():
+    z = np.zeros((1, 1, 3), np.float32)
+    n = np.array([[[0, 0, 1]]], np.float32)
+    patches = [{"sh": np.zeros((3, 9), np.float32), "env": np.zeros((2, 2, 2, 3), np.float32)}]
+    try:
+        out, _ = rn.recomposite(np.zeros((1, 1), np.int32), n, n, np.array([0, 0, 1.0]), z, np.full((1, 1, 3), 2, np.float32),
+                                z, patches, k_d=0.0, k_r=0.0, gamma=1e-3)
+    except ValueError as e:
+        assert "gamma" in str(e)
+    else:
+        assert np.isfinite(out).all(), out

@@ -46,17 +46,18 @@ def farr(shape, lo=-10.0, hi=10.0):
     return arrays(np.float32, shape, elements=finite_floats(lo, hi))
 
 
+def _cast(a, dtype):
+    with np.errstate(all="ignore"):
+        return a.astype(dtype)
+
+
 def random_array():
+    """Any dtype and shape (0 to 4 dimensions of 0 to 5), values from a nasty mix (cast, so that
+    1e300 becomes inf in float32, NaN becomes some integer, and so on)."""
     shapes = st.lists(st.integers(0, 5), min_size=0, max_size=4).map(tuple)
-
-    def build(dtype, shape):
-        return arrays(dtype, shape, elements=None if dtype in (np.bool_,) else
-                      (st.integers(-3, 300) if np.issubdtype(dtype, np.integer) and dtype != np.uint8 else
-                       st.integers(0, 255) if dtype == np.uint8 else
-                       st.complex_numbers(max_magnitude=10, width=64) if dtype == np.complex64 else
-                       st.one_of(finite_floats(), NASTY_FLOATS)))
-
-    return st.tuples(DTYPES, shapes).flatmap(lambda t: build(*t))
+    values = st.one_of(st.floats(-10, 10, allow_nan=False), NASTY_FLOATS)
+    return st.tuples(DTYPES, shapes).flatmap(
+        lambda t: arrays(np.float64, t[1], elements=values).map(lambda a: _cast(a, t[0])))
 
 
 def hostile(valid):
@@ -194,12 +195,45 @@ def call(fn, *args, allow_inf=False, **kwargs):
     return out
 
 
+def _big(x, limit):
+    try:
+        return abs(float(x)) > limit
+    except (TypeError, ValueError):
+        return False
+
+
+def _small_positive(x, limit):
+    try:
+        return 0 < float(x) < limit
+    except (TypeError, ValueError):
+        return False
+
+
+# Known native gaps, each with a strict xfail test in tests/test_native_contract.py: for these
+# inputs only the exception contract is checked here, not the finiteness of the result, so that
+# `make fuzz-py` keeps looking for new problems. Remove an entry when its xfail test passes.
+KNOWN_NONFINITE = {
+    "normals_bump": lambda kw: _big(kw.get("strength", 0), 1e15),      # test_normals_bump_with_a_huge_strength_...
+    "recomposite": lambda kw: _small_positive(kw.get("gamma", 1), 0.1),  # test_recomposite_with_a_tiny_gamma_...
+}
+
+
 def fuzz(fn, kwargs_strategy, allow_inf=False):
     """A hypothesis test: fn(**mutated(kwargs)) follows the contract."""
+    known = KNOWN_NONFINITE.get(getattr(fn, "__name__", ""), lambda kw: False)
+
     @given(data=st.data())
     def test(data):
-        kwargs = data.draw(kwargs_strategy)
-        call(fn, allow_inf=allow_inf, **data.draw(mutated(kwargs)))
+        kwargs = data.draw(mutated(data.draw(kwargs_strategy)))
+        if known(kwargs):
+            try:
+                fn(**kwargs)
+            except ALLOWED:
+                pass
+            except BaseException as e:
+                raise AssertionError(f"{fn.__name__} raised {type(e).__name__}: {e}") from e
+            return
+        call(fn, allow_inf=allow_inf, **kwargs)
     return test
 
 
