@@ -117,5 +117,35 @@ def test_writing_into_sh_fit_input_while_it_runs_never_returns_nan():
     finally:
         stop.set()
         th.join()
-    print(outcomes)
     assert len(outcomes) == 12
+
+
+def test_writing_into_reflection_env_values_while_it_runs_never_returns_nan():
+    hw = 160
+    y, x = np.mgrid[0:hw, 0:hw]
+    u, v = (x + 0.5) / hw * 2 - 1, 1 - (y + 0.5) / hw * 2
+    z2 = 1 - u * u - v * v
+    n = np.stack([u, v, np.sqrt(np.clip(z2, 0, None))], -1).astype(np.float32)
+    r = rn.reflect_dirs(n, np.array([0, 0, 1], np.float32))
+    mask = (z2 > 0.02).astype(np.float32)
+    values = (1.5 + 0.3 * r).astype(np.float32)
+    stop = threading.Event()
+
+    def writer():
+        rng = np.random.default_rng(2)
+        while not stop.is_set():
+            i = int(rng.integers(0, hw - 4))
+            values[i:i + 4] = rng.choice(np.array([np.nan, np.inf, 1e30, -1e30, 2.0], np.float32), size=(4, hw, 3))
+
+    th = threading.Thread(target=writer)
+    th.start()
+    try:
+        for _ in range(4):
+            try:
+                m = rn.reflection_env(r, values, mask, size=32)["map"]
+            except ValueError:
+                continue
+            assert np.isfinite(m).all()
+    finally:
+        stop.set()
+        th.join()
