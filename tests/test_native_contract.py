@@ -101,6 +101,12 @@ def test_interpolate_with_huge_rows_times_points_is_a_memory_error():
         rn.interpolate(values, FACE, np.zeros(p, np.int64), bary)
 
 
+def test_sh_eval_with_huge_channels_times_normals_is_a_memory_error():
+    n = np.tile(np.array([[0, 0, 1]], np.float32), (100_000, 1))
+    with pytest.raises(MemoryError, match="normals × channels"):
+        rn.sh_eval(np.ones((100_000, 9), np.float32), n)
+
+
 def test_env_prefilter_with_20000_params_is_refused_fast():
     img = np.ones((16, 32, 3), np.float32)
     t0 = time.perf_counter()
