@@ -48,15 +48,24 @@ demo: native dist
 
 # The Blender 4.2+ extension zip: add-on files at the root, the manifest with the wheel's real
 # filename, the wheel under wheels/ (tools/build_extension.py; rewrites the zip only if it changed).
-dist: native
-	$(PY) tools/build_extension.py --wheels target/wheels --out dist
+# Packages the add-on imports that Blender does not ship go into the zip as wheels too: OpenEXR
+# (the compositing tools read and write multilayer EXRs), the version pinned in requirements.txt,
+# for the native wheel's Python and platform.
+EXTRA_WHEELS := target/extra-wheels
+$(EXTRA_WHEELS)/.done: requirements.txt
+	@rm -rf $(EXTRA_WHEELS)
+	$(PIP) download -q --no-deps --only-binary=:all: -d $(EXTRA_WHEELS) "$$(grep -E '^OpenEXR==' requirements.txt)"
+	@touch $@
+
+dist: native $(EXTRA_WHEELS)/.done
+	$(PY) tools/build_extension.py --wheels target/wheels --extra-wheels $(EXTRA_WHEELS) --out dist
 
 test: cargo-test pytest
 
 cargo-test:
 	cargo test -p rokeby-core --quiet
 
-pytest: native
+pytest: native $(EXTRA_WHEELS)/.done
 	$(PY) -m pytest -q
 
 # Peers of the benchmark (exact MMP geodesics, potpourri3d, libigl, matplotlib) live in their

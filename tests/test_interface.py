@@ -358,7 +358,7 @@ def test_preferences_are_the_add_on_s_and_are_read(tmp_path):
         ball.rokeby.map_resolution, ball.rokeby.map_samples = "256", 1
         bpy.context.scene.render.engine = "CYCLES"
         assert bpy.ops.rokeby.reflection_map(mirror="Ball") == {"FINISHED"}
-        assert "Ball.exr" in os.listdir(tmp_path / "cache") and reflmap.image_for(ball).packed_file is None
+        assert f"{reflmap.map_stem(ball)}.exr" in os.listdir(tmp_path / "cache") and reflmap.image_for(ball).packed_file is None
         # GPU opt-in: with GPU previews off, the painted-appearance preview cannot be switched on.
         p.gpu_viewport_preview = False
         assert not appearance_preview.enabled() and not bpy.ops.rokeby.appearance_preview.poll()

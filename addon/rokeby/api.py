@@ -289,9 +289,9 @@ def mirror_of(obj, scene=None):
         return None
     if obj.rokeby.is_mirror:
         return obj
-    for m in _scene(scene).objects:
-        if not m.rokeby.is_mirror:
-            continue
+    from . import registry  # noqa: PLC0415
+
+    for m in registry.mirrors(_scene(scene)):
         if any(obj in (c.surface_handle, c.target_handle) for c in m.rokeby.constraints) or any(obj == rg.center for rg in m.rokeby.regions):
             return m
     return None
@@ -331,6 +331,9 @@ def _new_empty(scene, name, location, display, size, color):
     ob.location = [float(x) for x in location]
     ob.color = color
     ob.show_name = False
+    from .registry import MADE_KEY  # noqa: PLC0415
+
+    ob[MADE_KEY] = True  # goes with the last mirror that uses it (rokeby.registry)
     _handle_collection(scene).objects.link(ob)
     return ob
 
@@ -338,11 +341,15 @@ def _new_empty(scene, name, location, display, size, color):
 def _remove_objects(objs):
     import bpy  # noqa: PLC0415
 
+    from . import registry  # noqa: PLC0415
+
     for ob in objs:
         try:
             bpy.data.objects.remove(ob, do_unlink=True)
         except (ReferenceError, RuntimeError):
             pass
+    # The collection made for the first handle goes with the last one.
+    registry.drop_empty_handle_collection()
 
 
 def _view_from_eye(eye, target):
@@ -447,10 +454,11 @@ def add_constraint(mirror, surface_point, reflected_point=None, *, eye=None, vie
 
 
 def _handle_users(scene, ob, skip=None):
+    """How many constraints and regions (of any mirror in the file, ``skip`` aside) use ``ob``."""
+    from . import registry  # noqa: PLC0415
+
     n = 0
-    for m in scene.objects:
-        if not m.rokeby.is_mirror:
-            continue
+    for m in registry.mirrors():
         for c in m.rokeby.constraints:
             if c != skip and ob in (c.surface_handle, c.target_handle):
                 n += 1
@@ -466,6 +474,15 @@ def _index(collection, index, what):
     return int(index)
 
 
+def _made_here(ob) -> bool:
+    from .registry import made_by_addon  # noqa: PLC0415
+
+    try:
+        return made_by_addon(ob)
+    except ReferenceError:
+        return False
+
+
 def remove_constraint(mirror, index: int, *, delete_handles: bool = True, scene=None):
     """Remove constraint ``index``; its handles are deleted unless another item uses them."""
     scene = _scene(scene)
@@ -473,7 +490,7 @@ def remove_constraint(mirror, index: int, *, delete_handles: bool = True, scene=
     i = _index(mirror.rokeby.constraints, index, "constraint")
     c = mirror.rokeby.constraints[i]
     handles = [h for h in (c.surface_handle, c.target_handle) if h is not None]
-    doomed = [h for h in handles if _handle_users(scene, h, skip=c) == 0] if delete_handles else []
+    doomed = [h for h in handles if _handle_users(scene, h, skip=c) == 0 and _made_here(h)] if delete_handles else []
     mirror.rokeby.constraints.remove(i)
     mirror.rokeby.active_constraint = min(mirror.rokeby.active_constraint, max(len(mirror.rokeby.constraints) - 1, 0))
     _remove_objects(doomed)
@@ -561,12 +578,14 @@ def add_region(mirror, kind: str = "EUCLIDEAN", *, center=None, radius: float = 
 
 
 def remove_region(mirror, index: int, *, delete_center: bool = True, scene=None):
-    """Remove region ``index`` (and its centre empty when nothing else uses it)."""
+    """Remove region ``index`` (and its centre empty when the add-on made it and nothing else
+    uses it; an object of the artist's own given as ``center`` stays)."""
     scene = _scene(scene)
     _require_mirror(mirror)
     i = _index(mirror.rokeby.regions, index, "region")
     rg = mirror.rokeby.regions[i]
-    doomed = [rg.center] if (delete_center and rg.center is not None and _handle_users(scene, rg.center, skip=rg) == 0) else []
+    doomed = [rg.center] if (delete_center and rg.center is not None and _handle_users(scene, rg.center, skip=rg) == 0
+                             and _made_here(rg.center)) else []
     mirror.rokeby.regions.remove(i)
     mirror.rokeby.active_region = min(mirror.rokeby.active_region, max(len(mirror.rokeby.regions) - 1, 0))
     _drop_unused_readers(mirror)
@@ -585,11 +604,17 @@ def _other_mirrors_of_mesh(mirror) -> list:
 
 
 def remove_mirror(mirror, *, scene=None):
-    """Stop editing ``mirror``: its constraints, regions, handles and field go. The field of
-    another mirror is never touched: a mesh shared with other mirrors keeps its attributes (it
-    holds no field of this one: that lives in this mirror's own carrier, removed here)."""
+    """Stop editing ``mirror``: its constraints, regions, handles and field go, and the file is
+    left as it was before ``add_mirror``: its materials' node trees as they were (unless another
+    mirror still edits them), the "Rokeby Handles" collection removed once empty, the add-on's
+    node groups removed once nothing uses them. Handles, centres and data another mirror uses
+    stay: a mesh shared with other mirrors keeps its attributes (it holds no field of this one:
+    that lives in this mirror's own carrier, removed here)."""
+    from . import registry, rendering  # noqa: PLC0415
+
     scene = _scene(scene)
     _require_mirror(mirror)
+    materials = rendering.edited_materials(mirror)
     while len(mirror.rokeby.constraints):
         remove_constraint(mirror, len(mirror.rokeby.constraints) - 1, scene=scene)
     while len(mirror.rokeby.regions):
@@ -598,9 +623,9 @@ def remove_mirror(mirror, *, scene=None):
         _ev.strip_field(mirror.data)
     _ev.remove_carrier(mirror)
     mirror.rokeby.is_mirror = False
-    from . import rendering  # noqa: PLC0415
-
-    # Its materials come back as they were (unless another mirror still edits them).
+    # Its materials come back as they were (unless another mirror still edits them), also when
+    # the render nodes were installed before the file was loaded (nothing synced them yet).
+    registry.release(registry.mirrors(), materials=materials)
     rendering.sync_scene(scene)
 
 

@@ -134,8 +134,8 @@ def setup(obj, material=None, target: str = "POINT", resolution: int = 1024, uv_
         mat.use_nodes = had_nodes
         what = ", ".join(f"{sock} (from '{link.from_node.name}')" for _p, sock, link in foreign)
         raise ValueError(f"material: in '{mat.name}', {what} {'is' if len(foreign) == 1 else 'are'} driven by other nodes, "
-                         "which painting would replace; nothing was changed. Unlink them, or call "
-                         "setup(..., linked='REPLACE') (appearance.remove puts the links back)")
+                         "which painting would replace; nothing was changed. Unlink them, or set up with Replace Texture Links "
+                         "(linked='REPLACE' from Python); Remove Appearance Painting puts the links back")
     replaced = {param: [link.from_node.name, link.from_socket.identifier] for param, _s, link in foreign}
     nt = mat.node_tree
     me = obj.data

@@ -107,6 +107,13 @@ class ROKEBY_OT_appearance_setup(bpy.types.Operator):
     bl_label = "Set Up Appearance Painting"
     bl_options = {"REGISTER", "UNDO"}
 
+    replace_links: bpy.props.BoolProperty(
+        name="Replace Texture Links",
+        description="Paint over Principled inputs that other nodes (textures) drive: the links are kept aside, "
+        "and Remove Appearance Painting puts them back",
+        default=False,
+    )
+
     @classmethod
     def poll(cls, context):
         return _poll_mesh(cls, context)
@@ -114,7 +121,36 @@ class ROKEBY_OT_appearance_setup(bpy.types.Operator):
     def execute(self, context):
         s = _settings(context)
         try:
-            appearance.setup(context.active_object, target=s.target, resolution=s.resolution)
+            appearance.setup(context.active_object, target=s.target, resolution=s.resolution,
+                             linked="REPLACE" if self.replace_links else "REFUSE")
+        except ValueError as e:
+            self.report({"ERROR"}, str(e))
+            return {"CANCELLED"}
+        return {"FINISHED"}
+
+
+class ROKEBY_OT_appearance_remove(bpy.types.Operator):
+    """Remove appearance painting from the active material: its Rokeby nodes go and the texture
+    links Set Up replaced come back, so the material is as it was before (the painted
+    attributes stay on the mesh for a later Set Up)"""
+
+    bl_idname = "rokeby.appearance_remove"
+    bl_label = "Remove Appearance Painting"
+    bl_options = {"REGISTER", "UNDO"}
+
+    @classmethod
+    def poll(cls, context):
+        if not _poll_mesh(cls, context):
+            return False
+        mat = context.active_object.active_material
+        nodes = mat.node_tree.nodes if mat is not None and mat.node_tree is not None else None
+        if nodes is None or not any(nodes.get(appearance.NODE_PREFIX + "global_" + p) is not None for p in appearance.PARAMS):
+            return _fail(cls, f"'{context.active_object.name}' has no appearance painting in its active material")
+        return True
+
+    def execute(self, context):
+        try:
+            appearance.remove(context.active_object)
         except ValueError as e:
             self.report({"ERROR"}, str(e))
             return {"CANCELLED"}
@@ -347,7 +383,9 @@ class ROKEBY_PT_appearance(bpy.types.Panel):
                 if len(ob.data.uv_layers) == 0:
                     col.label(text="This mesh has no UV map", icon="ERROR")
             if appearance.PARAMS["roughness"][0] not in ob.data.attributes or s.target == "TEXTURE":
-                layout.operator(ROKEBY_OT_appearance_setup.bl_idname)
+                row = layout.row(align=True)
+                row.operator(ROKEBY_OT_appearance_setup.bl_idname)
+                row.operator(ROKEBY_OT_appearance_setup.bl_idname, text="", icon="LINKED").replace_links = True
         else:
             img = appearance._texture_image(ob, "roughness")
             layout.label(text=f"Target: images {img.size[0]}² on UV map '{ob.active_material.node_tree.nodes[appearance.NODE_PREFIX + 'uv'].uv_map}'" if img else "Target: images", icon="IMAGE_DATA")
@@ -426,7 +464,7 @@ _SLIDER_NAMES = {"diffuse": "Diffuse", "specular": "Specular", "roughness": "Rou
 PANELS = (ROKEBY_PT_appearance, ROKEBY_PT_appearance_brush, ROKEBY_PT_appearance_sliders)
 
 
-_CLASSES = (RokebyStrokePoint, RokebyAppearanceBrush, ROKEBY_OT_appearance_setup, ROKEBY_OT_appearance_texture_remove, ROKEBY_OT_appearance_paint, ROKEBY_OT_appearance_preview, *PANELS)
+_CLASSES = (RokebyStrokePoint, RokebyAppearanceBrush, ROKEBY_OT_appearance_setup, ROKEBY_OT_appearance_remove, ROKEBY_OT_appearance_texture_remove, ROKEBY_OT_appearance_paint, ROKEBY_OT_appearance_preview, *PANELS)
 
 
 def register():

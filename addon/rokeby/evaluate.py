@@ -224,6 +224,9 @@ def mark_dirty(obj):
         _DIRTY.add(obj.session_uid)
     except (AttributeError, ReferenceError):
         pass
+    from . import registry  # noqa: PLC0415
+
+    registry.pointers_changed()
 
 
 def report_of(obj) -> MirrorReport | None:
@@ -284,12 +287,25 @@ def _finite_matrix(m, what: str) -> np.ndarray:
 
 
 def object_in_scene(obj, scene) -> bool:
+    """Whether ``obj`` (a handle or region centre) is still there: not removed, and linked into
+    some collection. Deleting with X only unlinks an object that a constraint's pointer still
+    uses, so an object whose only users are pointers counts as deleted. Costs no scan of
+    ``scene.objects`` (rokeby.registry); ``scene`` is kept for callers."""
     if obj is None:
         return False
     try:
-        return scene.objects.get(obj.name) == obj
+        users = obj.users - int(obj.use_fake_user)
     except ReferenceError:
         return False
+    return users > _pointer_users(obj)
+
+
+def _pointer_users(obj) -> int:
+    """How many of the users of ``obj`` are the add-on's own pointers (constraints, regions, a
+    map origin) of the mirrors in the file."""
+    from . import registry  # noqa: PLC0415
+
+    return registry.pointer_counts().get(obj.session_uid, 0)
 
 
 def to_world(co, nrm, matrix, what: str):
@@ -1721,7 +1737,10 @@ def edited_meshes(scene) -> set:
 
 
 def mirrors_of(scene) -> list:
-    return [ob for ob in scene.objects if ob.rokeby.is_mirror]
+    """The mirrors linked into ``scene``, from the add-on's registry (no scan of its objects)."""
+    from . import registry  # noqa: PLC0415
+
+    return registry.mirrors(scene)
 
 
 def evaluate_scene(scene, depsgraph, *, force=False, geometry_changed=None, all_geometry=False, interactive=False, settle=True) -> dict:
@@ -1747,14 +1766,15 @@ def evaluate_scene(scene, depsgraph, *, force=False, geometry_changed=None, all_
     pending = [name for name, rep in out.items() if rep.pending]
     if settle and pending:
         depsgraph.update()  # our own handlers are guarded against re-entrance (handlers._busy)
+        by_name = {ob.name: ob for ob in mirrors}
         for name in pending:
-            ob = scene.objects.get(name)
+            ob = by_name.get(name)
             if ob is not None:
                 out[name] = evaluate_mirror(ob, scene, depsgraph, force=force, reread_geometry=True, interactive=interactive)
-    # Forget objects that no longer exist.
-    import bpy  # noqa: PLC0415
+    # Forget objects that are no longer mirrors (deleted, or Remove Mirror).
+    from . import registry  # noqa: PLC0415
 
-    live = {ob.session_uid for ob in bpy.data.objects}
+    live = {ob.session_uid for ob in registry.mirrors()}
     for uid in [u for u in _STATE if u not in live]:
         del _STATE[uid]
     return out

@@ -229,35 +229,23 @@ def _is_light(ob) -> bool:
 
 def _stored(o) -> bool:
     """Whether ``o`` has ever had shadow links written (their ID property group exists). Cheap (no
-    RNA access), so the handlers' pass over every object stays as fast as a custom-property test."""
-    if _system_properties():
-        props = o.bl_system_properties_get()
-        return props is not None and "rokeby_shadow" in props
-    return "rokeby_shadow" in o
+    RNA access)."""
+    from . import registry  # noqa: PLC0415
 
-
-_SYSTEM_PROPERTIES: list = [None]
-
-
-def _system_properties() -> bool:
-    """Blender 5 keeps registered properties apart from custom ones (``bl_system_properties_get``)."""
-    if _SYSTEM_PROPERTIES[0] is None:
-        import bpy  # noqa: PLC0415
-
-        _SYSTEM_PROPERTIES[0] = hasattr(bpy.types.ID, "bl_system_properties_get")
-    return _SYSTEM_PROPERTIES[0]
+    return registry.stored_group(o, "rokeby_shadow") is not None
 
 
 def _parts():
-    """(shadow meshes, twin lights, lights holding links) in the file: one pass over the objects."""
-    import bpy  # noqa: PLC0415
+    """(shadow meshes, twin lights, lights holding links) in the file, from the registry of what
+    the add-on owns (no pass over every object)."""
+    from . import registry  # noqa: PLC0415
 
     meshes, twins, lights = [], [], []
     if not _registered():
         return meshes, twins, lights
-    objects = bpy.data.objects
-    stored = [o for o in objects if "rokeby_shadow" in o] if not _system_properties() else [o for o in objects if _stored(o)]
-    for o in stored:
+    for o in registry.shadow_objects():
+        if not _stored(o):
+            continue
         links = o.rokeby_shadow
         role = links.role
         if role == "SHADOW_MESH":

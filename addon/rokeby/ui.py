@@ -311,6 +311,7 @@ MENU = (
     ("rokeby.appearance_setup", None, {}, "MATERIAL"),
     ("rokeby.appearance_paint", None, {}, "BRUSH_DATA"),
     ("rokeby.appearance_texture_remove", None, {}, "X"),
+    ("rokeby.appearance_remove", None, {}, "TRASH"),
     ("rokeby.appearance_preview", None, {}, "SHADING_RENDERED"),
     None,
     ("rokeby.shadow_start", None, {}, "LIGHT"),
