@@ -12,7 +12,7 @@ export ROKEBY_SHARED := $(SHARED)
 
 RUST_SRC := Cargo.toml pyproject.toml $(wildcard rust/*/Cargo.toml) $(shell find rust -name '*.rs' 2>/dev/null)
 
-.PHONY: all demo dist test bench cargo-test pytest native venv clean help fuzz
+.PHONY: all demo dist test bench cargo-test pytest native venv clean help fuzz fuzz-py
 
 all: native
 
@@ -21,6 +21,7 @@ help:
 	@echo "make test   cargo tests + pytest (bpy in background mode)"
 	@echo "make bench  benchmarks, printed next to the reference numbers"
 	@echo "make dist   the installable Blender extension zip, dist/rokeby-<version>.zip"
+	@echo "make fuzz-py  hypothesis fuzzing of rokeby_native and the file readers (FUZZ_PY_EXAMPLES=500)"
 
 # --- bootstrap -------------------------------------------------------------------------------
 $(VENV)/.deps: requirements.txt
@@ -93,6 +94,14 @@ fuzz: $(CARGO_FUZZ)
 		echo "== fuzz $$t ($(FUZZ_SECONDS) s)"; \
 		RUSTC_BOOTSTRAP=1 $(CARGO_FUZZ) fuzz run --fuzz-dir rust/fuzz --sanitizer none --release $$t -- -max_total_time=$(FUZZ_SECONDS) -rss_limit_mb=2048; \
 	done
+
+# Hypothesis fuzzing (issue 24) of every rokeby_native function and method and the bpy-free file
+# readers, FUZZ_PY_EXAMPLES examples each, random seeds, in a subprocess under a 4 GiB address-space
+# limit with ROKEBY_MAX_ALLOC_BYTES at 1 GiB (tests/fuzz/run_fuzz.py). `make test` runs it briefly
+# with fixed seeds (tests/test_fuzz_native.py).
+FUZZ_PY_EXAMPLES ?= 500
+fuzz-py: native
+	FUZZ_PY_RANDOM=1 $(PY) tests/fuzz/run_fuzz.py --examples $(FUZZ_PY_EXAMPLES)
 
 clean:
 	rm -rf $(VENV) $(PEERS) target dist out .tools rust/fuzz/target
