@@ -234,6 +234,7 @@ CASES = {
     "appearance_setup": (lambda b: _active(b), lambda b: bpy.ops.rokeby.appearance_setup()),
     "appearance_paint": (_with_painting, lambda b: bpy.ops.rokeby.appearance_paint(stroke=[{"name": "", "location": (0.0, -1.0, 0.0)}])),
     "appearance_texture_remove": (lambda b: _with_painting(b, "TEXTURE"), lambda b: bpy.ops.rokeby.appearance_texture_remove()),
+    "appearance_remove": (_with_painting, lambda b: bpy.ops.rokeby.appearance_remove()),
     "shadow_apply": (_with_shadow_session, lambda b: bpy.ops.rokeby.shadow_apply()),
     "shadow_remove": (_with_shadow_edit, lambda b: bpy.ops.rokeby.shadow_remove()),
 }

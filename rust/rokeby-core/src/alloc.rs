@@ -21,11 +21,13 @@ fn physical_memory() -> Option<u128> {
 pub fn max_bytes() -> Option<u128> {
     static LIMIT: OnceLock<Option<u128>> = OnceLock::new();
     *LIMIT.get_or_init(|| {
-        if let Some(v) = std::env::var("ROKEBY_MAX_ALLOC_BYTES")
-            .ok()
-            .and_then(|s| s.trim().parse::<u128>().ok())
-        {
-            return Some(v);
+        if let Ok(text) = std::env::var("ROKEBY_MAX_ALLOC_BYTES") {
+            // "1000000000", "1e9" or "1.5e9": a number of bytes; anything else is ignored with a
+            // warning on stderr (the process has no caller to raise to here).
+            match text.trim().parse::<f64>() {
+                Ok(v) if v.is_finite() && v >= 1.0 => return Some(v as u128),
+                _ => eprintln!("rokeby_native: ROKEBY_MAX_ALLOC_BYTES={text:?} is not a number of bytes; using the machine's memory"),
+            }
         }
         physical_memory()
     })

@@ -185,10 +185,13 @@ fn validate(b: &Buffers, patches: &[Patch], p: &Params) -> Result<()> {
     check("image", b.image, 3 * n, false)?;
     check("diffuse_color", b.diffuse_color, 3 * n, true)?;
     check("reflection_color", b.reflection_color, 3 * n, true)?;
-    if !(p.gamma > 0.0 && p.gamma.is_finite()) {
+    if !(p.gamma.is_finite() && (MIN_GAMMA..=MAX_GAMMA).contains(&p.gamma)) {
         return Err(RokebyError::invalid(
             "gamma",
-            format!("must be positive and finite, got {}", p.gamma),
+            format!(
+                "must be in [{MIN_GAMMA}, {MAX_GAMMA}] (a display gamma), got {}",
+                p.gamma
+            ),
         ));
     }
     if !(p.epsilon > 0.0) {
@@ -303,7 +306,43 @@ fn recomposite_with(
     // SAFETY: the chunks cover all 3n elements and each chunk was initialised by its task (a panic
     // there would have unwound past this line, leaving the length 0).
     unsafe { out.set_len(3 * n) };
+    check_overflow(&out, b.image, p)?;
     Ok((out, stats))
+}
+
+/// The gamma range [`recomposite`] accepts: display gammas, far from where x^(1/γ) of a finite HDR
+/// pixel overflows float32 for any practical value.
+pub const MIN_GAMMA: f64 = 0.1;
+pub const MAX_GAMMA: f64 = 10.0;
+
+/// Finite input never gives inf or NaN out: with γ ≠ 1 the power of eq. 5 can still overflow for
+/// extreme pixel values, and that is refused naming the pixel (γ = 1 sums finite terms whose
+/// bounds the callers check).
+fn check_overflow(out: &[f32], image: &[f32], p: &Params) -> Result<()> {
+    if p.gamma == 1.0 {
+        return Ok(());
+    }
+    let bad = out
+        .par_chunks(3 * 4096)
+        .zip(image.par_chunks(3 * 4096))
+        .enumerate()
+        .find_map_any(|(c, (o, im))| {
+            o.iter()
+                .zip(im)
+                .position(|(x, y)| !x.is_finite() && y.is_finite())
+                .map(|k| c * 3 * 4096 + k)
+        });
+    match bad {
+        Some(i) => Err(RokebyError::invalid(
+            "image",
+            format!(
+                "pixel {} overflows float32 after the power 1/γ (γ = {}): its values are too large for this gamma",
+                i / 3,
+                p.gamma
+            ),
+        )),
+        None => Ok(()),
+    }
 }
 
 #[cfg(target_arch = "x86_64")]

@@ -653,6 +653,9 @@ pub fn partial(
                 Vec::new(),
             );
             for y in task * ROWS_PER_TASK..((task + 1) * ROWS_PER_TASK).min(quad_rows) {
+                if crate::cancel::requested() {
+                    break; // the call returns Cancelled below
+                }
                 for x in 0..width - 1 {
                     let a = y * width + x;
                     let (b, c, d) = (a + 1, a + 1 + width, a + width);
@@ -733,6 +736,7 @@ pub fn partial(
             (n_tris, hits)
         })
         .collect();
+    crate::cancel::check()?;
     let triangles: usize = tasks.iter().map(|t| t.0).sum();
     let mut map = ParaboloidMap::new(s, ch);
     let mut positions = ParaboloidMap::new(s, 2);
@@ -1138,6 +1142,7 @@ pub fn fill_holes(maps: &mut [&mut ParaboloidMap], covered: &[bool]) -> Result<u
             "size does not match the map",
         ));
     }
+    crate::cancel::check()?;
     let h = 2.0 / s as f64;
     let rho2 = |i: usize, j: usize| {
         let (a, b) = texel_uv(s, i, j);
@@ -1280,12 +1285,14 @@ pub fn fill_holes(maps: &mut [&mut ParaboloidMap], covered: &[bool]) -> Result<u
     }
     let a = SparseColMat::<u32, f64>::try_new_from_triplets(nv, nv, &trip)
         .map_err(|e| RokebyError::invalid("covered", format!("sparse assembly failed: {e:?}")))?;
+    crate::cancel::check()?;
     let lu = a.sp_lu().map_err(|e| {
         RokebyError::invalid(
             "covered",
             format!("hole-filling factorisation failed ({e:?})"),
         )
     })?;
+    crate::cancel::check()?; // the sparse factorisation and solve run to completion once started
     let x = lu.solve(&b);
     for (r, &t) in vars.iter().enumerate() {
         let mut off = 0;

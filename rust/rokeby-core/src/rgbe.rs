@@ -114,13 +114,14 @@ pub fn decode(bytes: &[u8]) -> Result<(usize, usize, Vec<f32>)> {
     }
     let res = line()?;
     let t: Vec<&str> = res.split_whitespace().collect();
-    let (h, w) =
-        match t.as_slice() {
-            ["-Y", h, "+X", w] => (h.parse::<usize>().ok(), w.parse::<usize>().ok()),
-            _ => return Err(bad(format!(
+    let (h, w) = match t.as_slice() {
+        ["-Y", h, "+X", w] => (h.parse::<usize>().ok(), w.parse::<usize>().ok()),
+        _ => {
+            return Err(bad(format!(
                 "resolution line {res:?}: only the standard orientation \"-Y H +X W\" is supported"
-            ))),
-        };
+            )))
+        }
+    };
     let (Some(h), Some(w)) = (h, w) else {
         return Err(bad(format!(
             "resolution line {res:?} does not hold two sizes"

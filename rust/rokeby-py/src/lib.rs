@@ -98,8 +98,19 @@ fn f32_array<'py>(obj: &Bound<'py, PyAny>, name: &str) -> PyResult<F32Array<'py>
     if let Ok(a) = arr.cast::<PyArrayDyn<f64>>() {
         let ro = a.readonly();
         let shape = ro.shape().to_vec();
+        let view = ro.as_array();
+        // Finite float64 beyond float32's range would turn into inf here: refused, naming the value.
+        if let Some((i, x)) = view
+            .iter()
+            .enumerate()
+            .find(|(_, x)| x.is_finite() && x.abs() > f32::MAX as f64)
+        {
+            return Err(PyValueError::new_err(format!(
+                "{name}: value {i} ({x:e}) is beyond float32's range (±3.4e38)"
+            )));
+        }
         return Ok(F32Array::Owned(
-            ro.as_array().iter().map(|&x| x as f32).collect(),
+            view.iter().map(|&x| x as f32).collect(),
             shape,
         ));
     }
@@ -372,9 +383,11 @@ fn rotation_field<'py>(
         "quaternion" => FieldOutput::Quaternion,
         "rotation_vector" => FieldOutput::RotationVector,
         "view_blend" => FieldOutput::ViewBlend,
-        other => return Err(PyValueError::new_err(format!(
+        other => {
+            return Err(PyValueError::new_err(format!(
             "output: expected \"quaternion\", \"rotation_vector\" or \"view_blend\", got {other:?}"
-        ))),
+        )))
+        }
     };
     let width = output_width(output);
     let pts = f32_array(points, "points")?;
