@@ -212,10 +212,7 @@ def _small_positive(x, limit):
 # Known native gaps, each with a strict xfail test in tests/test_native_contract.py: for these
 # inputs only the exception contract is checked here, not the finiteness of the result, so that
 # `make fuzz-py` keeps looking for new problems. Remove an entry when its xfail test passes.
-KNOWN_NONFINITE = {
-    "normals_bump": lambda kw: _big(kw.get("strength", 0), 1e15),      # test_normals_bump_with_a_huge_strength_...
-    "recomposite": lambda kw: _small_positive(kw.get("gamma", 1), 0.1),  # test_recomposite_with_a_tiny_gamma_...
-}
+KNOWN_NONFINITE: dict = {}
 
 
 def fuzz(fn, kwargs_strategy, allow_inf=False):

@@ -545,6 +545,7 @@ pub fn partial(
     let mut tex: Vec<(u32, u32, DVec3)> = Vec::with_capacity(2 * s * s);
     for face in 0..2 {
         for i in 0..s {
+            crate::cancel::check()?;
             for j in 0..s {
                 let (u, v) = texel_uv(s, i, j);
                 if u * u + v * v > 1.0 {
@@ -568,7 +569,9 @@ pub fn partial(
         let b = x.to_bits() as i64;
         b ^ ((((b >> 63) as u64) >> 1) as i64)
     };
+    crate::cancel::check()?;
     tex.sort_unstable_by_key(|t| (t.0 / gt as u32, total_key(t.2.x), t.1));
+    crate::cancel::check()?;
     let tex_xy: Vec<[f64; 2]> = tex.iter().map(|t| [t.2.x, t.2.y]).collect();
     let mut cell_start = vec![0u32; gt * gt + 1];
     for t in &tex {
