@@ -54,19 +54,12 @@ pub fn check<T>(what: &str, dims: &[usize]) -> Result<usize> {
 /// A vector of `product(dims)` copies of `value`, or OutOfMemory naming `what`.
 pub fn filled<T: Clone>(what: &str, dims: &[usize], value: T) -> Result<Vec<T>> {
     let n = check::<T>(what, dims)?;
-    let mut v: Vec<T> = Vec::new();
-    v.try_reserve_exact(n).map_err(|_| {
-        RokebyError::out_of_memory(
-            what,
-            Some((n as u128) * std::mem::size_of::<T>() as u128),
-            None,
-        )
-    })?;
+    let mut v = with_capacity::<T>(what, dims)?;
     v.resize(n, value);
     Ok(v)
 }
 
-/// An empty vector with room for `product(dims)` elements, or OutOfMemory naming `what`.
+/// An empty vector with room for exactly `product(dims)` elements, or OutOfMemory naming `what`.
 pub fn with_capacity<T>(what: &str, dims: &[usize]) -> Result<Vec<T>> {
     let n = check::<T>(what, dims)?;
     let mut v: Vec<T> = Vec::new();
