@@ -12,7 +12,7 @@ bpy = pytest.importorskip("bpy")
 
 import rokeby  # noqa: E402
 from conftest import cycles  # noqa: E402
-from rokeby import api, rendering, shading  # noqa: E402
+from rokeby import api, refraction, rendering, shading  # noqa: E402
 
 
 def _tree_state(tree):
@@ -183,3 +183,61 @@ def test_install_is_atomic_under_an_injected_fault(victim, monkeypatch):
     assert shading.uninstall(mat)
     assert _tree_state(mat.node_tree) == before
     assert sorted(g.name for g in bpy.data.node_groups if not g.name.startswith("Rokeby")) == [g for g in groups if not g.startswith("Rokeby")]
+
+
+def _glass_material():
+    mat = bpy.data.materials.new("Glass")
+    mat.use_nodes = True
+    nt = mat.node_tree
+    nt.nodes.remove(nt.nodes["Principled BSDF"])
+    glass = nt.nodes.new("ShaderNodeBsdfGlass")
+    glass.inputs["Roughness"].default_value = 0.1
+    nt.links.new(glass.outputs["BSDF"], nt.nodes["Material Output"].inputs["Surface"])
+    return mat
+
+
+def test_glass_removal_finds_a_renamed_material_output():
+    _scene()
+    mat = _glass_material()
+    nt = mat.node_tree
+    assert refraction.install(mat) == 1
+    nt.nodes["Material Output"].name = "Final Output"
+    refraction.uninstall(mat)
+    surface = nt.nodes["Final Output"].inputs["Surface"]
+    assert surface.is_linked and surface.links[0].from_node.bl_idname == "ShaderNodeBsdfGlass"
+
+
+@pytest.mark.parametrize("victim", ["_copy_input", "_feed"])
+def test_glass_install_is_atomic_under_an_injected_fault(victim, monkeypatch):
+    _scene()
+    mat = _glass_material()
+    before = _tree_state(mat.node_tree)
+    real = getattr(refraction, victim)
+    calls = []
+
+    def failing(*args, **kwargs):
+        calls.append(1)
+        if len(calls) == 2 or victim == "_feed":  # half way: some parts are already made and linked
+            raise RuntimeError("injected fault")
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(refraction, victim, failing)
+    with pytest.raises(RuntimeError, match="injected fault"):
+        refraction.install(mat)
+    assert _tree_state(mat.node_tree) == before
+    assert not refraction.installed(mat)
+
+
+def test_removal_refuses_when_the_bsdf_and_its_parts_are_gone():
+    """With the original BSDF and its diffuse part deleted, nothing holds the artist's values:
+    removal refuses by name and changes nothing (no black material, no half-removed nodes)."""
+    sc, ball, mat = _scene()
+    _edit(ball)
+    nt = mat.node_tree
+    nt.nodes.remove(next(n for n in nt.nodes if shading.SPLIT in n))
+    nt.nodes.remove(next(n for n in nt.nodes if n.get(shading.ROLE) == "diffuse"))
+    state = _tree_state(nt)
+    with pytest.raises(rokeby.evaluate.RokebyError, match="Principled BSDF that Rokeby split was deleted"):
+        api.remove_render_nodes(ball)
+    assert _tree_state(nt) == state
+    assert ball.rokeby.render_edits  # the mirror is as it was too

@@ -812,8 +812,11 @@ def remove_render_nodes(mirror) -> int:
 
         kept = {mat for ob in registry.mirrors() if ob.type == "MESH" and rendering.kept(ob) for mat in rendering.edited_materials(ob)}
         return sum(rendering.uninstall_material(mat) for mat in mats if mat not in kept)
+    # Each material is checked before anything changes (rokeby.shading refuses a split BSDF it
+    # cannot rebuild); render_edits goes off once the nodes are out.
+    count = sum(rendering.uninstall_material(mat) for mat in mats)
     mirror.rokeby.render_edits = False
-    return sum(rendering.uninstall_material(mat) for mat in mats)
+    return count
 
 
 def capture_reflection_map(mirror, *, resolution=None, samples=None, storage: str = "AUTO", scene=None):

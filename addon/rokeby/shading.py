@@ -525,16 +525,28 @@ def _recreate(tree, key) -> None:
 _NODE_KEYS = (SPLIT, SIGNATURE, SPLIT_ID, ORIGINAL_TREE)
 
 
-def _snapshot(tree) -> dict:
+def _snapshot(tree, keys=_NODE_KEYS) -> dict:
     """What an install may change in ``tree``: its nodes, links, our keys on the artist's nodes and
     the group each group node uses (for ``_restore`` after a failure half way)."""
     return {
         "nodes": {nd.as_pointer() for nd in tree.nodes},
         "links": {(lk.from_node.as_pointer(), lk.from_socket.identifier, lk.to_node.as_pointer(), lk.to_socket.identifier) for lk in tree.links},
-        "keys": {nd.as_pointer(): {k: nd[k] for k in _NODE_KEYS if k in nd} for nd in tree.nodes},
+        "keys": {nd.as_pointer(): {k: nd[k] for k in keys if k in nd} for nd in tree.nodes},
+        "key_names": tuple(keys),
         "groups": {nd.as_pointer(): nd.node_tree for nd in tree.nodes if nd.bl_idname == "ShaderNodeGroup"},
         "node_groups": {g.as_pointer() for g in bpy.data.node_groups},
     }
+
+
+def atomic(tree, keys, fn):
+    """``fn()`` on ``tree``, all or nothing: an exception restores the tree (``_restore``),
+    including the custom properties ``keys`` on its nodes, and is raised again."""
+    snap = _snapshot(tree, keys)
+    try:
+        return fn()
+    except BaseException:
+        _restore(tree, snap)
+        raise
 
 
 def _restore(tree, snap) -> None:
@@ -557,7 +569,7 @@ def _restore(tree, snap) -> None:
                 tree.links.new(out, inp)
     for ptr, nd in nodes.items():
         keys = snap["keys"].get(ptr, {})
-        for k in _NODE_KEYS:
+        for k in snap["key_names"]:
             if k in keys:
                 nd[k] = keys[k]
             elif k in nd:
@@ -579,12 +591,7 @@ def install(material) -> int:
     if material is None or not material.use_nodes or material.node_tree is None:
         return 0
     tree = material.node_tree
-    snap = _snapshot(tree)
-    try:
-        return _install_tree(tree, material)
-    except BaseException:
-        _restore(tree, snap)
-        raise
+    return atomic(tree, _NODE_KEYS, lambda: _install_tree(tree, material))
 
 
 def _bsdfs_inside(tree, seen=None) -> bool:
