@@ -241,3 +241,22 @@ def test_removal_refuses_when_the_bsdf_and_its_parts_are_gone():
         api.remove_render_nodes(ball)
     assert _tree_state(nt) == state
     assert ball.rokeby.render_edits  # the mirror is as it was too
+
+
+def test_old_file_parts_found_after_renaming_the_split_bsdf():
+    """Files from before split ids: the parts carry the BSDF's name; renamed since, the BSDF still
+    finds them (one unclaimed set) and removal restores the tree, with no second BSDF."""
+    sc, ball, mat = _scene()
+    nt = mat.node_tree
+    before = _tree_state(nt)
+    _edit(ball)
+    split = next(n for n in nt.nodes if shading.SPLIT in n)
+    for n in nt.nodes:  # as an older version stored it
+        if shading._ours(n) and shading.SOURCE in n:
+            n[shading.SOURCE] = split.name
+            del n[shading.SOURCE_NAME]
+    del split[shading.SPLIT_ID]
+    split.name = "My Plastic"
+    api.remove_render_nodes(ball)
+    nt.nodes["My Plastic"].name = "Principled BSDF"
+    assert _tree_state(nt) == before

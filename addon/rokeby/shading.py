@@ -461,6 +461,13 @@ def _live_targets(parts) -> list:
 def _unsplit(tree, bsdf) -> None:
     """Remove the parts standing in for ``bsdf`` and put it back where they were linked."""
     parts = _parts_of(tree, _split_key(bsdf))
+    if not parts and SPLIT_ID not in bsdf:
+        # A file from before split ids, the BSDF renamed since: its parts carry the old name. Adopt
+        # the one set of parts no split BSDF claims (with several, they stay for _recreate).
+        claimed = {_split_key(nd) for nd in tree.nodes if SPLIT in nd}
+        free = {str(nd[SOURCE]) for nd in tree.nodes if _ours(nd) and SOURCE in nd} - claimed
+        if len(free) == 1:
+            parts = _parts_of(tree, free.pop())
     targets = _live_targets(parts) or recorded_targets(tree, bsdf.get(SPLIT, []))
     for node in parts:
         tree.nodes.remove(node)
