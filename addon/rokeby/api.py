@@ -799,13 +799,24 @@ def install_render_nodes(mirror) -> int:
 
 def remove_render_nodes(mirror) -> int:
     """Take the render nodes out of the mirror's materials again and turn its ``render_edits``
-    off (so evaluation does not put them back); returns from how many materials they went."""
+    off (so evaluation does not put them back); returns from how many materials they went. On an
+    object that is no longer a mirror (after Remove Mirror) it takes out whatever nodes are left in
+    its materials that no other mirror keeps."""
     from . import rendering  # noqa: PLC0415
 
-    _require_mirror(mirror)
-    mirror.rokeby.render_edits = False
+    _check_mirror(mirror)
     mats = {slot.material for slot in mirror.material_slots if slot.material is not None}
-    return sum(rendering.uninstall_material(mat) for mat in mats)
+    if not mirror.rokeby.is_mirror:
+        # A former mirror (Remove Mirror): its materials lose nodes no remaining mirror keeps.
+        from . import registry  # noqa: PLC0415
+
+        kept = {mat for ob in registry.mirrors() if ob.type == "MESH" and rendering.kept(ob) for mat in rendering.edited_materials(ob)}
+        return sum(rendering.uninstall_material(mat) for mat in mats if mat not in kept)
+    # Each material is checked before anything changes (rokeby.shading refuses a split BSDF it
+    # cannot rebuild); render_edits goes off once the nodes are out.
+    count = sum(rendering.uninstall_material(mat) for mat in mats)
+    mirror.rokeby.render_edits = False
+    return count
 
 
 def capture_reflection_map(mirror, *, resolution=None, samples=None, storage: str = "AUTO", scene=None):

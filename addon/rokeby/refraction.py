@@ -394,6 +394,10 @@ def _unsplit(tree, glass) -> None:
                     if all(l2.to_node.name in names for out in up.outputs for l2 in out.links):
                         parts.append(up)
                         names.add(up.name)
+    # Where the parts feed now (found by tag: the Material Output may have been renamed since).
+    live = [lk.to_socket for nd in parts for out in nd.outputs for lk in out.links
+            if lk.to_node.name not in names and not _ours(lk.to_node) and not _shading_ours(lk.to_node)]
+    targets = live or targets
     for node in parts:
         tree.nodes.remove(node)
     for sock in targets:
@@ -411,6 +415,11 @@ def install(material) -> int:
     if material is None or not material.use_nodes or material.node_tree is None:
         return 0
     tree = material.node_tree
+    # Atomic: an exception half way leaves the node tree exactly as it was.
+    return shading.atomic(tree, (SPLIT, SPLIT_ID, SIGNATURE), lambda: _install_tree(tree))
+
+
+def _install_tree(tree) -> int:
     count = 0
     # By name: re-splitting removes nodes of this loop's snapshot (never touch a removed node).
     for name in [nd.name for nd in tree.nodes]:

@@ -147,7 +147,10 @@ def sync_scene(scene, reports=None, *, changed_materials=(), force=False) -> boo
         for mat in bpy.data.materials:
             if mat in wanted_mats or mat in elsewhere_wanted or (mat in elsewhere and mat not in want) or not installed(mat):
                 continue
-            touched |= uninstall_material(mat)
+            try:
+                touched |= uninstall_material(mat)
+            except RokebyError:
+                continue  # its split BSDF cannot be rebuilt: kept as is (Remove Render Edits says why)
         for m in mirrors:
             uid = m.session_uid
             if wanted(m) and (done.get(uid) != keys[uid] or force or any(mat in changed or mat.node_tree in changed for mat in edited_materials(m))):

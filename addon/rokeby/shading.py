@@ -27,9 +27,11 @@ Two groups, made once per file and rebuilt in place when an older version is fou
 
 from __future__ import annotations
 
+import uuid
+
 import bpy
 
-from .evaluate import RENDER_ATTRIBUTE, RENDER_ATTRIBUTE_WA
+from .evaluate import RENDER_ATTRIBUTE, RENDER_ATTRIBUTE_WA, RokebyError
 
 DIRECTION_GROUP = "Rokeby Edited Direction"
 GROUP = "Rokeby Edited Normal"
@@ -223,6 +225,8 @@ ROLE = "rokeby_role"
 SOURCE = "rokeby_source"  # on split parts: the name of the Principled BSDF they stand in for
 SPLIT = "rokeby_split"  # on a split Principled BSDF: its original outgoing links
 SIGNATURE = "rokeby_signature"  # on a split Principled BSDF: its inputs when it was split
+SPLIT_ID = "rokeby_split_id"  # on a split Principled BSDF: the key its parts carry in SOURCE
+SOURCE_NAME = "rokeby_source_name"  # on split parts: the BSDF's name when split (to recreate it)
 SPECULAR_BSDFS = ("ShaderNodeBsdfGlossy", "ShaderNodeBsdfAnisotropic")
 # BSDFs inside a node group are edited in a copy of the group local to the material:
 COPY_OF = "rokeby_copy_of"  # on the copy (a node tree): the group it copies
@@ -327,6 +331,17 @@ def _signature(bsdf) -> str:
     return node_signature(bsdf, "distribution", "subsurface_method")
 
 
+def _split_key(bsdf) -> str:
+    """What the parts of ``bsdf`` carry in SOURCE: its split id (files from before ids: its name)."""
+    return str(bsdf.get(SPLIT_ID, bsdf.name))
+
+
+def _tag_part(node, role, label, bsdf):
+    _tag(node, role, label, _split_key(bsdf))
+    node[SOURCE_NAME] = bsdf.name
+    return node
+
+
 def _clone(tree, bsdf, role, overrides, location):
     """A copy of the Principled BSDF ``bsdf`` (values and links) with ``overrides`` set unlinked."""
     part = tree.nodes.new(bsdf.bl_idname)
@@ -344,14 +359,14 @@ def _clone(tree, bsdf, role, overrides, location):
         sock.default_value = value
     part.location = location
     part.hide = True
-    return _tag(part, role, f"Rokeby: {role} part of {bsdf.name}", bsdf.name)
+    return _tag_part(part, role, f"Rokeby: {role} part of {bsdf.name}", bsdf)
 
 
 def _value_socket(tree, socket, bsdf, location):
     """An output socket carrying ``socket``'s value: its upstream link, or a Value node."""
     if socket.is_linked:
         return socket.links[0].from_socket
-    node = _tag(tree.nodes.new("ShaderNodeValue"), "value", f"Rokeby: {socket.name} of {bsdf.name}", bsdf.name)
+    node = _tag_part(tree.nodes.new("ShaderNodeValue"), "value", f"Rokeby: {socket.name} of {bsdf.name}", bsdf)
     node.outputs[0].default_value = socket.default_value
     node.location = location
     return node.outputs[0]
@@ -371,6 +386,8 @@ def _split(tree, bsdf) -> None:
     edits of it into the parts and ``uninstall`` puts it back in place.
     """
     x, y = bsdf.location
+    if SPLIT_ID not in bsdf:
+        bsdf[SPLIT_ID] = uuid.uuid4().hex
     outgoing = recorded_targets(tree, record_outgoing(bsdf, SPLIT))
     bsdf[SIGNATURE] = _signature(bsdf)
     normal_in = bsdf.inputs["Normal"]
@@ -383,7 +400,7 @@ def _split(tree, bsdf) -> None:
     if _has_coat(bsdf):
         _feed_edited_normal(tree, specular.inputs["Coat Normal"], "Rokeby: edited coat reflections", (x, y - 520))
     # (1 − F) Diffuse: Mix(F, Diffuse, black).
-    fresnel = _tag(tree.nodes.new("ShaderNodeFresnel"), "fresnel", f"Rokeby: specular layer of {bsdf.name}", bsdf.name)
+    fresnel = _tag_part(tree.nodes.new("ShaderNodeFresnel"), "fresnel", f"Rokeby: specular layer of {bsdf.name}", bsdf)
     fresnel.location = (x + 300, y + 300)
     tree.links.new(_value_socket(tree, bsdf.inputs["IOR"], bsdf, (x + 100, y + 300)), fresnel.inputs["IOR"])
     if normal_in.is_linked:
@@ -392,14 +409,14 @@ def _split(tree, bsdf) -> None:
     weight = scalar_math(tree, "MULTIPLY", level.outputs[0], fresnel.outputs["Fac"])
     weight.use_clamp = True
     for node in (level, weight):
-        _tag(node, "math", f"Rokeby: specular layer of {bsdf.name}", bsdf.name)
-    nothing = _tag(tree.nodes.new("ShaderNodeEmission"), "black", "Rokeby: nothing", bsdf.name)
+        _tag_part(node, "math", f"Rokeby: specular layer of {bsdf.name}", bsdf)
+    nothing = _tag_part(tree.nodes.new("ShaderNodeEmission"), "black", "Rokeby: nothing", bsdf)
     nothing.inputs["Strength"].default_value = 0.0
-    attenuated = _tag(tree.nodes.new("ShaderNodeMixShader"), "attenuate", f"Rokeby: diffuse under the specular layer of {bsdf.name}", bsdf.name)
+    attenuated = _tag_part(tree.nodes.new("ShaderNodeMixShader"), "attenuate", f"Rokeby: diffuse under the specular layer of {bsdf.name}", bsdf)
     tree.links.new(weight.outputs[0], attenuated.inputs["Fac"])
     tree.links.new(diffuse.outputs["BSDF"], attenuated.inputs[1])
     tree.links.new(nothing.outputs["Emission"], attenuated.inputs[2])
-    total = _tag(tree.nodes.new("ShaderNodeAddShader"), "sum", f"Rokeby: {bsdf.name} with edited specular", bsdf.name)
+    total = _tag_part(tree.nodes.new("ShaderNodeAddShader"), "sum", f"Rokeby: {bsdf.name} with edited specular", bsdf)
     tree.links.new(attenuated.outputs["Shader"], total.inputs[0])
     tree.links.new(specular.outputs["BSDF"], total.inputs[1])
     result = total.outputs["Shader"]
@@ -408,14 +425,14 @@ def _split(tree, bsdf) -> None:
         _feed_edited_normal(tree, metal.inputs["Normal"], "Rokeby: edited reflections", (x, y - 620))
         if _has_coat(bsdf):
             _feed_edited_normal(tree, metal.inputs["Coat Normal"], "Rokeby: edited coat reflections", (x, y - 720))
-        mix = _tag(tree.nodes.new("ShaderNodeMixShader"), "metallic", f"Rokeby: metallic of {bsdf.name}", bsdf.name)
+        mix = _tag_part(tree.nodes.new("ShaderNodeMixShader"), "metallic", f"Rokeby: metallic of {bsdf.name}", bsdf)
         tree.links.new(_value_socket(tree, bsdf.inputs["Metallic"], bsdf, (x + 100, y + 400)), mix.inputs["Fac"])
         tree.links.new(result, mix.inputs[1])
         tree.links.new(metal.outputs["BSDF"], mix.inputs[2])
         result = mix.outputs["Shader"]
     if not _fixed(bsdf.inputs["Alpha"], 1.0):
-        clear = _tag(tree.nodes.new("ShaderNodeBsdfTransparent"), "transparent", "Rokeby: alpha", bsdf.name)
-        mix = _tag(tree.nodes.new("ShaderNodeMixShader"), "alpha", f"Rokeby: alpha of {bsdf.name}", bsdf.name)
+        clear = _tag_part(tree.nodes.new("ShaderNodeBsdfTransparent"), "transparent", "Rokeby: alpha", bsdf)
+        mix = _tag_part(tree.nodes.new("ShaderNodeMixShader"), "alpha", f"Rokeby: alpha of {bsdf.name}", bsdf)
         tree.links.new(_value_socket(tree, bsdf.inputs["Alpha"], bsdf, (x + 100, y + 450)), mix.inputs["Fac"])
         tree.links.new(clear.outputs["BSDF"], mix.inputs[1])
         tree.links.new(result, mix.inputs[2])
@@ -424,21 +441,150 @@ def _split(tree, bsdf) -> None:
         tree.links.new(result, sock)
 
 
-def _unsplit(tree, bsdf) -> None:
-    """Remove the parts standing in for ``bsdf`` and put it back where it was linked."""
-    targets = recorded_targets(tree, bsdf.get(SPLIT, []))
-    parts = [nd for nd in tree.nodes if _ours(nd) and nd.get(SOURCE) == bsdf.name]
-    # The edited-normal groups that feed the parts go with them.
+def _parts_of(tree, key) -> list:
+    """The nodes standing in for the split BSDF whose parts carry ``key``, with the edited-normal
+    groups that feed them. Found by tag, never by a node's name (artists rename nodes)."""
+    parts = [nd for nd in tree.nodes if _ours(nd) and str(nd.get(SOURCE)) == key]
     for part in list(parts):
         for sock in part.inputs:
             parts.extend(lk.from_node for lk in sock.links if _is_normal_group(lk.from_node))
-    for node in {nd.name: nd for nd in parts}.values():
+    return list({nd.as_pointer(): nd for nd in parts}.values())
+
+
+def _live_targets(parts) -> list:
+    """The artist's input sockets the parts feed now (wherever those nodes were renamed or moved)."""
+    inside = {nd.as_pointer() for nd in parts}
+    return [lk.to_socket for nd in parts for out in nd.outputs for lk in out.links
+            if lk.to_node.as_pointer() not in inside and not _ours(lk.to_node)]
+
+
+def _unsplit(tree, bsdf) -> None:
+    """Remove the parts standing in for ``bsdf`` and put it back where they were linked."""
+    parts = _parts_of(tree, _split_key(bsdf))
+    if not parts and SPLIT_ID not in bsdf:
+        # A file from before split ids, the BSDF renamed since: its parts carry the old name. Adopt
+        # the one set of parts no split BSDF claims (with several, they stay for _recreate).
+        claimed = {_split_key(nd) for nd in tree.nodes if SPLIT in nd}
+        free = {str(nd[SOURCE]) for nd in tree.nodes if _ours(nd) and SOURCE in nd} - claimed
+        if len(free) == 1:
+            parts = _parts_of(tree, free.pop())
+    targets = _live_targets(parts) or recorded_targets(tree, bsdf.get(SPLIT, []))
+    for node in parts:
         tree.nodes.remove(node)
     for sock in targets:
         tree.links.new(bsdf.outputs["BSDF"], sock)
-    for key in (SPLIT, SIGNATURE):
+    for key in (SPLIT, SIGNATURE, SPLIT_ID):
         if key in bsdf:
             del bsdf[key]
+
+
+def _upstream(socket):
+    """The artist's output socket linked to ``socket`` (None when unlinked or fed by our node)."""
+    if socket.is_linked and not _ours(socket.links[0].from_node):
+        return socket.links[0].from_socket
+    return None
+
+
+def _recreate(tree, key) -> None:
+    """The Principled BSDF whose parts carry ``key`` was deleted (e.g. Clean Up ▸ Delete Unused
+    Nodes removes it: it is unlinked while split). Build it again from its parts (every value,
+    link and setting it had: the diffuse part holds all but the four inputs it overrides, which the
+    specular part and the metallic/alpha mixes hold), link it where the parts fed, remove them."""
+    parts = _parts_of(tree, key)
+    by_role = {nd.get(ROLE): nd for nd in parts if nd.get(SOURCE) is not None}
+    diffuse, specular = by_role["diffuse"], by_role["specular"]
+    bsdf = tree.nodes.new("ShaderNodeBsdfPrincipled")
+    bsdf.name = str(diffuse.get(SOURCE_NAME, bsdf.name))
+    bsdf.distribution = diffuse.distribution
+    bsdf.subsurface_method = diffuse.subsurface_method
+    bsdf.location = (diffuse.location.x - 300, diffuse.location.y - 200)
+    sources = {sock.identifier: diffuse for sock in diffuse.inputs}
+    sources["Specular IOR Level"] = sources["Coat Weight"] = specular
+    for dst in bsdf.inputs:
+        src_node = sources.get(dst.identifier, diffuse)
+        src = next(sk for sk in src_node.inputs if sk.identifier == dst.identifier)
+        if hasattr(src, "default_value"):
+            dst.default_value = src.default_value
+        up = _upstream(src)
+        if up is not None:
+            tree.links.new(up, dst)
+    for role, ident, default in (("metallic", "Metallic", 0.0), ("alpha", "Alpha", 1.0)):
+        dst = bsdf.inputs[ident]
+        mix = by_role.get(role)
+        if mix is None:
+            dst.default_value = default
+            continue
+        fac = mix.inputs["Fac"]
+        up = _upstream(fac)
+        if up is not None:
+            tree.links.new(up, dst)
+        elif fac.is_linked and fac.links[0].from_node.bl_idname == "ShaderNodeValue":
+            dst.default_value = fac.links[0].from_node.outputs[0].default_value
+        else:
+            dst.default_value = fac.default_value
+    targets = _live_targets(parts)
+    for node in parts:
+        tree.nodes.remove(node)
+    for sock in targets:
+        tree.links.new(bsdf.outputs["BSDF"], sock)
+
+
+_NODE_KEYS = (SPLIT, SIGNATURE, SPLIT_ID, ORIGINAL_TREE)
+
+
+def _snapshot(tree, keys=_NODE_KEYS) -> dict:
+    """What an install may change in ``tree``: its nodes, links, our keys on the artist's nodes and
+    the group each group node uses (for ``_restore`` after a failure half way)."""
+    return {
+        "nodes": {nd.as_pointer() for nd in tree.nodes},
+        "links": {(lk.from_node.as_pointer(), lk.from_socket.identifier, lk.to_node.as_pointer(), lk.to_socket.identifier) for lk in tree.links},
+        "keys": {nd.as_pointer(): {k: nd[k] for k in keys if k in nd} for nd in tree.nodes},
+        "key_names": tuple(keys),
+        "groups": {nd.as_pointer(): nd.node_tree for nd in tree.nodes if nd.bl_idname == "ShaderNodeGroup"},
+        "node_groups": {g.as_pointer() for g in bpy.data.node_groups},
+    }
+
+
+def atomic(tree, keys, fn):
+    """``fn()`` on ``tree``, all or nothing: an exception restores the tree (``_restore``),
+    including the custom properties ``keys`` on its nodes, and is raised again."""
+    snap = _snapshot(tree, keys)
+    try:
+        return fn()
+    except BaseException:
+        _restore(tree, snap)
+        raise
+
+
+def _restore(tree, snap) -> None:
+    """Put ``tree`` back as ``_snapshot`` found it: nodes added since go (with their links), links
+    added since go, links removed since come back, our keys and group assignments are reset, and
+    group copies made since are removed."""
+    for nd in [nd for nd in tree.nodes if nd.as_pointer() not in snap["nodes"]]:
+        tree.nodes.remove(nd)
+    nodes = {nd.as_pointer(): nd for nd in tree.nodes}
+    for lk in list(tree.links):
+        if (lk.from_node.as_pointer(), lk.from_socket.identifier, lk.to_node.as_pointer(), lk.to_socket.identifier) not in snap["links"]:
+            tree.links.remove(lk)
+    now = {(lk.from_node.as_pointer(), lk.from_socket.identifier, lk.to_node.as_pointer(), lk.to_socket.identifier) for lk in tree.links}
+    for key in snap["links"] - now:
+        a, out_id, b, in_id = key
+        if a in nodes and b in nodes:
+            out = next((sk for sk in nodes[a].outputs if sk.identifier == out_id), None)
+            inp = next((sk for sk in nodes[b].inputs if sk.identifier == in_id), None)
+            if out is not None and inp is not None:
+                tree.links.new(out, inp)
+    for ptr, nd in nodes.items():
+        keys = snap["keys"].get(ptr, {})
+        for k in snap["key_names"]:
+            if k in keys:
+                nd[k] = keys[k]
+            elif k in nd:
+                del nd[k]
+        if ptr in snap["groups"] and nd.node_tree != snap["groups"][ptr]:
+            nd.node_tree = snap["groups"][ptr]
+    for g in [g for g in bpy.data.node_groups if g.as_pointer() not in snap["node_groups"] and g.get(COPY_OF) is not None and g.users == 0]:
+        bpy.data.node_groups.remove(g)
 
 
 def install(material) -> int:
@@ -447,10 +593,12 @@ def install(material) -> int:
     Glossy/Anisotropic BSDFs and metallic Principled BSDFs (metallic = 1) get n' at their Normal
     (and Coat Normal) input; other Principled BSDFs are split so that the diffuse lobe keeps the
     original normal (see ``_split``). A normal already linked there (a bump map) passes through.
-    Installing twice changes nothing."""
+    Installing twice changes nothing. Atomic: an exception half way leaves the node tree exactly
+    as it was (``_restore``)."""
     if material is None or not material.use_nodes or material.node_tree is None:
         return 0
-    return _install_tree(material.node_tree, material)
+    tree = material.node_tree
+    return atomic(tree, _NODE_KEYS, lambda: _install_tree(tree, material))
 
 
 def _bsdfs_inside(tree, seen=None) -> bool:
@@ -558,6 +706,15 @@ def uninstall(material) -> bool:
 
 
 def _uninstall_tree(tree) -> None:
+    # Checked before anything changes: a BSDF that cannot be built again refuses the removal.
+    for key in {str(nd[SOURCE]) for nd in tree.nodes if _ours(nd) and SOURCE in nd}:
+        if not any(SPLIT in nd and _split_key(nd) == key for nd in tree.nodes):
+            roles = {nd.get(ROLE) for nd in tree.nodes if _ours(nd) and str(nd.get(SOURCE)) == key}
+            if "diffuse" not in roles or "specular" not in roles:
+                raise RokebyError(
+                    f"material node tree '{tree.name}': the Principled BSDF that Rokeby split was deleted together "
+                    "with its diffuse/specular parts; its settings are lost, so the render nodes are not removed "
+                    "(undo the deletion, or delete the nodes labelled 'Rokeby:' by hand)")
     for node in [nd for nd in tree.nodes if ORIGINAL_TREE in nd]:
         copy, original = node.node_tree, node[ORIGINAL_TREE]
         del node[ORIGINAL_TREE]
@@ -567,6 +724,9 @@ def _uninstall_tree(tree) -> None:
             bpy.data.node_groups.remove(copy)
     for bsdf in [nd for nd in tree.nodes if SPLIT in nd]:
         _unsplit(tree, bsdf)
+    # Parts whose Principled BSDF is gone (deleted as "unused"): it is built again from them.
+    for key in dict.fromkeys(str(nd[SOURCE]) for nd in tree.nodes if _ours(nd) and nd.get(ROLE) == "diffuse" and SOURCE in nd):
+        _recreate(tree, key)
     for group in [nd for nd in tree.nodes if _ours(nd) and nd.bl_idname == "ShaderNodeGroup"]:
         upstream = [lk.from_socket for lk in group.inputs["Normal"].links] if "Normal" in group.inputs else []
         targets = [lk.to_socket for out in group.outputs for lk in out.links]
