@@ -35,6 +35,7 @@ evaluates. Values are checked to be finite before they are written.
 from __future__ import annotations
 
 import hashlib
+import os
 import time
 from dataclasses import dataclass, field
 
@@ -1500,6 +1501,11 @@ def evaluate_mirror(obj, scene, depsgraph, *, force=False, reread_geometry=False
     try:
         if obj.type != "MESH":
             raise RokebyError(f"mirror '{name}' is {words.kind(obj.type)}, not a mesh")
+        if obj.library is not None:
+            # Read-only: its field cannot follow this scene's camera or edits (no carrier, no
+            # attribute can be written to it); a library override is a mirror of its own.
+            raise RokebyError(f"mirror '{name}' is linked from library '{obj.library.filepath}' and cannot store the field: "
+                              "make it local or a library override")
         settings = obj.rokeby
         if obj.mode == "EDIT":
             # Edit Mode writes its own mesh back on exit; the field follows when it does.
@@ -1765,9 +1771,14 @@ def evaluate_scene(scene, depsgraph, *, force=False, geometry_changed=None, all_
     # Shift+D / Alt+D copies get handles of their own before anything reads them.
     if duplicates.separate_copies(mirrors):
         depsgraph.update()  # the new handles are evaluated (their Shrinkwrap, their parent)
+    local_names = {ob.name for ob in mirrors if ob.library is None}
     for ob in mirrors:
         reread = all_geometry or ob in changed or (ob.type == "MESH" and ob.data in changed)
-        out[ob.name] = evaluate_mirror(ob, scene, depsgraph, force=force, reread_geometry=reread, interactive=interactive)
+        rep = evaluate_mirror(ob, scene, depsgraph, force=force, reread_geometry=reread, interactive=interactive)
+        # A mirror linked from a library shares its name with its library override, which keeps
+        # the plain name; the linked one is listed with its library's file name.
+        key = ob.name if ob.library is None or ob.name not in local_names else f"{ob.name} ({os.path.basename(ob.library.filepath)})"
+        out[key] = rep
     pending = [name for name, rep in out.items() if rep.pending]
     if settle and pending:
         depsgraph.update()  # our own handlers are guarded against re-entrance (handlers._busy)

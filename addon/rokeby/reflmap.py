@@ -482,7 +482,9 @@ def capture(mirror, *, resolution=None, samples=None, storage: str = "AUTO", sce
     if not isinstance(samples, (int, np.integer)) or samples < 1:
         raise RokebyError(f"samples: expected a whole number >= 1, got {samples!r}")
     storage = _storage(storage)
-    if scene.objects.get(mirror.name) != mirror:
+    from . import registry  # noqa: PLC0415
+
+    if not registry.in_scene(mirror, scene):
         raise RokebyError(f"mirror: '{mirror.name}' is not in scene '{scene.name}'")
     mid = map_id(mirror)
     paths = [cache_dir() + _file_name(mirror, k, mid) for k in range(len(ROUGHNESS_LEVELS))]

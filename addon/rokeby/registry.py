@@ -185,6 +185,12 @@ def _valid(objs: dict) -> list:
     return []
 
 
+def in_scene(ob, scene) -> bool:
+    """Whether ``ob`` is linked into ``scene``, by identity: a lookup by name finds the wrong
+    object when a linked asset and its library override share the name."""
+    return any(s == scene for s in ob.users_scene)
+
+
 def mirrors(scene=None) -> list:
     """Every mirror in the file, or those linked into ``scene``."""
     ensure()
@@ -194,7 +200,7 @@ def mirrors(scene=None) -> list:
     key = scene.session_uid
     inside = _members.get(key)
     if inside is None:
-        inside = _members[key] = frozenset(ob.session_uid for ob in found if scene.objects.get(ob.name) == ob)
+        inside = _members[key] = frozenset(ob.session_uid for ob in found if in_scene(ob, scene))
     return [ob for ob in found if ob.session_uid in inside]
 
 
@@ -258,7 +264,7 @@ def made_by_addon(ob) -> bool:
     if ob.get(MADE_KEY):
         return True
     coll = bpy.data.collections.get(HANDLE_COLLECTION)
-    return coll is not None and coll.objects.get(ob.name) == ob
+    return coll is not None and any(o == ob for o in coll.objects)
 
 
 def _refcounts(found) -> dict:

@@ -693,8 +693,10 @@ def sync_falloffs(scene) -> int:
     is gone keep their value."""
 
     written = 0
+    from . import registry  # noqa: PLC0415
+
     for ob in _parts()[0]:
-        if scene.objects.get(ob.name) != ob:
+        if not registry.in_scene(ob, scene):
             continue
         light = ob.rokeby_shadow.light
         keys = ob.data.shape_keys
