@@ -50,11 +50,15 @@ demo: native dist
 # filename, the wheel under wheels/ (tools/build_extension.py; rewrites the zip only if it changed).
 # Packages the add-on imports that Blender does not ship go into the zip as wheels too: OpenEXR
 # (the compositing tools read and write multilayer EXRs), the version pinned in requirements.txt,
-# for the native wheel's Python and platform.
+# for every CPython the supported Blenders embed (3.11: Blender 4.2-5.0; 3.13: Blender 5.1 and later) and
+# the native wheel's platform. The native wheel itself is built once for the stable ABI (abi3, CPython >= 3.11).
 EXTRA_WHEELS := target/extra-wheels
+BLENDER_PYTHONS := 3.11 3.13
 $(EXTRA_WHEELS)/.done: requirements.txt
 	@rm -rf $(EXTRA_WHEELS)
-	$(PIP) download -q --no-deps --only-binary=:all: -d $(EXTRA_WHEELS) "$$(grep -E '^OpenEXR==' requirements.txt)"
+	for v in $(BLENDER_PYTHONS); do \
+	  $(PIP) download -q --no-deps --only-binary=:all: --python-version $$v -d $(EXTRA_WHEELS) "$$(grep -E '^OpenEXR==' requirements.txt)" || exit 1; \
+	done
 	@touch $@
 
 dist: native $(EXTRA_WHEELS)/.done

@@ -63,27 +63,45 @@ def test_zip_layout_and_manifest(built):
 
 
 def test_listed_wheels_install_on_this_python(built):
+    """One zip for every supported Blender: the native wheel is built for the stable ABI (abi3, CPython 3.11
+    and later: Blender 4.2-5.0 embed 3.11, Blender 5.1 and later 3.13) and loads on this Python; OpenEXR,
+    which has no stable-ABI wheel, comes once per CPython, and one of them installs here."""
     from packaging.tags import sys_tags
     from packaging.utils import parse_wheel_filename
 
     here = set(sys_tags())
     with zipfile.ZipFile(built) as zf:
         manifest = tomllib.loads(zf.read("blender_manifest.toml").decode())
+        by_dist: dict = {}
         for entry in manifest["wheels"]:
             name = entry.removeprefix("./")
             dist, version, _build, tags = parse_wheel_filename(Path(name).name)
             assert dist in ("rokeby-native", "openexr"), name
+            by_dist.setdefault(str(dist), []).append((name, tags))
             if dist == "rokeby-native":
                 assert str(version) == manifest["version"]
-            assert tags & here, f"{name} does not install on this Python ({sys.version_info[:2]}, {sys.platform})"
-            assert any(t.interpreter == "cp311" for t in tags)  # Blender 4.2-4.5 bundle CPython 3.11
+                assert {(t.interpreter, t.abi) for t in tags} == {("cp311", "abi3")}, name
             with zipfile.ZipFile(zf.open(name)) as whl:  # a real wheel with the extension module
                 mod = "rokeby_native/" if dist == "rokeby-native" else "OpenEXR"
                 assert any(n.startswith(mod) and n.endswith(".so") for n in whl.namelist()) or sys.platform != "linux"
+        assert len(by_dist["rokeby-native"]) == 1, by_dist["rokeby-native"]
+        for dist, wheels in by_dist.items():
+            assert any(tags & here for _n, tags in wheels), f"no {dist} wheel installs on this Python ({sys.version_info[:2]}, {sys.platform}): {wheels}"
+        exr_pythons = {t.interpreter for _n, tags in by_dist["openexr"] for t in tags}
+        assert {"cp311", "cp313"} <= exr_pythons, exr_pythons
         # The compositing tools (Recomposite Render, the EXR sequence operator) read EXRs with the
         # OpenEXR package, which Blender does not ship: the zip brings the pinned one.
         pinned = next(ln.split("==")[1].strip() for ln in (ROOT / "requirements.txt").read_text().splitlines() if ln.startswith("OpenEXR=="))
-        assert any(Path(e).name.startswith(f"openexr-{pinned}-") for e in manifest["wheels"]), manifest["wheels"]
+        assert all(Path(n).name.startswith(f"openexr-{pinned}-") for n, _t in by_dist["openexr"]), by_dist["openexr"]
+
+
+def test_extra_wheels_follow_the_native_wheels_pythons():
+    ov = be.pythons_overlap
+    assert ov("rokeby_native-0.1.0-cp311-abi3-manylinux_2_35_x86_64.whl", "cp313")
+    assert ov("rokeby_native-0.1.0-cp311-abi3-manylinux_2_35_x86_64.whl", "cp311")
+    assert not ov("rokeby_native-0.1.0-cp311-abi3-manylinux_2_35_x86_64.whl", "cp310")
+    assert not ov("rokeby_native-0.1.0-cp311-cp311-manylinux_2_35_x86_64.whl", "cp313")
+    assert ov("rokeby_native-0.1.0-cp311-cp311-manylinux_2_35_x86_64.whl", "py3")
 
 
 def test_blender_validates_the_zip(built):
@@ -105,7 +123,8 @@ def test_build_is_idempotent_and_refuses_bad_input(built, tmp_path):
     stale.mkdir()
     wheel = next(WHEELS.glob("rokeby_native-*.whl"))
     (stale / wheel.name).write_bytes(wheel.read_bytes())
-    (stale / wheel.name.replace("cp311-cp311", "cp312-cp312")).write_bytes(b"")
+    name, version, *tags = wheel.name.split("-")
+    (stale / "-".join([name, version + ".post1", *tags])).write_bytes(b"")
     with pytest.raises(be.BuildError, match="several"):
         be.build(ROOT / "addon" / "rokeby", stale, tmp_path / "out")
     with pytest.raises(be.BuildError, match="no rokeby_native wheel"):

@@ -83,14 +83,28 @@ def find_extra_wheels(extra_dir: "Path | None", native: Path) -> list[Path]:
     native wheel's Python and platform are taken."""
     if extra_dir is None or not extra_dir.is_dir():
         return []
-    py, _abi, _plat = wheel_tags(native.name)
     platforms = set(blender_platforms(native.name))
     out = []
     for w in sorted(extra_dir.glob("*.whl")):
         wpy, _wabi, wplat = wheel_tags(w.name)
-        if wpy in (py, "py3") and (wplat == "any" or set(blender_platforms(w.name)) & platforms):
+        if pythons_overlap(native.name, wpy) and (wplat == "any" or set(blender_platforms(w.name)) & platforms):
             out.append(w)
     return out
+
+
+def pythons_overlap(native_name: str, python_tag: str) -> bool:
+    """Whether a wheel for ``python_tag`` can load beside the native wheel. A stable-ABI (abi3) native
+    wheel tagged cp311 loads in every CPython from 3.11 on, so the extra wheels of each of those versions
+    go into the zip (Blender installs the one for its own Python); a version-specific native wheel takes
+    only its own version's."""
+    py, abi, _plat = wheel_tags(native_name)
+    tags = python_tag.split(".")
+    if any(t in ("py3", py) for t in tags):
+        return True
+    if abi != "abi3" or not py.startswith("cp3"):
+        return False
+    floor = int(py[3:])
+    return any(t.startswith("cp3") and t[3:].isdigit() and int(t[3:]) >= floor for t in tags)
 
 
 def manifest_text(source: str, wheel_name: "str | list[str]", platforms: list[str]) -> str:
