@@ -12,7 +12,7 @@ export ROKEBY_SHARED := $(SHARED)
 
 RUST_SRC := Cargo.toml pyproject.toml $(wildcard rust/*/Cargo.toml) $(shell find rust -name '*.rs' 2>/dev/null)
 
-.PHONY: all demo dist test bench cargo-test pytest native venv clean help fuzz fuzz-py
+.PHONY: all demo dist test bench cargo-test pytest native venv clean help fuzz fuzz-py lint
 
 all: native
 
@@ -21,6 +21,7 @@ help:
 	@echo "make test   cargo tests + pytest (bpy in background mode)"
 	@echo "make bench  benchmarks, printed next to the reference numbers"
 	@echo "make dist   the installable Blender extension zip, dist/rokeby-<version>.zip"
+	@echo "make lint   ruff (errors), cargo fmt --check, and the add-on checked against the newest Blender API stubs"
 	@echo "make fuzz-py  hypothesis fuzzing of rokeby_native and the file readers (FUZZ_PY_EXAMPLES=500)"
 
 # --- bootstrap -------------------------------------------------------------------------------
@@ -71,6 +72,18 @@ cargo-test:
 
 pytest: native $(EXTRA_WHEELS)/.done
 	$(PY) -m pytest -q
+
+# Static checks in their own environment (the Blender API stubs are a fake `bpy` package).
+LINT := .venv-lint
+$(LINT)/.deps: requirements-lint.txt
+	@test -x $(LINT)/bin/python || $(PYTHON) -m venv $(LINT)
+	$(LINT)/bin/python -m pip install -q -r requirements-lint.txt
+	@touch $@
+
+lint: $(LINT)/.deps
+	$(LINT)/bin/ruff check --select E9,F63,F7,F82 addon tests bench tools
+	cargo fmt --all --check
+	$(LINT)/bin/python tools/api_check.py
 
 # Peers of the benchmark (exact MMP geodesics, potpourri3d, libigl, matplotlib) live in their
 # own environment: they need numpy >= 2, bpy 4.5 needs numpy < 2.

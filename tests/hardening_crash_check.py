@@ -54,7 +54,7 @@ try:
     bpy.context.view_layer.update()
 finally:
     bpy.app.handlers.depsgraph_update_post.remove(other_addons_handler)
-del victim  # a Python reference to a removed ID: never touched again
+victim = None  # a Python reference to a removed ID: never touched again
 rep = api.report(ball)
 in_handler = api.stored_field(ball).copy()
 evaluate.reset()
