@@ -147,11 +147,12 @@ def frame(h, w, seed=0):
 
 def test_bilateral_at_the_largest_sigma_on_1080p_finishes():
     n, depth = frame(1080, 1920)
-    t0 = time.perf_counter()
+    # CPU seconds of this process, not wall time: a hang guard that a loaded machine cannot trip.
+    t0 = time.process_time()
     out = rn.normals_bilateral(n, depth, sigma_s=50.0)
-    took = time.perf_counter() - t0
-    print(f"normals_bilateral(sigma_s=50) on 1920×1080: {took:.1f} s")
-    assert took < 120, took  # ~19 minutes before issue 24
+    took = time.process_time() - t0
+    print(f"normals_bilateral(sigma_s=50) on 1920×1080: {took:.1f} CPU s")
+    assert took < 240, took  # ~19 minutes (per thread) before issue 24
     assert out.shape == n.shape and np.isfinite(out).all()
     with pytest.raises(ValueError, match="sigma_s"):
         rn.normals_bilateral(n[:4, :4], depth[:4, :4], sigma_s=50.5)
