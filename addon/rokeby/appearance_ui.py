@@ -14,16 +14,19 @@ from bpy.props import CollectionProperty, EnumProperty, FloatProperty, FloatVect
 
 from . import appearance, words
 
+# Explicit item numbers: Blender stores the number, so new brushes are appended with new numbers
+# (files saved before issue 22 stored 0-6 without explicit numbers, which are these).
 _BRUSH_ITEMS = [
-    ("diffuse", "Diffuse", "Paint the diffuse colour"),
-    ("specular", "Specular", "Paint the specular intensity k_s toward the value"),
-    ("sharpen", "Sharpen", "Lower the roughness (sharper highlights)"),
-    ("blur", "Blur", "Raise the roughness (blurrier highlights)"),
-    ("stretch", "Stretch", "Raise the anisotropy and turn it along the stroke"),
-    ("metallic", "Metallic", "Move energy between diffuse and specular (Metallic) toward the value"),
-    ("roughness", "Roughness", "Paint the roughness toward the value"),
+    ("diffuse", "Diffuse", "Paint the diffuse colour", 0),
+    ("specular", "Specular", "Paint the specular intensity k_s toward the value", 1),
+    ("sharpen", "Sharpen", "Lower the roughness (sharper highlights)", 2),
+    ("blur", "Blur", "Raise the roughness (blurrier highlights)", 3),
+    ("stretch", "Stretch", "Raise the anisotropy and turn it along the stroke", 4),
+    ("metallic", "Metallic", "Move energy between diffuse and specular (Metallic) toward the value", 5),
+    ("roughness", "Roughness", "Paint the roughness toward the value", 6),
+    ("specular_tint", "Specular Colour", "Paint the colour of the highlights (Principled Specular Tint) toward the colour", 7),
 ]
-_MODES = {"diffuse": "MIX", "specular": "MIX", "metallic": "MIX", "roughness": "MIX"}
+_MODES = {"diffuse": "MIX", "specular": "MIX", "metallic": "MIX", "roughness": "MIX", "specular_tint": "MIX"}
 
 
 class RokebyStrokePoint(bpy.types.PropertyGroup):
@@ -39,8 +42,8 @@ class RokebyAppearanceBrush(bpy.types.PropertyGroup):
     target: EnumProperty(
         name="Target",
         items=[
-            ("POINT", "Per-Point Attribute", "Paint per-point attributes of the mesh"),
-            ("TEXTURE", "Image Texture", "Paint one float image per parameter on the active UV map (packed into the .blend on save)"),
+            ("POINT", "Per-Point Attribute", "Paint per-point attributes of the mesh", 0),
+            ("TEXTURE", "Image Texture", "Paint one float image per parameter on the active UV map (packed into the .blend on save)", 1),
         ],
         default="POINT",
     )
@@ -48,14 +51,31 @@ class RokebyAppearanceBrush(bpy.types.PropertyGroup):
         name="Preview Model",
         description="The BRDF the viewport preview shades with (the final render always uses Blender's Principled BSDF)",
         items=[
-            ("PRINCIPLED", "Principled (GGX)", "Blender's BSDF as a split sum: GGX prefiltered radiance and the GGX albedo table"),
-            ("PHONG", "Phong", "The seed's normalised Phong lobe, exponent from the roughness"),
-            ("TORRANCE_SPARROW", "Torrance–Sparrow", "Fraser's simplified Torrance–Sparrow lobe with Schlick's Fresnel"),
+            ("PRINCIPLED", "Principled (GGX)", "Blender's BSDF as a split sum: GGX prefiltered radiance and the GGX albedo table", 0),
+            ("PHONG", "Phong", "The seed's normalised Phong lobe, exponent from the roughness", 1),
+            ("TORRANCE_SPARROW", "Torrance–Sparrow", "Fraser's simplified Torrance–Sparrow lobe with Schlick's Fresnel", 2),
         ],
         default="PRINCIPLED",
         update=lambda self, context: _redraw_views(context),
     )
     resolution: IntProperty(name="Resolution", description="Side of the painted images in texels (texture target)", default=1024, min=8, max=16384)
+    # Fraser's interface: the painted object under the environment and under a point light, side by side.
+    preview_light: EnumProperty(
+        name="Preview Light",
+        description="What lights the viewport preview",
+        items=[
+            ("ENVIRONMENT", "Environment", "The world's environment image, prefiltered for the preview model", 0),
+            ("POINT", "Point Light", "One movable point light (Light Location, Intensity) instead of the world", 1),
+            ("BESIDE", "Both, Side by Side", "Fraser's interface: the object under the world and, beside it on screen, "
+             "a copy under the point light (placed relative to the copy as Light Location is to the object)", 2),
+        ],
+        default="ENVIRONMENT",
+        update=lambda self, context: _redraw_views(context),
+    )
+    light_location: FloatVectorProperty(name="Light Location", description="The preview's point light, world space", size=3,
+                                        subtype="TRANSLATION", default=(3.0, -3.0, 4.0), update=lambda self, context: _redraw_views(context))
+    light_intensity: FloatProperty(name="Light Intensity", description="The preview's point light in W/sr (radiance falls off as 1/d²)",
+                                   default=10.0, min=0.0, soft_max=1000.0, update=lambda self, context: _redraw_views(context))
 
 
 def _redraw_views(context):
@@ -94,7 +114,7 @@ def _poll_painted(cls, context) -> bool:
 
 def _dab(settings, obj, points, previous=None, pack=True):
     brush = settings.brush
-    value = tuple(settings.color) if brush == "diffuse" else settings.value
+    value = tuple(settings.color) if brush in appearance.COLORS else settings.value
     appearance.paint(obj, brush, points, settings.radius, value=value, strength=settings.strength, mode=_MODES.get(brush),
                      previous=previous, pack=pack)
 
@@ -425,7 +445,7 @@ class ROKEBY_PT_appearance_brush(_PaintedSubPanel, bpy.types.Panel):
         col.prop(s, "brush")
         col.prop(s, "radius")
         col.prop(s, "strength")
-        col.prop(s, "color" if s.brush == "diffuse" else "value")
+        col.prop(s, "color" if s.brush in appearance.COLORS else "value")
         layout.operator(ROKEBY_OT_appearance_paint.bl_idname, icon="BRUSH_DATA")
         from . import appearance_preview
 
@@ -433,6 +453,11 @@ class ROKEBY_PT_appearance_brush(_PaintedSubPanel, bpy.types.Panel):
         layout.operator(ROKEBY_OT_appearance_preview.bl_idname, text="Hide Preview" if on else "Preview Under the World", icon="SHADING_RENDERED", depress=on)
         if on:
             layout.prop(s, "preview_model")
+            layout.prop(s, "preview_light")
+            if s.preview_light != "ENVIRONMENT":
+                col = layout.column(align=True)
+                col.prop(s, "light_location")
+                col.prop(s, "light_intensity")
         if on and appearance_preview.last_error:
             layout.label(text=appearance_preview.last_error, icon="ERROR")
 
@@ -453,12 +478,12 @@ class ROKEBY_PT_appearance_sliders(_PaintedSubPanel, bpy.types.Panel):
         for param in appearance.PARAMS:
             node = nodes.get(appearance.NODE_PREFIX + "global_" + param)
             if node is not None:
-                col.prop(node.inputs[7 if param == "diffuse" else 1], "default_value", text=_SLIDER_NAMES.get(param, param))
+                col.prop(node.inputs[7 if param in appearance.COLORS else 1], "default_value", text=_SLIDER_NAMES.get(param, param))
 
 
 # Slider labels as words (the parameter names title-cased would read "Anisotropic_Rotation").
 _SLIDER_NAMES = {"diffuse": "Diffuse", "specular": "Specular", "roughness": "Roughness", "metallic": "Metallic",
-                 "anisotropic": "Anisotropy", "anisotropic_rotation": "Anisotropic Rotation"}
+                 "anisotropic": "Anisotropy", "anisotropic_rotation": "Anisotropic Rotation", "specular_tint": "Specular Colour"}
 
 # The painting panels, parent first.
 PANELS = (ROKEBY_PT_appearance, ROKEBY_PT_appearance_brush, ROKEBY_PT_appearance_sliders)
