@@ -119,3 +119,21 @@ def test_specular_tint_under_the_environment_matches_numpy(gl):
     white, red = out[(1.0, 1.0, 1.0)], out[(1.0, 0.0, 0.0)]
     assert red[0] > 0.9 * white[0] and red[1] < 0.7 * white[1], (white, red)  # the Fresnel bias B stays white
     tex.release()
+
+
+def test_render_difference_is_measured_not_claimed():
+    """Renders use Principled (GGX) whatever the preview model: the measured difference is 0 for
+    the Principled preview and well above 0 for Phong and Torrance–Sparrow (rough metal most:
+    rough GGX loses energy, the seed's models do not); bad worlds are refused by name."""
+    im = envmaps.read_exr(envmaps.studio_world("forest"))
+    assert appearance_glsl.render_difference(im, "PRINCIPLED", roughness=0.6, metallic=1.0) == 0.0
+    d = {m: appearance_glsl.render_difference(im, m, base=(0.9, 0.9, 0.9), roughness=0.6, metallic=1.0) for m in ("PHONG", "TORRANCE_SPARROW")}
+    assert all(0.1 < x < 1.0 for x in d.values()), d
+    smooth = appearance_glsl.render_difference(im, "PHONG", base=(0.9, 0.9, 0.9), roughness=0.1, metallic=1.0)
+    assert 0.01 < smooth < d["PHONG"], (smooth, d)
+    with pytest.raises(ValueError, match="lat-long"):
+        appearance_glsl.render_difference(np.ones((8, 8, 3), np.float32), "PHONG")
+    with pytest.raises(ValueError, match="NaN"):
+        appearance_glsl.render_difference(np.full((8, 16, 3), np.nan, np.float32), "PHONG")
+    with pytest.raises(ValueError, match="model"):
+        appearance_glsl.render_difference(im, "BLINN")

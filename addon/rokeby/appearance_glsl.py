@@ -292,3 +292,49 @@ def shade_point_reference(n, v, p, light_position, light_intensity: float, base,
     else:
         raise ValueError(f"model: expected one of {', '.join(MODELS)}, got {model!r}")
     return np.where(nl > 0, out * light_intensity / d2, 0.0)
+
+
+# --- the final-render model (issue 22) ------------------------------------------------------------
+# Renders use Blender's Principled BSDF (GGX) whatever the preview model. A fit was measured and
+# rejected (docs/addon.md, "Final-render model"): the GGX roughness whose prefiltering lobe is
+# closest to Phong's or Torrance–Sparrow's (relative L2 of the normalised lobes) leaves 20 % lobe
+# error at low roughness (GGX's tails) and made the image difference *larger* at roughness ≥ 0.5
+# (rough GGX loses energy, which these two models do not). So the panel states the difference,
+# measured with :func:`render_difference`, instead of claiming a match.
+
+RENDER_DIFFERENCE_ROWS = 128  # the world is resampled to this height first (both models alike)
+
+
+def render_difference(pixels, model: str, base=(0.8, 0.8, 0.8), specular: float = 0.5, roughness: float = 0.5,
+                      metallic: float = 0.0, size: int = 64, spec_tint=(1.0, 1.0, 1.0)) -> float:
+    """How much a render (Principled/GGX) differs from ``model``'s preview of the same painted
+    values under the lat-long world ``pixels``: mean |render − preview| / mean |preview| over a
+    sphere seen head-on (``size``² pixels), both shaded as the preview shades them (the
+    Principled preview matches Cycles within 4 %, tests/test_appearance.py). The world is
+    resampled to RENDER_DIFFERENCE_ROWS rows first. 0 for PRINCIPLED."""
+    m = str(model).upper()
+    if m not in MODELS:
+        raise ValueError(f"model: expected one of {', '.join(MODELS)}, got {model!r}")
+    px = np.asarray(pixels, np.float32)[..., :3]
+    if px.ndim != 3 or px.shape[0] < 2 or px.shape[1] != 2 * px.shape[0]:
+        raise ValueError(f"pixels: expected a lat-long world (H, 2H, 3+), got {np.shape(pixels)}")
+    if not np.isfinite(px).all():
+        raise ValueError("pixels: the world contains NaN or inf")
+    if m == "PRINCIPLED":
+        return 0.0
+    if px.shape[0] > RENDER_DIFFERENCE_ROWS:
+        px = envmaps.convert(px, "latlong", "latlong", RENDER_DIFFERENCE_ROWS, supersample=2)
+    ys, xs = np.mgrid[0:size, 0:size] + 0.5
+    p = np.stack([xs / size * 2 - 1, ys / size * 2 - 1], -1)
+    inside = (p**2).sum(-1) < 0.98
+    n = np.stack([p[..., 0], -np.sqrt(np.maximum(1 - (p**2).sum(-1), 0)), p[..., 1]], -1)[inside]
+    v = np.array([0.0, -1.0, 0.0])
+    irr = np.asarray(envmaps.irradiance(px, size=8)["irradiance_coeffs"], np.float64)
+    shaded = {}
+    for mm in (m, "PRINCIPLED"):
+        lv = envmaps.prefilter(px, LOBE[mm], level_params(mm))
+        at = atlas(lv, height=px.shape[0])
+        shaded[mm] = shade_reference(at, len(lv), irr, n, v, np.asarray(base, np.float64)[:3], specular, roughness, metallic,
+                                     model=mm, spec_tint=np.asarray(spec_tint, np.float64)[:3])
+    preview, render = shaded[m], shaded["PRINCIPLED"]
+    return float(np.abs(render - preview).mean() / max(np.abs(preview).mean(), 1e-30))

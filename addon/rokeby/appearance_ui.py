@@ -10,7 +10,7 @@ touched only inside that draw handler, so it registers in background mode."""
 from __future__ import annotations
 
 import bpy
-from bpy.props import CollectionProperty, EnumProperty, FloatProperty, FloatVectorProperty, IntProperty, PointerProperty
+from bpy.props import CollectionProperty, EnumProperty, FloatProperty, FloatVectorProperty, IntProperty, PointerProperty, StringProperty
 
 from . import appearance, words
 
@@ -27,6 +27,18 @@ _BRUSH_ITEMS = [
     ("specular_tint", "Specular Colour", "Paint the colour of the highlights (Principled Specular Tint) toward the colour", 7),
 ]
 _MODES = {"diffuse": "MIX", "specular": "MIX", "metallic": "MIX", "roughness": "MIX", "specular_tint": "MIX"}
+
+
+def _redraw_views(context):
+    for area in context.screen.areas if getattr(context, "screen", None) else ():
+        if area.type == "VIEW_3D":
+            area.tag_redraw()
+
+
+def _redraw_update(_self, context):
+    """The settings' update callback (a named function: a lambda in these annotations would not
+    see this module's names when Blender evaluates them)."""
+    _redraw_views(context)
 
 
 class RokebyStrokePoint(bpy.types.PropertyGroup):
@@ -56,7 +68,7 @@ class RokebyAppearanceBrush(bpy.types.PropertyGroup):
             ("TORRANCE_SPARROW", "Torrance–Sparrow", "Fraser's simplified Torrance–Sparrow lobe with Schlick's Fresnel", 2),
         ],
         default="PRINCIPLED",
-        update=lambda self, context: _redraw_views(context),
+        update=_redraw_update,
     )
     resolution: IntProperty(name="Resolution", description="Side of the painted images in texels (texture target)", default=1024, min=8, max=16384)
     # Fraser's interface: the painted object under the environment and under a point light, side by side.
@@ -70,18 +82,16 @@ class RokebyAppearanceBrush(bpy.types.PropertyGroup):
              "a copy under the point light (placed relative to the copy as Light Location is to the object)", 2),
         ],
         default="ENVIRONMENT",
-        update=lambda self, context: _redraw_views(context),
+        update=_redraw_update,
     )
     light_location: FloatVectorProperty(name="Light Location", description="The preview's point light, world space", size=3,
-                                        subtype="TRANSLATION", default=(3.0, -3.0, 4.0), update=lambda self, context: _redraw_views(context))
+                                        subtype="TRANSLATION", default=(3.0, -3.0, 4.0), update=_redraw_update)
+    # The final-render model (issue 22): renders use Principled (GGX); Measure Difference to Render
+    # stores how far they are from the Phong / Torrance–Sparrow preview (−1: not measured).
+    render_difference: FloatProperty(name="Render Difference", default=-1.0, options={"SKIP_SAVE"})
+    render_difference_key: StringProperty(name="Measured For", default="", options={"SKIP_SAVE"})
     light_intensity: FloatProperty(name="Light Intensity", description="The preview's point light in W/sr (radiance falls off as 1/d²)",
-                                   default=10.0, min=0.0, soft_max=1000.0, update=lambda self, context: _redraw_views(context))
-
-
-def _redraw_views(context):
-    for area in context.screen.areas if getattr(context, "screen", None) else ():
-        if area.type == "VIEW_3D":
-            area.tag_redraw()
+                                   default=10.0, min=0.0, soft_max=1000.0, update=_redraw_update)
 
 
 def _settings(context):
@@ -377,6 +387,76 @@ class ROKEBY_OT_appearance_preview(bpy.types.Operator):
         return {"FINISHED"}
 
 
+def _difference_key(context) -> str:
+    """What a render-difference figure was measured for: the preview model, the object, its
+    painted values and the world image (a change shows the figure as stale)."""
+    ob = context.active_object
+    s = _settings(context)
+    world = context.scene.world
+    img = next((n.image for n in world.node_tree.nodes if n.type == "TEX_ENVIRONMENT" and n.image is not None), None) \
+        if world is not None and world.use_nodes else None
+    means = tuple(round(float(x), 3) for x in _painted_means(ob)) if ob is not None and ob.type == "MESH" else ()
+    return f"{s.preview_model}|{ob.name if ob else ''}|{img.name if img else ''}|{means}"
+
+
+def _painted_means(ob):
+    """The object's painted values averaged: base (rgb), specular, roughness, metallic, tint (rgb)."""
+    import numpy as np
+
+    base = appearance.point_values(ob, "diffuse")[:, :3].mean(axis=0)
+    rest = [float(appearance.point_values(ob, p).mean()) for p in ("specular", "roughness", "metallic")]
+    tint = appearance.point_values(ob, "specular_tint")[:, :3].mean(axis=0) if appearance.PARAMS["specular_tint"][0] in ob.data.attributes \
+        else np.ones(3)
+    return (*base, *rest, *tint)
+
+
+class ROKEBY_OT_appearance_render_difference(bpy.types.Operator):
+    """Measure how much the final render (always Blender's Principled BSDF) differs from the
+    preview model's shading of this object's painted values under the world"""
+
+    bl_idname = "rokeby.appearance_render_difference"
+    bl_label = "Measure Difference to Render"
+
+    @classmethod
+    def poll(cls, context):
+        return _poll_painted(cls, context)
+
+    def execute(self, context):
+        from . import appearance_glsl, appearance_preview
+
+        s = _settings(context)
+        px = appearance_preview.world_pixels(context.scene)
+        if px is None:
+            self.report({"ERROR"}, "the world has no equirectangular Environment Texture to measure under")
+            return {"CANCELLED"}
+        try:
+            v = _painted_means(context.active_object)
+            d = appearance_glsl.render_difference(px, s.preview_model, base=v[0:3], specular=v[3], roughness=v[4], metallic=v[5],
+                                                  spec_tint=v[6:9])
+        except ValueError as e:
+            self.report({"ERROR"}, str(e))
+            return {"CANCELLED"}
+        s.render_difference = d
+        s.render_difference_key = _difference_key(context)
+        self.report({"INFO"}, f"Renders (Principled) differ from the {s.preview_model.replace('_', '–').title()} preview by {100 * d:.1f} %")
+        return {"FINISHED"}
+
+
+def draw_render_model(layout, context) -> None:
+    """What the panel says about the final render: always Principled (GGX); for another preview
+    model, by how much the render differs (measured), or the button that measures it."""
+    s = _settings(context)
+    if s.preview_model == "PRINCIPLED":
+        layout.label(text="Renders use this model (Principled BSDF)", icon="CHECKMARK")
+        return
+    col = layout.column(align=True)
+    col.label(text="Renders use Principled (GGX), not this model", icon="INFO")
+    if s.render_difference >= 0 and s.render_difference_key == _difference_key(context):
+        col.label(text=f"Render differs from this preview by {100 * s.render_difference:.1f} % (measured)", icon="ERROR")
+    else:
+        col.operator(ROKEBY_OT_appearance_render_difference.bl_idname, icon="VIEWZOOM")
+
+
 class ROKEBY_PT_appearance(bpy.types.Panel):
     """Set up painting on the active mesh (target: per-point attributes or image textures)."""
 
@@ -453,6 +533,7 @@ class ROKEBY_PT_appearance_brush(_PaintedSubPanel, bpy.types.Panel):
         layout.operator(ROKEBY_OT_appearance_preview.bl_idname, text="Hide Preview" if on else "Preview Under the World", icon="SHADING_RENDERED", depress=on)
         if on:
             layout.prop(s, "preview_model")
+            draw_render_model(layout, context)
             layout.prop(s, "preview_light")
             if s.preview_light != "ENVIRONMENT":
                 col = layout.column(align=True)
@@ -489,7 +570,8 @@ _SLIDER_NAMES = {"diffuse": "Diffuse", "specular": "Specular", "roughness": "Rou
 PANELS = (ROKEBY_PT_appearance, ROKEBY_PT_appearance_brush, ROKEBY_PT_appearance_sliders)
 
 
-_CLASSES = (RokebyStrokePoint, RokebyAppearanceBrush, ROKEBY_OT_appearance_setup, ROKEBY_OT_appearance_remove, ROKEBY_OT_appearance_texture_remove, ROKEBY_OT_appearance_paint, ROKEBY_OT_appearance_preview, *PANELS)
+_CLASSES = (RokebyStrokePoint, RokebyAppearanceBrush, ROKEBY_OT_appearance_setup, ROKEBY_OT_appearance_remove, ROKEBY_OT_appearance_texture_remove, ROKEBY_OT_appearance_paint, ROKEBY_OT_appearance_preview,
+            ROKEBY_OT_appearance_render_difference, *PANELS)
 
 
 def register():
