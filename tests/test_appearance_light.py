@@ -137,3 +137,20 @@ def test_render_difference_is_measured_not_claimed():
         appearance_glsl.render_difference(np.full((8, 16, 3), np.nan, np.float32), "PHONG")
     with pytest.raises(ValueError, match="model"):
         appearance_glsl.render_difference(im, "BLINN")
+
+
+def test_viewport_draws_the_point_lit_view_beside_the_environment_lit_one():
+    """tests/appearance_light_check.py in a fresh bpy process, through Blender's gpu module and
+    the viewport handler's draw_view: 'BESIDE' draws the environment-lit ball unchanged and, to
+    its right on screen, a copy under the point light that matches the numpy twin; the copy's
+    highlight moves right, left and up with the light; a red specular colour turns it red."""
+    from bpy_process import run_check
+
+    res = run_check("appearance_light_check.py")
+    assert res["env_covered_left"] > 0.15 and res["env_covered_right"] == 0.0, res
+    assert res["beside_covered_right"] > 0.15 and res["left_same"] < 1e-6, res
+    assert res["point_rel"] < 0.05, res
+    (rx, ry), (lx, ly), (ux, uy) = res["highlight_light_right"], res["highlight_light_left"], res["highlight_light_up"]
+    assert rx - lx > 4 and abs(ry - ly) < 1.5 and uy - ry > 3, res
+    w, r = res["highlight_white"], res["highlight_red"]
+    assert max(w) / min(w) < 1.3 and r[0] > 0.5 * w[0] and r[1] < 0.3 * r[0] and r[2] < 0.3 * r[0], res
