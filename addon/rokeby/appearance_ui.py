@@ -438,7 +438,8 @@ class ROKEBY_OT_appearance_render_difference(bpy.types.Operator):
             return {"CANCELLED"}
         s.render_difference = d
         s.render_difference_key = _difference_key(context)
-        self.report({"INFO"}, f"Renders (Principled) differ from the {s.preview_model.replace('_', '–').title()} preview by {100 * d:.1f} %")
+        name = s.bl_rna.properties["preview_model"].enum_items[s.preview_model].name
+        self.report({"INFO"}, f"Renders (Principled) differ from the {name} preview by {100 * d:.1f} %")
         return {"FINISHED"}
 
 

@@ -313,6 +313,7 @@ MENU = (
     ("rokeby.appearance_texture_remove", None, {}, "X"),
     ("rokeby.appearance_remove", None, {}, "TRASH"),
     ("rokeby.appearance_preview", None, {}, "SHADING_RENDERED"),
+    ("rokeby.appearance_render_difference", None, {}, "VIEWZOOM"),
     None,
     ("rokeby.shadow_start", None, {}, "LIGHT"),
     ("rokeby.shadow_drag", None, {}, "MOUSE_LMB_DRAG"),
