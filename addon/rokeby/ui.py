@@ -324,6 +324,7 @@ MENU = (
     ("rokeby.composite_setup_passes", None, {}, "RENDERLAYERS"),
     ("rokeby.composite_render", None, {}, "RENDER_STILL"),
     ("rokeby.composite_edit", None, {}, "IMAGE"),
+    ("rokeby.composite_to_compositor", None, {}, "NODE_COMPOSITING"),
     ("rokeby.composite_sequence", None, {}, "SEQUENCE"),
 )
 
