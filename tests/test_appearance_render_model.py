@@ -79,3 +79,16 @@ def test_measuring_without_an_environment_is_refused(painted):
     with pytest.raises(RuntimeError, match="no equirectangular Environment Texture"):
         bpy.ops.rokeby.appearance_render_difference()
     assert bpy.context.scene.rokeby_appearance_brush.render_difference == -1.0
+
+
+def test_preview_settings_update_without_errors(painted, capfd):
+    """Changing the preview model, light or light location runs their update (a viewport redraw);
+    before, the update was a lambda that raised NameError inside Blender on every change."""
+    s = bpy.context.scene.rokeby_appearance_brush
+    capfd.readouterr()
+    s.preview_model = "TORRANCE_SPARROW"
+    s.preview_light = "BESIDE"
+    s.light_location = (1.0, -2.0, 3.0)
+    s.light_intensity = 5.0
+    err = capfd.readouterr().err
+    assert "Error" not in err and "Traceback" not in err, err

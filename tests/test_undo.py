@@ -309,7 +309,7 @@ NOT_COVERED = {
     "update": "recomputes the field from the scene as it is: undoing it changes nothing",
     "reflection_map": "a Cycles capture; tests/test_reflmap.py covers its data",
     "appearance_preview": "switches a viewport draw handler on or off: no scene data changes",
-    "appearance_render_difference": "measures; stores the figure in unsaved brush settings only (tests/test_appearance_render_model.py)",
+    "appearance_render_difference": "a measurement: stores the figure in the brush settings, edits nothing (tests/test_appearance_render_model.py)",
     "shadow_start": "a shadow-editing session lives outside the file (no scene data changes until Apply)",
     "shadow_drag": "moves a handle of the session, outside the file; Apply is the undoable step",
     "shadow_stop": "ends the session; the scene's data does not change",

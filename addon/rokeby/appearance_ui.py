@@ -88,8 +88,8 @@ class RokebyAppearanceBrush(bpy.types.PropertyGroup):
                                         subtype="TRANSLATION", default=(3.0, -3.0, 4.0), update=_redraw_update)
     # The final-render model (issue 22): renders use Principled (GGX); Measure Difference to Render
     # stores how far they are from the Phong / Torrance–Sparrow preview (−1: not measured).
-    render_difference: FloatProperty(name="Render Difference", default=-1.0, options={"SKIP_SAVE"})
-    render_difference_key: StringProperty(name="Measured For", default="", options={"SKIP_SAVE"})
+    render_difference: FloatProperty(name="Render Difference", default=-1.0)
+    render_difference_key: StringProperty(name="Measured For", default="")
     light_intensity: FloatProperty(name="Light Intensity", description="The preview's point light in W/sr (radiance falls off as 1/d²)",
                                    default=10.0, min=0.0, soft_max=1000.0, update=_redraw_update)
 
