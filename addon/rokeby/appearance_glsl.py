@@ -19,6 +19,13 @@ Preview models (``RokebyAppearance.options.y``), all driven by the painted Princ
 * ``TORRANCE_SPARROW`` — Fraser's simplified Torrance–Sparrow lobe exp(−(θ_h/σ)²), σ = α, with
   Schlick's Fresnel at n·v.
 
+The specular tint (Principled Specular Tint, the specular colour brush) multiplies the dielectric
+F0 in every model (``rk_shade_tinted``; ``rk_shade`` is it with a white tint). Fraser's second
+view, one point light (``options.w`` = RK_LIGHT_POINT, ``light`` in the block), evaluates each
+model's BRDF directly (``rk_shade_point``, numpy twin :func:`shade_point_reference`). Renders
+always use the Principled BSDF: :func:`render_difference` measures how far a Phong or
+Torrance–Sparrow preview is from it.
+
 The atlas stacks the levels top to bottom, each resampled to the same H×W lat-long grid (row 0 at
 the top, Blender's convention); lookups are bilinear with texelFetch, wrapping in u and crossing
 the poles at u + ½, exactly like rokeby_core::envmap.
