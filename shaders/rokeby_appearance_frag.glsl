@@ -1,6 +1,7 @@
-/* Rokeby appearance preview, fragment stage (v_par: specular, roughness, metallic). Parameters on a
- * texture target come from their image at the fragment's UV; then the global sliders, as the
- * material's rokeby_global_* nodes apply them. */
+/* Rokeby appearance preview, fragment stage (v_par: specular, roughness, metallic; v_tint: the
+ * specular tint). Parameters on a texture target come from their image at the fragment's UV; then
+ * the global sliders, as the material's rokeby_global_* nodes apply them; then the light
+ * (options.w): the prefiltered world, or the point light of Fraser's second view. */
 void main()
 {
   vec3 n = normalize(v_nor);
@@ -23,7 +24,17 @@ void main()
   if ((tex & RK_TEX_METALLIC) != 0) {
     par.z = rk_painted(rk_tex_metallic, v_uv).r;
   }
+  vec3 tint = v_tint;
+  if ((tex & RK_TEX_SPECULAR_TINT) != 0) {
+    tint = rk_painted(rk_tex_specular_tint, v_uv).rgb;
+  }
   base *= rk_appearance.tint;
+  tint = max(tint * rk_appearance.spec_tint.rgb, vec3(0.0));
   par = clamp(par * rk_appearance.scale.xyz, 0.0, 1.0);
-  frag = vec4(rk_shade(n, v, base.rgb, par.x, par.y, par.z), 1.0);
+  if (rk_appearance.options.w == RK_LIGHT_POINT) {
+    frag = vec4(rk_shade_point(n, v, v_pos, base.rgb, par.x, par.y, par.z, tint), 1.0);
+  }
+  else {
+    frag = vec4(rk_shade_tinted(n, v, base.rgb, par.x, par.y, par.z, tint), 1.0);
+  }
 }

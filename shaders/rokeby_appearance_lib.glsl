@@ -77,18 +77,19 @@ vec2 rk_brdf_albedo(float n_dot_v, float roughness)
   return mix(a, b, f.y);
 }
 
-/* n: shading normal, v: direction to the viewer (both unit, world space). */
-vec3 rk_shade(vec3 n, vec3 v, vec3 base, float specular, float roughness, float metallic)
+/* n: shading normal, v: direction to the viewer (both unit, world space); tint: the specular tint
+ * (Principled's Specular Tint: the dielectric F0 times it, as Blender 4 does; metals keep F0 = base). */
+vec3 rk_shade_tinted(vec3 n, vec3 v, vec3 base, float specular, float roughness, float metallic, vec3 tint)
 {
   vec3 r = reflect(-v, n);
   float nv = clamp(dot(n, v), 0.0, 1.0);
-  vec3 f0 = mix(vec3(0.08 * specular), base, metallic);
+  vec3 f0 = mix(0.08 * specular * tint, base, metallic);
   vec3 diffuse = base * (1.0 - metallic) * rk_irradiance(n);
   vec3 spec = rk_specular(r, roughness);
   int model = rk_appearance.options.y;
   if (model == RK_MODEL_PRINCIPLED) {
     vec2 ab = rk_brdf_albedo(nv, roughness);
-    float e_dielectric = 0.08 * specular * ab.x + ab.y; /* the specular layer's albedo */
+    vec3 e_dielectric = 0.08 * specular * tint * ab.x + ab.y; /* the specular layer's albedo */
     return diffuse * (1.0 - e_dielectric) + spec * (f0 * ab.x + ab.y);
   }
   if (model == RK_MODEL_TORRANCE_SPARROW) {
@@ -96,6 +97,60 @@ vec3 rk_shade(vec3 n, vec3 v, vec3 base, float specular, float roughness, float 
     return diffuse + spec * fresnel;
   }
   return diffuse + spec * f0; /* Phong: k_s = F0, the lobe is normalised */
+}
+
+vec3 rk_shade(vec3 n, vec3 v, vec3 base, float specular, float roughness, float metallic)
+{
+  return rk_shade_tinted(n, v, base, specular, roughness, metallic, vec3(1.0));
+}
+
+/* Fraser's second view: the same painted parameters under one point light (light.xyz, intensity
+ * light.w, falling off as 1/d^2), each model's BRDF evaluated directly (numpy twin:
+ * rokeby.appearance_glsl.shade_point_reference). p: the shaded point (world space).
+ * Principled: GGX D, Smith height-correlated visibility, Schlick F (alpha = roughness^2), the
+ * diffuse weighted by what the specular layer leaves, as in rk_shade. Phong: the paper's
+ * (1 + s)/(2 pi) k_s max(0, r.l)^s / (l.n), s = (2/alpha^2 - 2)/4 as the atlas levels use.
+ * Torrance-Sparrow: the paper's k_s S / (4 cos_i cos_o), S = exp(-(theta_h/s)^2)/(pi s^2), s = alpha. */
+vec3 rk_shade_point(vec3 n, vec3 v, vec3 p, vec3 base, float specular, float roughness, float metallic, vec3 tint)
+{
+  vec3 to_light = rk_appearance.light.xyz - p;
+  float d2 = max(dot(to_light, to_light), 1e-8);
+  vec3 l = to_light * inversesqrt(d2);
+  float nl = dot(n, l);
+  if (nl <= 0.0) {
+    return vec3(0.0);
+  }
+  float nv = clamp(dot(n, v), 1e-3, 1.0);
+  vec3 h = normalize(l + v);
+  float nh = clamp(dot(n, h), 0.0, 1.0);
+  float vh = clamp(dot(v, h), 0.0, 1.0);
+  float alpha = max(roughness * roughness, 1e-3);
+  vec3 f0 = mix(0.08 * specular * tint, base, metallic);
+  vec3 diffuse = base * (1.0 - metallic) / RK_PI;
+  vec3 brdf_nl; /* the BRDF times n.l */
+  int model = rk_appearance.options.y;
+  if (model == RK_MODEL_PRINCIPLED) {
+    float a2 = alpha * alpha;
+    float q = nh * nh * (a2 - 1.0) + 1.0;
+    float d = a2 / (RK_PI * q * q);
+    float vis = 0.5 / (nl * sqrt(nv * nv * (1.0 - a2) + a2) + nv * sqrt(nl * nl * (1.0 - a2) + a2));
+    vec3 f = f0 + (1.0 - f0) * pow(1.0 - vh, 5.0);
+    vec2 ab = rk_brdf_albedo(nv, roughness);
+    vec3 e_dielectric = 0.08 * specular * tint * ab.x + ab.y;
+    brdf_nl = (diffuse * (1.0 - e_dielectric) + d * vis * f) * nl;
+  }
+  else if (model == RK_MODEL_TORRANCE_SPARROW) {
+    float th = acos(nh);
+    float s = exp(-(th / alpha) * (th / alpha)) / (RK_PI * alpha * alpha);
+    vec3 f = f0 + (1.0 - f0) * pow(1.0 - nv, 5.0);
+    brdf_nl = diffuse * nl + f * s / (4.0 * nv);
+  }
+  else {
+    float sigma = min((2.0 / (alpha * alpha) - 2.0) / 4.0, 1e6);
+    float rl = max(dot(reflect(-v, n), l), 1e-8); /* pow(0, 0) is undefined */
+    brdf_nl = diffuse * nl + f0 * (1.0 + sigma) / (2.0 * RK_PI) * pow(rl, sigma);
+  }
+  return brdf_nl * rk_appearance.light.w / d2;
 }
 
 /* A painted image at uv as the material's Image Texture node reads it (Linear, Extend): bilinear

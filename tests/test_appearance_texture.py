@@ -52,10 +52,10 @@ def test_texture_target_wires_images_through_the_uv_map_and_removal_restores(bal
         tex = nodes["rokeby_tex_" + param]
         assert tex.inputs["Vector"].links[0].from_node.name == "rokeby_uv"
         glob = nodes["rokeby_global_" + param]
-        sock = glob.inputs[6] if param == "diffuse" else glob.inputs[0]
+        sock = glob.inputs[6] if param in appearance.COLORS else glob.inputs[0]
         assert sock.links[0].from_node.name == "rokeby_tex_" + param
         assert tuple(tex.image.size) == (64, 64) and tex.image.is_float
-        assert tex.image.colorspace_settings.name == ("Non-Color" if param != "diffuse" else tex.image.colorspace_settings.name)
+        assert tex.image.colorspace_settings.name == ("Non-Color" if param not in appearance.COLORS else tex.image.colorspace_settings.name)
     # filled from the attributes: roughness 0.1, metallic 1 everywhere
     np.testing.assert_allclose(appearance.read_texture(ball, "roughness"), 0.1, atol=1e-6)
     np.testing.assert_allclose(appearance.read_texture(ball, "metallic"), 1.0, atol=1e-6)

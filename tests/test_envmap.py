@@ -182,7 +182,7 @@ def test_radiance_hdr_files_round_trip_and_agree_with_blender(tmp_path, worlds):
     with pytest.raises(ValueError, match="not finite"):
         envmaps.write_hdr(tmp_path / "nan.hdr", np.full((2, 2, 3), np.nan, np.float32))
     with pytest.raises(ValueError, match="expected an OpenEXR"):
-        envmaps.read_image(tmp_path / "x.png")
+        envmaps.read_image(tmp_path / "x.tif")
 
 
 def test_bad_input_gives_clear_errors():

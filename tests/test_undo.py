@@ -99,6 +99,11 @@ def snapshot():
             sorted((lk.from_node.name, lk.from_socket.identifier, lk.to_node.name, lk.to_socket.identifier) for lk in tree.links),
         )
     state["images"] = sorted((im.name, tuple(im.size), _pixels(im)) for im in bpy.data.images)
+    sc = bpy.context.scene
+    tree = sc.node_tree if sc.use_nodes else None
+    state["compositor"] = None if tree is None else (
+        sorted((n.name, n.bl_idname, n.image.name if getattr(n, "image", None) else None) for n in tree.nodes),
+        sorted((lk.from_node.name, lk.to_node.name, lk.to_socket.identifier) for lk in tree.links))
     active = bpy.context.view_layer.objects.active
     state["active"] = active.name if active else None
     return state
@@ -231,6 +236,7 @@ CASES = {
     "composite_setup_passes": (lambda b: _tiny_renders(), lambda b: bpy.ops.rokeby.composite_setup_passes()),
     "composite_render": (_with_passes, _composite_render),
     "composite_edit": (_with_rendered_frame, lambda b: bpy.ops.rokeby.composite_edit(edit="EMBOSS", amount=0.5, image_name="Edited")),
+    "composite_to_compositor": (_with_rendered_frame, lambda b: bpy.ops.rokeby.composite_to_compositor(image_name="Rendered")),
     "appearance_setup": (lambda b: _active(b), lambda b: bpy.ops.rokeby.appearance_setup()),
     "appearance_paint": (_with_painting, lambda b: bpy.ops.rokeby.appearance_paint(stroke=[{"name": "", "location": (0.0, -1.0, 0.0)}])),
     "appearance_texture_remove": (lambda b: _with_painting(b, "TEXTURE"), lambda b: bpy.ops.rokeby.appearance_texture_remove()),
@@ -303,6 +309,7 @@ NOT_COVERED = {
     "update": "recomputes the field from the scene as it is: undoing it changes nothing",
     "reflection_map": "a Cycles capture; tests/test_reflmap.py covers its data",
     "appearance_preview": "switches a viewport draw handler on or off: no scene data changes",
+    "appearance_render_difference": "a measurement: stores the figure in the brush settings, edits nothing (tests/test_appearance_render_model.py)",
     "shadow_start": "a shadow-editing session lives outside the file (no scene data changes until Apply)",
     "shadow_drag": "moves a handle of the session, outside the file; Apply is the undoable step",
     "shadow_stop": "ends the session; the scene's data does not change",

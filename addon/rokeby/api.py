@@ -1078,6 +1078,21 @@ def _check_fit(fit, noise_tolerance):
         raise RokebyError("noise_tolerance: only the 'qp' fit has constraints to relax")
 
 
+def use_in_compositor(image_name: str = "Rokeby Recomposited", *, scene=None):
+    """Feeds the recomposited image ``image_name`` into the scene's compositor: an Image node
+    (``compositing.COMPOSITOR_NODE``) that later recomposites of that image keep current, linked to
+    a Viewer for the backdrop; chain it with other compositor nodes. Returns the node."""
+    import bpy  # noqa: PLC0415
+
+    from . import compositing as comp  # noqa: PLC0415
+
+    img = bpy.data.images.get(image_name)
+    if img is None:
+        raise comp.CompositingError(f"image_name: there is no image '{image_name}': click Render and Recomposite "
+                                    "(or Recomposite Render) first")
+    return comp.feed_compositor(_scene(scene), img)
+
+
 def _recomposite_opened(opened, edit, amount, k_d, k_r, image_name):
     from . import compositing as comp  # noqa: PLC0415
 

@@ -15,11 +15,12 @@ sharpen/blur  ``rokeby_roughness``           Roughness (sharpen lowers, blur rai
 stretch       ``rokeby_anisotropic``         Anisotropic, and its direction ``rokeby_anisotropic_rotation``
                                              (Anisotropic Rotation) from the stroke direction
 metallic      ``rokeby_metallic``            Metallic (energy between diffuse and specular)
+specular_tint ``rokeby_specular_tint`` (RGBA) Specular Tint (Fraser's Step 6: the highlight's colour)
 ============  =============================  ==========================================
 
 Each scalar attribute reaches its input through a Multiply node named ``rokeby_global_<param>``
-whose second value is that parameter's global slider (1 = as painted); the colour goes through a
-Mix (Multiply) node with the global tint. A stroke is a list of dabs; a dab at world position c with
+whose second value is that parameter's global slider (1 = as painted); the colours (:data:`COLORS`)
+go through a Mix (Multiply) node with their global tint. A stroke is a list of dabs; a dab at world position c with
 radius r changes every point p by w = strength · exp(−‖p − c‖² / (2 (r/2)²)) (Gaussian falloff,
 e⁻² ≈ 0.14 at the radius): ``value ← value + w (target − value)`` for mode 'MIX', or
 ``value ← clamp(value ± w · amount)`` for 'ADD'/'SUBTRACT'. All vectorised with numpy.
@@ -44,7 +45,13 @@ PARAMS = {
     "anisotropic": ("rokeby_anisotropic", "Anisotropic", 0.0, (0.0, 1.0)),
     "anisotropic_rotation": ("rokeby_anisotropic_rotation", "Anisotropic Rotation", 0.0, (0.0, 1.0)),
     "metallic": ("rokeby_metallic", "Metallic", 0.0, (0.0, 1.0)),
+    # Fraser's proposed Step 6 ("change the colour of specular highlights"): Blender's specular
+    # tint, the colour of the dielectric reflection at normal incidence (F0 · tint; on metals it
+    # tints the grazing edge, Blender's F82 tint).
+    "specular_tint": ("rokeby_specular_tint", "Specular Tint", (1.0, 1.0, 1.0, 1.0), (0.0, 1.0)),
 }
+# The colour parameters (RGBA attributes, Mix (Multiply) global nodes, RGB brushes).
+COLORS = ("diffuse", "specular_tint")
 # Largest colour component a brush or tint accepts: room for HDR albedo tricks, far from float32's
 # overflow (3.4e38), so no painted or blended value can become inf in the attribute or image.
 MAX_COLOR = 1e4
@@ -153,7 +160,7 @@ def setup(obj, material=None, target: str = "POINT", resolution: int = 1024, uv_
     for param, (attr, socket_name, default, _) in PARAMS.items():
         sock = bsdf.inputs[socket_name]
         if attr not in me.attributes:
-            if param == "diffuse":
+            if param in COLORS:
                 a = me.attributes.new(attr, "FLOAT_COLOR", "POINT")
                 a.data.foreach_set("color", np.tile(np.array(sock.default_value, np.float32), n))
             else:
@@ -168,7 +175,7 @@ def setup(obj, material=None, target: str = "POINT", resolution: int = 1024, uv_
             node_attr.location = (bsdf.location.x - 500, bsdf.location.y - 80 * list(PARAMS).index(param))
         glob = nt.nodes.get(NODE_PREFIX + "global_" + param)
         if glob is None:
-            if param == "diffuse":
+            if param in COLORS:
                 glob = nt.nodes.new("ShaderNodeMix")
                 glob.data_type = "RGBA"
                 glob.blend_type = "MULTIPLY"
@@ -204,10 +211,10 @@ def _attr(obj, param):
 
 
 def read(obj, param) -> np.ndarray:
-    """The painted values of ``param``: (N,) floats, or (N, 4) RGBA for 'diffuse'."""
+    """The painted values of ``param``: (N,) floats, or (N, 4) RGBA for the colours ('diffuse', 'specular_tint')."""
     a = _attr(obj, param)
     n = len(obj.data.vertices)
-    if param == "diffuse":
+    if param in COLORS:
         v = np.empty(4 * n, np.float32)
         a.data.foreach_get("color", v)
         return v.reshape(n, 4)
@@ -228,7 +235,7 @@ def _finite32(values, what: str) -> np.ndarray:
 def _write(obj, param, values):
     values = _finite32(values, "value")
     a = _attr(obj, param)
-    a.data.foreach_set("color" if param == "diffuse" else "value", np.ascontiguousarray(values, np.float32).ravel())
+    a.data.foreach_set("color" if param in COLORS else "value", np.ascontiguousarray(values, np.float32).ravel())
     obj.data.update()
 
 
@@ -254,7 +261,7 @@ def paint(obj, brush: str, centres, radius: float, value=None, strength: float =
           pack: bool = True) -> np.ndarray:
     """One stroke of ``brush`` (a parameter of PARAMS or Fraser's 'sharpen', 'blur', 'stretch')
     through world-space ``centres`` ((3,) or (K, 3) dabs, applied in order). ``value`` is the
-    target (mode 'MIX', an RGB(A) colour for 'diffuse') or the amount (modes 'ADD'/'SUBTRACT';
+    target (mode 'MIX', an RGB(A) colour for 'diffuse' and 'specular_tint') or the amount (modes 'ADD'/'SUBTRACT';
     default 0.25). ``previous``: the stroke's point before these dabs (not painted again; it
     gives 'stretch' its direction when a stroke arrives one dab at a time). ``pack``: on a
     texture target, pack the changed images afterwards (~50 ms at 1024²), so an undo step taken
@@ -293,12 +300,12 @@ def paint(obj, brush: str, centres, radius: float, value=None, strength: float =
             raise ValueError(f"value: brush {brush!r} in mode 'MIX' needs a target value")
         value = 0.25
     lo, hi = PARAMS[param][3]
-    if param == "diffuse":
+    if param in COLORS:
         v = np.asarray(value, np.float64).ravel()
         if v.size == 3:
             v = np.append(v, 1.0)
         if v.size != 4 or not np.isfinite(v).all() or (v < 0).any() or (v > MAX_COLOR).any():
-            raise ValueError(f"value: a diffuse colour is 3 or 4 finite values in [0, {MAX_COLOR:g}], got {value!r}")
+            raise ValueError(f"value: a {'diffuse' if param == 'diffuse' else 'specular tint'} colour is 3 or 4 finite values in [0, {MAX_COLOR:g}], got {value!r}")
         target = v
     else:
         if not (isinstance(value, (int, float)) and math.isfinite(value)):
@@ -323,7 +330,7 @@ def paint(obj, brush: str, centres, radius: float, value=None, strength: float =
         idx = _reach(pts, dab, radius)
         reached.append(idx)
         w = falloff(pts[idx], dab, radius, strength)
-        if param == "diffuse":
+        if param in COLORS:
             w = w[:, None]
         v = vals[idx]
         if mode == "MIX":
@@ -332,7 +339,7 @@ def paint(obj, brush: str, centres, radius: float, value=None, strength: float =
             v = v + (1.0 if mode == "ADD" else -1.0) * w * target
         if param == "anisotropic_rotation":
             v = np.mod(v, 1.0)
-        elif param != "diffuse":
+        elif param not in COLORS:
             v = np.clip(v, lo, hi)
         else:
             v = np.maximum(v, 0.0)
@@ -402,13 +409,13 @@ def _stretch_direction(obj, pts, m, path, first, radius, strength, idx):
 
 def set_global(mat, param: str, value) -> None:
     """Fraser's global sliders: scales ``param`` over the whole object (1 = as painted; for
-    'diffuse' an RGB tint)."""
+    the colours an RGB tint)."""
     if param not in PARAMS:
         raise ValueError(f"param: unknown parameter {param!r} (expected one of {', '.join(PARAMS)})")
     node = mat.node_tree.nodes.get(NODE_PREFIX + "global_" + param) if mat is not None and mat.use_nodes else None
     if node is None:
         raise ValueError(f"material: '{getattr(mat, 'name', mat)}' is not set up for painting: click Set Up Appearance Painting first (Rokeby ▸ Appearance Painting)")
-    if param == "diffuse":
+    if param in COLORS:
         v = np.asarray(value, np.float64).ravel()
         if v.size == 3:
             v = np.append(v, 1.0)
@@ -482,13 +489,13 @@ def setup_texture(obj, resolution: int = 1024, uv_map: str | None = None, materi
             if img is not None:
                 bpy.data.images.remove(img)
             img = bpy.data.images.new(_image_name(mat, param), resolution, resolution, alpha=True, float_buffer=True)
-        if param != "diffuse":
+        if param not in COLORS:
             img.colorspace_settings.name = "Non-Color"
         img["rokeby_painted"] = True
         # fill from the attributes: barycentric interpolation of the vertex values at each texel
         vals = read(obj, param).astype(np.float64)
         px = np.empty((resolution * resolution, 4), np.float32)
-        if param == "diffuse":
+        if param in COLORS:
             px[:] = vals.mean(axis=0)
             px[ras["texel"]] = np.einsum("nk,nkc->nc", ras["bary"], vals[ras["tri_verts"]])
         else:
@@ -505,7 +512,7 @@ def setup_texture(obj, resolution: int = 1024, uv_map: str | None = None, materi
         tex.interpolation = "Linear"
         tex.extension = "EXTEND"
         nt.links.new(uvn.outputs["UV"], tex.inputs["Vector"])
-        nt.links.new(tex.outputs["Color"], glob.inputs[6] if param == "diffuse" else glob.inputs[0])
+        nt.links.new(tex.outputs["Color"], glob.inputs[6] if param in COLORS else glob.inputs[0])
     _ensure_save_handler()
     pack_painted(obj)
     return mat
@@ -532,7 +539,7 @@ def remove_texture(obj, material=None, delete_images: bool = True) -> None:
             if delete_images and img is not None and img.users == 0:
                 bpy.data.images.remove(img)
         if glob is not None and attr is not None:
-            if param == "diffuse":
+            if param in COLORS:
                 nt.links.new(attr.outputs["Color"], glob.inputs[6])
             else:
                 nt.links.new(attr.outputs["Fac"], glob.inputs[0])
@@ -700,7 +707,7 @@ def _world_index(ras, m):
 
 def read_texture(obj, param) -> np.ndarray:
     """The painted image of ``param`` on a texture target: (res, res) floats, or (res, res, 4)
-    RGBA for 'diffuse'; row 0 is v = 0 (Blender's pixel order)."""
+    RGBA for the colours; row 0 is v = 0 (Blender's pixel order)."""
     if param not in PARAMS:
         raise ValueError(f"param: unknown parameter {param!r} (expected one of {', '.join(PARAMS)})")
     img = _texture_image(obj, param)
@@ -710,7 +717,7 @@ def read_texture(obj, param) -> np.ndarray:
     px = np.empty(w * h * 4, np.float32)
     img.pixels.foreach_get(px)
     px = px.reshape(h, w, 4)
-    return px if param == "diffuse" else px[..., 0].copy()
+    return px if param in COLORS else px[..., 0].copy()
 
 
 def _paint_texture(obj, img, param, c, radius, strength, mode, target):
@@ -738,7 +745,7 @@ def _paint_texture(obj, img, param, c, radius, strength, mode, target):
         touched.append(near)
         w = falloff(pts[near], dab, radius, strength)
         rows = tex[order[near]]
-        if param == "diffuse":
+        if param in COLORS:
             v = px[rows].astype(np.float64)
             w = w[:, None]
         else:
@@ -746,11 +753,11 @@ def _paint_texture(obj, img, param, c, radius, strength, mode, target):
         v = v + w * (target - v) if mode == "MIX" else v + (1.0 if mode == "ADD" else -1.0) * w * target
         if param == "anisotropic_rotation":
             v = np.mod(v, 1.0)
-        elif param != "diffuse":
+        elif param not in COLORS:
             v = np.clip(v, lo, hi)
         else:
             v = np.maximum(v, 0.0)
-        if param == "diffuse":
+        if param in COLORS:
             px[rows] = v
         else:
             px[rows, :3] = v[:, None]
@@ -760,7 +767,7 @@ def _paint_texture(obj, img, param, c, radius, strength, mode, target):
         img.update()
         _ensure_save_handler()  # a file reopened in a new session: the next save packs this
     px = px.reshape(res, res, 4)
-    return px.copy() if param == "diffuse" else px[..., 0].copy()
+    return px.copy() if param in COLORS else px[..., 0].copy()
 
 
 # Painted image → pointer of the packed data its pixels in memory came from. Blender's global
@@ -918,3 +925,40 @@ def _stretch_direction_texture(obj, path, first, radius, strength):
     px[rows, :3] = rho[:, None]
     img.pixels.foreach_set(px.ravel())
     img.update()
+
+
+def migrate() -> list[str]:
+    """Files painted before a parameter existed (the specular colour, issue 22) get it at load:
+    each painted mesh's material (with ``rokeby_global_roughness``) lacking a parameter's nodes is
+    set up again (idempotent: what exists is kept; the new attribute and, on a texture target, its
+    image start from the material's value, so the render does not change). Returns what was done,
+    or why a material was left as it was (a linked library, or the new input driven by another
+    node: painting that parameter then asks for Set Up)."""
+    import bpy
+
+    done = []
+    for ob in bpy.data.objects:
+        if ob.type != "MESH" or ob.library is not None or ob.data.library is not None or len(ob.data.vertices) == 0:
+            continue
+        for slot in ob.material_slots:
+            mat = slot.material
+            nodes = mat.node_tree.nodes if mat is not None and mat.use_nodes and mat.node_tree is not None else None
+            if nodes is None or nodes.get(NODE_PREFIX + "global_roughness") is None or mat.library is not None:
+                continue
+            missing = [p for p in PARAMS if nodes.get(NODE_PREFIX + "global_" + p) is None
+                       or (nodes.get(NODE_PREFIX + "uv") is not None and nodes.get(NODE_PREFIX + "tex_" + p) is None)]
+            if not missing:
+                continue
+            uvn = nodes.get(NODE_PREFIX + "uv")
+            kw = {}
+            if uvn is not None:
+                img = next((t.image for p in PARAMS if (t := nodes.get(NODE_PREFIX + "tex_" + p)) is not None and t.image is not None), None)
+                kw = {"target": "TEXTURE", "resolution": img.size[0] if img is not None else 1024,
+                      "uv_map": uvn.uv_map if uvn.uv_map in ob.data.uv_layers else None}
+            try:
+                setup(ob, mat, **kw)
+            except ValueError as e:
+                done.append(f"'{mat.name}' on '{ob.name}' kept without {', '.join(missing)}: {e}")
+                continue
+            done.append(f"'{mat.name}' on '{ob.name}': added {', '.join(missing)}")
+    return done

@@ -58,7 +58,7 @@ class WorldLight:
         self.sh = np.asarray(envmaps.irradiance(px, size=8)["irradiance_coeffs"], np.float32)  # (3, 9)
         self._texture = None
         self._lut = None
-        self._ubo = None
+        self._ubos = {}
 
     def texture(self):
         if self._texture is None:
@@ -75,20 +75,22 @@ class WorldLight:
             self._lut = _texture(np.concatenate([lut, np.zeros((s, s, 1), np.float32), np.ones((s, s, 1), np.float32)], axis=-1))
         return self._lut
 
-    def block(self, view_projection, eye, **material):
-        """The uniform block for one draw (one GPU buffer per world, updated in place);
-        ``material``: pack_block's textures, tint and scale."""
+    def block(self, view_projection, eye, slot=0, **material):
+        """The uniform block for one draw (one GPU buffer per world and ``slot``, updated in place:
+        the environment-lit and the point-lit view of one redraw use two slots); ``material``:
+        pack_block's textures, tint, scale, specular tint and light."""
         import gpu
 
         data = appearance_glsl.pack_block(view_projection, eye, len(self.levels), self.model, self.sh, **material)
-        if self._ubo is None:
-            self._ubo = gpu.types.GPUUniformBuf(data)
+        ubo = self._ubos.get(slot)
+        if ubo is None:
+            ubo = self._ubos[slot] = gpu.types.GPUUniformBuf(data)
         else:
-            self._ubo.update(data)
-        return self._ubo
+            ubo.update(data)
+        return ubo
 
 
-POINTS_WIDTH = 4096  # rk_points: texels per row (two per vertex)
+POINTS_WIDTH = 4095  # rk_points: texels per row (three per vertex: a vertex never straddles rows)
 
 
 def _read_mesh(obj, uv_name):
@@ -115,23 +117,28 @@ def _same(a, b) -> bool:
 
 
 def _point_values(obj) -> np.ndarray:
-    """(N, 8) float32: per vertex the painted base colour (rgba), specular, roughness, metallic, 0 —
-    rk_points' two texels per vertex."""
+    """(N, 12) float32: per vertex the painted base colour (rgba); specular, roughness, metallic, 0;
+    specular tint (rgb), 1 — rk_points' three texels per vertex. A mesh painted before the
+    specular colour existed (not migrated: a linked library) previews with a white tint."""
     n = len(obj.data.vertices)
-    out = np.zeros((n, 8), np.float32)
+    out = np.zeros((n, 4 * appearance_glsl.TEXELS_PER_POINT), np.float32)
     out[:, 0:4] = appearance.read(obj, "diffuse")
     for k, param in enumerate(appearance_glsl.POINT_PARAMS):
         out[:, 4 + k] = appearance.read(obj, param)
+    if appearance.PARAMS["specular_tint"][0] in obj.data.attributes:
+        out[:, 8:12] = appearance.read(obj, "specular_tint")
+    else:
+        out[:, 8:12] = 1.0
     return out
 
 
 def _points_texture(values):
     import gpu
 
-    n = len(values)
-    rows = max(1, -(-2 * n // POINTS_WIDTH))
+    n, k = len(values), appearance_glsl.TEXELS_PER_POINT
+    rows = max(1, -(-k * n // POINTS_WIDTH))
     flat = np.zeros((rows * POINTS_WIDTH, 4), np.float32)
-    flat[: 2 * n] = values.reshape(2 * n, 4)
+    flat[: k * n] = values.reshape(k * n, 4)
     return gpu.types.GPUTexture((POINTS_WIDTH, rows), format="RGBA32F", data=gpu.types.Buffer("FLOAT", flat.size, flat.ravel()))
 
 
@@ -219,8 +226,8 @@ def mesh_preview(obj, evaluated: bool = False) -> MeshPreview:
 
 
 def material_state(obj):
-    """(texture bits, {param: GPU texture of its image}, tint, scale): what the material's
-    texture targets and global sliders (rokeby_global_* nodes) add to the painted values."""
+    """(texture bits, {param: GPU texture of its image}, tint, scale, specular tint): what the
+    material's texture targets and global sliders (rokeby_global_* nodes) add to the painted values."""
     import gpu
 
     bits, textures = 0, {}
@@ -229,7 +236,7 @@ def material_state(obj):
         if img is not None:
             bits |= bit
             textures[param] = gpu.texture.from_image(img)
-    tint, scale = (1.0, 1.0, 1.0, 1.0), [1.0, 1.0, 1.0]
+    tint, scale, spec_tint = (1.0, 1.0, 1.0, 1.0), [1.0, 1.0, 1.0], (1.0, 1.0, 1.0)
     mat = obj.active_material
     nodes = mat.node_tree.nodes if mat is not None and mat.use_nodes else None
     if nodes is not None:
@@ -240,7 +247,10 @@ def material_state(obj):
             g = nodes.get(appearance.NODE_PREFIX + "global_" + param)
             if g is not None:
                 scale[k] = float(g.inputs[1].default_value)
-    return bits, textures, tint, tuple(scale)
+        g = nodes.get(appearance.NODE_PREFIX + "global_specular_tint")
+        if g is not None:
+            spec_tint = tuple(g.inputs[7].default_value)[:3]
+    return bits, textures, tint, tuple(scale), spec_tint
 
 
 def _uv_name(obj, me=None):
@@ -273,22 +283,29 @@ def prepare(obj, depsgraph=None):
     return mp, batch, mp.points_texture(src), state
 
 
-def draw_object(obj, world: WorldLight, view_projection, eye, depsgraph=None) -> MeshPreview:
+def draw_object(obj, world: WorldLight, view_projection, eye, depsgraph=None, point_light=None, offset=(0.0, 0.0, 0.0)) -> MeshPreview:
     """Draws ``obj`` (set up with rokeby.appearance.setup) into the bound framebuffer: per-point
     targets per vertex, texture targets at their texels, with the material's global sliders.
     With a ``depsgraph`` the mesh its modifiers make is drawn (the painted attributes and UVs as
-    the modifiers carry them, as the render sees them), else the object's own mesh. Returns the
-    mesh's :class:`MeshPreview` (its batch and painted values are kept for the next draw)."""
+    the modifiers carry them, as the render sees them), else the object's own mesh.
+    ``point_light``: None for the environment-lit view, or (world position, intensity) for
+    Fraser's point-light view; ``offset``: a world translation of the drawn copy (the point-lit
+    view drawn beside the object). Returns the mesh's :class:`MeshPreview` (its batch and painted
+    values are kept for the next draw)."""
     import gpu
+    from mathutils import Matrix
 
-    mp, batch, points, (bits, textures, tint, scale) = prepare(obj, depsgraph)
+    mp, batch, points, (bits, textures, tint, scale, spec_tint) = prepare(obj, depsgraph)
     sh = shader()
     gpu.state.depth_test_set("LESS_EQUAL")
     gpu.state.depth_mask_set(True)
     sh.bind()
-    sh.uniform_float("rk_model", obj.matrix_world)
-    sh.uniform_block("rk_appearance", world.block(view_projection, eye, textures=bits, tint=tint, scale=scale,
-                                                           model_matrix=np.array(obj.matrix_world)))
+    model = np.array(obj.matrix_world, np.float64)
+    model[:3, 3] += np.asarray(offset, np.float64)
+    lit = {} if point_light is None else {"light": "POINT", "light_position": tuple(point_light[0]), "light_intensity": float(point_light[1])}
+    sh.uniform_float("rk_model", obj.matrix_world if not np.any(offset) else Matrix(model.tolist()))
+    sh.uniform_block("rk_appearance", world.block(view_projection, eye, slot=int(point_light is not None), textures=bits, tint=tint,
+                                                  scale=scale, spec_tint=spec_tint, model_matrix=model, **lit))
     sh.uniform_sampler("rk_env_atlas", world.texture())
     sh.uniform_sampler("rk_brdf_lut", world.lut_texture())
     sh.uniform_sampler("rk_points", points)
@@ -350,19 +367,47 @@ def view_eye(rv3d):
     return tuple(inv.translation if rv3d.is_perspective else inv.translation + inv.col[2].xyz * 1e4)
 
 
-def draw_view(scene, rv3d, objects, model: str = "PRINCIPLED", depsgraph=None) -> int:
+PREVIEW_LIGHTS = ("ENVIRONMENT", "POINT", "BESIDE")
+BESIDE_GAP = 1.25  # the point-lit copy's offset in bounding diameters along the view's right
+
+
+def beside_offset(obj, rv3d) -> np.ndarray:
+    """Where Fraser's second view goes: the world translation that puts a copy of ``obj`` to the
+    right of it on screen, BESIDE_GAP of its (world) bounding diameters away."""
+    m = np.array(obj.matrix_world, np.float64)
+    corners = np.array([tuple(c) for c in obj.bound_box], np.float64) @ m[:3, :3].T + m[:3, 3]
+    diameter = float(np.linalg.norm(corners.max(axis=0) - corners.min(axis=0)))
+    right = np.array(rv3d.view_matrix.inverted().col[0].xyz, np.float64)
+    return right / max(np.linalg.norm(right), 1e-30) * BESIDE_GAP * max(diameter, 1e-6)
+
+
+def draw_view(scene, rv3d, objects, model: str = "PRINCIPLED", depsgraph=None, light: str = "ENVIRONMENT",
+              light_position=(3.0, -3.0, 4.0), light_intensity: float = 10.0) -> int:
     """What the POST_VIEW handler draws for one 3D view: every painted mesh among ``objects``
     under ``scene``'s world, with the view's matrices (with a ``depsgraph``: as its modifiers
-    make it). Returns how many were drawn; raises ValueError when the world has nothing to
-    preview under."""
-    light = world_light(scene, model)
-    if light is None:
+    make it). ``light``: 'ENVIRONMENT' (the world), 'POINT' (the point light at
+    ``light_position``, world space, of ``light_intensity`` W/sr) or 'BESIDE' (Fraser's interface:
+    the object under the world and, to its right on screen, a copy under the point light, placed
+    relative to the copy as ``light_position`` is to the object). Returns how many objects were
+    drawn; raises ValueError when the world has nothing to preview under."""
+    light = str(light).upper()
+    if light not in PREVIEW_LIGHTS:
+        raise ValueError(f"light: expected one of {', '.join(PREVIEW_LIGHTS)}, got {light!r}")
+    world = world_light(scene, model)
+    if world is None:
         raise ValueError("the world has no equirectangular Environment Texture to preview under")
     eye, vp = view_eye(rv3d), np.array(rv3d.perspective_matrix)
+    lp = np.asarray(light_position, np.float64)
     drawn = 0
     for ob in objects:
         if ob.type == "MESH" and appearance.PARAMS["roughness"][0] in ob.data.attributes:
-            draw_object(ob, light, vp, eye, depsgraph)
+            if light == "POINT":
+                draw_object(ob, world, vp, eye, depsgraph, point_light=(lp, light_intensity))
+            else:
+                draw_object(ob, world, vp, eye, depsgraph)
+            if light == "BESIDE":
+                off = beside_offset(ob, rv3d)
+                draw_object(ob, world, vp, eye, depsgraph, point_light=(lp + off, light_intensity), offset=off)
             drawn += 1
     return drawn
 
@@ -379,8 +424,11 @@ def _draw():
         return
     try:
         settings = getattr(ctx.scene, "rokeby_appearance_brush", None)
-        draw_view(ctx.scene, rv3d, ctx.visible_objects, settings.preview_model if settings is not None else "PRINCIPLED",
-                  ctx.evaluated_depsgraph_get())
+        if settings is None:
+            draw_view(ctx.scene, rv3d, ctx.visible_objects, "PRINCIPLED", ctx.evaluated_depsgraph_get())
+        else:
+            draw_view(ctx.scene, rv3d, ctx.visible_objects, settings.preview_model, ctx.evaluated_depsgraph_get(),
+                      settings.preview_light, tuple(settings.light_location), settings.light_intensity)
         last_error = None
     except Exception as e:  # noqa: BLE001 - a draw handler must not raise into Blender's redraw
         last_error = str(e) if isinstance(e, ValueError) else f"{type(e).__name__}: {e}"

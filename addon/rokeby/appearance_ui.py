@@ -10,20 +10,35 @@ touched only inside that draw handler, so it registers in background mode."""
 from __future__ import annotations
 
 import bpy
-from bpy.props import CollectionProperty, EnumProperty, FloatProperty, FloatVectorProperty, IntProperty, PointerProperty
+from bpy.props import CollectionProperty, EnumProperty, FloatProperty, FloatVectorProperty, IntProperty, PointerProperty, StringProperty
 
 from . import appearance, words
 
+# Explicit item numbers: Blender stores the number, so new brushes are appended with new numbers
+# (files saved before issue 22 stored 0-6 without explicit numbers, which are these).
 _BRUSH_ITEMS = [
-    ("diffuse", "Diffuse", "Paint the diffuse colour"),
-    ("specular", "Specular", "Paint the specular intensity k_s toward the value"),
-    ("sharpen", "Sharpen", "Lower the roughness (sharper highlights)"),
-    ("blur", "Blur", "Raise the roughness (blurrier highlights)"),
-    ("stretch", "Stretch", "Raise the anisotropy and turn it along the stroke"),
-    ("metallic", "Metallic", "Move energy between diffuse and specular (Metallic) toward the value"),
-    ("roughness", "Roughness", "Paint the roughness toward the value"),
+    ("diffuse", "Diffuse", "Paint the diffuse colour", 0),
+    ("specular", "Specular", "Paint the specular intensity k_s toward the value", 1),
+    ("sharpen", "Sharpen", "Lower the roughness (sharper highlights)", 2),
+    ("blur", "Blur", "Raise the roughness (blurrier highlights)", 3),
+    ("stretch", "Stretch", "Raise the anisotropy and turn it along the stroke", 4),
+    ("metallic", "Metallic", "Move energy between diffuse and specular (Metallic) toward the value", 5),
+    ("roughness", "Roughness", "Paint the roughness toward the value", 6),
+    ("specular_tint", "Specular Colour", "Paint the colour of the highlights (Principled Specular Tint) toward the colour", 7),
 ]
-_MODES = {"diffuse": "MIX", "specular": "MIX", "metallic": "MIX", "roughness": "MIX"}
+_MODES = {"diffuse": "MIX", "specular": "MIX", "metallic": "MIX", "roughness": "MIX", "specular_tint": "MIX"}
+
+
+def _redraw_views(context):
+    for area in context.screen.areas if getattr(context, "screen", None) else ():
+        if area.type == "VIEW_3D":
+            area.tag_redraw()
+
+
+def _redraw_update(_self, context):
+    """The settings' update callback (a named function: a lambda in these annotations would not
+    see this module's names when Blender evaluates them)."""
+    _redraw_views(context)
 
 
 class RokebyStrokePoint(bpy.types.PropertyGroup):
@@ -39,8 +54,8 @@ class RokebyAppearanceBrush(bpy.types.PropertyGroup):
     target: EnumProperty(
         name="Target",
         items=[
-            ("POINT", "Per-Point Attribute", "Paint per-point attributes of the mesh"),
-            ("TEXTURE", "Image Texture", "Paint one float image per parameter on the active UV map (packed into the .blend on save)"),
+            ("POINT", "Per-Point Attribute", "Paint per-point attributes of the mesh", 0),
+            ("TEXTURE", "Image Texture", "Paint one float image per parameter on the active UV map (packed into the .blend on save)", 1),
         ],
         default="POINT",
     )
@@ -48,20 +63,35 @@ class RokebyAppearanceBrush(bpy.types.PropertyGroup):
         name="Preview Model",
         description="The BRDF the viewport preview shades with (the final render always uses Blender's Principled BSDF)",
         items=[
-            ("PRINCIPLED", "Principled (GGX)", "Blender's BSDF as a split sum: GGX prefiltered radiance and the GGX albedo table"),
-            ("PHONG", "Phong", "The seed's normalised Phong lobe, exponent from the roughness"),
-            ("TORRANCE_SPARROW", "Torrance–Sparrow", "Fraser's simplified Torrance–Sparrow lobe with Schlick's Fresnel"),
+            ("PRINCIPLED", "Principled (GGX)", "Blender's BSDF as a split sum: GGX prefiltered radiance and the GGX albedo table", 0),
+            ("PHONG", "Phong", "The seed's normalised Phong lobe, exponent from the roughness", 1),
+            ("TORRANCE_SPARROW", "Torrance–Sparrow", "Fraser's simplified Torrance–Sparrow lobe with Schlick's Fresnel", 2),
         ],
         default="PRINCIPLED",
-        update=lambda self, context: _redraw_views(context),
+        update=_redraw_update,
     )
     resolution: IntProperty(name="Resolution", description="Side of the painted images in texels (texture target)", default=1024, min=8, max=16384)
-
-
-def _redraw_views(context):
-    for area in context.screen.areas if getattr(context, "screen", None) else ():
-        if area.type == "VIEW_3D":
-            area.tag_redraw()
+    # Fraser's interface: the painted object under the environment and under a point light, side by side.
+    preview_light: EnumProperty(
+        name="Preview Light",
+        description="What lights the viewport preview",
+        items=[
+            ("ENVIRONMENT", "Environment", "The world's environment image, prefiltered for the preview model", 0),
+            ("POINT", "Point Light", "One movable point light (Light Location, Intensity) instead of the world", 1),
+            ("BESIDE", "Both, Side by Side", "Fraser's interface: the object under the world and, beside it on screen, "
+             "a copy under the point light (placed relative to the copy as Light Location is to the object)", 2),
+        ],
+        default="ENVIRONMENT",
+        update=_redraw_update,
+    )
+    light_location: FloatVectorProperty(name="Light Location", description="The preview's point light, world space", size=3,
+                                        subtype="TRANSLATION", default=(3.0, -3.0, 4.0), update=_redraw_update)
+    # The final-render model (issue 22): renders use Principled (GGX); Measure Difference to Render
+    # stores how far they are from the Phong / Torrance–Sparrow preview (−1: not measured).
+    render_difference: FloatProperty(name="Render Difference", default=-1.0)
+    render_difference_key: StringProperty(name="Measured For", default="")
+    light_intensity: FloatProperty(name="Light Intensity", description="The preview's point light in W/sr (radiance falls off as 1/d²)",
+                                   default=10.0, min=0.0, soft_max=1000.0, update=_redraw_update)
 
 
 def _settings(context):
@@ -94,7 +124,7 @@ def _poll_painted(cls, context) -> bool:
 
 def _dab(settings, obj, points, previous=None, pack=True):
     brush = settings.brush
-    value = tuple(settings.color) if brush == "diffuse" else settings.value
+    value = tuple(settings.color) if brush in appearance.COLORS else settings.value
     appearance.paint(obj, brush, points, settings.radius, value=value, strength=settings.strength, mode=_MODES.get(brush),
                      previous=previous, pack=pack)
 
@@ -357,6 +387,77 @@ class ROKEBY_OT_appearance_preview(bpy.types.Operator):
         return {"FINISHED"}
 
 
+def _difference_key(context) -> str:
+    """What a render-difference figure was measured for: the preview model, the object, its
+    painted values and the world image (a change shows the figure as stale)."""
+    ob = context.active_object
+    s = _settings(context)
+    world = context.scene.world
+    img = next((n.image for n in world.node_tree.nodes if n.type == "TEX_ENVIRONMENT" and n.image is not None), None) \
+        if world is not None and world.use_nodes else None
+    means = tuple(round(float(x), 3) for x in _painted_means(ob)) if ob is not None and ob.type == "MESH" else ()
+    return f"{s.preview_model}|{ob.name if ob else ''}|{img.name if img else ''}|{means}"
+
+
+def _painted_means(ob):
+    """The object's painted values averaged: base (rgb), specular, roughness, metallic, tint (rgb)."""
+    import numpy as np
+
+    base = appearance.point_values(ob, "diffuse")[:, :3].mean(axis=0)
+    rest = [float(appearance.point_values(ob, p).mean()) for p in ("specular", "roughness", "metallic")]
+    tint = appearance.point_values(ob, "specular_tint")[:, :3].mean(axis=0) if appearance.PARAMS["specular_tint"][0] in ob.data.attributes \
+        else np.ones(3)
+    return (*base, *rest, *tint)
+
+
+class ROKEBY_OT_appearance_render_difference(bpy.types.Operator):
+    """Measure how much the final render (always Blender's Principled BSDF) differs from the
+    preview model's shading of this object's painted values under the world"""
+
+    bl_idname = "rokeby.appearance_render_difference"
+    bl_label = "Measure Difference to Render"
+
+    @classmethod
+    def poll(cls, context):
+        return _poll_painted(cls, context)
+
+    def execute(self, context):
+        from . import appearance_glsl, appearance_preview
+
+        s = _settings(context)
+        px = appearance_preview.world_pixels(context.scene)
+        if px is None:
+            self.report({"ERROR"}, "the world has no equirectangular Environment Texture to measure under")
+            return {"CANCELLED"}
+        try:
+            v = _painted_means(context.active_object)
+            d = appearance_glsl.render_difference(px, s.preview_model, base=v[0:3], specular=v[3], roughness=v[4], metallic=v[5],
+                                                  spec_tint=v[6:9])
+        except ValueError as e:
+            self.report({"ERROR"}, str(e))
+            return {"CANCELLED"}
+        s.render_difference = d
+        s.render_difference_key = _difference_key(context)
+        name = s.bl_rna.properties["preview_model"].enum_items[s.preview_model].name
+        self.report({"INFO"}, f"Renders (Principled) differ from the {name} preview by {100 * d:.1f} %")
+        return {"FINISHED"}
+
+
+def draw_render_model(layout, context) -> None:
+    """What the panel says about the final render: always Principled (GGX); for another preview
+    model, by how much the render differs (measured), or the button that measures it."""
+    s = _settings(context)
+    if s.preview_model == "PRINCIPLED":
+        layout.label(text="Renders use this model (Principled BSDF)", icon="CHECKMARK")
+        return
+    col = layout.column(align=True)
+    col.label(text="Renders use Principled (GGX), not this model", icon="INFO")
+    if s.render_difference >= 0 and s.render_difference_key == _difference_key(context):
+        col.label(text=f"Render differs from this preview by {100 * s.render_difference:.1f} % (measured)", icon="ERROR")
+    else:
+        col.operator(ROKEBY_OT_appearance_render_difference.bl_idname, icon="VIEWZOOM")
+
+
 class ROKEBY_PT_appearance(bpy.types.Panel):
     """Set up painting on the active mesh (target: per-point attributes or image textures)."""
 
@@ -425,7 +526,7 @@ class ROKEBY_PT_appearance_brush(_PaintedSubPanel, bpy.types.Panel):
         col.prop(s, "brush")
         col.prop(s, "radius")
         col.prop(s, "strength")
-        col.prop(s, "color" if s.brush == "diffuse" else "value")
+        col.prop(s, "color" if s.brush in appearance.COLORS else "value")
         layout.operator(ROKEBY_OT_appearance_paint.bl_idname, icon="BRUSH_DATA")
         from . import appearance_preview
 
@@ -433,6 +534,12 @@ class ROKEBY_PT_appearance_brush(_PaintedSubPanel, bpy.types.Panel):
         layout.operator(ROKEBY_OT_appearance_preview.bl_idname, text="Hide Preview" if on else "Preview Under the World", icon="SHADING_RENDERED", depress=on)
         if on:
             layout.prop(s, "preview_model")
+            draw_render_model(layout, context)
+            layout.prop(s, "preview_light")
+            if s.preview_light != "ENVIRONMENT":
+                col = layout.column(align=True)
+                col.prop(s, "light_location")
+                col.prop(s, "light_intensity")
         if on and appearance_preview.last_error:
             layout.label(text=appearance_preview.last_error, icon="ERROR")
 
@@ -453,18 +560,19 @@ class ROKEBY_PT_appearance_sliders(_PaintedSubPanel, bpy.types.Panel):
         for param in appearance.PARAMS:
             node = nodes.get(appearance.NODE_PREFIX + "global_" + param)
             if node is not None:
-                col.prop(node.inputs[7 if param == "diffuse" else 1], "default_value", text=_SLIDER_NAMES.get(param, param))
+                col.prop(node.inputs[7 if param in appearance.COLORS else 1], "default_value", text=_SLIDER_NAMES.get(param, param))
 
 
 # Slider labels as words (the parameter names title-cased would read "Anisotropic_Rotation").
 _SLIDER_NAMES = {"diffuse": "Diffuse", "specular": "Specular", "roughness": "Roughness", "metallic": "Metallic",
-                 "anisotropic": "Anisotropy", "anisotropic_rotation": "Anisotropic Rotation"}
+                 "anisotropic": "Anisotropy", "anisotropic_rotation": "Anisotropic Rotation", "specular_tint": "Specular Colour"}
 
 # The painting panels, parent first.
 PANELS = (ROKEBY_PT_appearance, ROKEBY_PT_appearance_brush, ROKEBY_PT_appearance_sliders)
 
 
-_CLASSES = (RokebyStrokePoint, RokebyAppearanceBrush, ROKEBY_OT_appearance_setup, ROKEBY_OT_appearance_remove, ROKEBY_OT_appearance_texture_remove, ROKEBY_OT_appearance_paint, ROKEBY_OT_appearance_preview, *PANELS)
+_CLASSES = (RokebyStrokePoint, RokebyAppearanceBrush, ROKEBY_OT_appearance_setup, ROKEBY_OT_appearance_remove, ROKEBY_OT_appearance_texture_remove, ROKEBY_OT_appearance_paint, ROKEBY_OT_appearance_preview,
+            ROKEBY_OT_appearance_render_difference, *PANELS)
 
 
 def register():

@@ -10,14 +10,24 @@ render farm can run a sequence as independent tasks).
 output is an RGB EXR of the recomposited image. Edits apply in that order: smoothing, emboss,
 ripple, noise, bump. ``--objects 1,3`` limits them to those object pass indices. Exit status 0,
 or 2 with one line naming what is wrong (a missing or unreadable file, a missing output folder, a
-bad edit, a backend that cannot start); the files are checked before any work. A sequence:
+bad edit, a backend that cannot start); the files are checked before any work. The output is
+written whole and then renamed into place, so a crash never leaves half a frame;
+``--skip-existing`` exits 0 at once when the output is there (a rerun resumes). A sequence:
 
-    for f in frames/*.exr; do python -m rokeby.composite "$f" "out/$(basename "$f")" --emboss 0.6; done
+    python -m rokeby.composite --sequence frames/ out/ --pattern "shot_####.exr" --emboss 0.6 --skip-existing
+    python -m rokeby.composite --sequence frames/ out/ --frame 7 --emboss 0.6   # one frame per process (a farm task)
+
+``--sequence`` takes folders: the frames are the files matching ``--pattern`` (a glob, or '#' per
+frame digit), in frame order, written under their own names; progress on stderr, one line per
+frame; frames that fail are named at the end and the others still run (exit 1); a rerun with
+``--skip-existing`` does only what is missing. ``--frame K`` (1-based, in that order) runs only
+frame K, e.g. ``--frame $SLURM_ARRAY_TASK_ID``.
 """
 
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 import os
 import sys
@@ -96,8 +106,12 @@ def main(argv=None) -> int:
 
 def _main(argv) -> int:
     ap = _Parser(prog="python -m rokeby.composite", description=__doc__.split("\n\n")[0])
-    ap.add_argument("input", help="Blender multilayer EXR with the passes of setup_passes")
-    ap.add_argument("output", help="recomposited RGB EXR")
+    ap.add_argument("input", help="Blender multilayer EXR with the passes of setup_passes (with --sequence: the folder of frames)")
+    ap.add_argument("output", help="recomposited RGB EXR (with --sequence: the output folder)")
+    ap.add_argument("--sequence", action="store_true", help="input and output are folders: recomposite every frame")
+    ap.add_argument("--pattern", default="*.exr", help="with --sequence: which files are frames, a glob or '#' per digit (default *.exr)")
+    ap.add_argument("--frame", type=int, metavar="K", help="with --sequence: only the K-th frame (1-based, frame order): one process per frame")
+    ap.add_argument("--skip-existing", action="store_true", help="an output that exists is kept and its frame skipped (resume a stopped run)")
     ap.add_argument("--layer", help="view layer (default: the first in the file)")
     ap.add_argument("--emboss", type=float, metavar="BETA", help="n_z → β n_z, β in (0, 1]")
     ap.add_argument("--ripple", type=float, metavar="STRENGTH", help="fading 2D ripple decal of this strength")
@@ -127,6 +141,50 @@ def _main(argv) -> int:
                          "or through Blender's gpu module (blender_gpu: bpy in this process; its context costs one tiny EEVEE render)")
     ap.add_argument("--report", metavar="JSON", help="write per-patch reconstruction report and timings")
     a = ap.parse_args(argv)
+    if a.sequence:
+        return _sequence(a)
+    if a.frame is not None:
+        ap.error("--frame needs --sequence")
+    return _frame(a)
+
+
+def _sequence(a) -> int:
+    """--sequence: every frame (or frame --frame) of the input folder through :func:`_frame`."""
+    if not os.path.isdir(a.input):
+        raise C.CompositingError(f"input: {a.input} is not a folder (--sequence takes folders)")
+    frames = C.sequence_frames(a.input, a.pattern)
+    if not frames:
+        raise C.CompositingError(f"input: no frames matching '{a.pattern}' in {a.input}")
+    if os.path.realpath(a.output) == os.path.realpath(a.input):
+        raise C.CompositingError("output: the output folder must differ from the input folder (the frames would be overwritten)")
+    if a.frame is not None:
+        if not 1 <= a.frame <= len(frames):
+            raise C.CompositingError(f"--frame: {a.frame} is not in 1..{len(frames)} (the frames matching '{a.pattern}')")
+        todo = [(a.frame, frames[a.frame - 1])]
+    else:
+        todo = list(enumerate(frames, 1))
+    os.makedirs(a.output, exist_ok=True)
+    failed = []
+    for k, path in todo:
+        one = argparse.Namespace(**vars(a))
+        one.input, one.output = path, os.path.join(a.output, os.path.basename(path))
+        done_before = a.skip_existing and os.path.exists(one.output)
+        rc = _frame(one)
+        state = "skipped (done before)" if done_before else ("done" if rc == 0 else "failed")
+        print(f"rokeby.composite: frame {k}/{len(frames)} {os.path.basename(path)}: {state}", file=sys.stderr, flush=True)
+        if rc != 0:
+            failed.append(os.path.basename(path))
+    if failed:
+        print(f"rokeby.composite: {len(failed)} frame(s) failed: {', '.join(failed)} (run again with --skip-existing to redo only them)",
+              file=sys.stderr)
+        return 1
+    return 0
+
+
+def _frame(a) -> int:
+    """One frame: ``a.input`` recomposited into ``a.output`` (0, or 2 with one line on stderr)."""
+    if a.skip_existing and os.path.exists(a.output):
+        return 0
     # Files are checked before the (slow) reconstruction: a missing one is one line and status 2.
     problem = _missing_files(a)
     if problem is not None:
@@ -135,7 +193,8 @@ def _main(argv) -> int:
     try:  # before any work, named by its flag
         C._check_k(a.kd, a.kr)
     except C.CompositingError as exc:
-        ap.error(f"argument {'--kd' if str(exc).startswith('k_d') else '--kr'}: {exc}")
+        print(f"rokeby.composite: argument {'--kd' if str(exc).startswith('k_d') else '--kr'}: {exc} (see --help)", file=sys.stderr)
+        return 2
 
     t0 = time.perf_counter()
     try:
@@ -187,9 +246,13 @@ def _main(argv) -> int:
         print(f"rokeby.composite: --backend {a.backend}: {exc}", file=sys.stderr)
         return 2
     t_comp = time.perf_counter()
+    partial = a.output + ".partial.exr"  # written whole, then renamed: a crash leaves no half frame
     try:
-        C.write_exr(a.output, out, p.header)
+        C.write_exr(partial, out, p.header)
+        os.replace(partial, a.output)
     except (OSError, RuntimeError) as exc:  # a read-only folder, a full disk
+        with contextlib.suppress(OSError):
+            os.remove(partial)
         print(f"rokeby.composite: output: cannot write {a.output}: {exc}", file=sys.stderr)
         return 2
     t_end = time.perf_counter()

@@ -29,8 +29,10 @@ there, and the report (and a RuntimeWarning) says so.
 from __future__ import annotations
 
 import contextlib
+import glob
 import math
 import os
+import re
 import sys
 import time
 import warnings
@@ -202,7 +204,78 @@ def show_image(name: str, pixels: np.ndarray):
     rgba[..., 3] = 1.0
     img.pixels.foreach_set(rgba.reshape(-1))
     img.update()
+    _keep_compositor_current(img)
     return img
+
+
+def sequence_frames(directory: str, pattern: str = "*.exr") -> list[str]:
+    """The frames of a sequence, in frame order: files in ``directory`` matching ``pattern``, a
+    glob ('*.exr', 'shot_*.exr') or a frame-number pattern with '#' for each digit
+    ('shot_####.exr'). Numbers sort by value (frame_2 before frame_10). The add-on's sequence
+    operator and ``python -m rokeby.composite --sequence`` both list frames with this."""
+    if not directory or not os.path.isdir(directory):
+        raise CompositingError(f"folder: {directory!r} is not a folder")
+    if "#" in pattern:
+        regex = re.compile("^" + re.sub(r"#+", lambda m: rf"\d{{{len(m.group())}}}", re.escape(pattern).replace(r"\#", "#")) + "$")
+        names = [n for n in os.listdir(directory) if regex.match(n)]
+    else:
+        names = [os.path.basename(f) for f in glob.glob(os.path.join(glob.escape(directory), pattern))]
+    key = lambda n: [int(s) if s.isdigit() else s for s in re.split(r"(\d+)", n)]  # noqa: E731
+    return [os.path.join(directory, n) for n in sorted(names, key=key) if os.path.isfile(os.path.join(directory, n))]
+
+
+# --- the compositor's input (issue 22) ------------------------------------------------------------
+# Zubiaga et al. edit normals inside a node-based compositor. Rokeby's recompositing runs outside
+# Blender's compositor (Rust or GLSL), so its result enters the compositor as an Image node named
+# COMPOSITOR_NODE that every recomposite of the same image keeps pointing at the current pixels
+# (show_image → _keep_compositor_current): the artist chains it with other compositor nodes, and a
+# Viewer shows it in the backdrop. The Composite node (what F12 renders write) is not touched.
+COMPOSITOR_NODE = "rokeby_recomposited"
+COMPOSITOR_IMAGE_KEY = "rokeby_image_name"  # custom property on that node: the image it follows
+
+
+def feed_compositor(scene, image):
+    """Puts ``image`` (a recomposited Blender image) into ``scene``'s compositor: turns the
+    compositor on, adds (or reuses) the Image node COMPOSITOR_NODE reading it, and feeds the
+    Viewer with it (one is added when the tree has none) so the backdrop shows it, as clicking a
+    node with Ctrl+Shift does. The Composite node (what renders write) and the artist's other
+    links stay as they are. Returns the node; later recomposites of the same image name update
+    what it reads."""
+    if image is None:
+        raise CompositingError("image: none given: click Render and Recomposite (or Recomposite Render) first")
+    if scene is None:
+        raise CompositingError("scene: none given")
+    scene.use_nodes = True
+    tree = scene.node_tree
+    node = tree.nodes.get(COMPOSITOR_NODE)
+    if node is None or node.bl_idname != "CompositorNodeImage":
+        node = tree.nodes.new("CompositorNodeImage")
+        node.name = COMPOSITOR_NODE
+        node.label = "Rokeby Recomposited"
+        xs = [n.location.x for n in tree.nodes if n != node]
+        node.location = (min(xs) if xs else 0.0, min((n.location.y for n in tree.nodes if n != node), default=0.0) - 350.0)
+    node.image = image
+    node[COMPOSITOR_IMAGE_KEY] = image.name
+    viewer = next((n for n in tree.nodes if n.bl_idname == "CompositorNodeViewer"), None)
+    if viewer is None:
+        viewer = tree.nodes.new("CompositorNodeViewer")
+        viewer.location = (node.location.x + 300.0, node.location.y)
+    tree.links.new(node.outputs["Image"], viewer.inputs[0])
+    return node
+
+
+def _keep_compositor_current(img) -> None:
+    """Every scene's COMPOSITOR_NODE that follows ``img``'s name reads ``img`` (show_image makes a
+    new image when the frame size changes) and the compositor sees the new pixels."""
+    import bpy
+
+    for sc in bpy.data.scenes:
+        tree = sc.node_tree if sc.use_nodes else None
+        node = tree.nodes.get(COMPOSITOR_NODE) if tree is not None else None
+        if node is not None and node.get(COMPOSITOR_IMAGE_KEY) == img.name:
+            if node.image != img:
+                node.image = img
+            tree.update_tag()
 
 
 # --- passes -------------------------------------------------------------------------------------

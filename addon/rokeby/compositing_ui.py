@@ -7,9 +7,7 @@ docs/compositing.md)."""
 
 from __future__ import annotations
 
-import glob
 import os
-import re
 import tempfile
 
 import bpy
@@ -221,19 +219,8 @@ class ROKEBY_OT_composite_edit(_EditProps, bpy.types.Operator):
 
 
 def sequence_frames(directory: str, pattern: str = "*.exr") -> list[str]:
-    """The frames of a sequence, in frame order: files in ``directory`` matching ``pattern``, a
-    glob ('*.exr', 'shot_*.exr') or a frame-number pattern with '#' for each digit
-    ('shot_####.exr'). Numbers sort by value (frame_2 before frame_10)."""
-    directory = bpy.path.abspath(directory) if directory else directory
-    if not directory or not os.path.isdir(directory):
-        raise comp.CompositingError(f"folder: {directory!r} is not a folder")
-    if "#" in pattern:
-        regex = re.compile("^" + re.sub(r"#+", lambda m: rf"\d{{{len(m.group())}}}", re.escape(pattern).replace(r"\#", "#")) + "$")
-        names = [n for n in os.listdir(directory) if regex.match(n)]
-    else:
-        names = [os.path.basename(f) for f in glob.glob(os.path.join(glob.escape(directory), pattern))]
-    key = lambda n: [int(s) if s.isdigit() else s for s in re.split(r"(\d+)", n)]  # noqa: E731
-    return [os.path.join(directory, n) for n in sorted(names, key=key) if os.path.isfile(os.path.join(directory, n))]
+    """:func:`rokeby.compositing.sequence_frames` of a Blender path ('//' relative to the .blend)."""
+    return comp.sequence_frames(bpy.path.abspath(directory) if directory else directory, pattern)
 
 
 def _image_rgb(img) -> np.ndarray:
@@ -322,6 +309,35 @@ class ROKEBY_OT_composite_sequence(_EditProps, bpy.types.Operator):
         return {"FINISHED"}
 
 
+class ROKEBY_OT_composite_to_compositor(bpy.types.Operator):
+    """Feed the recomposited image into the scene's compositor (an Image node that every later
+    recomposite keeps current, shown in the backdrop through a Viewer), to chain it with other
+    compositor nodes"""
+
+    bl_idname = "rokeby.composite_to_compositor"
+    bl_label = "Use in Compositor"
+    bl_options = {"REGISTER", "UNDO"}
+
+    image_name: bpy.props.StringProperty(name="Image", default="Rokeby Recomposited")
+
+    @classmethod
+    def poll(cls, context):
+        if context.scene is None:
+            return _fail(cls, "Needs a scene")
+        return True
+
+    def execute(self, context):
+        from . import api  # noqa: PLC0415
+
+        try:
+            node = api.use_in_compositor(self.image_name, scene=context.scene)
+        except (comp.CompositingError, ValueError) as exc:
+            self.report({"ERROR"}, f"Rokeby: {exc}")
+            return {"CANCELLED"}
+        self.report({"INFO"}, f"Rokeby: the compositor's node '{node.name}' reads '{self.image_name}' and follows every recomposite of it")
+        return {"FINISHED"}
+
+
 class ROKEBY_PT_compositing(bpy.types.Panel):
     bl_label = "Rokeby Compositing"
     bl_space_type = "PROPERTIES"
@@ -333,12 +349,13 @@ class ROKEBY_PT_compositing(bpy.types.Panel):
         col.operator(ROKEBY_OT_composite_setup_passes.bl_idname, icon="RENDERLAYERS")
         col.operator(ROKEBY_OT_composite_render.bl_idname, icon="RENDER_STILL")
         col.operator(ROKEBY_OT_composite_edit.bl_idname, icon="IMAGE")
+        col.operator(ROKEBY_OT_composite_to_compositor.bl_idname, icon="NODE_COMPOSITING")
         col.separator()
         col.operator(ROKEBY_OT_composite_sequence.bl_idname, icon="SEQUENCE")
 
 
 CLASSES = (ROKEBY_OT_composite_setup_passes, ROKEBY_OT_composite_render, ROKEBY_OT_composite_edit,
-           ROKEBY_OT_composite_sequence, ROKEBY_PT_compositing)
+           ROKEBY_OT_composite_sequence, ROKEBY_OT_composite_to_compositor, ROKEBY_PT_compositing)
 
 
 def register():

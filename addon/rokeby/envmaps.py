@@ -1,5 +1,6 @@
 """Environment maps for painting under environment light (issue 8): reading and writing HDR
-images (OpenEXR, and Radiance RGBE ``.hdr`` through the Rust core), conversions between lat-long, cube, sphere (mirror-ball) and dual-paraboloid
+images (OpenEXR, and Radiance RGBE ``.hdr`` through the Rust core), reading 8-bit PNG/JPEG ones
+(sRGB-decoded; Blender's image loader), conversions between lat-long, cube, sphere (mirror-ball) and dual-paraboloid
 maps, order-2 SH irradiance, and specular prefiltering across roughness levels — all computed by
 the Rust core (``rokeby_core::envmap``/``prefilter``) through :mod:`rokeby.native`.
 
@@ -122,15 +123,67 @@ def write_hdr(path, pixels) -> Path:
     return path
 
 
+# 8-bit (LDR) environment images, as Fraser's implementation also loads: read through Blender's
+# image loader (the only PNG/JPEG decoder in Rokeby's environment), sRGB-decoded to linear here.
+LDR_SUFFIXES = (".png", ".jpg", ".jpeg")
+
+
+def srgb_to_linear(values) -> np.ndarray:
+    """The sRGB transfer function inverted (IEC 61966-2-1, the piecewise curve Blender's 'sRGB'
+    colour space uses): v ≤ 0.04045 → v / 12.92, else ((v + 0.055) / 1.055)^2.4."""
+    v = np.asarray(values, np.float64)
+    return np.where(v <= 0.04045, v / 12.92, ((np.maximum(v, 0.0) + 0.055) / 1.055) ** 2.4).astype(np.float32)
+
+
+def read_ldr(path) -> np.ndarray:
+    """An 8-bit (or 16-bit PNG) environment image, PNG or JPEG, as (H, W, 3) float32 linear values
+    (the file's sRGB-encoded values decoded with :func:`srgb_to_linear`; an alpha channel is
+    kept, undecoded, as a 4th channel), row 0 at the top. Decoded by Blender's image loader (bpy
+    is imported here, not at module import)."""
+    path = Path(path)
+    if not path.exists():
+        raise FileNotFoundError(f"read_ldr: {path} does not exist")
+    try:
+        import bpy  # noqa: PLC0415
+    except ImportError:
+        raise ValueError(f"read_ldr: {path}: PNG/JPEG environments are decoded by Blender's image loader, and bpy is not importable here") from None
+    try:
+        img = bpy.data.images.load(str(path.resolve()), check_existing=False)
+    except RuntimeError as e:
+        raise ValueError(f"read_ldr: {path}: not a readable PNG or JPEG image ({e})") from None
+    try:
+        img.colorspace_settings.name = "Non-Color"  # the file's values as stored, decoded below
+        w, h = img.size
+        if w < 1 or h < 1 or not img.has_data:
+            raise ValueError(f"read_ldr: {path}: not a readable PNG or JPEG image (no pixels)")
+        # Blender's pixels are RGBA whatever the file holds; the depth says whether it had alpha
+        # (8-bit: 8 grey, 16 grey+alpha, 24 RGB, 32 RGBA; float buffers: 96 RGB, 128 RGBA).
+        alpha = img.depth in (16, 32, 128) if not (img.depth == 16 and img.is_float) else False
+        px = np.empty(w * h * 4, np.float32)
+        img.pixels.foreach_get(px)
+    finally:
+        bpy.data.images.remove(img)
+    px = flip_rows(px.reshape(h, w, 4))
+    if not np.isfinite(px).all():
+        raise ValueError(f"read_ldr: {path}: decoded to non-finite values")
+    rgb = srgb_to_linear(np.clip(px[..., :3], 0.0, 1.0))
+    if alpha:
+        return np.ascontiguousarray(np.concatenate([rgb, px[..., 3:4]], axis=-1))
+    return np.ascontiguousarray(rgb)
+
+
 def read_image(path) -> np.ndarray:
-    """An HDR environment image, OpenEXR (``.exr``) or Radiance (``.hdr``, ``.pic``), as (H, W, C)
-    float32 with row 0 at the top."""
+    """An environment image as (H, W, C) float32 linear values with row 0 at the top: HDR,
+    OpenEXR (``.exr``) or Radiance (``.hdr``, ``.pic``), or 8-bit PNG/JPEG (``.png``, ``.jpg``,
+    ``.jpeg``; sRGB-decoded, :func:`read_ldr`)."""
     suffix = Path(path).suffix.lower()
     if suffix == ".exr":
         return read_exr(path)
     if suffix in (".hdr", ".pic", ".rgbe"):
         return read_hdr(path)
-    raise ValueError(f"read_image: {path}: expected an OpenEXR (.exr) or Radiance (.hdr) file")
+    if suffix in LDR_SUFFIXES:
+        return read_ldr(path)
+    raise ValueError(f"read_image: {path}: expected an OpenEXR (.exr), Radiance (.hdr), PNG (.png) or JPEG (.jpg, .jpeg) file")
 
 
 def flip_rows(pixels: np.ndarray) -> np.ndarray:

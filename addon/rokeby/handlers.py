@@ -217,6 +217,9 @@ def migrate_file():
     # Shadow edits saved with names (before shadow data version 1) get pointers.
     for msg in shadow.migrate():
         print(f"Rokeby: migrated {msg}")
+    # Appearance painting saved before the specular colour brush (issue 22) gets its parameter.
+    for msg in appearance.migrate():
+        print(f"Rokeby: appearance painting: {msg}")
 
 
 @persistent

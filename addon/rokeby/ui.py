@@ -313,6 +313,7 @@ MENU = (
     ("rokeby.appearance_texture_remove", None, {}, "X"),
     ("rokeby.appearance_remove", None, {}, "TRASH"),
     ("rokeby.appearance_preview", None, {}, "SHADING_RENDERED"),
+    ("rokeby.appearance_render_difference", None, {}, "VIEWZOOM"),
     None,
     ("rokeby.shadow_start", None, {}, "LIGHT"),
     ("rokeby.shadow_drag", None, {}, "MOUSE_LMB_DRAG"),
@@ -323,6 +324,7 @@ MENU = (
     ("rokeby.composite_setup_passes", None, {}, "RENDERLAYERS"),
     ("rokeby.composite_render", None, {}, "RENDER_STILL"),
     ("rokeby.composite_edit", None, {}, "IMAGE"),
+    ("rokeby.composite_to_compositor", None, {}, "NODE_COMPOSITING"),
     ("rokeby.composite_sequence", None, {}, "SEQUENCE"),
 )
 
