@@ -18,22 +18,22 @@ from . import prefs
 from .progress import Progress
 
 EDITS = [
-    ("EMBOSS", "Emboss", "n_z → β n_z (amount = β in (0, 1])"),
-    ("RIPPLE", "Ripple", "fading 2D ripple decal (amount = strength)"),
-    ("NOISE", "Noise", "fading procedural noise bump decal (amount = strength)"),
-    ("SMOOTH", "Smooth", "cross-bilateral smoothing with depth (amount = σ in pixels)"),
-    ("NONE", "None", "no edit (material edits k_D, k_R only)"),
+    ("EMBOSS", "Emboss", "n_z → β n_z (amount = β in (0, 1])", 0),
+    ("RIPPLE", "Ripple", "fading 2D ripple decal (amount = strength)", 1),
+    ("NOISE", "Noise", "fading procedural noise bump decal (amount = strength)", 2),
+    ("SMOOTH", "Smooth", "cross-bilateral smoothing with depth (amount = σ in pixels)", 3),
+    ("NONE", "None", "no edit (material edits k_D, k_R only)", 4),
 ]
 
 FITS = [
-    ("QP", "QP", "the paper's fit, D(n) ≥ D0 at every pixel (occlusion-aware; rides a render's noise)"),
-    ("QP_TOLERANT", "QP, noise-tolerant", "D(n) ≥ D0 − κσ, σ the diffuse pass's pixel noise (κ: Noise Tolerance)"),
-    ("LS", "Least squares", "the fast fit; on noisy renders measured closest to the true environment"),
+    ("QP", "QP", "the paper's fit, D(n) ≥ D0 at every pixel (occlusion-aware; rides a render's noise)", 0),
+    ("QP_TOLERANT", "QP, noise-tolerant", "D(n) ≥ D0 − κσ, σ the diffuse pass's pixel noise (κ: Noise Tolerance)", 1),
+    ("LS", "Least squares", "the fast fit; on noisy renders measured closest to the true environment", 2),
 ]
 
 BACKENDS = [
-    ("CPU", "CPU", "eqs. 3–5 in the Rust core"),
-    ("GPU", "GPU (Blender)", "eqs. 3–5 by the GLSL shader, drawn through Blender's gpu module"),
+    ("CPU", "CPU", "eqs. 3–5 in the Rust core", 0),
+    ("GPU", "GPU (Blender)", "eqs. 3–5 by the GLSL shader, drawn through Blender's gpu module", 1),
 ]
 
 

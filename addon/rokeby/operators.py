@@ -366,7 +366,7 @@ class ROKEBY_OT_freeze(_Op, bpy.types.Operator):
     bl_options = UNDO
 
     mirror: StringProperty(name="Mirror")
-    action: EnumProperty(name="Action", items=[("TOGGLE", "Toggle", ""), ("FREEZE", "Freeze", ""), ("UNFREEZE", "Unfreeze", "")], default="TOGGLE")
+    action: EnumProperty(name="Action", items=[("TOGGLE", "Toggle", "", 0), ("FREEZE", "Freeze", "", 1), ("UNFREEZE", "Unfreeze", "", 2)], default="TOGGLE")
 
     def run(self, context, mirror):
         api._require_mirror(mirror)
@@ -436,7 +436,7 @@ class ROKEBY_OT_render_nodes(_Op, bpy.types.Operator):
     bl_options = UNDO
 
     mirror: StringProperty(name="Mirror")
-    action: EnumProperty(name="Action", items=[("INSTALL", "Install", ""), ("REMOVE", "Remove", "")], default="INSTALL")
+    action: EnumProperty(name="Action", items=[("INSTALL", "Install", "", 0), ("REMOVE", "Remove", "", 1)], default="INSTALL")
 
     def run(self, context, mirror):
         if self.action == "REMOVE":
@@ -453,7 +453,7 @@ class ROKEBY_OT_reflection_map(_Op, bpy.types.Operator):
     bl_options = UNDO
 
     mirror: StringProperty(name="Mirror")
-    action: EnumProperty(name="Action", items=[("CAPTURE", "Capture", ""), ("CLEAR", "Clear", "Remove the map's images")], default="CAPTURE")
+    action: EnumProperty(name="Action", items=[("CAPTURE", "Capture", "", 0), ("CLEAR", "Clear", "Remove the map's images", 1)], default="CAPTURE")
 
     def run(self, context, mirror):
         from . import reflmap  # noqa: PLC0415

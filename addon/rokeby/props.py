@@ -24,16 +24,16 @@ from bpy.props import (
 from bpy.types import PropertyGroup
 
 METRICS = [
-    ("EUCLIDEAN", "Euclidean", "Straight-line distance to each constraint (fast; works across several objects)"),
-    ("GEODESIC", "Geodesic", "Distance over the surface: weights do not leak across gaps and folds"),
+    ("EUCLIDEAN", "Euclidean", "Straight-line distance to each constraint (fast; works across several objects)", 0),
+    ("GEODESIC", "Geodesic", "Distance over the surface: weights do not leak across gaps and folds", 1),
 ]
 GEODESIC_METHODS = [
-    ("HEAT", "Heat (accurate)", "Heat method on an intrinsic Delaunay triangulation: about 1-2% error; factorised once per mesh"),
-    ("DIJKSTRA", "Dijkstra (fast)", "Shortest paths along edges, as in the paper: fastest, over-estimates by 5-10%"),
+    ("HEAT", "Heat (accurate)", "Heat method on an intrinsic Delaunay triangulation: about 1-2% error; factorised once per mesh", 0),
+    ("DIJKSTRA", "Dijkstra (fast)", "Shortest paths along edges, as in the paper: fastest, over-estimates by 5-10%", 1),
 ]
 POLAR_METHODS = [
-    ("EXACT", "Exact", "Rotational factor by an SVD in double precision"),
-    ("FAST", "Fast", "Newton iteration on SO(3), warm-started and verified; about twice as fast"),
+    ("EXACT", "Exact", "Rotational factor by an SVD in double precision", 0),
+    ("FAST", "Fast", "Newton iteration on SO(3), warm-started and verified; about twice as fast", 1),
 ]
 REGION_KINDS = [
     ("EUCLIDEAN", "Euclidean", "A sphere around an empty: radius and border in world units; may span several objects", "SPHERE", 0),
@@ -94,8 +94,8 @@ class RokebyMaterialRef(PropertyGroup):
 
 
 RENDER_MODES = [
-    ("RAY_TRACED", "Ray traced", "Edited normals on the specular BSDFs: exact parallax, occlusion and self-reflection (slower, noisier when rough)"),
-    ("REFLECTION_MAP", "Reflection map", "A panorama captured from the mirror's centre, looked up in the edited direction (paper §6.3): fast and noise-free, but no parallax or self-reflection"),
+    ("RAY_TRACED", "Ray traced", "Edited normals on the specular BSDFs: exact parallax, occlusion and self-reflection (slower, noisier when rough)", 0),
+    ("REFLECTION_MAP", "Reflection map", "A panorama captured from the mirror's centre, looked up in the edited direction (paper §6.3): fast and noise-free, but no parallax or self-reflection", 1),
 ]
 EYE_SOURCES = [
     ("CAMERA", "Scene Camera", "Constraints' reflected directions r are taken from the render eye (the scene camera, or the frozen eye), so renders hit every green handle from the camera", "CAMERA_DATA", 0),
@@ -103,7 +103,7 @@ EYE_SOURCES = [
 ]
 # Saved with each mirror: 0 = made before these settings existed (load_post migrates it), 1 = now.
 DATA_VERSION = 1
-MAP_RESOLUTIONS = [(str(w), f"{w} × {w // 2}", f"Capture a {w} × {w // 2} panorama") for w in (256, 512, 1024, 2048)]
+MAP_RESOLUTIONS = [(str(w), f"{w} × {w // 2}", f"Capture a {w} × {w // 2} panorama", i) for i, w in enumerate((256, 512, 1024, 2048))]
 
 
 class RokebyImageRef(PropertyGroup):
@@ -152,7 +152,7 @@ class RokebyConstraint(PropertyGroup):
     view_distance: FloatProperty(name="View distance", default=10.0, min=0.0)
     view_perspective: EnumProperty(
         name="View projection",
-        items=[("PERSP", "Perspective", ""), ("ORTHO", "Orthographic", "")],
+        items=[("PERSP", "Perspective", "", 0), ("ORTHO", "Orthographic", "", 1)],
         default="PERSP",
     )
 

@@ -22,7 +22,7 @@ _DRAW_HANDLE = [None]
 
 ACTIVE = (1.0, 0.55, 0.0, 1.0)
 INACTIVE = (0.5, 0.5, 0.5, 1.0)
-STYLES = [("affine", "Affine", ""), ("similarity", "Similarity", ""), ("rigid", "Rigid", "")]
+STYLES = [("affine", "Affine", "", 0), ("similarity", "Similarity", "", 1), ("rigid", "Rigid", "", 2)]
 
 
 def _key(scene):

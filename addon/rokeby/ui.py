@@ -205,7 +205,7 @@ class ROKEBY_PT_settings(_MirrorSubPanel, bpy.types.Panel):
         col = layout.column()
         col.label(text="Distance")
         row = col.row(align=True)
-        for ident, name, _desc in METRICS:  # an operator: geodesic distances take a while, with progress
+        for ident, name, *_ in METRICS:  # an operator: geodesic distances take a while, with progress
             op = row.operator("rokeby.distance_set", text=name, depress=s.metric == ident)
             op.mirror, op.metric = mirror.name, ident
         if s.metric == "GEODESIC":
