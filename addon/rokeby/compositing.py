@@ -39,7 +39,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from . import native
+from . import native, transaction
 
 AOV_REFLOCC = "rokeby_reflocc"
 AOV_CAMERA_X = "rokeby_camera_x"
@@ -132,6 +132,7 @@ def _material_nodes(mat) -> None:
     nt.links.new(vt.outputs["Vector"], out_c.inputs["Color"])
 
 
+@transaction.atomic
 def setup_passes(scene, view_layer=None) -> list[str]:
     """Enables on ``view_layer`` (default: the scene's first) every pass the method needs, adds the
     reflection-occlusion and view-vector AOVs (and their nodes in every material of the scene's
