@@ -61,6 +61,18 @@ __all__ = [
 ]
 
 
+def _cancellable(fn):
+    """``fn`` is an operation ``rokeby.native.cancel()`` can stop (KeyboardInterrupt; an
+    operator's Esc, Ctrl-C): see ``native.cancellable``."""
+    import functools  # noqa: PLC0415
+
+    @functools.wraps(fn)
+    def wrapper(*args, **kwargs):
+        with native.cancellable():
+            return fn(*args, **kwargs)
+    return wrapper
+
+
 def _vec3(value, name: str) -> np.ndarray:
     a = np.asarray(value, dtype=np.float64)
     if a.shape != (3,):
@@ -827,6 +839,7 @@ def remove_render_nodes(mirror) -> int:
     return count
 
 
+@_cancellable
 def capture_reflection_map(mirror, *, resolution=None, samples=None, storage: str = "AUTO", scene=None):
     """Capture (or refresh) the reflection map of ``mirror``: a Cycles equirectangular panorama
     from its bounding-box centre (or ``rokeby.map_origin``) with the mirror hidden, plus blurred
@@ -1022,6 +1035,7 @@ def setup_compositing_passes(scene=None, view_layer=None) -> list[str]:
     return compositing.setup_passes(_scene(scene), view_layer)
 
 
+@_cancellable
 def recomposite_render(path: str, *, edit: str = "emboss", amount: float = 0.5, scene=None,
                        image_name: str = "Rokeby Recomposited", k_d: float = 1.0, k_r: float = 1.0,
                        backend: str = "cpu", warn: bool = True, fit: str = "qp", noise_tolerance: float = 0.0):
@@ -1050,6 +1064,7 @@ def recomposite_render(path: str, *, edit: str = "emboss", amount: float = 0.5, 
     return img, opened.reconstruction.reports
 
 
+@_cancellable
 def recomposite_exr(path: str, *, edit: str = "emboss", amount: float = 0.5, image_name: str = "Rokeby Recomposited",
                     k_d: float = 1.0, k_r: float = 1.0, backend: str = "cpu", warn: bool = True, fit: str = "qp",
                     noise_tolerance: float = 0.0):

@@ -86,12 +86,47 @@ def _indices(text: str) -> list[int]:
 def main(argv=None) -> int:
     """The tool: 0 on success; 2 with one line on stderr naming the problem for a bad file, flag
     or value, an unwritable output or a resource limit (issue 24: never a traceback for those)."""
+    import signal  # noqa: PLC0415
+
+    from . import native  # noqa: PLC0415
+
+    def interrupted(_sig, _frame):
+        native.cancel()  # a native call in flight stops at its next row
+        raise KeyboardInterrupt
+
+    old = signal.signal(signal.SIGINT, interrupted) if _main_thread() else None
     try:
-        return _main(argv)
+        with native.cancellable():
+            return _main(argv)
+    except KeyboardInterrupt:  # Ctrl-C / SIGINT: one line, status 130, no (partial) output file
+        print("rokeby.composite: cancelled", file=sys.stderr)
+        return 130
     except (C.CompositingError, ValueError, OSError, MemoryError) as exc:
         what = "out of memory" if isinstance(exc, MemoryError) else " ".join(str(exc).split())
         print(f"rokeby.composite: {what or type(exc).__name__}", file=sys.stderr)
         return 2
+    finally:
+        if old is not None:
+            signal.signal(signal.SIGINT, old)
+
+
+def _main_thread() -> bool:
+    import threading  # noqa: PLC0415
+
+    return threading.current_thread() is threading.main_thread()
+
+
+def _write_whole(path: str, write) -> None:
+    """``write(tmp)`` to a temporary file next to ``path``, then renamed over it: an interrupted
+    or failed write leaves no partial file (and an existing ``path`` as it was)."""
+    folder, name = os.path.split(os.path.abspath(path))
+    tmp = os.path.join(folder, f".{name}.partial-{os.getpid()}{os.path.splitext(name)[1]}")
+    try:
+        write(tmp)
+        os.replace(tmp, path)
+    finally:
+        if os.path.exists(tmp):
+            os.remove(tmp)
 
 
 def _main(argv) -> int:
@@ -188,7 +223,7 @@ def _main(argv) -> int:
         return 2
     t_comp = time.perf_counter()
     try:
-        C.write_exr(a.output, out, p.header)
+        _write_whole(a.output, lambda tmp: C.write_exr(tmp, out, p.header))
     except (OSError, RuntimeError) as exc:  # a read-only folder, a full disk
         print(f"rokeby.composite: output: cannot write {a.output}: {exc}", file=sys.stderr)
         return 2
@@ -202,8 +237,12 @@ def _main(argv) -> int:
                         "recomposite": t_comp - t_edit, "write": t_end - t_comp, **rec.timings},
         }
         try:
-            with open(a.report, "w") as f:
-                json.dump(rep, f, indent=1, default=str)
+            text = json.dumps(rep, indent=1, default=str)
+
+            def dump(tmp):
+                with open(tmp, "w") as f:
+                    f.write(text)
+            _write_whole(a.report, dump)
         except OSError as exc:
             print(f"rokeby.composite: --report: cannot write {a.report}: {exc}", file=sys.stderr)
             return 2
