@@ -143,13 +143,11 @@ def test_reflection_map_mode_install():
         ctx = _installed()
         ball = ctx["ball"]
         api.capture_reflection_map(ball, resolution=32, samples=1, storage="PACK")
+        ball.rokeby.render_edits = False  # the switch alone installs nothing
+        ball.rokeby.render_mode = "REFLECTION_MAP"
         return ctx
 
-    def op(ctx):
-        ctx["ball"].rokeby.render_mode = "REFLECTION_MAP"
-        api.install_render_nodes(ctx["ball"])
-
-    _check(make, op)
+    _check(make, lambda ctx: api.install_render_nodes(ctx["ball"]))
 
 
 # --- reflection-map captures: the maps folder --------------------------------------------------

@@ -93,3 +93,26 @@ def test_cancel_from_a_timer_thread_leaves_the_scene_unchanged(big_frame):
     assert fired and stopped - fired[0] < 10, "the call did not stop soon after cancel()"
     assert not diff(before, snapshot())
     compositing.close_render()
+
+
+def test_recomposite_operator_reports_cancelled(big_frame, capfd):
+    """The Recomposite Render operator (synchronous here: no window) cancelled from a timer
+    thread: {'CANCELLED'}, the report says so, and no image was made."""
+    from atomic_harness import diff, snapshot
+
+    from rokeby import compositing, compositing_ui, native
+
+    bpy.ops.wm.read_factory_settings(use_empty=True)
+    rokeby.register()
+    compositing.close_render()
+    before = snapshot()
+    timer = threading.Timer(6.0, native.cancel)
+    timer.start()
+    try:
+        r = bpy.ops.rokeby.composite_edit(filepath=str(big_frame), edit="SMOOTH", amount=50.0, backend="CPU")
+    finally:
+        timer.cancel()
+    assert r == {"CANCELLED"}
+    assert compositing_ui.CANCELLED in capfd.readouterr().out
+    assert not diff(before, snapshot())
+    compositing.close_render()

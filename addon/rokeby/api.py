@@ -1079,16 +1079,35 @@ def recomposite_exr(path: str, *, edit: str = "emboss", amount: float = 0.5, ima
     again without reading the file."""
     from . import compositing as comp  # noqa: PLC0415
 
+    out, stats = recomposite_exr_pixels(path, edit=edit, amount=amount, k_d=k_d, k_r=k_r, backend=backend, warn=warn,
+                                        fit=fit, noise_tolerance=noise_tolerance)
+    t0 = time.perf_counter()
+    img = comp.show_image(image_name, out)
+    stats["show_s"] = time.perf_counter() - t0
+    return img, stats
+
+
+@_cancellable
+def recomposite_exr_pixels(path: str, *, edit: str = "emboss", amount: float = 0.5, k_d: float = 1.0, k_r: float = 1.0,
+                           backend: str = "cpu", warn: bool = True, fit: str = "qp", noise_tolerance: float = 0.0):
+    """``recomposite_exr`` without showing the result: returns (pixels (H, W, 3) float32, stats)
+    and touches no Blender data, so with the 'cpu' backend it may run on a worker thread (the
+    Recomposite Render operator does, stopping on Esc through ``rokeby.native.cancel()``)."""
+    from . import compositing as comp  # noqa: PLC0415
+
     if edit not in comp.EDITS:  # before reading the file
         raise RokebyError(f"edit: unknown {edit!r} (expected one of {', '.join(map(repr, comp.EDITS))})")
     _check_fit(fit, noise_tolerance)
     t0 = time.perf_counter()
     opened = comp.open_render(path, backend=backend, warn=warn, method=fit, noise_tolerance=noise_tolerance)
     t1 = time.perf_counter()
-    img, stats = _recomposite_opened(opened, edit, amount, k_d, k_r, image_name)
-    stats["open_s"] = t1 - t0
-    stats["warnings"] = opened.reconstruction.warnings() if opened.reconstructed else []
-    return img, stats
+    n = comp.edit_normals(opened.passes, opened.reconstruction, edit, amount)
+    t2 = time.perf_counter()
+    out, stats = opened.session(n, k_d=k_d, k_r=k_r)
+    t3 = time.perf_counter()
+    stats = {**stats, "reused": opened.reused, "edit_s": t2 - t1, "recomposite_s": t3 - t2, "show_s": 0.0, "open_s": t1 - t0,
+             "warnings": opened.reconstruction.warnings() if opened.reconstructed else []}
+    return out, stats
 
 
 def _check_fit(fit, noise_tolerance):
