@@ -6,6 +6,7 @@ collections, images, passes) and the disk (the reflection-map folder, the output
 as they were."""
 
 import math
+import os
 import shutil
 
 import numpy as np
@@ -279,3 +280,36 @@ def test_shadow_remove():
 
 def test_setup_compositing_passes():
     _check(_base, lambda ctx: api.setup_compositing_passes(ctx["scene"]))
+
+
+# --- files written whole --------------------------------------------------------------------------
+
+@pytest.mark.parametrize("writer", ["compositing", "envmaps"])
+@pytest.mark.parametrize("fault", ["write", "rename"])
+def test_exr_writes_are_whole_or_nothing(tmp_path, monkeypatch, writer, fault):
+    """The recomposited frame (CLI, sequence) and environment maps are written under a temporary
+    name and renamed: a failure while writing or renaming keeps the old file and leaves no partial
+    one."""
+    import OpenEXR
+
+    from rokeby import compositing, envmaps
+
+    write = {"compositing": compositing.write_exr, "envmaps": envmaps.write_exr}[writer]
+    out = tmp_path / "frame.exr"
+    write(out, np.full((4, 6, 3), 0.25, np.float32))
+    before = out.read_bytes()
+    if fault == "rename":
+        def boom(*_a):
+            raise OSError("injected: disk full")
+        monkeypatch.setattr(os, "replace", boom)
+    else:
+        def boom(self, path):
+            with open(path, "wb") as f:
+                f.write(b"v/1\x01 half")  # a partial file, then the failure
+            raise RuntimeError("injected: write failed")
+        monkeypatch.setattr(OpenEXR.File, "write", boom)
+    with pytest.raises((OSError, RuntimeError), match="injected"):
+        write(out, np.full((4, 6, 3), 0.75, np.float32))
+    monkeypatch.undo()
+    assert out.read_bytes() == before
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["frame.exr"]

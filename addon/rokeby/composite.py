@@ -26,6 +26,7 @@ import time
 import numpy as np
 
 from . import compositing as C
+from . import transaction
 
 
 def _pair(text: str) -> tuple[float, float]:
@@ -114,19 +115,6 @@ def _main_thread() -> bool:
     import threading  # noqa: PLC0415
 
     return threading.current_thread() is threading.main_thread()
-
-
-def _write_whole(path: str, write) -> None:
-    """``write(tmp)`` to a temporary file next to ``path``, then renamed over it: an interrupted
-    or failed write leaves no partial file (and an existing ``path`` as it was)."""
-    folder, name = os.path.split(os.path.abspath(path))
-    tmp = os.path.join(folder, f".{name}.partial-{os.getpid()}{os.path.splitext(name)[1]}")
-    try:
-        write(tmp)
-        os.replace(tmp, path)
-    finally:
-        if os.path.exists(tmp):
-            os.remove(tmp)
 
 
 def _main(argv) -> int:
@@ -223,7 +211,7 @@ def _main(argv) -> int:
         return 2
     t_comp = time.perf_counter()
     try:
-        _write_whole(a.output, lambda tmp: C.write_exr(tmp, out, p.header))
+        C.write_exr(a.output, out, p.header)  # written whole (transaction.write_whole)
     except (OSError, RuntimeError) as exc:  # a read-only folder, a full disk
         print(f"rokeby.composite: output: cannot write {a.output}: {exc}", file=sys.stderr)
         return 2
@@ -242,7 +230,7 @@ def _main(argv) -> int:
             def dump(tmp):
                 with open(tmp, "w") as f:
                     f.write(text)
-            _write_whole(a.report, dump)
+            transaction.write_whole(a.report, dump)
         except OSError as exc:
             print(f"rokeby.composite: --report: cannot write {a.report}: {exc}", file=sys.stderr)
             return 2

@@ -347,7 +347,7 @@ def _read_exr(path: str, layer: str | None) -> Passes:
 
 
 def write_exr(path: str, image: np.ndarray, header: dict | None = None) -> None:
-    """Writes an (H, W, 3) float32 image as an RGB EXR (ZIP compressed)."""
+    """Writes an (H, W, 3) float32 image as an RGB EXR (ZIP compressed), whole or not at all."""
     import OpenEXR
 
     hdr = {"compression": OpenEXR.ZIP_COMPRESSION, "type": OpenEXR.scanlineimage}
@@ -355,10 +355,12 @@ def write_exr(path: str, image: np.ndarray, header: dict | None = None) -> None:
         if isinstance(v, str) and k not in ("File", "Date"):
             hdr[k] = v
     with OpenEXR.File(hdr, {"RGB": np.ascontiguousarray(image[..., :3], np.float32)}) as f:
-        try:
-            f.write(str(path))
-        except RuntimeError as exc:  # OpenEXR's "Cannot open image file": a path problem, not a bug
-            raise OSError(f"{path}: cannot write the EXR: {exc}") from None
+        def write(tmp):
+            try:
+                f.write(tmp)
+            except RuntimeError as exc:  # OpenEXR's "Cannot open image file": a path problem, not a bug
+                raise OSError(f"{path}: cannot write the EXR: {exc}") from None
+        transaction.write_whole(path, write)  # no half-written file, the old one kept on failure
 
 
 # --- screen space -------------------------------------------------------------------------------

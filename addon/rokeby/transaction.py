@@ -389,6 +389,21 @@ def remove(idb) -> None:
         kind.remove(idb)
 
 
+def write_whole(path, write) -> None:
+    """``write(tmp)`` to a temporary file next to ``path``, then renamed over it: a failed or
+    interrupted write leaves no partial file, and an existing ``path`` as it was. bpy-free."""
+    import os  # noqa: PLC0415
+
+    folder, name = os.path.split(os.path.abspath(str(path)))
+    tmp = os.path.join(folder, f".{name}.partial-{os.getpid()}{os.path.splitext(name)[1]}")
+    try:
+        write(tmp)
+        os.replace(tmp, str(path))
+    finally:
+        if os.path.exists(tmp):
+            os.remove(tmp)
+
+
 DOOMED = "rokeby_doomed"
 
 
