@@ -151,6 +151,35 @@ def test_reflection_map_mode_install():
     _check(make, lambda ctx: api.install_render_nodes(ctx["ball"]))
 
 
+def _glass():
+    """The ball made of a Glass BSDF (split for refraction on install), a mirror with a constraint."""
+    ctx = _base()
+    mat = bpy.data.materials.new("Glass")
+    mat.use_nodes = True
+    nt = mat.node_tree
+    nt.nodes.remove(nt.nodes["Principled BSDF"])
+    glass = nt.nodes.new("ShaderNodeBsdfGlass")
+    glass.inputs["Roughness"].default_value = 0.1
+    nt.links.new(glass.outputs["BSDF"], nt.nodes["Material Output"].inputs["Surface"])
+    ctx["ball"].material_slots[0].material = mat
+    api.add_mirror(ctx["ball"])
+    ctx["ball"].rokeby.render_edits = False
+    api.add_constraint(ctx["ball"], (0.0, -1.0, 0.0), (1.0, -3.0, 2.0))
+    api.evaluate()
+    return ctx
+
+
+def test_glass_install_and_remove():
+    _check(_glass, lambda ctx: api.install_render_nodes(ctx["ball"]))
+
+    def installed():
+        ctx = _glass()
+        api.install_render_nodes(ctx["ball"])
+        return ctx
+
+    _check(installed, lambda ctx: api.remove_render_nodes(ctx["ball"]))
+
+
 # --- reflection-map captures: the maps folder --------------------------------------------------
 
 def _saved(tmp_path, captured):

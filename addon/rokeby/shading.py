@@ -722,8 +722,6 @@ def _uninstall_tree(tree) -> None:
         if original is not None:
             node.node_tree = original
         if copy is not None and copy.get(COPY_OF) is not None and copy.users == 0:
-            from . import transaction  # noqa: PLC0415
-
             transaction.remove(copy)
     for bsdf in [nd for nd in tree.nodes if SPLIT in nd]:
         _unsplit(tree, bsdf)
