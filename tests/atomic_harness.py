@@ -263,6 +263,7 @@ class Injector:
         self.k, self.lines, self.root, self.skip, self.own = k, lines, root, skip, own
         self.count = 0
         self.where = None
+        self._generators = []  # frames of generators already entered: resuming one is no new step
 
     def _ours(self, frame) -> bool:
         fn = frame.f_code.co_filename
@@ -294,6 +295,10 @@ class Injector:
     def _trace(self, frame, event, arg):
         if event != "call" or self.count >= self.k or not self._ours(frame):
             return None
+        if frame.f_code.co_flags & 0x2A0:  # a generator, coroutine or async generator
+            if any(f is frame for f in self._generators):
+                return self._local if self.lines else None
+            self._generators.append(frame)
         self._step(frame)
         return self._local if self.lines else None
 

@@ -296,6 +296,23 @@ def test_shadow_apply():
     _check(_shadow_scene, lambda ctx: api.apply_shadow_edit(ctx["session"], falloff_beta=1.0))
 
 
+def test_shadow_apply_again():
+    """Updating an applied edit (another drag, another β): the shadow mesh's shape key and
+    properties come back as they were."""
+    def make():
+        ctx = _shadow_scene()
+        api.apply_shadow_edit(ctx["session"])
+        s = ctx["session"]
+        h = s.handles(0)["points"].astype(np.float64)
+        n = len(h)
+        m = int(np.argmin(h[:, 0]))
+        s.drag(0, ((m - n // 4) % n, (m + n // 4) % n), m, h[m] + (h[m] - h.mean(axis=0)) * 0.2)
+        s.commit()
+        return ctx
+
+    _check(make, lambda ctx: api.apply_shadow_edit(ctx["session"], falloff_beta=2.0))
+
+
 def test_shadow_remove():
     def make():
         ctx = _shadow_scene()
