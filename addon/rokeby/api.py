@@ -309,7 +309,7 @@ def mirror_of(obj, scene=None):
     return None
 
 
-@transaction.atomic
+@transaction.atomic(materials=transaction.of_mirrors)
 def add_mirror(obj, *, metric: str = "EUCLIDEAN", geodesic_method: str = "HEAT", polar: str = "FAST"):
     """Make the mesh object ``obj`` a Rokeby mirror (its reflections become editable)."""
     _check_mirror(obj)
@@ -380,7 +380,7 @@ def _surface_of(mirror, scene, point):
     return _ev.project_to_surface(mirror, dg, geo, _vec3(point, "surface_point"), m), geo, dg
 
 
-@transaction.atomic
+@transaction.atomic(materials=transaction.of_mirrors)
 def add_constraint(mirror, surface_point, reflected_point=None, *, eye=None, view=None, name: str = "", kind: str = "REFLECTION", scene=None):
     """Add a reflection (or, ``kind='REFRACTION'``, refraction) constraint to ``mirror`` and
     return its index.
@@ -497,7 +497,7 @@ def _made_here(ob) -> bool:
         return False
 
 
-@transaction.atomic
+@transaction.atomic(materials=transaction.of_mirrors)
 def remove_constraint(mirror, index: int, *, delete_handles: bool = True, scene=None):
     """Remove constraint ``index``; its handles are deleted unless another item uses them."""
     scene = _scene(scene)
@@ -525,7 +525,7 @@ def _drop_unused_readers(mirror):
     _ev.drop_unused_readers(mirror)
 
 
-@transaction.atomic
+@transaction.atomic(materials=transaction.of_mirrors)
 def add_region(mirror, kind: str = "EUCLIDEAN", *, center=None, radius: float = 1.0, border: float = 0.25, vertex_group: str = "", name: str = "", scene=None):
     """Add a region of interest to ``mirror`` and return its index.
 
@@ -593,7 +593,7 @@ def add_region(mirror, kind: str = "EUCLIDEAN", *, center=None, radius: float = 
     return len(mirror.rokeby.regions) - 1
 
 
-@transaction.atomic
+@transaction.atomic(materials=transaction.of_mirrors)
 def remove_region(mirror, index: int, *, delete_center: bool = True, scene=None):
     """Remove region ``index`` (and its centre empty when the add-on made it and nothing else
     uses it; an object of the artist's own given as ``center`` stays)."""
@@ -620,7 +620,7 @@ def _other_mirrors_of_mesh(mirror) -> list:
     return [ob for ob in bpy.data.objects if ob != mirror and ob.data == me and ob.rokeby.is_mirror]
 
 
-@transaction.atomic
+@transaction.atomic(materials=transaction.of_mirrors)
 def remove_mirror(mirror, *, scene=None):
     """Stop editing ``mirror``: its constraints, regions, handles and field go, and the file is
     left as it was before ``add_mirror``: its materials' node trees as they were (unless another
@@ -796,7 +796,7 @@ def set_edited_materials(mirror, materials=None):
     s.all_materials = False
 
 
-@transaction.atomic
+@transaction.atomic(materials=transaction.of_mirrors)
 def install_render_nodes(mirror) -> int:
     """Make final renders (Cycles; EEVEE uses the same nodes) show the edit now. Evaluation does
     this by itself for every mirror with a constraint while its ``render_edits`` is on (the
@@ -816,7 +816,7 @@ def install_render_nodes(mirror) -> int:
     return count
 
 
-@transaction.atomic
+@transaction.atomic(materials=transaction.of_mirrors)
 def remove_render_nodes(mirror) -> int:
     """Take the render nodes out of the mirror's materials again and turn its ``render_edits``
     off (so evaluation does not put them back); returns from how many materials they went. On an

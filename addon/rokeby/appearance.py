@@ -91,7 +91,7 @@ def _foreign_links(bsdf) -> list:
     return out
 
 
-@transaction.atomic
+@transaction.atomic(materials=transaction.of_object)
 def setup(obj, material=None, target: str = "POINT", resolution: int = 1024, uv_map: str | None = None,
           linked: str = "REFUSE"):
     """Creates the attributes (filled with the material's current values) and wires them into the
@@ -451,7 +451,7 @@ def _image_name(mat, param):
     return f"rokeby {mat.name} {param}"
 
 
-@transaction.atomic
+@transaction.atomic(materials=transaction.of_object)
 def setup_texture(obj, resolution: int = 1024, uv_map: str | None = None, material=None):
     """Switches ``material`` (default: the active one, set up by :func:`setup`) to image-texture
     targets: one ``resolution``² float image per parameter, filled from the painted attributes
@@ -513,7 +513,7 @@ def setup_texture(obj, resolution: int = 1024, uv_map: str | None = None, materi
     return mat
 
 
-@transaction.atomic
+@transaction.atomic(materials=transaction.of_object)
 def remove_texture(obj, material=None, delete_images: bool = True) -> None:
     """Back to per-point targets: removes the Image Texture and UV Map nodes and relinks the
     attribute nodes, so the material is exactly as :func:`setup` left it (nodes, links, values);
@@ -542,7 +542,7 @@ def remove_texture(obj, material=None, delete_images: bool = True) -> None:
     transaction.remove_node(nt, nodes[NODE_PREFIX + "uv"])
 
 
-@transaction.atomic
+@transaction.atomic(materials=transaction.of_object)
 def remove(obj, material=None, delete_attributes: bool = False) -> None:
     """Undoes :func:`setup` on ``material`` (default: the active one): every Rokeby node goes
     (texture target included), the links ``setup(linked='REPLACE')`` replaced come back, so the

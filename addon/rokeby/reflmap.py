@@ -481,7 +481,7 @@ def is_stale(mirror, scene=None) -> bool:
     return s.map_fingerprint != scene_fingerprint(mirror, scene)
 
 
-@transaction.atomic
+@transaction.atomic(materials=transaction.of_mirrors)
 def capture(mirror, *, resolution=None, samples=None, storage: str = "AUTO", scene=None):
     """Capture the reflection map of ``mirror`` and return its (sharp) image.
 

@@ -422,7 +422,7 @@ def shadow_mesh_of(obj):
     return next((o for o in _parts()[0] if o.rokeby_shadow.caster == obj), None)
 
 
-@transaction.atomic
+@transaction.atomic(materials=transaction.none)
 def remove(obj) -> None:
     """Removes the shadow edit of ``obj`` (a caster or its shadow mesh): the shadow mesh, the twin
     light and the linking; the light's own linking before the edit comes back, so renders are
@@ -566,7 +566,7 @@ def migrate() -> list[str]:
     return msgs
 
 
-@transaction.atomic
+@transaction.atomic(materials=transaction.none)
 def apply(session: ShadowSession, *, scene=None, falloff_beta: float = 0.0):
     """Makes (or updates) the shadow-mesh object of ``session``'s current edit and sets up the
     light and shadow linking. ``falloff_beta`` (β ≥ 0, §6.2) blends the edit back towards the
