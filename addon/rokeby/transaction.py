@@ -78,6 +78,7 @@ class Transaction:
 
         d = bpy.data
         self.removed: list = []
+        self.renamed: list = []
         self.nodes: list = []
         self.hooks: list = []
         self.undo_hooks: list = []
@@ -121,7 +122,7 @@ class Transaction:
                 continue
             ll = getattr(ob, "light_linking", None)
             self.objects.append((ob, {a: getattr(ob, a) for a in _OBJECT_FLAGS if hasattr(ob, a)}, ob.data, ob.parent,
-                                 ob.matrix_world.copy(),
+                                 ob.matrix_basis.copy(),  # not matrix_world: stale until the depsgraph runs
                                  (ll.receiver_collection, ll.blocker_collection) if ll is not None else None,
                                  [_modifier(m) for m in ob.modifiers]))
         self.materials = [(m, m.pass_index, m.use_nodes) for m in d.materials if m.library is None]
@@ -146,6 +147,10 @@ class Transaction:
             for parent in [*bpy.data.collections, *(sc.collection for sc in bpy.data.scenes)]:
                 if idb in set(parent.children):
                     parent.children.unlink(idb)
+        if not self.doomed(idb):
+            # Its name is free at once, as after a deletion (a replacement may take it).
+            self.renamed.append((idb, idb.name))
+            idb.name = f"{idb.name} (deleted)"
         self.removed.append(idb)
 
     def doomed(self, idb) -> bool:
@@ -200,8 +205,8 @@ class Transaction:
                     ob.data = data
                 if ob.parent != parent:
                     ob.parent = parent
-                if ob.matrix_world != matrix:
-                    ob.matrix_world = matrix
+                if ob.matrix_basis != matrix:
+                    ob.matrix_basis = matrix
                 for a, v in flags.items():
                     if getattr(ob, a) != v:
                         setattr(ob, a, v)
@@ -229,7 +234,7 @@ class Transaction:
                 if sock is not None and _copy(sock.default_value) != value:
                     sock.default_value = value
             for nd, saved in snap["node_props"]:
-                if nd.as_pointer() in nodes:
+                if nd.as_pointer() in nodes and _idprops(nd) != saved:
                     _load_idprops(nd, saved)
         for me, names, ours, keys in self.attributes:
             for name in [a.name for a in me.attributes if a.name not in names and not a.name.startswith(".")]:
@@ -240,6 +245,8 @@ class Transaction:
                 a = me.attributes.get(name)
                 if a is None:
                     a = me.attributes.new(name, kind, domain)
+                elif values is not None and np.array_equal(_read(a), values):
+                    continue
                 _write(a, values)
             if keys is not None and me.shape_keys is not None:
                 for kb in me.shape_keys.key_blocks:
@@ -274,7 +281,8 @@ class Transaction:
                 except (AttributeError, TypeError, ValueError):
                     pass
         for owner, saved in self.props:
-            _load_idprops(owner, saved)
+            if _idprops(owner) != saved:  # untouched ones are left alone
+                _load_idprops(owner, saved)
         for owner in self.bare:
             for k in list(owner.keys()):
                 del owner[k]
@@ -286,6 +294,11 @@ class Transaction:
                     d.objects.remove(i, do_unlink=True)
                 else:
                     getattr(d, kind).remove(i)
+        for idb, name in reversed(self.renamed):
+            try:
+                idb.name = name
+            except ReferenceError:
+                pass
 
 
 def _rna_values(struct) -> dict:
