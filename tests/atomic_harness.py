@@ -149,7 +149,7 @@ def mesh_state(me) -> dict:
 def object_state(ob) -> dict:
     out = {
         "type": ob.type, "data": getattr(ob.data, "name", None), "parent": ob.parent.name if ob.parent else None,
-        "matrix": _plain(tuple(tuple(r) for r in ob.matrix_world)),
+        "matrix": _plain(tuple(tuple(r) for r in ob.matrix_basis)),  # matrix_world is stale until the depsgraph runs
         "flags": {a: getattr(ob, a) for a in ("hide_render", "hide_viewport", "visible_camera", "visible_diffuse",
                                                "visible_glossy", "visible_transmission", "visible_volume_scatter",
                                                "visible_shadow", "is_holdout", "is_shadow_catcher", "pass_index",
