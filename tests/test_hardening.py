@@ -534,3 +534,32 @@ def test_nearest_triangle_without_a_bvh_matches_blenders_bvh(spot):
         t = evaluate.nearest_triangle(geo, x)
         one = BVHTree.FromPolygons(v[f[t]].tolist(), [[0, 1, 2]], all_triangles=True)
         assert one.find_nearest(x.tolist())[3] <= bvh.find_nearest(x.tolist())[3] + 1e-6 * size
+
+
+# --- the limits table of docs/errors.md -------------------------------------------------------
+
+
+@pytest.mark.parametrize("frame", [1048575, -1048575, float("nan"), float("inf")])
+def test_evaluate_refuses_a_frame_outside_blenders_range_by_name(frame):
+    bpy.ops.wm.read_factory_settings(use_empty=True)
+    rokeby.register()
+    sc = bpy.context.scene
+    before = sc.frame_current
+    with pytest.raises(api.RokebyError, match=r"frame: must be finite and within ±1048574"):
+        api.evaluate(frame=frame)
+    assert sc.frame_current == before
+    api.evaluate(frame=1048574)  # the bound itself is Blender's last frame
+    assert sc.frame_current == 1048574
+
+
+@pytest.mark.parametrize("resolution", [16, 48, 16384, 0, -64, 64.5, "big"])
+def test_capture_refuses_a_map_width_outside_32_to_8192_or_not_a_power_of_two(resolution):
+    bpy.ops.wm.read_factory_settings(use_empty=True)
+    rokeby.register()
+    bpy.ops.mesh.primitive_uv_sphere_add()
+    ball = bpy.context.object
+    api.add_mirror(ball)
+    n_images = len(bpy.data.images)
+    with pytest.raises(api.RokebyError, match="resolution"):
+        api.capture_reflection_map(ball, resolution=resolution, samples=1, storage="PACK")
+    assert len(bpy.data.images) == n_images and ball.rokeby.map_image is None

@@ -265,3 +265,39 @@ def test_recomposite_with_a_tiny_gamma_is_refused_or_finite():
         assert "gamma" in str(e)
     else:
         assert np.isfinite(out).all(), out
+
+
+@pytest.mark.parametrize("limit_env", [{}, {"ROKEBY_MAX_ALLOC_BYTES": str(10**9)}], ids=["machine-limit", "env-limit"])
+def test_every_allocation_crash_of_the_issue_survives_in_a_subprocess(limit_env):
+    """Issue 24's aborts, each in a process under a 2 GiB address-space limit (an abort or an
+    uncaught allocation failure kills it before RESULT): the 53-byte .hdr declaring 65536², the
+    30000² one, interpolate turning 2.4 MB into 40 GB, sh_eval's C×N output, noise_decal of
+    100000², env_prefilter with 20,000 parameters. Without ROKEBY_MAX_ALLOC_BYTES the sizes are
+    checked against the machine's memory and what passes that check fails in try_reserve."""
+    r = run_isolated("""
+        import resource
+        import numpy as np
+        import rokeby_native as rn
+        resource.setrlimit(resource.RLIMIT_AS, (2 << 30, 2 << 30))
+        FACE = np.array([[0, 1, 2]], np.int64)
+        cases = {
+            "hdr 65536": lambda: rn.rgbe_decode(b"#?RADIANCE\\nFORMAT=32-bit_rle_rgbe\\n\\n-Y 65536 +X 65536\\n"),
+            "hdr 30000": lambda: rn.rgbe_decode(b"#?RADIANCE\\nFORMAT=32-bit_rle_rgbe\\n\\n-Y 30000 +X 30000\\n"),
+            "interpolate": lambda: rn.interpolate(np.ones((100_000, 3), np.float32), FACE, np.zeros(100_000, np.int64),
+                                                  np.full((100_000, 3), 1 / 3, np.float32)),
+            "sh_eval": lambda: rn.sh_eval(np.ones((100_000, 9), np.float32),
+                                          np.tile(np.array([[0, 0, 1]], np.float32), (100_000, 1))),
+            "noise_decal": lambda: rn.normals_noise_decal(100000, 100000, 16.0, 3, 0, (0.0, 0.0), 10.0),
+            "env_prefilter": lambda: rn.env_prefilter(np.ones((16, 32, 3), np.float32), "phong", np.full(20000, 10.0)),
+        }
+        for name, call in cases.items():
+            try:
+                call()
+            except (MemoryError, ValueError) as e:
+                print("ok", name, type(e).__name__)
+            else:
+                raise SystemExit("no error: " + name)
+        print("RESULT survived")
+    """, limit_env, timeout=120)
+    assert r.returncode == 0 and "RESULT survived" in r.stdout, (r.returncode, r.stdout[-2000:], r.stderr[-2000:])
+    assert r.stdout.count("ok ") == 6

@@ -14,7 +14,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from . import native, words
+from . import native, transaction, words
 
 __all__ = [
     "reflect",
@@ -59,6 +59,18 @@ __all__ = [
     "RokebyError",
     "MirrorReport",
 ]
+
+
+def _cancellable(fn):
+    """``fn`` is an operation ``rokeby.native.cancel()`` can stop (KeyboardInterrupt; an
+    operator's Esc, Ctrl-C): see ``native.cancellable``."""
+    import functools  # noqa: PLC0415
+
+    @functools.wraps(fn)
+    def wrapper(*args, **kwargs):
+        with native.cancellable():
+            return fn(*args, **kwargs)
+    return wrapper
 
 
 def _vec3(value, name: str) -> np.ndarray:
@@ -297,6 +309,7 @@ def mirror_of(obj, scene=None):
     return None
 
 
+@transaction.atomic(materials=transaction.of_mirrors)
 def add_mirror(obj, *, metric: str = "EUCLIDEAN", geodesic_method: str = "HEAT", polar: str = "FAST"):
     """Make the mesh object ``obj`` a Rokeby mirror (its reflections become editable)."""
     _check_mirror(obj)
@@ -345,7 +358,7 @@ def _remove_objects(objs):
 
     for ob in objs:
         try:
-            bpy.data.objects.remove(ob, do_unlink=True)
+            transaction.remove(ob)
         except (ReferenceError, RuntimeError):
             pass
     # The collection made for the first handle goes with the last one.
@@ -367,6 +380,7 @@ def _surface_of(mirror, scene, point):
     return _ev.project_to_surface(mirror, dg, geo, _vec3(point, "surface_point"), m), geo, dg
 
 
+@transaction.atomic(materials=transaction.of_mirrors)
 def add_constraint(mirror, surface_point, reflected_point=None, *, eye=None, view=None, name: str = "", kind: str = "REFLECTION", scene=None):
     """Add a reflection (or, ``kind='REFRACTION'``, refraction) constraint to ``mirror`` and
     return its index.
@@ -483,6 +497,7 @@ def _made_here(ob) -> bool:
         return False
 
 
+@transaction.atomic(materials=transaction.of_mirrors)
 def remove_constraint(mirror, index: int, *, delete_handles: bool = True, scene=None):
     """Remove constraint ``index``; its handles are deleted unless another item uses them."""
     scene = _scene(scene)
@@ -510,6 +525,7 @@ def _drop_unused_readers(mirror):
     _ev.drop_unused_readers(mirror)
 
 
+@transaction.atomic(materials=transaction.of_mirrors)
 def add_region(mirror, kind: str = "EUCLIDEAN", *, center=None, radius: float = 1.0, border: float = 0.25, vertex_group: str = "", name: str = "", scene=None):
     """Add a region of interest to ``mirror`` and return its index.
 
@@ -577,6 +593,7 @@ def add_region(mirror, kind: str = "EUCLIDEAN", *, center=None, radius: float = 
     return len(mirror.rokeby.regions) - 1
 
 
+@transaction.atomic(materials=transaction.of_mirrors)
 def remove_region(mirror, index: int, *, delete_center: bool = True, scene=None):
     """Remove region ``index`` (and its centre empty when the add-on made it and nothing else
     uses it; an object of the artist's own given as ``center`` stays)."""
@@ -603,6 +620,7 @@ def _other_mirrors_of_mesh(mirror) -> list:
     return [ob for ob in bpy.data.objects if ob != mirror and ob.data == me and ob.rokeby.is_mirror]
 
 
+@transaction.atomic(materials=transaction.of_mirrors)
 def remove_mirror(mirror, *, scene=None):
     """Stop editing ``mirror``: its constraints, regions, handles and field go, and the file is
     left as it was before ``add_mirror``: its materials' node trees as they were (unless another
@@ -778,6 +796,7 @@ def set_edited_materials(mirror, materials=None):
     s.all_materials = False
 
 
+@transaction.atomic(materials=transaction.of_mirrors)
 def install_render_nodes(mirror) -> int:
     """Make final renders (Cycles; EEVEE uses the same nodes) show the edit now. Evaluation does
     this by itself for every mirror with a constraint while its ``render_edits`` is on (the
@@ -797,6 +816,7 @@ def install_render_nodes(mirror) -> int:
     return count
 
 
+@transaction.atomic(materials=transaction.of_mirrors)
 def remove_render_nodes(mirror) -> int:
     """Take the render nodes out of the mirror's materials again and turn its ``render_edits``
     off (so evaluation does not put them back); returns from how many materials they went. On an
@@ -819,6 +839,7 @@ def remove_render_nodes(mirror) -> int:
     return count
 
 
+@_cancellable
 def capture_reflection_map(mirror, *, resolution=None, samples=None, storage: str = "AUTO", scene=None):
     """Capture (or refresh) the reflection map of ``mirror``: a Cycles equirectangular panorama
     from its bounding-box centre (or ``rokeby.map_origin``) with the mirror hidden, plus blurred
@@ -1014,6 +1035,7 @@ def setup_compositing_passes(scene=None, view_layer=None) -> list[str]:
     return compositing.setup_passes(_scene(scene), view_layer)
 
 
+@_cancellable
 def recomposite_render(path: str, *, edit: str = "emboss", amount: float = 0.5, scene=None,
                        image_name: str = "Rokeby Recomposited", k_d: float = 1.0, k_r: float = 1.0,
                        backend: str = "cpu", warn: bool = True, fit: str = "qp", noise_tolerance: float = 0.0):
@@ -1042,6 +1064,7 @@ def recomposite_render(path: str, *, edit: str = "emboss", amount: float = 0.5, 
     return img, opened.reconstruction.reports
 
 
+@_cancellable
 def recomposite_exr(path: str, *, edit: str = "emboss", amount: float = 0.5, image_name: str = "Rokeby Recomposited",
                     k_d: float = 1.0, k_r: float = 1.0, backend: str = "cpu", warn: bool = True, fit: str = "qp",
                     noise_tolerance: float = 0.0):
@@ -1056,16 +1079,35 @@ def recomposite_exr(path: str, *, edit: str = "emboss", amount: float = 0.5, ima
     again without reading the file."""
     from . import compositing as comp  # noqa: PLC0415
 
+    out, stats = recomposite_exr_pixels(path, edit=edit, amount=amount, k_d=k_d, k_r=k_r, backend=backend, warn=warn,
+                                        fit=fit, noise_tolerance=noise_tolerance)
+    t0 = time.perf_counter()
+    img = comp.show_image(image_name, out)
+    stats["show_s"] = time.perf_counter() - t0
+    return img, stats
+
+
+@_cancellable
+def recomposite_exr_pixels(path: str, *, edit: str = "emboss", amount: float = 0.5, k_d: float = 1.0, k_r: float = 1.0,
+                           backend: str = "cpu", warn: bool = True, fit: str = "qp", noise_tolerance: float = 0.0):
+    """``recomposite_exr`` without showing the result: returns (pixels (H, W, 3) float32, stats)
+    and touches no Blender data, so with the 'cpu' backend it may run on a worker thread (the
+    Recomposite Render operator does, stopping on Esc through ``rokeby.native.cancel()``)."""
+    from . import compositing as comp  # noqa: PLC0415
+
     if edit not in comp.EDITS:  # before reading the file
         raise RokebyError(f"edit: unknown {edit!r} (expected one of {', '.join(map(repr, comp.EDITS))})")
     _check_fit(fit, noise_tolerance)
     t0 = time.perf_counter()
     opened = comp.open_render(path, backend=backend, warn=warn, method=fit, noise_tolerance=noise_tolerance)
     t1 = time.perf_counter()
-    img, stats = _recomposite_opened(opened, edit, amount, k_d, k_r, image_name)
-    stats["open_s"] = t1 - t0
-    stats["warnings"] = opened.reconstruction.warnings() if opened.reconstructed else []
-    return img, stats
+    n = comp.edit_normals(opened.passes, opened.reconstruction, edit, amount)
+    t2 = time.perf_counter()
+    out, stats = opened.session(n, k_d=k_d, k_r=k_r)
+    t3 = time.perf_counter()
+    stats = {**stats, "reused": opened.reused, "edit_s": t2 - t1, "recomposite_s": t3 - t2, "show_s": 0.0, "open_s": t1 - t0,
+             "warnings": opened.reconstruction.warnings() if opened.reconstructed else []}
+    return out, stats
 
 
 def _check_fit(fit, noise_tolerance):

@@ -35,7 +35,7 @@ import math
 
 import numpy as np
 
-from . import words
+from . import transaction, words
 
 # brush → (attribute, Principled input, default when the material has no value, clamp range)
 PARAMS = {
@@ -98,6 +98,7 @@ def _foreign_links(bsdf) -> list:
     return out
 
 
+@transaction.atomic(materials=transaction.of_object)
 def setup(obj, material=None, target: str = "POINT", resolution: int = 1024, uv_map: str | None = None,
           linked: str = "REFUSE"):
     """Creates the attributes (filled with the material's current values) and wires them into the
@@ -457,6 +458,7 @@ def _image_name(mat, param):
     return f"rokeby {mat.name} {param}"
 
 
+@transaction.atomic(materials=transaction.of_object)
 def setup_texture(obj, resolution: int = 1024, uv_map: str | None = None, material=None):
     """Switches ``material`` (default: the active one, set up by :func:`setup`) to image-texture
     targets: one ``resolution``² float image per parameter, filled from the painted attributes
@@ -518,6 +520,7 @@ def setup_texture(obj, resolution: int = 1024, uv_map: str | None = None, materi
     return mat
 
 
+@transaction.atomic(materials=transaction.of_object)
 def remove_texture(obj, material=None, delete_images: bool = True) -> None:
     """Back to per-point targets: removes the Image Texture and UV Map nodes and relinks the
     attribute nodes, so the material is exactly as :func:`setup` left it (nodes, links, values);
@@ -535,17 +538,18 @@ def remove_texture(obj, material=None, delete_images: bool = True) -> None:
         attr = nodes.get(NODE_PREFIX + param)
         if tex is not None:
             img = tex.image
-            nodes.remove(tex)
-            if delete_images and img is not None and img.users == 0:
-                bpy.data.images.remove(img)
+            transaction.remove_node(nt, tex)
+            if delete_images and img is not None:
+                transaction.remove_unused(img)  # once the node is gone
         if glob is not None and attr is not None:
             if param in COLORS:
                 nt.links.new(attr.outputs["Color"], glob.inputs[6])
             else:
                 nt.links.new(attr.outputs["Fac"], glob.inputs[0])
-    nodes.remove(nodes[NODE_PREFIX + "uv"])
+    transaction.remove_node(nt, nodes[NODE_PREFIX + "uv"])
 
 
+@transaction.atomic(materials=transaction.of_object)
 def remove(obj, material=None, delete_attributes: bool = False) -> None:
     """Undoes :func:`setup` on ``material`` (default: the active one): every Rokeby node goes
     (texture target included), the links ``setup(linked='REPLACE')`` replaced come back, so the
@@ -566,7 +570,7 @@ def remove(obj, material=None, delete_attributes: bool = False) -> None:
         for name in (NODE_PREFIX + "global_" + param, NODE_PREFIX + param):
             node = nodes.get(name)
             if node is not None:
-                nodes.remove(node)
+                transaction.remove_node(nt, node)
         if len(rec) == 2 and bsdf is not None:
             src = nodes.get(rec[0])
             out = next((o for o in src.outputs if o.identifier == rec[1]), None) if src is not None else None
@@ -576,7 +580,7 @@ def remove(obj, material=None, delete_attributes: bool = False) -> None:
             obj.data.attributes.remove(obj.data.attributes[attr])
     tan = nodes.get(NODE_PREFIX + "tangent")
     if tan is not None:
-        nodes.remove(tan)
+        transaction.remove_node(nt, tan)
 
 
 def target(obj) -> str:

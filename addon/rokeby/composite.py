@@ -27,7 +27,6 @@ frame K, e.g. ``--frame $SLURM_ARRAY_TASK_ID``.
 from __future__ import annotations
 
 import argparse
-import contextlib
 import json
 import os
 import sys
@@ -36,6 +35,7 @@ import time
 import numpy as np
 
 from . import compositing as C
+from . import transaction
 
 
 def _pair(text: str) -> tuple[float, float]:
@@ -96,12 +96,34 @@ def _indices(text: str) -> list[int]:
 def main(argv=None) -> int:
     """The tool: 0 on success; 2 with one line on stderr naming the problem for a bad file, flag
     or value, an unwritable output or a resource limit (issue 24: never a traceback for those)."""
+    import signal  # noqa: PLC0415
+
+    from . import native  # noqa: PLC0415
+
+    def interrupted(_sig, _frame):
+        native.cancel()  # a native call in flight stops at its next row
+        raise KeyboardInterrupt
+
+    old = signal.signal(signal.SIGINT, interrupted) if _main_thread() else None
     try:
-        return _main(argv)
+        with native.cancellable():
+            return _main(argv)
+    except KeyboardInterrupt:  # Ctrl-C / SIGINT: one line, status 130, no (partial) output file
+        print("rokeby.composite: cancelled", file=sys.stderr)
+        return 130
     except (C.CompositingError, ValueError, OSError, MemoryError) as exc:
         what = "out of memory" if isinstance(exc, MemoryError) else " ".join(str(exc).split())
         print(f"rokeby.composite: {what or type(exc).__name__}", file=sys.stderr)
         return 2
+    finally:
+        if old is not None:
+            signal.signal(signal.SIGINT, old)
+
+
+def _main_thread() -> bool:
+    import threading  # noqa: PLC0415
+
+    return threading.current_thread() is threading.main_thread()
 
 
 def _main(argv) -> int:
@@ -246,13 +268,9 @@ def _frame(a) -> int:
         print(f"rokeby.composite: --backend {a.backend}: {exc}", file=sys.stderr)
         return 2
     t_comp = time.perf_counter()
-    partial = a.output + ".partial.exr"  # written whole, then renamed: a crash leaves no half frame
     try:
-        C.write_exr(partial, out, p.header)
-        os.replace(partial, a.output)
+        C.write_exr(a.output, out, p.header)  # written whole (transaction.write_whole): a crash leaves no half frame
     except (OSError, RuntimeError) as exc:  # a read-only folder, a full disk
-        with contextlib.suppress(OSError):
-            os.remove(partial)
         print(f"rokeby.composite: output: cannot write {a.output}: {exc}", file=sys.stderr)
         return 2
     t_end = time.perf_counter()
@@ -265,8 +283,12 @@ def _frame(a) -> int:
                         "recomposite": t_comp - t_edit, "write": t_end - t_comp, **rec.timings},
         }
         try:
-            with open(a.report, "w") as f:
-                json.dump(rep, f, indent=1, default=str)
+            text = json.dumps(rep, indent=1, default=str)
+
+            def dump(tmp):
+                with open(tmp, "w") as f:
+                    f.write(text)
+            transaction.write_whole(a.report, dump)
         except OSError as exc:
             print(f"rokeby.composite: --report: cannot write {a.report}: {exc}", file=sys.stderr)
             return 2

@@ -41,7 +41,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from . import native
+from . import native, transaction
 
 AOV_REFLOCC = "rokeby_reflocc"
 AOV_CAMERA_X = "rokeby_camera_x"
@@ -134,6 +134,7 @@ def _material_nodes(mat) -> None:
     nt.links.new(vt.outputs["Vector"], out_c.inputs["Color"])
 
 
+@transaction.atomic
 def setup_passes(scene, view_layer=None) -> list[str]:
     """Enables on ``view_layer`` (default: the scene's first) every pass the method needs, adds the
     reflection-occlusion and view-vector AOVs (and their nodes in every material of the scene's
@@ -419,7 +420,7 @@ def _read_exr(path: str, layer: str | None) -> Passes:
 
 
 def write_exr(path: str, image: np.ndarray, header: dict | None = None) -> None:
-    """Writes an (H, W, 3) float32 image as an RGB EXR (ZIP compressed)."""
+    """Writes an (H, W, 3) float32 image as an RGB EXR (ZIP compressed), whole or not at all."""
     import OpenEXR
 
     hdr = {"compression": OpenEXR.ZIP_COMPRESSION, "type": OpenEXR.scanlineimage}
@@ -427,10 +428,12 @@ def write_exr(path: str, image: np.ndarray, header: dict | None = None) -> None:
         if isinstance(v, str) and k not in ("File", "Date"):
             hdr[k] = v
     with OpenEXR.File(hdr, {"RGB": np.ascontiguousarray(image[..., :3], np.float32)}) as f:
-        try:
-            f.write(str(path))
-        except RuntimeError as exc:  # OpenEXR's "Cannot open image file": a path problem, not a bug
-            raise OSError(f"{path}: cannot write the EXR: {exc}") from None
+        def write(tmp):
+            try:
+                f.write(tmp)
+            except RuntimeError as exc:  # OpenEXR's "Cannot open image file": a path problem, not a bug
+                raise OSError(f"{path}: cannot write the EXR: {exc}") from None
+        transaction.write_whole(path, write)  # no half-written file, the old one kept on failure
 
 
 # --- screen space -------------------------------------------------------------------------------

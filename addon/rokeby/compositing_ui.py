@@ -17,6 +17,9 @@ from . import compositing as comp
 from . import prefs
 from .progress import Progress
 
+# What an operator reports when Esc / Ctrl-C / rokeby.native.cancel() stopped it (nothing changed).
+CANCELLED = "Rokeby: Cancelled (nothing was changed)"
+
 EDITS = [
     ("EMBOSS", "Emboss", "n_z → β n_z (amount = β in (0, 1])", 0),
     ("RIPPLE", "Ripple", "fading 2D ripple decal (amount = strength)", 1),
@@ -161,6 +164,9 @@ class ROKEBY_OT_composite_render(_EditProps, bpy.types.Operator):
             with Progress(context, 1) as progress:  # render, reconstruct, recomposite: seconds
                 img, reports = api.recomposite_render(path, scene=context.scene, warn=False, **_edit_args(self, context))
                 progress.step()
+        except KeyboardInterrupt:
+            self.report({"WARNING"}, CANCELLED)
+            return {"CANCELLED"}
         except (comp.CompositingError, api.RokebyError, ValueError, RuntimeError) as exc:
             self.report({"ERROR"}, f"Rokeby: {exc}")
             return {"CANCELLED"}
@@ -194,12 +200,72 @@ class ROKEBY_OT_composite_edit(_EditProps, bpy.types.Operator):
         if not self.filepath and not context.scene.get(LAST_EXR, ""):  # nothing rendered yet: pick an EXR
             context.window_manager.fileselect_add(self)
             return {"RUNNING_MODAL"}
-        return self.execute(context)
+        return self._start(context)
+
+    def _path(self, context) -> str:
+        return bpy.path.abspath(self.filepath) if self.filepath else context.scene.get(LAST_EXR, "")
+
+    def _start(self, context):
+        """With a window and the CPU backend: read, reconstruct and recomposite on a worker thread
+        while the operator waits modally, so that Esc stops it (rokeby.native.cancel()); the image
+        is made on the main thread once the pixels are there. Otherwise: ``execute``."""
+        import threading  # noqa: PLC0415
+
+        from . import api  # noqa: PLC0415
+
+        args = _edit_args(self, context)
+        path = self._path(context)
+        if not path or args["backend"] != "cpu" or context.window is None or bpy.app.background:
+            return self.execute(context)
+        image_name = args.pop("image_name")
+        self._result = {}
+
+        def work():
+            try:
+                self._result["ok"] = api.recomposite_exr_pixels(path, warn=False, **args)
+            except BaseException as exc:  # noqa: BLE001 - handed to the main thread
+                self._result["error"] = exc
+
+        self._image_name = image_name
+        self._thread = threading.Thread(target=work, name="rokeby recomposite", daemon=True)
+        self._thread.start()
+        wm = context.window_manager
+        self._timer = wm.event_timer_add(0.1, window=context.window)
+        wm.modal_handler_add(self)
+        context.workspace.status_text_set("Rokeby: recompositing… (Esc: cancel)")
+        return {"RUNNING_MODAL"}
+
+    def modal(self, context, event):
+        from . import native  # noqa: PLC0415
+
+        if event.type == "ESC":
+            native.cancel()  # the worker's native call stops at its next row
+        if self._thread.is_alive():
+            return {"RUNNING_MODAL"} if event.type == "ESC" else {"PASS_THROUGH"}
+        context.window_manager.event_timer_remove(self._timer)
+        context.workspace.status_text_set(None)
+        exc = self._result.get("error")
+        if exc is not None:
+            return self._failed(exc)
+        out, stats = self._result["ok"]
+        img = comp.show_image(self._image_name, out)
+        return self._done(img, stats)
+
+    def _failed(self, exc):
+        from . import api  # noqa: PLC0415
+
+        if isinstance(exc, KeyboardInterrupt):
+            self.report({"WARNING"}, CANCELLED)
+            return {"CANCELLED"}
+        if isinstance(exc, (comp.CompositingError, api.RokebyError, ValueError, RuntimeError, MemoryError)):
+            self.report({"ERROR"}, f"Rokeby: {exc}")
+            return {"CANCELLED"}
+        raise exc
 
     def execute(self, context):
         from . import api  # noqa: PLC0415
 
-        path = bpy.path.abspath(self.filepath) if self.filepath else context.scene.get(LAST_EXR, "")
+        path = self._path(context)
         if not path:
             self.report({"ERROR"}, "Rokeby: no rendered frame to edit: click Render and Recomposite first, or pick an EXR")
             return {"CANCELLED"}
@@ -207,9 +273,11 @@ class ROKEBY_OT_composite_edit(_EditProps, bpy.types.Operator):
             with Progress(context, 1) as progress:  # the first edit of a frame reads and reconstructs it
                 img, stats = api.recomposite_exr(path, warn=False, **_edit_args(self, context))
                 progress.step()
-        except (comp.CompositingError, api.RokebyError, ValueError, RuntimeError) as exc:
-            self.report({"ERROR"}, f"Rokeby: {exc}")
-            return {"CANCELLED"}
+        except (KeyboardInterrupt, comp.CompositingError, api.RokebyError, ValueError, RuntimeError, MemoryError) as exc:
+            return self._failed(exc)
+        return self._done(img, stats)
+
+    def _done(self, img, stats):
         for msg in stats["warnings"]:
             self.report({"WARNING"}, f"Rokeby: {msg}")
         ms = 1e3 * (stats["edit_s"] + stats["recomposite_s"] + stats["show_s"])
@@ -291,12 +359,25 @@ class ROKEBY_OT_composite_sequence(_EditProps, bpy.types.Operator):
                     continue
                 try:
                     img, _stats = api.recomposite_exr(path, warn=False, **args)
+                except KeyboardInterrupt:  # Ctrl-C / a cancel: the frames done stay, the rest is left
+                    comp.close_render()
+                    self.report({"WARNING"}, f"Rokeby: Cancelled after {len(done)} frame(s) recomposited into {out_dir} "
+                                             "(the frame in progress was not written)")
+                    return {"FINISHED"} if done else {"CANCELLED"}
+                except (comp.CompositingError, api.RokebyError, ValueError, RuntimeError, OSError) as exc:
+                    failed.append(f"{os.path.basename(path)}: {exc}")
+                    progress.step()
+                    continue
+                try:
                     partial = out + ".partial.exr"  # written whole, then renamed: a crash leaves no half frame
                     comp.write_exr(partial, _image_rgb(img))
                     os.replace(partial, out)
                     done.append(path)
                 except (comp.CompositingError, api.RokebyError, ValueError, RuntimeError, OSError) as exc:
                     failed.append(f"{os.path.basename(path)}: {exc}")
+                finally:
+                    if os.path.exists(partial):
+                        os.remove(partial)
                 progress.step()
         comp.close_render()  # the last frame's passes: let go of their memory
         summary = (f"Rokeby: {len(done)} frame(s) recomposited into {out_dir}"

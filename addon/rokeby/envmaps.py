@@ -93,8 +93,10 @@ def write_exr(path, pixels) -> Path:
     data = px[..., 0] if name == "Y" else px
     header = {"compression": OpenEXR.ZIP_COMPRESSION, "type": OpenEXR.scanlineimage}
     path = Path(path)
+    from . import transaction  # noqa: PLC0415
+
     with OpenEXR.File(header, {name: np.ascontiguousarray(data)}) as f:
-        f.write(str(path))
+        transaction.write_whole(path, f.write)  # no half-written file, the old one kept on failure
     return path
 
 

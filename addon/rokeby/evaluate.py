@@ -1390,9 +1390,11 @@ def remove_carrier(obj) -> bool:
     if carrier is not None:
         mesh = carrier.data
         obj.rokeby.field_carrier = None
-        bpy.data.objects.remove(carrier)
-        if mesh is not None and mesh.users == 0:
-            bpy.data.meshes.remove(mesh)
+        from . import transaction  # noqa: PLC0415
+
+        transaction.remove(carrier)
+        if mesh is not None:
+            transaction.remove_unused(mesh)
         found = True
     return found
 

@@ -7,6 +7,9 @@ scattered through the code.
 
 from __future__ import annotations
 
+import contextlib
+import threading
+
 try:
     import rokeby_native as _native
     IMPORT_ERROR: Exception | None = None
@@ -42,11 +45,52 @@ def missing_hint() -> str:
     return "Build it: run `make` in the Rokeby checkout, or install the extension zip, which bundles its wheel"
 
 
+class _Checked:
+    """``rokeby_native`` with a look at the cancel request before each use: a cancel that came
+    between two native calls (the core's own flag is cleared by the next cancellable call) still
+    stops the operation at its next native call."""
+
+    def __getattr__(self, name):
+        check_cancelled()
+        return getattr(_native, name)
+
+
+_CHECKED = _Checked()
+_CANCEL = threading.Event()
+
+
 def module():
     """The ``rokeby_native`` module, or a clear error saying how to get it."""
     if _native is None:
         raise NativeUnavailable(f"Rokeby's native core (rokeby_native) is not available. {missing_hint()} ({IMPORT_ERROR})")
-    return _native
+    return _CHECKED
+
+
+def cancel() -> None:
+    """Stop the running operation: the cancellable native calls in flight stop at their next row
+    and the next native call of the operation does not start (both raise KeyboardInterrupt).
+    Callable from any thread (an operator's Esc, a signal handler). The request holds until the
+    next operation starts (``cancellable``)."""
+    _CANCEL.set()
+    if _native is not None and hasattr(_native, "cancel"):
+        _native.cancel()
+
+
+def check_cancelled() -> None:
+    """KeyboardInterrupt when ``cancel()`` was called during the running operation."""
+    if _CANCEL.is_set():
+        raise KeyboardInterrupt("cancelled")
+
+
+@contextlib.contextmanager
+def cancellable():
+    """An operation that ``cancel()`` can stop: earlier requests are forgotten at its start and
+    at its end."""
+    _CANCEL.clear()
+    try:
+        yield
+    finally:
+        _CANCEL.clear()
 
 
 def rotation_field(*args, **kwargs):

@@ -42,7 +42,7 @@ import uuid
 
 import numpy as np
 
-from . import shading
+from . import shading, transaction
 from .evaluate import RokebyError
 
 # Widths of the panorama (height = width / 2); the UI offers these, the API any power of two.
@@ -407,13 +407,31 @@ def _store(name: str, px: np.ndarray, storage: str, filepath: str, old):
         img.file_format = "OPEN_EXR"
         img.use_half_precision = True
         if storage == "FILE":
+            # Written under a temporary name and renamed over the old map only once the whole
+            # capture has succeeded (``transaction.later``): a failure keeps the old files.
             absolute = bpy.path.abspath(filepath)
             os.makedirs(os.path.dirname(absolute), exist_ok=True)
-            img.filepath_raw = absolute
+            partial = f"{absolute}.partial-{uuid.uuid4().hex[:8]}.exr"
+            transaction.on_rollback(lambda: os.path.exists(partial) and os.remove(partial))
+            img.filepath_raw = partial
             img.save()
-            img.source = "FILE"
-            img.filepath = filepath
-            img.reload()
+
+            def publish(img=img, partial=partial, absolute=absolute, filepath=filepath):
+                # The old map is kept aside until the capture has succeeded.
+                backup = None
+                if os.path.exists(absolute):
+                    backup = f"{absolute}.old-{uuid.uuid4().hex[:8]}"
+                    os.replace(absolute, backup)
+                    transaction.on_rollback(lambda: os.replace(backup, absolute))
+                os.replace(partial, absolute)
+                if backup is None:
+                    transaction.on_rollback(lambda: os.path.exists(absolute) and os.remove(absolute))
+                else:
+                    transaction.later(lambda: os.path.exists(backup) and os.remove(backup))
+                img.source = "FILE"
+                img.filepath = filepath
+                img.reload()
+            transaction.at_end(publish)
         else:
             img.pack()
     except Exception:
@@ -422,7 +440,7 @@ def _store(name: str, px: np.ndarray, storage: str, filepath: str, old):
     if old is not None and old != img:
         try:
             old.user_remap(img)
-            bpy.data.images.remove(old)
+            transaction.remove(old)
         except ReferenceError:
             pass
     img.name = name
@@ -463,6 +481,7 @@ def is_stale(mirror, scene=None) -> bool:
     return s.map_fingerprint != scene_fingerprint(mirror, scene)
 
 
+@transaction.atomic(materials=transaction.of_mirrors)
 def capture(mirror, *, resolution=None, samples=None, storage: str = "AUTO", scene=None):
     """Capture the reflection map of ``mirror`` and return its (sharp) image.
 
@@ -808,7 +827,7 @@ def uninstall(material) -> bool:
             for sock in consumers:
                 tree.links.new(bsdf.outputs["BSDF"], sock)
         for nd in parts.values():
-            tree.nodes.remove(nd)
+            transaction.remove_node(tree, nd)
     return bool(ours)
 
 

@@ -67,7 +67,7 @@ import uuid
 import bpy
 import numpy as np
 
-from . import shading
+from . import shading, transaction
 from .evaluate import REFRACTION_ATTRIBUTE, RokebyError
 from .shading import mix_vector, scalar_math, vector_math
 
@@ -399,7 +399,7 @@ def _unsplit(tree, glass) -> None:
             if lk.to_node.name not in names and not _ours(lk.to_node) and not _shading_ours(lk.to_node)]
     targets = live or targets
     for node in parts:
-        tree.nodes.remove(node)
+        transaction.remove_node(tree, node)
     for sock in targets:
         tree.links.new(glass.outputs["BSDF"], sock)
     for key in (SPLIT, SPLIT_ID, SIGNATURE):
@@ -458,12 +458,12 @@ def uninstall(material) -> bool:
     for group in [nd for nd in tree.nodes if _is_group(nd)]:
         upstream = [lk.from_socket for lk in group.inputs["Normal"].links]
         targets = [lk.to_socket for out in group.outputs for lk in out.links]
-        tree.nodes.remove(group)
+        transaction.remove_node(tree, group)
         if upstream:
             for sock in targets:
                 tree.links.new(upstream[0], sock)
     for node in [nd for nd in tree.nodes if _ours(nd)]:
-        tree.nodes.remove(node)
+        transaction.remove_node(tree, node)
     return found
 
 

@@ -29,6 +29,8 @@ import contextlib
 
 import bpy
 
+from . import transaction
+
 # Custom properties of the objects a shadow edit makes (rokeby.shadow).
 SHADOW_KEYS = ("rokeby_shadow_of", "rokeby_twin_of")  # before shadow links were pointers (shadow.migrate)
 # On handles and region centres the add-on made (api); older files: membership of HANDLE_COLLECTION.
@@ -346,14 +348,14 @@ def release(found, objects=(), carrier=(), materials=()) -> None:
     used = _refcounts(found)
     for ob in dict.fromkeys(o for o in objects if _alive(o)):
         if ob.library is None and used.get(ob.session_uid, 0) == 0 and made_by_addon(ob):
-            bpy.data.objects.remove(ob, do_unlink=True)
+            transaction.remove(ob)
             _STATS["removed"] += 1
     for ob in dict.fromkeys(o for o in carrier if _alive(o)):
         if ob.users == 0:
             mesh = ob.data
-            bpy.data.objects.remove(ob)
-            if mesh is not None and mesh.users == 0:
-                bpy.data.meshes.remove(mesh)
+            transaction.remove(ob)
+            if mesh is not None:
+                transaction.remove_unused(mesh)
             _STATS["removed"] += 1
     kept = {mat for m in found if rendering.kept(m) for mat in rendering.edited_materials(m)}
     for mat in dict.fromkeys(m for m in materials if _alive(m)):
@@ -367,9 +369,9 @@ def drop_empty_handle_collection() -> bool:
     """Remove the "Rokeby Handles" collection once it holds nothing (it is made with the first
     handle, so a file goes back to the collections it had)."""
     coll = bpy.data.collections.get(HANDLE_COLLECTION)
-    if coll is None or coll.library is not None or len(coll.objects) or len(coll.children):
+    if coll is None or coll.library is not None or len(coll.objects) or len(coll.children) or transaction.doomed(coll):
         return False
-    bpy.data.collections.remove(coll)
+    transaction.remove(coll)
     return True
 
 
@@ -390,6 +392,10 @@ def drop_unused_node_groups() -> int:
         doomed = [ng for ng in bpy.data.node_groups
                   if ng.users == 0 and not ng.use_fake_user and ng.library is None and _our_group(ng)]
         if not doomed:
+            return removed
+        if transaction.active():
+            # Inside an operation: removed when it succeeds (and what they used, with them).
+            transaction.later(drop_unused_node_groups)
             return removed
         for ng in doomed:
             bpy.data.node_groups.remove(ng)

@@ -31,6 +31,7 @@ import uuid
 
 import bpy
 
+from . import transaction
 from .evaluate import RENDER_ATTRIBUTE, RENDER_ATTRIBUTE_WA, RokebyError
 
 DIRECTION_GROUP = "Rokeby Edited Direction"
@@ -235,7 +236,7 @@ _SEP = "\x1f"
 
 
 def _ours(node) -> bool:
-    return bool(node.get(LINK_TAG))
+    return bool(node.get(LINK_TAG)) and not node.get(transaction.DOOMED)
 
 
 def _tag(node, role, label, source=None):
@@ -470,7 +471,7 @@ def _unsplit(tree, bsdf) -> None:
             parts = _parts_of(tree, free.pop())
     targets = _live_targets(parts) or recorded_targets(tree, bsdf.get(SPLIT, []))
     for node in parts:
-        tree.nodes.remove(node)
+        transaction.remove_node(tree, node)
     for sock in targets:
         tree.links.new(bsdf.outputs["BSDF"], sock)
     for key in (SPLIT, SIGNATURE, SPLIT_ID):
@@ -524,7 +525,7 @@ def _recreate(tree, key) -> None:
             dst.default_value = fac.default_value
     targets = _live_targets(parts)
     for node in parts:
-        tree.nodes.remove(node)
+        transaction.remove_node(tree, node)
     for sock in targets:
         tree.links.new(bsdf.outputs["BSDF"], sock)
 
@@ -721,7 +722,7 @@ def _uninstall_tree(tree) -> None:
         if original is not None:
             node.node_tree = original
         if copy is not None and copy.get(COPY_OF) is not None and copy.users == 0:
-            bpy.data.node_groups.remove(copy)
+            transaction.remove(copy)
     for bsdf in [nd for nd in tree.nodes if SPLIT in nd]:
         _unsplit(tree, bsdf)
     # Parts whose Principled BSDF is gone (deleted as "unused"): it is built again from them.
@@ -730,9 +731,9 @@ def _uninstall_tree(tree) -> None:
     for group in [nd for nd in tree.nodes if _ours(nd) and nd.bl_idname == "ShaderNodeGroup"]:
         upstream = [lk.from_socket for lk in group.inputs["Normal"].links] if "Normal" in group.inputs else []
         targets = [lk.to_socket for out in group.outputs for lk in out.links]
-        tree.nodes.remove(group)
+        transaction.remove_node(tree, group)
         if upstream:
             for sock in targets:
                 tree.links.new(upstream[0], sock)
     for node in [nd for nd in tree.nodes if _ours(nd)]:
-        tree.nodes.remove(node)
+        transaction.remove_node(tree, node)

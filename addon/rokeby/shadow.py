@@ -30,7 +30,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from . import native
+from . import native, transaction
 
 SHADOW_SUFFIX = " Shadow Mesh"
 TWIN_SUFFIX = " (edited shadows)"
@@ -244,7 +244,7 @@ def _parts():
     if not _registered():
         return meshes, twins, lights
     for o in registry.shadow_objects():
-        if not _stored(o):
+        if not _stored(o) or transaction.doomed(o):
             continue
         links = o.rokeby_shadow
         role = links.role
@@ -364,7 +364,7 @@ def _remove_collections(colls) -> None:
         except ReferenceError:  # already removed (listed twice)
             continue
         if ours:
-            bpy.data.collections.remove(c)
+            transaction.remove(c)
 
 
 def _remove_twin(twin) -> None:
@@ -372,7 +372,7 @@ def _remove_twin(twin) -> None:
     them (for a new twin): ``_collect_orphan_collections`` removes those nothing uses."""
     import bpy  # noqa: PLC0415
 
-    bpy.data.objects.remove(twin, do_unlink=True)
+    transaction.remove(twin)
     _collect_orphan_collections()
 
 
@@ -401,6 +401,9 @@ def _collect_orphan_collections() -> None:
     """Linking collections nothing uses any more (their light and twin are gone) are removed."""
     import bpy  # noqa: PLC0415
 
+    if transaction.active():  # once the twins and shadow meshes are gone
+        transaction.later(_collect_orphan_collections)
+        return
     _remove_collections([c for c in bpy.data.collections if c.users == 0 and LINKING_TAG in c])
 
 
@@ -419,6 +422,7 @@ def shadow_mesh_of(obj):
     return next((o for o in _parts()[0] if o.rokeby_shadow.caster == obj), None)
 
 
+@transaction.atomic(materials=transaction.none)
 def remove(obj) -> None:
     """Removes the shadow edit of ``obj`` (a caster or its shadow mesh): the shadow mesh, the twin
     light and the linking; the light's own linking before the edit comes back, so renders are
@@ -430,9 +434,9 @@ def remove(obj) -> None:
         raise ShadowEditError(f"{getattr(obj, 'name', obj)!r} has no shadow edit")
     light = ob.rokeby_shadow.light
     me = ob.data
-    bpy.data.objects.remove(ob, do_unlink=True)
-    if me is not None and me.users == 0:
-        bpy.data.meshes.remove(me)
+    transaction.remove(ob)
+    if me is not None:
+        transaction.remove_unused(me)
     if light is not None:
         if _edits_of(light) and _is_light(light):
             _link(light)  # other casters' edits from the same light stay
@@ -562,6 +566,7 @@ def migrate() -> list[str]:
     return msgs
 
 
+@transaction.atomic(materials=transaction.none)
 def apply(session: ShadowSession, *, scene=None, falloff_beta: float = 0.0):
     """Makes (or updates) the shadow-mesh object of ``session``'s current edit and sets up the
     light and shadow linking. ``falloff_beta`` (β ≥ 0, §6.2) blends the edit back towards the
