@@ -245,11 +245,14 @@ def addon_section(emit):
     emit("render rows, geodesic solves). Whole update: Blender's depsgraph update including the handler (and its")
     emit("copy of the mesh's attributes). Medians of 30 moves. Goal: under 16 ms (one viewport frame at 60 Hz).")
     emit()
-    emit("| mirror | vertices | distance | polar | Python (ms) | Rust (ms) | handler total (ms) | whole update (ms) | goal (ms) |")
-    emit("|---|---:|---|---|---:|---:|---:|---:|---:|")
+    emit("Next update: the depsgraph update that re-evaluates the mesh the attribute write tagged (`me.update_tag()`,")
+    emit("issue 23; it no longer recomputes normals inside the handler).")
+    emit()
+    emit("| mirror | vertices | distance | polar | Python (ms) | Rust (ms) | handler total (ms) | whole update (ms) | next update (ms) | goal (ms) |")
+    emit("|---|---:|---|---|---:|---:|---:|---:|---:|---:|")
     for r in rows:
         dist = "Euclidean" if r["metric"] == "EUCLIDEAN" else f"geodesic, {r['method'].lower()}"
-        emit(f"| {r['mesh']} | {r['vertices']:,} | {dist} | {r['polar'].lower()} | {r['python_ms']:.1f} | {r['rust_ms']:.1f} | {r['python_ms'] + r['rust_ms']:.1f} | {r['update_ms']:.1f} | 16 |")
+        emit(f"| {r['mesh']} | {r['vertices']:,} | {dist} | {r['polar'].lower()} | {r['python_ms']:.1f} | {r['rust_ms']:.1f} | {r['python_ms'] + r['rust_ms']:.1f} | {r['update_ms']:.1f} | {r.get('after_ms', float('nan')):.1f} | 16 |")
     emit()
     emit("On this shared 2-core machine the same configuration varies by up to about 40% between runs.")
     emit()
@@ -572,6 +575,34 @@ import tradeoff_sections  # noqa: E402
 TRADEOFFS = tradeoff_sections.SECTIONS
 
 
+ROOFLINE_MARKER = "## Field kernels against this machine's roofline"
+
+
+def roofline_section(emit):
+    """Issue 23: the field kernels (f32 lanes: portable, AVX2, AVX-512; the scalar f64 reference)
+    beside this machine's own f32 FMA peak and stream-triad bandwidth, measured in the same run by
+    rust/rokeby-core/examples/field_roofline.rs, with the goals and the paper's GPU figure."""
+    import subprocess
+
+    r = subprocess.run(["cargo", "run", "--quiet", "--release", "-p", "rokeby-core", "--example", "field_roofline"],
+                       cwd=ROOT, capture_output=True, text=True, check=True)
+    emit(ROOFLINE_MARKER + " (issue 23)")
+    emit()
+    emit("The per-pixel field (`edited_directions`) and the per-vertex field (`rotation_field`, view-blend output as")
+    emit("the add-on writes it) per kernel: `scalar` is the f64 reference (the tests' oracle), the others are the f32")
+    emit("lanes this CPU runs (forced with `ROKEBY_SIMD=scalar|portable|avx2|avx512`). GFLOP/s counts the lanes'")
+    emit("algorithm (28 flops per constraint, three Newton steps of 160, 70 for r(q) and R r; a single constraint is a")
+    emit("constant rotation, 70), so its share of the measured peak is the roofline share. `max diff`: the largest angle")
+    emit("(rad) from the f64 reference with the exact polar method. Medians of 7 runs; the machine is shared, so")
+    emit("instruction counts (callgrind, docs/benchmarks.md below) confirm the ratios.")
+    emit()
+    emit("```")
+    for line in r.stdout.rstrip().splitlines():
+        emit(line)
+    emit("```")
+    emit()
+
+
 def _refresh_section(emit, out, marker, section):
     """Run one section and put it into docs/benchmarks.md in place of its old text (appended
     when the report has none yet)."""
@@ -596,7 +627,7 @@ def _refresh_section(emit, out, marker, section):
 def main():
     ap = argparse.ArgumentParser(description="Rokeby benchmarks")
     ap.add_argument("--peers", default=None, help="python of .venv-peers (exact geodesics, potpourri3d, libigl, matplotlib)")
-    ap.add_argument("--only", choices=["field", "geodesic", "addon", "heavy", "render", "viewport", "envmap", "appearance", "compositing", "shadow", *TRADEOFFS], default=None)
+    ap.add_argument("--only", choices=["field", "roofline", "geodesic", "addon", "heavy", "render", "viewport", "envmap", "appearance", "compositing", "shadow", *TRADEOFFS], default=None)
     args = ap.parse_args()
     rng = np.random.default_rng(2009)
     out = []
@@ -620,6 +651,9 @@ def main():
     (ROOT / "docs").mkdir(exist_ok=True)
     if args.only == "viewport":
         _refresh_section(emit, out, VIEWPORT_MARKER, viewport_section)
+        return
+    if args.only == "roofline":
+        _refresh_section(emit, out, ROOFLINE_MARKER, roofline_section)
         return
     if args.only == "compositing":
         _refresh_section(emit, out, COMPOSITING_MARKER, compositing_section)
@@ -666,6 +700,7 @@ def main():
         return
     if args.only != "field":
         geodesic_section(emit, args.peers)
+        roofline_section(emit)
 
     # 1. Per-pixel path at the paper's resolution.
     w, h = 1280, 960

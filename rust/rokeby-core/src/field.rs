@@ -32,6 +32,10 @@ use crate::region::Region;
 use glam::{DMat3, DQuat, DVec3};
 use rayon::prelude::*;
 
+mod lanes;
+mod simd;
+pub use lanes::Kernel;
+
 /// Row length of a constraint: [p (3), r (3), e (3)].
 pub const CONSTRAINT_STRIDE: usize = 9;
 
@@ -69,6 +73,8 @@ pub struct Field {
     er: Vec<DMat3>,
     regions: Vec<Region>,
     groups: Vec<Group>,
+    /// Which implementation evaluates it (`Kernel::from_env()` unless chosen).
+    kernel: Kernel,
 }
 
 /// Per-chunk working memory: no allocation per point or pixel.
@@ -76,6 +82,21 @@ struct Scratch {
     warm: Vec<DQuat>,
     blend_warm: DQuat,
     d2: Vec<f64>,
+}
+
+impl Scratch {
+    /// Warm-starts the (one) group's Newton iteration from a lane's f32 rotation.
+    fn warm_from(&mut self, q: [f32; 4]) {
+        let q = DQuat::from_xyzw(q[0] as f64, q[1] as f64, q[2] as f64, q[3] as f64);
+        let len = q.length();
+        if let Some(w) = self.warm.first_mut() {
+            *w = if len.is_finite() && len > 0.5 {
+                q / len
+            } else {
+                DQuat::IDENTITY
+            };
+        }
+    }
 }
 
 fn outer(a: DVec3, b: DVec3) -> DMat3 {
@@ -332,7 +353,6 @@ pub fn view_blend_rotation_vectors(parts: &[f32]) -> Result<Vec<f32>> {
 }
 
 /// The original reflected direction r(q) = reflect(i, n), i = (q − eye)/|q − eye| (eq. 6's r(q)).
-
 pub fn reflect_dir(q: DVec3, n: DVec3, eye: DVec3) -> Option<DVec3> {
     let i = (q - eye).try_normalize()?;
     let n = n.try_normalize()?;
@@ -400,7 +420,18 @@ impl Field {
             er,
             regions,
             groups,
+            kernel: Kernel::from_env(),
         })
+    }
+
+    /// The kernel that evaluates this field: `kernel`, or the widest one below it this CPU runs.
+    pub fn with_kernel(mut self, kernel: Kernel) -> Self {
+        self.kernel = Kernel::resolve(kernel);
+        self
+    }
+
+    pub fn kernel(&self) -> Kernel {
+        self.kernel
     }
 
     pub fn num_constraints(&self) -> usize {
@@ -591,7 +622,7 @@ impl Field {
         }
     }
 
-    fn check_distances(&self, dist: Distances, n_points: usize) -> Result<()> {
+    fn check_distance_shape(&self, dist: Distances, n_points: usize) -> Result<()> {
         if let Distances::Given(d) = dist {
             let k = self.constraints.len();
             if d.len() != k * n_points {
@@ -600,7 +631,13 @@ impl Field {
                     format!("expected shape ({k}, {n_points}) for {k} constraints and {n_points} points, got {} values", d.len()),
                 ));
             }
-            if let Some(i) = d.iter().position(|x| x.is_nan() || *x < 0.0) {
+        }
+        Ok(())
+    }
+
+    fn check_distance_values(&self, dist: Distances, n_points: usize) -> Result<()> {
+        if let Distances::Given(d) = dist {
+            if let Some(i) = first_index(d, |x| x.is_nan() || *x < 0.0) {
                 return Err(RokebyError::invalid(
                     "distances",
                     format!("entry ({}, {}) = {} is not a distance (NaN or negative; unreachable is +inf)", i / n_points.max(1), i % n_points.max(1), d[i]),
@@ -652,8 +689,10 @@ impl Field {
         output: FieldOutput,
     ) -> Result<Vec<f32>> {
         let n = points.len() / 3;
-        check_finite(points, "points")?;
-        self.check_distances(dist, n)?;
+        if points.is_empty() {
+            return Err(RokebyError::invalid("points", "is empty"));
+        }
+        self.check_distance_shape(dist, n)?;
         self.check_per_point_regions(n)?;
         let eye = match view {
             Some((normals, eye)) => {
@@ -663,6 +702,7 @@ impl Field {
                         "must have the same shape as points",
                     ));
                 }
+                check_finite(points, "points")?;
                 check_nonzero_dirs(normals, "normals")?;
                 let eye = DVec3::from_array(eye);
                 if !eye.is_finite() {
@@ -675,65 +715,159 @@ impl Field {
         };
         let width = output_width(output);
         let mut out = vec![0f32; n * width];
-        const CHUNK: usize = 2048;
-        out.par_chunks_mut(CHUNK * width)
-            .enumerate()
-            .for_each(|(ci, chunk)| {
+        let plan = self.lanes_plan(polar, dist);
+        let Some(plan) = plan else {
+            check_finite(points, "points")?;
+            self.check_distance_values(dist, n)?;
+            const CHUNK: usize = 2048;
+            par_chunks_if_large(&mut out, CHUNK * width, n, |ci, chunk| {
                 let mut s = self.scratch();
-                let base = ci * CHUNK;
                 for (j, o) in chunk.chunks_exact_mut(width).enumerate() {
-                    let i = base + j;
-                    let q = vec3_at(points, i);
-                    if output == FieldOutput::ViewBlend {
-                        let (rot, a) = self.view_blend_parts_at(i, n, q, dist, polar, &mut s);
-                        let rot = polar::canonical(rot);
-                        let u = match self.regions.as_slice() {
-                            [Region::Euclidean {
-                                center,
-                                radius,
-                                border,
-                            }] if *border > 0.0 => {
-                                (radius - q.distance(*center)) / border.min(*radius)
-                            }
-                            _ => a,
-                        };
-                        o.copy_from_slice(&[
-                            rot.x as f32,
-                            rot.y as f32,
-                            rot.z as f32,
-                            rot.w as f32,
-                            a as f32,
-                            u as f32,
-                        ]);
-                        continue;
-                    }
-                    let r_view =
-                        eye.and_then(|(normals, eye)| reflect_dir(q, vec3_at(normals, i), eye));
-                    let rot =
-                        polar::canonical(self.rotation_at(i, n, q, r_view, dist, polar, &mut s));
-                    match output {
-                        FieldOutput::ViewBlend => {} // written above
-                        FieldOutput::Quaternion => o.copy_from_slice(&[
-                            rot.x as f32,
-                            rot.y as f32,
-                            rot.z as f32,
-                            rot.w as f32,
-                        ]),
-                        FieldOutput::RotationVector => {
-                            let v = polar::rotation_vector(rot);
-                            o.copy_from_slice(&[v.x as f32, v.y as f32, v.z as f32]);
-                        }
-                    }
+                    self.point_scalar(
+                        ci * CHUNK + j,
+                        n,
+                        points,
+                        dist,
+                        eye,
+                        polar,
+                        output,
+                        o,
+                        &mut s,
+                    );
                 }
+                (false, false)
             });
-        check_output(&out)?;
+            check_output(&out)?;
+            return Ok(out);
+        };
+        let inputs = lanes::Inputs {
+            field: self,
+            plan: &plan,
+            points,
+            dist: match dist {
+                Distances::Given(d) => Some(d),
+                Distances::Euclidean => None,
+            },
+            n,
+            job: lanes::Job::Points {
+                output,
+                view: eye.is_some(),
+                ramp: lanes::ramp_of(&self.regions),
+            },
+        };
+        const CHUNK: usize = 4096;
+        let (suspect, nonfinite) = par_chunks_if_large(&mut out, CHUNK * width, n, |ci, chunk| {
+            let start = ci * CHUNK;
+            let left = lanes::run(self.kernel, &inputs, start, chunk);
+            let mut s = self.scratch();
+            let mut nonfinite = false;
+            for (i, q) in left.points {
+                s.warm_from(q);
+                let o = &mut chunk[(i - start) * width..(i - start + 1) * width];
+                self.point_scalar(i, n, points, dist, eye, polar, output, o, &mut s);
+                nonfinite |= !o.iter().all(|x| x.is_finite());
+            }
+            (left.suspect, nonfinite)
+        });
+        if suspect {
+            // The same errors, in the same order, as the checks the scalar path runs first.
+            check_finite(points, "points")?;
+            self.check_distance_values(dist, n)?;
+        }
+        if nonfinite {
+            check_output(&out)?;
+        }
         Ok(out)
+    }
+
+    /// The lanes' plan when this call can use them: a vector kernel, Newton's polar method (the
+    /// exact one stays the f64 SVD), and one group.
+    fn lanes_plan(&self, polar: PolarMethod, dist: Distances) -> Option<lanes::Plan> {
+        if self.kernel == Kernel::Scalar || polar != PolarMethod::Iterative {
+            return None;
+        }
+        let plan = self.plan()?;
+        // A constant group never reads its distances; the scan below still refuses bad ones.
+        if plan.constant.is_some() && matches!(dist, Distances::Given(_)) {
+            return None;
+        }
+        Some(plan)
+    }
+
+    /// One point of `rotation_field_as` by the scalar f64 path (the reference).
+    #[allow(clippy::too_many_arguments)]
+    fn point_scalar(
+        &self,
+        i: usize,
+        n: usize,
+        points: &[f32],
+        dist: Distances,
+        eye: Option<(&[f32], DVec3)>,
+        polar: PolarMethod,
+        output: FieldOutput,
+        o: &mut [f32],
+        s: &mut Scratch,
+    ) {
+        let q = vec3_at(points, i);
+        if output == FieldOutput::ViewBlend {
+            let (rot, a) = self.view_blend_parts_at(i, n, q, dist, polar, s);
+            let rot = polar::canonical(rot);
+            let u = match lanes::ramp_of(&self.regions) {
+                Some((center, radius, border)) => {
+                    (radius - q.distance(center)) / border.min(radius)
+                }
+                None => a,
+            };
+            o.copy_from_slice(&[
+                rot.x as f32,
+                rot.y as f32,
+                rot.z as f32,
+                rot.w as f32,
+                a as f32,
+                u as f32,
+            ]);
+            return;
+        }
+        let r_view = eye.and_then(|(normals, eye)| reflect_dir(q, vec3_at(normals, i), eye));
+        let rot = polar::canonical(self.rotation_at(i, n, q, r_view, dist, polar, s));
+        match output {
+            FieldOutput::ViewBlend => {} // written above
+            FieldOutput::Quaternion => {
+                o.copy_from_slice(&[rot.x as f32, rot.y as f32, rot.z as f32, rot.w as f32])
+            }
+            FieldOutput::RotationVector => {
+                let v = polar::rotation_vector(rot);
+                o.copy_from_slice(&[v.x as f32, v.y as f32, v.z as f32]);
+            }
+        }
+    }
+
+    /// One pixel of `edited_directions` by the scalar f64 path (the reference).
+    #[allow(clippy::too_many_arguments)]
+    fn pixel_scalar(
+        &self,
+        i: usize,
+        n: usize,
+        positions: &[f32],
+        normals: &[f32],
+        eye: DVec3,
+        dist: Distances,
+        polar: PolarMethod,
+        o: &mut [f32],
+        s: &mut Scratch,
+    ) {
+        let q = vec3_at(positions, i);
+        // Checked: q ≠ eye and n ≠ 0, so r exists; the fallback is unreachable for valid input.
+        let r = reflect_dir(q, vec3_at(normals, i), eye).unwrap_or(DVec3::Z);
+        let rot = self.rotation_at(i, n, q, Some(r), dist, polar, s);
+        let e = (rot * r).normalize();
+        o.copy_from_slice(&[e.x as f32, e.y as f32, e.z as f32]);
     }
 
     /// Per-pixel path (paper §6.1): for a G-buffer of positions and normals (N×3 flattened) seen
     /// from `eye`, the edited reflection directions e(q) = R_a(q) r(q) as unit vectors (N×3).
     /// Work is split into rows of `row_len` pixels (tiles of coherent pixels: the iterative polar
-    /// method warm-starts from the previous pixel of the row).
+    /// method warm-starts from the previous pixel of the row, the lanes from the pixel W before).
     pub fn edited_directions(
         &self,
         positions: &[f32],
@@ -750,34 +884,96 @@ impl Field {
                 "must have the same shape as positions",
             ));
         }
-        check_finite(positions, "positions")?;
-        check_nonzero_dirs(normals, "normals")?;
+        if positions.is_empty() {
+            return Err(RokebyError::invalid("positions", "is empty"));
+        }
         let eye = DVec3::from_array(eye);
         if !eye.is_finite() {
             return Err(RokebyError::invalid("eye", "is not finite"));
         }
-        check_eye(positions, eye)?;
-        self.check_distances(dist, n)?;
+        self.check_distance_shape(dist, n)?;
         self.check_per_point_regions(n)?;
+        let checks = || -> Result<()> {
+            check_finite(positions, "positions")?;
+            check_nonzero_dirs(normals, "normals")?;
+            check_eye(positions, eye)?;
+            self.check_distance_values(dist, n)
+        };
         let row_len = row_len.clamp(1, 1 << 16);
         let mut out = vec![0f32; n * 3];
-        out.par_chunks_mut(row_len * 3)
-            .enumerate()
-            .for_each(|(ci, chunk)| {
+        let Some(plan) = self.lanes_plan(polar, dist) else {
+            checks()?;
+            par_chunks_if_large(&mut out, row_len * 3, n, |ci, chunk| {
                 let mut s = self.scratch();
-                let base = ci * row_len;
                 for (j, o) in chunk.chunks_exact_mut(3).enumerate() {
-                    let i = base + j;
-                    let q = vec3_at(positions, i);
-                    // Checked above: q ≠ eye and n ≠ 0, so r exists; the fallback is unreachable.
-                    let r = reflect_dir(q, vec3_at(normals, i), eye).unwrap_or(DVec3::Z);
-                    let rot = self.rotation_at(i, n, q, Some(r), dist, polar, &mut s);
-                    let e = (rot * r).normalize();
-                    o.copy_from_slice(&[e.x as f32, e.y as f32, e.z as f32]);
+                    let i = ci * row_len + j;
+                    self.pixel_scalar(i, n, positions, normals, eye, dist, polar, o, &mut s);
                 }
+                (false, false)
             });
-        check_output(&out)?;
+            check_output(&out)?;
+            return Ok(out);
+        };
+        let inputs = lanes::Inputs {
+            field: self,
+            plan: &plan,
+            points: positions,
+            dist: match dist {
+                Distances::Given(d) => Some(d),
+                Distances::Euclidean => None,
+            },
+            n,
+            job: lanes::Job::Pixels {
+                normals,
+                eye: eye.as_vec3().to_array(),
+            },
+        };
+        let (suspect, nonfinite) = par_chunks_if_large(&mut out, row_len * 3, n, |ci, chunk| {
+            let start = ci * row_len;
+            let left = lanes::run(self.kernel, &inputs, start, chunk);
+            let mut s = self.scratch();
+            let mut nonfinite = false;
+            for (i, q) in left.points {
+                s.warm_from(q);
+                let o = &mut chunk[(i - start) * 3..(i - start + 1) * 3];
+                self.pixel_scalar(i, n, positions, normals, eye, dist, polar, o, &mut s);
+                nonfinite |= !o.iter().all(|x| x.is_finite());
+            }
+            (left.suspect, nonfinite)
+        });
+        if suspect {
+            checks()?;
+        }
+        if nonfinite {
+            check_output(&out)?;
+        }
         Ok(out)
+    }
+}
+
+/// Points up to which a call runs on the calling thread: waking the pool costs more than it
+/// saves for a few thousand points, and on two cores shared with Blender it competes with the UI.
+const SMALL_JOB: usize = 16384;
+
+/// `f(chunk index, chunk)` over `out` in chunks of `chunk_len` values, in parallel unless the job
+/// (`n` points) is small; returns the OR of the flags the chunks report.
+fn par_chunks_if_large(
+    out: &mut [f32],
+    chunk_len: usize,
+    n: usize,
+    f: impl Fn(usize, &mut [f32]) -> (bool, bool) + Sync,
+) -> (bool, bool) {
+    let or = |a: (bool, bool), b: (bool, bool)| (a.0 | b.0, a.1 | b.1);
+    if n <= SMALL_JOB {
+        out.chunks_mut(chunk_len)
+            .enumerate()
+            .map(|(ci, c)| f(ci, c))
+            .fold((false, false), or)
+    } else {
+        out.par_chunks_mut(chunk_len)
+            .enumerate()
+            .map(|(ci, c)| f(ci, c))
+            .reduce(|| (false, false), or)
     }
 }
 

@@ -211,6 +211,13 @@ pub(crate) fn run_cancellable<T: Send, F: FnOnce() -> Result<T, RokebyError> + S
     })
 }
 
+/// field_kernel() -> str: the kernel the field functions use now: "scalar" (the f64 reference),
+/// "portable", "avx2" or "avx512" — ROKEBY_SIMD (read at each call) resolved against this CPU.
+#[pyfunction]
+fn field_kernel() -> &'static str {
+    rokeby_core::field::Kernel::from_env().name()
+}
+
 /// cancel()
 ///
 /// Stops the cancellable native calls in flight (blurs, filters, prefiltering, reconstruction) at
@@ -1121,6 +1128,7 @@ fn rokeby_native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
     m.add("NumericalError", m.py().get_type::<NumericalError>())?;
     m.add_function(wrap_pyfunction!(cancel, m)?)?;
+    m.add_function(wrap_pyfunction!(field_kernel, m)?)?;
     m.add_function(wrap_pyfunction!(rotation_field, m)?)?;
     m.add_function(wrap_pyfunction!(edited_directions, m)?)?;
     m.add_function(wrap_pyfunction!(view_blend, m)?)?;

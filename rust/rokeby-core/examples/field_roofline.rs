@@ -1,0 +1,349 @@
+//! The field kernels against this machine's roofline (issue 23): the f32 FMA peak and the memory
+//! bandwidth measured in the same run, then the per-pixel field (`edited_directions`, 1280×960, K =
+//! 1 / 8 / 32) and the per-vertex field (`rotation_field`, 100k points, K = 8, the add-on's
+//! view-blend output) per kernel, with the largest angle from the scalar f64 reference.
+//!
+//! `cargo run --release -p rokeby-core --example field_roofline [-- --quick] [-- --json]`
+//! `--callgrind K KERNEL`: one small per-pixel evaluation only (for instruction counts).
+
+use glam::{DQuat, DVec3};
+use rokeby_core::field::{Distances, Field, FieldOutput, Kernel};
+use rokeby_core::polar::PolarMethod;
+use std::time::Instant;
+
+/// A curved mirror z = 0.3 (x² + y²) over [−1, 1]², sampled w × h, seen from `EYE`.
+const EYE: [f64; 3] = [0.2, -2.5, 3.0];
+
+fn surface(w: usize, h: usize) -> (Vec<f32>, Vec<f32>) {
+    let mut p = Vec::with_capacity(3 * w * h);
+    let mut n = Vec::with_capacity(3 * w * h);
+    for j in 0..h {
+        for i in 0..w {
+            let x = -1.0 + 2.0 * (i as f64 + 0.5) / w as f64;
+            let y = -1.0 + 2.0 * (j as f64 + 0.5) / h as f64;
+            let z = 0.3 * (x * x + y * y);
+            let nm = DVec3::new(-0.6 * x, -0.6 * y, 1.0).normalize();
+            p.extend([x as f32, y as f32, z as f32]);
+            n.extend([nm.x as f32, nm.y as f32, nm.z as f32]);
+        }
+    }
+    (p, n)
+}
+
+/// K constraints at pseudo-random points of the surface, each edited by up to ~25°.
+fn constraints(k: usize) -> Vec<f32> {
+    let mut s = 0x9e3779b97f4a7c15u64;
+    let mut rnd = || {
+        s ^= s << 13;
+        s ^= s >> 7;
+        s ^= s << 17;
+        (s >> 11) as f64 / (1u64 << 53) as f64
+    };
+    let eye = DVec3::from_array(EYE);
+    let mut rows = Vec::new();
+    for _ in 0..k {
+        let (x, y) = (rnd() * 1.8 - 0.9, rnd() * 1.8 - 0.9);
+        let p = DVec3::new(x, y, 0.3 * (x * x + y * y));
+        let n = DVec3::new(-0.6 * x, -0.6 * y, 1.0).normalize();
+        let i = (p - eye).normalize();
+        let r = i - 2.0 * i.dot(n) * n;
+        let axis = DVec3::new(rnd() - 0.5, rnd() - 0.5, rnd() - 0.5).normalize();
+        let e = DQuat::from_axis_angle(axis, 0.45 * rnd()) * r;
+        rows.extend([p.x, p.y, p.z, r.x, r.y, r.z, e.x, e.y, e.z].map(|v| v as f32));
+    }
+    rows
+}
+
+fn median(mut v: Vec<f64>) -> f64 {
+    v.sort_by(|a, b| a.partial_cmp(b).unwrap());
+    v[v.len() / 2]
+}
+
+fn time(reps: usize, mut f: impl FnMut()) -> f64 {
+    f();
+    median(
+        (0..reps)
+            .map(|_| {
+                let t = Instant::now();
+                f();
+                t.elapsed().as_secs_f64()
+            })
+            .collect(),
+    )
+}
+
+/// f32 FMA peak: 12 independent accumulators of 16 lanes per thread.
+#[inline(always)]
+fn fma_loop<const F: bool>(iters: usize) -> f32 {
+    let mut acc = [[1.0f32; 16]; 12];
+    let b = [0.999_999f32; 16];
+    let c = [1e-7f32; 16];
+    for _ in 0..iters {
+        for a in acc.iter_mut() {
+            for l in 0..16 {
+                a[l] = if F {
+                    a[l].mul_add(b[l], c[l])
+                } else {
+                    a[l] * b[l] + c[l]
+                };
+            }
+        }
+    }
+    acc.iter().flatten().sum()
+}
+
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx512f,fma")]
+unsafe fn fma_avx512(iters: usize) -> f32 {
+    fma_loop::<true>(iters)
+}
+
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2,fma")]
+unsafe fn fma_avx2(iters: usize) -> f32 {
+    fma_loop::<true>(iters)
+}
+
+fn fma_any(iters: usize) -> f32 {
+    #[cfg(target_arch = "x86_64")]
+    {
+        if Kernel::Avx512.available() {
+            return unsafe { fma_avx512(iters) };
+        }
+        if Kernel::Avx2.available() {
+            return unsafe { fma_avx2(iters) };
+        }
+    }
+    fma_loop::<false>(iters)
+}
+
+/// GFLOP/s over all threads (2 flops per FMA).
+fn peak_gflops(threads: usize) -> f64 {
+    let iters = 2_000_000;
+    let secs = time(5, || {
+        let s: f32 = std::thread::scope(|sc| {
+            let hs: Vec<_> = (0..threads).map(|_| sc.spawn(|| fma_any(iters))).collect();
+            hs.into_iter().map(|h| h.join().unwrap()).sum()
+        });
+        std::hint::black_box(s);
+    });
+    (threads * iters * 12 * 16 * 2) as f64 / secs / 1e9
+}
+
+/// Stream triad a = b + s c over 3 × 64 MB, all threads: GB/s (12 bytes per element).
+fn triad_gbs(threads: usize) -> f64 {
+    let n = 16 << 20;
+    let b = vec![1.0f32; n];
+    let c = vec![2.0f32; n];
+    let mut a = vec![0.0f32; n];
+    let chunk = n.div_ceil(threads);
+    let secs = time(5, || {
+        std::thread::scope(|sc| {
+            for ((a, b), c) in a
+                .chunks_mut(chunk)
+                .zip(b.chunks(chunk))
+                .zip(c.chunks(chunk))
+            {
+                sc.spawn(move || {
+                    for ((x, y), z) in a.iter_mut().zip(b).zip(c) {
+                        *x = y + 3.0 * z;
+                    }
+                });
+            }
+        });
+        std::hint::black_box(&a);
+    });
+    (12 * n) as f64 / secs / 1e9
+}
+
+/// Flops per pixel of the lanes' algorithm (the model the roofline shares use): 28 per constraint
+/// (distance 8, weight 2, 9 FMAs for M), three Newton steps of about 160, and 70 for r(q) and R r.
+/// A single constraint (a constant rotation) costs only the last part.
+fn flops_per_pixel(k: usize) -> f64 {
+    if k == 1 {
+        70.0
+    } else {
+        28.0 * k as f64 + 3.0 * 160.0 + 70.0
+    }
+}
+
+fn angle_between(a: &[f32], b: &[f32]) -> f64 {
+    a.chunks_exact(3)
+        .zip(b.chunks_exact(3))
+        .map(|(x, y)| {
+            let x = DVec3::new(x[0] as f64, x[1] as f64, x[2] as f64);
+            let y = DVec3::new(y[0] as f64, y[1] as f64, y[2] as f64);
+            x.cross(y).length().atan2(x.dot(y))
+        })
+        .fold(0.0, f64::max)
+}
+
+fn quat_angle(a: &[f32], b: &[f32]) -> f64 {
+    a.chunks_exact(6)
+        .zip(b.chunks_exact(6))
+        .map(|(x, y)| {
+            let x = DQuat::from_xyzw(x[0] as f64, x[1] as f64, x[2] as f64, x[3] as f64);
+            let y = DQuat::from_xyzw(y[0] as f64, y[1] as f64, y[2] as f64, y[3] as f64);
+            let d = x.conjugate() * y;
+            2.0 * d.xyz().length().atan2(d.w.abs())
+        })
+        .fold(0.0, f64::max)
+}
+
+fn main() {
+    let args: Vec<String> = std::env::args().collect();
+    if let Some(i) = args.iter().position(|a| a == "--callgrind") {
+        let k: usize = args[i + 1].parse().unwrap();
+        let kernel = Kernel::parse(&args[i + 2]).unwrap();
+        let (p, n) = surface(128, 96);
+        if args.iter().any(|a| a == "--points") {
+            let f = Field::new(&constraints(k), vec![])
+                .unwrap()
+                .with_kernel(kernel);
+            let out = f
+                .rotation_field_as(
+                    &p,
+                    Distances::Euclidean,
+                    None,
+                    PolarMethod::Iterative,
+                    FieldOutput::ViewBlend,
+                )
+                .unwrap();
+            println!("{} {}", f.kernel().name(), out[0]);
+            return;
+        }
+        let f = Field::new(&constraints(k), vec![])
+            .unwrap()
+            .with_kernel(kernel);
+        let out = f
+            .edited_directions(
+                &p,
+                &n,
+                EYE,
+                Distances::Euclidean,
+                PolarMethod::Iterative,
+                128,
+            )
+            .unwrap();
+        println!("{} {}", f.kernel().name(), out[0]);
+        return;
+    }
+    let quick = args.iter().any(|a| a == "--quick");
+    let reps = if quick { 3 } else { 7 };
+    let threads = rayon::current_num_threads();
+    let peak = peak_gflops(threads);
+    let bw = triad_gbs(threads);
+    println!("machine: {threads} threads, f32 FMA peak {peak:.0} GFLOP/s, triad {bw:.1} GB/s, best kernel {}",
+        Kernel::best().name());
+    let kernels: Vec<Kernel> = [
+        Kernel::Scalar,
+        Kernel::Portable,
+        Kernel::Avx2,
+        Kernel::Avx512,
+    ]
+    .into_iter()
+    .filter(|k| k.available())
+    .collect();
+    let (w, h) = if quick { (640, 480) } else { (1280, 960) };
+    let (p, n) = surface(w, h);
+    let mp = (w * h) as f64 / 1e6;
+    println!("\nper-pixel field, {w}x{h}, polar fast (goal at 1280x960 on 2 cores: 250 / 120 / 80 MP/s at K = 1 / 8 / 32; paper GTX 260: 18.5 MP/s at K = 32)");
+    println!(
+        "{:>4} {:>9} {:>9} {:>11} {:>12} {:>11}",
+        "K", "kernel", "MP/s", "GFLOP/s", "% of peak", "max diff"
+    );
+    for k in [1usize, 8, 32] {
+        let rows = constraints(k);
+        let reference = Field::new(&rows, vec![])
+            .unwrap()
+            .with_kernel(Kernel::Scalar)
+            .edited_directions(&p, &n, EYE, Distances::Euclidean, PolarMethod::Svd, w)
+            .unwrap();
+        for &kern in &kernels {
+            let f = Field::new(&rows, vec![]).unwrap().with_kernel(kern);
+            let mut out = Vec::new();
+            let r = if kern == Kernel::Scalar {
+                reps.min(3)
+            } else {
+                reps
+            };
+            let secs = time(r, || {
+                out = f
+                    .edited_directions(&p, &n, EYE, Distances::Euclidean, PolarMethod::Iterative, w)
+                    .unwrap();
+            });
+            let rate = mp / secs;
+            let gf = rate * 1e6 * flops_per_pixel(k) / 1e9;
+            println!(
+                "{k:>4} {:>9} {rate:>9.1} {gf:>11.1} {:>11.1}% {:>11.1e}",
+                kern.name(),
+                100.0 * gf / peak,
+                angle_between(&out, &reference)
+            );
+        }
+        // The exact polar method stays the f64 SVD, point by point.
+        if k == 32 {
+            let f = Field::new(&rows, vec![]).unwrap();
+            let secs = time(reps.min(3), || {
+                std::hint::black_box(
+                    f.edited_directions(&p, &n, EYE, Distances::Euclidean, PolarMethod::Svd, w)
+                        .unwrap(),
+                );
+            });
+            println!(
+                "{k:>4} {:>9} {:>9.1}   (polar exact: the scalar f64 SVD)",
+                "exact",
+                mp / secs
+            );
+        }
+    }
+    let side = if quick { 160 } else { 317 };
+    let (pts, _) = surface(side, side);
+    let npts = side * side;
+    println!("\nper-vertex field, {npts} points, K = 8, view-blend output, polar fast (goal at 100k: <= 1.5 ms on 2 cores, <= 2.5 ms on 1)");
+    let rows = constraints(8);
+    let reference = Field::new(&rows, vec![])
+        .unwrap()
+        .with_kernel(Kernel::Scalar)
+        .rotation_field_as(
+            &pts,
+            Distances::Euclidean,
+            None,
+            PolarMethod::Svd,
+            FieldOutput::ViewBlend,
+        )
+        .unwrap();
+    let one = rayon::ThreadPoolBuilder::new()
+        .num_threads(1)
+        .build()
+        .unwrap();
+    println!(
+        "{:>9} {:>10} {:>10} {:>11} {:>11}",
+        "kernel", "ms", "ms 1 core", "ns/point", "max diff"
+    );
+    for &kern in &kernels {
+        let f = Field::new(&rows, vec![]).unwrap().with_kernel(kern);
+        let mut out = Vec::new();
+        let mut run = || {
+            out = f
+                .rotation_field_as(
+                    &pts,
+                    Distances::Euclidean,
+                    None,
+                    PolarMethod::Iterative,
+                    FieldOutput::ViewBlend,
+                )
+                .unwrap();
+        };
+        let secs = time(reps, &mut run);
+        let secs1 = one.install(|| time(reps, &mut run));
+        println!(
+            "{:>9} {:>10.2} {:>10.2} {:>11.1} {:>11.1e}",
+            kern.name(),
+            secs * 1e3,
+            secs1 * 1e3,
+            secs * 1e9 / npts as f64,
+            quat_angle(&out, &reference)
+        );
+    }
+}
