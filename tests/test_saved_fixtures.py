@@ -1,7 +1,7 @@
 """Files written by the previous release load with the new code and keep their meaning.
 
 The previous release's add-on (a git worktree of PREVIOUS_RELEASE, its addon/ on PYTHONPATH) runs
-tests/blend_fixtures/make_fixtures.py to build one scene per feature and save it; the current code
+tests/blend_fixtures/feature_fixtures.py to build one scene per feature and save it; the current code
 opens each file in a fresh process. What a user sees must be the same: each mirror's report status,
 the stored fields (within 1e-5) and a tiny Cycles render (32 px, fixed seed: equal within noise).
 See docs/saved-data.md."""
@@ -19,7 +19,7 @@ import numpy as np
 import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
-SCRIPT = Path("tests") / "blend_fixtures" / "make_fixtures.py"
+SCRIPT = Path("tests") / "blend_fixtures" / "feature_fixtures.py"
 # The last released stop: files it writes must load with this code. Move it forward (one line)
 # when a release is cut; never to a commit whose files the current code cannot read.
 PREVIOUS_RELEASE = "59f8664"
@@ -71,7 +71,7 @@ def _env(addon: Path) -> dict:
 
 @pytest.fixture(scope="module")
 def written(old_tree, tmp_path_factory):
-    """The previous release's fixtures: its own make_fixtures.py, or this one copied into its tree
+    """The previous release's fixtures: its own feature_fixtures.py, or this one copied into its tree
     (it uses only entry points that existed there)."""
     script = old_tree / SCRIPT
     if not script.exists():

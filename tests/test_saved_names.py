@@ -28,7 +28,7 @@ bpy = pytest.importorskip("bpy")
 HERE = Path(__file__).resolve().parent
 SNAPSHOT = HERE / "data" / "saved_names.json"
 sys.path.insert(0, str(HERE / "blend_fixtures"))
-import make_fixtures  # noqa: E402
+import feature_fixtures  # noqa: E402
 
 sys.path.pop(0)
 
@@ -186,7 +186,7 @@ def exr_names(tmp_path) -> dict:
     p = tmp_path / "written.exr"
     compositing.write_exr(str(p), np.zeros((2, 3, 3), np.float32))
     out["write_exr"] = channels(p)
-    sc = make_fixtures.build_compositing()
+    sc = feature_fixtures.build_compositing()
     api.setup_compositing_passes(sc)
     sc.render.resolution_x = sc.render.resolution_y = 4
     sc.cycles.samples = 1
@@ -198,7 +198,7 @@ def exr_names(tmp_path) -> dict:
 
 def _recomposite(sc, tmp_path):
     """What Render and Recomposite leaves in the file (entry points newer than the previous
-    release, so not in make_fixtures.py): the recomposited image and its compositor node."""
+    release, so not in feature_fixtures.py): the recomposited image and its compositor node."""
     from rokeby import api
 
     sc.render.resolution_x = sc.render.resolution_y = 16
@@ -207,14 +207,14 @@ def _recomposite(sc, tmp_path):
         warnings.simplefilter("ignore", RuntimeWarning)
         api.recomposite_render(str(tmp_path / "recomposite.exr"), edit="emboss", amount=0.5, scene=sc)
     api.use_in_compositor(scene=sc)
-    sc.render.resolution_x = sc.render.resolution_y = make_fixtures.SIZE
-    sc.cycles.samples = make_fixtures.SAMPLES
+    sc.render.resolution_x = sc.render.resolution_y = feature_fixtures.SIZE
+    sc.cycles.samples = feature_fixtures.SAMPLES
 
 
 def collect(tmp_path) -> dict:
     tmp = str(tmp_path)
     snap = {"features": {}}
-    for feature, sc in make_fixtures.scenes():
+    for feature, sc in feature_fixtures.scenes():
         if feature == "compositing":
             _recomposite(sc, tmp_path)
         # Saved and opened again: what is in the file, after the add-on's load handlers ran.

@@ -2,8 +2,8 @@
 points, saved as .blend files, with what the add-on showed for them (reports, stored fields,
 tiny Cycles renders) in ``fixtures.json``.
 
-    python make_fixtures.py write OUTDIR   # build, save OUTDIR/<feature>.blend and OUTDIR/fixtures.json
-    python make_fixtures.py load OUTDIR    # open each OUTDIR/<feature>.blend, print RESULT {json} of the same figures
+    python feature_fixtures.py write OUTDIR   # build, save OUTDIR/<feature>.blend and OUTDIR/fixtures.json
+    python feature_fixtures.py load OUTDIR    # open each OUTDIR/<feature>.blend, print RESULT {json} of the same figures
 
 tests/test_saved_fixtures.py runs ``write`` with the previous release's add-on (a git worktree of
 an earlier commit, its addon/ on PYTHONPATH) and ``load`` with the current one, and compares.
