@@ -11,8 +11,8 @@
 //! window's cone become new windows. ICH's filter drops a window when a path through an end
 //! vertex of its edge already reaches the far end of the window sooner (Xin & Wang §3.2, rules
 //! on d(v1) and d(v2)): every path through that window could then be shortened, so nothing it
-//! would reach is lost. Vertices whose total angle is at least 2π, or that lie on a boundary or
-//! non-manifold edge, become pseudo-sources when their distance is final.
+//! would reach is lost. Saddle vertices (total angle over 2π), reflex boundary vertices (over π)
+//! and vertices on non-manifold edges become pseudo-sources when their distance is final.
 
 use crate::error::{Result, RokebyError};
 use crate::geodesic::{Mesh, Source};
@@ -58,11 +58,14 @@ impl Ord for Entry {
     }
 }
 
-/// Which vertices may bend a shortest path: total angle ≥ 2π (saddles, and flat vertices within
-/// rounding), or on a boundary or non-manifold edge.
+/// Which vertices may bend a shortest path: interior vertices whose total angle exceeds 2π
+/// (saddles), boundary vertices whose angle exceeds π (reflex corners of a hole or an outline),
+/// and vertices on non-manifold edges. Flat vertices are not among them: a straight line through
+/// one is the common edge of the (closed) cones of the windows on either side.
 pub(crate) fn pseudo_source_vertices(mesh: &Mesh, adj: &Adjacency) -> Vec<bool> {
     let nv = mesh.vertices.len();
     let mut angle = vec![0.0f64; nv];
+    let mut boundary = vec![false; nv];
     let mut out = vec![false; nv];
     for (fi, f) in mesh.faces.iter().enumerate() {
         if f[0] == f[1] || f[1] == f[2] || f[0] == f[2] {
@@ -73,14 +76,24 @@ pub(crate) fn pseudo_source_vertices(mesh: &Mesh, adj: &Adjacency) -> Vec<bool> 
             let (e1, e2) = (p[(k + 1) % 3] - p[k], p[(k + 2) % 3] - p[k]);
             let c = e1.cross(e2).length();
             angle[f[k]] += c.atan2(e1.dot(e2));
-            if adj.across(3 * fi + k).count() != 1 {
-                out[f[k]] = true;
-                out[f[(k + 1) % 3]] = true;
+            let (a, b) = (f[k], f[(k + 1) % 3]);
+            match adj.across(3 * fi + k).count() {
+                1 => {}
+                0 => {
+                    boundary[a] = true;
+                    boundary[b] = true;
+                }
+                _ => {
+                    out[a] = true;
+                    out[b] = true;
+                }
             }
         }
     }
+    let pi = std::f64::consts::PI;
     for v in 0..nv {
-        if angle[v] >= 2.0 * std::f64::consts::PI * (1.0 - 1e-9) {
+        let full = if boundary[v] { pi } else { 2.0 * pi };
+        if angle[v] > full * (1.0 + 1e-9) {
             out[v] = true;
         }
     }
