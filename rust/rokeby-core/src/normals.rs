@@ -172,11 +172,7 @@ pub fn bump(normals: &[f32], f: &Frame, height: &[f32], strength: f32) -> Result
         }
         // A huge strength overflowed float32: in f64, scaled to the largest component (the result
         // is unit(ñ)), the normal tilts towards the gradient instead of becoming NaN.
-        let e = [
-            n[0] as f64 - s * gx as f64,
-            n[1] as f64 + s * gy as f64,
-            n[2] as f64,
-        ];
+        let e = [n[0] as f64 - s * gx as f64, n[1] as f64 + s * gy as f64, n[2] as f64];
         let m = e.iter().fold(0.0f64, |a, x| a.max(x.abs()));
         if m > 0.0 && m.is_finite() {
             [(e[0] / m) as f32, (e[1] / m) as f32, (e[2] / m) as f32]
