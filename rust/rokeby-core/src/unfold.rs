@@ -239,7 +239,7 @@ impl Walk<'_> {
 
     /// Starts from a face that contains the source at `s` (in the face's own layout `p`): its
     /// corners get their chords; every edge that does not pass through the source is a window.
-    fn from_face(&mut self, f: usize, p: [DVec2; 3], depth: usize) {
+    fn start_at_face(&mut self, f: usize, p: [DVec2; 3], depth: usize) {
         let fv = self.mesh.faces[f];
         for k in 0..3 {
             self.set(fv[k], p[k].distance(self.s));
@@ -357,7 +357,7 @@ pub(crate) fn near_source(
                 s,
                 eps: 1e-12 * scale,
             };
-            walk.from_face(f, p, NEAR_DEPTH - 1);
+            walk.start_at_face(f, p, NEAR_DEPTH - 1);
         }
     }
 }
