@@ -210,3 +210,72 @@ def test_api_reuses_the_solver_until_the_mesh_changes():
     flipped[0] = flipped[0][::-1]
     assert api.geodesic_solver(v, flipped) is not a  # topology changed
     assert api.geodesic_solver(v, f, boundary="neumann") is not a
+
+
+@pytest.mark.parametrize("name", ["fandisk.obj", "homer.obj", "nefertiti.obj", "spot.obj", "stanford-bunny.obj", "teapot.obj"])
+def test_no_distance_is_shorter_than_the_straight_chord(name):
+    """Issue 21: next to a handle the heat method gave distances shorter than the straight line
+    to it (up to -70 %), which no path on the surface can be, and the 1/d² weights there came out
+    up to ~10x too large. Random surface points (inside faces, on an edge, on a corner) and
+    vertices, one source and a set of two, every method."""
+    v, f = load_obj(mesh_path(name))
+    s = rn.GeodesicSolver(v, f)
+    rng = np.random.default_rng(21)
+    sources = []
+    for k in range(6):
+        b = rng.dirichlet([1, 1, 1])
+        if k == 4:
+            b = np.array([0.0, 0.4, 0.6])
+        if k == 5:
+            b = np.array([0.0, 0.0, 1.0])
+        sources.append((int(rng.integers(len(f))), tuple(b)))
+    sources += [int(x) for x in rng.integers(len(v), size=3)]
+    x = np.empty((len(sources), 3))
+    for i, src in enumerate(sources):
+        x[i] = v[src] if isinstance(src, int) else np.asarray(src[1]) @ v[f[src[0]]].astype(np.float64)
+    chord = np.linalg.norm(v[None].astype(np.float64) - x[:, None], axis=2)
+    pair = [[sources[6], sources[0]]]
+    chord_pair = np.minimum(chord[6], chord[0])[None]
+    scale = np.abs(v).max()
+    methods = ("dijkstra", "heat", "exact") if name in ("spot.obj", "teapot.obj") else ("dijkstra", "heat")
+    for method in methods:
+        for srcs, ch in ((sources, chord), (pair, chord_pair)):
+            d = s.distances(srcs, method=method).astype(np.float64)
+            assert not np.isnan(d).any()
+            fin = np.isfinite(d)
+            short = fin & (d < ch * (1 - 1e-6) - 1e-6 * scale)
+            assert not short.any(), (
+                f"{name} {method}: {short.sum()} of {fin.sum()} distances below the chord, "
+                f"worst {100 * np.max((ch - d)[short] / ch[short]):.1f} % short")
+
+
+def test_exact_method_matches_pygeodesic_mmp():
+    """Issue 21: the exact method (window propagation) gives MMP's distances (pygeodesic, the
+    fixture of bench/make_exact_fixture.py) to float32 precision, at every vertex; a surface point
+    on a vertex is that vertex."""
+    from pathlib import Path
+
+    ref = np.load(Path(__file__).parent / "data" / "spot_exact_geodesics.npz")
+    v, f = load_obj(mesh_path("spot.obj"))
+    s = rn.GeodesicSolver(v, f)
+    d = s.distances(ref["sources"], method="exact").astype(np.float64)
+    ex = ref["distances"]
+    pos = ex > 0
+    assert np.max(np.abs(d[pos] - ex[pos]) / ex[pos]) < 1e-5
+    assert np.all(d[~pos] == 0)
+    src = int(ref["sources"][0])
+    face = int(np.nonzero((f == src).any(axis=1))[0][0])
+    bary = tuple(float(x) for x in (f[face] == src))
+    np.testing.assert_allclose(s.distances([(face, bary)], method="exact")[0], d[0], rtol=1e-6, atol=1e-7)
+
+
+def test_mirror_geodesic_methods_keep_their_stored_numbers():
+    """Blender stores an enum by its number: files saved with Heat (0) or Dijkstra (1) must load
+    with the same method after Exact (2) was added, and every item maps to a native method."""
+    from rokeby import props
+
+    assert [(i[0], i[4]) for i in props.GEODESIC_METHODS] == [("HEAT", 0), ("DIJKSTRA", 1), ("EXACT", 2)]
+    v, f = flat_grid(9)
+    s = rn.GeodesicSolver(v, f)
+    for name in ("heat", "dijkstra", "exact"):
+        assert np.isfinite(s.distances([40], method=name)).all()

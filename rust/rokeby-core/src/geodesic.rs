@@ -43,6 +43,8 @@ pub enum Source {
 pub enum Method {
     Dijkstra,
     Heat,
+    /// Exact polyhedral geodesics by window propagation ([`crate::exact`]).
+    Exact,
 }
 
 impl Method {
@@ -50,6 +52,7 @@ impl Method {
         match name {
             "dijkstra" => Some(Method::Dijkstra),
             "heat" => Some(Method::Heat),
+            "exact" => Some(Method::Exact),
             _ => None,
         }
     }
@@ -238,6 +241,10 @@ pub struct GeodesicSolver {
     component: Vec<usize>,
     heat: OnceLock<std::result::Result<Heat, RokebyError>>,
     mean_edge: f64,
+    /// Faces across each edge and around each vertex, for the unfolding next to sources.
+    adjacency: crate::unfold::Adjacency,
+    /// Vertices where exact shortest paths may bend (saddles, boundary), made on first use.
+    pseudo_sources: OnceLock<Vec<bool>>,
 }
 
 /// The lower triangle (which is all a Cholesky factorisation with `Side::Lower` reads) of
@@ -300,7 +307,10 @@ impl GeodesicSolver {
         } else {
             graph.len.iter().map(|&x| x as f64).sum::<f64>() / graph.len.len() as f64
         };
+        let adjacency = crate::unfold::Adjacency::new(&mesh);
         GeodesicSolver {
+            adjacency,
+            pseudo_sources: OnceLock::new(),
             mesh,
             average_boundary,
             graph,
@@ -365,6 +375,17 @@ impl GeodesicSolver {
         let rows: Vec<Vec<f64>> = match method {
             Method::Dijkstra => sets.par_iter().map(|s| self.dijkstra(s)).collect(),
             Method::Heat => self.heat_method(&sets)?,
+            Method::Exact => {
+                let pseudo = self.pseudo_sources.get_or_init(|| {
+                    crate::exact::pseudo_source_vertices(&self.mesh, &self.adjacency)
+                });
+                let cap = 5000 * (self.mesh.faces.len() + 1000);
+                sets.par_iter()
+                    .map(|s| {
+                        crate::exact::exact_distances(&self.mesh, &self.adjacency, pseudo, s, cap)
+                    })
+                    .collect::<Result<Vec<_>>>()?
+            }
         };
         Ok(rows
             .into_iter()
@@ -372,24 +393,53 @@ impl GeodesicSolver {
             .collect())
     }
 
-    /// Exact distances from the sources to the vertices of their own triangles (and the 1-ring of
-    /// vertex sources): the seeds of Dijkstra and the fix-up of the heat method near sources.
-    fn seeds(&self, set: &[Source]) -> Vec<(usize, f64)> {
-        let mut seeds = Vec::new();
-        for src in set {
-            match *src {
-                Source::Vertex(v) => {
-                    seeds.push((v, 0.0));
-                }
-                Source::Point(p) => {
-                    let x = self.mesh.point(&p);
-                    for &v in &self.mesh.faces[p.face] {
-                        seeds.push((v, x.distance(self.mesh.vertices[v])));
+    /// Distances next to the sources: the unfolded straight-line distances ([`crate::unfold`]),
+    /// exact on the source's own faces and, wherever the geodesic is straight across a few
+    /// edges, one to three rings out; then edge paths from those vertices one step further, which
+    /// carry straight lines through flat vertices. Returns (vertex, distance, straight): every
+    /// value is the length of a path on the surface, so never shorter than the geodesic.
+    fn seeds(&self, set: &[Source]) -> Vec<(usize, f64, bool)> {
+        let nv = self.mesh.vertices.len();
+        let mut dist = vec![f64::INFINITY; nv];
+        let mut touched = Vec::new();
+        crate::unfold::near_source(&self.mesh, &self.adjacency, set, &mut dist, &mut touched);
+        let mut straight = vec![false; nv];
+        let mut heap = BinaryHeap::with_capacity(touched.len());
+        for &v in &touched {
+            straight[v] = true;
+            heap.push(HeapItem(dist[v] as f32, v as u32));
+        }
+        let mut reached = touched.clone();
+        while let Some(HeapItem(key, v)) = heap.pop() {
+            let v = v as usize;
+            if key > dist[v] as f32 || !straight[v] {
+                continue;
+            }
+            for (w, l) in self.graph.neighbours(v) {
+                let nd = dist[v] + l;
+                if nd < dist[w] {
+                    if dist[w] == f64::INFINITY {
+                        reached.push(w);
                     }
+                    dist[w] = nd;
+                    heap.push(HeapItem(nd as f32, w as u32));
                 }
             }
         }
-        seeds
+        reached
+            .into_iter()
+            .map(|v| (v, dist[v], straight[v]))
+            .collect()
+    }
+
+    /// The 3D positions of a set's sources.
+    fn source_points(&self, set: &[Source]) -> Vec<DVec3> {
+        set.iter()
+            .map(|src| match *src {
+                Source::Vertex(v) => self.mesh.vertices[v],
+                Source::Point(p) => self.mesh.point(&p),
+            })
+            .collect()
     }
 
     /// Multi-source Dijkstra along edges.
@@ -397,7 +447,7 @@ impl GeodesicSolver {
         let nv = self.mesh.vertices.len();
         let mut dist = vec![f64::INFINITY; nv];
         let mut heap = BinaryHeap::new();
-        for (v, d) in self.seeds(set) {
+        for (v, d, _) in self.seeds(set) {
             if d < dist[v] {
                 dist[v] = d;
                 heap.push(HeapItem(d as f32, v as u32));
@@ -575,10 +625,14 @@ impl GeodesicSolver {
     /// their gradient. Only the directions are kept, not the heat values of each front.
     fn heat_directions(&self, hm: &Heat, u0: Vec<f64>) -> Vec<glam::DVec2> {
         let nv = self.mesh.vertices.len();
-        // Heat values more than 30 orders of magnitude below the peak lose their direction (measured:
-        // with 1e-250 the far half of a 1.6M-triangle mesh came out 30 % short; with 1e-30 the mean
-        // error there is 1.9 %). Each front costs one more triangular solve.
-        const RESOLVED: f64 = 1e-30;
+        // (Measured before the per-face rescaling: 1e-250 left the far half of a 1.6M-triangle
+        // mesh 30 % short, 1e-30 gave 1.9 % there; 1e-150 has not been re-measured at that size.)
+        // Heat values more than 150 orders of magnitude below the peak lose their direction; one
+        // solve resolves every shared mesh (up to 100k faces) in one pass. Measured against exact
+        // geodesics (issue 21): with the earlier 1e-30, nefertiti needed several fronts (1.21 %
+        // mean error, ~1.1 s for 3 sources); with 1e-150 one (1.20 %, ~0.6 s). Each further
+        // front costs one more triangular solve.
+        const RESOLVED: f64 = 1e-150;
         let mut dir = vec![glam::DVec2::ZERO; hm.faces.len()];
         let mut assigned = vec![false; hm.faces.len()];
         let mut resolved = vec![false; nv];
@@ -599,10 +653,13 @@ impl GeodesicSolver {
                 progressed = true;
                 let p = hf.layout();
                 let mut g = glam::DVec2::ZERO;
+                // Per-face rescaling: the direction does not depend on the scale, and values far
+                // below 1 keep their full precision in the products.
+                let m = 1.0 / (0..3).fold(0.0f64, |m, k| m.max(current[hf.vertex(k)]));
                 for k in 0..3 {
                     // Edge opposite corner k, counter-clockwise, turned by +90° (N × e).
                     let e = p[(k + 2) % 3] - p[(k + 1) % 3];
-                    g += glam::DVec2::new(-e.y, e.x) * current[hf.vertex(k)];
+                    g += glam::DVec2::new(-e.y, e.x) * (current[hf.vertex(k)] * m);
                 }
                 let gl = g.length();
                 if gl > 0.0 {
@@ -672,19 +729,14 @@ impl GeodesicSolver {
                 let dirs = self.heat_directions(hm, (0..nv).map(|i| u[(i, s)]).collect());
                 // Near-field: within r1 of a source the direction field is the gradient of the
                 // chord distance to the nearest source point; blended into the heat gradient up to r2.
-                let src_pts: Vec<DVec3> = sets[s]
+                let src_pts = self.source_points(&sets[s]);
+                let chord_v: Vec<f64> = self
+                    .mesh
+                    .vertices
                     .iter()
-                    .map(|src| match *src {
-                        Source::Vertex(v) => self.mesh.vertices[v],
-                        Source::Point(p) => self.mesh.point(&p),
-                    })
+                    .map(|&x| chord_to(&src_pts, x))
                     .collect();
-                let chord = |v: usize| {
-                    src_pts
-                        .iter()
-                        .map(|p| p.distance(self.mesh.vertices[v]))
-                        .fold(f64::INFINITY, f64::min)
-                };
+                let chord = |v: usize| chord_v[v];
                 let (r1, r2) = (NEAR_R1 * self.mean_edge, NEAR_R2 * self.mean_edge);
                 for (fi, hf) in hm.faces.iter().enumerate() {
                     let p = hf.layout();
@@ -761,22 +813,30 @@ impl GeodesicSolver {
                         None => f64::INFINITY,
                     };
                 }
-                for (v, d) in self.seeds(set) {
-                    row[v] = d;
-                    if let Some(Source::Vertex(src)) = set
-                        .iter()
-                        .find(|s| matches!(s, Source::Vertex(x) if *x == v))
-                    {
-                        for (w, l) in self.graph.neighbours(*src) {
-                            row[w] = row[w].min(l);
-                        }
+                // No path is shorter than the chord to the nearest source (the heat method's
+                // values can be, next to a source); next to the sources the unfolded distances
+                // replace the heat values altogether.
+                let pts = self.source_points(set);
+                for (i, x) in row.iter_mut().enumerate() {
+                    if x.is_finite() {
+                        *x = x.max(chord_to(&pts, self.mesh.vertices[i]));
                     }
+                }
+                for (v, d, straight) in self.seeds(set) {
+                    row[v] = if straight { d } else { d.min(row[v]) };
                 }
                 row
             })
             .collect();
         Ok(rows)
     }
+}
+
+/// The straight-line distance from `x` to the nearest of `pts`: a lower bound of every geodesic.
+fn chord_to(pts: &[DVec3], x: DVec3) -> f64 {
+    pts.iter()
+        .map(|p| p.distance(x))
+        .fold(f64::INFINITY, f64::min)
 }
 
 /// Values at surface points by barycentric interpolation of per-vertex values (paper §6.2: the

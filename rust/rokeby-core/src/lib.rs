@@ -21,6 +21,7 @@ pub mod bvh;
 pub mod cancel;
 pub mod envmap;
 pub mod error;
+pub mod exact;
 pub mod field;
 pub mod geodesic;
 pub mod intrinsic;
@@ -37,5 +38,6 @@ pub mod sh;
 pub mod shadow;
 pub mod shadow_mesh;
 pub mod silhouette;
+pub mod unfold;
 
 pub use error::{Result, RokebyError};

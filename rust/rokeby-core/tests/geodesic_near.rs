@@ -1,0 +1,266 @@
+//! Next to the source (issue 21): no method may return a distance shorter than the straight chord
+//! to the nearest source, which no path on the surface can beat; on developable meshes the values
+//! around a vertex or surface-point source are the exact unfolded distances.
+
+use glam::DVec3;
+use rokeby_core::geodesic::{GeodesicSolver, Mesh, Method, Source, SurfacePoint};
+use std::path::PathBuf;
+
+fn shared_meshes() -> Vec<PathBuf> {
+    let root = std::env::var("ROKEBY_SHARED").map_or_else(
+        |_| PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../../shared"),
+        PathBuf::from,
+    );
+    let dir = root.join("meshes");
+    let mut out: Vec<PathBuf> = std::fs::read_dir(&dir)
+        .unwrap_or_else(|e| panic!("shared meshes at {dir:?}: {e} (set ROKEBY_SHARED)"))
+        .filter_map(|e| e.ok().map(|e| e.path()))
+        .filter(|p| p.extension().is_some_and(|x| x == "obj"))
+        .collect();
+    out.sort();
+    assert!(!out.is_empty(), "no .obj in {dir:?}");
+    out
+}
+
+/// A minimal OBJ reader: `v` lines and `f` lines (polygons fanned, `a/b/c` and negative indices).
+fn load_obj(path: &PathBuf) -> (Vec<f32>, Vec<i64>) {
+    let text = std::fs::read_to_string(path).unwrap();
+    let (mut v, mut f) = (Vec::new(), Vec::new());
+    for line in text.lines() {
+        let mut it = line.split_whitespace();
+        match it.next() {
+            Some("v") => v.extend(it.take(3).map(|x| x.parse::<f32>().unwrap())),
+            Some("f") => {
+                let nv = (v.len() / 3) as i64;
+                let idx: Vec<i64> = it
+                    .map(|t| {
+                        let i: i64 = t.split('/').next().unwrap().parse().unwrap();
+                        if i < 0 {
+                            nv + i
+                        } else {
+                            i - 1
+                        }
+                    })
+                    .collect();
+                for k in 1..idx.len().saturating_sub(1) {
+                    f.extend_from_slice(&[idx[0], idx[k], idx[k + 1]]);
+                }
+            }
+            _ => {}
+        }
+    }
+    (v, f)
+}
+
+/// A small deterministic generator (no dependency): xorshift64*.
+struct Rng(u64);
+impl Rng {
+    fn next(&mut self) -> f64 {
+        self.0 ^= self.0 >> 12;
+        self.0 ^= self.0 << 25;
+        self.0 ^= self.0 >> 27;
+        (self.0.wrapping_mul(0x2545F4914F6CDD1D) >> 11) as f64 / (1u64 << 53) as f64
+    }
+    fn below(&mut self, n: usize) -> usize {
+        ((self.next() * n as f64) as usize).min(n - 1)
+    }
+}
+
+fn source_point(m: &Mesh, s: &Source) -> DVec3 {
+    match *s {
+        Source::Vertex(v) => m.vertices[v],
+        Source::Point(p) => m.point(&p),
+    }
+}
+
+#[test]
+fn no_distance_is_shorter_than_the_chord_on_any_shared_mesh() {
+    let mut rng = Rng(0x9E3779B97F4A7C15);
+    let mut report = Vec::new();
+    for path in shared_meshes() {
+        let (v, f) = load_obj(&path);
+        let s = GeodesicSolver::new(Mesh::new(&v, &f).unwrap());
+        let m = s.mesh();
+        let (nv, nf) = (m.vertices.len(), m.faces.len());
+        // Random surface points (some on edges and corners, as snapped handles are), and vertices.
+        let mut sets: Vec<Vec<Source>> = Vec::new();
+        for k in 0..6 {
+            let (a, b) = (rng.next(), rng.next());
+            let (a, b) = if a + b > 1.0 {
+                (1.0 - a, 1.0 - b)
+            } else {
+                (a, b)
+            };
+            let bary = match k {
+                4 => [0.0, a.max(0.05), 1.0 - a.max(0.05)],
+                5 => [1.0, 0.0, 0.0],
+                _ => [a, b, 1.0 - a - b],
+            };
+            sets.push(vec![Source::Point(SurfacePoint {
+                face: rng.below(nf),
+                bary,
+            })]);
+        }
+        for _ in 0..3 {
+            sets.push(vec![Source::Vertex(rng.below(nv))]);
+        }
+        // A set of two: the chord to the nearer one bounds every value.
+        sets.push(vec![
+            Source::Vertex(rng.below(nv)),
+            Source::Point(SurfacePoint {
+                face: rng.below(nf),
+                bary: [0.3, 0.3, 0.4],
+            }),
+        ]);
+        let scale = m
+            .vertices
+            .iter()
+            .fold(0.0f64, |a, x| a.max(x.abs().max_element()));
+        for method in [Method::Dijkstra, Method::Heat] {
+            let d = s.distances(&sets, method).unwrap();
+            let (mut worst, mut bad, mut checked) = (0.0f64, 0usize, 0usize);
+            for (r, set) in sets.iter().enumerate() {
+                let pts: Vec<DVec3> = set.iter().map(|x| source_point(m, x)).collect();
+                for i in 0..nv {
+                    let got = d[r * nv + i] as f64;
+                    assert!(!got.is_nan(), "{path:?} {method:?}: NaN at vertex {i}");
+                    if !got.is_finite() {
+                        continue;
+                    }
+                    let chord = pts
+                        .iter()
+                        .map(|p| p.distance(m.vertices[i]))
+                        .fold(f64::INFINITY, f64::min);
+                    checked += 1;
+                    // float32 output: a relative rounding of 6e-8 and an absolute one near 0.
+                    if got < chord * (1.0 - 1e-6) - 1e-6 * scale {
+                        bad += 1;
+                        worst = worst.max((chord - got) / chord);
+                    }
+                }
+            }
+            report.push(format!(
+                "{:?} {method:?}: {bad} of {checked} below the chord (worst {:.1} %)",
+                path.file_name().unwrap(),
+                100.0 * worst
+            ));
+        }
+    }
+    println!("{}", report.join("\n"));
+    assert!(
+        report.iter().all(|r| r.contains(": 0 of")),
+        "{}",
+        report.join("\n")
+    );
+}
+
+/// A grid of n×n vertices on [0,1]², alternating diagonals, mapped through `map`.
+fn grid(n: usize, map: impl Fn(f64, f64) -> DVec3) -> (Vec<f32>, Vec<i64>) {
+    let mut v = Vec::new();
+    for j in 0..n {
+        for i in 0..n {
+            let p = map(i as f64 / (n - 1) as f64, j as f64 / (n - 1) as f64);
+            v.extend_from_slice(&[p.x as f32, p.y as f32, p.z as f32]);
+        }
+    }
+    let mut f = Vec::new();
+    for j in 0..n - 1 {
+        for i in 0..n - 1 {
+            let a = (j * n + i) as i64;
+            let (b, c, d) = (a + 1, a + n as i64, a + n as i64 + 1);
+            if (i + j) % 2 == 0 {
+                f.extend_from_slice(&[a, b, d, a, d, c]);
+            } else {
+                f.extend_from_slice(&[a, b, c, b, d, c]);
+            }
+        }
+    }
+    (v, f)
+}
+
+#[test]
+fn next_to_the_source_the_unfolded_distances_are_exact_on_developable_meshes() {
+    // A plane and a half cylinder (unrolls isometrically onto the unit square): around a vertex
+    // source (1- and 2-ring) and around surface points (their triangle and the next ring), every
+    // method returns the unrolled straight-line distance.
+    let n = 41;
+    let h = 1.0 / (n - 1) as f64;
+    let r = 1.0 / std::f64::consts::PI;
+    for (name, map) in [
+        (
+            "plane",
+            Box::new(|x: f64, y: f64| DVec3::new(x, y, 0.0)) as Box<dyn Fn(f64, f64) -> DVec3>,
+        ),
+        (
+            "cylinder",
+            Box::new(move |x: f64, y: f64| {
+                let a = x * std::f64::consts::PI;
+                DVec3::new(r * a.cos(), r * a.sin(), y)
+            }),
+        ),
+    ] {
+        let (v, f) = grid(n, map);
+        let s = GeodesicSolver::new(Mesh::new(&v, &f).unwrap());
+        let m = s.mesh();
+        // The polyhedral half cylinder unrolls onto columns one chord (not one arc) wide.
+        let w = if name == "plane" {
+            h
+        } else {
+            2.0 * r * (std::f64::consts::PI * h / 2.0).sin()
+        };
+        let uv = |i: usize| DVec3::new((i % n) as f64 * w, (i / n) as f64 * h, 0.0);
+        // The face containing vertex 20·n+20 as its first corner, and a point inside it.
+        let centre = 20 * n + 20;
+        let face = m.faces.iter().position(|t| t[0] == centre).unwrap();
+        let bary = [0.2, 0.5, 0.3];
+        let fp = m.faces[face];
+        let p_uv = uv(fp[0]) * bary[0] + uv(fp[1]) * bary[1] + uv(fp[2]) * bary[2];
+        let edge_bary = [0.0, 0.35, 0.65];
+        let e_uv = uv(fp[1]) * edge_bary[1] + uv(fp[2]) * edge_bary[2];
+        let cases = [
+            (Source::Vertex(centre), uv(centre), 2.0 * h),
+            (Source::Point(SurfacePoint { face, bary }), p_uv, 1.4 * h),
+            (
+                Source::Point(SurfacePoint {
+                    face,
+                    bary: edge_bary,
+                }),
+                e_uv,
+                1.2 * h,
+            ),
+        ];
+        // The exact method everywhere (the unrolled straight line never leaves the strip).
+        for (src, at, _) in cases {
+            let d = s.distances(&[vec![src]], Method::Exact).unwrap();
+            for i in 0..n * n {
+                let want = uv(i).distance(at);
+                assert!(
+                    (d[i] as f64 - want).abs() < 2e-6,
+                    "{name} exact {src:?}: vertex {i} at {} should be {want}",
+                    d[i]
+                );
+            }
+        }
+        for method in [Method::Heat, Method::Dijkstra] {
+            for (src, at, radius) in cases {
+                let d = s.distances(&[vec![src]], method).unwrap();
+                let mut checked = 0;
+                for i in 0..n * n {
+                    let want = uv(i).distance(at);
+                    if want <= radius {
+                        checked += 1;
+                        assert!(
+                            (d[i] as f64 - want).abs() < 2e-6,
+                            "{name} {method:?} {src:?}: vertex {i} at {} should be {want}",
+                            d[i]
+                        );
+                    }
+                }
+                assert!(
+                    checked >= 6,
+                    "{name}: only {checked} vertices near the source"
+                );
+            }
+        }
+    }
+}
