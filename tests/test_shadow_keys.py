@@ -111,3 +111,72 @@ def test_add_configuration_from_another_light_is_refused(tmp_path):
     with pytest.raises(shadow.ShadowEditError, match="add_configuration"):
         api.apply_shadow_edit(s, add_configuration=True)
     assert [k.name for k in shadow.shadow_mesh_of(ball).data.shape_keys.key_blocks] == keys_before
+
+
+def _key(ob, name=None):
+    from rokeby import shadow
+
+    k = ob.data.shape_keys.key_blocks[name or shadow.EDIT_KEY]
+    co = np.empty(len(ob.data.vertices) * 3, np.float32)
+    k.data.foreach_get("co", co)
+    return co.reshape(-1, 3)
+
+
+def test_live_shadow_mesh_changes_every_drag_step_and_cancel_restores(tmp_path):
+    bpy, sc, ball, lamp, ground = ts._blender_scene()
+    from rokeby import api, shadow
+
+    s = api.start_shadow_edit(ball, lamp, [ground], min_loop_vertices=10)
+    h = s.handles(0)["points"].astype(np.float64)
+    n, m = len(h), int(np.argmax(h[:, 0]))
+    c = h.mean(axis=0)
+    fixed = ((m - n // 5) % n, (m + n // 5) % n)
+    live = shadow.live_begin(s)  # no edit yet: the preview installs one
+    ob = live.shadow_object
+    assert live.created and shadow.shadow_mesh_of(ball) == ob
+    rest = _key(ob)
+    seen = [rest]
+    for scale in (1.1, 1.2, 1.3):  # three steps of one drag (mouse moves)
+        s.drag(0, fixed, m, c + (h[m] - c) * scale)
+        shadow.live_step(live)
+        seen.append(_key(ob))
+    for a, b in zip(seen, seen[1:]):
+        assert np.abs(b - a).max() > 1e-3, "each drag step must change the shadow mesh"
+    # What a render (and the viewport) shows mid-drag: the edited edge, before any release.
+    ball.visible_camera = False
+    mid = ts._render(bpy, sc, tmp_path / "mid.png")
+    want = np.linalg.norm(h[m] - c) * 1.3
+    got = ts._edge_along(mid, c, (h[m] - c) / np.linalg.norm(h[m] - c))
+    assert abs(got - want) * ts.SIZE / 4.0 < 3.0, f"mid-drag edge at {got:.3f}, cursor at {want:.3f}"
+    # Esc: the drag is dropped and the preview's shadow mesh goes.
+    s.cancel()
+    shadow.live_end(live, keep=False)
+    assert shadow.shadow_mesh_of(ball) is None
+    assert lamp.light_linking.blocker_collection is None
+
+
+def test_live_cancel_on_an_applied_edit_puts_its_keys_back():
+    bpy, sc, ball, lamp, ground = ts._blender_scene()
+    from rokeby import api, shadow
+
+    s = _edit(api, ball, lamp, ground, 1.3)
+    ob, _ = api.apply_shadow_edit(s)
+    before = _key(ob)
+    h = s.handles(0)["points"].astype(np.float64)
+    n, m = len(h), int(np.argmin(h[:, 0]))
+    c = h.mean(axis=0)
+    live = shadow.live_begin(s)
+    s.drag(0, ((m - n // 5) % n, (m + n // 5) % n), m, c + (h[m] - c) * 1.4)
+    shadow.live_step(live)
+    assert np.abs(_key(ob) - before).max() > 1e-3
+    s.cancel()
+    shadow.live_end(live, keep=False)
+    np.testing.assert_array_equal(_key(ob), before)
+    # And a kept drag is applied: the key holds the committed edit.
+    s.drag(0, ((m - n // 5) % n, (m + n // 5) % n), m, c + (h[m] - c) * 1.4)
+    live = shadow.live_begin(s)
+    shadow.live_step(live)
+    stepped = _key(ob)
+    s.commit()
+    shadow.live_end(live, keep=True)
+    np.testing.assert_allclose(_key(ob), stepped, atol=1e-6)

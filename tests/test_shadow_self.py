@@ -161,3 +161,86 @@ def test_a_self_shadow_loop_dragged_changes_the_caster_there_and_only_there(tmp_
     assert bpy.data.objects.get(caster.name + shadow.SELF_SUFFIX) is None
     again = _render(bpy, sc, tmp_path / "again.png")
     np.testing.assert_allclose(again, plain, atol=1e-4)
+
+
+def test_live_self_shadow_drag_links_the_self_shadow_mesh_and_cancel_removes_it():
+    bpy, sc, caster, lamp, ground = _scene()
+    from rokeby import api, shadow
+
+    s = api.start_shadow_edit(caster, lamp, [ground], min_loop_vertices=10)
+    live = shadow.live_begin(s)
+    k, h = _self_loop(s)
+    n, m = len(h), int(np.argmin(h[:, 0]))
+    c = h.mean(axis=0)
+    s.drag(k, ((m - n // 5) % n, (m + n // 5) % n), m, c + (h[m] - c) * 1.3)
+    shadow.live_step(live)
+    b = live.shadow_object.rokeby_shadow.self_blocker
+    twin = lamp.rokeby_shadow.twin
+    assert b is not None and b.name in twin.light_linking.blocker_collection.objects  # not a blocker of the receivers
+    assert caster.name in lamp.light_linking.blocker_collection.objects  # excluded: B shadows the caster instead
+    s.cancel()
+    shadow.live_end(live, keep=False)
+    assert shadow.shadow_mesh_of(caster) is None
+    assert not [o for o in bpy.data.objects if o.rokeby_shadow.role == "SELF_BLOCKER"]
+
+
+def test_a_light_inside_the_casters_bounds_gives_an_editable_shadow_that_renders(tmp_path):
+    """§5.2: a light inside the caster's bounding box (between its two parts) was refused; each part
+    now gets its own frustum. The nearer sphere's shadow on the ground, dragged, renders."""
+    bpy = pytest.importorskip("bpy")
+    import test_shadow as ts
+
+    bpy_, sc, ball, lamp, ground = ts._blender_scene()
+    from rokeby import api
+
+    # A second, smaller sphere in the same object, beyond the light: the light (0.8, 0, 3.5) lies
+    # inside the bounds of the whole caster but outside each sphere's.
+    import bmesh
+
+    b = bmesh.new()
+    b.from_mesh(ball.data)
+    bmesh.ops.create_uvsphere(b, u_segments=24, v_segments=12, radius=0.3, matrix=_scale(1, 1, 1, (1.6, 0.0, 2.7)))
+    b.to_mesh(ball.data)
+    b.free()
+    lamp.location = (0.8, 0.0, 3.5)
+    sc.view_layers[0].update()
+    corners = np.array(ball.bound_box) + np.array(ball.location)  # no rotation or scale
+    lo, hi = corners.min(axis=0), corners.max(axis=0)
+    assert np.all(lo < lamp.location) and np.all(np.array(lamp.location) < hi)
+    ball.visible_camera = False
+    before = ts._render(bpy, sc, tmp_path / "before.png")
+    s = api.start_shadow_edit(ball, lamp, [ground], min_loop_vertices=10)
+    k = next(i for i, lp in enumerate(s.loops()) if lp["active"] and s.handles(i)["hit"].all()
+             and np.linalg.norm(s.handles(i)["points"].mean(axis=0)[:2] - [-0.6, 0.0]) < 0.5)
+    h = s.handles(k)["points"].astype(np.float64)
+    n, c = len(h), h.mean(axis=0)
+    m = int(np.argmin(h[:, 0]))  # the far (-x) side of the big sphere's shadow
+    target = c + (h[m] - c) * 1.2
+    s.drag(k, ((m - n // 5) % n, (m + n // 5) % n), m, target)
+    s.commit()
+    api.apply_shadow_edit(s)
+    after = ts._render(bpy, sc, tmp_path / "after.png")
+    d = (h[m] - c) / np.linalg.norm(h[m] - c)
+    px = ts.SIZE / 4.0
+    e0, e1 = ts._edge_along(before, c, d), ts._edge_along(after, c, d)
+    want = np.linalg.norm(target - c)
+    print(f"light inside the bounds: edge {e0 * px:.1f} px -> {e1 * px:.1f} px (target {want * px:.1f})")
+    assert abs(e0 - np.linalg.norm(h[m] - c)) * px < 2.5
+    assert abs(e1 - want) * px < 3.0
+    f0, f1 = ts._edge_along(before, c, -d), ts._edge_along(after, c, -d)
+    assert abs(f1 - f0) * px < 1.5
+
+
+def test_a_light_inside_a_single_parts_bounds_stays_a_clear_error():
+    bpy = pytest.importorskip("bpy")
+    import test_shadow as ts
+
+    bpy_, sc, ball, lamp, ground = ts._blender_scene()
+    from rokeby import shadow
+
+    lamp.location = (0.0, 0.0, 1.6)  # inside the ball
+    sc.view_layers[0].update()
+    n = len(bpy.data.objects)
+    with pytest.raises(shadow.ShadowEditError, match="inside the caster's bounding box"):
+        shadow.start(ball, lamp, [ground])
+    assert len(bpy.data.objects) == n

@@ -93,6 +93,7 @@ class ShadowSession:
     rest_normals: np.ndarray | None = None  # (V, 3) world vertex normals at the start
     light_kw: dict = field(default_factory=dict)  # light_position= or light_direction= (world) at the start
     triangles: np.ndarray | None = None  # (F, 3) the caster's triangles
+    _edges: dict = field(default_factory=dict)  # loop -> (K, 2) its silhouette edges' vertices
 
     def caster_object(self):
         """The caster (None once it is deleted)."""
@@ -143,7 +144,9 @@ class ShadowSession:
         step["self"] = bool(len(seg) and on.mean() > 0.5)
         # Where it acts: the segment's silhouette points before and after (the self-shadow mesh
         # keeps the displacement near them only).
-        step["vertices"] = np.unique(np.asarray(self.editor.loops()[step["loop"]]["edges"], np.int64)[seg])
+        if step["loop"] not in self._edges:  # a loop's silhouette edges are fixed for the session
+            self._edges[step["loop"]] = np.asarray(self.editor.loops()[step["loop"]]["edges"], np.int64)
+        step["vertices"] = np.unique(self._edges[step["loop"]][seg])
         self.pending = step
         return r
 
@@ -227,12 +230,17 @@ def start(caster, light, receivers=None, *, scene=None, min_loop_vertices: int =
     cm = api.mesh_arrays(caster, dg)
     rm = [api.mesh_arrays(o, dg) for o in receivers]
     rv, rf = _merged(rm)
+    opts = {"min_loop_vertices": int(min_loop_vertices), "w_z": float(w_z), "constraint_weight": float(constraint_weight), **kw}
     try:
-        ed = native.module().ShadowEditor(cm.vertices, cm.triangles.astype(np.int64), rv, rf, normals=cm.normals,
-                                          min_loop_vertices=int(min_loop_vertices), w_z=float(w_z),
-                                          constraint_weight=float(constraint_weight), **kw)
+        ed = native.module().ShadowEditor(cm.vertices, cm.triangles.astype(np.int64), rv, rf, normals=cm.normals, **opts)
     except ValueError as exc:
-        raise ShadowEditError(f"cannot edit the shadow of '{caster.name}' from '{light.name}': {exc}") from exc
+        ed = None
+        if "inside the caster's bounding box" in str(exc):
+            # §5.2: "if the light is allowed to enter the bounding volume of a shadow caster ... a
+            # shadow frustum for each silhouette loop separately": one frustum per part.
+            ed = PartsEditor.build(cm.vertices, cm.triangles.astype(np.int64), cm.normals, rv, rf, opts)
+        if ed is None:
+            raise ShadowEditError(f"cannot edit the shadow of '{caster.name}' from '{light.name}': {exc}") from exc
     m = np.array(caster.matrix_world, dtype=np.float64)
     lv = kw.get("light_direction")
     if lv is None:
@@ -242,6 +250,126 @@ def start(caster, light, receivers=None, *, scene=None, min_loop_vertices: int =
     return ShadowSession(ed, caster.session_uid, light.session_uid, [o.session_uid for o in receivers], lv_local / np.linalg.norm(lv_local),
                          np.asarray(cm.vertices, np.float64), m, rest_normals=np.asarray(cm.normals, np.float64), light_kw=kw,
                          triangles=np.asarray(cm.triangles, np.int64))
+
+
+def connected_components(triangles: np.ndarray, n: int) -> np.ndarray:
+    """(n,) component number of every vertex of the triangle mesh (label propagation with
+    pointer jumping; numpy only)."""
+    tris = np.asarray(triangles, np.int64)
+    lab = np.arange(n)
+    while True:
+        new = lab.copy()
+        np.minimum.at(new, tris.ravel(), np.repeat(lab[tris].min(axis=1), 3))
+        new = new[new]
+        if np.array_equal(new, lab):
+            break
+        lab = new
+    return np.unique(lab, return_inverse=True)[1]
+
+
+class PartsEditor:
+    """A light inside the caster's bounding box (§5.2, per-loop frusta): the native editor builds
+    one light frustum around the whole caster and refuses such a light. When the caster is made of
+    several closed parts (connected components; a cap and a face, a chandelier's arms) whose own
+    bounds the light lies outside, each part gets its own editor and so its own frustum, with the
+    other parts among its receivers (their shadows on each other are self-shadows, their handles
+    ``on_caster``). Same interface as ``rokeby_native.ShadowEditor``; loop numbers run over the
+    parts in turn, shadow-mesh vertices are the caster's. A light inside one part's own bounds
+    stays refused (that needs per-loop frusta in the native editor)."""
+
+    def __init__(self, parts, n_vertices, rest):
+        self.parts = parts  # [(editor, vertex ids, number of other-part triangles among its receivers)]
+        self.n = n_vertices
+        self.rest = rest
+        self._index = [(p, k) for p, (ed, _, _) in enumerate(parts) for k in range(ed.num_loops)]
+
+    @classmethod
+    def build(cls, v, f, normals, rv, rf, opts):
+        comp = connected_components(f, len(v))
+        if comp.max() == 0:
+            return None
+        light = opts.get("light_position")
+        parts = []
+        for c in range(comp.max() + 1):
+            ids = np.nonzero(comp == c)[0]
+            lo, hi = v[ids].min(axis=0), v[ids].max(axis=0)
+            if light is not None and np.all(light >= lo) and np.all(light <= hi):
+                continue  # the light is inside this part's own bounds: not editable
+            remap = np.full(len(v), -1, np.int64)
+            remap[ids] = np.arange(len(ids))
+            mine = comp[f[:, 0]] == c
+            others = f[~mine]
+            recv_v = np.concatenate([np.asarray(v, np.float32), np.asarray(rv, np.float32)])
+            recv_f = np.concatenate([others, np.asarray(rf, np.int64) + len(v)])
+            try:
+                ed = native.module().ShadowEditor(np.asarray(v)[ids], remap[f[mine]], recv_v, recv_f,
+                                                  normals=np.asarray(normals)[ids], **opts)
+            except ValueError:
+                continue  # this part's shadow falls nowhere, or it is too small: the others stay editable
+            parts.append((ed, ids, len(others)))
+        if not parts:
+            return None
+        return cls(parts, len(v), np.asarray(v, np.float32))
+
+    @property
+    def num_loops(self) -> int:
+        return len(self._index)
+
+    @property
+    def factored(self) -> bool:
+        return all(ed.factored for ed, _, _ in self.parts)
+
+    def _at(self, loop):
+        loop = int(loop)
+        if not 0 <= loop < len(self._index):
+            raise ValueError(f"loop: loop {loop} does not exist (the caster has {len(self._index)})")
+        p, k = self._index[loop]
+        return self.parts[p], k
+
+    @staticmethod
+    def _mark(h, others):
+        h = dict(h)
+        on = np.asarray(h["on_caster"], bool).copy()
+        on |= np.asarray(h["hit"], bool) & ~on & (np.asarray(h["triangle"]) < others)
+        h["on_caster"] = on
+        return h
+
+    def loops(self):
+        out = []
+        for ed, ids, _ in self.parts:
+            for lp in ed.loops():
+                lp = dict(lp)
+                lp["edges"] = ids[np.asarray(lp["edges"], np.int64)]
+                out.append(lp)
+        return out
+
+    def handles(self, loop, eye=None):
+        (ed, _, others), k = self._at(loop)
+        return self._mark(ed.handles(k, eye), others)
+
+    def drag(self, loop, fixed, moved, target, **kwargs):
+        (ed, _, others), k = self._at(loop)
+        r = dict(ed.drag(k, fixed, moved, target, **kwargs))
+        r["handles"] = self._mark(r["handles"], others)
+        return r
+
+    def commit(self):
+        for ed, _, _ in self.parts:
+            ed.commit()
+
+    def cancel(self):
+        for ed, _, _ in self.parts:
+            ed.cancel()
+
+    def reset(self):
+        for ed, _, _ in self.parts:
+            ed.reset()
+
+    def shadow_mesh(self):
+        out = self.rest.copy()
+        for ed, ids, _ in self.parts:
+            out[ids] = ed.shadow_mesh()
+        return out
 
 
 # --- Links between the parts of an edit (props.RokebyShadowLinks, ``obj.rokeby_shadow``) -----------
@@ -1030,3 +1158,116 @@ def sync_falloffs(scene) -> int:
             continue
         written += _set_key_values(ob, values)
     return written
+
+
+# --- Live shadow while dragging (the paper's Fig. 3 B–D) -----------------------------------------
+# Each drag step writes the current (uncommitted) shadow mesh into the edit's shape key, so the
+# viewport (EEVEE, or Solid with shadows, both honour the linking) and renders show the edited
+# shadow during the drag. live_begin installs the edit (apply) if the caster has none; live_end
+# keeps the result (apply again: everything consistent) or puts back exactly what was there.
+
+
+@dataclass
+class LivePreview:
+    session: ShadowSession
+    shadow_object: object
+    created: bool
+    rest: np.ndarray  # (3V,) float32 the caster's rest coordinates (the keys' Basis)
+    saved: dict  # (object name-independent) id -> {key name: coordinates} before the drag
+    had_blocker: bool
+    steps: int = 0
+
+
+def _key_coords(ob) -> dict:
+    out = {}
+    if ob is None or ob.data.shape_keys is None:
+        return out
+    n = len(ob.data.vertices)
+    for k in ob.data.shape_keys.key_blocks:
+        co = np.empty(n * 3, np.float32)
+        k.data.foreach_get("co", co)
+        out[k.name] = (co, k.value)
+    return out
+
+
+def live_begin(session: ShadowSession, *, scene=None) -> LivePreview:
+    """Starts showing ``session``'s edit live (see :func:`live_step`)."""
+    caster = session.caster_object()
+    if caster is None:
+        raise ShadowEditError("the caster of this session no longer exists")
+    ob = shadow_mesh_of(caster)
+    created = ob is None
+    saved, had_blocker = {}, False
+    if created:
+        ob, _twin = apply(session, scene=scene)
+    else:
+        if ob.rokeby_shadow.light != session.light_object():
+            raise ShadowEditError(f"the edit of '{caster.name}' is from another light; apply or remove it first")
+        b = _live_self_blocker(ob)
+        had_blocker = b is not None
+        saved = {"mesh": _key_coords(ob), "blocker": _key_coords(b)}
+    rest = np.empty(len(caster.data.vertices) * 3, np.float32)
+    caster.data.vertices.foreach_get("co", rest)
+    return LivePreview(session, ob, created, rest, saved, had_blocker)
+
+
+def live_step(preview: LivePreview) -> None:
+    """Writes the session's current shadow mesh (the drag in progress included; §6.1 by
+    back-substitution) into the shadow object's key; self-shadow drags update the self-shadow mesh
+    too (made and linked at the first one)."""
+    s, ob = preview.session, preview.shadow_object
+    local = _local_displacement(s, np.asarray(s.shadow_mesh(), np.float64))
+    key_name = configuration_key(s.configuration)
+    kb = ob.data.shape_keys.key_blocks
+    if kb.get(key_name) is None:
+        raise ShadowEditError(f"'{ob.name}' has no key '{key_name}' any more; start the drag again")
+    kb[key_name].data.foreach_set("co", preview.rest + local.astype(np.float32).ravel())
+    ob.data.update()
+    if s.has_self_edits():
+        caster, light = s.caster_object(), s.light_object()
+        linked = _live_self_blocker(ob) is not None
+        self_world = s.self_shadow_mesh()
+        self_local = _local_displacement(s, s.rest_world + _self_displacement(s, self_world, s.rest_normals))
+        _self_blocker(ob, caster, light, preview.rest, key_name, self_local)
+        if not linked:
+            _link(light)
+    preview.steps += 1
+
+
+def live_end(preview: LivePreview, *, keep: bool, scene=None) -> None:
+    """Ends the live preview: ``keep`` applies the session's (committed) edit; otherwise the
+    shadow object and self-shadow mesh get back exactly the keys they had (or are removed when the
+    preview made them)."""
+    import bpy  # noqa: PLC0415
+
+    s = preview.session
+    if keep:
+        apply(s, scene=scene)
+        return
+    caster = s.caster_object()
+    if preview.created:
+        if caster is not None and shadow_mesh_of(caster) is not None:
+            remove(caster)
+        return
+    ob = preview.shadow_object
+    for part, coords in (("mesh", preview.saved.get("mesh", {})), ("blocker", preview.saved.get("blocker", {}))):
+        o = ob if part == "mesh" else _live_self_blocker(ob)
+        if o is None or o.data.shape_keys is None:
+            continue
+        for name, (co, value) in coords.items():
+            k = o.data.shape_keys.key_blocks.get(name)
+            if k is not None:
+                k.data.foreach_set("co", co)
+                k.value = value
+        o.data.update()
+    b = _live_self_blocker(ob)
+    if b is not None and not preview.had_blocker:
+        ob.rokeby_shadow.self_blocker = None
+        me = b.data
+        bpy.data.objects.remove(b, do_unlink=True)
+        if me is not None and me.users == 0:
+            bpy.data.meshes.remove(me)
+        light = ob.rokeby_shadow.light
+        if _is_light(light):
+            _link(light)
+    (scene if scene is not None else bpy.context.scene).view_layers[0].update()

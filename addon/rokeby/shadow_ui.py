@@ -190,7 +190,7 @@ class ROKEBY_OT_shadow_drag(bpy.types.Operator):
         try:
             self._drag(sess)
         except ValueError as exc:
-            sess.editor.cancel()
+            sess.cancel()
             self.report({"ERROR"}, f"Rokeby: {exc}")
             return {"CANCELLED"}
         sess.commit()
@@ -223,6 +223,13 @@ class ROKEBY_OT_shadow_drag(bpy.types.Operator):
         n = len(sess.loops()[self.loop]["points"])
         w = max(1, int(self.segment * n))
         self.fixed = ((self.moved - w) % n, (self.moved + w) % n)
+        # The edited shadow shows in the viewport during the drag (Fig. 3 B-D): each step writes
+        # the shadow mesh (shadow.live_step); Esc puts back what was there.
+        try:
+            self._live = shadow.live_begin(sess, scene=context.scene)
+        except (shadow.ShadowEditError, ValueError) as exc:
+            self._live = None
+            self.report({"WARNING"}, f"Rokeby: no live shadow: {exc}")
         context.window_manager.modal_handler_add(self)
         return {"RUNNING_MODAL"}
 
@@ -240,16 +247,22 @@ class ROKEBY_OT_shadow_drag(bpy.types.Operator):
                 self.target = loc
                 try:
                     self._drag(sess)
+                    if self._live is not None:
+                        shadow.live_step(self._live)
                 except ValueError as exc:
                     self.report({"WARNING"}, f"Rokeby: {exc}")
                 _refresh(context.scene, _view_eye(rv3d))
             return {"RUNNING_MODAL"}
         if event.type == "LEFTMOUSE" and event.value == "RELEASE":
             sess.commit()
+            if self._live is not None:
+                shadow.live_end(self._live, keep=True, scene=context.scene)
             _refresh(context.scene)
             return {"FINISHED"}
         if event.type in {"RIGHTMOUSE", "ESC"}:
-            sess.editor.cancel()
+            sess.cancel()
+            if self._live is not None:
+                shadow.live_end(self._live, keep=False, scene=context.scene)
             _refresh(context.scene)
             return {"CANCELLED"}
         return {"RUNNING_MODAL"}
