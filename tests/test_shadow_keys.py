@@ -180,3 +180,30 @@ def test_live_cancel_on_an_applied_edit_puts_its_keys_back():
     s.commit()
     shadow.live_end(live, keep=True)
     np.testing.assert_allclose(_key(ob), stepped, atol=1e-6)
+
+
+def test_apply_operator_adds_a_key_configuration_and_the_panel_offers_it():
+    bpy, sc, ball, lamp, ground = ts._blender_scene()
+    import rokeby
+    from rokeby import shadow, shadow_ui
+    from test_scene import _Layout
+
+    rokeby.register()
+    try:
+        bpy.context.view_layer.objects.active = ball
+        for location, scale in ((tuple(ts.LIGHT), 1.3), (tuple(_rotated(30.0)), 0.8)):
+            lamp.location = location
+            sc.view_layers[0].update()
+            assert bpy.ops.rokeby.shadow_start(light="Lamp", min_loop_vertices=10) == {"FINISHED"}
+            sess = shadow_ui.session(sc)
+            h = sess.handles(0)["points"].astype(np.float64)
+            n, c = len(h), h.mean(axis=0)
+            assert bpy.ops.rokeby.shadow_drag(loop=0, fixed=(n - 8, 14), moved=3, target=tuple(c + (h[3] - c) * scale)) == {"FINISHED"}
+            log = []
+            shadow_ui.ROKEBY_PT_shadow.draw(type("P", (), {"layout": _Layout(log)})(), bpy.context)
+            assert bpy.ops.rokeby.shadow_apply(add_configuration=location != tuple(ts.LIGHT)) == {"FINISHED"}
+        ob = shadow.shadow_mesh_of(ball)
+        assert shadow.configuration_vectors(ob).shape == (2, 3)
+        assert log.count(("operator", "rokeby.shadow_apply")) == 2  # Apply, and Add as Key Configuration
+    finally:
+        rokeby.unregister()

@@ -13,7 +13,7 @@ CAM = np.array([-0.8, 0.0])
 LIGHT = (3.0, 0.0, 5.0)
 
 
-def _caster_object(bpy, name="Mushroom"):
+def _caster_object(bpy, name="Mushroom", cap_z=1.5):
     """A flat ellipsoid 6 × 6 × 0.5 (the "face", top at z = 0.25) and a sphere (the "cap", r 0.5
     at z 1.5) in one closed mesh."""
     import bmesh
@@ -21,7 +21,7 @@ def _caster_object(bpy, name="Mushroom"):
     b = bmesh.new()
     bmesh.ops.create_uvsphere(b, u_segments=64, v_segments=32, radius=1.0, matrix=_scale(3.0, 3.0, 0.25, (0.0, 0.0, 0.0)))
     nf = len(b.faces)
-    bmesh.ops.create_uvsphere(b, u_segments=48, v_segments=24, radius=0.5, matrix=_scale(1, 1, 1, (0.0, 0.0, 1.5)))
+    bmesh.ops.create_uvsphere(b, u_segments=48, v_segments=24, radius=0.5, matrix=_scale(1, 1, 1, (0.0, 0.0, cap_z)))
     me = bpy.data.meshes.new(name)
     b.to_mesh(me)
     b.free()
@@ -41,7 +41,7 @@ def _scale(sx, sy, sz, t):
     return m
 
 
-def _scene():
+def _scene(cap_z=1.5):
     bpy = pytest.importorskip("bpy")
     import rokeby
 
@@ -57,7 +57,7 @@ def _scene():
     sc.world.color = (0, 0, 0)
     bpy.ops.mesh.primitive_plane_add(size=20, location=(0, 0, -1))
     ground = bpy.context.object
-    caster = _caster_object(bpy)
+    caster = _caster_object(bpy, cap_z=cap_z)
     ld = bpy.data.lights.new("Lamp", "POINT")
     ld.energy = 3000.0
     ld.shadow_soft_size = 0.0
@@ -109,8 +109,11 @@ def _drag_self(s, scale=1.5):
     return k, h, r["handles"]["points"].astype(np.float64), m, target
 
 
-def test_a_self_shadow_loop_dragged_changes_the_caster_there_and_only_there(tmp_path):
-    bpy, sc, caster, lamp, ground = _scene()
+@pytest.mark.parametrize("cap_z", [1.5, 0.6], ids=["floating cap", "cap in contact"])
+def test_a_self_shadow_loop_dragged_changes_the_caster_there_and_only_there(tmp_path, cap_z):
+    """The cap floating over the face, and the cap sunk into it (a contact shadow: the §7.1 case
+    where the shadow mesh meets the surface it shadows)."""
+    bpy, sc, caster, lamp, ground = _scene(cap_z)
     from rokeby import api, shadow
 
     plain = _render(bpy, sc, tmp_path / "plain.png")
@@ -244,3 +247,27 @@ def test_a_light_inside_a_single_parts_bounds_stays_a_clear_error():
     with pytest.raises(shadow.ShadowEditError, match="inside the caster's bounding box"):
         shadow.start(ball, lamp, [ground])
     assert len(bpy.data.objects) == n
+
+
+def test_self_shadow_edit_survives_save_and_reload_and_a_deleted_self_shadow_mesh_gives_the_caster_back(tmp_path):
+    bpy, sc, caster, lamp, ground = _scene()
+    from rokeby import api, shadow
+
+    plain = _render(bpy, sc, tmp_path / "plain.png")
+    s = api.start_shadow_edit(caster, lamp, [ground], min_loop_vertices=10)
+    _drag_self(s)
+    api.apply_shadow_edit(s)
+    edited = _render(bpy, sc, tmp_path / "edited.png")
+    path = str(tmp_path / "self.blend")
+    bpy.ops.wm.save_as_mainfile(filepath=path)
+    bpy.ops.wm.open_mainfile(filepath=path)
+    sc = bpy.context.scene
+    caster = bpy.data.objects["Mushroom"]
+    ob = shadow.shadow_mesh_of(caster)
+    b = ob.rokeby_shadow.self_blocker
+    assert b is not None and shadow.shadow_mesh_of(b) == ob
+    np.testing.assert_allclose(_render(bpy, sc, tmp_path / "reloaded.png"), edited, atol=1e-4)
+    # Deleted by hand: the caster shadows itself again (its original self-shadows), nothing breaks.
+    bpy.data.objects.remove(b, do_unlink=True)
+    assert shadow.repair(sc)
+    np.testing.assert_allclose(_render(bpy, sc, tmp_path / "deleted.png"), plain, atol=0.02)

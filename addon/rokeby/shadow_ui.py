@@ -275,6 +275,12 @@ class ROKEBY_OT_shadow_apply(bpy.types.Operator):
     bl_label = "Apply Shadow Edit"
     bl_options = {"REGISTER", "UNDO"}
 
+    add_configuration: bpy.props.BoolProperty(
+        name="Add as Key Configuration",
+        description="Keep the caster's edit and add this one for the light's current position (§6.2): the edits are "
+                    "blended by the light's angle to each",
+        default=False)
+
     @classmethod
     def poll(cls, context):
         return _poll_session(cls, context)
@@ -285,7 +291,7 @@ class ROKEBY_OT_shadow_apply(bpy.types.Operator):
             self.report({"ERROR"}, "Rokeby: start a shadow edit first")
             return {"CANCELLED"}
         try:
-            ob, twin = shadow.apply(sess, scene=context.scene)
+            ob, twin = shadow.apply(sess, scene=context.scene, add_configuration=self.add_configuration)
         except shadow.ShadowEditError as exc:
             self.report({"ERROR"}, f"Rokeby: {exc}")
             return {"CANCELLED"}
@@ -353,6 +359,10 @@ class ROKEBY_PT_shadow(bpy.types.Panel):
         col.label(text=f"{sess.caster} from {sess.light}: {sum(lp['active'] for lp in loops)} of {len(loops)} loops editable")
         col.operator(ROKEBY_OT_shadow_drag.bl_idname, icon="MOUSE_LMB_DRAG")
         col.operator(ROKEBY_OT_shadow_apply.bl_idname, icon="CHECKMARK")
+        caster = sess.caster_object()
+        if caster is not None and shadow.shadow_mesh_of(caster) is not None:
+            op = col.operator(ROKEBY_OT_shadow_apply.bl_idname, text="Add as Key Configuration", icon="KEYFRAME")
+            op.add_configuration = True
         col.operator(ROKEBY_OT_shadow_stop.bl_idname, icon="X")
 
 
