@@ -95,6 +95,11 @@ def test_a_file_with_two_configurations_reloads_them(tmp_path):
     lamp = bpy.data.objects["Lamp"]
     assert shadow.configuration_vectors(ob).shape == (2, 3)
     np.testing.assert_allclose(shadow.configuration_weights(ob, lamp), [0.0, 1.0], atol=1e-6)
+    # A new edit applied without add_configuration replaces the edit, every configuration of it.
+    ball, ground = bpy.data.objects["Ball"], bpy.data.objects["Ground"]
+    ob, _ = api.apply_shadow_edit(_edit(api, ball, lamp, ground, 1.2))
+    assert shadow.configuration_vectors(ob).shape == (1, 3)
+    assert [k.name for k in ob.data.shape_keys.key_blocks] == ["Basis", shadow.EDIT_KEY]
 
 
 def test_add_configuration_from_another_light_is_refused(tmp_path):

@@ -90,6 +90,7 @@ class ShadowSession:
     drags: list = field(default_factory=list)  # committed drags, replayable (self-shadow part, §6.1 is linear)
     pending: dict | None = None  # the uncommitted drag
     configuration: int = 0  # which keyed configuration (§6.2) this session's edit is (set by apply)
+    applied: bool = False  # applied once: applying again updates its configuration only
     rest_normals: np.ndarray | None = None  # (V, 3) world vertex normals at the start
     light_kw: dict = field(default_factory=dict)  # light_position= or light_direction= (world) at the start
     triangles: np.ndarray | None = None  # (F, 3) the caster's triangles
@@ -1016,8 +1017,10 @@ def apply(session: ShadowSession, *, scene=None, falloff_beta: float = 0.0, add_
     configs = configuration_vectors(ob) if "rokeby_light_initial" in ob else np.zeros((0, 3))
     if add_configuration and len(configs):
         session.configuration = len(configs)
-    elif session.configuration >= max(len(configs), 1):
-        session.configuration = 0  # its configuration was removed with the edit: start again at 0
+    elif not session.applied or session.configuration >= max(len(configs), 1):
+        # A new edit replaces the caster's edit, every configuration of it.
+        session.configuration = 0
+        _drop_configurations(ob)
     # The edit lives in a shape key on the caster's rest shape, so the falloff of §6.2 can blend
     # between original (0) and shadow mesh (1), and keyed configurations between each other,
     # without touching the mesh again.
@@ -1044,6 +1047,7 @@ def apply(session: ShadowSession, *, scene=None, falloff_beta: float = 0.0, add_
     ob.data.update()
     _deform_like(ob, caster)
     _self_blocker(ob, caster, light, rest, key_name, self_local)
+    session.applied = True
 
     twin = _link(light)
     if previous_light is not None and previous_light != light:
@@ -1055,6 +1059,20 @@ def apply(session: ShadowSession, *, scene=None, falloff_beta: float = 0.0, add_
         _collect_orphan_collections()
     sc.view_layers[0].update()
     return ob, twin
+
+
+def _drop_configurations(ob) -> None:
+    """Removes the keyed configurations after the first (keys and light vectors) from shadow mesh
+    ``ob`` and its self-shadow mesh."""
+    if "rokeby_light_configurations" in ob:
+        del ob["rokeby_light_configurations"]
+    b = ob.rokeby_shadow.self_blocker
+    for o in (ob, b):
+        keys = None if o is None else o.data.shape_keys
+        if keys is None:
+            continue
+        for k in [k for k in keys.key_blocks if k.name.startswith(EDIT_KEY + " ")]:
+            o.shape_key_remove(k)
 
 
 def configuration_weights(shadow_object, light, beta: float = 0.0, *, caster=None) -> np.ndarray:
