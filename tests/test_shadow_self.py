@@ -126,6 +126,11 @@ def test_a_self_shadow_loop_dragged_changes_the_caster_there_and_only_there(tmp_
     from rokeby import api, shadow
 
     plain = _render(bpy, sc, tmp_path / "plain.png")
+    # "Within noise": 4 samples leave the anti-aliased edge pixels noisy, and another light set-up
+    # draws other random numbers; the plain scene with another seed measures that noise.
+    sc.cycles.seed = 2
+    noise = np.abs(_render(bpy, sc, tmp_path / "plain2.png") - plain)
+    sc.cycles.seed = 1
     s = api.start_shadow_edit(caster, lamp, [ground], min_loop_vertices=10)
     k, h0, h1, m, target = _drag_self(s)
     assert np.all(np.abs(h0[:, 2] - 0.2) < 0.06), "the loop's handles lie on the face (the caster)"
@@ -155,19 +160,17 @@ def test_a_self_shadow_loop_dragged_changes_the_caster_there_and_only_there(tmp_
         o.data.shape_keys.key_blocks[shadow.EDIT_KEY].value = 0.0
     sc.view_layers[0].update()
     zero = _render(bpy, sc, tmp_path / "zero.png")
-    # "Within noise": 4 samples leave the anti-aliased edge pixels noisy, and another light set-up
-    # draws other random numbers; the plain scene with another seed measures that noise.
-    sc.cycles.seed = 2
-    noise = np.abs(_render(bpy, sc, tmp_path / "plain2.png") - plain)
-    sc.cycles.seed = 1
     diff = np.abs(zero - plain)
     pad = np.pad(plain, 1, mode="edge")
     window = np.stack([pad[1 + dy:SIZE + 1 + dy, 1 + dx:SIZE + 1 + dx] for dy in (-1, 0, 1) for dx in (-1, 0, 1)])
     flat = np.ptp(window, axis=0) < 0.05  # away from edges: lit or shadowed, no coverage noise
-    print(f"installed at zero vs plain: sum {diff.sum():.2f} (another seed: {noise.sum():.2f}), "
-          f"flat pixels max {diff[flat].max():.4f}")
-    assert diff.sum() <= 1.5 * noise.sum() + 0.5, "the installed set-up changes the render beyond noise"
+    print(f"installed at zero vs plain: sum {diff.sum():.2f} (plain with another seed: {noise.sum():.2f}), "
+          f"edge pixels mean {diff[~flat].mean():.4f}, flat pixels max {diff[flat].max():.4f}")
     assert diff[flat].max() < 0.03, "acne or a light leak away from the shadow edges"
+    if engine == "CYCLES":
+        assert diff.sum() <= 1.5 * noise.sum() + 0.5, "the installed set-up changes the render beyond noise"
+    else:  # EEVEE has no sampling noise here; its shadow maps move edge pixels a little
+        assert diff[~flat].mean() < 0.1
     # Removing the edit takes the self-shadow mesh along and renders the plain scene again.
     api.remove_shadow_edit(caster)
     assert bpy.data.objects.get(caster.name + shadow.SELF_SUFFIX) is None
