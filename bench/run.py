@@ -568,6 +568,24 @@ def shadow_section(emit):
     emit()
     emit(f"Load average {many['load_average']:.1f} at the end, on {many['cpus']} CPUs (other jobs shared the machine).")
     emit()
+    # Issue 22: the live shadow while dragging, per drag step in Blender (bench/shadow_live.py).
+    with tempfile.TemporaryDirectory() as tmp:
+        out = Path(tmp) / "live.json"
+        env = dict(os.environ, PYTHONPATH=os.pathsep.join([str(ROOT / "addon"), os.environ.get("PYTHONPATH", "")]))
+        subprocess.run([sys.executable, str(ROOT / "bench" / "shadow_live.py"), "--json", str(out)], check=True, stdout=subprocess.DEVNULL, env=env)
+        live = json.loads(out.read_text())["rows"]
+    emit("Live shadow while dragging (issue 22, bench/shadow_live.py, medians of 7 steps): drag = `session.drag`, "
+         "step = `shadow.live_step` (shadow mesh by back-substitution, written into the edit key), depsgraph = `view_layer.update()`.")
+    emit()
+    emit("| paper model | shared mesh | tris | drag (ms) | step (ms) | depsgraph (ms) | per step (ms) |")
+    emit("|---|---|---:|---:|---:|---:|---:|")
+    for r in live:
+        if "error" in r:
+            emit(f"| {r['paper']} | {r['mesh']} | {r['triangles']:,} | error: {r['error']} |")
+            continue
+        emit(f"| {r['paper']} | {r['mesh']} | {r['triangles']:,} | {r['drag_ms']:.1f} | {r['live_step_ms']:.1f} | "
+             f"{r['depsgraph_ms']:.1f} | {r['total_ms']:.1f} |")
+    emit()
 
 
 import tradeoff_sections  # noqa: E402

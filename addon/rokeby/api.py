@@ -1161,15 +1161,18 @@ def start_shadow_edit(caster, light, receivers=None, *, scene=None, min_loop_ver
     return shadow.start(caster, light, receivers, scene=_scene(scene), min_loop_vertices=min_loop_vertices, w_z=w_z)
 
 
-def apply_shadow_edit(session, *, scene=None, falloff_beta: float = 0.0):
+def apply_shadow_edit(session, *, scene=None, falloff_beta: float = 0.0, add_configuration: bool = False):
     """Creates or updates the shadow-mesh object of ``session`` (shadow rays only, same vertex
     groups and armature as the caster) and the light/shadow linking that makes the receivers show
-    the edited shadow while the caster keeps its own self-shadows. ``falloff_beta`` > 0 blends the
-    edit out as the light moves away, (l_initial · l_current)^β (§6.2), kept up to date by the
-    add-on's handlers. Returns (shadow object, twin light)."""
+    the edited shadow; drags whose handles lie on the caster edit its self-shadows too (a
+    self-shadow mesh shadows the caster in its place). ``falloff_beta`` > 0 blends the edit out as
+    the light moves away, (l_initial · l_current)^β (§6.2), kept up to date by the add-on's
+    handlers. ``add_configuration=True`` keeps the existing edit and adds this one as a keyed
+    configuration (§6.2): the handlers blend them by the light's angle to each. Returns (shadow
+    object, twin light)."""
     from . import shadow  # noqa: PLC0415
 
-    return shadow.apply(session, scene=_scene(scene), falloff_beta=falloff_beta)
+    return shadow.apply(session, scene=_scene(scene), falloff_beta=falloff_beta, add_configuration=add_configuration)
 
 
 def remove_shadow_edit(obj) -> None:

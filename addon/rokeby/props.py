@@ -269,6 +269,8 @@ SHADOW_ROLES = [
     ("NONE", "None", "Not a part of a shadow edit (lights that have edits keep their links here too)", 0),
     ("SHADOW_MESH", "Shadow mesh", "The edited copy of a caster, seen by shadow rays only", 1),
     ("TWIN", "Twin light", "The light's twin that lights everything but the casters, blocked by the shadow meshes", 2),
+    ("SELF_BLOCKER", "Self-shadow mesh", "The copy of a caster that shadows the caster itself: its edited self-shadow loops, "
+     "elsewhere the caster a hair inside its surface", 3),
 ]
 
 
@@ -290,6 +292,8 @@ class RokebyShadowLinks(PropertyGroup):
     linking_saved: BoolProperty(name="Own linking stored", default=False, options={"HIDDEN"})
     receivers_before: PointerProperty(type=bpy.types.Collection, name="Own receivers", description="The light's receiver collection before its first shadow edit")
     blockers_before: PointerProperty(type=bpy.types.Collection, name="Own blockers", description="The light's blocker collection before its first shadow edit")
+    self_blocker: PointerProperty(type=bpy.types.Object, name="Self-shadow mesh",
+                                  description="On a shadow mesh with edited self-shadows: the copy that shadows the caster in its place")
 
 
 classes = (RokebyMaterialRef, RokebyImageRef, RokebyConstraint, RokebyRegion, RokebyMirror, RokebyShadowLinks)

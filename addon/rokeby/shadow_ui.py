@@ -190,7 +190,7 @@ class ROKEBY_OT_shadow_drag(bpy.types.Operator):
         try:
             self._drag(sess)
         except ValueError as exc:
-            sess.editor.cancel()
+            sess.cancel()
             self.report({"ERROR"}, f"Rokeby: {exc}")
             return {"CANCELLED"}
         sess.commit()
@@ -223,6 +223,13 @@ class ROKEBY_OT_shadow_drag(bpy.types.Operator):
         n = len(sess.loops()[self.loop]["points"])
         w = max(1, int(self.segment * n))
         self.fixed = ((self.moved - w) % n, (self.moved + w) % n)
+        # The edited shadow shows in the viewport during the drag (Fig. 3 B-D): each step writes
+        # the shadow mesh (shadow.live_step); Esc puts back what was there.
+        try:
+            self._live = shadow.live_begin(sess, scene=context.scene)
+        except (shadow.ShadowEditError, ValueError) as exc:
+            self._live = None
+            self.report({"WARNING"}, f"Rokeby: no live shadow: {exc}")
         context.window_manager.modal_handler_add(self)
         return {"RUNNING_MODAL"}
 
@@ -240,16 +247,22 @@ class ROKEBY_OT_shadow_drag(bpy.types.Operator):
                 self.target = loc
                 try:
                     self._drag(sess)
+                    if self._live is not None:
+                        shadow.live_step(self._live)
                 except ValueError as exc:
                     self.report({"WARNING"}, f"Rokeby: {exc}")
                 _refresh(context.scene, _view_eye(rv3d))
             return {"RUNNING_MODAL"}
         if event.type == "LEFTMOUSE" and event.value == "RELEASE":
             sess.commit()
+            if self._live is not None:
+                shadow.live_end(self._live, keep=True, scene=context.scene)
             _refresh(context.scene)
             return {"FINISHED"}
         if event.type in {"RIGHTMOUSE", "ESC"}:
-            sess.editor.cancel()
+            sess.cancel()
+            if self._live is not None:
+                shadow.live_end(self._live, keep=False, scene=context.scene)
             _refresh(context.scene)
             return {"CANCELLED"}
         return {"RUNNING_MODAL"}
@@ -262,6 +275,12 @@ class ROKEBY_OT_shadow_apply(bpy.types.Operator):
     bl_label = "Apply Shadow Edit"
     bl_options = {"REGISTER", "UNDO"}
 
+    add_configuration: bpy.props.BoolProperty(
+        name="Add as Key Configuration",
+        description="Keep the caster's edit and add this one for the light's current position (§6.2): the edits are "
+                    "blended by the light's angle to each",
+        default=False)
+
     @classmethod
     def poll(cls, context):
         return _poll_session(cls, context)
@@ -272,7 +291,7 @@ class ROKEBY_OT_shadow_apply(bpy.types.Operator):
             self.report({"ERROR"}, "Rokeby: start a shadow edit first")
             return {"CANCELLED"}
         try:
-            ob, twin = shadow.apply(sess, scene=context.scene)
+            ob, twin = shadow.apply(sess, scene=context.scene, add_configuration=self.add_configuration)
         except shadow.ShadowEditError as exc:
             self.report({"ERROR"}, f"Rokeby: {exc}")
             return {"CANCELLED"}
@@ -340,6 +359,10 @@ class ROKEBY_PT_shadow(bpy.types.Panel):
         col.label(text=f"{sess.caster} from {sess.light}: {sum(lp['active'] for lp in loops)} of {len(loops)} loops editable")
         col.operator(ROKEBY_OT_shadow_drag.bl_idname, icon="MOUSE_LMB_DRAG")
         col.operator(ROKEBY_OT_shadow_apply.bl_idname, icon="CHECKMARK")
+        caster = sess.caster_object()
+        if caster is not None and shadow.shadow_mesh_of(caster) is not None:
+            op = col.operator(ROKEBY_OT_shadow_apply.bl_idname, text="Add as Key Configuration", icon="KEYFRAME")
+            op.add_configuration = True
         col.operator(ROKEBY_OT_shadow_stop.bl_idname, icon="X")
 
 
