@@ -12,19 +12,20 @@ export ROKEBY_SHARED := $(SHARED)
 
 RUST_SRC := Cargo.toml pyproject.toml $(wildcard rust/*/Cargo.toml) $(shell find rust -name '*.rs' 2>/dev/null)
 
-.PHONY: all demo dist test bench cargo-test pytest native venv clean help fuzz fuzz-py
+.PHONY: all demo dist test test-blender bench cargo-test pytest native venv clean help fuzz fuzz-py
 
 all: native
 
 help:
 	@echo "make demo   build everything and run the demonstration"
 	@echo "make test   cargo tests + pytest (bpy in background mode)"
+	@echo "make test-blender BPY=4.2.23  the whole pytest suite on another bpy, in .venv-bpy-<version>"
 	@echo "make bench  benchmarks, printed next to the reference numbers"
 	@echo "make dist   the installable Blender extension zip, dist/rokeby-<version>.zip"
 	@echo "make fuzz-py  hypothesis fuzzing of rokeby_native and the file readers (FUZZ_PY_EXAMPLES=500)"
 
 # --- bootstrap -------------------------------------------------------------------------------
-$(VENV)/.deps: requirements.txt
+$(VENV)/.deps: requirements.txt requirements-test.txt
 	@test -x $(PY) || $(PYTHON) -m venv $(VENV)
 	$(PIP) install -q --upgrade pip
 	$(PIP) install -q -r requirements.txt
@@ -50,11 +51,16 @@ demo: native dist
 # filename, the wheel under wheels/ (tools/build_extension.py; rewrites the zip only if it changed).
 # Packages the add-on imports that Blender does not ship go into the zip as wheels too: OpenEXR
 # (the compositing tools read and write multilayer EXRs), the version pinned in requirements.txt,
-# for the native wheel's Python and platform.
+# for each CPython that Blender bundles (3.11 up to 5.0, 3.13 from 5.1): the zip lists them all and
+# Blender installs the one for its Python.
 EXTRA_WHEELS := target/extra-wheels
-$(EXTRA_WHEELS)/.done: requirements.txt
+EXTRA_PYTHONS := 3.11 3.13
+$(EXTRA_WHEELS)/.done: requirements-test.txt
 	@rm -rf $(EXTRA_WHEELS)
-	$(PIP) download -q --no-deps --only-binary=:all: -d $(EXTRA_WHEELS) "$$(grep -E '^OpenEXR==' requirements.txt)"
+	@set -e; for v in $(EXTRA_PYTHONS); do \
+		$(PIP) download -q --no-deps --only-binary=:all: --python-version $$v --implementation cp \
+			-d $(EXTRA_WHEELS) "$$(grep -E '^OpenEXR==' requirements-test.txt)"; \
+	done
 	@touch $@
 
 dist: native $(EXTRA_WHEELS)/.done
@@ -67,6 +73,31 @@ cargo-test:
 
 pytest: native $(EXTRA_WHEELS)/.done
 	$(PY) -m pytest -q
+
+# --- the Blender matrix (issue 19) -------------------------------------------------------------
+# `make test-blender BPY=4.2.23` runs the whole pytest suite against bpy <version> in its own venv,
+# .venv-bpy-<version>, made idempotently like .venv: BPY_PYTHON (CPython 3.11 for bpy 4.2-5.0; a
+# CPython 3.13 for bpy 5.1+), bpy==<version>, the numpy that bpy needs (BPY_NUMPY: 1.26.4 up to
+# 5.0; for 5.1+ the one bpy's own requirements pick, unless set) and requirements-test.txt, then
+# the rokeby_native wheel that `make native` built (the same wheel the extension zip ships).
+BPY        ?= 4.2.23
+BPY_PYTHON ?= python3
+BPY_NUMPY  ?= $(if $(filter 4.% 5.0 5.0.%,$(BPY)),1.26.4,)
+BPY_VENV   := .venv-bpy-$(BPY)
+BPY_PY     := $(BPY_VENV)/bin/python
+PYTEST_ARGS ?= -q
+
+$(BPY_VENV)/.deps: requirements-test.txt
+	@test -x $(BPY_PY) || $(BPY_PYTHON) -m venv $(BPY_VENV)
+	$(BPY_PY) -m pip install -q --upgrade pip
+	$(BPY_PY) -m pip install -q "bpy==$(BPY)" $(if $(BPY_NUMPY),"numpy==$(BPY_NUMPY)") -r requirements-test.txt
+	@echo "$(CURDIR)/addon" > "$$($(BPY_PY) -c 'import sysconfig; print(sysconfig.get_paths()["purelib"])')/rokeby_addon.pth"
+	@$(BPY_PY) -c 'import bpy, sys; v = bpy.app.version_string; print("bpy", v, "on Python", sys.version.split()[0]); sys.exit(not v.startswith("$(BPY)".rsplit(".", 1)[0]))'
+	@touch $@
+
+test-blender: native $(EXTRA_WHEELS)/.done $(BPY_VENV)/.deps
+	$(BPY_PY) -m pip install -q --force-reinstall --no-deps target/wheels/rokeby_native-*.whl
+	$(BPY_PY) -m pytest $(PYTEST_ARGS)
 
 # Peers of the benchmark (exact MMP geodesics, potpourri3d, libigl, matplotlib) live in their
 # own environment: they need numpy >= 2, bpy 4.5 needs numpy < 2.
@@ -104,4 +135,4 @@ fuzz-py: native
 	FUZZ_PY_RANDOM=1 $(PY) tests/fuzz/run_fuzz.py --examples $(FUZZ_PY_EXAMPLES)
 
 clean:
-	rm -rf $(VENV) $(PEERS) target dist out .tools rust/fuzz/target
+	rm -rf $(VENV) $(PEERS) .venv-bpy-* target dist out .tools rust/fuzz/target
