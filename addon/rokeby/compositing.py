@@ -167,9 +167,9 @@ def setup_passes(scene, view_layer=None) -> list[str]:
         if not m.use_nodes:
             m.use_nodes = True
         _material_nodes(m)
-    st = scene.render.image_settings
-    st.file_format = "OPEN_EXR_MULTILAYER"
-    st.color_depth = "32"
+    from . import compat  # noqa: PLC0415
+
+    compat.set_multilayer_exr(scene.render.image_settings, "32")
     return list(PASSES)
 
 
@@ -310,7 +310,11 @@ def _read_exr(path: str, layer: str | None) -> Passes:
         if not f.parts:
             raise CompositingError(f"{path}: not a readable multilayer EXR (truncated or corrupted?): it has no image parts")
         part = f.parts[0]
-        chans = part.channels
+        # Blender 5.0+ writes a multilayer EXR as one part per pass by default (up to 4.5, and with
+        # "interleave", one part): the channel names carry the layer and pass either way.
+        chans = {}
+        for p in f.parts:
+            chans.update(p.channels)
         layer = _layer_channels(chans, layer)
         arrays, missing = {}, []
         for name, (attr, ch) in PASSES.items():
