@@ -67,6 +67,7 @@ def test_listed_wheels_install_on_this_python(built):
     from packaging.utils import parse_wheel_filename
 
     here = set(sys_tags())
+    installs: dict = {}
     with zipfile.ZipFile(built) as zf:
         manifest = tomllib.loads(zf.read("blender_manifest.toml").decode())
         for entry in manifest["wheels"]:
@@ -75,15 +76,40 @@ def test_listed_wheels_install_on_this_python(built):
             assert dist in ("rokeby-native", "openexr"), name
             if dist == "rokeby-native":
                 assert str(version) == manifest["version"]
-            assert tags & here, f"{name} does not install on this Python ({sys.version_info[:2]}, {sys.platform})"
-            assert any(t.interpreter == "cp311" for t in tags)  # Blender 4.2-4.5 bundle CPython 3.11
+                assert any(t.interpreter == "cp311" for t in tags)  # Blender 4.2-5.0 bundle CPython 3.11
+            # Each wheel is for a CPython some Blender bundles: 3.11 (4.2-5.0) or 3.13 (5.1+).
+            assert {t.interpreter for t in tags} & {"cp311", "cp313"}, name
+            installs.setdefault(dist, []).append(bool(tags & here))
             with zipfile.ZipFile(zf.open(name)) as whl:  # a real wheel with the extension module
                 mod = "rokeby_native/" if dist == "rokeby-native" else "OpenEXR"
                 assert any(n.startswith(mod) and n.endswith(".so") for n in whl.namelist()) or sys.platform != "linux"
         # The compositing tools (Recomposite Render, the EXR sequence operator) read EXRs with the
         # OpenEXR package, which Blender does not ship: the zip brings the pinned one.
-        pinned = next(ln.split("==")[1].strip() for ln in (ROOT / "requirements.txt").read_text().splitlines() if ln.startswith("OpenEXR=="))
+        pinned = next(ln.split("==")[1].strip() for ln in (ROOT / "requirements-test.txt").read_text().splitlines() if ln.startswith("OpenEXR=="))
         assert any(Path(e).name.startswith(f"openexr-{pinned}-") for e in manifest["wheels"]), manifest["wheels"]
+    # The native wheel installs on this Python, and so does one of the OpenEXR wheels (Blender
+    # installs those for its own Python).
+    ver = f"{sys.version_info[:2]}, {sys.platform}"
+    assert installs["rokeby-native"] == [True], f"the rokeby_native wheel does not install on this Python ({ver})"
+    assert any(installs["openexr"]), f"no OpenEXR wheel of the zip installs on this Python ({ver})"
+
+
+def test_extra_wheels_follow_the_pythons_the_native_wheel_loads_in(tmp_path):
+    """A wheel built for one CPython takes the OpenEXR wheel of that CPython only; a stable-ABI
+    (abi3) wheel, which loads in every CPython from its own on, takes those of 3.11 and 3.13 too
+    (Blender 4.2-5.0 and 5.1+), never one for an older Python."""
+    extra = tmp_path / "extra"
+    extra.mkdir()
+    for py in ("cp310", "cp311", "cp313"):
+        (extra / f"openexr-3.5.3-{py}-{py}-manylinux_2_28_x86_64.whl").write_bytes(b"")
+    (extra / "openexr-3.5.3-cp313-cp313-win_amd64.whl").write_bytes(b"")  # another platform
+
+    def picked(native_name):
+        return sorted(w.name.split("-")[2] for w in be.find_extra_wheels(extra, Path(native_name)))
+
+    assert picked("rokeby_native-0.1.0-cp311-cp311-manylinux_2_35_x86_64.whl") == ["cp311"]
+    assert picked("rokeby_native-0.1.0-cp311-abi3-manylinux_2_35_x86_64.whl") == ["cp311", "cp313"]
+    assert picked("rokeby_native-0.1.0-cp313-cp313-manylinux_2_35_x86_64.whl") == ["cp313"]
 
 
 def test_blender_validates_the_zip(built):

@@ -79,18 +79,33 @@ def find_wheel(wheel_dir: Path, version: str) -> Path:
 
 def find_extra_wheels(extra_dir: "Path | None", native: Path) -> list[Path]:
     """Wheels of the Python packages the add-on imports that Blender does not ship (OpenEXR, for
-    the compositing tools), downloaded by `make dist` into ``extra_dir``; only those for the
-    native wheel's Python and platform are taken."""
+    the compositing tools), downloaded by `make dist` into ``extra_dir``; only those for a Python
+    the native wheel loads in (its own; with the stable ABI, ``abi3``, every CPython from its
+    own on: Blender 4.2-5.0 bundle 3.11, 5.1+ 3.13) and its platform are taken. Blender installs,
+    of the wheels a manifest lists, those for its own Python."""
     if extra_dir is None or not extra_dir.is_dir():
         return []
-    py, _abi, _plat = wheel_tags(native.name)
+    py, abi, _plat = wheel_tags(native.name)
     platforms = set(blender_platforms(native.name))
     out = []
     for w in sorted(extra_dir.glob("*.whl")):
         wpy, _wabi, wplat = wheel_tags(w.name)
-        if wpy in (py, "py3") and (wplat == "any" or set(blender_platforms(w.name)) & platforms):
+        if _loads_with(wpy, py, abi) and (wplat == "any" or set(blender_platforms(w.name)) & platforms):
             out.append(w)
     return out
+
+
+def _cpython(tag: str) -> "tuple[int, int] | None":
+    m = re.fullmatch(r"cp(\d)(\d+)", tag)
+    return (int(m.group(1)), int(m.group(2))) if m else None
+
+
+def _loads_with(extra_py: str, native_py: str, native_abi: str) -> bool:
+    """Whether a wheel tagged ``extra_py`` is for a Python the native wheel loads in."""
+    if extra_py in (native_py, "py3"):
+        return True
+    mine, theirs = _cpython(native_py), _cpython(extra_py)
+    return native_abi == "abi3" and mine is not None and theirs is not None and theirs >= mine
 
 
 def manifest_text(source: str, wheel_name: "str | list[str]", platforms: list[str]) -> str:
