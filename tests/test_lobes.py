@@ -11,6 +11,7 @@ bpy = pytest.importorskip("bpy")
 OpenEXR = pytest.importorskip("OpenEXR")
 
 from rokeby import api, compat, shading  # noqa: E402
+from rokeby.compositing import exr_pass_names  # noqa: E402
 from test_render import SIZE, chrome_ball  # noqa: E402,F401  (fixture)
 
 PASSES = ("Combined", "DiffDir", "DiffInd", "DiffCol", "GlossDir", "GlossInd", "rokeby_n")
@@ -49,7 +50,11 @@ def _passes(tmp_path, name):
     bpy.ops.render.render(write_still=True)
     with OpenEXR.File(sc.render.filepath) as f:
         ch = {k: v for part in f.parts for k, v in part.channels.items()}  # one part per pass from 5.0
-        out = {p: np.asarray(ch[f"ViewLayer.{p}"].pixels, np.float32)[..., :3] for p in PASSES if f"ViewLayer.{p}" in ch}
+        out = {}
+        for p in PASSES:  # "DiffDir" up to 4.5, "Diffuse Direct" from 5.0
+            key = next((f"ViewLayer.{n}" for n in exr_pass_names(p) if f"ViewLayer.{n}" in ch), None)
+            if key is not None:
+                out[p] = np.asarray(ch[key].pixels, np.float32)[..., :3]
     assert all(np.isfinite(v).all() for v in out.values())
     return out
 
