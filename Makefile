@@ -50,7 +50,7 @@ demo: native dist
 # The Blender 4.2+ extension zip: add-on files at the root, the manifest with the wheel's real
 # filename, the wheel under wheels/ (tools/build_extension.py; rewrites the zip only if it changed).
 # Packages the add-on imports that Blender does not ship go into the zip as wheels too: OpenEXR
-# (the compositing tools read and write multilayer EXRs), the version pinned in requirements.txt,
+# (the compositing tools read and write multilayer EXRs), the version pinned in requirements-test.txt,
 # for each CPython that Blender bundles (3.11 up to 5.0, 3.13 from 5.1): the zip lists them all and
 # Blender installs the one for its Python.
 EXTRA_WHEELS := target/extra-wheels
