@@ -174,3 +174,15 @@ def test_node_custom_properties_survive_reload(tmp_path):
     bpy.ops.wm.open_mainfile(filepath=str(path))
     node = bpy.data.materials["tagged"].node_tree.nodes[node.name]
     assert node.get("rokeby_tag") == "kept"
+
+
+def test_depsgraph_id_types_are_those_the_depsgraph_accepts():
+    bpy.ops.wm.read_factory_settings(use_empty=True)
+    dg = bpy.context.evaluated_depsgraph_get()
+    asked = ("MESH", "NODETREE", "NO_SUCH_ID_TYPE")
+    named = compat.depsgraph_id_types(asked)
+    assert named == ("MESH", "NODETREE")
+    for t in named:
+        assert dg.id_type_updated(t) in (True, False)
+    with pytest.raises(TypeError):  # what compat leaves out is what the depsgraph refuses
+        dg.id_type_updated("NO_SUCH_ID_TYPE")

@@ -22,6 +22,8 @@ number, and is computed once:
 * **Storage of Python-defined properties** (:func:`stored_group`): the registered
   ``PointerProperty`` groups live among the ID's custom properties up to 4.5; from 5.0 apart from
   them (``ID.bl_system_properties_get``).
+* **ID types the depsgraph names** (:func:`depsgraph_id_types`): the ids
+  ``Depsgraph.id_type_updated`` accepts; a type a release does not name is left out.
 * **Text drawn into images** (:func:`blf_draws_into_images`): ``blf.bind_imbuf`` and
   ``blf.draw_buffer`` exist from 4.3; 4.2 draws text only on the screen.
 * **Node custom properties** (``node["key"]``) work on every supported release (tests/test_compat.py
@@ -128,6 +130,22 @@ def builtin_shader_name(name: str) -> "str | None":
     """The built-in shader :func:`builtin_shader` uses for ``name`` (None until it was first
     asked in a process that can draw)."""
     return _builtin_names.get(name)
+
+
+# --- the depsgraph ------------------------------------------------------------------------------
+
+@functools.cache
+def _depsgraph_id_types() -> frozenset:
+    fn = bpy.types.Depsgraph.bl_rna.functions["id_type_updated"]
+    return frozenset(item.identifier for item in fn.parameters["id_type"].enum_items)
+
+
+@functools.cache
+def depsgraph_id_types(types: tuple) -> tuple:
+    """Those of ``types`` (ID type ids: "MESH", "NODETREE", ...) that ``Depsgraph.id_type_updated``
+    accepts in this Blender, in their order."""
+    have = _depsgraph_id_types()
+    return tuple(t for t in types if t in have)
 
 
 # --- text ------------------------------------------------------------------------------------
