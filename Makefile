@@ -12,20 +12,22 @@ export ROKEBY_SHARED := $(SHARED)
 
 RUST_SRC := Cargo.toml pyproject.toml $(wildcard rust/*/Cargo.toml) $(shell find rust -name '*.rs' 2>/dev/null)
 
-.PHONY: all demo dist test bench cargo-test pytest native venv clean help fuzz fuzz-py lint
+.PHONY: all demo dist test test-blender test-matrix bench cargo-test pytest native venv clean help fuzz fuzz-py lint
 
 all: native
 
 help:
 	@echo "make demo   build everything and run the demonstration"
 	@echo "make test   cargo tests + pytest (bpy in background mode)"
+	@echo "make test-blender BPY=4.2.23  the whole pytest suite on another bpy, in .venv-bpy-<version>"
+	@echo "make test-matrix  test-blender for each of MATRIX (4.2.23 5.0.1 5.3.0), as CI runs it"
 	@echo "make bench  benchmarks, printed next to the reference numbers"
 	@echo "make dist   the installable Blender extension zip, dist/rokeby-<version>.zip"
 	@echo "make lint   ruff (errors), cargo fmt --check, and the add-on checked against the newest Blender API stubs"
 	@echo "make fuzz-py  hypothesis fuzzing of rokeby_native and the file readers (FUZZ_PY_EXAMPLES=500)"
 
 # --- bootstrap -------------------------------------------------------------------------------
-$(VENV)/.deps: requirements.txt
+$(VENV)/.deps: requirements.txt requirements-test.txt
 	@test -x $(PY) || $(PYTHON) -m venv $(VENV)
 	$(PIP) install -q --upgrade pip
 	$(PIP) install -q -r requirements.txt
@@ -50,15 +52,16 @@ demo: native dist
 # The Blender 4.2+ extension zip: add-on files at the root, the manifest with the wheel's real
 # filename, the wheel under wheels/ (tools/build_extension.py; rewrites the zip only if it changed).
 # Packages the add-on imports that Blender does not ship go into the zip as wheels too: OpenEXR
-# (the compositing tools read and write multilayer EXRs), the version pinned in requirements.txt,
-# for every CPython the supported Blenders embed (3.11: Blender 4.2-5.0; 3.13: Blender 5.1 and later) and
-# the native wheel's platform. The native wheel itself is built once for the stable ABI (abi3, CPython >= 3.11).
+# (the compositing tools read and write multilayer EXRs), the version pinned in requirements-test.txt,
+# for each CPython that Blender bundles (3.11 up to 5.0, 3.13 from 5.1): the zip lists them all and
+# Blender installs the one for its Python.
 EXTRA_WHEELS := target/extra-wheels
-BLENDER_PYTHONS := 3.11 3.13
-$(EXTRA_WHEELS)/.done: requirements.txt
+EXTRA_PYTHONS := 3.11 3.13
+$(EXTRA_WHEELS)/.done: requirements-test.txt
 	@rm -rf $(EXTRA_WHEELS)
-	for v in $(BLENDER_PYTHONS); do \
-	  $(PIP) download -q --no-deps --only-binary=:all: --python-version $$v -d $(EXTRA_WHEELS) "$$(grep -E '^OpenEXR==' requirements.txt)" || exit 1; \
+	@set -e; for v in $(EXTRA_PYTHONS); do \
+		$(PIP) download -q --no-deps --only-binary=:all: --python-version $$v --implementation cp \
+			-d $(EXTRA_WHEELS) "$$(grep -E '^OpenEXR==' requirements-test.txt)"; \
 	done
 	@touch $@
 
@@ -84,6 +87,48 @@ lint: $(LINT)/.deps
 	$(LINT)/bin/ruff check --select E9,F63,F7,F82 addon tests bench tools
 	cargo fmt --all --check
 	$(LINT)/bin/python tools/api_check.py
+
+# --- the Blender matrix (issue 19) -------------------------------------------------------------
+# `make test-blender BPY=4.2.23` runs the whole pytest suite against bpy <version> in its own venv,
+# .venv-bpy-<version>, made idempotently like .venv: BPY_PYTHON, bpy==<version>, the numpy that bpy
+# needs (BPY_NUMPY: 1.26.4 up to 5.0; for 5.1+ the one bpy's own requirements pick, unless set) and
+# requirements-test.txt, then the rokeby_native wheel that `make native` built (the same abi3 wheel
+# the extension zip ships). bpy 4.2-5.0 run on this machine's CPython 3.11. bpy 5.1 and later are
+# built for CPython 3.13 only: they run inside tools/py313, a Debian 13 root with its python3.13 made
+# once in .py313/ (BPY_RUN; the project folder is bound at the same path inside, so the venv is the
+# project's .venv-bpy-<version> on both sides).
+BPY        ?= 4.2.23
+BPY_CP311  := $(filter 4.% 5.0 5.0.%,$(BPY))
+BPY_RUN    ?= $(if $(BPY_CP311),,tools/py313)
+BPY_PYTHON ?= $(if $(BPY_CP311),python3,python3.13)
+BPY_NUMPY  ?= $(if $(BPY_CP311),1.26.4,)
+BPY_VENV   := .venv-bpy-$(BPY)
+BPY_PY     := $(BPY_VENV)/bin/python
+PYTEST_ARGS ?= -q
+
+$(BPY_VENV)/.deps: requirements-test.txt
+	$(if $(BPY_RUN),$(BPY_RUN) --setup)
+	@test -e $(BPY_VENV)/pyvenv.cfg || $(BPY_RUN) $(BPY_PYTHON) -m venv $(BPY_VENV)
+	$(BPY_RUN) $(BPY_PY) -m pip install -q --upgrade pip
+	$(BPY_RUN) $(BPY_PY) -m pip install -q "bpy==$(BPY)" $(if $(BPY_NUMPY),"numpy==$(BPY_NUMPY)") -r requirements-test.txt
+	@echo "$(CURDIR)/addon" > "$$($(BPY_RUN) $(BPY_PY) -c 'import sysconfig; print(sysconfig.get_paths()["purelib"])')/rokeby_addon.pth"
+	@$(BPY_RUN) $(BPY_PY) -c 'import bpy, sys; v = bpy.app.version_string; print("bpy", v, "on Python", sys.version.split()[0]); sys.exit(not v.startswith("$(BPY)".rsplit(".", 1)[0]))'
+	@touch $@
+
+test-blender: native $(EXTRA_WHEELS)/.done $(BPY_VENV)/.deps
+	$(BPY_RUN) $(BPY_PY) -m pip install -q --force-reinstall --no-deps target/wheels/rokeby_native-*.whl
+	$(BPY_RUN) $(BPY_PY) -m pytest $(PYTEST_ARGS)
+
+# Every leg CI runs after `make test` (4.5 LTS): the other LTS, 5.0 and the newest 5.x. Each leg runs
+# to the end; the target fails if any did, and prints what each cost.
+MATRIX ?= 4.2.23 5.0.1 5.3.0
+test-matrix: native $(EXTRA_WHEELS)/.done
+	@failed=""; for v in $(MATRIX); do \
+		s=$$(date +%s); \
+		$(MAKE) --no-print-directory test-blender BPY=$$v || failed="$$failed $$v"; \
+		echo "== leg bpy $$v: $$(( $$(date +%s) - s )) s"; \
+	done; \
+	if [ -n "$$failed" ]; then echo "== failed legs:$$failed"; exit 1; fi
 
 # Peers of the benchmark (exact MMP geodesics, potpourri3d, libigl, matplotlib) live in their
 # own environment: they need numpy >= 2, bpy 4.5 needs numpy < 2.
@@ -121,4 +166,4 @@ fuzz-py: native
 	FUZZ_PY_RANDOM=1 $(PY) tests/fuzz/run_fuzz.py --examples $(FUZZ_PY_EXAMPLES)
 
 clean:
-	rm -rf $(VENV) $(PEERS) target dist out .tools rust/fuzz/target
+	rm -rf $(VENV) $(PEERS) $(LINT) .venv-bpy-* .py313 target dist out .tools rust/fuzz/target

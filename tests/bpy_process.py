@@ -37,7 +37,9 @@ def gpu_context(scene) -> None:
         cam = bpy.data.objects.new("cam", bpy.data.cameras.new("cam"))
         scene.collection.objects.link(cam)
         scene.camera = cam
-    scene.render.engine = "BLENDER_EEVEE_NEXT"
+    from rokeby import compat
+
+    scene.render.engine = compat.eevee_engine()
     scene.render.resolution_x = scene.render.resolution_y = 8
     bpy.ops.render.render()
 

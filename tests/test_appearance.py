@@ -7,7 +7,7 @@ import pytest
 bpy = pytest.importorskip("bpy")
 
 from bpy_process import run_check  # noqa: E402
-from rokeby import appearance, envmaps  # noqa: E402
+from rokeby import appearance, compat, envmaps  # noqa: E402
 
 
 @pytest.fixture
@@ -93,7 +93,7 @@ def _render(tmp_path, name, engine="CYCLES"):
     return envmaps.read_exr(tmp_path / f"{name}.exr")[..., :3]
 
 
-@pytest.mark.parametrize("engine", ["CYCLES", "BLENDER_EEVEE_NEXT"])
+@pytest.mark.parametrize("engine", ["CYCLES", pytest.param(compat.eevee_engine(), id="EEVEE")])
 def test_painted_roughness_renders_only_where_painted(ball, tmp_path, engine):
     """Chrome ball under the shipped courtyard world: blurring the right half (+X, the camera's
     right) changes the right half of the render, the far-left pixels stay as they were, in Cycles

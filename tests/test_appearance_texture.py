@@ -7,7 +7,7 @@ import pytest
 
 bpy = pytest.importorskip("bpy")
 
-from rokeby import appearance, envmaps  # noqa: E402
+from rokeby import appearance, compat, envmaps  # noqa: E402
 
 
 @pytest.fixture
@@ -160,7 +160,7 @@ def test_texture_and_point_targets_agree(ball):
     np.testing.assert_allclose(got_c, col_pt[lv], atol=2e-3)
 
 
-@pytest.mark.parametrize("engine", ["CYCLES", "BLENDER_EEVEE_NEXT"])
+@pytest.mark.parametrize("engine", ["CYCLES", pytest.param(compat.eevee_engine(), id="EEVEE")])
 def test_painted_roughness_texture_renders_only_where_painted(ball, tmp_path, engine):
     """Chrome ball under courtyard.exr, roughness in a 256² texture: blurring the +X side (the
     camera's right) changes the right of a 40×40 render, the far left stays (Cycles, and EEVEE on

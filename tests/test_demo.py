@@ -7,7 +7,7 @@ import pytest
 bpy = pytest.importorskip("bpy")
 
 import rokeby  # noqa: E402
-from rokeby import api, demo_scene as ds, evaluate  # noqa: E402
+from rokeby import api, compat, demo_scene as ds, evaluate  # noqa: E402
 
 from conftest import SHARED, mesh_path  # noqa: E402
 
@@ -58,4 +58,7 @@ def test_side_by_side_composes_and_labels(tmp_path):
     np.testing.assert_allclose(top[:, :40, :3], 0.25, atol=0.01)
     np.testing.assert_allclose(top[:, -40:, :3], 0.75, atol=0.01)
     band = px[: h - 30, ..., :3]
+    if not compat.blf_draws_into_images():
+        assert band.max() < 0.1  # empty bands, no half-drawn text
+        pytest.skip("captions: blf.bind_imbuf (Blender 4.3+) is missing, blf cannot draw into images here")
     assert band.max() > 0.5  # the captions were drawn (white on dark)

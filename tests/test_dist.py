@@ -91,7 +91,7 @@ def test_listed_wheels_install_on_this_python(built):
         assert {"cp311", "cp313"} <= exr_pythons, exr_pythons
         # The compositing tools (Recomposite Render, the EXR sequence operator) read EXRs with the
         # OpenEXR package, which Blender does not ship: the zip brings the pinned one.
-        pinned = next(ln.split("==")[1].strip() for ln in (ROOT / "requirements.txt").read_text().splitlines() if ln.startswith("OpenEXR=="))
+        pinned = next(ln.split("==")[1].strip() for ln in (ROOT / "requirements-test.txt").read_text().splitlines() if ln.startswith("OpenEXR=="))
         assert all(Path(n).name.startswith(f"openexr-{pinned}-") for n, _t in by_dist["openexr"]), by_dist["openexr"]
 
 
@@ -102,6 +102,24 @@ def test_extra_wheels_follow_the_native_wheels_pythons():
     assert not ov("rokeby_native-0.1.0-cp311-abi3-manylinux_2_35_x86_64.whl", "cp310")
     assert not ov("rokeby_native-0.1.0-cp311-cp311-manylinux_2_35_x86_64.whl", "cp313")
     assert ov("rokeby_native-0.1.0-cp311-cp311-manylinux_2_35_x86_64.whl", "py3")
+
+
+def test_extra_wheels_follow_the_pythons_the_native_wheel_loads_in(tmp_path):
+    """A wheel built for one CPython takes the OpenEXR wheel of that CPython only; a stable-ABI
+    (abi3) wheel, which loads in every CPython from its own on, takes those of 3.11 and 3.13 too
+    (Blender 4.2-5.0 and 5.1+), never one for an older Python."""
+    extra = tmp_path / "extra"
+    extra.mkdir()
+    for py in ("cp310", "cp311", "cp313"):
+        (extra / f"openexr-3.5.3-{py}-{py}-manylinux_2_28_x86_64.whl").write_bytes(b"")
+    (extra / "openexr-3.5.3-cp313-cp313-win_amd64.whl").write_bytes(b"")  # another platform
+
+    def picked(native_name):
+        return sorted(w.name.split("-")[2] for w in be.find_extra_wheels(extra, Path(native_name)))
+
+    assert picked("rokeby_native-0.1.0-cp311-cp311-manylinux_2_35_x86_64.whl") == ["cp311"]
+    assert picked("rokeby_native-0.1.0-cp311-abi3-manylinux_2_35_x86_64.whl") == ["cp311", "cp313"]
+    assert picked("rokeby_native-0.1.0-cp313-cp313-manylinux_2_35_x86_64.whl") == ["cp313"]
 
 
 def test_blender_validates_the_zip(built):

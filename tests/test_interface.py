@@ -19,7 +19,7 @@ import pytest
 bpy = pytest.importorskip("bpy")
 
 import rokeby  # noqa: E402
-from rokeby import api, evaluate, progress, words  # noqa: E402
+from rokeby import api, compat, evaluate, progress, words  # noqa: E402
 
 from conftest import ROOT  # noqa: E402
 
@@ -296,11 +296,12 @@ def test_setup_passes_reports_every_change_and_undoes(registered, capfd):
     assert bpy.ops.rokeby.composite_setup_passes() == {"FINISHED"}
     out = capfd.readouterr()
     text = out.out + out.err
-    assert "Output file format switched to OpenEXR MultiLayer (was PNG)" in text, text
+    # Blender's own names of the formats: 5.0+ add the extension ("OpenEXR MultiLayer (.exr)").
+    assert re.search(r"Output file format switched to OpenEXR MultiLayer( \(\.exr\))? \(was PNG( \(\.png\))?\)", text), text
     assert "Output colour depth switched to 32-bit (was 8-bit)" in text, text
     assert re.search(r"Passes enabled on view layer: .*Diffuse Direct", text) and "Shader AOVs added: rokeby_reflocc" in text
     assert "Pass index given to 1 object(s): Ball" in text
-    assert st.file_format == "OPEN_EXR_MULTILAYER" and vl.use_pass_diffuse_direct
+    assert compat.is_multilayer_exr(st) and vl.use_pass_diffuse_direct
     assert "UNDO" in bpy.types.ROKEBY_OT_composite_setup_passes.bl_options
     bpy.ops.ed.undo_push(message="Set Up Compositing Passes")
     bpy.ops.ed.undo()

@@ -10,7 +10,8 @@ import pytest
 bpy = pytest.importorskip("bpy")
 OpenEXR = pytest.importorskip("OpenEXR")
 
-from rokeby import api, shading  # noqa: E402
+from rokeby import api, compat, shading  # noqa: E402
+from rokeby.compositing import exr_pass_names  # noqa: E402
 from test_render import SIZE, chrome_ball  # noqa: E402,F401  (fixture)
 
 PASSES = ("Combined", "DiffDir", "DiffInd", "DiffCol", "GlossDir", "GlossInd", "rokeby_n")
@@ -44,12 +45,16 @@ def plastic_ball(chrome_ball):  # noqa: F811
 
 def _passes(tmp_path, name):
     sc = bpy.context.scene
-    sc.render.image_settings.file_format = "OPEN_EXR_MULTILAYER"
+    compat.set_multilayer_exr(sc.render.image_settings, None)
     sc.render.filepath = str(tmp_path / f"{name}.exr")
     bpy.ops.render.render(write_still=True)
     with OpenEXR.File(sc.render.filepath) as f:
-        ch = f.channels()
-        out = {p: np.asarray(ch[f"ViewLayer.{p}"].pixels, np.float32)[..., :3] for p in PASSES if f"ViewLayer.{p}" in ch}
+        ch = {k: v for part in f.parts for k, v in part.channels.items()}  # one part per pass from 5.0
+        out = {}
+        for p in PASSES:  # "DiffDir" up to 4.5, "Diffuse Direct" from 5.0
+            key = next((f"ViewLayer.{n}" for n in exr_pass_names(p) if f"ViewLayer.{n}" in ch), None)
+            if key is not None:
+                out[p] = np.asarray(ch[key].pixels, np.float32)[..., :3]
     assert all(np.isfinite(v).all() for v in out.values())
     return out
 

@@ -10,7 +10,7 @@ from conftest import cycles
 bpy = pytest.importorskip("bpy")
 
 import rokeby  # noqa: E402
-from rokeby import api, evaluate, reflmap  # noqa: E402
+from rokeby import api, compat, evaluate, reflmap  # noqa: E402
 from rokeby.evaluate import RokebyError  # noqa: E402
 
 SIZE = 48
@@ -398,7 +398,7 @@ def test_eevee_renders_the_map_material(chrome_ball, tmp_path):
     ball.rokeby.render_mode = "REFLECTION_MAP"
     api.install_render_nodes(ball)
     sc = bpy.context.scene
-    sc.render.engine = "BLENDER_EEVEE_NEXT"
+    sc.render.engine = compat.eevee_engine()
     sc.eevee.taa_render_samples = 1
     sc.render.resolution_x = sc.render.resolution_y = 24
     px = _render(tmp_path, "eevee", size=24)

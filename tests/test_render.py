@@ -8,7 +8,7 @@ from conftest import cycles
 bpy = pytest.importorskip("bpy")
 
 import rokeby  # noqa: E402
-from rokeby import api, envmaps, evaluate  # noqa: E402
+from rokeby import api, compat, envmaps, evaluate  # noqa: E402
 
 SIZE = 48
 
@@ -136,7 +136,7 @@ def test_eevee_renders_the_edit(chrome_ball, tmp_path):
     finite, not black, and the edit changes the picture inside its region."""
     ball, _ = chrome_ball
     sc = bpy.context.scene
-    sc.render.engine = "BLENDER_EEVEE_NEXT"
+    sc.render.engine = compat.eevee_engine()
     sc.eevee.taa_render_samples = 1
     api.add_mirror(ball)
     api.add_constraint(ball, (0.0, -1.0, 0.0), eye=(0.0, -4.0, 0.0))

@@ -13,7 +13,7 @@ from test_wysiwyg import EYE, angles_deg, directions, hit_mask, new_scene, physi
 
 bpy = pytest.importorskip("bpy")
 
-from rokeby import api, evaluate, handlers, native  # noqa: E402
+from rokeby import api, compat, evaluate, handlers, native  # noqa: E402
 
 LEFT, RIGHT = (-0.65, 0.0, 0.0), (0.65, 0.0, 0.0)
 SCALE = 0.5
@@ -218,7 +218,8 @@ def test_copies_of_a_subdivided_mirror_never_share_its_carrier():
         assert mine is not None and mine is not carrier and evaluate.carrier_of(ball) is carrier
         mod = copy.modifiers[evaluate.TRANSFER_MODIFIER]
         source = next(i.identifier for i in mod.node_group.interface.items_tree if getattr(i, "in_out", "") == "INPUT" and i.name == "Source")
-        assert mod[source] == mine and ball.modifiers[evaluate.TRANSFER_MODIFIER][source] == carrier
+        assert compat.modifier_input(mod, source) == mine
+        assert compat.modifier_input(ball.modifiers[evaluate.TRANSFER_MODIFIER], source) == carrier
         # Each carrier holds its own mirror's field.
         for ob in (ball, copy):
             np.testing.assert_allclose(api.stored_field(ob), evaluate.state_of(ob).rotations, atol=1e-6)

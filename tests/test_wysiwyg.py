@@ -19,7 +19,7 @@ from conftest import ROOT, cycles
 bpy = pytest.importorskip("bpy")
 
 import rokeby  # noqa: E402
-from rokeby import api, evaluate, handlers, native  # noqa: E402
+from rokeby import api, compat, evaluate, handlers, native  # noqa: E402
 
 SIZE = 64
 EYE = (0.0, -4.0, 0.0)
@@ -68,8 +68,7 @@ def new_scene():
     sc = bpy.context.scene
     cycles(sc, SIZE, 1, seed=1)
     sc.cycles.filter_width = 0.01
-    sc.render.image_settings.file_format = "OPEN_EXR_MULTILAYER"
-    sc.render.image_settings.color_depth = "32"
+    compat.set_multilayer_exr(sc.render.image_settings, "32")
     vl = sc.view_layers[0]
     for name in ("P", "N"):
         aov = vl.aovs.add()
@@ -96,7 +95,7 @@ def read_layers(path):
     import OpenEXR
 
     with OpenEXR.File(str(path), separate_channels=True) as f:
-        ch = f.parts[0].channels
+        ch = {k: v for part in f.parts for k, v in part.channels.items()}  # one part per pass from 5.0
         out = {}
         for key in ("Combined", "P", "N"):
             names = sorted(k for k in ch if k.split(".")[-2:-1] == [key])

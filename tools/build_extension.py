@@ -79,8 +79,10 @@ def find_wheel(wheel_dir: Path, version: str) -> Path:
 
 def find_extra_wheels(extra_dir: "Path | None", native: Path) -> list[Path]:
     """Wheels of the Python packages the add-on imports that Blender does not ship (OpenEXR, for
-    the compositing tools), downloaded by `make dist` into ``extra_dir``; only those for the
-    native wheel's Python and platform are taken."""
+    the compositing tools), downloaded by `make dist` into ``extra_dir``; only those for a Python
+    the native wheel loads in (its own; with the stable ABI, ``abi3``, every CPython from its
+    own on: Blender 4.2-5.0 bundle 3.11, 5.1+ 3.13) and its platform are taken. Blender installs,
+    of the wheels a manifest lists, those for its own Python."""
     if extra_dir is None or not extra_dir.is_dir():
         return []
     platforms = set(blender_platforms(native.name))

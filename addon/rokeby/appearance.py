@@ -785,7 +785,10 @@ def pack(img) -> None:
     operator's undo step, keep its pixels."""
     img.file_format = "OPEN_EXR"
     img.use_half_precision = False
-    img.pack()
+    # Packing again an image whose packed data is current re-reads it from its file: the painted
+    # image has none, and Blender 5.0 then drops the packed data. Pack only what changed.
+    if img.is_dirty or img.packed_file is None:
+        img.pack()
     _PACKED[img.name] = img.packed_file.as_pointer()
 
 

@@ -12,7 +12,7 @@ from __future__ import annotations
 import bpy
 from bpy.props import CollectionProperty, EnumProperty, FloatProperty, FloatVectorProperty, IntProperty, PointerProperty, StringProperty
 
-from . import appearance, words
+from . import appearance, compat, words
 
 # Explicit item numbers: Blender stores the number, so new brushes are appended with new numbers
 # (files saved before issue 22 stored 0-6 without explicit numbers, which are these).
@@ -328,7 +328,7 @@ def draw_cursor(circle, viewport_size, colour=CURSOR_COLOUR) -> None:
 
     pts = np.asarray(circle, np.float32)
     lines = np.stack([pts, np.roll(pts, -1, axis=0)], axis=1).reshape(-1, 3)
-    sh = gpu.shader.from_builtin("POLYLINE_UNIFORM_COLOR")
+    sh = compat.builtin_shader("POLYLINE_UNIFORM_COLOR")
     gpu.state.blend_set("ALPHA")
     sh.bind()
     sh.uniform_float("viewportSize", viewport_size)

@@ -69,6 +69,21 @@ PASSES = {
     AOV_INCOMING_CAM: ("incoming_cam", 3),
 }
 
+# The names the passes have in a multilayer EXR: up to Blender 4.5 the short ones of PASSES, from
+# 5.0 the long ones (the channel names then read "ViewLayer.Diffuse Direct", ".Object Index.X").
+# The reader accepts either, so frames from any release load; errors name the short ones.
+PASS_NAMES_LONG = {
+    "DiffDir": "Diffuse Direct", "DiffInd": "Diffuse Indirect", "DiffCol": "Diffuse Color",
+    "GlossDir": "Glossy Direct", "GlossInd": "Glossy Indirect", "GlossCol": "Glossy Color",
+    "IndexOB": "Object Index", "IndexMA": "Material Index", "AO": "Ambient Occlusion",
+}
+
+
+def exr_pass_names(name: str) -> tuple:
+    """The names pass ``name`` (a key of PASSES, or any render pass) may have in a multilayer EXR."""
+    return (name, PASS_NAMES_LONG[name]) if name in PASS_NAMES_LONG else (name,)
+
+
 # Blender's Vector Transform "Camera" space has z pointing forward; Blender's camera object (and
 # our screen space) has z towards the viewer.
 _CAM_FLIP = np.diag([1.0, 1.0, -1.0])
@@ -170,9 +185,9 @@ def setup_passes(scene, view_layer=None) -> list[str]:
         if not m.use_nodes:
             m.use_nodes = True
         _material_nodes(m)
-    st = scene.render.image_settings
-    st.file_format = "OPEN_EXR_MULTILAYER"
-    st.color_depth = "32"
+    from . import compat  # noqa: PLC0415
+
+    compat.set_multilayer_exr(scene.render.image_settings, "32")
     return list(PASSES)
 
 
@@ -377,6 +392,19 @@ def _library_output(lines: list):
                     lines.append(ln.split(": ", 1)[1] if ln.startswith("/") and ": " in ln else ln)
 
 
+def _pass_pixels(chans: dict, bases: list) -> "np.ndarray | None":
+    """The pixels of the first of ``bases`` (``Layer.Pass``) the channels hold: grouped (RGB[A]) by
+    the OpenEXR reader, or separate channels X[YZ], R[GB], V, Z; None when none is there."""
+    for base in bases:
+        if base in chans:
+            return np.asarray(chans[base].pixels, np.float32)
+        for suffixes in ("XYZ", "RGB", "X", "V", "Z", "R"):
+            keys = [f"{base}.{c}" for c in suffixes]
+            if all(k in chans for k in keys):
+                return np.stack([np.asarray(chans[k].pixels, np.float32) for k in keys], -1)
+    return None
+
+
 def _read_exr(path: str, layer: str | None) -> Passes:
     import OpenEXR
 
@@ -384,22 +412,18 @@ def _read_exr(path: str, layer: str | None) -> Passes:
         if not f.parts:
             raise CompositingError(f"{path}: not a readable multilayer EXR (truncated or corrupted?): it has no image parts")
         part = f.parts[0]
-        chans = part.channels
+        # Blender 5.0+ writes a multilayer EXR as one part per pass by default (up to 4.5, and with
+        # "interleave", one part): the channel names carry the layer and pass either way.
+        chans = {}
+        for p in f.parts:
+            chans.update(p.channels)
         layer = _layer_channels(chans, layer)
         arrays, missing = {}, []
         for name, (attr, ch) in PASSES.items():
-            base = f"{layer}.{name}"
-            if base in chans:  # grouped (RGB[A]) by the OpenEXR reader
-                a = np.asarray(chans[base].pixels, np.float32)
-            else:  # separate channels: X[YZ], R[GB], V, Z
-                for suffixes in ("XYZ", "RGB", "X", "V", "Z", "R"):
-                    keys = [f"{base}.{c}" for c in suffixes]
-                    if all(k in chans for k in keys):
-                        a = np.stack([np.asarray(chans[k].pixels, np.float32) for k in keys], -1)
-                        break
-                else:
-                    missing.append(name)
-                    continue
+            a = _pass_pixels(chans, [f"{layer}.{n}" for n in exr_pass_names(name)])
+            if a is None:
+                missing.append(name)
+                continue
             if a.ndim == 2:
                 a = a[..., None]
             if ch == 1:

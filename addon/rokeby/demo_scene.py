@@ -305,11 +305,12 @@ def glass_view(demo: DemoScene, *, edited: bool) -> dict:
 
 def side_by_side(before: Path, after: Path, out: Path, labels=("", "")) -> tuple:
     """One picture: ``before`` and ``after`` next to each other with a caption band under each
-    (composed with numpy, saved through a Blender image, captions drawn with blf into an ImBuf).
+    (composed with numpy, saved through a Blender image, captions drawn with blf into an ImBuf;
+    where blf cannot draw into images, Blender 4.2, the bands stay empty and a note says so).
     Returns its (width, height)."""
-    import blf
     import bpy
-    import imbuf
+
+    from . import compat
 
     pics = []
     for path in (before, after):
@@ -335,6 +336,12 @@ def side_by_side(before: Path, after: Path, out: Path, labels=("", "")) -> tuple
     img.file_format = "PNG"
     img.save()
     bpy.data.images.remove(img)
+    if not compat.blf_draws_into_images():
+        print(f"  (no captions in {out.name}: this Blender's blf cannot draw into images; 4.3+ can)")
+        return width, h + band
+    import blf
+    import imbuf
+
     buf = imbuf.load(str(out))
     with blf.bind_imbuf(0, buf):
         blf.size(0, 17)

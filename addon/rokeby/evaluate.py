@@ -436,14 +436,20 @@ def _reader_ids(mod) -> dict:
     return {item.name: item.identifier for item in mod.node_group.interface.items_tree if getattr(item, "in_out", "") == "INPUT"}
 
 
+def _reader_group(mod) -> "str | None":
+    """The vertex group a reader modifier reads (None: none set)."""
+    from . import compat  # noqa: PLC0415
+
+    ident = _reader_ids(mod).get("Vertex Group")
+    return compat.modifier_input(mod, ident) if ident is not None else None
+
+
 def find_reader(obj, group: str):
     """The reader modifier of ``group`` on ``obj`` (found by what it reads, not by its name,
     which Blender may have shortened), or None."""
     for mod in obj.modifiers:
-        if mod.type == "NODES" and _reader_tree(mod.node_group):
-            ident = _reader_ids(mod).get("Vertex Group")
-            if ident is not None and mod.get(ident) == group:
-                return mod
+        if mod.type == "NODES" and _reader_tree(mod.node_group) and _reader_group(mod) == group:
+            return mod
     return None
 
 
@@ -456,6 +462,8 @@ def ensure_reader(obj, group: str, renamed_from: "str | None" = None) -> "str | 
     applied, e.g. by Convert ▸ Mesh, leaves a baked copy of the weights in the mesh: it is
     removed), repointed after a rename. Returns what changed when the evaluated mesh must be
     evaluated again before the weights can be read (None: nothing)."""
+    from . import compat  # noqa: PLC0415
+
     attribute = REGION_ATTRIBUTE_PREFIX + group
     mod = find_reader(obj, group)
     why = None
@@ -473,9 +481,9 @@ def ensure_reader(obj, group: str, renamed_from: "str | None" = None) -> "str | 
         mod.node_group = vertex_group_reader()
         mod.show_in_editmode = False
     ids = _reader_ids(mod)
-    if mod.get(ids["Vertex Group"]) != group or mod.get(ids["Attribute"]) != attribute:
-        mod[ids["Vertex Group"]] = group
-        mod[ids["Attribute"]] = attribute
+    if compat.modifier_input(mod, ids["Vertex Group"]) != group or compat.modifier_input(mod, ids["Attribute"]) != attribute:
+        compat.set_modifier_input(mod, ids["Vertex Group"], group)
+        compat.set_modifier_input(mod, ids["Attribute"], attribute)
         why = why or f"the reader modifier of vertex group '{group}' was repointed"
     if renamed_from is not None and mod.name.startswith(VG_MODIFIER_PREFIX):
         mod.name = VG_MODIFIER_PREFIX + group
@@ -490,7 +498,7 @@ def drop_unused_readers(obj, used=None):
         used = {rg.vertex_group for rg in obj.rokeby.regions if rg.kind == "FREEFORM" and rg.vertex_group}
     seen = set()
     for mod in _readers(obj):
-        group = mod.get(_reader_ids(mod).get("Vertex Group", ""), None)
+        group = _reader_group(mod)
         if group not in used or group in seen:
             obj.modifiers.remove(mod)
         else:
@@ -558,7 +566,7 @@ def sync_freeform_regions(obj) -> list:
     # Readers no region uses any more (the group was deleted, the region changed kind or group)
     # go; like every change here, the mirror is then pending (nothing of the evaluated mesh at
     # hand is touched again: it may refer to the removed modifier).
-    unused = [mod for mod in _readers(obj) if mod.get(_reader_ids(mod).get("Vertex Group", ""), None) not in used]
+    unused = [mod for mod in _readers(obj) if _reader_group(mod) not in used]
     if unused:
         changes.append("removed the reader modifier" + ("s " if len(unused) > 1 else " ") + ", ".join(f"'{m.name}'" for m in unused) + " that no free-form region uses")
         drop_unused_readers(obj, used)
@@ -1370,9 +1378,11 @@ def ensure_carrier(obj, depsgraph):
         mod.show_in_editmode = False
     if mod.node_group is None or mod.node_group.name != TRANSFER_GROUP or mod.node_group.get("rokeby_version") != TRANSFER_VERSION:
         mod.node_group = _transfer_group()
+    from . import compat  # noqa: PLC0415
+
     ident = next(i.identifier for i in mod.node_group.interface.items_tree if getattr(i, "in_out", "") == "INPUT" and i.name == "Source")
-    if mod.get(ident) != carrier:
-        mod[ident] = carrier
+    if compat.modifier_input(mod, ident) != carrier:
+        compat.set_modifier_input(mod, ident, carrier)
     return carrier
 
 

@@ -31,7 +31,7 @@ import contextlib
 import bpy
 from bpy.app.handlers import persistent
 
-from . import appearance, evaluate, registry, rendering, shading, shadow
+from . import appearance, compat, evaluate, registry, rendering, shading, shadow
 
 _busy = False
 _suspend = 0
@@ -110,10 +110,10 @@ def _updates_needed(depsgraph) -> bool:
     """Whether ``depsgraph.updates`` (a walk over every ID of the graph: 0.6 ms at 10,000
     objects) can hold anything for the add-on: data that was edited, or a mirror whose geometry
     other objects drive (modifiers, shape keys). Moving unrelated objects needs no walk."""
-    try:
-        if any(depsgraph.id_type_updated(t) for t in _DATA_TYPES):
-            return True
-    except TypeError:  # an ID type this Blender does not name: walk
+    types = compat.depsgraph_id_types(_DATA_TYPES)
+    if len(types) < len(_DATA_TYPES):  # an ID type this Blender does not name: walk
+        return True
+    if any(depsgraph.id_type_updated(t) for t in types):
         return True
     for ob in registry.mirrors():
         if ob.type != "MESH" or (ob.data is not None and ob.data.shape_keys is not None):

@@ -71,13 +71,15 @@ def ensure_context() -> None:
         return
     import bpy  # noqa: PLC0415
 
+    from . import compat  # noqa: PLC0415
+
     scene = bpy.data.scenes.new("rokeby_gpu_context")
     cam_data = bpy.data.cameras.new("rokeby_gpu_context")
     cam = bpy.data.objects.new("rokeby_gpu_context", cam_data)
     try:
         scene.collection.objects.link(cam)
         scene.camera = cam
-        scene.render.engine = "BLENDER_EEVEE_NEXT"
+        scene.render.engine = compat.eevee_engine()
         scene.render.resolution_x = scene.render.resolution_y = 8
         scene.render.resolution_percentage = 100
         window = bpy.context.window

@@ -334,7 +334,7 @@ def _render_panorama(scene, mirror, origin, width: int, samples: int) -> np.ndar
     """Render the equirectangular panorama (H, W, 3) float32, row 0 at the bottom."""
     import bpy  # noqa: PLC0415
 
-    from . import handlers  # noqa: PLC0415
+    from . import compat, handlers  # noqa: PLC0415
 
     height = width // 2
     tmp = tempfile.mkdtemp(prefix="rokeby_capture_")
@@ -365,7 +365,7 @@ def _render_panorama(scene, mirror, origin, width: int, samples: int) -> np.ndar
                 ("use_file_extension", False), ("filepath", path),
             ))
             im = r.image_settings
-            undo.set_many(im, (("file_format", "OPEN_EXR"), ("color_mode", "RGB"), ("color_depth", "32"), ("exr_codec", "ZIP"), ("color_management", "FOLLOW_SCENE")))
+            undo.set_many(im, compat.single_layer_exr_items() + (("color_mode", "RGB"), ("color_depth", "32"), ("exr_codec", "ZIP"), ("color_management", "FOLLOW_SCENE")))
             undo.set(scene.cycles, "samples", int(samples))
             if scene == bpy.context.scene:
                 bpy.ops.render.render(write_still=True)

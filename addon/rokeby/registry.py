@@ -30,25 +30,13 @@ import contextlib
 import bpy
 
 from . import transaction
+from .compat import stored_group
 
 # Custom properties of the objects a shadow edit makes (rokeby.shadow).
 SHADOW_KEYS = ("rokeby_shadow_of", "rokeby_twin_of")  # before shadow links were pointers (shadow.migrate)
 # On handles and region centres the add-on made (api); older files: membership of HANDLE_COLLECTION.
 MADE_KEY = "rokeby_made"
 HANDLE_COLLECTION = "Rokeby Handles"
-# Registered properties are stored as ID properties: on the ID itself up to Blender 4.x, apart from
-# custom ones (``bl_system_properties_get``) from 5.0 (a feature test, not a version number). The
-# rebuild reads them there without going through RNA (one dict lookup per object).
-_SYSTEM_PROPERTIES = hasattr(bpy.types.ID, "bl_system_properties_get")
-
-
-def stored_group(ob, name: str):
-    """The stored ID property group ``name`` of a registered PointerProperty of ``ob`` (None until
-    something was written to it): cheap, no RNA."""
-    if _SYSTEM_PROPERTIES:
-        props = ob.bl_system_properties_get()
-        return props.get(name) if props is not None else None
-    return ob.get(name)
 
 _mirrors: dict = {}  # session_uid -> mirror object
 _shadow: dict = {}  # session_uid -> shadow mesh or twin light

@@ -423,9 +423,9 @@ def _is_light(ob) -> bool:
 def _stored(o) -> bool:
     """Whether ``o`` has ever had shadow links written (their ID property group exists). Cheap (no
     RNA access)."""
-    from . import registry  # noqa: PLC0415
+    from . import compat  # noqa: PLC0415
 
-    return registry.stored_group(o, "rokeby_shadow") is not None
+    return compat.stored_group(o, "rokeby_shadow") is not None
 
 
 def _parts():

@@ -14,7 +14,7 @@ from __future__ import annotations
 import bpy
 import numpy as np
 
-from . import shadow, words
+from . import compat, shadow, words
 
 _SESSIONS: dict = {}
 _OVERLAY: dict = {}
@@ -80,7 +80,7 @@ def _draw():
     import gpu  # noqa: PLC0415 - only while drawing
     from gpu_extras.batch import batch_for_shader  # noqa: PLC0415
 
-    shader = gpu.shader.from_builtin("FLAT_COLOR")
+    shader = compat.builtin_shader("FLAT_COLOR")
     gpu.state.line_width_set(2.0)
     gpu.state.point_size_set(6.0)
     batch_for_shader(shader, "LINES", {"pos": geo["lines"], "color": geo["line_colors"]}).draw(shader)

@@ -23,7 +23,7 @@ from __future__ import annotations
 import numpy as np
 import bpy
 
-from . import evaluate, glsl
+from . import compat, evaluate, glsl
 
 DEPTH_BIAS = 2e-5
 _CIRCLE_SEGMENTS = 64
@@ -283,12 +283,12 @@ def draw_overlays(obj, scene, viewport_size, view_right, view_up):
     gpu.state.blend_set("ALPHA")
     gpu.state.depth_test_set("NONE")
     if len(g["lines"]):
-        sh = gpu.shader.from_builtin("POLYLINE_SMOOTH_COLOR")
+        sh = compat.builtin_shader("POLYLINE_SMOOTH_COLOR")
         sh.bind()
         sh.uniform_float("viewportSize", viewport_size)
         sh.uniform_float("lineWidth", 2.0)
         batch_for_shader(sh, "LINES", {"pos": g["lines"], "color": g["line_colours"]}).draw(sh)
-    sh = gpu.shader.from_builtin("POLYLINE_UNIFORM_COLOR")
+    sh = compat.builtin_shader("POLYLINE_UNIFORM_COLOR")
     for key, colour, width in (("region_outer", REGION_COLOUR, 2.0), ("region_core", CORE_COLOUR, 1.0)):
         if len(g[key]):
             sh.bind()
@@ -297,7 +297,7 @@ def draw_overlays(obj, scene, viewport_size, view_right, view_up):
             sh.uniform_float("color", colour)
             batch_for_shader(sh, "LINES", {"pos": g[key]}).draw(sh)
     if len(g["handles"]):
-        sh = gpu.shader.from_builtin("POINT_FLAT_COLOR")
+        sh = compat.builtin_shader("POINT_FLAT_COLOR")  # FLAT_COLOR where missing (4.2)
         gpu.state.point_size_set(9.0)
         sh.bind()
         batch_for_shader(sh, "POINTS", {"pos": g["handles"], "color": g["handle_colours"]}).draw(sh)
