@@ -17,6 +17,7 @@ bpy = pytest.importorskip("bpy")
 
 import rokeby  # noqa: E402
 from conftest import cycles  # noqa: E402
+from rokeby import compat  # noqa: E402
 from rokeby import compositing as C  # noqa: E402
 from rokeby import envmaps  # noqa: E402
 
@@ -72,20 +73,19 @@ def test_use_in_compositor_feeds_an_image_node_that_follows_every_recomposite(fr
         img = bpy.data.images["Rokeby Recomposited"]
         first = _image(img).copy()
         sc = bpy.context.scene
-        sc.use_nodes = True  # Blender's default tree: Render Layers → Reroute → Composite and Viewer
-        before = sorted((lk.from_node.name, lk.to_node.name) for lk in sc.node_tree.links if lk.to_node.bl_idname != "CompositorNodeViewer")
+        tree0 = compat.compositor_tree(sc, create=True)  # the compositor as this Blender makes it
+        before = sorted((lk.from_node.name, lk.to_node.name) for lk in tree0.links if lk.to_node.bl_idname != "CompositorNodeViewer")
         assert bpy.ops.rokeby.composite_to_compositor() == {"FINISHED"}
-        tree = bpy.context.scene.node_tree
+        tree = compat.compositor_tree(bpy.context.scene)
         node = tree.nodes[C.COMPOSITOR_NODE]
-        assert bpy.context.scene.use_nodes and node.image == img
+        assert node.image == img
         viewer = next(n for n in tree.nodes if n.bl_idname == "CompositorNodeViewer")
         assert viewer.inputs[0].links[0].from_node == node
-        comp_node = next(n for n in tree.nodes if n.bl_idname == "CompositorNodeComposite")
         assert sorted((lk.from_node.name, lk.to_node.name) for lk in tree.links if lk.to_node.bl_idname != "CompositorNodeViewer") == before
         # the artist's chain: our image into the Composite through an Exposure node of 0 stops
         expo = tree.nodes.new("CompositorNodeExposure")
         tree.links.new(node.outputs["Image"], expo.inputs["Image"])
-        tree.links.new(expo.outputs["Image"], comp_node.inputs["Image"])
+        tree.links.new(expo.outputs["Image"], compat.compositor_output(tree))
         out1 = _composite(tmp_path, "c1")
         np.testing.assert_allclose(out1, first, rtol=1e-4, atol=1e-5)
         assert bpy.ops.rokeby.composite_edit(filepath=str(frame), edit="EMBOSS", amount=0.9) == {"FINISHED"}

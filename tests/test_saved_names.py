@@ -24,9 +24,13 @@ import numpy as np
 import pytest
 
 bpy = pytest.importorskip("bpy")
+from rokeby import compat  # noqa: E402
 
 HERE = Path(__file__).resolve().parent
-SNAPSHOT = HERE / "data" / "saved_names.json"
+# One snapshot per Blender release: what a release itself names (its EXR pass names, the passes a
+# view layer has on by default) differs, and a file saved by one release must keep its meaning there.
+BLENDER = "%d.%d" % tuple(bpy.app.version[:2])
+SNAPSHOT = HERE / "data" / ("saved_names.json" if BLENDER == "4.5" else f"saved_names-blender-{BLENDER}.json")
 sys.path.insert(0, str(HERE / "blend_fixtures"))
 import feature_fixtures  # noqa: E402
 
@@ -160,8 +164,9 @@ def saved_names(sc, tmp: str = "") -> dict:
     for ng in d.node_groups:
         iface = sorted(f"{it.in_out} {it.name} {getattr(it, 'socket_type', '')}" for it in ng.interface.items_tree if it.item_type == "SOCKET")
         out["node_groups"][_norm(ng.name, tmp)] = {"type": ng.bl_idname, "interface": iface, "nodes": _node_entries(ng, tmp)}
-    if sc.node_tree is not None:  # the scene's compositor
-        out["compositor"] = _node_entries(sc.node_tree, tmp)
+    tree = compat.compositor_tree(sc)
+    if tree is not None:  # the scene's compositor
+        out["compositor"] = _node_entries(tree, tmp)
     for m in d.materials:
         if m.node_tree is not None:
             out["materials"][_norm(m.name, tmp)] = _node_entries(m.node_tree, tmp)

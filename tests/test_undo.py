@@ -14,7 +14,7 @@ import pytest
 bpy = pytest.importorskip("bpy")
 
 import rokeby  # noqa: E402
-from rokeby import api, evaluate  # noqa: E402
+from rokeby import api, compat, evaluate  # noqa: E402
 from rokeby.evaluate import ATTRIBUTE  # noqa: E402
 
 
@@ -100,7 +100,7 @@ def snapshot():
         )
     state["images"] = sorted((im.name, tuple(im.size), _pixels(im)) for im in bpy.data.images)
     sc = bpy.context.scene
-    tree = sc.node_tree if sc.use_nodes else None
+    tree = compat.compositor_tree(sc)
     state["compositor"] = None if tree is None else (
         sorted((n.name, n.bl_idname, n.image.name if getattr(n, "image", None) else None) for n in tree.nodes),
         sorted((lk.from_node.name, lk.to_node.name, lk.to_socket.identifier) for lk in tree.links))

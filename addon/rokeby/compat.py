@@ -220,6 +220,59 @@ def set_modifier_input(mod, identifier: str, value) -> None:
         mod[identifier] = value
 
 
+def _plain(v):
+    if hasattr(v, "to_dict"):
+        return v.to_dict()
+    if hasattr(v, "to_list"):
+        return v.to_list()
+    if hasattr(v, "__len__") and not isinstance(v, str) and not hasattr(v, "bl_rna"):
+        return list(v)
+    return v
+
+
+def modifier_inputs(mod) -> dict:
+    """Everything the Geometry Nodes modifier ``mod`` stores for its inputs (values, and whether and
+    which attribute an input reads), as plain values, for :func:`set_modifier_inputs` to put back:
+    its ID properties up to 5.1; from 5.2 the writable RNA properties of each input
+    (``value``, ``type``, ``attribute_name``, ...)."""
+    if _modifier_rna_inputs():
+        props = mod.properties
+        out: dict = {}
+        if props is None:
+            return out
+        for ident in dir(props.inputs):
+            item = getattr(props.inputs, ident, None)
+            if ident.startswith("_") or item is None or not hasattr(item, "bl_rna") or ident in ("bl_rna", "rna_type"):
+                continue
+            out[ident] = {p.identifier: _plain(getattr(item, p.identifier)) for p in item.bl_rna.properties
+                          if not p.is_readonly and p.identifier not in ("name", "rna_type") and p.type != "POINTER"}
+        return out
+    return {k: _plain(mod[k]) for k in mod.keys()}
+
+
+def set_modifier_inputs(mod, saved: dict) -> None:
+    """Puts back what :func:`modifier_inputs` returned (keys the modifier no longer has are skipped;
+    up to 5.1, ID properties added since are removed)."""
+    if _modifier_rna_inputs():
+        props = mod.properties
+        if props is None:
+            return
+        for ident, values in saved.items():
+            item = getattr(props.inputs, ident, None)
+            if item is None:
+                continue
+            for name, v in values.items():
+                if getattr(item, name, None) != v:
+                    setattr(item, name, v)
+        mod.id_data.update_tag()
+        return
+    for k in [k for k in mod.keys() if k not in saved]:
+        del mod[k]
+    for k, v in saved.items():
+        if mod.get(k) != v:
+            mod[k] = v
+
+
 # --- where Python-defined properties are stored ------------------------------------------------
 
 @functools.cache

@@ -261,8 +261,9 @@ def feed_compositor(scene, image):
         raise CompositingError("image: none given: click Render and Recomposite (or Recomposite Render) first")
     if scene is None:
         raise CompositingError("scene: none given")
-    scene.use_nodes = True
-    tree = scene.node_tree
+    from . import compat  # noqa: PLC0415
+
+    tree = compat.compositor_tree(scene, create=True)
     node = tree.nodes.get(COMPOSITOR_NODE)
     if node is None or node.bl_idname != "CompositorNodeImage":
         node = tree.nodes.new("CompositorNodeImage")
@@ -285,8 +286,10 @@ def _keep_compositor_current(img) -> None:
     new image when the frame size changes) and the compositor sees the new pixels."""
     import bpy
 
+    from . import compat  # noqa: PLC0415
+
     for sc in bpy.data.scenes:
-        tree = sc.node_tree if sc.use_nodes else None
+        tree = compat.compositor_tree(sc)
         node = tree.nodes.get(COMPOSITOR_NODE) if tree is not None else None
         if node is not None and node.get(COMPOSITOR_IMAGE_KEY) == img.name:
             if node.image != img:

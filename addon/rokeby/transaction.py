@@ -314,13 +314,17 @@ def _rna_values(struct) -> dict:
 
 
 def _modifier(m) -> tuple:
-    return (m.name, m.type, getattr(m, "node_group", None), _idprops(m) if m.type == "NODES" else {},
+    from . import compat  # noqa: PLC0415  (bpy-free at import)
+
+    return (m.name, m.type, getattr(m, "node_group", None), compat.modifier_inputs(m) if m.type == "NODES" else {},
             m.show_viewport, m.show_render, m.show_in_editmode)
 
 
 def _load_modifiers(ob, mods) -> None:
     """Modifiers added since go; geometry-node modifiers removed since (the add-on's are) come
     back with their group, inputs and place in the stack."""
+    from . import compat  # noqa: PLC0415  (bpy-free at import)
+
     names = [m[0] for m in mods]
     for m in [m for m in ob.modifiers if m.name not in names]:
         ob.modifiers.remove(m)
@@ -330,14 +334,14 @@ def _load_modifiers(ob, mods) -> None:
             m = ob.modifiers.new(name, kind)
             m.node_group = group
             m.show_viewport, m.show_render, m.show_in_editmode = show_v, show_r, show_e
-            _load_idprops(m, props)
+            compat.set_modifier_inputs(m, props)
             at = list(ob.modifiers).index(m)
             if at != i and i < len(ob.modifiers):
                 ob.modifiers.move(at, i)
         elif m is not None and kind == "NODES":
             if m.node_group != group:
                 m.node_group = group
-            _load_idprops(m, props)
+            compat.set_modifier_inputs(m, props)
 
 
 def _collection_of(idb):

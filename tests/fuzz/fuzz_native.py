@@ -587,6 +587,18 @@ def test_cancel():
     call(rn.normals_bilateral, unit_vectors(4, 0).reshape(2, 2, 3), np.ones((2, 2), np.float32))
 
 
+def test_field_kernel():
+    # No arguments: the kernel the field functions run now, one of the documented names; extra
+    # arguments are refused by pyo3 with a TypeError, not a crash.
+    assert rn.field_kernel() in ("scalar", "portable", "avx2", "avx512")
+    try:
+        rn.field_kernel(1)
+    except TypeError:
+        pass
+    else:
+        raise AssertionError("field_kernel(1) was accepted")
+
+
 # --- classes -----------------------------------------------------------------------------------
 
 
