@@ -59,12 +59,20 @@ def _plain(v, depth=0):
 
 
 def _idprops(owner) -> dict:
-    try:
-        # An empty property group is what reading a registered property makes: not a change.
-        out = {k: _plain(owner[k]) for k in owner.keys() if not k.endswith("_seconds")}
-        return {k: v for k, v in out.items() if v != {}}
-    except (TypeError, AttributeError):
-        return {}
+    """Custom properties and, where Blender keeps them apart (5.0+), the registered ones."""
+    from rokeby import compat
+
+    out = {}
+    for prefix, container in (("", owner), ("system:", compat.system_properties(owner))):
+        if container is None:
+            continue
+        try:
+            # An empty property group is what reading a registered property makes: not a change.
+            got = {prefix + k: _plain(container[k]) for k in container.keys() if not k.endswith("_seconds")}
+        except (TypeError, AttributeError):
+            continue
+        out.update({k: v for k, v in got.items() if v != {}})
+    return out
 
 
 def _socket_value(s):

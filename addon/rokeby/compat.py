@@ -282,6 +282,21 @@ def _system_properties() -> bool:
     return "bl_system_properties_get" in bpy.types.ID.bl_rna.functions
 
 
+def system_properties(owner):
+    """The container of ``owner``'s registered (Python-defined) properties where it is kept apart from
+    its custom properties (5.0+: ``bl_system_properties_get()``; None until something was stored),
+    or None where both live together (up to 4.5: ``owner.keys()`` already lists them)."""
+    if not _system_properties():
+        return None
+    get = getattr(owner, "bl_system_properties_get", None)
+    if get is None:
+        return None
+    try:
+        return get()
+    except (TypeError, RuntimeError):
+        return None
+
+
 def stored_group(idblock, name: str):
     """The stored ID property group of the registered ``PointerProperty`` ``name`` of ``idblock``
     (None until something was written to it): one dict lookup, no RNA, so the handlers can scan

@@ -29,24 +29,59 @@ _OBJECT_FLAGS = ("hide_render", "visible_camera", "visible_diffuse", "visible_gl
 _active: list = []
 
 
-def _idprops(owner) -> dict:
+# Registered properties (obj.rokeby, ...) are kept apart from custom properties from Blender 5.0
+# (compat.system_properties); a record holds them under this key beside the custom ones.
+_SYSTEM = "\x00system"
+
+
+def _plain_props(container) -> dict:
     out = {}
-    for k in owner.keys():
-        v = owner[k]
+    for k in container.keys():
+        v = container[k]
         out[k] = v.to_dict() if hasattr(v, "to_dict") else (v.to_list() if hasattr(v, "to_list") else v)
     return out
 
 
-def _load_idprops(owner, saved: dict) -> None:
-    for k in [k for k in owner.keys() if k not in saved]:
-        del owner[k]
+def _system(owner):
+    from . import compat  # noqa: PLC0415  (bpy-free at import)
+
+    return compat.system_properties(owner)
+
+
+def _idprops(owner) -> dict:
+    out = _plain_props(owner)
+    sysg = _system(owner)
+    if sysg is not None and len(sysg.keys()):
+        out[_SYSTEM] = _plain_props(sysg)
+    return out
+
+
+def _has_props(owner) -> bool:
+    if len(owner.keys()):
+        return True
+    sysg = _system(owner)
+    return sysg is not None and bool(len(sysg.keys()))
+
+
+def _load_into(container, saved: dict) -> None:
+    for k in [k for k in container.keys() if k not in saved]:
+        del container[k]
     for k, v in saved.items():
-        cur = owner.get(k)
+        cur = container.get(k)
         if isinstance(v, dict) and hasattr(cur, "clear") and hasattr(cur, "update"):
             cur.clear()
             cur.update(v)
         else:
-            owner[k] = v
+            container[k] = v
+
+
+def _load_idprops(owner, saved: dict) -> None:
+    saved = dict(saved)
+    system = saved.pop(_SYSTEM, {})
+    _load_into(owner, saved)
+    sysg = _system(owner)
+    if sysg is not None:
+        _load_into(sysg, system)
 
 
 def _groups_used(trees) -> list:
@@ -85,8 +120,8 @@ class Transaction:
         self.end_hooks: list = []
         self.ids = {k: {i.as_pointer() for i in getattr(d, k)} for k in _KINDS}
         owners = [*d.objects, *d.meshes, *d.materials, *d.lights, *d.collections, *d.images, *d.node_groups, *d.scenes]
-        self.props = [(o, _idprops(o)) for o in owners if o.library is None and len(o.keys())]
-        self.bare = [o for o in owners if o.library is None and not len(o.keys())]
+        self.props = [(o, _idprops(o)) for o in owners if o.library is None and _has_props(o)]
+        self.bare = [o for o in owners if o.library is None and not _has_props(o)]
         mats = d.materials if materials is None else [m for m in dict.fromkeys(materials) if m is not None]
         trees = [m.node_tree for m in mats if m.node_tree is not None and m.library is None]
         trees += [g for g in d.node_groups if g.library is None] if materials is None else _groups_used(trees)
@@ -284,8 +319,7 @@ class Transaction:
             if _idprops(owner) != saved:  # untouched ones are left alone
                 _load_idprops(owner, saved)
         for owner in self.bare:
-            for k in list(owner.keys()):
-                del owner[k]
+            _load_idprops(owner, {})
         # Data-blocks made since go (objects first: they use the rest).
         for kind in _KINDS:
             new = [i for i in getattr(d, kind) if i.as_pointer() not in self.ids[kind]]
