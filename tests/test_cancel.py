@@ -34,7 +34,8 @@ def big_frame(tmp_path_factory):
     small = folder / "small.exr"
     C.render_passes(sc, str(small))
     with OpenEXR.File(str(small)) as f:
-        ch = {name: np.repeat(np.repeat(np.asarray(c.pixels), 48, 0), 48, 1) for name, c in f.parts[0].channels.items()}
+        # Every part: up to 4.5 one part holds every pass; from 5.0 there is one part per pass.
+        ch = {name: np.repeat(np.repeat(np.asarray(c.pixels), 48, 0), 48, 1) for part in f.parts for name, c in part.channels.items()}
     big = folder / "big.exr"
     with OpenEXR.File({"compression": OpenEXR.NO_COMPRESSION, "type": OpenEXR.scanlineimage}, ch) as f:
         f.write(str(big))

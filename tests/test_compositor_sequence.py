@@ -55,8 +55,7 @@ def _image(img):
 def _composite(tmp_path, name):
     sc = bpy.context.scene
     sc.render.use_compositing = True
-    sc.render.image_settings.file_format = "OPEN_EXR"
-    sc.render.image_settings.color_depth = "32"
+    compat.set_single_layer_exr(sc.render.image_settings, "32")
     sc.render.filepath = str(tmp_path / name)
     bpy.ops.render.render(write_still=True)
     return envmaps.read_exr(tmp_path / f"{name}.exr")[..., :3]
