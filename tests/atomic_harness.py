@@ -139,7 +139,9 @@ def mesh_state(me) -> dict:
     me.vertices.foreach_get("co", co)
     out = {
         "co": _digest(co), "props": _idprops(me),
-        "attributes": {a.name: _attribute(a) for a in me.attributes},
+        # Blender's internal attributes (".select_edge", ".uv_seam", ...) are editor state, not what an
+        # operation edits; 5.0 leaves some uninitialised, so they differ between identical builds.
+        "attributes": {a.name: _attribute(a) for a in me.attributes if not a.name.startswith(".")},
         "materials": [m.name if m else None for m in me.materials],
         "uv_layers": [uv.name for uv in me.uv_layers],
         "shape_keys": None,
