@@ -35,6 +35,9 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 TARGET = ROOT / "addon" / "rokeby"
 ON_PURPOSE = {"compat.py"}
+# Properties that add-ons bundled with Blender register at start-up (Cycles' settings): real in every
+# Blender the add-on runs in, absent from the stubs of the core API.
+BUNDLED_ADDON_PROPERTIES = {"cycles", "cycles_curves", "cycles_visibility"}
 BLENDER_MODULES = ("bpy", "bmesh", "gpu", "gpu_extras", "mathutils", "bpy_extras", "blf", "bl_math", "idprop", "aud", "imbuf")
 
 
@@ -70,24 +73,19 @@ class Stubs:
     def has(self, cls: str, name: str) -> bool:
         """``name`` on ``cls``, a base of it, or a subclass (code typed by a base class, a node typed as
         ``Node``, reaches a subclass's attribute)."""
+        return self._reaches(cls, name, self.bases) or self._reaches(cls, name, self.children)
+
+    def _reaches(self, cls: str, name: str, step: dict) -> bool:
+        """Whether a class reached from ``cls`` through ``step`` (bases or children) defines ``name``."""
         seen, todo = set(), [cls]
-        while todo:  # up
+        while todo:
             c = todo.pop()
             if c in seen:
                 continue
             seen.add(c)
             if name in self.own.get(c, ()):
                 return True
-            todo.extend(self.bases.get(c, ()))
-        seen, todo = set(), [cls]
-        while todo:  # down
-            c = todo.pop()
-            if c in seen:
-                continue
-            seen.add(c)
-            if name in self.own.get(c, ()):
-                return True
-            todo.extend(self.children.get(c, ()))
+            todo.extend(step.get(c, ()))
         return False
 
 
@@ -114,7 +112,8 @@ def classify(diag: dict, stubs: Stubs, union_sites: set) -> str | None:
             return f"enum item not in the newest Blender API: '{m.group(1)}'" if m.group(1) not in stubs.strings else None
     if rule == "reportAttributeAccessIssue":
         m = re.search(r'attribute "([^"]+)" for class "(?:type\[)?([^"\]]+)\]?"', msg)
-        if m and m.group(2) in stubs.own and not m.group(1).startswith("rokeby") and site_of(diag) not in union_sites \
+        if m and m.group(2) in stubs.own and not m.group(1).startswith("rokeby") \
+                and m.group(1) not in BUNDLED_ADDON_PROPERTIES and site_of(diag) not in union_sites \
                 and not stubs.has(m.group(2), m.group(1)):
             return f"not in the newest Blender API: {m.group(2)}.{m.group(1)}"
     if rule in ("reportMissingImports", "reportAttributeAccessIssue") and re.search(r'"(%s)[.\w]*"' % "|".join(BLENDER_MODULES), msg):
