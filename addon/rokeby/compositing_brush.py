@@ -213,6 +213,9 @@ class BrushSession:
         self.depth = p.depth
         self.image, _stats = opened.session(self.layer)  # the identity: the render, bit for bit
         self.image = np.ascontiguousarray(self.image, np.float32)
+        h, w = self.shape
+        self.rgba = np.ones((h, w, 4), np.float32)  # the image as Blender stores it: bottom row first, α = 1
+        self.rgba[..., :3] = self.image[::-1]
         self._applied: list[_Applied] = []
         self._active = None
         self.timings: dict = {}
@@ -224,6 +227,12 @@ class BrushSession:
     @property
     def painting(self) -> bool:
         return self._active is not None
+
+    def _put(self, rows: slice, cols: slice, pixels: np.ndarray) -> None:
+        """Writes recomposited pixels into the window rows × cols of ``image`` and ``rgba``."""
+        h = self.shape[0]
+        self.image[rows, cols] = pixels
+        self.rgba[h - rows.stop:h - rows.start, cols, :3] = pixels[::-1]
 
     def records(self) -> list:
         return [s.record() for s in self.strokes]
@@ -268,7 +277,7 @@ class BrushSession:
         self.layer[rows, cols] = edited[inner]
         t1 = time.perf_counter()
         out, _stats = self.opened.session.window(self.layer[rows, cols], rows, cols)
-        self.image[rows, cols] = out
+        self._put(rows, cols, out)
         box = a["box"]
         a["box"] = (rows, cols) if box is None else (slice(min(box[0].start, rows.start), max(box[0].stop, rows.stop)),
                                                       slice(min(box[1].start, cols.start), max(box[1].stop, cols.stop)))
@@ -308,7 +317,7 @@ class BrushSession:
         if a is not None and a["box"] is not None:
             rows, cols = a["box"]
             self.layer[rows, cols] = a["before_n"][rows, cols]
-            self.image[rows, cols] = a["before_i"][rows, cols]
+            self._put(rows, cols, a["before_i"][rows, cols])
 
     def paint(self, points, radius: float, strength: float, mode: str) -> Stroke:
         """A whole stroke through ``points``; an error when none of its dabs reaches the image
@@ -336,7 +345,7 @@ class BrushSession:
             raise BrushError("no stroke to undo")
         a = self._applied.pop()
         self.layer[a.rows, a.cols] = a.normals
-        self.image[a.rows, a.cols] = a.image
+        self._put(a.rows, a.cols, a.image)
         return a.stroke
 
     def sync(self, records) -> bool:
@@ -419,15 +428,25 @@ def open_brush(path: str, image_name: str = "Rokeby Recomposited", *, fit: str =
 
 
 def show_step(session: BrushSession):
-    """Writes the session's image into its Blender image (the compositor's node follows)."""
-    return _show(session)
+    """Writes the session's image into its Blender image (the compositor's node follows): the
+    whole image from the session's Blender-ordered copy, without reordering it per step."""
+    import bpy  # noqa: PLC0415
+
+    img = bpy.data.images.get(session.image_name)
+    h, w = session.shape
+    if img is None or tuple(img.size) != (w, h) or not img.is_float or img.get(SOURCE_KEY) != session.path:
+        return _show(session)
+    img.pixels.foreach_set(session.rgba.reshape(-1))
+    img.update()
+    comp._keep_compositor_current(img)
+    return img
 
 
 def finish_stroke(session: BrushSession):
     """Ends the stroke in progress and records the strokes on the image (the next undo step
     holds them). Returns the stroke (None if it never reached the image)."""
     stroke = session.end()
-    img = _show(session)
+    img = show_step(session)
     _record(session, img)
     return stroke
 
@@ -444,7 +463,7 @@ def paint_stroke(session: BrushSession, points_px, radius: float, strength: floa
     before = session.image.copy()
     stroke = session.paint(points_px, radius, strength, mode)
     if session.image_name:
-        img = _show(session)
+        img = show_step(session)
         _record(session, img)
     changed = int((session.image != before).any(-1).sum())
     return {"stroke": stroke, "changed_pixels": changed, "seconds": time.perf_counter() - t0}
@@ -463,7 +482,7 @@ def sync_after_undo() -> int:
             continue
         s.cancel()  # a stroke in progress (none, from the UI: undo waits for the stroke's end)
         done += s.sync(list(img.get(STROKES_KEY, [])))
-        _show(s)  # also unchanged strokes: the step may have brought the image back without its pixels
+        show_step(s)  # also unchanged strokes: the step may have brought the image back without its pixels
     return done
 
 
