@@ -188,7 +188,11 @@ class ROKEBY_OT_composite_brush(bpy.types.Operator):
     # --- interactive ------------------------------------------------------------------------
     def invoke(self, context, event):
         if context.area is None or context.area.type != "IMAGE_EDITOR" or context.region is None:
-            return self.execute(context)
+            if len(self.stroke):
+                return self.execute(context)
+            self.report({"ERROR"}, "Rokeby: Paint Normals paints in an Image Editor: open the recomposited image there "
+                                   "and click Paint Normals in its sidebar (Rokeby tab)")
+            return {"CANCELLED"}
         try:
             session = self._open(context)
         except (comp.CompositingError, ValueError, RuntimeError, OSError) as exc:
