@@ -105,7 +105,8 @@ def test_a_stroke_changes_the_image_under_it_only_and_reaches_the_compositor(reg
     dist = _segment_distance(changed.shape, A, Bp)
     assert got["changed_pixels"] == changed.sum() > 100
     assert dist[changed].max() < RADIUS  # the falloff reaches 0 at the radius
-    assert (dist < RADIUS - 1.5)[s.on].sum() <= changed.sum() + 10  # and the sphere's pixels under it all change
+    inner = (dist < RADIUS - 1.5) & s.on
+    assert changed[inner].mean() > 0.95  # and the sphere's pixels well inside it change
     assert np.isfinite(after).all()
     assert img[B.SOURCE_KEY] == str(frame) and len(img[B.STROKES_KEY]) == 1
     # the compositor's Image node reads the brushed image: a render through it outputs the stroke
@@ -200,6 +201,7 @@ def test_modal_events_paint_a_stroke_and_esc_cancels_it(registered, frame):
     assert d.handle(_event("LEFTMOUSE", "PRESS", *_region(10.0, 10.0))) == {"RUNNING_MODAL"}
     d.handle(_event("MOUSEMOVE", "NOTHING", *_region(30.0, 30.0)))
     assert (_pixels(bpy.data.images["Brushed"]) != stroked).any()
+    assert d.handle(_event("Z", "PRESS")) == {"RUNNING_MODAL"}  # held mid-stroke (Ctrl+Z would cut it)
     assert d.handle(_event("ESC", "PRESS")) == {"RUNNING_MODAL"}
     assert _pixels(bpy.data.images["Brushed"]).tobytes() == stroked.tobytes() and d.strokes == 1
     # a drag outside the image changes nothing; Esc between strokes ends the brush

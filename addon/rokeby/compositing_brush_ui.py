@@ -4,7 +4,7 @@ result (the image, and the compositor's Image node reading it) updates at every 
 
 Modal: left drag paints one stroke (one undo step, pushed when the button is released); Esc or
 right mouse during a stroke cancels that stroke, and when no stroke is in progress ends the
-brush; other events (zoom, pan) pass through. A circle of the brush radius follows the mouse (a
+brush; between strokes other events (zoom, pan, Ctrl+Z) pass through, during one they are held. A circle of the brush radius follows the mouse (a
 POST_PIXEL handler of the Image Editor, added and removed by the operator: ``gpu`` is touched
 only there). Exec (scripts): one stroke given as (row, col) pixels. The settings are the
 operator's (remembered between uses; shown in the Image Editor's sidebar, Rokeby tab)."""
@@ -98,7 +98,9 @@ class StrokeDriver:
             return {"RUNNING_MODAL"}
         if t in ("MOUSEMOVE", "INBETWEEN_MOUSEMOVE") and s.painting:
             return self._step(event)
-        return {"PASS_THROUGH"}  # hovering, zooming, panning
+        if s.painting:  # nothing else mid-stroke (an undo now would cut the stroke in two)
+            return {"RUNNING_MODAL"}
+        return {"PASS_THROUGH"}  # hovering, zooming, panning, undo between strokes
 
     def _step(self, event) -> set:
         try:
