@@ -6,9 +6,9 @@ directions, one undo step per stroke, Esc cancels a stroke, bad inputs are named
 
 Background mode has no window, so no Image Editor area and no View2D: the modal part is driven
 through ``StrokeDriver`` (the operator's modal() hands every event to it) with synthetic events,
-and region coordinates are mapped to pixels by ``view_to_pixel`` after a fixed region → view
-scale (what ``View2D.region_to_view`` does for an unzoomed editor); ``region_to_pixel`` itself
-(one call of ``View2D.region_to_view``) does not run here."""
+and window coordinates are mapped to pixels by ``view_to_pixel`` after a fixed window → view
+offset and scale (what ``View2D.region_to_view`` does for an unzoomed editor); ``region_to_pixel``
+itself (one call of ``View2D.region_to_view``) does not run here."""
 
 import types
 
@@ -162,11 +162,11 @@ def test_operator_stroke_is_one_undo_step_and_redo_brings_it_back(registered, fr
 
 
 def _event(kind, value="NOTHING", x=0.0, y=0.0):
-    return types.SimpleNamespace(type=kind, value=value, mouse_region_x=x, mouse_region_y=y)
+    return types.SimpleNamespace(type=kind, value=value, mouse_x=x, mouse_y=y)
 
 
 def _to_pixel(x, y):
-    """Region → pixel for an editor showing the 48-pixel image unzoomed with its corner at (100, 50)."""
+    """Window → pixel for an editor showing the 48-pixel image unzoomed with its corner at (100, 50)."""
     return B.view_to_pixel((x - 100.0) / SIZE, (y - 50.0) / SIZE, (SIZE, SIZE))
 
 

@@ -59,8 +59,9 @@ class RokebyBrushPoint(bpy.types.PropertyGroup):
 
 class StrokeDriver:
     """The brush's modal logic, apart from Blender's event loop: ``handle(event)`` takes an event
-    (``type``, ``value``, ``mouse_region_x``/``_y``) and returns the operator's modal result.
-    ``to_pixel(x, y)`` maps region coordinates to (row, col) pixels; ``redraw()`` after each
+    (``type``, ``value``, ``mouse_x``/``_y``: window coordinates) and returns the operator's modal
+    result. ``to_pixel(x, y)`` maps window coordinates to (row, col) pixels (through the Image
+    Editor's main region, whichever region the button was in); ``redraw()`` after each
     change of the image. Each step writes the image (``compositing_brush.show_step``); a stroke
     that reached the image ends with its record on the image and one undo step."""
 
@@ -72,7 +73,7 @@ class StrokeDriver:
         self.strokes = 0  # strokes ended (undo steps pushed)
 
     def _pixel(self, event):
-        return self.to_pixel(event.mouse_region_x, event.mouse_region_y)
+        return self.to_pixel(event.mouse_x, event.mouse_y)
 
     def _show(self):
         brush.show_step(self.session)
@@ -202,18 +203,21 @@ class ROKEBY_OT_composite_brush(bpy.types.Operator):
             return {"CANCELLED"}
         context.space_data.image = bpy.data.images[session.image_name]
         size = tuple(session.shape[::-1])
-        region = context.region
+        # the image's region (the button sits in the sidebar, another region of the same area)
+        region = next(r for r in context.area.regions if r.type == "WINDOW")
+        self._region = region
         self._driver = StrokeDriver(session, self.radius, self.strength, self.mode.lower(),
-                                    lambda x, y: brush.region_to_pixel(region, size, x, y), context.area.tag_redraw)
+                                    lambda x, y: brush.region_to_pixel(region, size, x - region.x, y - region.y),
+                                    context.area.tag_redraw)
         context.window_manager.modal_handler_add(self)
-        _cursor_show(context, event, self.radius, size)
+        _cursor_show(context, region, event, self.radius, size)
         context.workspace.status_text_set("Rokeby Paint Normals: drag to paint (one undo step per stroke); "
                                           "Esc / right mouse: cancel the stroke, or finish")
         return {"RUNNING_MODAL"}
 
     def modal(self, context, event):
         if event.type in ("MOUSEMOVE", "INBETWEEN_MOUSEMOVE"):
-            _cursor_show(context, event, self.radius, tuple(self._driver.session.shape[::-1]))
+            _cursor_show(context, self._region, event, self.radius, tuple(self._driver.session.shape[::-1]))
         result = self._driver.handle(event)
         if "FINISHED" in result or "CANCELLED" in result:
             _cursor_hide()
@@ -230,11 +234,11 @@ class ROKEBY_OT_composite_brush(bpy.types.Operator):
 _cursor = {"handle": None, "at": None}
 
 
-def _cursor_show(context, event, radius: float, size) -> None:
-    v2d = context.region.view2d
+def _cursor_show(context, region, event, radius: float, size) -> None:
+    v2d = region.view2d
     x0, _y0 = v2d.view_to_region(0.0, 0.0, clip=False)
     x1, _y1 = v2d.view_to_region(1.0, 0.0, clip=False)
-    _cursor["at"] = (event.mouse_region_x, event.mouse_region_y, radius * (x1 - x0) / max(size[0], 1))
+    _cursor["at"] = (event.mouse_x - region.x, event.mouse_y - region.y, radius * (x1 - x0) / max(size[0], 1))
     if _cursor["handle"] is None:
         _cursor["handle"] = bpy.types.SpaceImageEditor.draw_handler_add(_draw_cursor, (), "WINDOW", "POST_PIXEL")
     context.area.tag_redraw()
