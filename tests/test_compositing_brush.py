@@ -292,3 +292,20 @@ def test_window_recompositing_and_steps_match_the_whole_frame_bit_for_bit():
         again.paint(path, 7.0, 0.9, mode)
         again.paint([(40.0, 50.0)], 9.0, 0.5, "bump")
         assert again.image.tobytes() == second.tobytes()
+
+
+def test_an_unrelated_undo_leaves_another_edit_of_the_image_alone(registered, frame):
+    """Recomposite Render into the painted image after a stroke, then an undo of something else:
+    the image keeps the one-knob edit (undo keeps an image's pixels; the brush rewrites them only
+    when the step changed its strokes)."""
+    s = B.open_brush(str(frame), "Rokeby Recomposited")
+    bpy.ops.ed.undo_push(message="opened")
+    B.paint_stroke(s, [A, Bp], RADIUS, 0.8, "emboss")
+    bpy.ops.ed.undo_push(message="stroke")
+    assert bpy.ops.rokeby.composite_edit(filepath=str(frame), edit="EMBOSS", amount=0.3) == {"FINISHED"}
+    knob = _pixels(bpy.data.images["Rokeby Recomposited"])
+    bpy.ops.ed.undo_push(message="recomposite")
+    bpy.ops.mesh.primitive_cube_add(location=(0.0, 5.0, 0.0))
+    bpy.ops.ed.undo_push(message="cube")
+    bpy.ops.ed.undo()
+    assert _pixels(bpy.data.images["Rokeby Recomposited"]).tobytes() == knob.tobytes()

@@ -470,8 +470,8 @@ def paint_stroke(session: BrushSession, points_px, radius: float, strength: floa
 
 
 def sync_after_undo() -> int:
-    """undo_post / redo_post: each open brush takes the strokes the step left on its image and
-    shows them. Returns how many images changed."""
+    """undo_post / redo_post: each open brush takes the strokes the step left on its image and,
+    where they changed, shows them. Returns how many images changed."""
     import bpy  # noqa: PLC0415
 
     done = 0
@@ -480,9 +480,14 @@ def sync_after_undo() -> int:
         if img is None or img.get(SOURCE_KEY, s.path) != s.path:
             s.cancel()
             continue
-        s.cancel()  # a stroke in progress (none, from the UI: undo waits for the stroke's end)
-        done += s.sync(list(img.get(STROKES_KEY, [])))
-        show_step(s)  # also unchanged strokes: the step may have brought the image back without its pixels
+        was_painting = s.painting  # (not from the UI: the brush holds Ctrl+Z until the stroke ends)
+        s.cancel()
+        # Only when the strokes changed: undo keeps an image's pixels as they are, and they may be
+        # another edit's now (Recomposite Render into the same image), which an unrelated undo
+        # must not overwrite.
+        if s.sync(list(img.get(STROKES_KEY, []))) or was_painting:
+            show_step(s)
+            done += 1
     return done
 
 
