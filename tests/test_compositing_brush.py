@@ -223,8 +223,10 @@ def test_region_to_pixel_mapping():
 
 
 def test_strokes_survive_save_and_reload(registered, frame, tmp_path):
-    s = B.open_brush(str(frame), "Brushed")
-    B.paint_stroke(s, [A, Bp], RADIUS, 0.6, "bump")
+    from rokeby import api
+
+    s = api.open_normal_brush(str(frame), "Brushed")  # the facade: the same session and stroke
+    api.paint_normals(s, [A, Bp], radius=RADIUS, strength=0.6, mode="bump")
     B.paint_stroke(s, [(10.0, 24.0), (38.0, 24.0)], RADIUS, 0.6, "emboss")
     want = _pixels(bpy.data.images["Brushed"])
     bpy.ops.wm.save_as_mainfile(filepath=str(tmp_path / "brushed.blend"))
