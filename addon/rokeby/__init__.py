@@ -13,6 +13,19 @@ from __future__ import annotations
 
 __all__ = ["register", "unregister", "is_registered"]
 
+from . import _legacy
+
+_legacy.install(__name__)  # old module paths (rokeby.evaluate, rokeby.shading, ...) name the moved modules
+
+
+def __getattr__(name: str):
+    """``rokeby.shading`` and the other old module names as attributes (they moved: rokeby._legacy)."""
+    if name in _legacy.MOVED:
+        import importlib
+
+        return importlib.import_module(f"{__name__}.{name}")
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+
 _registered = False
 
 
@@ -21,7 +34,12 @@ def is_registered() -> bool:
 
 
 def _modules():
-    from . import appearance_ui, compositing_ui, handlers, operators, prefs, props, shadow_ui, ui, viewport
+    from .appearance import ui as appearance_ui
+    from .compositing import ui as compositing_ui
+    from .reflection import handlers, operators, props, ui
+    from .blender import prefs
+    from .shadow import ui as shadow_ui
+    from .reflection.viewport import draw as viewport
 
     # ui after every module with operators: its menus name them all.
     return (prefs, props, operators, handlers, viewport, appearance_ui, compositing_ui, shadow_ui, ui)

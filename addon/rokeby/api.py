@@ -14,7 +14,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from . import native, transaction, words
+from .core import native, words
+from .blender import transaction
 
 __all__ = [
     "reflect",
@@ -236,8 +237,8 @@ def geodesic_distances(vertices, faces, sources, *, method: str = "heat", bounda
 # Everything below needs Blender. The operators in rokeby.operators are thin wrappers of these
 # functions, and background scripts (render farms, pipelines) call them directly.
 
-from . import evaluate as _ev  # noqa: E402 - aliased: api.evaluate is a function
-from .evaluate import ATTRIBUTE, MirrorReport, RokebyError, rotate  # noqa: E402
+from .reflection import evaluate as _ev  # noqa: E402 - aliased: api.evaluate is a function
+from .reflection.evaluate import ATTRIBUTE, MirrorReport, RokebyError, rotate  # noqa: E402
 
 HANDLE_COLLECTION = "Rokeby Handles"
 
@@ -301,7 +302,7 @@ def mirror_of(obj, scene=None):
         return None
     if obj.rokeby.is_mirror:
         return obj
-    from . import registry  # noqa: PLC0415
+    from .reflection import registry  # noqa: PLC0415
 
     for m in registry.mirrors(_scene(scene)):
         if any(obj in (c.surface_handle, c.target_handle) for c in m.rokeby.constraints) or any(obj == rg.center for rg in m.rokeby.regions):
@@ -344,7 +345,7 @@ def _new_empty(scene, name, location, display, size, color):
     ob.location = [float(x) for x in location]
     ob.color = color
     ob.show_name = False
-    from .registry import MADE_KEY  # noqa: PLC0415
+    from .reflection.registry import MADE_KEY  # noqa: PLC0415
 
     ob[MADE_KEY] = True  # goes with the last mirror that uses it (rokeby.registry)
     _handle_collection(scene).objects.link(ob)
@@ -354,7 +355,7 @@ def _new_empty(scene, name, location, display, size, color):
 def _remove_objects(objs):
     import bpy  # noqa: PLC0415
 
-    from . import registry  # noqa: PLC0415
+    from .reflection import registry  # noqa: PLC0415
 
     for ob in objs:
         try:
@@ -402,7 +403,7 @@ def add_constraint(mirror, surface_point, reflected_point=None, *, eye=None, vie
     """
     scene = _scene(scene)
     _require_mirror(mirror)
-    from .props import CONSTRAINT_KINDS  # noqa: PLC0415 - Blender only
+    from .reflection.props import CONSTRAINT_KINDS  # noqa: PLC0415 - Blender only
 
     kinds = [item[0] for item in CONSTRAINT_KINDS]
     if kind not in kinds:
@@ -469,7 +470,7 @@ def add_constraint(mirror, surface_point, reflected_point=None, *, eye=None, vie
 
 def _handle_users(scene, ob, skip=None):
     """How many constraints and regions (of any mirror in the file, ``skip`` aside) use ``ob``."""
-    from . import registry  # noqa: PLC0415
+    from .reflection import registry  # noqa: PLC0415
 
     n = 0
     for m in registry.mirrors():
@@ -489,7 +490,7 @@ def _index(collection, index, what):
 
 
 def _made_here(ob) -> bool:
-    from .registry import made_by_addon  # noqa: PLC0415
+    from .reflection.registry import made_by_addon  # noqa: PLC0415
 
     try:
         return made_by_addon(ob)
@@ -628,7 +629,8 @@ def remove_mirror(mirror, *, scene=None):
     node groups removed once nothing uses them. Handles, centres and data another mirror uses
     stay: a mesh shared with other mirrors keeps its attributes (it holds no field of this one:
     that lives in this mirror's own carrier, removed here)."""
-    from . import registry, rendering  # noqa: PLC0415
+    from .reflection import registry  # noqa: PLC0415
+    from .reflection.render import rendering  # noqa: PLC0415
 
     scene = _scene(scene)
     _require_mirror(mirror)
@@ -657,7 +659,7 @@ def evaluate(scene=None, frame=None, *, force: bool = False) -> "dict[str, Mirro
     """Bring every mirror of ``scene`` up to date (at ``frame`` when given, which may be
     fractional) and return a report per mirror. Only mirrors whose inputs changed are recomputed,
     unless ``force``. Never raises for a bad mirror: its report says what is wrong."""
-    from . import handlers  # noqa: PLC0415
+    from .reflection import handlers  # noqa: PLC0415
 
     global _SETTING_FRAME
     scene = _scene(scene)
@@ -689,7 +691,7 @@ def evaluate(scene=None, frame=None, *, force: bool = False) -> "dict[str, Mirro
         edited = _ev.edited_meshes(scene)
         dg = _depsgraph(scene)
         reports = _ev.evaluate_scene(scene, dg, force=force, geometry_changed=edited, all_geometry=frame is not None)
-        from . import rendering  # noqa: PLC0415
+        from .reflection.render import rendering  # noqa: PLC0415
 
         # Final renders follow: render nodes in every edited material (see rokeby.rendering).
         rendering.sync_scene(scene, reports, force=force)
@@ -739,7 +741,7 @@ def ior_from_material(mirror, material=None) -> float:
     """Take the mirror's IOR from its material: the IOR input of the first Glass, Refraction or
     Principled BSDF (with transmission) found in ``material`` (default: the edited materials in
     order). The IOR must be a plain value, not linked. Returns the IOR now set."""
-    from . import refraction  # noqa: PLC0415
+    from .reflection.render import refraction  # noqa: PLC0415
 
     _require_mirror(mirror)
     materials = [material] if material is not None else edited_materials(mirror)
@@ -769,7 +771,7 @@ def reset_stats():
 def edited_materials(mirror) -> list:
     """The materials whose reflections are edited: every material of the mirror unless a
     subset was chosen with ``set_edited_materials``."""
-    from . import rendering  # noqa: PLC0415
+    from .reflection.render import rendering  # noqa: PLC0415
 
     _require_mirror(mirror)
     return rendering.edited_materials(mirror)
@@ -808,7 +810,7 @@ def install_render_nodes(mirror) -> int:
     Returns how many BSDF inputs (ray traced) or BSDFs (reflection map) were rewired. In both
     modes "Rokeby Edited Refraction Normal" feeds Refraction BSDFs and split Glass BSDFs first
     (rokeby.refraction; counted too), so a split Glass's reflection part is edited as well."""
-    from . import rendering  # noqa: PLC0415
+    from .reflection.render import rendering  # noqa: PLC0415
 
     _require_mirror(mirror)
     count = rendering.install(mirror)
@@ -822,13 +824,13 @@ def remove_render_nodes(mirror) -> int:
     off (so evaluation does not put them back); returns from how many materials they went. On an
     object that is no longer a mirror (after Remove Mirror) it takes out whatever nodes are left in
     its materials that no other mirror keeps."""
-    from . import rendering  # noqa: PLC0415
+    from .reflection.render import rendering  # noqa: PLC0415
 
     _check_mirror(mirror)
     mats = {slot.material for slot in mirror.material_slots if slot.material is not None}
     if not mirror.rokeby.is_mirror:
         # A former mirror (Remove Mirror): its materials lose nodes no remaining mirror keeps.
-        from . import registry  # noqa: PLC0415
+        from .reflection import registry  # noqa: PLC0415
 
         kept = {mat for ob in registry.mirrors() if ob.type == "MESH" and rendering.kept(ob) for mat in rendering.edited_materials(ob)}
         return sum(rendering.uninstall_material(mat) for mat in mats if mat not in kept)
@@ -848,7 +850,7 @@ def capture_reflection_map(mirror, *, resolution=None, samples=None, storage: st
     ``map_samples``); ``storage``: 'AUTO' (an OpenEXR cache in //rokeby_maps/ when the .blend is
     saved, else packed), 'FILE' or 'PACK'. Materials already in reflection-map mode show the new
     map at once. Returns the image. See rokeby.reflmap."""
-    from . import reflmap  # noqa: PLC0415
+    from .reflection.render import reflmap  # noqa: PLC0415
 
     return reflmap.capture(mirror, resolution=resolution, samples=samples, storage=storage, scene=scene)
 
@@ -856,7 +858,7 @@ def capture_reflection_map(mirror, *, resolution=None, samples=None, storage: st
 def reflection_map(mirror):
     """The captured lat-long image of ``mirror`` (Blender's equirectangular convention:
     ``rokeby.reflmap.direction_to_uv``), or None."""
-    from . import reflmap  # noqa: PLC0415
+    from .reflection.render import reflmap  # noqa: PLC0415
 
     _require_mirror(mirror)
     return reflmap.image_for(mirror)

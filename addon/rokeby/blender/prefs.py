@@ -6,8 +6,8 @@ never in a .blend; settings that belong to a file (brush settings, the viewport 
 live on the Scene (see ``appearance_ui`` and ``viewport``).
 
 The class's ``bl_idname`` is the add-on's package name: ``rokeby`` as a legacy add-on,
-``bl_ext.<repository>.rokeby`` as an extension; this module sits at the package's root, so its
-``__package__`` is that name in both cases. Code reads the preferences through :func:`get`,
+``bl_ext.<repository>.rokeby`` as an extension; this module sits in the package's ``blender``
+folder, so its ``__package__`` less the last part is that name in both cases. Code reads the preferences through :func:`get`,
 which also answers (with the defaults) where the add-on is registered without Blender knowing it
 as an add-on (``import rokeby; rokeby.register()`` with bpy as a Python module, render farms).
 """
@@ -19,7 +19,7 @@ from types import SimpleNamespace
 import bpy
 from bpy.props import BoolProperty, EnumProperty, StringProperty
 
-PACKAGE = __package__
+PACKAGE = __package__.rpartition(".")[0]  # the add-on's package: this module is in its blender/ folder
 
 COMPOSITING_BACKENDS = [
     ("CPU", "CPU", "Eqs. 3–5 in the Rust core: works everywhere, including background mode", 0),

@@ -41,7 +41,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from . import native, words
+from ..core import native, words
 
 ATTRIBUTE = "rokeby_rotation"
 # What final renders read (rokeby.shading): the field's view-independent parts per vertex (per
@@ -438,7 +438,7 @@ def _reader_ids(mod) -> dict:
 
 def _reader_group(mod) -> "str | None":
     """The vertex group a reader modifier reads (None: none set)."""
-    from . import compat  # noqa: PLC0415
+    from ..blender import compat  # noqa: PLC0415
 
     ident = _reader_ids(mod).get("Vertex Group")
     return compat.modifier_input(mod, ident) if ident is not None else None
@@ -462,7 +462,7 @@ def ensure_reader(obj, group: str, renamed_from: "str | None" = None) -> "str | 
     applied, e.g. by Convert ▸ Mesh, leaves a baked copy of the weights in the mesh: it is
     removed), repointed after a rename. Returns what changed when the evaluated mesh must be
     evaluated again before the weights can be read (None: nothing)."""
-    from . import compat  # noqa: PLC0415
+    from ..blender import compat  # noqa: PLC0415
 
     attribute = REGION_ATTRIBUTE_PREFIX + group
     mod = find_reader(obj, group)
@@ -1378,7 +1378,7 @@ def ensure_carrier(obj, depsgraph):
         mod.show_in_editmode = False
     if mod.node_group is None or mod.node_group.name != TRANSFER_GROUP or mod.node_group.get("rokeby_version") != TRANSFER_VERSION:
         mod.node_group = _transfer_group()
-    from . import compat  # noqa: PLC0415
+    from ..blender import compat  # noqa: PLC0415
 
     ident = next(i.identifier for i in mod.node_group.interface.items_tree if getattr(i, "in_out", "") == "INPUT" and i.name == "Source")
     if compat.modifier_input(mod, ident) != carrier:
@@ -1402,7 +1402,7 @@ def remove_carrier(obj) -> bool:
     if carrier is not None:
         mesh = carrier.data
         obj.rokeby.field_carrier = None
-        from . import transaction  # noqa: PLC0415
+        from ..blender import transaction  # noqa: PLC0415
 
         transaction.remove(carrier)
         if mesh is not None:

@@ -38,7 +38,8 @@ from functools import lru_cache
 
 import numpy as np
 
-from . import envmaps, glsl
+from .. import envmaps
+from ..core import shaders as glsl
 
 FILES = {
     "types": "rokeby_appearance_types.glsl",

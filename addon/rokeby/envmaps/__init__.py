@@ -18,7 +18,7 @@ from pathlib import Path
 
 import numpy as np
 
-from . import native
+from ..core import native
 
 LAYOUTS = ("latlong", "cube", "sphere", "paraboloid")
 LOBES = ("phong", "ggx", "torrance_sparrow")
@@ -93,7 +93,7 @@ def write_exr(path, pixels) -> Path:
     data = px[..., 0] if name == "Y" else px
     header = {"compression": OpenEXR.ZIP_COMPRESSION, "type": OpenEXR.scanlineimage}
     path = Path(path)
-    from . import transaction  # noqa: PLC0415
+    from ..blender import transaction  # noqa: PLC0415
 
     with OpenEXR.File(header, {name: np.ascontiguousarray(data)}) as f:
         transaction.write_whole(path, f.write)  # no half-written file, the old one kept on failure

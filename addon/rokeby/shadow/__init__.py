@@ -30,7 +30,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from . import native, transaction
+from ..core import native
+from ..blender import transaction
 
 SHADOW_SUFFIX = " Shadow Mesh"
 TWIN_SUFFIX = " (edited shadows)"
@@ -204,7 +205,7 @@ def start(caster, light, receivers=None, *, scene=None, min_loop_vertices: int =
     caster's bounds, nothing under the light) are :class:`ShadowEditError` naming the cause."""
     import bpy  # noqa: PLC0415 - Blender only
 
-    from . import api  # noqa: PLC0415
+    from .. import api  # noqa: PLC0415
 
     sc = scene if scene is not None else bpy.context.scene
     if caster is None or caster.type != "MESH":
@@ -423,7 +424,7 @@ def _is_light(ob) -> bool:
 def _stored(o) -> bool:
     """Whether ``o`` has ever had shadow links written (their ID property group exists). Cheap (no
     RNA access)."""
-    from . import compat  # noqa: PLC0415
+    from ..blender import compat  # noqa: PLC0415
 
     return compat.stored_group(o, "rokeby_shadow") is not None
 
@@ -431,7 +432,7 @@ def _stored(o) -> bool:
 def _parts():
     """(shadow meshes, twin lights, lights holding links) in the file, from the registry of what
     the add-on owns (no pass over every object)."""
-    from . import registry  # noqa: PLC0415
+    from ..reflection import registry  # noqa: PLC0415
 
     meshes, twins, lights = [], [], []
     if not _registered():
@@ -452,7 +453,7 @@ def _parts():
 
 def _self_blockers():
     """Self-shadow meshes in the file (from the registry)."""
-    from . import registry  # noqa: PLC0415
+    from ..reflection import registry  # noqa: PLC0415
 
     if not _registered():
         return []
@@ -621,7 +622,7 @@ def _collect_orphan_collections() -> None:
 
 
 def _data_version() -> int:
-    from .props import SHADOW_DATA_VERSION  # noqa: PLC0415
+    from ..reflection.props import SHADOW_DATA_VERSION  # noqa: PLC0415
 
     return SHADOW_DATA_VERSION
 
@@ -1158,7 +1159,7 @@ def sync_falloffs(scene) -> int:
     meshes whose light or caster is gone keep their values."""
 
     written = 0
-    from . import registry  # noqa: PLC0415
+    from ..reflection import registry  # noqa: PLC0415
 
     for ob in _parts()[0]:
         if not registry.in_scene(ob, scene):

@@ -31,8 +31,8 @@ import uuid
 
 import bpy
 
-from . import transaction
-from .evaluate import RENDER_ATTRIBUTE, RENDER_ATTRIBUTE_WA, RokebyError
+from ...blender import transaction
+from ..evaluate import RENDER_ATTRIBUTE, RENDER_ATTRIBUTE_WA, RokebyError
 
 DIRECTION_GROUP = "Rokeby Edited Direction"
 GROUP = "Rokeby Edited Normal"

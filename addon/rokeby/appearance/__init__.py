@@ -35,7 +35,8 @@ import math
 
 import numpy as np
 
-from . import transaction, words
+from ..blender import transaction
+from ..core import words
 
 # brush → (attribute, Principled input, default when the material has no value, clamp range)
 PARAMS = {

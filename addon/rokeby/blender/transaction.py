@@ -109,7 +109,7 @@ class Transaction:
 
         import bpy  # noqa: PLC0415
 
-        from . import shading  # noqa: PLC0415
+        from ..reflection.render import shading  # noqa: PLC0415
 
         d = bpy.data
         self.removed: list = []
@@ -222,7 +222,7 @@ class Transaction:
     def rollback(self) -> None:  # noqa: C901 - one pass per kind of data
         import bpy  # noqa: PLC0415
 
-        from . import shading  # noqa: PLC0415
+        from ..reflection.render import shading  # noqa: PLC0415
 
         d = bpy.data
         for fn in reversed(self.undo_hooks):
@@ -460,7 +460,7 @@ def none(*_args, **_kwargs) -> list:
 def of_mirrors(obj=None, *_args, **_kwargs) -> list:
     """For ``atomic(materials=of_mirrors)``: the materials of ``obj`` and of every mirror (the
     render nodes of all of them may be synced)."""
-    from . import registry  # noqa: PLC0415
+    from ..reflection import registry  # noqa: PLC0415
 
     obs = [*registry.mirrors(), obj]
     out = []

@@ -41,7 +41,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from . import native, transaction
+from ..core import native
+from ..blender import transaction
 
 AOV_REFLOCC = "rokeby_reflocc"
 AOV_CAMERA_X = "rokeby_camera_x"
@@ -185,7 +186,7 @@ def setup_passes(scene, view_layer=None) -> list[str]:
         if not m.use_nodes:
             m.use_nodes = True
         _material_nodes(m)
-    from . import compat  # noqa: PLC0415
+    from ..blender import compat  # noqa: PLC0415
 
     compat.set_multilayer_exr(scene.render.image_settings, "32")
     return list(PASSES)
@@ -261,7 +262,7 @@ def feed_compositor(scene, image):
         raise CompositingError("image: none given: click Render and Recomposite (or Recomposite Render) first")
     if scene is None:
         raise CompositingError("scene: none given")
-    from . import compat  # noqa: PLC0415
+    from ..blender import compat  # noqa: PLC0415
 
     tree = compat.compositor_tree(scene, create=True)
     node = tree.nodes.get(COMPOSITOR_NODE)
@@ -286,7 +287,7 @@ def _keep_compositor_current(img) -> None:
     new image when the frame size changes) and the compositor sees the new pixels."""
     import bpy
 
-    from . import compat  # noqa: PLC0415
+    from ..blender import compat  # noqa: PLC0415
 
     for sc in bpy.data.scenes:
         tree = compat.compositor_tree(sc)
@@ -723,7 +724,7 @@ class RecompositeSession:
 
     def _backend(self):
         if self.backend == "blender_gpu":
-            from . import recomposite_gpu as in_blender  # noqa: PLC0415 - not the module-level recomposite_gpu below
+            from . import blender_gpu as in_blender  # noqa: PLC0415 - not the module-level recomposite_gpu below
 
             in_blender.ensure_context()
             return in_blender.blender_recompositor()
@@ -847,7 +848,7 @@ RECOMPOSITE_INTERFACE_NAME = "rokeby_recomposite_iface"
 def recomposite_files() -> dict:
     """The recompositing shader's sources as ``glsl.create_shader`` / ``glsl.standalone_from`` take
     them (no types block, no library: the fragment file holds its helpers)."""
-    from . import glsl
+    from ..core import shaders as glsl
 
     d = glsl.shader_dir()
     return {"types": "", "lib": "", "vertex": (d / RECOMPOSITE_FILES["vertex"]).read_text(),
@@ -856,7 +857,7 @@ def recomposite_files() -> dict:
 
 def recomposite_sources(version: str = "330 core") -> tuple[str, str]:
     """(vertex, fragment) GLSL of the recompositing pass for a plain OpenGL context."""
-    from . import glsl
+    from ..core import shaders as glsl
 
     return glsl.standalone_from(RECOMPOSITE_INTERFACE, recomposite_files(), version)
 

@@ -14,7 +14,9 @@ from __future__ import annotations
 import bpy
 import numpy as np
 
-from . import compat, shadow, words
+from ..blender import compat
+from .. import shadow
+from ..core import words
 
 _SESSIONS: dict = {}
 _OVERLAY: dict = {}

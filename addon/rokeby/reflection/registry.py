@@ -29,8 +29,8 @@ import contextlib
 
 import bpy
 
-from . import transaction
-from .compat import stored_group
+from ..blender import transaction
+from ..blender.compat import stored_group
 
 # Custom properties of the objects a shadow edit makes (rokeby.shadow).
 SHADOW_KEYS = ("rokeby_shadow_of", "rokeby_twin_of")  # before shadow links were pointers (shadow.migrate)
@@ -228,7 +228,7 @@ def _pointers(mirror):
 
 
 def _uses(mirror) -> dict:
-    from . import rendering  # noqa: PLC0415
+    from .render import rendering  # noqa: PLC0415
 
     carrier = getattr(mirror.rokeby, "field_carrier", None)
     return {
@@ -331,7 +331,7 @@ def release(found, objects=(), carrier=(), materials=()) -> None:
     """Remove what no mirror of ``found`` uses any more: add-on-made handles and centres in
     ``objects``, unused ``carrier`` objects, the render nodes of ``materials`` no mirror keeps;
     then the handle collection when empty and the add-on's unused node groups."""
-    from . import rendering  # noqa: PLC0415
+    from .render import rendering  # noqa: PLC0415
 
     used = _refcounts(found)
     for ob in dict.fromkeys(o for o in objects if _alive(o)):
@@ -364,7 +364,8 @@ def drop_empty_handle_collection() -> bool:
 
 
 def _our_group(ng) -> bool:
-    from . import evaluate, reflmap, refraction, shading  # noqa: PLC0415
+    from . import evaluate  # noqa: PLC0415
+    from .render import reflmap, refraction, shading  # noqa: PLC0415
 
     names = {shading.GROUP, shading.DIRECTION_GROUP, refraction.GROUP, reflmap.SHARED_GROUP, evaluate.VG_NODE_GROUP,
              evaluate.TRANSFER_GROUP}

@@ -25,7 +25,7 @@ material slots), so an update costs a tuple comparison per mirror.
 from __future__ import annotations
 
 from . import reflmap, refraction, shading
-from .evaluate import RokebyError
+from ..evaluate import RokebyError
 
 _KEYS: dict = {}
 _NOTES: dict = {}
@@ -109,7 +109,7 @@ def sync_scene(scene, reports=None, *, changed_materials=(), force=False) -> boo
     fills each mirror's report (``renders``, ``render_note``). ``changed_materials``: materials
     or node trees Blender reported as edited (their nodes are checked again). Returns whether
     anything was (re)installed or removed. Never raises: problems go into the reports."""
-    from . import registry  # noqa: PLC0415 - what the add-on owns: no pass over the scene's objects
+    from .. import registry  # noqa: PLC0415 - what the add-on owns: no pass over the scene's objects
 
     mirrors = [ob for ob in registry.mirrors(scene) if ob.type == "MESH" and (reports is None or ob.name in reports)]
     done = _KEYS.setdefault(scene.session_uid, {})
@@ -165,7 +165,7 @@ def sync_scene(scene, reports=None, *, changed_materials=(), force=False) -> boo
             _NOTES[m.session_uid] = (None, f"renders show no edit: {why}")
         rep = (reports or {}).get(m.name)
         if rep is None:
-            from . import evaluate  # noqa: PLC0415
+            from .. import evaluate  # noqa: PLC0415
 
             rep = evaluate.report_of(m)
         note = _NOTES.get(m.session_uid)

@@ -22,7 +22,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from . import appearance, appearance_glsl, envmaps, glsl
+from .. import appearance, envmaps
+from . import glsl as appearance_glsl
+from ..blender import gpu as glsl
 
 _shader = None
 
@@ -416,7 +418,7 @@ def _draw():
     global last_error
     import bpy
 
-    from . import prefs
+    from ..blender import prefs
 
     ctx = bpy.context
     rv3d = ctx.region_data

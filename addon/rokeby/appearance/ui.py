@@ -12,7 +12,9 @@ from __future__ import annotations
 import bpy
 from bpy.props import CollectionProperty, EnumProperty, FloatProperty, FloatVectorProperty, IntProperty, PointerProperty, StringProperty
 
-from . import appearance, compat, words
+from .. import appearance
+from ..blender import compat
+from ..core import words
 
 # Explicit item numbers: Blender stores the number, so new brushes are appended with new numbers
 # (files saved before issue 22 stored 0-6 without explicit numbers, which are these).
@@ -371,14 +373,15 @@ class ROKEBY_OT_appearance_preview(bpy.types.Operator):
 
     @classmethod
     def poll(cls, context):
-        from . import appearance_preview, prefs
+        from . import preview as appearance_preview
+        from ..blender import prefs
 
         if not appearance_preview.enabled() and not prefs.get(context).gpu_viewport_preview:
             return _fail(cls, "GPU viewport previews are switched off in Rokeby's add-on preferences")
         return True
 
     def execute(self, context):
-        from . import appearance_preview
+        from . import preview as appearance_preview
 
         appearance_preview.enable(not appearance_preview.enabled())
         for area in context.screen.areas if context.screen else ():
@@ -422,7 +425,7 @@ class ROKEBY_OT_appearance_render_difference(bpy.types.Operator):
         return _poll_painted(cls, context)
 
     def execute(self, context):
-        from . import appearance_glsl, appearance_preview
+        from . import glsl as appearance_glsl, preview as appearance_preview
 
         s = _settings(context)
         px = appearance_preview.world_pixels(context.scene)
@@ -528,7 +531,7 @@ class ROKEBY_PT_appearance_brush(_PaintedSubPanel, bpy.types.Panel):
         col.prop(s, "strength")
         col.prop(s, "color" if s.brush in appearance.COLORS else "value")
         layout.operator(ROKEBY_OT_appearance_paint.bl_idname, icon="BRUSH_DATA")
-        from . import appearance_preview
+        from . import preview as appearance_preview
 
         on = appearance_preview.enabled()
         layout.operator(ROKEBY_OT_appearance_preview.bl_idname, text="Hide Preview" if on else "Preview Under the World", icon="SHADING_RENDERED", depress=on)
@@ -583,7 +586,7 @@ def register():
 
 
 def unregister():
-    from . import appearance_preview
+    from . import preview as appearance_preview
 
     appearance_preview.enable(False)
     show_cursor(None)

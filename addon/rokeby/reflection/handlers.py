@@ -31,7 +31,10 @@ import contextlib
 import bpy
 from bpy.app.handlers import persistent
 
-from . import appearance, compat, evaluate, registry, rendering, shading, shadow
+from .. import appearance, shadow
+from ..blender import compat
+from . import evaluate, registry
+from .render import rendering, shading
 
 _busy = False
 _suspend = 0

@@ -9,7 +9,10 @@ from __future__ import annotations
 
 import bpy
 
-from . import api, evaluate, native, viewport, words
+from .. import api
+from . import evaluate
+from ..core import native, words
+from .viewport import draw as viewport
 from .props import METRICS
 
 _STATUS_ICON = {"OK": "CHECKMARK", "WARNING": "ERROR", "ERROR": "CANCEL", "DISABLED": "HIDE_ON"}
@@ -253,7 +256,7 @@ class ROKEBY_PT_render(_MirrorSubPanel, bpy.types.Panel):
 
 
 def _draw_reflection_map(layout, mirror, scene):
-    from . import reflmap  # noqa: PLC0415
+    from .render import reflmap  # noqa: PLC0415
 
     s = mirror.rokeby
     box = layout.box()

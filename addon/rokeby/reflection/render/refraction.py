@@ -67,8 +67,9 @@ import uuid
 import bpy
 import numpy as np
 
-from . import shading, transaction
-from .evaluate import REFRACTION_ATTRIBUTE, RokebyError
+from . import shading
+from ...blender import transaction
+from ..evaluate import REFRACTION_ATTRIBUTE, RokebyError
 from .shading import mix_vector, scalar_math, vector_math
 
 GROUP = "Rokeby Edited Refraction Normal"

@@ -42,8 +42,9 @@ import uuid
 
 import numpy as np
 
-from . import shading, transaction
-from .evaluate import RokebyError
+from . import shading
+from ...blender import transaction
+from ..evaluate import RokebyError
 
 # Widths of the panorama (height = width / 2); the UI offers these, the API any power of two.
 RESOLUTIONS = (256, 512, 1024, 2048)
@@ -62,7 +63,7 @@ ID_CHARS = 12
 def cache_dir() -> str:
     """Where FILE storage writes maps: the add-on preferences' Reflection Map Cache folder when set
     (a machine-level choice), else ``CACHE_DIR`` next to the .blend."""
-    from . import prefs  # noqa: PLC0415
+    from ...blender import prefs  # noqa: PLC0415
 
     folder = prefs.get().cache_folder
     return folder.rstrip("/\\") + "/" if folder else CACHE_DIR
@@ -168,7 +169,7 @@ def prefilter(px: np.ndarray, roughness_levels=ROUGHNESS_LEVELS) -> list:
 
 
 def _api():
-    from . import api  # noqa: PLC0415 - api imports evaluate; keep the import graph acyclic
+    from ... import api  # noqa: PLC0415 - api imports evaluate; keep the import graph acyclic
 
     return api
 
@@ -334,7 +335,8 @@ def _render_panorama(scene, mirror, origin, width: int, samples: int) -> np.ndar
     """Render the equirectangular panorama (H, W, 3) float32, row 0 at the bottom."""
     import bpy  # noqa: PLC0415
 
-    from . import compat, handlers  # noqa: PLC0415
+    from ...blender import compat  # noqa: PLC0415
+    from .. import handlers  # noqa: PLC0415
 
     height = width // 2
     tmp = tempfile.mkdtemp(prefix="rokeby_capture_")
@@ -501,7 +503,7 @@ def capture(mirror, *, resolution=None, samples=None, storage: str = "AUTO", sce
     if not isinstance(samples, (int, np.integer)) or samples < 1:
         raise RokebyError(f"samples: expected a whole number >= 1, got {samples!r}")
     storage = _storage(storage)
-    from . import registry  # noqa: PLC0415
+    from .. import registry  # noqa: PLC0415
 
     if not registry.in_scene(mirror, scene):
         raise RokebyError(f"mirror: '{mirror.name}' is not in scene '{scene.name}'")

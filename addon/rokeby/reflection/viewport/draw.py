@@ -23,7 +23,9 @@ from __future__ import annotations
 import numpy as np
 import bpy
 
-from . import compat, evaluate, glsl
+from ...blender import compat
+from .. import evaluate
+from . import glsl
 
 DEPTH_BIAS = 2e-5
 _CIRCLE_SEGMENTS = 64
@@ -327,7 +329,7 @@ def _draw_callback():
         scene = context.scene
         if scene is None or not getattr(scene, "rokeby_viewport_preview", False):
             return
-        from . import prefs  # noqa: PLC0415
+        from ...blender import prefs  # noqa: PLC0415
 
         if not prefs.get(context).gpu_viewport_preview:  # the machine's opt-out (add-on preferences)
             return

@@ -18,20 +18,11 @@ from __future__ import annotations
 import math
 import re
 from dataclasses import dataclass, field
-from pathlib import Path
 
 import numpy as np
 
-_HERE = Path(__file__).resolve().parent
-
-
-def shader_dir() -> Path:
-    """``shaders/`` next to the add-on when packaged, else the checkout's top-level ``shaders/``."""
-    for candidate in (_HERE / "shaders", _HERE.parents[1] / "shaders"):
-        if (candidate / "rokeby_field_lib.glsl").is_file():
-            return candidate
-    raise FileNotFoundError(f"Rokeby's GLSL files (rokeby_field_lib.glsl) were found neither in {_HERE / 'shaders'} nor in {_HERE.parents[1] / 'shaders'}")
-
+from ...blender.gpu import create_shader  # noqa: F401 - glsl.create_shader, as before
+from ...core.shaders import shader_dir, standalone_from, standalone_header  # noqa: F401 - re-exported
 
 FILES = {
     "types": "rokeby_field_types.glsl",
@@ -74,71 +65,6 @@ INTERFACE = {
     "fragment_out": [(0, "VEC4", "rk_out")],
 }
 INTERFACE_NAME = "rokeby_preview_iface"
-
-_GLSL_TYPE = {"VEC2": "vec2", "VEC3": "vec3", "VEC4": "vec4", "MAT4": "mat4", "FLOAT": "float", "INT": "int",
-              "IVEC3": "ivec3", "FLOAT_2D": "sampler2D", "FLOAT_2D_ARRAY": "sampler2DArray"}
-
-
-def standalone_header(interface: dict, types: str, version: str = "330 core") -> list[str]:
-    """The declarations a plain OpenGL context needs for a shader described by ``interface`` (in
-    GPUShaderCreateInfo's terms): version, the types file, uniform blocks, push constants as
-    uniforms, samplers."""
-    common = [f"#version {version}", types]
-    for _slot, type_name, name in interface["uniform_buf"]:
-        common.append(f"layout(std140) uniform {name}_block {{ {type_name} {name}; }};")
-    for type_name, name in interface["push_constant"]:
-        common.append(f"uniform {_GLSL_TYPE[type_name]} {name};")
-    for _slot, type_name, name in interface["sampler"]:
-        common.append(f"uniform {_GLSL_TYPE[type_name]} {name};")
-    return common
-
-
-def standalone_from(interface: dict, src: dict, version: str = "330 core") -> tuple[str, str]:
-    """(vertex, fragment) for a plain OpenGL context (moderngl): a header generated from
-    ``interface``, then the same files (``src``: types, lib, vertex, fragment) Blender compiles."""
-    common = standalone_header(interface, src["types"], version)
-    vert = list(common)
-    for slot, type_name, name in interface["vertex_in"]:
-        vert.append(f"layout(location = {slot}) in {_GLSL_TYPE[type_name]} {name};")
-    for interp, type_name, name in interface["vertex_out"]:
-        vert.append(f"{'flat ' if interp == 'flat' else ''}out {_GLSL_TYPE[type_name]} {name};")
-    frag = list(common)
-    for interp, type_name, name in interface["vertex_out"]:
-        frag.append(f"{'flat ' if interp == 'flat' else ''}in {_GLSL_TYPE[type_name]} {name};")
-    for slot, type_name, name in interface["fragment_out"]:
-        frag.append(f"layout(location = {slot}) out {_GLSL_TYPE[type_name]} {name};")
-    vert.append(src["vertex"])
-    frag += [src["lib"], src["fragment"]]
-    return "\n".join(vert) + "\n", "\n".join(frag) + "\n"
-
-
-def create_shader(interface: dict, interface_name: str, src: dict):
-    """Compiles ``src`` (types, lib, vertex, fragment) through Blender's GPUShaderCreateInfo as
-    ``interface`` declares it (call only while drawing: ``gpu`` is imported here)."""
-    import gpu  # noqa: PLC0415
-
-    info = gpu.types.GPUShaderCreateInfo()
-    for slot, type_name, name in interface["vertex_in"]:
-        info.vertex_in(slot, type_name, name)
-    if interface["vertex_out"]:  # an empty interface block is a GLSL syntax error
-        iface = gpu.types.GPUStageInterfaceInfo(interface_name)
-        for interp, type_name, name in interface["vertex_out"]:
-            getattr(iface, interp)(type_name, name)
-        info.vertex_out(iface)
-    for type_name, name in interface["push_constant"]:
-        info.push_constant(type_name, name)
-    for slot, type_name, name in interface["sampler"]:
-        info.sampler(slot, type_name, name)
-    if src["types"].strip():
-        info.typedef_source(src["types"])
-    for slot, type_name, name in interface["uniform_buf"]:
-        info.uniform_buf(slot, type_name, name)
-    for slot, type_name, name in interface["fragment_out"]:
-        info.fragment_out(slot, type_name, name)
-    info.vertex_source(src["vertex"])
-    info.fragment_source(src["lib"] + "\n" + src["fragment"])
-    return gpu.shader.create_from_info(info)
-
 
 def standalone_sources(version: str = "330 core") -> tuple[str, str]:
     """(vertex, fragment) of the field preview for a plain OpenGL context (moderngl)."""

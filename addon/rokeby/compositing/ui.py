@@ -13,9 +13,9 @@ import tempfile
 import bpy
 import numpy as np
 
-from . import compositing as comp
-from . import prefs
-from .progress import Progress
+from .. import compositing as comp
+from ..blender import prefs
+from ..blender.progress import Progress
 
 # What an operator reports when Esc / Ctrl-C / rokeby.native.cancel() stopped it (nothing changed).
 CANCELLED = "Rokeby: Cancelled (nothing was changed)"
@@ -157,7 +157,7 @@ class ROKEBY_OT_composite_render(_EditProps, bpy.types.Operator):
         return True
 
     def execute(self, context):
-        from . import api  # noqa: PLC0415
+        from .. import api  # noqa: PLC0415
 
         path = bpy.path.abspath(self.filepath) if self.filepath else os.path.join(tempfile.gettempdir(), "rokeby_composite.exr")
         try:
@@ -211,7 +211,7 @@ class ROKEBY_OT_composite_edit(_EditProps, bpy.types.Operator):
         is made on the main thread once the pixels are there. Otherwise: ``execute``."""
         import threading  # noqa: PLC0415
 
-        from . import api  # noqa: PLC0415
+        from .. import api  # noqa: PLC0415
 
         args = _edit_args(self, context)
         path = self._path(context)
@@ -236,7 +236,7 @@ class ROKEBY_OT_composite_edit(_EditProps, bpy.types.Operator):
         return {"RUNNING_MODAL"}
 
     def modal(self, context, event):
-        from . import native  # noqa: PLC0415
+        from ..core import native  # noqa: PLC0415
 
         if event.type == "ESC":
             native.cancel()  # the worker's native call stops at its next row
@@ -252,7 +252,7 @@ class ROKEBY_OT_composite_edit(_EditProps, bpy.types.Operator):
         return self._done(img, stats)
 
     def _failed(self, exc):
-        from . import api  # noqa: PLC0415
+        from .. import api  # noqa: PLC0415
 
         if isinstance(exc, KeyboardInterrupt):
             self.report({"WARNING"}, CANCELLED)
@@ -263,7 +263,7 @@ class ROKEBY_OT_composite_edit(_EditProps, bpy.types.Operator):
         raise exc
 
     def execute(self, context):
-        from . import api  # noqa: PLC0415
+        from .. import api  # noqa: PLC0415
 
         path = self._path(context)
         if not path:
@@ -332,7 +332,7 @@ class ROKEBY_OT_composite_sequence(_EditProps, bpy.types.Operator):
         return self.execute(context)
 
     def execute(self, context):
-        from . import api  # noqa: PLC0415
+        from .. import api  # noqa: PLC0415
 
         try:
             frames = sequence_frames(self.directory, self.pattern)
@@ -408,7 +408,7 @@ class ROKEBY_OT_composite_to_compositor(bpy.types.Operator):
         return True
 
     def execute(self, context):
-        from . import api  # noqa: PLC0415
+        from .. import api  # noqa: PLC0415
 
         try:
             node = api.use_in_compositor(self.image_name, scene=context.scene)

@@ -14,9 +14,11 @@ import bpy
 import numpy as np
 from bpy.props import BoolProperty, EnumProperty, FloatProperty, FloatVectorProperty, IntProperty, StringProperty
 
-from . import api, evaluate, words
+from .. import api
+from . import evaluate
+from ..core import words
 from .evaluate import RokebyError
-from .progress import Progress
+from ..blender.progress import Progress
 from .props import CONSTRAINT_KINDS, METRICS, REGION_KINDS
 
 UNDO = {"REGISTER", "UNDO"}
@@ -456,7 +458,7 @@ class ROKEBY_OT_reflection_map(_Op, bpy.types.Operator):
     action: EnumProperty(name="Action", items=[("CAPTURE", "Capture", "", 0), ("CLEAR", "Clear", "Remove the map's images", 1)], default="CAPTURE")
 
     def run(self, context, mirror):
-        from . import reflmap  # noqa: PLC0415
+        from .render import reflmap  # noqa: PLC0415
 
         api._require_mirror(mirror)
         if self.action == "CLEAR":

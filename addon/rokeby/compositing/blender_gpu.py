@@ -32,7 +32,7 @@ import weakref
 
 import numpy as np
 
-from .compositing import (RECOMPOSITE_INTERFACE, RECOMPOSITE_INTERFACE_NAME, CompositingError, frame_result,
+from . import (RECOMPOSITE_INTERFACE, RECOMPOSITE_INTERFACE_NAME, CompositingError, frame_result,
                           recomposite_files, recomposite_frame)
 
 
@@ -71,7 +71,7 @@ def ensure_context() -> None:
         return
     import bpy  # noqa: PLC0415
 
-    from . import compat  # noqa: PLC0415
+    from ..blender import compat  # noqa: PLC0415
 
     scene = bpy.data.scenes.new("rokeby_gpu_context")
     cam_data = bpy.data.cameras.new("rokeby_gpu_context")
@@ -102,7 +102,7 @@ class BlenderRecompositor:
 
     def __init__(self):
         gpu = _gpu()
-        from . import glsl  # noqa: PLC0415
+        from ..blender import gpu as glsl  # noqa: PLC0415
 
         self.shader = glsl.create_shader(RECOMPOSITE_INTERFACE, RECOMPOSITE_INTERFACE_NAME, recomposite_files())
         fmt = gpu.types.GPUVertFormat()
