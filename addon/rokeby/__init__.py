@@ -34,15 +34,16 @@ def is_registered() -> bool:
 
 
 def _modules():
-    from .appearance import ui as appearance_ui
-    from .compositing import ui as compositing_ui
-    from .reflection import handlers, operators, props, ui
+    from .appearance import addon as appearance
     from .blender import prefs
-    from .shadow import ui as shadow_ui
-    from .reflection.viewport import draw as viewport
+    from .compositing import addon as compositing
+    from .reflection import addon as reflection
+    from .reflection import ui as reflection_ui
+    from .shadow import addon as shadow
 
-    # ui after every module with operators: its menus name them all.
-    return (prefs, props, operators, handlers, viewport, appearance_ui, compositing_ui, shadow_ui, ui)
+    # Each feature registers itself (props, operators, UI, hooks). The reflection sidebar's menus
+    # name every feature's operators: it goes last.
+    return (prefs, reflection, appearance, compositing, shadow, reflection_ui)
 
 
 def register():

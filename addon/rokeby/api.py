@@ -14,8 +14,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .core import native, words
-from .blender import transaction
+from .core import native, schema, vecmath, words
+from .blender import meshes, transaction
 
 __all__ = [
     "reflect",
@@ -90,24 +90,8 @@ def _unit(v: np.ndarray, name: str) -> np.ndarray:
     return v / n
 
 
-def reflect(incident, normal) -> np.ndarray:
-    """Mirror reflection of unit ``incident`` (pointing at the surface) about unit ``normal``."""
-    i = np.asarray(incident, dtype=np.float64)
-    n = np.asarray(normal, dtype=np.float64)
-    return i - 2.0 * np.sum(i * n, axis=-1, keepdims=True) * n
-
-
-def refract(incident, normal, eta) -> np.ndarray:
-    """Snell refraction of unit ``incident`` (pointing at the surface, against unit ``normal``)
-    with eta = η_outside / η_inside (1/IOR when entering); zero vectors where the ray is totally
-    internally reflected. Vectorised over leading axes."""
-    i = np.asarray(incident, dtype=np.float64)
-    n = np.asarray(normal, dtype=np.float64)
-    eta = np.asarray(eta, dtype=np.float64)[..., None] if np.ndim(eta) else float(eta)
-    c = -np.sum(i * n, axis=-1, keepdims=True)
-    k = 1.0 - eta * eta * (1.0 - c * c)
-    t = eta * i + (eta * c - np.sqrt(np.maximum(k, 0.0))) * n
-    return np.where(k > 0.0, t, 0.0)
+reflect = vecmath.reflect  # one home: rokeby.core.vecmath
+refract = vecmath.refract
 
 
 def constraint_row(surface_point, normal, reflected_point, eye) -> np.ndarray:
@@ -137,48 +121,14 @@ def physical_reflected_point(surface_point, normal, eye, distance: float) -> np.
     return p + distance * _unit(reflect(i, n), "reflected direction")
 
 
-@dataclass
-class MeshArrays:
-    """An evaluated mesh as arrays: vertices and vertex normals (V, 3) float32, triangles (F, 3)
-    int32, in world space unless asked otherwise."""
-
-    vertices: np.ndarray
-    normals: np.ndarray
-    triangles: np.ndarray
+MeshArrays = meshes.MeshArrays  # the Blender layer's mesh arrays (rokeby.blender.meshes)
 
 
 def mesh_arrays(obj, depsgraph=None, *, world: bool = True) -> MeshArrays:
     """Vertices, vertex normals and triangles of ``obj``'s evaluated mesh (modifiers, shape keys
-    and armatures applied), read with foreach_get."""
-    import bpy  # noqa: PLC0415 - Blender only
-
-    if obj is None:
-        raise ValueError("obj: is None")
-    if obj.type != "MESH":
-        raise ValueError(f"obj: '{obj.name}' is {words.kind(obj.type)}, not a mesh")
-    dg = depsgraph if depsgraph is not None else bpy.context.evaluated_depsgraph_get()
-    ob_eval = obj.evaluated_get(dg)
-    me = ob_eval.to_mesh()
-    try:
-        me.calc_loop_triangles()
-        nv, nt = len(me.vertices), len(me.loop_triangles)
-        if nt == 0:
-            raise ValueError(f"obj: '{obj.name}' has no faces")
-        co = np.empty(nv * 3, dtype=np.float32)
-        me.vertices.foreach_get("co", co)
-        nrm = np.empty(nv * 3, dtype=np.float32)
-        me.vertex_normals.foreach_get("vector", nrm)
-        tri = np.empty(nt * 3, dtype=np.int32)
-        me.loop_triangles.foreach_get("vertices", tri)
-    finally:
-        ob_eval.to_mesh_clear()
-    if world:
-        co, nrm = _ev.to_world(co, nrm, np.array(obj.matrix_world, dtype=np.float64), f"obj: '{obj.name}'")
-    else:
-        co, nrm = co.reshape(-1, 3), nrm.reshape(-1, 3)
-        if not (np.all(np.isfinite(co)) and np.all(np.isfinite(nrm))):
-            raise ValueError(f"obj: '{obj.name}' has non-finite vertex positions")
-    return MeshArrays(co, nrm, tri.reshape(-1, 3))
+    and armatures applied), read with foreach_get (rokeby.blender.meshes.mesh_arrays; a bad
+    transform is a RokebyError)."""
+    return meshes.mesh_arrays(obj, depsgraph, world=world, error=RokebyError)
 
 
 def rotation_field(points, constraints, **kwargs) -> np.ndarray:
@@ -239,8 +189,9 @@ def geodesic_distances(vertices, faces, sources, *, method: str = "heat", bounda
 
 from .reflection import evaluate as _ev  # noqa: E402 - aliased: api.evaluate is a function
 from .reflection.evaluate import ATTRIBUTE, MirrorReport, RokebyError, rotate  # noqa: E402
+from .reflection.registry import of_mirrors as _of_mirrors  # noqa: E402
 
-HANDLE_COLLECTION = "Rokeby Handles"
+HANDLE_COLLECTION = schema.HANDLE_COLLECTION
 
 
 def _scene(scene):
@@ -272,27 +223,8 @@ def _camera_eye(scene) -> tuple:
     return tuple(scene.camera.matrix_world.translation)
 
 
-def _check_mirror(obj):
-    if obj is None:
-        raise RokebyError("mirror: is None")
-    try:
-        name, kind = obj.name, obj.type
-    except ReferenceError:
-        raise RokebyError("mirror: the object was deleted") from None
-    if kind != "MESH":
-        raise RokebyError(f"mirror: '{name}' is {words.kind(kind)}, not a mesh")
-    if len(obj.data.polygons) == 0:
-        raise RokebyError(f"mirror: '{name}' has no faces")
-    if obj.library is not None or obj.data.library is not None:
-        raise RokebyError(f"mirror: '{name}' is linked from a library; make it local (or a library override with local mesh data)")
-    return obj
-
-
-def _require_mirror(obj):
-    _check_mirror(obj)
-    if not obj.rokeby.is_mirror:
-        raise RokebyError(f"mirror: '{obj.name}' is not a Rokeby mirror: make it one with Add Mirror (Object ▸ Rokeby ▸ Add Mirror)")
-    return obj
+_check_mirror = _ev.check_mirror  # reflection.evaluate: a mesh mirror that can be edited
+_require_mirror = _ev.require_mirror
 
 
 def mirror_of(obj, scene=None):
@@ -310,7 +242,7 @@ def mirror_of(obj, scene=None):
     return None
 
 
-@transaction.atomic(materials=transaction.of_mirrors)
+@transaction.atomic(materials=_of_mirrors)
 def add_mirror(obj, *, metric: str = "EUCLIDEAN", geodesic_method: str = "HEAT", polar: str = "FAST"):
     """Make the mesh object ``obj`` a Rokeby mirror (its reflections become editable)."""
     _check_mirror(obj)
@@ -381,7 +313,7 @@ def _surface_of(mirror, scene, point):
     return _ev.project_to_surface(mirror, dg, geo, _vec3(point, "surface_point"), m), geo, dg
 
 
-@transaction.atomic(materials=transaction.of_mirrors)
+@transaction.atomic(materials=_of_mirrors)
 def add_constraint(mirror, surface_point, reflected_point=None, *, eye=None, view=None, name: str = "", kind: str = "REFLECTION", scene=None):
     """Add a reflection (or, ``kind='REFRACTION'``, refraction) constraint to ``mirror`` and
     return its index.
@@ -445,7 +377,7 @@ def add_constraint(mirror, surface_point, reflected_point=None, *, eye=None, vie
         red = _new_empty(scene, f"{mirror.name} {label} surface", p, "SPHERE", size, (1.0, 0.1, 0.1, 1.0))
         created.append(red)
         shrink = red.constraints.new("SHRINKWRAP")
-        shrink.name = "Rokeby: stay on mirror"
+        shrink.name = schema.SHRINKWRAP_NAME
         shrink.target = mirror
         shrink.shrinkwrap_type = "NEAREST_SURFACE"
         role = "transmitted" if kind == "REFRACTION" else "reflected"
@@ -498,7 +430,7 @@ def _made_here(ob) -> bool:
         return False
 
 
-@transaction.atomic(materials=transaction.of_mirrors)
+@transaction.atomic(materials=_of_mirrors)
 def remove_constraint(mirror, index: int, *, delete_handles: bool = True, scene=None):
     """Remove constraint ``index``; its handles are deleted unless another item uses them."""
     scene = _scene(scene)
@@ -526,7 +458,7 @@ def _drop_unused_readers(mirror):
     _ev.drop_unused_readers(mirror)
 
 
-@transaction.atomic(materials=transaction.of_mirrors)
+@transaction.atomic(materials=_of_mirrors)
 def add_region(mirror, kind: str = "EUCLIDEAN", *, center=None, radius: float = 1.0, border: float = 0.25, vertex_group: str = "", name: str = "", scene=None):
     """Add a region of interest to ``mirror`` and return its index.
 
@@ -571,7 +503,7 @@ def add_region(mirror, kind: str = "EUCLIDEAN", *, center=None, radius: float = 
             created.append(centre_ob)
             if kind == "GEODESIC":
                 shrink = centre_ob.constraints.new("SHRINKWRAP")
-                shrink.name = "Rokeby: stay on mirror"
+                shrink.name = schema.SHRINKWRAP_NAME
                 shrink.target = mirror
                 shrink.shrinkwrap_type = "NEAREST_SURFACE"
         if kind == "FREEFORM":
@@ -594,7 +526,7 @@ def add_region(mirror, kind: str = "EUCLIDEAN", *, center=None, radius: float = 
     return len(mirror.rokeby.regions) - 1
 
 
-@transaction.atomic(materials=transaction.of_mirrors)
+@transaction.atomic(materials=_of_mirrors)
 def remove_region(mirror, index: int, *, delete_center: bool = True, scene=None):
     """Remove region ``index`` (and its centre empty when the add-on made it and nothing else
     uses it; an object of the artist's own given as ``center`` stays)."""
@@ -621,7 +553,7 @@ def _other_mirrors_of_mesh(mirror) -> list:
     return [ob for ob in bpy.data.objects if ob != mirror and ob.data == me and ob.rokeby.is_mirror]
 
 
-@transaction.atomic(materials=transaction.of_mirrors)
+@transaction.atomic(materials=_of_mirrors)
 def remove_mirror(mirror, *, scene=None):
     """Stop editing ``mirror``: its constraints, regions, handles and field go, and the file is
     left as it was before ``add_mirror``: its materials' node trees as they were (unless another
@@ -798,7 +730,7 @@ def set_edited_materials(mirror, materials=None):
     s.all_materials = False
 
 
-@transaction.atomic(materials=transaction.of_mirrors)
+@transaction.atomic(materials=_of_mirrors)
 def install_render_nodes(mirror) -> int:
     """Make final renders (Cycles; EEVEE uses the same nodes) show the edit now. Evaluation does
     this by itself for every mirror with a constraint while its ``render_edits`` is on (the
@@ -818,7 +750,7 @@ def install_render_nodes(mirror) -> int:
     return count
 
 
-@transaction.atomic(materials=transaction.of_mirrors)
+@transaction.atomic(materials=_of_mirrors)
 def remove_render_nodes(mirror) -> int:
     """Take the render nodes out of the mirror's materials again and turn its ``render_edits``
     off (so evaluation does not put them back); returns from how many materials they went. On an
@@ -1039,7 +971,7 @@ def setup_compositing_passes(scene=None, view_layer=None) -> list[str]:
 
 @_cancellable
 def recomposite_render(path: str, *, edit: str = "emboss", amount: float = 0.5, scene=None,
-                       image_name: str = "Rokeby Recomposited", k_d: float = 1.0, k_r: float = 1.0,
+                       image_name: str = schema.RECOMPOSITED_IMAGE, k_d: float = 1.0, k_r: float = 1.0,
                        backend: str = "cpu", warn: bool = True, fit: str = "qp", noise_tolerance: float = 0.0):
     """Renders ``scene`` with the compositing passes to the multilayer EXR ``path``, reconstructs
     its environments, edits the normals (``edit``: 'emboss' with β = amount, 'ripple' or 'noise'
@@ -1067,7 +999,7 @@ def recomposite_render(path: str, *, edit: str = "emboss", amount: float = 0.5, 
 
 
 @_cancellable
-def recomposite_exr(path: str, *, edit: str = "emboss", amount: float = 0.5, image_name: str = "Rokeby Recomposited",
+def recomposite_exr(path: str, *, edit: str = "emboss", amount: float = 0.5, image_name: str = schema.RECOMPOSITED_IMAGE,
                     k_d: float = 1.0, k_r: float = 1.0, backend: str = "cpu", warn: bool = True, fit: str = "qp",
                     noise_tolerance: float = 0.0):
     """Edits a frame already rendered with the compositing passes (the multilayer EXR ``path``, say
@@ -1122,7 +1054,7 @@ def _check_fit(fit, noise_tolerance):
         raise RokebyError("noise_tolerance: only the 'qp' fit has constraints to relax")
 
 
-def use_in_compositor(image_name: str = "Rokeby Recomposited", *, scene=None):
+def use_in_compositor(image_name: str = schema.RECOMPOSITED_IMAGE, *, scene=None):
     """Feeds the recomposited image ``image_name`` into the scene's compositor: an Image node
     (``compositing.COMPOSITOR_NODE``) that later recomposites of that image keep current, linked to
     a Viewer for the backdrop; chain it with other compositor nodes. Returns the node."""

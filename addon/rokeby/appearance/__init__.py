@@ -35,21 +35,21 @@ import math
 
 import numpy as np
 
-from ..blender import transaction
-from ..core import words
+from ..blender import hooks, transaction
+from ..core import schema, words
 
 # brush → (attribute, Principled input, default when the material has no value, clamp range)
 PARAMS = {
-    "diffuse": ("rokeby_base_color", "Base Color", (0.8, 0.8, 0.8, 1.0), (0.0, 1.0)),
-    "specular": ("rokeby_specular", "Specular IOR Level", 0.5, (0.0, 1.0)),
-    "roughness": ("rokeby_roughness", "Roughness", 0.5, (0.0, 1.0)),
-    "anisotropic": ("rokeby_anisotropic", "Anisotropic", 0.0, (0.0, 1.0)),
-    "anisotropic_rotation": ("rokeby_anisotropic_rotation", "Anisotropic Rotation", 0.0, (0.0, 1.0)),
-    "metallic": ("rokeby_metallic", "Metallic", 0.0, (0.0, 1.0)),
+    "diffuse": (schema.APPEARANCE_ATTRIBUTES["diffuse"], "Base Color", (0.8, 0.8, 0.8, 1.0), (0.0, 1.0)),
+    "specular": (schema.APPEARANCE_ATTRIBUTES["specular"], "Specular IOR Level", 0.5, (0.0, 1.0)),
+    "roughness": (schema.APPEARANCE_ATTRIBUTES["roughness"], "Roughness", 0.5, (0.0, 1.0)),
+    "anisotropic": (schema.APPEARANCE_ATTRIBUTES["anisotropic"], "Anisotropic", 0.0, (0.0, 1.0)),
+    "anisotropic_rotation": (schema.APPEARANCE_ATTRIBUTES["anisotropic_rotation"], "Anisotropic Rotation", 0.0, (0.0, 1.0)),
+    "metallic": (schema.APPEARANCE_ATTRIBUTES["metallic"], "Metallic", 0.0, (0.0, 1.0)),
     # Fraser's proposed Step 6 ("change the colour of specular highlights"): Blender's specular
     # tint, the colour of the dielectric reflection at normal incidence (F0 · tint; on metals it
     # tints the grazing edge, Blender's F82 tint).
-    "specular_tint": ("rokeby_specular_tint", "Specular Tint", (1.0, 1.0, 1.0, 1.0), (0.0, 1.0)),
+    "specular_tint": (schema.APPEARANCE_ATTRIBUTES["specular_tint"], "Specular Tint", (1.0, 1.0, 1.0, 1.0), (0.0, 1.0)),
 }
 # The colour parameters (RGBA attributes, Mix (Multiply) global nodes, RGB brushes).
 COLORS = ("diffuse", "specular_tint")
@@ -58,7 +58,7 @@ COLORS = ("diffuse", "specular_tint")
 MAX_COLOR = 1e4
 # Fraser's brush names on top of the parameters.
 BRUSHES = {"sharpen": ("roughness", "SUBTRACT"), "blur": ("roughness", "ADD"), "stretch": ("anisotropic", "ADD")}
-NODE_PREFIX = "rokeby_"
+NODE_PREFIX = schema.APPEARANCE_NODE_PREFIX
 
 
 def _principled(mat):
@@ -83,7 +83,7 @@ def _check_mesh(obj):
 LINKED = ("REFUSE", "REPLACE")
 # Custom property on a rokeby_global_<param> node: [node name, output identifier] of the link it
 # replaced (setup(linked='REPLACE')), put back by remove().
-REPLACED_KEY = "rokeby_replaced_link"
+REPLACED_KEY = schema.APPEARANCE_REPLACED_KEY
 
 
 def _foreign_links(bsdf) -> list:
@@ -456,7 +456,7 @@ def _check_texture_args(obj, resolution, uv_map):
 
 
 def _image_name(mat, param):
-    return f"rokeby {mat.name} {param}"
+    return schema.appearance_image_name(mat.name, param)
 
 
 @transaction.atomic(materials=transaction.of_object)
@@ -494,7 +494,7 @@ def setup_texture(obj, resolution: int = 1024, uv_map: str | None = None, materi
             img = bpy.data.images.new(_image_name(mat, param), resolution, resolution, alpha=True, float_buffer=True)
         if param not in COLORS:
             img.colorspace_settings.name = "Non-Color"
-        img["rokeby_painted"] = True
+        img[schema.APPEARANCE_PAINTED_KEY] = True
         # fill from the attributes: barycentric interpolation of the vertex values at each texel
         vals = read(obj, param).astype(np.float64)
         px = np.empty((resolution * resolution, 4), np.float32)
@@ -801,7 +801,7 @@ def pack_painted(obj=None) -> int:
     imgs = bpy.data.images if obj is None else [t.image for p in PARAMS if (t := _tex_node(obj, p)) is not None and t.image is not None]
     done = 0
     for img in imgs:
-        if img.get("rokeby_painted") and (img.is_dirty or img.packed_file is None or _PACKED.get(img.name) != img.packed_file.as_pointer()):
+        if img.get(schema.APPEARANCE_PAINTED_KEY) and (img.is_dirty or img.packed_file is None or _PACKED.get(img.name) != img.packed_file.as_pointer()):
             pack(img)
             done += 1
     return done
@@ -813,7 +813,7 @@ def reload_after_undo(*_args) -> int:
 
     done = 0
     for img in bpy.data.images:
-        pf = img.packed_file if img.get("rokeby_painted") else None
+        pf = img.packed_file if img.get(schema.APPEARANCE_PAINTED_KEY) else None
         if pf is not None and _PACKED.get(img.name) != pf.as_pointer():
             img.reload()
             _PACKED[img.name] = img.packed_file.as_pointer()
@@ -827,11 +827,7 @@ def _pack_painted_images(*_args):
 
 
 def _ensure_save_handler():
-    import bpy
-
-    handlers = bpy.app.handlers.save_pre
-    if not any(getattr(f, "__name__", "") == "_rokeby_pack_painted_images" for f in handlers):
-        handlers.append(_rokeby_pack_painted_images)
+    hooks.add("appearance", "save_pre", _rokeby_pack_painted_images)  # once, however often asked
 
 
 def _rokeby_pack_painted_images(*args):

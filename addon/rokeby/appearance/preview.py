@@ -25,6 +25,7 @@ import numpy as np
 from .. import appearance, envmaps
 from . import glsl as appearance_glsl
 from ..blender import gpu as glsl
+from ..core import schema
 
 _shader = None
 
@@ -425,7 +426,7 @@ def _draw():
     if rv3d is None or not prefs.get(ctx).gpu_viewport_preview:  # the machine's opt-out (add-on preferences)
         return
     try:
-        settings = getattr(ctx.scene, "rokeby_appearance_brush", None)
+        settings = getattr(ctx.scene, schema.SCENE_APPEARANCE_BRUSH_PROP, None)
         if settings is None:
             draw_view(ctx.scene, rv3d, ctx.visible_objects, "PRINCIPLED", ctx.evaluated_depsgraph_get())
         else:

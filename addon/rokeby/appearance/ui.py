@@ -15,6 +15,7 @@ from bpy.props import CollectionProperty, EnumProperty, FloatProperty, FloatVect
 from .. import appearance
 from ..blender import compat
 from ..core import words
+from ..core import schema
 
 # Explicit item numbers: Blender stores the number, so new brushes are appended with new numbers
 # (files saved before issue 22 stored 0-6 without explicit numbers, which are these).
@@ -590,7 +591,7 @@ def unregister():
 
     appearance_preview.enable(False)
     show_cursor(None)
-    if hasattr(bpy.types.Scene, "rokeby_appearance_brush"):
+    if hasattr(bpy.types.Scene, schema.SCENE_APPEARANCE_BRUSH_PROP):
         del bpy.types.Scene.rokeby_appearance_brush
     for c in reversed(_CLASSES):
         if getattr(c, "is_registered", False):

@@ -6,7 +6,7 @@ as it was. Feature-agnostic (the Blender layer); the features wrap their operati
 What is recorded: which data-blocks exist (those made since are removed again); the custom
 properties of objects, meshes, materials, lights, collections, images, node groups and scenes
 (the add-on's property groups live there); every node tree's nodes, links, node properties, group
-assignments and input values (``shading._snapshot``); the add-on's mesh attributes (``rokeby*``,
+assignments and input values (``nodes.snapshot``); the add-on's mesh attributes (``rokeby*``,
 data included) and shape-key positions; which objects and child collections each collection
 holds; objects' ray visibility, pass index, display, parent, data and light linking; materials'
 pass index; the view layers' passes and AOVs and the output format.
@@ -21,6 +21,8 @@ from __future__ import annotations
 import contextlib
 
 import numpy as np
+
+from ..core import schema
 
 _KINDS = ("objects", "meshes", "materials", "node_groups", "images", "lights", "cameras", "collections", "worlds", "texts")
 _OBJECT_FLAGS = ("hide_render", "visible_camera", "visible_diffuse", "visible_glossy", "visible_transmission",
@@ -97,7 +99,7 @@ def _groups_used(trees) -> list:
                 out[g.as_pointer()] = g
                 todo.append(g)
     for g in bpy.data.node_groups:
-        if g.library is None and g.name.startswith("Rokeby"):
+        if g.library is None and g.name.startswith(schema.NODE_GROUP_PREFIX):
             out.setdefault(g.as_pointer(), g)
     return list(out.values())
 
@@ -109,7 +111,7 @@ class Transaction:
 
         import bpy  # noqa: PLC0415
 
-        from ..reflection.render import shading  # noqa: PLC0415
+        from . import nodes  # noqa: PLC0415
 
         d = bpy.data
         self.removed: list = []
@@ -127,7 +129,7 @@ class Transaction:
         trees += [g for g in d.node_groups if g.library is None] if materials is None else _groups_used(trees)
         self.trees = []
         for t in trees:
-            snap = shading._snapshot(t, ())
+            snap = nodes.snapshot(t, ())
             snap["values"] = {(nd.as_pointer(), s.identifier): _copy(s.default_value)
                               for nd in t.nodes for s in nd.inputs if hasattr(s, "default_value")}
             snap["node_props"] = [(nd, _idprops(nd)) for nd in t.nodes]
@@ -222,7 +224,7 @@ class Transaction:
     def rollback(self) -> None:  # noqa: C901 - one pass per kind of data
         import bpy  # noqa: PLC0415
 
-        from ..reflection.render import shading  # noqa: PLC0415
+        from . import nodes  # noqa: PLC0415
 
         d = bpy.data
         for fn in reversed(self.undo_hooks):
@@ -261,7 +263,7 @@ class Transaction:
             for ch in children - set(coll.children):
                 coll.children.link(ch)
         for tree, snap in self.trees:
-            shading._restore(tree, snap)
+            nodes.restore(tree, snap)
             nodes = {nd.as_pointer(): nd for nd in tree.nodes}
             for (ptr, ident), value in snap["values"].items():
                 nd = nodes.get(ptr)
@@ -457,21 +459,6 @@ def none(*_args, **_kwargs) -> list:
     return []
 
 
-def of_mirrors(obj=None, *_args, **_kwargs) -> list:
-    """For ``atomic(materials=of_mirrors)``: the materials of ``obj`` and of every mirror (the
-    render nodes of all of them may be synced)."""
-    from ..reflection import registry  # noqa: PLC0415
-
-    obs = [*registry.mirrors(), obj]
-    out = []
-    for ob in obs:
-        try:
-            out += [s.material for s in ob.material_slots if s.material is not None]
-        except (AttributeError, ReferenceError):
-            continue
-    return out
-
-
 def of_object(obj=None, material=None, *_args, **kwargs) -> list:
     """For ``atomic(materials=of_object)``: ``material`` (or ``kwargs['material']``) and the
     materials of ``obj``."""
@@ -515,7 +502,7 @@ def write_whole(path, write) -> None:
             os.remove(tmp)
 
 
-DOOMED = "rokeby_doomed"
+DOOMED = schema.DOOMED_KEY
 
 
 def remove_node(tree, node) -> None:

@@ -43,12 +43,13 @@ import numpy as np
 
 from ..core import native
 from ..blender import transaction
+from ..core import schema
 
-AOV_REFLOCC = "rokeby_reflocc"
-AOV_CAMERA_X = "rokeby_camera_x"
-AOV_CAMERA_Y = "rokeby_camera_y"
-AOV_INCOMING_CAM = "rokeby_incoming_cam"
-NODE_TAG = "Rokeby Compositing"
+AOV_REFLOCC = schema.AOV_REFLOCC
+AOV_CAMERA_X = schema.AOV_CAMERA_X
+AOV_CAMERA_Y = schema.AOV_CAMERA_Y
+AOV_INCOMING_CAM = schema.AOV_INCOMING_CAM
+NODE_TAG = schema.COMPOSITING_NODE_TAG
 
 # Pass name in a Blender multilayer EXR → (field, number of channels).
 PASSES = {
@@ -110,7 +111,7 @@ def _material_nodes(mat) -> None:
     """Adds (once; again, whole, when an artist deleted a part) the AOV outputs of the reflection
     occlusion, the camera rotation and the view vector."""
     nt = mat.node_tree
-    ours = [n for n in nt.nodes if n.get("rokeby_compositing")]
+    ours = [n for n in nt.nodes if n.get(schema.COMPOSITING_NODE_KEY)]
     have = {n.aov_name for n in ours if n.bl_idname == "ShaderNodeOutputAOV" and n.inputs[0].is_linked}
     if have >= {AOV_REFLOCC, AOV_CAMERA_X, AOV_CAMERA_Y, AOV_INCOMING_CAM}:
         return
@@ -119,8 +120,8 @@ def _material_nodes(mat) -> None:
     def node(kind, label):
         n = nt.nodes.new(kind)
         n.label = f"{NODE_TAG}: {label}"
-        n["rokeby_compositing"] = True
-        n.location = (-900, -600 - 120 * len([x for x in nt.nodes if x.get("rokeby_compositing")]))
+        n[schema.COMPOSITING_NODE_KEY] = True
+        n.location = (-900, -600 - 120 * len([x for x in nt.nodes if x.get(schema.COMPOSITING_NODE_KEY)]))
         return n
     tex = node("ShaderNodeTexCoord", "reflection")
     ao = node("ShaderNodeAmbientOcclusion", "self-reflection occlusion")
@@ -247,8 +248,8 @@ def sequence_frames(directory: str, pattern: str = "*.exr") -> list[str]:
 # COMPOSITOR_NODE that every recomposite of the same image keeps pointing at the current pixels
 # (show_image → _keep_compositor_current): the artist chains it with other compositor nodes, and a
 # Viewer shows it in the backdrop. The Composite node (what F12 renders write) is not touched.
-COMPOSITOR_NODE = "rokeby_recomposited"
-COMPOSITOR_IMAGE_KEY = "rokeby_image_name"  # custom property on that node: the image it follows
+COMPOSITOR_NODE = schema.COMPOSITOR_NODE
+COMPOSITOR_IMAGE_KEY = schema.COMPOSITOR_IMAGE_KEY  # custom property on that node: the image it follows
 
 
 def feed_compositor(scene, image):
@@ -269,7 +270,7 @@ def feed_compositor(scene, image):
     if node is None or node.bl_idname != "CompositorNodeImage":
         node = tree.nodes.new("CompositorNodeImage")
         node.name = COMPOSITOR_NODE
-        node.label = "Rokeby Recomposited"
+        node.label = schema.RECOMPOSITED_IMAGE
         xs = [n.location.x for n in tree.nodes if n != node]
         node.location = (min(xs) if xs else 0.0, min((n.location.y for n in tree.nodes if n != node), default=0.0) - 350.0)
     node.image = image

@@ -16,6 +16,7 @@ import numpy as np
 from .. import compositing as comp
 from ..blender import prefs
 from ..blender.progress import Progress
+from ..core import schema
 
 # What an operator reports when Esc / Ctrl-C / rokeby.native.cancel() stopped it (nothing changed).
 CANCELLED = "Rokeby: Cancelled (nothing was changed)"
@@ -111,7 +112,7 @@ class ROKEBY_OT_composite_setup_passes(bpy.types.Operator):
 
 
 MAX_SMOOTH_SIGMA = 50.0  # rokeby_core::normals::MAX_SIGMA_S: the smoothing's largest σ in pixels
-LAST_EXR = "rokeby_composite_exr"  # scene custom property: the EXR the last Render and Recomposite wrote
+LAST_EXR = schema.COMPOSITE_LAST_EXR_KEY  # scene custom property: the EXR the last Render and Recomposite wrote
 
 
 def _edit_args(op, context=None) -> dict:
@@ -131,7 +132,7 @@ class _EditProps:
     amount: bpy.props.FloatProperty(name="Amount", default=0.5, min=0.0)
     k_d: bpy.props.FloatProperty(name="Diffuse k_D", default=1.0, min=0.0)
     k_r: bpy.props.FloatProperty(name="Reflection k_R", default=1.0, min=0.0)
-    image_name: bpy.props.StringProperty(name="Image", default="Rokeby Recomposited")
+    image_name: bpy.props.StringProperty(name="Image", default=schema.RECOMPOSITED_IMAGE)
     backend: bpy.props.EnumProperty(name="Backend", items=BACKENDS, default="CPU",
                                     description="Where eqs. 3–5 run (default: the add-on preferences' Default Compositing Backend)")
     fit: bpy.props.EnumProperty(name="Diffuse Fit", items=FITS, default="QP")
@@ -399,7 +400,7 @@ class ROKEBY_OT_composite_to_compositor(bpy.types.Operator):
     bl_label = "Use in Compositor"
     bl_options = {"REGISTER", "UNDO"}
 
-    image_name: bpy.props.StringProperty(name="Image", default="Rokeby Recomposited")
+    image_name: bpy.props.StringProperty(name="Image", default=schema.RECOMPOSITED_IMAGE)
 
     @classmethod
     def poll(cls, context):

@@ -41,9 +41,11 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..core import native, words
+from ..blender import meshes
+from ..core import native, vecmath, words
+from ..core import schema
 
-ATTRIBUTE = "rokeby_rotation"
+ATTRIBUTE = schema.ROTATION_ATTRIBUTE
 # What final renders read (rokeby.shading): the field's view-independent parts per vertex (per
 # face corner where a polygon's quaternions straddle the antipodal seam),
 # the region rotation R as a unit quaternion (x, y, z in RENDER_ATTRIBUTE; w and the region weight
@@ -51,8 +53,8 @@ ATTRIBUTE = "rokeby_rotation"
 # the render camera's (or the frozen eye's) own r, as the per-pixel preview does. The corners of
 # each polygon are kept in one hemisphere of the quaternion sphere, so interpolation across a face
 # never crosses the antipodal seam that rotation vectors have at half turns.
-RENDER_ATTRIBUTE = "rokeby_render_rotation"
-RENDER_ATTRIBUTE_WA = "rokeby_render_rotation_wa"
+RENDER_ATTRIBUTE = schema.RENDER_ATTRIBUTE
+RENDER_ATTRIBUTE_WA = schema.RENDER_ATTRIBUTE_WA
 # The render/preview agreement the status promises (degrees, 99th percentile at triangle centres).
 AGREEMENT_DEGREES = 1.0
 # A camera and a constraint's generating eye that see its target this far apart are reported.
@@ -64,10 +66,10 @@ ESTIMATE_INTERVAL = 0.4
 # At most this many triangles are sampled for the interpolation-error estimate.
 AGREEMENT_SAMPLES = 4000
 # The second field, from refraction constraints [p, t, e_t] (present only while the mirror has some).
-REFRACTION_ATTRIBUTE = "rokeby_refraction"
-REGION_ATTRIBUTE_PREFIX = "rokeby_vg_"
-VG_NODE_GROUP = "Rokeby Vertex Group Reader"
-VG_MODIFIER_PREFIX = "Rokeby region: "
+REFRACTION_ATTRIBUTE = schema.REFRACTION_ATTRIBUTE
+REGION_ATTRIBUTE_PREFIX = schema.REGION_ATTRIBUTE_PREFIX
+VG_NODE_GROUP = schema.VG_NODE_GROUP
+VG_MODIFIER_PREFIX = schema.VG_MODIFIER_PREFIX
 # A red handle farther than this fraction of the mirror's size from its surface is reported.
 OFF_SURFACE_TOLERANCE = 1e-3
 
@@ -310,19 +312,9 @@ def _pointer_users(obj) -> int:
 
 
 def to_world(co, nrm, matrix, what: str):
-    """Object-space positions and normals (flat or (V, 3)) to world space as float32 (V, 3):
-    positions by ``matrix``, normals by its inverse transpose, renormalised. A singular or
-    non-finite result is refused, naming ``what``."""
-    m = np.asarray(matrix, dtype=np.float64)
-    lin = m[:3, :3]
-    if not abs(np.linalg.det(lin)) > 1e-30:
-        raise RokebyError(f"{what} has a singular transform (zero scale)")
-    v = np.asarray(co, dtype=np.float64).reshape(-1, 3) @ lin.T + m[:3, 3]
-    n = np.asarray(nrm, dtype=np.float64).reshape(-1, 3) @ np.linalg.inv(lin)
-    n /= np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-30)
-    if not (np.all(np.isfinite(v)) and np.all(np.isfinite(n))):
-        raise RokebyError(f"{what} has non-finite vertex positions or transform")
-    return v.astype(np.float32), n.astype(np.float32)
+    """Object-space positions and normals to world space (rokeby.blender.meshes.to_world); a
+    singular or non-finite result is a RokebyError naming ``what``."""
+    return meshes.to_world(co, nrm, matrix, what, RokebyError)
 
 
 def shares_mesh(obj) -> bool:
@@ -699,17 +691,16 @@ def project_to_surface(obj, depsgraph, geo: _Geometry, world_point, mirror_matri
 
 
 def reflect(incident, normal):
-    return incident - 2.0 * (incident @ normal) * normal
+    return vecmath.reflect(incident, normal)
 
 
 def refract(incident, normal, eta):
     """Snell refraction of unit ``incident`` (pointing at the surface, against unit ``normal``)
-    with eta = η_outside / η_inside; None on total internal reflection."""
-    c = -float(incident @ normal)
-    k = 1.0 - eta * eta * (1.0 - c * c)
-    if not k > 0.0:
+    with eta = η_outside / η_inside; None on total internal reflection (the one rule:
+    rokeby.core.vecmath.total_internal_reflection)."""
+    if vecmath.total_internal_reflection(incident, normal, eta):
         return None
-    return eta * incident + (eta * c - np.sqrt(k)) * normal
+    return vecmath.refract(incident, normal, eta)
 
 
 def valid_ior(value) -> float:
@@ -718,6 +709,31 @@ def valid_ior(value) -> float:
     if not (np.isfinite(ior) and ior > 0.0):
         raise RokebyError(f"IOR must be finite and > 0, got {ior}")
     return ior
+
+
+def check_mirror(obj):
+    """A RokebyError unless ``obj`` is a local mesh object with faces (one a mirror can be)."""
+    if obj is None:
+        raise RokebyError("mirror: is None")
+    try:
+        name, kind = obj.name, obj.type
+    except ReferenceError:
+        raise RokebyError("mirror: the object was deleted") from None
+    if kind != "MESH":
+        raise RokebyError(f"mirror: '{name}' is {words.kind(kind)}, not a mesh")
+    if len(obj.data.polygons) == 0:
+        raise RokebyError(f"mirror: '{name}' has no faces")
+    if obj.library is not None or obj.data.library is not None:
+        raise RokebyError(f"mirror: '{name}' is linked from a library; make it local (or a library override with local mesh data)")
+    return obj
+
+
+def require_mirror(obj):
+    """``obj`` if it is a Rokeby mirror (check_mirror and is_mirror), else a RokebyError."""
+    check_mirror(obj)
+    if not obj.rokeby.is_mirror:
+        raise RokebyError(f"mirror: '{obj.name}' is not a Rokeby mirror: make it one with Add Mirror (Object ▸ Rokeby ▸ Add Mirror)")
+    return obj
 
 
 # --- one mirror ----------------------------------------------------------------------------------
@@ -813,7 +829,7 @@ def _constraint_inputs(obj, scene, depsgraph, geo, mirror_matrix, report, kind="
     return (np.array(rows, dtype=np.float32).reshape(-1, 9), points)
 
 
-SHRINKWRAP_NAME = "Rokeby: stay on mirror"
+SHRINKWRAP_NAME = schema.SHRINKWRAP_NAME
 
 
 def shrinkwrap_target(handle):
@@ -926,16 +942,7 @@ def _geodesic_distances(state: _State, geo: _Geometry, points, method: str, time
 
 def _region_falloff(d: np.ndarray, radius: float, border: float) -> np.ndarray:
     """rokeby_core's region falloff (1 in the core, a smooth step over the border, 0 outside)."""
-    border = min(border, radius)
-    inner = radius - border
-    out = np.zeros(np.shape(d), dtype=np.float64)
-    inside = d < radius
-    core = inside & (d <= inner)
-    out[core] = 1.0
-    edge = inside & ~core
-    t = np.clip((d[edge] - inner) / border, 0.0, 1.0) if edge.any() else np.zeros(0)
-    out[edge] = 1.0 - t * t * (3.0 - 2.0 * t)
-    return out
+    return vecmath.region_falloff(d, radius, border)
 
 
 def constraint_groups(rows: np.ndarray, regions=None) -> list:
@@ -1248,9 +1255,9 @@ def _interpolation_error(geo, parts, eye, rows, kwargs, timer, ramp=False):
 
 
 # --- modifiers that change the vertex count: the field on the evaluated surface ----------------
-CARRIER_PREFIX = "Rokeby field: "
-TRANSFER_GROUP = "Rokeby Field Transfer"
-TRANSFER_MODIFIER = "Rokeby field"
+CARRIER_PREFIX = schema.CARRIER_PREFIX
+TRANSFER_GROUP = schema.TRANSFER_GROUP
+TRANSFER_MODIFIER = schema.TRANSFER_MODIFIER
 # 2: the refraction field is copied too (zeros, read as the identity, where the carrier has none).
 TRANSFER_VERSION = 2
 FIELD_ATTRIBUTES = (ATTRIBUTE, RENDER_ATTRIBUTE, RENDER_ATTRIBUTE_WA, REFRACTION_ATTRIBUTE)
@@ -1315,7 +1322,7 @@ def _transfer_group():
     import bpy  # noqa: PLC0415
 
     ng = bpy.data.node_groups.get(TRANSFER_GROUP)
-    if ng is not None and ng.bl_idname == "GeometryNodeTree" and ng.get("rokeby_version") == TRANSFER_VERSION:
+    if ng is not None and ng.bl_idname == "GeometryNodeTree" and ng.get(schema.VERSION_KEY) == TRANSFER_VERSION:
         return ng
     if ng is None or ng.bl_idname != "GeometryNodeTree":
         ng = bpy.data.node_groups.new(TRANSFER_GROUP, "GeometryNodeTree")
@@ -1345,7 +1352,7 @@ def _transfer_group():
         ng.links.new(sample.outputs[0], store.inputs["Value"])
         geometry = store.outputs["Geometry"]
     ng.links.new(geometry, gout.inputs["Geometry"])
-    ng["rokeby_version"] = TRANSFER_VERSION
+    ng[schema.VERSION_KEY] = TRANSFER_VERSION
     return ng
 
 
@@ -1376,7 +1383,7 @@ def ensure_carrier(obj, depsgraph):
     if mod is None or mod.type != "NODES":
         mod = obj.modifiers.new(TRANSFER_MODIFIER, "NODES")
         mod.show_in_editmode = False
-    if mod.node_group is None or mod.node_group.name != TRANSFER_GROUP or mod.node_group.get("rokeby_version") != TRANSFER_VERSION:
+    if mod.node_group is None or mod.node_group.name != TRANSFER_GROUP or mod.node_group.get(schema.VERSION_KEY) != TRANSFER_VERSION:
         mod.node_group = _transfer_group()
     from ..blender import compat  # noqa: PLC0415
 

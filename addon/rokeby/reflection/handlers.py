@@ -31,8 +31,7 @@ import contextlib
 import bpy
 from bpy.app.handlers import persistent
 
-from .. import appearance, shadow
-from ..blender import compat
+from ..blender import compat, hooks
 from . import evaluate, registry
 from .render import rendering, shading
 
@@ -70,13 +69,10 @@ def _run(scene, depsgraph, materials=(), **kwargs):
         # F12 shows the edit with no extra step: render nodes follow mirrors and materials.
         rendering.sync_scene(scene, reports, changed_materials=materials)
         moved = 0
-        if registry.shadow_objects():
-            # Shadow edits (#7): the falloff of each shadow mesh follows its light (writes only
-            # changed values, so the update it causes settles at once).
-            # Deleted casters, lights, twins or shadow meshes leave no half set-up behind.
-            for msg in shadow.repair(scene):
-                print(f"Rokeby: {msg}")
-            moved = shadow.sync_falloffs(scene)
+        # Other features' work after each update (shadow edits: repair and falloffs follow their
+        # lights), added through rokeby.blender.hooks so that no feature imports another.
+        for step in hooks.steps("scene_update"):
+            moved += step(scene) or 0
         if moved or any(r.recomputed for r in reports.values()):
             _redraw()
     except Exception as exc:  # noqa: BLE001 - a handler must never take Blender down
@@ -217,12 +213,10 @@ def migrate_file():
         s.render_edits = any(rendering.installed(m) for m in mats)
         s.freeze_eye_set = True
         s.data_version = DATA_VERSION
-    # Shadow edits saved with names (before shadow data version 1) get pointers.
-    for msg in shadow.migrate():
-        print(f"Rokeby: migrated {msg}")
-    # Appearance painting saved before the specular colour brush (issue 22) gets its parameter.
-    for msg in appearance.migrate():
-        print(f"Rokeby: appearance painting: {msg}")
+    # Shadow edits saved with names get pointers; appearance painting saved before the specular
+    # colour brush gets its parameter (each feature's "migrate" step, rokeby.blender.hooks).
+    for step in hooks.steps("migrate"):
+        step()
 
 
 @persistent
@@ -230,8 +224,10 @@ def on_undo_redo(*_args):
     registry.reset()
     evaluate.reset()
     rendering.reset()
-    # Painted images (#8): pixels in memory follow the packed data the step brought back.
-    appearance.reload_after_undo()
+    # Painted images (#8): pixels in memory follow the packed data the step brought back
+    # (each feature's "undo_redo" step, rokeby.blender.hooks).
+    for step in hooks.steps("undo_redo"):
+        step()
 
 
 _HANDLERS = (
@@ -247,14 +243,9 @@ _HANDLERS = (
 def register():
     registry.reset()
     for name, fn in _HANDLERS:
-        lst = getattr(bpy.app.handlers, name)
-        if fn not in lst:
-            lst.append(fn)
+        hooks.add("reflection", name, fn)
 
 
 def unregister():
-    for name, fn in _HANDLERS:
-        lst = getattr(bpy.app.handlers, name)
-        while fn in lst:
-            lst.remove(fn)
+    hooks.remove("reflection")
     evaluate.reset()

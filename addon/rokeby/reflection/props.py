@@ -23,6 +23,8 @@ from bpy.props import (
 )
 from bpy.types import PropertyGroup
 
+from ..core import schema
+
 METRICS = [
     ("EUCLIDEAN", "Euclidean", "Straight-line distance to each constraint (fast; works across several objects)", 0),
     ("GEODESIC", "Geodesic", "Distance over the surface: weights do not leak across gaps and folds", 1),
@@ -104,7 +106,7 @@ EYE_SOURCES = [
     ("CREATION", "View at Creation", "Each constraint keeps the eye of the view it was made from (Return to View shows it); renders from elsewhere miss its green handle by the angle the status reports", "VIEW3D", 1),
 ]
 # Saved with each mirror: 0 = made before these settings existed (load_post migrates it), 1 = now.
-DATA_VERSION = 1
+DATA_VERSION = schema.DATA_VERSION
 MAP_RESOLUTIONS = [(str(w), f"{w} × {w // 2}", f"Capture a {w} × {w // 2} panorama", i) for i, w in enumerate((256, 512, 1024, 2048))]
 
 
@@ -264,7 +266,7 @@ class RokebyMirror(PropertyGroup):
 # Renaming a caster, a light or anything derived keeps every link; a new object under an old
 # name takes nothing over. Files saved before this (names in custom properties) are migrated at
 # load (shadow.migrate, called by handlers.migrate_file).
-SHADOW_DATA_VERSION = 1
+SHADOW_DATA_VERSION = schema.SHADOW_DATA_VERSION
 SHADOW_ROLES = [
     ("NONE", "None", "Not a part of a shadow edit (lights that have edits keep their links here too)", 0),
     ("SHADOW_MESH", "Shadow mesh", "The edited copy of a caster, seen by shadow rays only", 1),
@@ -307,9 +309,9 @@ def register():
 
 
 def unregister():
-    if hasattr(bpy.types.Object, "rokeby_shadow"):
+    if hasattr(bpy.types.Object, schema.OBJECT_SHADOW_PROP):
         del bpy.types.Object.rokeby_shadow
-    if hasattr(bpy.types.Object, "rokeby"):
+    if hasattr(bpy.types.Object, schema.OBJECT_PROP):
         del bpy.types.Object.rokeby
     for cls in reversed(classes):
         if getattr(cls, "is_registered", False):

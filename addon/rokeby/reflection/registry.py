@@ -31,12 +31,13 @@ import bpy
 
 from ..blender import transaction
 from ..blender.compat import stored_group
+from ..core import schema
 
 # Custom properties of the objects a shadow edit makes (rokeby.shadow).
-SHADOW_KEYS = ("rokeby_shadow_of", "rokeby_twin_of")  # before shadow links were pointers (shadow.migrate)
+SHADOW_KEYS = schema.SHADOW_LEGACY_KEYS  # before shadow links were pointers (shadow.migrate)
 # On handles and region centres the add-on made (api); older files: membership of HANDLE_COLLECTION.
-MADE_KEY = "rokeby_made"
-HANDLE_COLLECTION = "Rokeby Handles"
+MADE_KEY = schema.MADE_KEY
+HANDLE_COLLECTION = schema.HANDLE_COLLECTION
 
 _mirrors: dict = {}  # session_uid -> mirror object
 _shadow: dict = {}  # session_uid -> shadow mesh or twin light
@@ -105,14 +106,14 @@ def note_depsgraph(depsgraph):
 
 
 def _is_mirror(ob) -> bool:
-    group = stored_group(ob, "rokeby")
+    group = stored_group(ob, schema.OBJECT_PROP)
     return group is not None and hasattr(group, "get") and bool(group.get("is_mirror", 0))
 
 
 def _is_shadow_part(ob) -> bool:
     """Shadow meshes, twin lights and lights holding links (``Object.rokeby_shadow``), and in files
     not yet migrated the custom properties of ``SHADOW_KEYS``."""
-    return stored_group(ob, "rokeby_shadow") is not None or any(key in ob for key in SHADOW_KEYS)
+    return stored_group(ob, schema.OBJECT_SHADOW_PROP) is not None or any(key in ob for key in SHADOW_KEYS)
 
 
 def _rebuild(n):
@@ -389,3 +390,16 @@ def drop_unused_node_groups() -> int:
         for ng in doomed:
             bpy.data.node_groups.remove(ng)
             removed += 1
+
+
+def of_mirrors(obj=None, *_args, **_kwargs) -> list:
+    """For ``transaction.atomic(materials=registry.of_mirrors)``: the materials of ``obj`` and of every mirror (the
+    render nodes of all of them may be synced)."""
+    obs = [*mirrors(), obj]
+    out = []
+    for ob in obs:
+        try:
+            out += [s.material for s in ob.material_slots if s.material is not None]
+        except (AttributeError, ReferenceError):
+            continue
+    return out

@@ -14,6 +14,7 @@ from . import evaluate
 from ..core import native, words
 from .viewport import draw as viewport
 from .props import METRICS
+from ..core import schema
 
 _STATUS_ICON = {"OK": "CHECKMARK", "WARNING": "ERROR", "ERROR": "CANCEL", "DISABLED": "HIDE_ON"}
 
@@ -68,7 +69,7 @@ class ROKEBY_PT_main(bpy.types.Panel):
         mirrors = evaluate.mirrors_of(context.scene)
         box = layout.box()
         box.label(text=f"Mirrors ({len(mirrors)})", icon="MOD_MIRROR")
-        box.prop(context.scene, "rokeby_viewport_preview", icon="SHADING_RENDERED")
+        box.prop(context.scene, schema.SCENE_VIEWPORT_PREVIEW_PROP, icon="SHADING_RENDERED")
         if viewport.last_error():
             box.label(text=f"Preview: {viewport.last_error()}"[:120], icon="ERROR")
         for m in mirrors:

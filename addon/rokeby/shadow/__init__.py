@@ -32,10 +32,11 @@ import numpy as np
 
 from ..core import native
 from ..blender import transaction
+from ..core import schema
 
 SHADOW_SUFFIX = " Shadow Mesh"
 TWIN_SUFFIX = " (edited shadows)"
-EDIT_KEY = "Rokeby shadow edit"
+EDIT_KEY = schema.SHADOW_EDIT_KEY
 RAY_VISIBILITY = ("visible_camera", "visible_diffuse", "visible_glossy", "visible_transmission", "visible_volume_scatter")
 
 
@@ -205,7 +206,7 @@ def start(caster, light, receivers=None, *, scene=None, min_loop_vertices: int =
     caster's bounds, nothing under the light) are :class:`ShadowEditError` naming the cause."""
     import bpy  # noqa: PLC0415 - Blender only
 
-    from .. import api  # noqa: PLC0415
+    from ..blender import meshes  # noqa: PLC0415
 
     sc = scene if scene is not None else bpy.context.scene
     if caster is None or caster.type != "MESH":
@@ -229,8 +230,8 @@ def start(caster, light, receivers=None, *, scene=None, min_loop_vertices: int =
     vl = sc.view_layers[0] if bpy.context.view_layer is None else bpy.context.view_layer
     vl.update()
     dg = bpy.context.evaluated_depsgraph_get()
-    cm = api.mesh_arrays(caster, dg)
-    rm = [api.mesh_arrays(o, dg) for o in receivers]
+    cm = meshes.mesh_arrays(caster, dg)
+    rm = [meshes.mesh_arrays(o, dg) for o in receivers]
     rv, rf = _merged(rm)
     opts = {"min_loop_vertices": int(min_loop_vertices), "w_z": float(w_z), "constraint_weight": float(constraint_weight), **kw}
     try:
@@ -379,14 +380,14 @@ class PartsEditor:
 # an object made later under an old name takes nothing over. Names of derived parts (shadow mesh,
 # twin, collections) follow their owner's name when the edit is applied or its linking made again.
 
-LINKING_TAG = "rokeby_shadow_linking"  # on the four linking collections: which role (they are ours)
+LINKING_TAG = schema.SHADOW_LINKING_TAG  # on the four linking collections: which role (they are ours)
 _COLLECTION_ATTRS = ("receivers_caster", "blockers_caster", "receivers_edited", "blockers_edited")
 
 
 def _registered() -> bool:
     import bpy  # noqa: PLC0415
 
-    return hasattr(bpy.types.Object, "rokeby_shadow")
+    return hasattr(bpy.types.Object, schema.OBJECT_SHADOW_PROP)
 
 
 def _require_registered() -> None:
@@ -426,7 +427,7 @@ def _stored(o) -> bool:
     RNA access)."""
     from ..blender import compat  # noqa: PLC0415
 
-    return compat.stored_group(o, "rokeby_shadow") is not None
+    return compat.stored_group(o, schema.OBJECT_SHADOW_PROP) is not None
 
 
 def _parts():
@@ -481,13 +482,13 @@ def _set_state(coll, obj, state: str):
     coll.collection_objects[list(coll.objects).index(obj)].light_linking.link_state = state
 
 
-RECEIVERS_CASTER, BLOCKERS_CASTER = "receivers (caster)", "blockers (caster)"
-RECEIVERS_EDITED, BLOCKERS_EDITED = "receivers (edited)", "blockers (edited)"
+RECEIVERS_CASTER, BLOCKERS_CASTER = schema.SHADOW_RECEIVERS_CASTER, schema.SHADOW_BLOCKERS_CASTER
+RECEIVERS_EDITED, BLOCKERS_EDITED = schema.SHADOW_RECEIVERS_EDITED, schema.SHADOW_BLOCKERS_EDITED
 _OURS = (RECEIVERS_CASTER, BLOCKERS_CASTER, RECEIVERS_EDITED, BLOCKERS_EDITED)
 
 
 def _collection_name(light_name: str, role: str) -> str:
-    return f"{light_name} · {role}"
+    return schema.shadow_collection_name(light_name, role)
 
 
 def _edits_of(light, meshes=None):
@@ -622,9 +623,7 @@ def _collect_orphan_collections() -> None:
 
 
 def _data_version() -> int:
-    from ..reflection.props import SHADOW_DATA_VERSION  # noqa: PLC0415
-
-    return SHADOW_DATA_VERSION
+    return schema.SHADOW_DATA_VERSION
 
 
 def shadow_mesh_of(obj):
@@ -770,25 +769,25 @@ def migrate() -> list[str]:
     msgs = []
     local = [o for o in objs if o.library is None]
     for ob in local:
-        if "rokeby_shadow_of" in ob and "rokeby_light" in ob:
+        if schema.SHADOW_LEGACY_SHADOW_OF_KEY in ob and schema.SHADOW_LEGACY_LIGHT_KEY in ob:
             links = ob.rokeby_shadow
-            caster, light = objs.get(str(ob["rokeby_shadow_of"])), objs.get(str(ob["rokeby_light"]))
+            caster, light = objs.get(str(ob[schema.SHADOW_LEGACY_SHADOW_OF_KEY])), objs.get(str(ob[schema.SHADOW_LEGACY_LIGHT_KEY]))
             links.role, links.caster, links.light, links.data_version = "SHADOW_MESH", caster, light, version
-            del ob["rokeby_shadow_of"], ob["rokeby_light"]
+            del ob[schema.SHADOW_LEGACY_SHADOW_OF_KEY], ob[schema.SHADOW_LEGACY_LIGHT_KEY]
             msgs.append(f"'{ob.name}': shadow mesh of {caster.name if caster else None!r} from {light.name if light else None!r}")
     for ob in local:
-        if "rokeby_twin_of" in ob:
-            light = objs.get(str(ob["rokeby_twin_of"]))
+        if schema.SHADOW_LEGACY_TWIN_OF_KEY in ob:
+            light = objs.get(str(ob[schema.SHADOW_LEGACY_TWIN_OF_KEY]))
             light = light if light is not None and light.type == "LIGHT" else None
             t = ob.rokeby_shadow
             t.role, t.light, t.data_version = "TWIN", light, version
             if light is not None and light.rokeby_shadow.twin is None:
                 light.rokeby_shadow.twin = ob
-            del ob["rokeby_twin_of"]
+            del ob[schema.SHADOW_LEGACY_TWIN_OF_KEY]
             msgs.append(f"'{ob.name}': twin of {light.name if light else None!r}")
     for ob in local:
-        if "rokeby_linking_before" in ob:
-            before = [str(n) for n in ob["rokeby_linking_before"]] + ["", ""]
+        if schema.SHADOW_LEGACY_LINKING_BEFORE_KEY in ob:
+            before = [str(n) for n in ob[schema.SHADOW_LEGACY_LINKING_BEFORE_KEY]] + ["", ""]
             links = ob.rokeby_shadow
             links.linking_saved = True
             links.receivers_before = colls.get(before[0]) if before[0] else None
@@ -798,7 +797,7 @@ def migrate() -> list[str]:
                 if c is not None and c.library is None:
                     c[LINKING_TAG] = role
                     setattr(links, attr, c)
-            del ob["rokeby_linking_before"]
+            del ob[schema.SHADOW_LEGACY_LINKING_BEFORE_KEY]
             msgs.append(f"'{ob.name}': linking of its shadow edits")
     return msgs
 
@@ -862,8 +861,8 @@ def configuration_key(i: int) -> str:
 def configuration_vectors(shadow_object) -> np.ndarray:
     """(K, 3) unit light vectors, in the caster's local frame, of the K keyed configurations of
     ``shadow_object`` (§6.2): where each of its edits was made."""
-    vs = [np.asarray(shadow_object["rokeby_light_initial"], np.float64)]
-    extra = np.asarray(shadow_object.get("rokeby_light_configurations", []), np.float64).reshape(-1, 3)
+    vs = [np.asarray(shadow_object[schema.SHADOW_LIGHT_INITIAL_KEY], np.float64)]
+    extra = np.asarray(shadow_object.get(schema.SHADOW_LIGHT_CONFIGURATIONS_KEY, []), np.float64).reshape(-1, 3)
     vs.extend(extra)
     out = np.asarray(vs).reshape(-1, 3)
     return out / np.linalg.norm(out, axis=1, keepdims=True)
@@ -1016,7 +1015,7 @@ def apply(session: ShadowSession, *, scene=None, falloff_beta: float = 0.0, add_
             ob.data = me.copy()
     if ob.data.shape_keys is not None and len(ob.data.vertices) != n:
         raise ShadowEditError(f"the shadow mesh of '{caster.name}' no longer matches its vertices; remove the shadow edit first")
-    configs = configuration_vectors(ob) if "rokeby_light_initial" in ob else np.zeros((0, 3))
+    configs = configuration_vectors(ob) if schema.SHADOW_LIGHT_INITIAL_KEY in ob else np.zeros((0, 3))
     if add_configuration and len(configs):
         session.configuration = len(configs)
     elif not session.applied or session.configuration >= max(len(configs), 1):
@@ -1034,13 +1033,13 @@ def apply(session: ShadowSession, *, scene=None, falloff_beta: float = 0.0, add_
     _write_key(ob, key_name, rest, local)
     lv = list(map(float, session.light_vector))
     if session.configuration == 0:
-        ob["rokeby_light_initial"] = lv
+        ob[schema.SHADOW_LIGHT_INITIAL_KEY] = lv
     else:
-        extra = list(ob.get("rokeby_light_configurations", []))
+        extra = list(ob.get(schema.SHADOW_LIGHT_CONFIGURATIONS_KEY, []))
         i = 3 * (session.configuration - 1)
         extra[i:i + 3] = lv
-        ob["rokeby_light_configurations"] = extra
-    ob["rokeby_falloff_beta"] = beta
+        ob[schema.SHADOW_LIGHT_CONFIGURATIONS_KEY] = extra
+    ob[schema.SHADOW_FALLOFF_BETA_KEY] = beta
     links = ob.rokeby_shadow
     links.role, links.caster, links.light, links.data_version = "SHADOW_MESH", caster, light, _data_version()
     values = configuration_weights(ob, light, beta)
@@ -1066,8 +1065,8 @@ def apply(session: ShadowSession, *, scene=None, falloff_beta: float = 0.0, add_
 def _drop_configurations(ob) -> None:
     """Removes the keyed configurations after the first (keys and light vectors) from shadow mesh
     ``ob`` and its self-shadow mesh."""
-    if "rokeby_light_configurations" in ob:
-        del ob["rokeby_light_configurations"]
+    if schema.SHADOW_LIGHT_CONFIGURATIONS_KEY in ob:
+        del ob[schema.SHADOW_LIGHT_CONFIGURATIONS_KEY]
     b = ob.rokeby_shadow.self_blocker
     for o in (ob, b):
         keys = None if o is None else o.data.shape_keys
@@ -1168,8 +1167,8 @@ def sync_falloffs(scene) -> int:
         keys = ob.data.shape_keys
         if light is None or light.type != "LIGHT" or keys is None or EDIT_KEY not in keys.key_blocks:
             continue
-        beta = float(ob.get("rokeby_falloff_beta", 0.0))
-        several = len(ob.get("rokeby_light_configurations", [])) >= 3
+        beta = float(ob.get(schema.SHADOW_FALLOFF_BETA_KEY, 0.0))
+        several = len(ob.get(schema.SHADOW_LIGHT_CONFIGURATIONS_KEY, [])) >= 3
         if not (np.isfinite(beta) and beta >= 0.0) or not (beta > 0.0 or several):
             continue  # β = 0 and one configuration: the key stays as apply or a script set it
         try:

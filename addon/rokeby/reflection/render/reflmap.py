@@ -44,7 +44,9 @@ import numpy as np
 
 from . import shading
 from ...blender import transaction
+from .. import evaluate
 from ..evaluate import RokebyError
+from ...core import latlong, schema
 
 # Widths of the panorama (height = width / 2); the UI offers these, the API any power of two.
 RESOLUTIONS = (256, 512, 1024, 2048)
@@ -54,7 +56,7 @@ DEFAULT_SAMPLES = 32
 # Roughness of each stored level: level 0 is the capture itself; rougher materials blend between
 # the two nearest levels.
 ROUGHNESS_LEVELS = (0.0, 0.25, 0.5, 1.0)
-CACHE_DIR = "//rokeby_maps/"
+CACHE_DIR = schema.REFLMAP_CACHE_DIR
 # File names in the cache: <sanitised mirror name, at most STEM_CHARS>-<map id, ID_CHARS hex>.exr
 STEM_CHARS = 40
 ID_CHARS = 12
@@ -68,13 +70,13 @@ def cache_dir() -> str:
     folder = prefs.get().cache_folder
     return folder.rstrip("/\\") + "/" if folder else CACHE_DIR
 STORAGES = ("AUTO", "FILE", "PACK")
-SHARED_GROUP = "Rokeby Reflection Map"
-MIRROR_GROUP_PREFIX = "Rokeby Reflection Map: "
-IMAGE_PREFIX = "Rokeby Map "
-TAG = "rokeby_reflection_map"
+SHARED_GROUP = schema.REFLMAP_SHARED_GROUP
+MIRROR_GROUP_PREFIX = schema.REFLMAP_MIRROR_GROUP_PREFIX
+IMAGE_PREFIX = schema.REFLMAP_IMAGE_PREFIX
+TAG = schema.REFLMAP_TAG
 # Bumped when the groups built here change; forces a rebuild through shading._fresh_group.
 MAP_VERSION = 1
-MAP_VERSION_KEY = "rokeby_reflmap_version"
+MAP_VERSION_KEY = schema.REFLMAP_VERSION_KEY
 # The panorama camera's rotation (XYZ Euler) that makes Cycles' equirectangular image match the
 # Environment Texture convention above (checked by tests/test_reflmap.py).
 PANO_ROTATION = (math.pi / 2, 0.0, -math.pi / 2)
@@ -83,20 +85,8 @@ PANO_ROTATION = (math.pi / 2, 0.0, -math.pi / 2)
 # --- the lat-long convention -----------------------------------------------------------------
 
 
-def direction_to_uv(d) -> np.ndarray:
-    """(…, 3) world directions → (…, 2) texture coordinates (u, v) in [0, 1]² (see the module
-    docstring)."""
-    d = np.asarray(d, dtype=np.float64)
-    u = 0.5 - np.arctan2(d[..., 1], d[..., 0]) / (2 * np.pi)
-    v = 0.5 + np.arctan2(d[..., 2], np.hypot(d[..., 0], d[..., 1])) / np.pi
-    return np.stack([u % 1.0, v], axis=-1)
-
-
-def uv_to_direction(u, v) -> np.ndarray:
-    """Texture coordinates → unit world directions (…, 3); the inverse of ``direction_to_uv``."""
-    phi = (0.5 - np.asarray(u, dtype=np.float64)) * 2 * np.pi
-    lat = (np.asarray(v, dtype=np.float64) - 0.5) * np.pi
-    return np.stack([np.cos(lat) * np.cos(phi), np.cos(lat) * np.sin(phi), np.sin(lat)], axis=-1)
+direction_to_uv = latlong.direction_to_uv  # one home: rokeby.core.latlong
+uv_to_direction = latlong.uv_to_direction
 
 
 def sample(pixels: np.ndarray, directions) -> np.ndarray:
@@ -168,10 +158,11 @@ def prefilter(px: np.ndarray, roughness_levels=ROUGHNESS_LEVELS) -> list:
 # --- capture -----------------------------------------------------------------------------------
 
 
-def _api():
-    from ... import api  # noqa: PLC0415 - api imports evaluate; keep the import graph acyclic
+def _of_mirrors(*args, **kwargs) -> list:
+    """The materials an operation on mirrors may edit (registry.of_mirrors)."""
+    from .. import registry  # noqa: PLC0415
 
-    return api
+    return registry.of_mirrors(*args, **kwargs)
 
 
 def image_name(mirror, level: int = 0) -> str:
@@ -258,7 +249,7 @@ def capture_origin(mirror, depsgraph=None) -> np.ndarray:
     set, else the centre of the mirror's world-space bounding box (of the evaluated mesh)."""
     import bpy  # noqa: PLC0415
 
-    _api()._require_mirror(mirror)
+    evaluate.require_mirror(mirror)
     origin = mirror.rokeby.map_origin
     if origin is not None:
         p = np.array(origin.matrix_world.translation, dtype=np.float64)
@@ -483,7 +474,7 @@ def is_stale(mirror, scene=None) -> bool:
     return s.map_fingerprint != scene_fingerprint(mirror, scene)
 
 
-@transaction.atomic(materials=transaction.of_mirrors)
+@transaction.atomic(materials=_of_mirrors)
 def capture(mirror, *, resolution=None, samples=None, storage: str = "AUTO", scene=None):
     """Capture the reflection map of ``mirror`` and return its (sharp) image.
 
@@ -494,9 +485,8 @@ def capture(mirror, *, resolution=None, samples=None, storage: str = "AUTO", sce
     before anything is rendered; the scene is left as it was, also on error."""
     import bpy  # noqa: PLC0415
 
-    api = _api()
     scene = scene if scene is not None else bpy.context.scene
-    api._require_mirror(mirror)
+    evaluate.require_mirror(mirror)
     s = mirror.rokeby
     width = _resolution(s.map_resolution if resolution is None else resolution)
     samples = s.map_samples if samples is None else samples
@@ -746,7 +736,7 @@ def _feed(tree, bsdf, group, mapping):
 
 def _tag(node, bsdf, role):
     node[TAG] = role
-    node["rokeby_bsdf"] = bsdf.name
+    node[schema.REFLMAP_BSDF_KEY] = bsdf.name
 
 
 def install(material, mirror) -> int:
@@ -768,7 +758,7 @@ def install(material, mirror) -> int:
         consumers = [lk.to_socket for lk in bsdf.outputs["BSDF"].links]
         g = tree.nodes.new("ShaderNodeGroup")
         g.node_tree = group_tree
-        g.label = "Rokeby: reflection map"
+        g.label = schema.FRAME_REFLECTION_MAP
         g.location = (bsdf.location.x - 300, bsdf.location.y - 250)
         _tag(g, bsdf, "group")
         _feed(tree, bsdf, g, _PRINCIPLED_INPUTS if principled else _GLOSSY_INPUTS)
@@ -778,7 +768,7 @@ def install(material, mirror) -> int:
         _tag(emit, bsdf, "emission")
         tree.links.new(g.outputs["Specular"], emit.inputs["Color"])
         if principled:
-            g["rokeby_saved"] = json.dumps({name: float(bsdf.inputs[name].default_value) for name in _SWITCHED_OFF})
+            g[schema.REFLMAP_SAVED_KEY] = json.dumps({name: float(bsdf.inputs[name].default_value) for name in _SWITCHED_OFF})
             for name in _SWITCHED_OFF:
                 for lk in list(bsdf.inputs[name].links):
                     tree.links.remove(lk)
@@ -808,7 +798,7 @@ def uninstall(material) -> bool:
     ours = [nd for nd in tree.nodes if nd.get(TAG)]
     by_bsdf: dict = {}
     for nd in ours:
-        by_bsdf.setdefault(nd["rokeby_bsdf"], {})[nd[TAG]] = nd
+        by_bsdf.setdefault(nd[schema.REFLMAP_BSDF_KEY], {})[nd[TAG]] = nd
     for bsdf_name, parts in by_bsdf.items():
         bsdf = tree.nodes.get(bsdf_name)
         g, emit, add = parts.get("group"), parts.get("emission"), parts.get("add")
@@ -816,7 +806,7 @@ def uninstall(material) -> bool:
             result = add.outputs["Shader"] if add is not None else (emit.outputs["Emission"] if emit is not None else None)
             consumers = [lk.to_socket for lk in result.links] if result is not None else []
             if bsdf.bl_idname == "ShaderNodeBsdfPrincipled" and g is not None:
-                saved = json.loads(g.get("rokeby_saved", "{}"))
+                saved = json.loads(g.get(schema.REFLMAP_SAVED_KEY, "{}"))
                 for name, value in saved.items():
                     bsdf.inputs[name].default_value = value
                 for name in ("Base Color",) + _SWITCHED_OFF:

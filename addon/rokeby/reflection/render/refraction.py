@@ -71,15 +71,16 @@ from . import shading
 from ...blender import transaction
 from ..evaluate import REFRACTION_ATTRIBUTE, RokebyError
 from .shading import mix_vector, scalar_math, vector_math
+from ...core import schema, vecmath
 
-GROUP = "Rokeby Edited Refraction Normal"
+GROUP = schema.REFRACTION_GROUP
 VERSION = 2
-OWN_VERSION_KEY = "rokeby_refraction_version"
-TAG = "rokeby_refraction"  # on every node this module adds: its role
-SOURCE = "rokeby_refraction_source"  # on the parts of a split Glass BSDF: the Glass's split id
-SPLIT_ID = "rokeby_refraction_split_id"  # on a split Glass BSDF
-SPLIT = "rokeby_refraction_split"  # on a split Glass BSDF: its original outgoing links
-SIGNATURE = "rokeby_refraction_signature"  # on a split Glass BSDF: its inputs when it was split
+OWN_VERSION_KEY = schema.REFRACTION_VERSION_KEY
+TAG = schema.REFRACTION_TAG  # on every node this module adds: its role
+SOURCE = schema.REFRACTION_SOURCE_KEY  # on the parts of a split Glass BSDF: the Glass's split id
+SPLIT_ID = schema.REFRACTION_SPLIT_ID_KEY  # on a split Glass BSDF
+SPLIT = schema.REFRACTION_SPLIT_KEY  # on a split Glass BSDF: its original outgoing links
+SIGNATURE = schema.REFRACTION_SIGNATURE_KEY  # on a split Glass BSDF: its inputs when it was split
 
 BELOW_MARGIN = 0.02  # m: edited directions are kept at least this far below the tangent plane
 REACH_MARGIN = 0.05  # μ: fraction of the reachable cone (in cos) kept clear of its grazing edge
@@ -101,10 +102,8 @@ def _normalize(v):
 
 
 def _refract(i, n, eta):
-    """GLSL/Blender refract: zero vector on total internal reflection."""
-    c = _dot(n, i)
-    k = 1.0 - eta * eta * (1.0 - c * c)
-    return np.where(k >= 0.0, eta * i - (eta * c + np.sqrt(np.maximum(k, 0.0))) * n, 0.0)
+    """GLSL/Blender refract: zero vector on total internal reflection (rokeby.core.vecmath)."""
+    return vecmath.refract(i, n, eta)
 
 
 def _rotate(rotvec, v):
@@ -327,7 +326,7 @@ def _feed(tree, socket, location, source=None):
     """Feed n'_t to ``socket`` through its own group node (``shading.feed_through``)."""
 
     def new_group():
-        group = _tag(tree.nodes.new("ShaderNodeGroup"), "normal", "Rokeby: edited refraction", source)
+        group = _tag(tree.nodes.new("ShaderNodeGroup"), "normal", schema.FRAME_EDITED_REFRACTION, source)
         group.node_tree = node_group()
         group.location = location
         return group

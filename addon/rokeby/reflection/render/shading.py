@@ -33,11 +33,13 @@ import bpy
 
 from ...blender import transaction
 from ..evaluate import RENDER_ATTRIBUTE, RENDER_ATTRIBUTE_WA, RokebyError
+from ...blender import nodes
+from ...core import schema
 
-DIRECTION_GROUP = "Rokeby Edited Direction"
-GROUP = "Rokeby Edited Normal"
-LINK_TAG = "rokeby_edited_normal"
-VERSION_KEY = "rokeby_version"
+DIRECTION_GROUP = schema.DIRECTION_GROUP
+GROUP = schema.NORMAL_GROUP
+LINK_TAG = schema.LINK_TAG
+VERSION_KEY = schema.VERSION_KEY
 # 3: the field is read as per-corner quaternions (RENDER_ATTRIBUTE) instead of rotation vectors.
 VERSION = 3
 
@@ -222,16 +224,16 @@ def node_group():
 
 # --- wiring materials ------------------------------------------------------------------------
 # Every node the add-on puts in a material carries LINK_TAG (older files: True) and a ROLE.
-ROLE = "rokeby_role"
-SOURCE = "rokeby_source"  # on split parts: the name of the Principled BSDF they stand in for
-SPLIT = "rokeby_split"  # on a split Principled BSDF: its original outgoing links
-SIGNATURE = "rokeby_signature"  # on a split Principled BSDF: its inputs when it was split
-SPLIT_ID = "rokeby_split_id"  # on a split Principled BSDF: the key its parts carry in SOURCE
-SOURCE_NAME = "rokeby_source_name"  # on split parts: the BSDF's name when split (to recreate it)
+ROLE = schema.ROLE_KEY
+SOURCE = schema.SOURCE_KEY  # on split parts: the name of the Principled BSDF they stand in for
+SPLIT = schema.SPLIT_KEY  # on a split Principled BSDF: its original outgoing links
+SIGNATURE = schema.SIGNATURE_KEY  # on a split Principled BSDF: its inputs when it was split
+SPLIT_ID = schema.SPLIT_ID_KEY  # on a split Principled BSDF: the key its parts carry in SOURCE
+SOURCE_NAME = schema.SOURCE_NAME_KEY  # on split parts: the BSDF's name when split (to recreate it)
 SPECULAR_BSDFS = ("ShaderNodeBsdfGlossy", "ShaderNodeBsdfAnisotropic")
 # BSDFs inside a node group are edited in a copy of the group local to the material:
-COPY_OF = "rokeby_copy_of"  # on the copy (a node tree): the group it copies
-ORIGINAL_TREE = "rokeby_original_tree"  # on the material's group node: the group it used
+COPY_OF = schema.COPY_OF_KEY  # on the copy (a node tree): the group it copies
+ORIGINAL_TREE = schema.ORIGINAL_TREE_KEY  # on the material's group node: the group it used
 _SEP = "\x1f"
 
 
@@ -397,9 +399,9 @@ def _split(tree, bsdf) -> None:
     specular = _clone(tree, bsdf, "specular", {
         "Base Color": black, "Metallic": 0.0, "Subsurface Weight": 0.0, "Transmission Weight": 0.0,
         "Sheen Weight": 0.0, "Emission Strength": 0.0, "Alpha": 1.0}, (x + 300, y + 150))
-    _feed_edited_normal(tree, specular.inputs["Normal"], "Rokeby: edited reflections", (x, y - 420))
+    _feed_edited_normal(tree, specular.inputs["Normal"], schema.FRAME_EDITED_REFLECTIONS, (x, y - 420))
     if _has_coat(bsdf):
-        _feed_edited_normal(tree, specular.inputs["Coat Normal"], "Rokeby: edited coat reflections", (x, y - 520))
+        _feed_edited_normal(tree, specular.inputs["Coat Normal"], schema.FRAME_EDITED_COAT, (x, y - 520))
     # (1 − F) Diffuse: Mix(F, Diffuse, black).
     fresnel = _tag_part(tree.nodes.new("ShaderNodeFresnel"), "fresnel", f"Rokeby: specular layer of {bsdf.name}", bsdf)
     fresnel.location = (x + 300, y + 300)
@@ -411,7 +413,7 @@ def _split(tree, bsdf) -> None:
     weight.use_clamp = True
     for node in (level, weight):
         _tag_part(node, "math", f"Rokeby: specular layer of {bsdf.name}", bsdf)
-    nothing = _tag_part(tree.nodes.new("ShaderNodeEmission"), "black", "Rokeby: nothing", bsdf)
+    nothing = _tag_part(tree.nodes.new("ShaderNodeEmission"), "black", schema.FRAME_NOTHING, bsdf)
     nothing.inputs["Strength"].default_value = 0.0
     attenuated = _tag_part(tree.nodes.new("ShaderNodeMixShader"), "attenuate", f"Rokeby: diffuse under the specular layer of {bsdf.name}", bsdf)
     tree.links.new(weight.outputs[0], attenuated.inputs["Fac"])
@@ -423,16 +425,16 @@ def _split(tree, bsdf) -> None:
     result = total.outputs["Shader"]
     if not _fixed(bsdf.inputs["Metallic"], 0.0):
         metal = _clone(tree, bsdf, "metal", {"Metallic": 1.0, "Emission Strength": 0.0, "Alpha": 1.0}, (x + 300, y + 100))
-        _feed_edited_normal(tree, metal.inputs["Normal"], "Rokeby: edited reflections", (x, y - 620))
+        _feed_edited_normal(tree, metal.inputs["Normal"], schema.FRAME_EDITED_REFLECTIONS, (x, y - 620))
         if _has_coat(bsdf):
-            _feed_edited_normal(tree, metal.inputs["Coat Normal"], "Rokeby: edited coat reflections", (x, y - 720))
+            _feed_edited_normal(tree, metal.inputs["Coat Normal"], schema.FRAME_EDITED_COAT, (x, y - 720))
         mix = _tag_part(tree.nodes.new("ShaderNodeMixShader"), "metallic", f"Rokeby: metallic of {bsdf.name}", bsdf)
         tree.links.new(_value_socket(tree, bsdf.inputs["Metallic"], bsdf, (x + 100, y + 400)), mix.inputs["Fac"])
         tree.links.new(result, mix.inputs[1])
         tree.links.new(metal.outputs["BSDF"], mix.inputs[2])
         result = mix.outputs["Shader"]
     if not _fixed(bsdf.inputs["Alpha"], 1.0):
-        clear = _tag_part(tree.nodes.new("ShaderNodeBsdfTransparent"), "transparent", "Rokeby: alpha", bsdf)
+        clear = _tag_part(tree.nodes.new("ShaderNodeBsdfTransparent"), "transparent", schema.FRAME_ALPHA, bsdf)
         mix = _tag_part(tree.nodes.new("ShaderNodeMixShader"), "alpha", f"Rokeby: alpha of {bsdf.name}", bsdf)
         tree.links.new(_value_socket(tree, bsdf.inputs["Alpha"], bsdf, (x + 100, y + 450)), mix.inputs["Fac"])
         tree.links.new(clear.outputs["BSDF"], mix.inputs[1])
@@ -534,58 +536,12 @@ _NODE_KEYS = (SPLIT, SIGNATURE, SPLIT_ID, ORIGINAL_TREE)
 
 
 def _snapshot(tree, keys=_NODE_KEYS) -> dict:
-    """What an install may change in ``tree``: its nodes, links, our keys on the artist's nodes and
-    the group each group node uses (for ``_restore`` after a failure half way)."""
-    return {
-        "nodes": {nd.as_pointer() for nd in tree.nodes},
-        "links": {(lk.from_node.as_pointer(), lk.from_socket.identifier, lk.to_node.as_pointer(), lk.to_socket.identifier) for lk in tree.links},
-        "keys": {nd.as_pointer(): {k: nd[k] for k in keys if k in nd} for nd in tree.nodes},
-        "key_names": tuple(keys),
-        "groups": {nd.as_pointer(): nd.node_tree for nd in tree.nodes if nd.bl_idname == "ShaderNodeGroup"},
-        "node_groups": {g.as_pointer() for g in bpy.data.node_groups},
-    }
+    """What an install may change in ``tree`` (rokeby.blender.nodes.snapshot, with our keys)."""
+    return nodes.snapshot(tree, keys)
 
 
-def atomic(tree, keys, fn):
-    """``fn()`` on ``tree``, all or nothing: an exception restores the tree (``_restore``),
-    including the custom properties ``keys`` on its nodes, and is raised again."""
-    snap = _snapshot(tree, keys)
-    try:
-        return fn()
-    except BaseException:
-        _restore(tree, snap)
-        raise
-
-
-def _restore(tree, snap) -> None:
-    """Put ``tree`` back as ``_snapshot`` found it: nodes added since go (with their links), links
-    added since go, links removed since come back, our keys and group assignments are reset, and
-    group copies made since are removed."""
-    for nd in [nd for nd in tree.nodes if nd.as_pointer() not in snap["nodes"]]:
-        tree.nodes.remove(nd)
-    nodes = {nd.as_pointer(): nd for nd in tree.nodes}
-    for lk in list(tree.links):
-        if (lk.from_node.as_pointer(), lk.from_socket.identifier, lk.to_node.as_pointer(), lk.to_socket.identifier) not in snap["links"]:
-            tree.links.remove(lk)
-    now = {(lk.from_node.as_pointer(), lk.from_socket.identifier, lk.to_node.as_pointer(), lk.to_socket.identifier) for lk in tree.links}
-    for key in snap["links"] - now:
-        a, out_id, b, in_id = key
-        if a in nodes and b in nodes:
-            out = next((sk for sk in nodes[a].outputs if sk.identifier == out_id), None)
-            inp = next((sk for sk in nodes[b].inputs if sk.identifier == in_id), None)
-            if out is not None and inp is not None:
-                tree.links.new(out, inp)
-    for ptr, nd in nodes.items():
-        keys = snap["keys"].get(ptr, {})
-        for k in snap["key_names"]:
-            if k in keys:
-                nd[k] = keys[k]
-            elif k in nd:
-                del nd[k]
-        if ptr in snap["groups"] and nd.node_tree != snap["groups"][ptr]:
-            nd.node_tree = snap["groups"][ptr]
-    for g in [g for g in bpy.data.node_groups if g.as_pointer() not in snap["node_groups"] and g.get(COPY_OF) is not None and g.users == 0]:
-        bpy.data.node_groups.remove(g)
+atomic = nodes.atomic  # all or nothing on one node tree (rokeby.blender.nodes)
+_restore = nodes.restore
 
 
 def install(material) -> int:
@@ -643,7 +599,7 @@ def _install_tree(tree, material) -> int:
             if node.node_tree.get(COPY_OF) is not None or _bsdfs_inside(node.node_tree):
                 count += _install_tree(_local_copy(node, material), material)
         elif node.bl_idname in SPECULAR_BSDFS:
-            _feed_edited_normal(tree, node.inputs["Normal"], "Rokeby: edited reflections", (x - 250, y - 300))
+            _feed_edited_normal(tree, node.inputs["Normal"], schema.FRAME_EDITED_REFLECTIONS, (x - 250, y - 300))
             count += 1
         elif node.bl_idname == "ShaderNodeBsdfPrincipled":
             if SPLIT in node:
@@ -651,9 +607,9 @@ def _install_tree(tree, material) -> int:
                     _unsplit(tree, node)
                     _split(tree, node)
             elif _is_metal(node):
-                _feed_edited_normal(tree, node.inputs["Normal"], "Rokeby: edited reflections", (x - 250, y - 300))
+                _feed_edited_normal(tree, node.inputs["Normal"], schema.FRAME_EDITED_REFLECTIONS, (x - 250, y - 300))
                 if _has_coat(node):
-                    _feed_edited_normal(tree, node.inputs["Coat Normal"], "Rokeby: edited coat reflections", (x - 250, y - 400))
+                    _feed_edited_normal(tree, node.inputs["Coat Normal"], schema.FRAME_EDITED_COAT, (x - 250, y - 400))
             else:
                 _split(tree, node)
             count += 1
@@ -685,7 +641,7 @@ def _sync_tree(tree) -> bool:
         if not _is_metal(bsdf):
             _split(tree, bsdf)
         else:
-            _feed_edited_normal(tree, bsdf.inputs["Normal"], "Rokeby: edited reflections", (bsdf.location.x - 250, bsdf.location.y - 300))
+            _feed_edited_normal(tree, bsdf.inputs["Normal"], schema.FRAME_EDITED_REFLECTIONS, (bsdf.location.x - 250, bsdf.location.y - 300))
     return bool(stale)
 
 

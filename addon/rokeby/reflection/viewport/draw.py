@@ -26,6 +26,7 @@ import bpy
 from ...blender import compat
 from .. import evaluate
 from . import glsl
+from ...core import schema
 
 DEPTH_BIAS = 2e-5
 _CIRCLE_SEGMENTS = 64
@@ -327,7 +328,7 @@ def _draw_callback():
     try:
         context = bpy.context
         scene = context.scene
-        if scene is None or not getattr(scene, "rokeby_viewport_preview", False):
+        if scene is None or not getattr(scene, schema.SCENE_VIEWPORT_PREVIEW_PROP, False):
             return
         from ...blender import prefs  # noqa: PLC0415
 
@@ -392,7 +393,7 @@ def unregister():
     if _handle is not None:
         bpy.types.SpaceView3D.draw_handler_remove(_handle, "WINDOW")
         _handle = None
-    if hasattr(bpy.types.Scene, "rokeby_viewport_preview"):
+    if hasattr(bpy.types.Scene, schema.SCENE_VIEWPORT_PREVIEW_PROP):
         del bpy.types.Scene.rokeby_viewport_preview
     free()
     _last_error = None

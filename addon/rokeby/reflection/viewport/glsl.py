@@ -22,6 +22,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ...blender.gpu import create_shader  # noqa: F401 - glsl.create_shader, as before
+from ...core import vecmath
 from ...core.shaders import shader_dir, standalone_from, standalone_header  # noqa: F401 - re-exported
 
 FILES = {
@@ -86,15 +87,8 @@ VERTEX_TEXTURE_WIDTH = 4096
 
 
 def _falloff(d: float, radius: float, border: float) -> float:
-    """region::falloff, in float64."""
-    border = min(border, radius)
-    if d >= radius:
-        return 0.0
-    inner = radius - border
-    if d <= inner:
-        return 1.0
-    t = min(max((d - inner) / border, 0.0), 1.0)
-    return 1.0 - t * t * (3.0 - 2.0 * t)
+    """region::falloff, in float64 (one home: rokeby.core.vecmath.region_falloff)."""
+    return float(vecmath.region_falloff(d, radius, border))
 
 
 @dataclass
