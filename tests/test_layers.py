@@ -51,9 +51,6 @@ KNOWN: dict[str, str] = {
     "rokeby.shadow -> rokeby.reflection.registry":
         "the registry of what the add-on owns indexes shadow objects too: split it into a feature-agnostic object index "
         "in blender/ and reflection's records (handles, carriers, tidy)",
-    "cycle: rokeby.compositing rokeby.compositing.blender_gpu":
-        "blender_gpu takes the shader interface and frame_result from the package, which imports it lazily: move those "
-        "into a compositing/shader.py both import",
     "cycle: rokeby.reflection.duplicates rokeby.reflection.evaluate rokeby.reflection.handlers rokeby.reflection.props "
     "rokeby.reflection.registry rokeby.reflection.render.reflmap rokeby.reflection.render.refraction "
     "rokeby.reflection.render.rendering rokeby.reflection.render.shading":

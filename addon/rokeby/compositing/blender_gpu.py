@@ -32,8 +32,8 @@ import weakref
 
 import numpy as np
 
-from . import (RECOMPOSITE_INTERFACE, RECOMPOSITE_INTERFACE_NAME, CompositingError, frame_result,
-                          recomposite_files, recomposite_frame)
+from .errors import CompositingError
+from .gl import RECOMPOSITE_INTERFACE, RECOMPOSITE_INTERFACE_NAME, frame_result, recomposite_files, recomposite_frame
 
 
 class NoGPUContext(RuntimeError):
