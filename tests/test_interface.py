@@ -36,8 +36,11 @@ def registered():
 
 
 def _operators():
+    """Every operator class of the add-on's modules (each feature package registers its own)."""
     out = {}
-    for module in rokeby._modules():
+    for name, module in list(sys.modules.items()):
+        if not name.startswith("rokeby.") or module is None:
+            continue
         for obj in vars(module).values():
             if isinstance(obj, type) and issubclass(obj, bpy.types.Operator) and getattr(obj, "bl_idname", "").startswith("rokeby."):
                 out[obj.bl_idname] = obj
