@@ -45,9 +45,6 @@ KNOWN: dict[str, str] = {
         "reflection's scene-model entry points (add_mirror, add_constraint, ...) are still implemented in api.py: "
         "move them into reflection/ and let api re-export them",
     "rokeby.reflection.ui -> rokeby.api": "as reflection.operators",
-    "rokeby.compositing.ui -> rokeby.api":
-        "the compositing entry points the operators call (recomposite_render, ...) are implemented in api.py: move them "
-        "into compositing/ and let api re-export them",
     "rokeby.shadow -> rokeby.reflection.registry":
         "the registry of what the add-on owns indexes shadow objects too: split it into a feature-agnostic object index "
         "in blender/ and reflection's records (handles, carriers, tidy)",

@@ -17,6 +17,7 @@ from .. import compositing as comp
 from ..blender import prefs
 from ..blender.progress import Progress
 from ..core import schema
+from ..core.errors import RokebyError
 
 # What an operator reports when Esc / Ctrl-C / rokeby.native.cancel() stopped it (nothing changed).
 CANCELLED = "Rokeby: Cancelled (nothing was changed)"
@@ -158,17 +159,17 @@ class ROKEBY_OT_composite_render(_EditProps, bpy.types.Operator):
         return True
 
     def execute(self, context):
-        from .. import api  # noqa: PLC0415
+        from . import workflow  # noqa: PLC0415
 
         path = bpy.path.abspath(self.filepath) if self.filepath else os.path.join(tempfile.gettempdir(), "rokeby_composite.exr")
         try:
             with Progress(context, 1) as progress:  # render, reconstruct, recomposite: seconds
-                img, reports = api.recomposite_render(path, scene=context.scene, warn=False, **_edit_args(self, context))
+                img, reports = workflow.recomposite_render(path, scene=context.scene, warn=False, **_edit_args(self, context))
                 progress.step()
         except KeyboardInterrupt:
             self.report({"WARNING"}, CANCELLED)
             return {"CANCELLED"}
-        except (comp.CompositingError, api.RokebyError, ValueError, RuntimeError) as exc:
+        except (comp.CompositingError, RokebyError, ValueError, RuntimeError) as exc:
             self.report({"ERROR"}, f"Rokeby: {exc}")
             return {"CANCELLED"}
         context.scene[LAST_EXR] = path
@@ -212,7 +213,7 @@ class ROKEBY_OT_composite_edit(_EditProps, bpy.types.Operator):
         is made on the main thread once the pixels are there. Otherwise: ``execute``."""
         import threading  # noqa: PLC0415
 
-        from .. import api  # noqa: PLC0415
+        from . import workflow  # noqa: PLC0415
 
         args = _edit_args(self, context)
         path = self._path(context)
@@ -223,7 +224,7 @@ class ROKEBY_OT_composite_edit(_EditProps, bpy.types.Operator):
 
         def work():
             try:
-                self._result["ok"] = api.recomposite_exr_pixels(path, warn=False, **args)
+                self._result["ok"] = workflow.recomposite_exr_pixels(path, warn=False, **args)
             except BaseException as exc:  # noqa: BLE001 - handed to the main thread
                 self._result["error"] = exc
 
@@ -253,18 +254,16 @@ class ROKEBY_OT_composite_edit(_EditProps, bpy.types.Operator):
         return self._done(img, stats)
 
     def _failed(self, exc):
-        from .. import api  # noqa: PLC0415
-
         if isinstance(exc, KeyboardInterrupt):
             self.report({"WARNING"}, CANCELLED)
             return {"CANCELLED"}
-        if isinstance(exc, (comp.CompositingError, api.RokebyError, ValueError, RuntimeError, MemoryError)):
+        if isinstance(exc, (comp.CompositingError, RokebyError, ValueError, RuntimeError, MemoryError)):
             self.report({"ERROR"}, f"Rokeby: {exc}")
             return {"CANCELLED"}
         raise exc
 
     def execute(self, context):
-        from .. import api  # noqa: PLC0415
+        from . import workflow  # noqa: PLC0415
 
         path = self._path(context)
         if not path:
@@ -272,9 +271,9 @@ class ROKEBY_OT_composite_edit(_EditProps, bpy.types.Operator):
             return {"CANCELLED"}
         try:
             with Progress(context, 1) as progress:  # the first edit of a frame reads and reconstructs it
-                img, stats = api.recomposite_exr(path, warn=False, **_edit_args(self, context))
+                img, stats = workflow.recomposite_exr(path, warn=False, **_edit_args(self, context))
                 progress.step()
-        except (KeyboardInterrupt, comp.CompositingError, api.RokebyError, ValueError, RuntimeError, MemoryError) as exc:
+        except (KeyboardInterrupt, comp.CompositingError, RokebyError, ValueError, RuntimeError, MemoryError) as exc:
             return self._failed(exc)
         return self._done(img, stats)
 
@@ -333,7 +332,7 @@ class ROKEBY_OT_composite_sequence(_EditProps, bpy.types.Operator):
         return self.execute(context)
 
     def execute(self, context):
-        from .. import api  # noqa: PLC0415
+        from . import workflow  # noqa: PLC0415
 
         try:
             frames = sequence_frames(self.directory, self.pattern)
@@ -359,13 +358,13 @@ class ROKEBY_OT_composite_sequence(_EditProps, bpy.types.Operator):
                     progress.step()
                     continue
                 try:
-                    img, _stats = api.recomposite_exr(path, warn=False, **args)
+                    img, _stats = workflow.recomposite_exr(path, warn=False, **args)
                 except KeyboardInterrupt:  # Ctrl-C / a cancel: the frames done stay, the rest is left
                     comp.close_render()
                     self.report({"WARNING"}, f"Rokeby: Cancelled after {len(done)} frame(s) recomposited into {out_dir} "
                                              "(the frame in progress was not written)")
                     return {"FINISHED"} if done else {"CANCELLED"}
-                except (comp.CompositingError, api.RokebyError, ValueError, RuntimeError, OSError) as exc:
+                except (comp.CompositingError, RokebyError, ValueError, RuntimeError, OSError) as exc:
                     failed.append(f"{os.path.basename(path)}: {exc}")
                     progress.step()
                     continue
@@ -374,7 +373,7 @@ class ROKEBY_OT_composite_sequence(_EditProps, bpy.types.Operator):
                     comp.write_exr(partial, _image_rgb(img))
                     os.replace(partial, out)
                     done.append(path)
-                except (comp.CompositingError, api.RokebyError, ValueError, RuntimeError, OSError) as exc:
+                except (comp.CompositingError, RokebyError, ValueError, RuntimeError, OSError) as exc:
                     failed.append(f"{os.path.basename(path)}: {exc}")
                 finally:
                     if os.path.exists(partial):
@@ -409,10 +408,10 @@ class ROKEBY_OT_composite_to_compositor(bpy.types.Operator):
         return True
 
     def execute(self, context):
-        from .. import api  # noqa: PLC0415
+        from . import workflow  # noqa: PLC0415
 
         try:
-            node = api.use_in_compositor(self.image_name, scene=context.scene)
+            node = workflow.use_in_compositor(self.image_name, scene=context.scene)
         except (comp.CompositingError, ValueError) as exc:
             self.report({"ERROR"}, f"Rokeby: {exc}")
             return {"CANCELLED"}

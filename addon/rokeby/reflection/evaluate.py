@@ -74,8 +74,7 @@ VG_MODIFIER_PREFIX = schema.VG_MODIFIER_PREFIX
 OFF_SURFACE_TOLERANCE = 1e-3
 
 
-class RokebyError(ValueError):
-    """A clear, user-facing problem with a mirror, constraint or region."""
+from ..core.errors import RokebyError  # noqa: E402, F401 - evaluate.RokebyError, as before
 
 
 @dataclass
