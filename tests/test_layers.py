@@ -41,10 +41,6 @@ NATIVE_HOME = f"{PACKAGE}.core.native"
 # the found violations to be exactly these: a new violation fails, and so does a fixed one that is
 # still listed (remove it from here).
 KNOWN: dict[str, str] = {
-    "rokeby.reflection.operators -> rokeby.api":
-        "reflection's scene-model entry points (add_mirror, add_constraint, ...) are still implemented in api.py: "
-        "move them into reflection/ and let api re-export them",
-    "rokeby.reflection.ui -> rokeby.api": "as reflection.operators",
     "rokeby.shadow -> rokeby.reflection.registry":
         "the registry of what the add-on owns indexes shadow objects too: split it into a feature-agnostic object index "
         "in blender/ and reflection's records (handles, carriers, tidy)",

@@ -14,7 +14,7 @@ import bpy
 import numpy as np
 from bpy.props import BoolProperty, EnumProperty, FloatProperty, FloatVectorProperty, IntProperty, StringProperty
 
-from .. import api
+from . import edit as api  # reflection editing's entry points (rokeby.api re-exports them)
 from . import evaluate
 from ..core import words
 from .evaluate import RokebyError

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import bpy
 
-from .. import api
+from . import edit as api  # reflection editing's entry points (rokeby.api re-exports them)
 from . import evaluate
 from ..core import native, words
 from .viewport import draw as viewport

@@ -1,4 +1,5 @@
-"""rokeby.api — the scripting API of Rokeby, used by the operators and by background scripts.
+"""Reflection editing's entry points, used by its operators and, through ``rokeby.api`` (which
+re-exports every name here), by background scripts.
 
 Data moves as numpy arrays (``foreach_get``/``foreach_set``), never with Python loops over
 vertices. Functions that need Blender import ``bpy`` lazily, so the maths helpers work in any
@@ -14,8 +15,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .core import native, schema, vecmath, words
-from .blender import meshes, transaction
+from ..core import native, schema, vecmath, words
+from ..blender import meshes, transaction
 
 __all__ = [
     "reflect",
@@ -187,9 +188,9 @@ def geodesic_distances(vertices, faces, sources, *, method: str = "heat", bounda
 # Everything below needs Blender. The operators in rokeby.operators are thin wrappers of these
 # functions, and background scripts (render farms, pipelines) call them directly.
 
-from .reflection import evaluate as _ev  # noqa: E402 - aliased: api.evaluate is a function
-from .reflection.evaluate import ATTRIBUTE, MirrorReport, RokebyError, rotate  # noqa: E402
-from .reflection.registry import of_mirrors as _of_mirrors  # noqa: E402
+from . import evaluate as _ev  # noqa: E402 - aliased: api.evaluate is a function
+from .evaluate import ATTRIBUTE, MirrorReport, RokebyError, rotate  # noqa: E402
+from .registry import of_mirrors as _of_mirrors  # noqa: E402
 
 HANDLE_COLLECTION = schema.HANDLE_COLLECTION
 
@@ -234,7 +235,7 @@ def mirror_of(obj, scene=None):
         return None
     if obj.rokeby.is_mirror:
         return obj
-    from .reflection import registry  # noqa: PLC0415
+    from . import registry  # noqa: PLC0415
 
     for m in registry.mirrors(_scene(scene)):
         if any(obj in (c.surface_handle, c.target_handle) for c in m.rokeby.constraints) or any(obj == rg.center for rg in m.rokeby.regions):
@@ -277,7 +278,7 @@ def _new_empty(scene, name, location, display, size, color):
     ob.location = [float(x) for x in location]
     ob.color = color
     ob.show_name = False
-    from .reflection.registry import MADE_KEY  # noqa: PLC0415
+    from .registry import MADE_KEY  # noqa: PLC0415
 
     ob[MADE_KEY] = True  # goes with the last mirror that uses it (rokeby.registry)
     _handle_collection(scene).objects.link(ob)
@@ -287,7 +288,7 @@ def _new_empty(scene, name, location, display, size, color):
 def _remove_objects(objs):
     import bpy  # noqa: PLC0415
 
-    from .reflection import registry  # noqa: PLC0415
+    from . import registry  # noqa: PLC0415
 
     for ob in objs:
         try:
@@ -335,7 +336,7 @@ def add_constraint(mirror, surface_point, reflected_point=None, *, eye=None, vie
     """
     scene = _scene(scene)
     _require_mirror(mirror)
-    from .reflection.props import CONSTRAINT_KINDS  # noqa: PLC0415 - Blender only
+    from .props import CONSTRAINT_KINDS  # noqa: PLC0415 - Blender only
 
     kinds = [item[0] for item in CONSTRAINT_KINDS]
     if kind not in kinds:
@@ -402,7 +403,7 @@ def add_constraint(mirror, surface_point, reflected_point=None, *, eye=None, vie
 
 def _handle_users(scene, ob, skip=None):
     """How many constraints and regions (of any mirror in the file, ``skip`` aside) use ``ob``."""
-    from .reflection import registry  # noqa: PLC0415
+    from . import registry  # noqa: PLC0415
 
     n = 0
     for m in registry.mirrors():
@@ -422,7 +423,7 @@ def _index(collection, index, what):
 
 
 def _made_here(ob) -> bool:
-    from .reflection.registry import made_by_addon  # noqa: PLC0415
+    from .registry import made_by_addon  # noqa: PLC0415
 
     try:
         return made_by_addon(ob)
@@ -561,8 +562,8 @@ def remove_mirror(mirror, *, scene=None):
     node groups removed once nothing uses them. Handles, centres and data another mirror uses
     stay: a mesh shared with other mirrors keeps its attributes (it holds no field of this one:
     that lives in this mirror's own carrier, removed here)."""
-    from .reflection import registry  # noqa: PLC0415
-    from .reflection.render import rendering  # noqa: PLC0415
+    from . import registry  # noqa: PLC0415
+    from .render import rendering  # noqa: PLC0415
 
     scene = _scene(scene)
     _require_mirror(mirror)
@@ -591,7 +592,7 @@ def evaluate(scene=None, frame=None, *, force: bool = False) -> "dict[str, Mirro
     """Bring every mirror of ``scene`` up to date (at ``frame`` when given, which may be
     fractional) and return a report per mirror. Only mirrors whose inputs changed are recomputed,
     unless ``force``. Never raises for a bad mirror: its report says what is wrong."""
-    from .reflection import handlers  # noqa: PLC0415
+    from . import handlers  # noqa: PLC0415
 
     global _SETTING_FRAME
     scene = _scene(scene)
@@ -623,7 +624,7 @@ def evaluate(scene=None, frame=None, *, force: bool = False) -> "dict[str, Mirro
         edited = _ev.edited_meshes(scene)
         dg = _depsgraph(scene)
         reports = _ev.evaluate_scene(scene, dg, force=force, geometry_changed=edited, all_geometry=frame is not None)
-        from .reflection.render import rendering  # noqa: PLC0415
+        from .render import rendering  # noqa: PLC0415
 
         # Final renders follow: render nodes in every edited material (see rokeby.rendering).
         rendering.sync_scene(scene, reports, force=force)
@@ -673,7 +674,7 @@ def ior_from_material(mirror, material=None) -> float:
     """Take the mirror's IOR from its material: the IOR input of the first Glass, Refraction or
     Principled BSDF (with transmission) found in ``material`` (default: the edited materials in
     order). The IOR must be a plain value, not linked. Returns the IOR now set."""
-    from .reflection.render import refraction  # noqa: PLC0415
+    from .render import refraction  # noqa: PLC0415
 
     _require_mirror(mirror)
     materials = [material] if material is not None else edited_materials(mirror)
@@ -703,7 +704,7 @@ def reset_stats():
 def edited_materials(mirror) -> list:
     """The materials whose reflections are edited: every material of the mirror unless a
     subset was chosen with ``set_edited_materials``."""
-    from .reflection.render import rendering  # noqa: PLC0415
+    from .render import rendering  # noqa: PLC0415
 
     _require_mirror(mirror)
     return rendering.edited_materials(mirror)
@@ -742,7 +743,7 @@ def install_render_nodes(mirror) -> int:
     Returns how many BSDF inputs (ray traced) or BSDFs (reflection map) were rewired. In both
     modes "Rokeby Edited Refraction Normal" feeds Refraction BSDFs and split Glass BSDFs first
     (rokeby.refraction; counted too), so a split Glass's reflection part is edited as well."""
-    from .reflection.render import rendering  # noqa: PLC0415
+    from .render import rendering  # noqa: PLC0415
 
     _require_mirror(mirror)
     count = rendering.install(mirror)
@@ -756,13 +757,13 @@ def remove_render_nodes(mirror) -> int:
     off (so evaluation does not put them back); returns from how many materials they went. On an
     object that is no longer a mirror (after Remove Mirror) it takes out whatever nodes are left in
     its materials that no other mirror keeps."""
-    from .reflection.render import rendering  # noqa: PLC0415
+    from .render import rendering  # noqa: PLC0415
 
     _check_mirror(mirror)
     mats = {slot.material for slot in mirror.material_slots if slot.material is not None}
     if not mirror.rokeby.is_mirror:
         # A former mirror (Remove Mirror): its materials lose nodes no remaining mirror keeps.
-        from .reflection import registry  # noqa: PLC0415
+        from . import registry  # noqa: PLC0415
 
         kept = {mat for ob in registry.mirrors() if ob.type == "MESH" and rendering.kept(ob) for mat in rendering.edited_materials(ob)}
         return sum(rendering.uninstall_material(mat) for mat in mats if mat not in kept)
@@ -782,7 +783,7 @@ def capture_reflection_map(mirror, *, resolution=None, samples=None, storage: st
     ``map_samples``); ``storage``: 'AUTO' (an OpenEXR cache in //rokeby_maps/ when the .blend is
     saved, else packed), 'FILE' or 'PACK'. Materials already in reflection-map mode show the new
     map at once. Returns the image. See rokeby.reflmap."""
-    from .reflection.render import reflmap  # noqa: PLC0415
+    from .render import reflmap  # noqa: PLC0415
 
     return reflmap.capture(mirror, resolution=resolution, samples=samples, storage=storage, scene=scene)
 
@@ -790,7 +791,7 @@ def capture_reflection_map(mirror, *, resolution=None, samples=None, storage: st
 def reflection_map(mirror):
     """The captured lat-long image of ``mirror`` (Blender's equirectangular convention:
     ``rokeby.reflmap.direction_to_uv``), or None."""
-    from .reflection.render import reflmap  # noqa: PLC0415
+    from .render import reflmap  # noqa: PLC0415
 
     _require_mirror(mirror)
     return reflmap.image_for(mirror)
@@ -957,50 +958,3 @@ def add_highlight_constraint(mirror, light, surface_point=None, *, eye=None, nam
     mirror.rokeby.constraints[index].light_name = light.name
     green.empty_display_type = "SPHERE"
     return index
-
-
-# --- Local shape editing at the compositing stage (Zubiaga et al. 2016; rokeby.compositing) ------
-
-from .compositing.workflow import (  # noqa: E402 - the compositing feature's entry points
-    _check_fit,
-    _recomposite_opened,
-    recomposite_exr,
-    recomposite_exr_pixels,
-    recomposite_render,
-    setup_compositing_passes,
-    use_in_compositor,
-)
-
-
-# --- Freeform shadow boundary editing (Mattausch et al.; rokeby.shadow) ---------------------------
-
-def start_shadow_edit(caster, light, receivers=None, *, scene=None, min_loop_vertices: int = 20, w_z: float = 2.5):
-    """Starts editing the shadow that the closed mesh ``caster`` casts from ``light`` onto
-    ``receivers`` (default: the scene's other visible meshes); returns a ``rokeby.shadow.ShadowSession``
-    (loops(), handles(), drag(), commit()). Clear errors for open casters, a light inside the
-    caster's bounds or nothing under the light; nothing in the scene changes."""
-    from . import shadow  # noqa: PLC0415
-
-    return shadow.start(caster, light, receivers, scene=_scene(scene), min_loop_vertices=min_loop_vertices, w_z=w_z)
-
-
-def apply_shadow_edit(session, *, scene=None, falloff_beta: float = 0.0, add_configuration: bool = False):
-    """Creates or updates the shadow-mesh object of ``session`` (shadow rays only, same vertex
-    groups and armature as the caster) and the light/shadow linking that makes the receivers show
-    the edited shadow; drags whose handles lie on the caster edit its self-shadows too (a
-    self-shadow mesh shadows the caster in its place). ``falloff_beta`` > 0 blends the edit out as
-    the light moves away, (l_initial · l_current)^β (§6.2), kept up to date by the add-on's
-    handlers. ``add_configuration=True`` keeps the existing edit and adds this one as a keyed
-    configuration (§6.2): the handlers blend them by the light's angle to each. Returns (shadow
-    object, twin light)."""
-    from . import shadow  # noqa: PLC0415
-
-    return shadow.apply(session, scene=_scene(scene), falloff_beta=falloff_beta, add_configuration=add_configuration)
-
-
-def remove_shadow_edit(obj) -> None:
-    """Removes the shadow edit of ``obj`` (a caster or its shadow mesh): the shadow mesh, the twin
-    light and the linking go, and the light's own linking from before the edit comes back."""
-    from . import shadow  # noqa: PLC0415
-
-    shadow.remove(obj)
