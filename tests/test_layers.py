@@ -45,10 +45,10 @@ KNOWN: dict[str, str] = {
         "the registry of what the add-on owns indexes shadow objects too: split it into a feature-agnostic object index "
         "in blender/ and reflection's records (handles, carriers, tidy)",
     "cycle: rokeby.reflection.duplicates rokeby.reflection.evaluate rokeby.reflection.handlers rokeby.reflection.props "
-    "rokeby.reflection.registry rokeby.reflection.render.reflmap rokeby.reflection.render.refraction "
-    "rokeby.reflection.render.rendering rokeby.reflection.render.shading":
+    "rokeby.reflection.registry rokeby.reflection.render.reflmap rokeby.reflection.render.rendering":
         "inside the reflection feature, modules still call each other both ways through function-level imports "
-        "(evaluate <-> registry <-> rendering/shading/reflmap, props -> evaluate/registry)",
+        "(evaluate <-> registry <-> rendering, reflmap -> handlers.suspended, props -> evaluate/registry, "
+        "evaluate <-> duplicates)",
 }
 
 

@@ -6,7 +6,7 @@ as it was. Feature-agnostic (the Blender layer); the features wrap their operati
 What is recorded: which data-blocks exist (those made since are removed again); the custom
 properties of objects, meshes, materials, lights, collections, images, node groups and scenes
 (the add-on's property groups live there); every node tree's nodes, links, node properties, group
-assignments and input values (``nodes.snapshot``); the add-on's mesh attributes (``rokeby*``,
+assignments and input values (``blender.nodes.snapshot``); the add-on's mesh attributes (``rokeby*``,
 data included) and shape-key positions; which objects and child collections each collection
 holds; objects' ray visibility, pass index, display, parent, data and light linking; materials'
 pass index; the view layers' passes and AOVs and the output format.
@@ -111,7 +111,7 @@ class Transaction:
 
         import bpy  # noqa: PLC0415
 
-        from . import nodes  # noqa: PLC0415
+        from . import nodes as node_trees  # noqa: PLC0415
 
         d = bpy.data
         self.removed: list = []
@@ -129,7 +129,7 @@ class Transaction:
         trees += [g for g in d.node_groups if g.library is None] if materials is None else _groups_used(trees)
         self.trees = []
         for t in trees:
-            snap = nodes.snapshot(t, ())
+            snap = node_trees.snapshot(t, ())
             snap["values"] = {(nd.as_pointer(), s.identifier): _copy(s.default_value)
                               for nd in t.nodes for s in nd.inputs if hasattr(s, "default_value")}
             snap["node_props"] = [(nd, _idprops(nd)) for nd in t.nodes]
@@ -224,7 +224,7 @@ class Transaction:
     def rollback(self) -> None:  # noqa: C901 - one pass per kind of data
         import bpy  # noqa: PLC0415
 
-        from . import nodes  # noqa: PLC0415
+        from . import nodes as node_trees  # noqa: PLC0415
 
         d = bpy.data
         for fn in reversed(self.undo_hooks):
@@ -263,7 +263,7 @@ class Transaction:
             for ch in children - set(coll.children):
                 coll.children.link(ch)
         for tree, snap in self.trees:
-            nodes.restore(tree, snap)
+            node_trees.restore(tree, snap)
             nodes = {nd.as_pointer(): nd for nd in tree.nodes}
             for (ptr, ident), value in snap["values"].items():
                 nd = nodes.get(ptr)

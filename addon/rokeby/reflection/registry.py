@@ -365,12 +365,9 @@ def drop_empty_handle_collection() -> bool:
 
 
 def _our_group(ng) -> bool:
-    from . import evaluate  # noqa: PLC0415
-    from .render import reflmap, refraction, shading  # noqa: PLC0415
-
-    names = {shading.GROUP, shading.DIRECTION_GROUP, refraction.GROUP, reflmap.SHARED_GROUP, evaluate.VG_NODE_GROUP,
-             evaluate.TRANSFER_GROUP}
-    return ng.name in names or ng.name.startswith(reflmap.MIRROR_GROUP_PREFIX) or ng.get(shading.COPY_OF) is not None
+    names = {schema.NORMAL_GROUP, schema.DIRECTION_GROUP, schema.REFRACTION_GROUP, schema.REFLMAP_SHARED_GROUP,
+             schema.VG_NODE_GROUP, schema.TRANSFER_GROUP}
+    return ng.name in names or ng.name.startswith(schema.REFLMAP_MIRROR_GROUP_PREFIX) or ng.get(schema.COPY_OF_KEY) is not None
 
 
 def drop_unused_node_groups() -> int:

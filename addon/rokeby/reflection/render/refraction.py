@@ -69,9 +69,11 @@ import numpy as np
 
 from . import shading
 from ...blender import transaction
-from ..evaluate import REFRACTION_ATTRIBUTE, RokebyError
+from ...core.errors import RokebyError
 from .shading import mix_vector, scalar_math, vector_math
 from ...core import schema, vecmath
+
+REFRACTION_ATTRIBUTE = schema.REFRACTION_ATTRIBUTE  # evaluate writes it
 
 GROUP = schema.REFRACTION_GROUP
 VERSION = 2

@@ -32,9 +32,11 @@ import uuid
 import bpy
 
 from ...blender import transaction
-from ..evaluate import RENDER_ATTRIBUTE, RENDER_ATTRIBUTE_WA, RokebyError
+from ...core.errors import RokebyError
 from ...blender import nodes
 from ...core import schema
+
+RENDER_ATTRIBUTE, RENDER_ATTRIBUTE_WA = schema.RENDER_ATTRIBUTE, schema.RENDER_ATTRIBUTE_WA  # evaluate writes them
 
 DIRECTION_GROUP = schema.DIRECTION_GROUP
 GROUP = schema.NORMAL_GROUP
