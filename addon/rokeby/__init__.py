@@ -33,7 +33,7 @@ def is_registered() -> bool:
     return _registered
 
 
-def _modules():
+def _features():
     from .appearance import addon as appearance
     from .blender import prefs
     from .compositing import addon as compositing
@@ -46,6 +46,19 @@ def _modules():
     return (prefs, reflection, appearance, compositing, shadow, reflection_ui)
 
 
+def _modules():
+    """The modules that declare the add-on's Blender classes (preferences, properties, operators,
+    panels), in the order the features register them."""
+    from .appearance import ui as appearance_ui
+    from .blender import prefs
+    from .compositing import ui as compositing_ui
+    from .reflection import handlers, operators, props, ui
+    from .reflection.viewport import draw as viewport
+    from .shadow import ui as shadow_ui
+
+    return (prefs, props, operators, handlers, viewport, appearance_ui, compositing_ui, shadow_ui, ui)
+
+
 def register():
     """Register the add-on (idempotent: a second call does nothing)."""
     global _registered
@@ -53,7 +66,7 @@ def register():
         return
     done = []
     try:
-        for module in _modules():
+        for module in _features():
             module.register()
             done.append(module)
     except Exception:
@@ -85,6 +98,6 @@ def _unregister_at_exit():
 
 def unregister():
     global _registered
-    for module in reversed(_modules()):
+    for module in reversed(_features()):
         module.unregister()
     _registered = False
