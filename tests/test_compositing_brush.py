@@ -21,7 +21,7 @@ import rokeby  # noqa: E402
 from conftest import cycles  # noqa: E402
 from rokeby import compat  # noqa: E402
 from rokeby import compositing as C  # noqa: E402
-from rokeby import compositing_brush as B  # noqa: E402
+from rokeby.compositing import brush as B  # noqa: E402
 from rokeby import envmaps  # noqa: E402
 from rokeby.compositing_ui import LAST_EXR  # noqa: E402
 
@@ -175,7 +175,7 @@ def _region(row, col):
 
 
 def test_modal_events_paint_a_stroke_and_esc_cancels_it(registered, frame):
-    from rokeby.compositing_brush_ui import StrokeDriver
+    from rokeby.compositing.brush_ui import StrokeDriver
 
     s = B.open_brush(str(frame), "Brushed")
     bpy.ops.ed.undo_push(message="opened")  # the step before the brush (in the UI: Render and Recomposite's)

@@ -50,8 +50,15 @@ def test_zip_layout_and_manifest(built):
     assert "__init__.py" in names and "def register" in init
     assert all(not n.startswith(("rokeby/", "addon/")) for n in names)
     assert not [n for n in names if "__pycache__" in n or n.endswith((".pyc", ".pyo")) or n.split("/")[0] in ("tests", ".pytest_cache")]
-    for name in ("api.py", "evaluate.py", "shading.py", "native.py", "operators.py", "props.py", "ui.py", "handlers.py"):
+    # Every subpackage of the layered add-on (docs/architecture.md) travels, with its modules.
+    for name in ("api/__init__.py", "reflection/edit.py", "core/__init__.py", "core/schema.py", "core/native.py", "blender/compat.py", "blender/hooks.py",
+                 "reflection/evaluate.py", "reflection/render/shading.py", "reflection/viewport/glsl.py", "reflection/operators.py",
+                 "reflection/props.py", "reflection/ui.py", "reflection/handlers.py", "envmaps/__init__.py", "appearance/ui.py",
+                 "shadow/__init__.py", "compositing/blender_gpu.py"):
         assert name in names, name
+    source_modules = sorted(p.relative_to(ROOT / "addon" / "rokeby").as_posix() for p in (ROOT / "addon" / "rokeby").rglob("*.py")
+                            if "__pycache__" not in p.parts)
+    assert [m for m in source_modules if m not in names] == []
     for key in ("schema_version", "id", "version", "name", "tagline", "maintainer", "type", "blender_version_min", "license"):
         assert manifest[key] == source[key], key
     assert manifest["type"] == "add-on" and manifest["id"] == "rokeby"

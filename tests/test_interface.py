@@ -36,8 +36,11 @@ def registered():
 
 
 def _operators():
+    """Every operator class of the add-on's modules (each feature package registers its own)."""
     out = {}
-    for module in rokeby._modules():
+    for name, module in list(sys.modules.items()):
+        if not name.startswith("rokeby.") or module is None:
+            continue
         for obj in vars(module).values():
             if isinstance(obj, type) and issubclass(obj, bpy.types.Operator) and getattr(obj, "bl_idname", "").startswith("rokeby."):
                 out[obj.bl_idname] = obj
@@ -212,8 +215,8 @@ def _message_strings(path: Path):
 def test_no_message_names_an_api_function():
     pattern = re.compile(r"(?<!\w)(" + "|".join(sorted(map(re.escape, _api_names()), key=len, reverse=True)) + r")(?![\w])")
     hits = []
-    for path in sorted(ADDON.glob("*.py")):
-        if path.name in ("demo.py", "composite.py"):  # a demo script's printout, the command line's help
+    for path in sorted(ADDON.rglob("*.py")):
+        if path.relative_to(ADDON).as_posix() in ("demo.py", "composite.py"):  # a demo script's printout, the command line's help
             continue
         for line, text in _message_strings(path):
             if pattern.search(text):
@@ -224,7 +227,7 @@ def test_no_message_names_an_api_function():
 def test_words_and_statuses():
     assert words.kind("EMPTY") == "an empty" and words.kind("LIGHT") == "a light" and words.kind("ARMATURE") == "an armature"
     assert words.status("OK") == "OK" and words.status("WARNING") == "Warning"
-    hits = [f"{p.name}:{i}" for p in ADDON.glob("*.py") for i, ln in enumerate(p.read_text().splitlines(), 1) if ".title()" in ln]
+    hits = [f"{p.name}:{i}" for p in ADDON.rglob("*.py") for i, ln in enumerate(p.read_text().splitlines(), 1) if ".title()" in ln]
     assert not hits, hits
 
 

@@ -269,9 +269,10 @@ def _enum_properties():
     rokeby.register()
     found = []
     pkg = Path(rokeby.__file__).parent
-    for f in sorted(pkg.glob("*.py")):
-        name = f"rokeby.{f.stem}"
-        if f.stem in ("__init__", "__main__") or name not in sys.modules:
+    for f in sorted(pkg.rglob("*.py")):  # the feature packages too (docs/architecture.md)
+        parts = f.relative_to(pkg).with_suffix("").parts
+        name = ".".join(("rokeby", *parts[:-1])) if parts[-1] == "__init__" else ".".join(("rokeby", *parts))
+        if parts == ("__init__",) or f.stem == "__main__" or name not in sys.modules:
             continue  # every module register() pulls in is imported; the rest declare no Blender classes
         mod = importlib.import_module(name)
         for cname, cls in vars(mod).items():
