@@ -10,7 +10,7 @@ import numpy as np
 import bpy
 from mathutils import Matrix
 
-from bpy_process import gpu_context, offscreen_pixels
+from support.bpy_process import gpu_context, offscreen_pixels
 from rokeby import appearance, appearance_glsl, appearance_preview, envmaps
 
 W, H = 128, 64

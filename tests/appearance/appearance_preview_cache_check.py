@@ -8,7 +8,7 @@ import json
 import numpy as np
 import bpy
 
-from bpy_process import gpu_context, offscreen_pixels
+from support.bpy_process import gpu_context, offscreen_pixels
 from rokeby import appearance, appearance_preview, envmaps
 
 W = H = 96

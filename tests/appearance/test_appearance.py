@@ -6,7 +6,8 @@ import pytest
 
 bpy = pytest.importorskip("bpy")
 
-from bpy_process import run_check  # noqa: E402
+from support.bpy_process import run_check  # noqa: E402
+from support.appearance import sphere_shader  # noqa: E402
 from rokeby import appearance, compat, envmaps  # noqa: E402
 
 
@@ -290,39 +291,13 @@ def test_preview_glsl_matches_numpy():
     moderngl = pytest.importorskip("moderngl")
     from rokeby import appearance_glsl
 
-    try:
-        ctx = moderngl.create_context(standalone=True, backend="egl")
-    except Exception as e:  # noqa: BLE001 - no EGL here
-        pytest.skip(f"no headless EGL context: {e}")
+    gl = sphere_shader("  frag = vec4(rk_shade(n, vec3(0.0, -1.0, 0.0), u_base, u_spec, u_rough, u_metal), 1.0);")
+    ctx, prog, vao, fbo, size = gl.ctx, gl.prog, gl.vao, gl.fbo, gl.size
     im = envmaps.read_exr(envmaps.studio_world("forest"))
     irr = envmaps.irradiance(im, size=8)["irradiance_coeffs"]  # (3, 9)
-    size = 48
-    fs = appearance_glsl.standalone_library() + """
-uniform vec3 u_base; uniform float u_spec; uniform float u_rough; uniform float u_metal;
-out vec4 frag;
-void main() {
-  vec2 p = (gl_FragCoord.xy / 48.0) * 2.0 - 1.0;
-  float rho2 = dot(p, p);
-  if (rho2 >= 1.0) { frag = vec4(0.0); return; }
-  vec3 n = vec3(p.x, -sqrt(1.0 - rho2), p.y);
-  frag = vec4(rk_shade(n, vec3(0.0, -1.0, 0.0), u_base, u_spec, u_rough, u_metal), 1.0);
-}"""
-    vs = "#version 330\nin vec2 pos; void main() { gl_Position = vec4(pos, 0.0, 1.0); }"
-    prog = ctx.program(vertex_shader=vs, fragment_shader=fs)
-    assert prog["rk_appearance_block"].size == appearance_glsl.BLOCK_BYTES  # the driver's std140 layout
-    lut = appearance_glsl.brdf_lut()
-    lut_tex = ctx.texture(lut.shape[1::-1], 2, np.ascontiguousarray(lut).tobytes(), dtype="f4")
-    lut_tex.use(1)
-    prog["rk_brdf_lut"].value = 1
-    prog["rk_env_atlas"].value = 0
-    quad = ctx.buffer(np.array([-1, -1, 1, -1, -1, 1, 1, 1], "f4").tobytes())
-    vao = ctx.vertex_array(prog, [(quad, "2f", "pos")])
-    fbo = ctx.framebuffer(color_attachments=[ctx.texture((size, size), 4, dtype="f4")])
     fbo.use()
-    ys, xs = np.mgrid[0:size, 0:size] + 0.5
-    p = np.stack([xs / size * 2 - 1, ys / size * 2 - 1], -1)  # row 0 = bottom, as glReadPixels
-    inside = (p**2).sum(-1) < 0.95
-    n = np.stack([p[..., 0], -np.sqrt(np.maximum(1 - (p**2).sum(-1), 0)), p[..., 1]], -1)[inside]
+    inside = gl.inside
+    n = gl.n[inside]
     v = np.array([0.0, -1.0, 0.0])
     shaded = {}
     for model in appearance_glsl.MODELS:
@@ -373,7 +348,7 @@ def test_viewport_preview_draws_through_blenders_gpu_module():
     white metal ball (roughness 0.4) under courtyard.exr against the numpy twin with analytic
     sphere normals (the mesh's interpolated normals differ slightly); the world turned half a turn
     is far off."""
-    res = run_check("appearance_preview_check.py")
+    res = run_check("appearance/appearance_preview_check.py")
     assert 0.6 < res["covered"] < 0.7  # the ball's disk: π/(4·1.1²) = 0.649 of the frame
     assert res["rel"] < 0.04, res
     assert res["rel_turned"] > 5 * res["rel"], res
@@ -391,7 +366,7 @@ def test_preview_keeps_its_batch_and_shows_texels():
     the painted ball (not the unpainted cube in front of it) as draw_object does; with the
     depsgraph a subdivided ball draws exactly as its applied mesh, with a dab painted on the cage;
     the brush cursor draws a ring of its radius."""
-    res = run_check("appearance_preview_cache_check.py")
+    res = run_check("appearance/appearance_preview_cache_check.py")
     assert res["redraw"] == {"builds": 1, "uploads": 1, "identical": True}, res
     s = res["stroke"]
     assert (s["builds"], s["uploads"]) == (1, 2) and s["changed_at_dab"] > 0.05 and s["changed_far"] == 0.0, s

@@ -7,48 +7,24 @@ import numpy as np
 import pytest
 
 from rokeby import appearance_glsl, envmaps
+from support.appearance import sphere_shader
 
 moderngl = pytest.importorskip("moderngl")
 
 SIZE = 48
-FS = """
-uniform vec3 u_base; uniform float u_spec; uniform float u_rough; uniform float u_metal; uniform vec3 u_tint;
-out vec4 frag;
-void main() {
-  vec2 p = (gl_FragCoord.xy / 48.0) * 2.0 - 1.0;
-  float rho2 = dot(p, p);
-  if (rho2 >= 1.0) { frag = vec4(0.0); return; }
-  vec3 n = vec3(p.x, -sqrt(1.0 - rho2), p.y);
+BODY = """\
   vec3 v = vec3(0.0, -1.0, 0.0);
   if (rk_appearance.options.w == RK_LIGHT_POINT) {
     frag = vec4(rk_shade_point(n, v, n, u_base, u_spec, u_rough, u_metal, u_tint), 1.0);
   } else {
     frag = vec4(rk_shade_tinted(n, v, u_base, u_spec, u_rough, u_metal, u_tint), 1.0);
-  }
-}"""
+  }"""
 
 
 @pytest.fixture(scope="module")
 def gl():
-    try:
-        ctx = moderngl.create_context(standalone=True, backend="egl")
-    except Exception as e:  # noqa: BLE001 - no EGL here
-        pytest.skip(f"no headless EGL context: {e}")
-    vs = "#version 330\nin vec2 pos; void main() { gl_Position = vec4(pos, 0.0, 1.0); }"
-    prog = ctx.program(vertex_shader=vs, fragment_shader=appearance_glsl.standalone_library() + FS)
-    assert prog["rk_appearance_block"].size == appearance_glsl.BLOCK_BYTES  # the driver's std140 layout
-    lut = appearance_glsl.brdf_lut()
-    lut_tex = ctx.texture(lut.shape[1::-1], 2, np.ascontiguousarray(lut).tobytes(), dtype="f4")
-    lut_tex.use(1)
-    prog["rk_brdf_lut"].value = 1
-    prog["rk_env_atlas"].value = 0
-    quad = ctx.buffer(np.array([-1, -1, 1, -1, -1, 1, 1, 1], "f4").tobytes())
-    vao = ctx.vertex_array(prog, [(quad, "2f", "pos")])
-    fbo = ctx.framebuffer(color_attachments=[ctx.texture((SIZE, SIZE), 4, dtype="f4")])
-    ys, xs = np.mgrid[0:SIZE, 0:SIZE] + 0.5
-    p = np.stack([xs / SIZE * 2 - 1, ys / SIZE * 2 - 1], -1)  # row 0 = bottom, as glReadPixels
-    inside = (p**2).sum(-1) < 0.95
-    n = np.stack([p[..., 0], -np.sqrt(np.maximum(1 - (p**2).sum(-1), 0)), p[..., 1]], -1)
+    sh = sphere_shader(BODY, uniforms=" uniform vec3 u_tint;", size=SIZE)
+    ctx, prog, vao, fbo, p, inside, n = sh.ctx, sh.prog, sh.vao, sh.fbo, sh.p, sh.inside, sh.n
 
     def draw(block, base, spec, rough, metal, tint=(1.0, 1.0, 1.0)):
         ubo = ctx.buffer(block)
@@ -144,9 +120,9 @@ def test_viewport_draws_the_point_lit_view_beside_the_environment_lit_one():
     the viewport handler's draw_view: 'BESIDE' draws the environment-lit ball unchanged and, to
     its right on screen, a copy under the point light that matches the numpy twin; the copy's
     highlight moves right, left and up with the light; a red specular colour turns it red."""
-    from bpy_process import run_check
+    from support.bpy_process import run_check
 
-    res = run_check("appearance_light_check.py")
+    res = run_check("appearance/appearance_light_check.py")
     assert res["env_covered_left"] > 0.15 and res["env_covered_right"] == 0.0, res
     assert res["beside_covered_right"] > 0.15 and res["left_same"] < 1e-6, res
     assert res["point_rel"] < 0.05, res

@@ -8,7 +8,7 @@ import pytest
 
 bpy = pytest.importorskip("bpy")
 
-from conftest import cycles  # noqa: E402
+from support import cycles  # noqa: E402
 from rokeby import appearance, envmaps  # noqa: E402
 
 

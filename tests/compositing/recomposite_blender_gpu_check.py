@@ -5,18 +5,14 @@ tests/test_recomposite_glsl.py. The GPU context comes from one tiny EEVEE render
 (recomposite_gpu.ensure_context). Prints RESULT {...} (JSON)."""
 
 import json
-import sys
-from pathlib import Path
 
 import numpy as np
 import bpy
 
-HERE = Path(__file__).resolve().parent
-sys.path.insert(0, str(HERE))
-sys.path.insert(0, str(HERE.parent / "bench"))
 
 import rokeby_native as rn  # noqa: E402
-from recomposite_frames import bad_inputs, frame, passes_and_reconstruction  # noqa: E402
+from support import bench_module  # noqa: E402
+from support.recomposite_frames import bad_inputs, frame, passes_and_reconstruction  # noqa: E402
 from rokeby import compositing as C  # noqa: E402
 from rokeby import recomposite_gpu as G  # noqa: E402
 
@@ -92,7 +88,7 @@ def main():
     out, st = G.recomposite_blender(ids2, n2, e2, v, d02, r02, img2, patches2)
     res["constant_view"] = {"stats": st, "rust_stats": dict(rst), "rel": rel(out, ref)}
 
-    import compositing as bc  # bench/compositing.py
+    bc = bench_module("compositing")
 
     rng = np.random.default_rng(2016)
     ns, inside, sd0, r, sr0, depth = bc.bumpy_sphere(128, rng)

@@ -10,8 +10,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 import rokeby_native as rn
+from support.compositing import pass_scene
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 C0, C1, C2 = 0.282094791773878, 0.488602511902920, 1.092548430592079
 
 
@@ -236,40 +237,11 @@ def test_recomposite_masks_nan_pixels():
 
 # --- the pipeline on a Cycles render ------------------------------------------------------------
 
-def _scene(tiny_object=False):
-    import bpy
-
-    bpy.ops.wm.read_factory_settings(use_empty=True)
-    sc = bpy.context.scene
-    sc.render.engine = "CYCLES"
-    sc.cycles.samples, sc.cycles.device, sc.cycles.use_denoising = 16, "CPU", False
-    sc.render.resolution_x, sc.render.resolution_y, sc.render.resolution_percentage = 64, 48, 100
-    from rokeby import envmaps
-
-    envmaps.use_studio_world(sc, "forest")
-    bpy.ops.mesh.primitive_uv_sphere_add(segments=48, ring_count=24)
-    bpy.ops.object.shade_smooth()
-    ob = bpy.context.object
-    mat = bpy.data.materials.new("red")
-    mat.use_nodes = True
-    b = mat.node_tree.nodes["Principled BSDF"]
-    b.inputs["Base Color"].default_value = (0.8, 0.3, 0.2, 1)
-    b.inputs["Metallic"].default_value = 0.5
-    b.inputs["Roughness"].default_value = 0.2
-    ob.data.materials.append(mat)
-    if tiny_object:
-        bpy.ops.mesh.primitive_ico_sphere_add(radius=0.06, location=(1.4, 0, 0.9))
-        bpy.context.object.data.materials.append(mat)
-    bpy.ops.object.camera_add(location=(0.3, -4.5, 0.8), rotation=(1.4, 0, 0.06))
-    sc.camera = bpy.context.object
-    return sc
-
-
 @pytest.fixture(scope="module")
 def rendered(tmp_path_factory):
     from rokeby import compositing as C
 
-    sc = _scene(tiny_object=True)
+    sc = pass_scene(tiny_object=True)
     path = tmp_path_factory.mktemp("comp") / "frame.exr"
     p = C.render_passes(sc, str(path))
     return path, p, np.array(sc.camera.matrix_world.to_3x3())
@@ -342,7 +314,7 @@ def test_pipeline_identity_edit_and_small_object_fallback(rendered):
 def test_session_frames_equal_one_shot_recompositing_bit_for_bit():
     """RecompositeSession (the CPU path of a slider loop) gives each frame exactly what the Rust
     core gives for the same arguments, refuses bad frames by name and goes on after them."""
-    from recomposite_frames import frame, passes_and_reconstruction
+    from support.recomposite_frames import frame, passes_and_reconstruction
     from rokeby import compositing as C
 
     args, kw = frame()
@@ -541,7 +513,7 @@ def test_api_recomposite_render_shows_a_new_image(tmp_path):
     import bpy
     from rokeby import api
 
-    sc = _scene()
+    sc = pass_scene()
     names = api.setup_compositing_passes(sc)
     assert "rokeby_reflocc" in names and sc.view_layers[0].use_pass_glossy_color
     img, reports = api.recomposite_render(str(tmp_path / "f.exr"), edit="none", scene=sc)
@@ -566,7 +538,7 @@ def test_recomposite_exr_edits_a_rendered_frame_without_rendering_or_reconstruct
     from rokeby import api
     from rokeby import compositing as C
 
-    sc = _scene()
+    sc = pass_scene()
     path = str(tmp_path / "frame.exr")
     api.recomposite_render(path, edit="none", scene=sc)
     calls = []
@@ -640,7 +612,7 @@ def test_screen_space_with_an_orthographic_camera(tmp_path):
     """All view vectors are parallel: the rotation must not come from them."""
     from rokeby import compositing as C
 
-    sc = _scene()
+    sc = pass_scene()
     sc.camera.data.type = "ORTHO"
     sc.cycles.samples = 2
     p = C.render_passes(sc, str(tmp_path / "o.exr"))
@@ -655,7 +627,7 @@ def test_operators_set_up_passes_and_show_the_recomposited_image(tmp_path):
 
     import rokeby
 
-    sc = _scene()
+    sc = pass_scene()
     rokeby.register()
     try:
         assert bpy.ops.rokeby.composite_setup_passes() == {"FINISHED"}

@@ -18,7 +18,7 @@ import pytest
 from rokeby import compositing as C
 from rokeby import envmaps
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 _spec = importlib.util.spec_from_file_location("compositing_validate", ROOT / "bench" / "compositing_validate.py")
 V = importlib.util.module_from_spec(_spec)
 _spec.loader.exec_module(V)

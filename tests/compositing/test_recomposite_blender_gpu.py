@@ -13,14 +13,14 @@ import pytest
 pytest.importorskip("bpy")
 pytest.importorskip("rokeby_native")
 
-from bpy_process import run_check  # noqa: E402
+from support.bpy_process import run_check  # noqa: E402
 
 OPTIONS = [{}, {"k_d": 0.7, "k_r": 1.3, "gamma": 2.2}, {"epsilon": 0.2}]
 
 
 @pytest.fixture(scope="module")
 def res():
-    return run_check("recomposite_blender_gpu_check.py", timeout=900)
+    return run_check("compositing/recomposite_blender_gpu_check.py", timeout=900)
 
 
 def test_without_a_gpu_context_the_error_says_what_to_do(res):

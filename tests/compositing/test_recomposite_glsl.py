@@ -4,8 +4,6 @@ EGL context (Mesa llvmpipe here)."""
 
 from __future__ import annotations
 
-import sys
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -13,8 +11,8 @@ import pytest
 moderngl = pytest.importorskip("moderngl")
 rn = pytest.importorskip("rokeby_native")
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "bench"))
-from recomposite_frames import bad_inputs, frame, passes_and_reconstruction  # noqa: E402
+from support import bench_module  # noqa: E402
+from support.recomposite_frames import bad_inputs, frame, passes_and_reconstruction  # noqa: E402
 from rokeby import compositing as C  # noqa: E402
 
 
@@ -65,7 +63,7 @@ def test_constant_view_and_no_optional_buffers(gl):
 def test_reconstructed_sphere_edited_by_emboss(gl):
     """A 'real' chain: SH fit and reflection map reconstructed from a shaded bumpy sphere, then the
     normals embossed; GLSL and Rust recomposite the same frame."""
-    import compositing as bc
+    bc = bench_module("compositing")
 
     rng = np.random.default_rng(2016)
     n, inside, d0, r, r0, depth = bc.bumpy_sphere(128, rng)

@@ -10,13 +10,13 @@ import sys
 import time
 from pathlib import Path
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 
 
 def test_native_fuzz_suite_survives_under_an_address_space_limit():
     env = {k: v for k, v in os.environ.items() if k != "ROKEBY_MAX_ALLOC_BYTES"}
     t0 = time.perf_counter()
-    r = subprocess.run([sys.executable, str(ROOT / "tests/fuzz/run_fuzz.py"), "--examples", "60"],
+    r = subprocess.run([sys.executable, str(ROOT / "tests/native/fuzz/run_fuzz.py"), "--examples", "60"],
                        cwd=ROOT, env=env, capture_output=True, text=True, timeout=300)
     took = time.perf_counter() - t0
     print(f"fuzz subprocess: {took:.1f} s")

@@ -14,7 +14,7 @@ import rokeby_native as rn
 from hypothesis import given, settings
 from hypothesis import strategies as st
 from hypothesis.extra.numpy import arrays
-from reference import uv_sphere
+from support.reference import uv_sphere
 
 FEW = settings(max_examples=25, deadline=None, derandomize=True)
 SOME = settings(max_examples=60, deadline=None, derandomize=True)

@@ -5,7 +5,6 @@ bpy as a module has no GPU context in background mode until a GPU engine has ren
 tiny EEVEE render creates it (on Mesa llvmpipe here). Prints one JSON line: RESULT {...}."""
 
 import json
-import sys
 
 import numpy as np
 import bpy
@@ -49,15 +48,14 @@ def main():
     shadow_lines = len(shadow_ui._OVERLAY[shadow_ui._key(scene)]["lines"])
 
     # Create Blender's GPU context: one tiny EEVEE render.
-    from bpy_process import gpu_context
+    from support.bpy_process import gpu_context
 
     gpu_context(scene)
 
     import gpu
     from mathutils import Matrix
 
-    sys.path.insert(0, sys.argv[1])
-    from gl_harness import look_at, perspective
+    from support.gl_harness import look_at, perspective
 
     vp = perspective(40, W / H, 0.1, 100.0) @ look_at(eye, (0, 0, 0))
     off = gpu.types.GPUOffScreen(W, H, format="RGBA32F")

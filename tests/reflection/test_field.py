@@ -8,7 +8,7 @@ from hypothesis import given
 from hypothesis import strategies as st
 from hypothesis.extra.numpy import arrays
 
-from reference import dir_angle, field_matrices, quat_to_matrix, random_constraints, region_blend, rot_angle
+from support.reference import dir_angle, field_matrices, quat_to_matrix, random_constraints, region_blend, rot_angle
 from rokeby import api
 
 
@@ -266,7 +266,7 @@ def test_ortho_methods_agree(rng):
     m = rng.normal(size=(500, 3, 3))
     a = quat_to_matrix(rn.ortho(m, method="exact"))
     b = quat_to_matrix(rn.ortho(m, method="fast"))
-    from reference import ortho
+    from support.reference import ortho
 
     ref = ortho(m)
     assert np.max(rot_angle(a, ref)) < 1e-5

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 import rokeby_native as rn
 
-from reference import dir_angle, quat_to_matrix, random_constraints, rot_angle
+from support.reference import dir_angle, quat_to_matrix, random_constraints, rot_angle
 from rokeby import api
 
 KERNELS = ["portable", "avx2", "avx512"]

@@ -5,7 +5,7 @@ import pytest
 import rokeby_native as rn
 
 from rokeby.meshio import load_obj
-from conftest import mesh_path
+from support import DATA, mesh_path
 
 
 @pytest.fixture(scope="module")
@@ -175,7 +175,7 @@ def test_against_exact_polyhedral_geodesics_on_a_real_mesh():
     """Ground truth from pygeodesic's exact MMP algorithm (bench/make_exact_fixture.py)."""
     from pathlib import Path
 
-    ref = np.load(Path(__file__).parent / "data" / "spot_exact_geodesics.npz")
+    ref = np.load(DATA / "spot_exact_geodesics.npz")
     v, f = load_obj(mesh_path("spot.obj"))
     assert int(ref["num_vertices"]) == len(v)
     s = rn.GeodesicSolver(v, f)
@@ -255,7 +255,7 @@ def test_exact_method_matches_pygeodesic_mmp():
     on a vertex is that vertex."""
     from pathlib import Path
 
-    ref = np.load(Path(__file__).parent / "data" / "spot_exact_geodesics.npz")
+    ref = np.load(DATA / "spot_exact_geodesics.npz")
     v, f = load_obj(mesh_path("spot.obj"))
     s = rn.GeodesicSolver(v, f)
     d = s.distances(ref["sources"], method="exact").astype(np.float64)

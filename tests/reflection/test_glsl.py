@@ -17,9 +17,9 @@ import pytest
 moderngl = pytest.importorskip("moderngl")
 rn = pytest.importorskip("rokeby_native")
 
-from conftest import mesh_path  # noqa: E402
-from gl_harness import Renderer, create_context, look_at, perspective  # noqa: E402
-from reference import random_constraints  # noqa: E402
+from support import mesh_path  # noqa: E402
+from support.gl_harness import Renderer, create_context, look_at, perspective  # noqa: E402
+from support.reference import random_constraints  # noqa: E402
 from rokeby import glsl  # noqa: E402
 from rokeby.meshio import load_obj, vertex_normals  # noqa: E402
 
@@ -296,10 +296,9 @@ def test_blender_compiles_and_draws_the_same_shader_offscreen():
     uniform block, textures, overlays) in bpy, offscreen, against the Rust reference on the
     evaluator's inputs (3 constraints in a Euclidean region on a UV sphere)."""
     pytest.importorskip("bpy")
-    from bpy_process import run_check
-    from conftest import ROOT
+    from support.bpy_process import run_check
 
-    res = run_check("blender_viewport_check.py", args=[ROOT / "tests"])
+    res = run_check("reflection/blender_viewport_check.py")
     assert res["error"] is None and res["status"] is None
     assert res["covered"] > 1000
     assert res["mean_err"] < MEAN_TOL and res["max_err"] < MAX_TOL, res

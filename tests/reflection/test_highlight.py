@@ -5,7 +5,7 @@ import math
 
 import numpy as np
 import pytest
-from conftest import cycles
+from support import cycles
 
 bpy = pytest.importorskip("bpy")
 

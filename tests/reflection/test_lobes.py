@@ -12,13 +12,13 @@ OpenEXR = pytest.importorskip("OpenEXR")
 
 from rokeby import api, compat, shading  # noqa: E402
 from rokeby.compositing import exr_pass_names  # noqa: E402
-from test_render import SIZE, chrome_ball  # noqa: E402,F401  (fixture)
+from support.reflection import CHROME_BALL_SIZE as SIZE  # noqa: E402  (chrome_ball: tests/reflection/conftest.py)
 
 PASSES = ("Combined", "DiffDir", "DiffInd", "DiffCol", "GlossDir", "GlossInd", "rokeby_n")
 
 
 @pytest.fixture
-def plastic_ball(chrome_ball):  # noqa: F811
+def plastic_ball(chrome_ball):
     ball, mat = chrome_ball
     sc = bpy.context.scene
     sc.cycles.samples = 16
@@ -234,7 +234,7 @@ def test_split_survives_save_and_reload(plastic_ball, tmp_path):
     assert mat.node_tree.nodes["Principled BSDF"].outputs["BSDF"].links[0].to_node.bl_idname == "ShaderNodeOutputMaterial"
 
 
-def test_extreme_edit_below_the_surface_gives_no_black_or_nan(chrome_ball, tmp_path):  # noqa: F811
+def test_extreme_edit_below_the_surface_gives_no_black_or_nan(chrome_ball, tmp_path):
     """Green handle behind the ball: e points below the surface over much of the region. The
     group folds it back above the tangent plane, so no pixel is black or NaN and the image
     stays continuous; without the fold, Cycles would clamp every such pixel to one grazing

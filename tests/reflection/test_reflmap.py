@@ -5,7 +5,7 @@ import os
 
 import numpy as np
 import pytest
-from conftest import cycles
+from support import cycles
 
 bpy = pytest.importorskip("bpy")
 
@@ -443,7 +443,7 @@ def test_bad_input_gives_clear_errors(encoded_room, monkeypatch):
 
 
 def test_operator_and_sidebar(encoded_room):
-    from test_scene import draw_sidebar
+    from support.ui import draw_sidebar
 
     ball, mat, _enc = encoded_room
     ball.rokeby.render_mode = "REFLECTION_MAP"

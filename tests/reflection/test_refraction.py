@@ -2,7 +2,6 @@
 field ``rokeby_refraction`` in Blender, and Cycles renders of a glass ball in front of a
 colour-coded backdrop."""
 
-import sys
 
 import numpy as np
 import pytest
@@ -12,10 +11,9 @@ bpy = pytest.importorskip("bpy")
 import rokeby  # noqa: E402
 from rokeby import api, evaluate, refraction  # noqa: E402
 
-from conftest import ROOT, cycles  # noqa: E402
-from reference import rotation_vectors  # noqa: E402
+from support import cycles  # noqa: E402
+from support.reference import rotation_vectors  # noqa: E402
 
-sys.path.insert(0, str(ROOT / "blend_fixtures"))
 import make_fixtures  # noqa: E402
 
 import rokeby_native  # noqa: E402

@@ -18,7 +18,7 @@ import rokeby  # noqa: E402
 from rokeby import api, evaluate  # noqa: E402
 from rokeby.meshio import load_obj  # noqa: E402
 
-from conftest import cycles, mesh_path  # noqa: E402
+from support import cycles, mesh_path  # noqa: E402
 
 
 @pytest.fixture(autouse=True)

@@ -3,40 +3,12 @@
 
 import numpy as np
 import pytest
-from conftest import cycles
 
 bpy = pytest.importorskip("bpy")
 
-import rokeby  # noqa: E402
-from rokeby import api, compat, envmaps, evaluate  # noqa: E402
+from rokeby import api, compat  # noqa: E402
 
-SIZE = 48
-
-
-@pytest.fixture
-def chrome_ball():
-    bpy.ops.wm.read_factory_settings(use_empty=True)
-    rokeby.register()
-    evaluate.reset()
-    sc = bpy.context.scene
-    cycles(sc, SIZE, 8, seed=1)
-    envmaps.use_studio_world(sc, "forest")
-    bpy.ops.mesh.primitive_uv_sphere_add(segments=64, ring_count=32)
-    bpy.ops.object.shade_smooth()
-    ball = bpy.context.object
-    ball.name = "Ball"
-    mat = bpy.data.materials.new("Chrome")
-    mat.use_nodes = True
-    bsdf = mat.node_tree.nodes["Principled BSDF"]
-    bsdf.inputs["Metallic"].default_value = 1.0
-    bsdf.inputs["Roughness"].default_value = 0.0
-    ball.data.materials.append(mat)
-    cam = bpy.data.objects.new("Camera", bpy.data.cameras.new("Camera"))
-    sc.collection.objects.link(cam)
-    sc.camera = cam
-    cam.location = (0.0, -4.0, 0.0)
-    cam.rotation_euler = (np.pi / 2, 0.0, 0.0)
-    return ball, mat
+from support.reflection import CHROME_BALL_SIZE as SIZE  # noqa: E402  (the chrome_ball fixture: tests/reflection/conftest.py)
 
 
 def _render(tmp_path, name):

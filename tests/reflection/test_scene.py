@@ -1,7 +1,6 @@
 """The add-on's scene model in Blender (bpy, background mode): mirrors, constraints and regions
 as scene data, live updates, keyframes, save/reload, view control and bad states."""
 
-import sys
 
 import numpy as np
 import pytest
@@ -11,10 +10,10 @@ bpy = pytest.importorskip("bpy")
 import rokeby  # noqa: E402
 from rokeby import api, evaluate  # noqa: E402
 
-from conftest import ROOT, SHARED  # noqa: E402
-from reference import rotation_vectors  # noqa: E402
+from support import SHARED  # noqa: E402
+from support.reference import rotation_vectors  # noqa: E402
+from support.ui import draw_sidebar  # noqa: E402
 
-sys.path.insert(0, str(ROOT / "blend_fixtures"))
 import make_fixtures  # noqa: E402
 
 import rokeby_native  # noqa: E402
@@ -357,74 +356,6 @@ def test_settings_are_animatable():
     api.evaluate(frame=10)
     large = np.count_nonzero(np.abs(api.stored_field(mirror)).max(1) > 1e-6)
     assert np.isclose(rg.radius, 3.0) and large > 2 * small > 0
-
-
-class _Layout:
-    """Stands in for bpy.types.UILayout in background mode (no window to draw in): records the
-    calls and checks that every property and operator the panel names exists."""
-
-    def __init__(self, log):
-        self.log = log
-        self.alert = False
-
-    def _sub(self, *a, **k):
-        return _Layout(self.log)
-
-    row = column = box = _sub
-
-    def label(self, text="", icon="NONE"):
-        self.log.append(("label", text))
-
-    def prop(self, data, name, **k):
-        assert name in data.bl_rna.properties, f"{type(data).__name__} has no property {name!r}"
-        self.log.append(("prop", name))
-
-    def prop_search(self, data, name, search_data, search_name, **k):
-        assert name in data.bl_rna.properties and search_name in search_data.bl_rna.properties
-        self.log.append(("prop_search", name))
-
-    def template_list(self, list_type, list_id, data, name, active_data, active_name, **k):
-        assert hasattr(bpy.types, list_type)
-        assert name in data.bl_rna.properties and active_name in active_data.bl_rna.properties
-        self.log.append(("list", name))
-
-    def operator(self, idname, **k):
-        mod, op = idname.split(".")
-        assert hasattr(getattr(bpy.ops, mod), op), idname
-        self.log.append(("operator", idname))
-        return _OpProps(idname)
-
-    def operator_menu_enum(self, idname, prop, **k):
-        return self.operator(idname)
-
-    def separator(self, **k):
-        pass
-
-    def menu(self, idname, **k):
-        assert hasattr(bpy.types, idname), idname
-        self.log.append(("menu", idname))
-
-
-def draw_sidebar(panel_log):
-    """Draws the sidebar's mirror panel and each sub-panel whose poll passes (as Blender does)
-    into ``panel_log``."""
-    from rokeby.ui import MIRROR_PANELS
-
-    for cls in MIRROR_PANELS:
-        if getattr(cls, "bl_parent_id", None) and not cls.poll(bpy.context):
-            continue
-        cls.draw(type("P", (), {"layout": _Layout(panel_log)})(), bpy.context)
-
-
-class _OpProps:
-    def __init__(self, idname):
-        mod, op = idname.split(".")
-        self.rna = getattr(getattr(bpy.ops, mod), op).get_rna_type()
-
-    def __setattr__(self, key, value):
-        if key != "rna":
-            assert key in self.rna.properties, f"{self.rna.identifier} has no property {key!r}"
-        object.__setattr__(self, key, value)
 
 
 def test_sidebar_panel_draws_every_state():

@@ -7,7 +7,8 @@ import os
 import numpy as np
 import pytest
 
-from reference import uv_sphere
+from support.reference import uv_sphere
+from support.shadow import LIGHT, SIZE, blender_scene, edge_along, edited_scene, render
 from rokeby import native
 
 rn = native.module()
@@ -15,7 +16,6 @@ rn = native.module()
 
 PLANE_V = np.array([[-20, -20, 0], [20, -20, 0], [20, 20, 0], [-20, 20, 0]], np.float32)
 PLANE_F = np.array([[0, 1, 2], [0, 2, 3]], np.int64)
-LIGHT = np.array([0.2, 0.1, 5.0])
 
 
 @pytest.fixture
@@ -119,88 +119,6 @@ def test_bad_drags_change_nothing(editor):
 
 # --- Blender: the shadow mesh object, linking, and a Cycles render ------------------------------
 
-SIZE = 96
-
-
-def _blender_scene(light_type="POINT"):
-    bpy = pytest.importorskip("bpy")
-    import rokeby
-
-    bpy.ops.wm.read_factory_settings(use_empty=True)
-    rokeby.register()  # shadow edits keep their links in obj.rokeby_shadow (idempotent)
-    sc = bpy.context.scene
-    sc.render.engine = "CYCLES"
-    sc.cycles.device = "CPU"
-    sc.cycles.samples = 4
-    sc.cycles.max_bounces = 0  # direct light only: a noise-free hard shadow edge
-    sc.cycles.use_denoising = False
-    sc.cycles.seed = 1
-    sc.render.resolution_x = sc.render.resolution_y = SIZE
-    sc.render.resolution_percentage = 100
-    sc.render.film_transparent = False
-    world = bpy.data.worlds.new("Black")
-    sc.world = world
-    world.color = (0, 0, 0)
-    bpy.ops.mesh.primitive_plane_add(size=12)
-    ground = bpy.context.object
-    ground.name = "Ground"
-    bpy.ops.mesh.primitive_uv_sphere_add(segments=48, ring_count=24, radius=0.5, location=(0, 0, 1.5))
-    bpy.ops.object.shade_smooth()
-    ball = bpy.context.object
-    ball.name = "Ball"
-    ld = bpy.data.lights.new("Lamp", light_type)
-    ld.energy = 3000.0
-    if light_type == "AREA":
-        ld.size = 0.4  # soft shadows: a penumbra about 3 px wide at the edge
-        sc.cycles.samples = 64
-    else:
-        ld.shadow_soft_size = 0.0
-    lamp = bpy.data.objects.new("Lamp", ld)
-    sc.collection.objects.link(lamp)
-    lamp.location = tuple(LIGHT)
-    cam = bpy.data.objects.new("Camera", bpy.data.cameras.new("Camera"))
-    cam.data.type = "ORTHO"
-    cam.data.ortho_scale = 4.0
-    sc.collection.objects.link(cam)
-    sc.camera = cam
-    cam.location = (0.0, 0.0, 10.0)
-    sc.view_layers[0].update()
-    return bpy, sc, ball, lamp, ground
-
-
-def _render(bpy, sc, path):
-    sc.render.filepath = str(path)
-    bpy.ops.render.render(write_still=True)
-    img = bpy.data.images.load(sc.render.filepath)
-    try:
-        px = np.array(img.pixels[:], dtype=np.float32).reshape(SIZE, SIZE, 4)[..., :3].mean(-1)
-    finally:
-        bpy.data.images.remove(img)
-    return px[::-1]  # row 0 = top of the image
-
-
-def _to_pixel(p):
-    """World (x, y) on the ground → (column, row) in the orthographic top view (4 units wide)."""
-    return np.array([(p[0] / 4.0 + 0.5) * SIZE, (0.5 - p[1] / 4.0) * SIZE])
-
-
-def _edge_along(img, centre, direction, r_max=1.9):
-    """Distance (world units) from ``centre`` along ``direction`` where the ground turns lit."""
-    ts = np.linspace(0.0, r_max, 400)
-    vals = []
-    for t in ts:
-        c, r = _to_pixel(centre + direction * t)
-        ci, ri = int(np.clip(c, 0, SIZE - 1)), int(np.clip(r, 0, SIZE - 1))
-        vals.append(img[ri, ci])
-    vals = np.asarray(vals)
-    thr = 0.5 * (vals.min() + vals.max())
-    # Dark inside, lit outside: the number of dark samples places the (half-intensity) edge, robust
-    # to sampling noise in a soft penumbra where the first crossing is not.
-    if vals[-1] <= thr:
-        return np.inf
-    return ts[1] * np.count_nonzero(vals <= thr)
-
-
 # EEVEE on a software GL (llvmpipe) spends about three minutes compiling its shaders: opt in with
 # ROKEBY_EEVEE_TESTS=1 (measured there: edited edge 22.3 px for a 23.5 px target, far side unmoved).
 EEVEE = pytest.param("EEVEE", "POINT", marks=pytest.mark.skipif(
@@ -211,15 +129,15 @@ EEVEE = pytest.param("EEVEE", "POINT", marks=pytest.mark.skipif(
 def test_render_shadow_edge_follows_the_dragged_handle(tmp_path, engine, light_type):
     """Cycles with hard (point) and soft (area light, the edge at half intensity) shadows, and EEVEE
     (which in 4.5 honours light and shadow linking and ray visibility)."""
-    bpy, sc, ball, lamp, ground = _blender_scene(light_type)
+    bpy, sc, ball, lamp, ground = blender_scene(light_type)
     from rokeby import api, compat
 
     sc.render.engine = compat.eevee_engine() if engine == "EEVEE" else engine
 
-    ball_before = _render(bpy, sc, tmp_path / "ball_before.png")
+    ball_before = render(bpy, sc, tmp_path / "ball_before.png")
     # The top view would see the ball over most of its shadow: hide it from the camera only.
     ball.visible_camera = False
-    before = _render(bpy, sc, tmp_path / "before.png")
+    before = render(bpy, sc, tmp_path / "before.png")
     s = api.start_shadow_edit(ball, lamp, [ground], min_loop_vertices=10)
     h = s.handles(0)["points"].astype(np.float64)
     n = len(h)
@@ -233,10 +151,10 @@ def test_render_shadow_edge_follows_the_dragged_handle(tmp_path, engine, light_t
     ob, twin = api.apply_shadow_edit(s)
     assert not ob.visible_camera and ob.visible_shadow and not ob.visible_diffuse
     assert twin.light_linking.blocker_collection is not None
-    after = _render(bpy, sc, tmp_path / "after.png")
+    after = render(bpy, sc, tmp_path / "after.png")
     px_per_unit = SIZE / 4.0
-    e0 = _edge_along(before, centre, d0)
-    e1 = _edge_along(after, centre, d0)
+    e0 = edge_along(before, centre, d0)
+    e1 = edge_along(after, centre, d0)
     want = np.linalg.norm(target - centre)
     # The shadow of the polygonal ball lies a pixel or so inside the handles of its smooth
     # silhouette (and a soft shadow's half-intensity line a little further in).
@@ -245,14 +163,14 @@ def test_render_shadow_edge_follows_the_dragged_handle(tmp_path, engine, light_t
     moved, asked = (e1 - e0) * px_per_unit, (want - np.linalg.norm(h[m] - centre)) * px_per_unit
     assert abs(moved - asked) < 2.0, f"the edge moved {moved:.1f} px for a {asked:.1f} px drag"
     # The far side of the shadow does not move.
-    f0 = _edge_along(before, centre, -d0)
-    f1 = _edge_along(after, centre, -d0)
+    f0 = edge_along(before, centre, -d0)
+    f1 = edge_along(after, centre, -d0)
     assert abs(f1 - f0) * px_per_unit < 1.5, f"far side moved {abs(f1 - f0) * px_per_unit:.1f} px"
     print(f"{engine} {light_type} edge px: unedited {e0 * px_per_unit:.1f} (handle {np.linalg.norm(h[m] - centre) * px_per_unit:.1f}), "
           f"edited {e1 * px_per_unit:.1f} (target {want * px_per_unit:.1f}), far side {f0 * px_per_unit:.1f} -> {f1 * px_per_unit:.1f}")
     # The caster keeps its own shading and self-shadows: no shadow of the shadow mesh falls on it.
     ball.visible_camera = True
-    ball_after = _render(bpy, sc, tmp_path / "ball_after.png")
+    ball_after = render(bpy, sc, tmp_path / "ball_after.png")
     yy, xx = np.mgrid[0:SIZE, 0:SIZE]
     on_ball = np.hypot((xx + 0.5) / SIZE * 4 - 2, 2 - (yy + 0.5) / SIZE * 4) < 0.45
     assert ball_before[on_ball].mean() > 0.1, "the ball should be lit from above"
@@ -260,7 +178,7 @@ def test_render_shadow_edge_follows_the_dragged_handle(tmp_path, engine, light_t
 
 
 def test_blender_bad_inputs_change_nothing():
-    bpy, sc, ball, lamp, ground = _blender_scene()
+    bpy, sc, ball, lamp, ground = blender_scene()
     from rokeby import shadow
 
     n_objects = len(bpy.data.objects)
@@ -281,21 +199,6 @@ def test_blender_bad_inputs_change_nothing():
     assert len(bpy.data.objects) == n_objects
 
 
-def _edited_scene(tmp_path=None):
-    bpy, sc, ball, lamp, ground = _blender_scene()
-    from rokeby import api
-
-    s = api.start_shadow_edit(ball, lamp, [ground], min_loop_vertices=10)
-    h = s.handles(0)["points"].astype(np.float64)
-    n = len(h)
-    centre = h.mean(axis=0)
-    m = int(np.argmax(h[:, 0]))
-    s.drag(0, ((m - n // 5) % n, (m + n // 5) % n), m, centre + (h[m] - centre) * 1.35)
-    s.commit()
-    ob, twin = api.apply_shadow_edit(s)
-    return bpy, sc, ball, lamp, ground, s, ob, twin
-
-
 def _evaluated(bpy, ob):
     dg = bpy.context.evaluated_depsgraph_get()
     e = ob.evaluated_get(dg)
@@ -310,7 +213,7 @@ def _evaluated(bpy, ob):
 
 def test_shadow_mesh_follows_an_armature_pose():
     bpy = pytest.importorskip("bpy")
-    bpy_, sc, ball, lamp, ground = _blender_scene()
+    bpy_, sc, ball, lamp, ground = blender_scene()
     # Skin the ball to one bone before editing: the shadow mesh gets the same group and modifier.
     arm = bpy.data.objects.new("Rig", bpy.data.armatures.new("Rig"))
     sc.collection.objects.link(arm)
@@ -360,7 +263,7 @@ def test_shadow_mesh_follows_an_armature_pose():
 
 
 def test_light_moved_20_degrees_puts_no_new_shadow_on_the_caster(tmp_path):
-    bpy, sc, ball, lamp, ground, s, ob, twin = _edited_scene()
+    bpy, sc, ball, lamp, ground, s, ob, twin = edited_scene()
     # Rotate the light 20° about the ball's centre (around the y axis); its twin follows.
     a = np.radians(20)
     rot = np.array([[np.cos(a), 0, np.sin(a)], [0, 1, 0], [-np.sin(a), 0, np.cos(a)]])
@@ -369,14 +272,14 @@ def test_light_moved_20_degrees_puts_no_new_shadow_on_the_caster(tmp_path):
     lamp.location = tuple(new)
     sc.view_layers[0].update()
     np.testing.assert_allclose(np.array(twin.matrix_world.translation), new, atol=1e-6)
-    edited = _render(bpy, sc, tmp_path / "edited.png")
+    edited = render(bpy, sc, tmp_path / "edited.png")
     # The same light without the edit: hide the shadow mesh, drop the linking.
     ob.visible_shadow = False
     lamp.light_linking.receiver_collection = None
     lamp.light_linking.blocker_collection = None
     twin.hide_render = True
     sc.view_layers[0].update()
-    plain = _render(bpy, sc, tmp_path / "plain.png")
+    plain = render(bpy, sc, tmp_path / "plain.png")
     yy, xx = np.mgrid[0:SIZE, 0:SIZE]
     on_ball = np.hypot((xx + 0.5) / SIZE * 4 - 2, 2 - (yy + 0.5) / SIZE * 4) < 0.45
     assert plain[on_ball].mean() > 0.1
@@ -386,7 +289,7 @@ def test_light_moved_20_degrees_puts_no_new_shadow_on_the_caster(tmp_path):
 
 
 def test_operators_start_drag_apply_and_the_overlay():
-    bpy, sc, ball, lamp, ground = _blender_scene()
+    bpy, sc, ball, lamp, ground = blender_scene()
     import rokeby
     from rokeby import shadow_ui
 

@@ -8,11 +8,11 @@ bpy = pytest.importorskip("bpy")
 
 import rokeby  # noqa: E402
 from rokeby import api, shadow  # noqa: E402
-from test_shadow import LIGHT, _blender_scene  # noqa: E402
+from support.shadow import LIGHT, blender_scene  # noqa: E402
 
 
 def _edit(beta):
-    _bpy, sc, ball, lamp, ground = _blender_scene()
+    _bpy, sc, ball, lamp, ground = blender_scene()
     rokeby.register()
     s = api.start_shadow_edit(ball, lamp, [ground], min_loop_vertices=10)
     h = s.handles(0)["points"].astype(np.float64)

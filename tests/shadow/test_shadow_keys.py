@@ -8,7 +8,7 @@ shadow during the drag; cancelling leaves the scene as before."""
 import numpy as np
 import pytest
 
-import test_shadow as ts
+from support import shadow as ts
 
 
 def _rotated(deg):
@@ -32,11 +32,11 @@ def _edge(img, lamp_pos):
     """The +x shadow edge (world units from the shadow's centre) under a light at ``lamp_pos``."""
     c = np.array([0.0, 0.0, 1.5])
     centre = lamp_pos + (c - lamp_pos) * (lamp_pos[2] / (lamp_pos[2] - c[2]))
-    return ts._edge_along(img, centre, np.array([1.0, 0.0, 0.0]))
+    return ts.edge_along(img, centre, np.array([1.0, 0.0, 0.0]))
 
 
 def test_two_keyed_configurations_blend_at_the_midpoint(tmp_path):
-    bpy, sc, ball, lamp, ground = ts._blender_scene()
+    bpy, sc, ball, lamp, ground = ts.blender_scene()
     from rokeby import api, shadow
 
     ball.visible_camera = False
@@ -75,11 +75,11 @@ def test_two_keyed_configurations_blend_at_the_midpoint(tmp_path):
 
 
 def _render(bpy, sc, path):
-    return ts._render(bpy, sc, path)
+    return ts.render(bpy, sc, path)
 
 
 def test_a_file_with_two_configurations_reloads_them(tmp_path):
-    bpy, sc, ball, lamp, ground = ts._blender_scene()
+    bpy, sc, ball, lamp, ground = ts.blender_scene()
     from rokeby import api, shadow
 
     s1 = _edit(api, ball, lamp, ground, 1.3)
@@ -103,7 +103,7 @@ def test_a_file_with_two_configurations_reloads_them(tmp_path):
 
 
 def test_add_configuration_from_another_light_is_refused(tmp_path):
-    bpy, sc, ball, lamp, ground = ts._blender_scene()
+    bpy, sc, ball, lamp, ground = ts.blender_scene()
     from rokeby import api, shadow
 
     api.apply_shadow_edit(_edit(api, ball, lamp, ground, 1.3))
@@ -128,7 +128,7 @@ def _key(ob, name=None):
 
 
 def test_live_shadow_mesh_changes_every_drag_step_and_cancel_restores(tmp_path):
-    bpy, sc, ball, lamp, ground = ts._blender_scene()
+    bpy, sc, ball, lamp, ground = ts.blender_scene()
     from rokeby import api, shadow
 
     s = api.start_shadow_edit(ball, lamp, [ground], min_loop_vertices=10)
@@ -149,9 +149,9 @@ def test_live_shadow_mesh_changes_every_drag_step_and_cancel_restores(tmp_path):
         assert np.abs(b - a).max() > 1e-3, "each drag step must change the shadow mesh"
     # What a render (and the viewport) shows mid-drag: the edited edge, before any release.
     ball.visible_camera = False
-    mid = ts._render(bpy, sc, tmp_path / "mid.png")
+    mid = ts.render(bpy, sc, tmp_path / "mid.png")
     want = np.linalg.norm(h[m] - c) * 1.3
-    got = ts._edge_along(mid, c, (h[m] - c) / np.linalg.norm(h[m] - c))
+    got = ts.edge_along(mid, c, (h[m] - c) / np.linalg.norm(h[m] - c))
     assert abs(got - want) * ts.SIZE / 4.0 < 3.0, f"mid-drag edge at {got:.3f}, cursor at {want:.3f}"
     # Esc: the drag is dropped and the preview's shadow mesh goes.
     s.cancel()
@@ -161,7 +161,7 @@ def test_live_shadow_mesh_changes_every_drag_step_and_cancel_restores(tmp_path):
 
 
 def test_live_cancel_on_an_applied_edit_puts_its_keys_back():
-    bpy, sc, ball, lamp, ground = ts._blender_scene()
+    bpy, sc, ball, lamp, ground = ts.blender_scene()
     from rokeby import api, shadow
 
     s = _edit(api, ball, lamp, ground, 1.3)
@@ -188,10 +188,10 @@ def test_live_cancel_on_an_applied_edit_puts_its_keys_back():
 
 
 def test_apply_operator_adds_a_key_configuration_and_the_panel_offers_it():
-    bpy, sc, ball, lamp, ground = ts._blender_scene()
+    bpy, sc, ball, lamp, ground = ts.blender_scene()
     import rokeby
     from rokeby import shadow, shadow_ui
-    from test_scene import _Layout
+    from support.ui import Layout
 
     rokeby.register()
     try:
@@ -205,7 +205,7 @@ def test_apply_operator_adds_a_key_configuration_and_the_panel_offers_it():
             n, c = len(h), h.mean(axis=0)
             assert bpy.ops.rokeby.shadow_drag(loop=0, fixed=(n - 8, 14), moved=3, target=tuple(c + (h[3] - c) * scale)) == {"FINISHED"}
             log = []
-            shadow_ui.ROKEBY_PT_shadow.draw(type("P", (), {"layout": _Layout(log)})(), bpy.context)
+            shadow_ui.ROKEBY_PT_shadow.draw(type("P", (), {"layout": Layout(log)})(), bpy.context)
             assert bpy.ops.rokeby.shadow_apply(add_configuration=location != tuple(ts.LIGHT)) == {"FINISHED"}
         ob = shadow.shadow_mesh_of(ball)
         assert shadow.configuration_vectors(ob).shape == (2, 3)

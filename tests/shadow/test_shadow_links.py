@@ -10,7 +10,7 @@ import pytest
 
 bpy = pytest.importorskip("bpy")
 
-import test_shadow as ts  # noqa: E402
+from support import shadow as ts  # noqa: E402
 from rokeby import shadow  # noqa: E402
 
 
@@ -27,12 +27,12 @@ def _shadow_pixels(img):
 def _edited(tmp_path):
     """The edited scene of tests/test_shadow.py, the ball hidden from the camera (the top view
     then sees its whole shadow), its render and the render of the same scene without the edit."""
-    bpy_, sc, ball, lamp, ground, _s, ob, twin = ts._edited_scene()
+    bpy_, sc, ball, lamp, ground, _s, ob, twin = ts.edited_scene()
     ball.visible_camera = False
     _settle(sc)
-    edited = ts._render(bpy, sc, tmp_path / "edited.png")
+    edited = ts.render(bpy, sc, tmp_path / "edited.png")
     ob.visible_shadow = False
-    plain = ts._render(bpy, sc, tmp_path / "plain.png")
+    plain = ts.render(bpy, sc, tmp_path / "plain.png")
     ob.visible_shadow = True
     _settle(sc)
     # The edit shows: hundreds of pixels more shadow than the unedited render.
@@ -61,7 +61,7 @@ def test_renaming_caster_and_light_keeps_the_edit_and_namesakes_take_nothing(tmp
     # Reference: the scene with a second light and a second ball under other names.
     others = [_add_lamp(sc, "Other lamp"), _add_ball(sc, "Other ball")]
     _settle(sc)
-    with_others = ts._render(bpy, sc, tmp_path / "others.png")
+    with_others = ts.render(bpy, sc, tmp_path / "others.png")
     for o in others:
         bpy.data.objects.remove(o, do_unlink=True)
     _settle(sc)
@@ -69,7 +69,7 @@ def test_renaming_caster_and_light_keeps_the_edit_and_namesakes_take_nothing(tmp
     ball.name, lamp.name = "Orb", "Key"
     _settle(sc)
     _settle(sc)
-    renamed = ts._render(bpy, sc, tmp_path / "renamed.png")
+    renamed = ts.render(bpy, sc, tmp_path / "renamed.png")
     print(f"shadow pixels: edited {_shadow_pixels(edited)}, after renaming {_shadow_pixels(renamed)}")
     np.testing.assert_allclose(renamed, edited, atol=1e-6, err_msg="renaming the caster and the light changed the render")
     assert shadow.repair(sc) == []
@@ -81,7 +81,7 @@ def test_renaming_caster_and_light_keeps_the_edit_and_namesakes_take_nothing(tmp
     assert [o.name for o in namesakes] == ["Lamp", "Ball"]
     _settle(sc)
     _settle(sc)
-    after = ts._render(bpy, sc, tmp_path / "namesakes.png")
+    after = ts.render(bpy, sc, tmp_path / "namesakes.png")
     print(f"shadow pixels with the other lamp and ball: {_shadow_pixels(with_others)}, with namesakes {_shadow_pixels(after)}")
     np.testing.assert_allclose(after, with_others, atol=1e-6,
                                err_msg="a new light or ball under the old names changed the edited shadow")
@@ -100,7 +100,7 @@ def test_renaming_caster_and_light_keeps_the_edit_and_namesakes_take_nothing(tmp
     sc = bpy.context.scene
     bpy.data.objects["Orb"].name = "Ball again"
     _settle(sc)
-    np.testing.assert_allclose(ts._render(bpy, sc, tmp_path / "reloaded.png"), edited, atol=1e-6)
+    np.testing.assert_allclose(ts.render(bpy, sc, tmp_path / "reloaded.png"), edited, atol=1e-6)
 
 
 def _write_as_main_did(ob):
@@ -142,11 +142,11 @@ def test_a_file_saved_with_names_migrates_and_keeps_its_shadow(tmp_path):
     _settle(sc)
     _settle(sc)
     assert shadow.repair(sc) == []
-    np.testing.assert_allclose(ts._render(bpy, sc, tmp_path / "migrated.png"), edited, atol=1e-6)
+    np.testing.assert_allclose(ts.render(bpy, sc, tmp_path / "migrated.png"), edited, atol=1e-6)
     # Migrated links are pointers: renames keep the edit, and removing it restores the plain light.
     ball.name, lamp.name = "Orb", "Key"
     _settle(sc)
-    np.testing.assert_allclose(ts._render(bpy, sc, tmp_path / "migrated_renamed.png"), edited, atol=1e-6)
+    np.testing.assert_allclose(ts.render(bpy, sc, tmp_path / "migrated_renamed.png"), edited, atol=1e-6)
     shadow.remove(ball)
     _settle(sc)
     assert lamp.light_linking.receiver_collection is None and lamp.light_linking.blocker_collection is None
@@ -179,7 +179,7 @@ def test_an_edit_whose_caster_left_the_scene_comes_back_with_it(tmp_path):
     sc.collection.objects.unlink(ball)
     sc.collection.children.link(props)
     _settle(sc)
-    np.testing.assert_allclose(ts._render(bpy, sc, tmp_path / "moved.png"), edited, atol=1e-6)
+    np.testing.assert_allclose(ts.render(bpy, sc, tmp_path / "moved.png"), edited, atol=1e-6)
     sc.collection.children.unlink(props)  # the caster is in no scene now, but not deleted
     _settle(sc)
     assert not ob.visible_shadow and ob.rokeby_shadow.caster == ball
@@ -187,7 +187,7 @@ def test_an_edit_whose_caster_left_the_scene_comes_back_with_it(tmp_path):
     _settle(sc)
     _settle(sc)
     assert ob.visible_shadow and shadow.repair(sc) == []
-    np.testing.assert_allclose(ts._render(bpy, sc, tmp_path / "back.png"), edited, atol=1e-6)
+    np.testing.assert_allclose(ts.render(bpy, sc, tmp_path / "back.png"), edited, atol=1e-6)
 
 
 def test_start_refuses_a_twin_light_and_a_shadow_mesh(tmp_path):
@@ -215,7 +215,7 @@ def test_a_session_survives_renames_and_derived_parts_follow_the_names(tmp_path)
         shadow._collection_name("Key", r) for r in shadow._OURS)
     assert {o.name for o in bpy.data.objects if o.rokeby_shadow.role != "NONE"} == {ob.name, twin.name}
     _settle(sc)
-    np.testing.assert_allclose(ts._render(bpy, sc, tmp_path / "reapplied.png"), edited, atol=1e-6)
+    np.testing.assert_allclose(ts.render(bpy, sc, tmp_path / "reapplied.png"), edited, atol=1e-6)
 
 
 def test_a_copied_light_gets_its_own_linking_and_the_twin_stays(tmp_path):
@@ -231,7 +231,7 @@ def test_a_copied_light_gets_its_own_linking_and_the_twin_stays(tmp_path):
     assert lamp.rokeby_shadow.twin == twin and twin.rokeby_shadow.light == lamp
     bpy.data.objects.remove(copy, do_unlink=True)
     _settle(sc)
-    np.testing.assert_allclose(ts._render(bpy, sc, tmp_path / "after_copy.png"), edited, atol=1e-6)
+    np.testing.assert_allclose(ts.render(bpy, sc, tmp_path / "after_copy.png"), edited, atol=1e-6)
 
 
 def test_a_twin_deleted_with_x_is_made_again(tmp_path):
@@ -244,7 +244,7 @@ def test_a_twin_deleted_with_x_is_made_again(tmp_path):
     new_twin = lamp.rokeby_shadow.twin
     assert new_twin is not None and new_twin.users_scene and new_twin.rokeby_shadow.light == lamp
     assert [o for o in bpy.data.objects if o.rokeby_shadow.role == "TWIN"] == [new_twin]
-    np.testing.assert_allclose(ts._render(bpy, sc, tmp_path / "twin_again.png"), edited, atol=1e-6)
+    np.testing.assert_allclose(ts.render(bpy, sc, tmp_path / "twin_again.png"), edited, atol=1e-6)
 
 
 def test_an_edit_from_a_copied_light_leaves_the_original_whole(tmp_path):

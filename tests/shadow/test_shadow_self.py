@@ -9,6 +9,8 @@ import os
 import numpy as np
 import pytest
 
+from support import shadow as ts
+
 SIZE = 64
 ORTHO = 4.0
 CAM = np.array([-0.8, 0.0])
@@ -44,47 +46,18 @@ def _scale(sx, sy, sz, t):
 
 
 def _scene(cap_z=1.5):
-    bpy = pytest.importorskip("bpy")
-    import rokeby
-
-    bpy.ops.wm.read_factory_settings(use_empty=True)
-    rokeby.register()
-    sc = bpy.context.scene
-    from conftest import cycles
-
-    cycles(sc, SIZE, 4)
-    sc.cycles.max_bounces = 0
-    sc.render.film_transparent = False
-    sc.world = bpy.data.worlds.new("Black")
-    sc.world.color = (0, 0, 0)
+    bpy, sc = ts.dark_scene(SIZE)
     bpy.ops.mesh.primitive_plane_add(size=20, location=(0, 0, -1))
     ground = bpy.context.object
     caster = _caster_object(bpy, cap_z=cap_z)
-    ld = bpy.data.lights.new("Lamp", "POINT")
-    ld.energy = 3000.0
-    ld.shadow_soft_size = 0.0
-    lamp = bpy.data.objects.new("Lamp", ld)
-    sc.collection.objects.link(lamp)
-    lamp.location = LIGHT
-    cam = bpy.data.objects.new("Camera", bpy.data.cameras.new("Camera"))
-    cam.data.type = "ORTHO"
-    cam.data.ortho_scale = ORTHO
-    sc.collection.objects.link(cam)
-    sc.camera = cam
-    cam.location = (CAM[0], CAM[1], 10.0)
+    lamp = ts.add_light(sc, LIGHT)
+    ts.add_top_camera(sc, CAM, ORTHO)
     sc.view_layers[0].update()
     return bpy, sc, caster, lamp, ground
 
 
 def _render(bpy, sc, path):
-    sc.render.filepath = str(path)
-    bpy.ops.render.render(write_still=True)
-    img = bpy.data.images.load(sc.render.filepath)
-    try:
-        px = np.array(img.pixels[:], dtype=np.float32).reshape(SIZE, SIZE, 4)[..., :3].mean(-1)
-    finally:
-        bpy.data.images.remove(img)
-    return px[::-1]
+    return ts.render(bpy, sc, path, SIZE)
 
 
 def _pixel(p):
@@ -203,9 +176,7 @@ def test_a_light_inside_the_casters_bounds_gives_an_editable_shadow_that_renders
     """§5.2: a light inside the caster's bounding box (between its two parts) was refused; each part
     now gets its own frustum. The nearer sphere's shadow on the ground, dragged, renders."""
     bpy = pytest.importorskip("bpy")
-    import test_shadow as ts
-
-    bpy_, sc, ball, lamp, ground = ts._blender_scene()
+    bpy_, sc, ball, lamp, ground = ts.blender_scene()
     from rokeby import api
 
     # A second, smaller sphere in the same object, beyond the light: the light (0.8, 0, 3.5) lies
@@ -223,7 +194,7 @@ def test_a_light_inside_the_casters_bounds_gives_an_editable_shadow_that_renders
     lo, hi = corners.min(axis=0), corners.max(axis=0)
     assert np.all(lo < lamp.location) and np.all(np.array(lamp.location) < hi)
     ball.visible_camera = False
-    before = ts._render(bpy, sc, tmp_path / "before.png")
+    before = ts.render(bpy, sc, tmp_path / "before.png")
     s = api.start_shadow_edit(ball, lamp, [ground], min_loop_vertices=10)
     k = next(i for i, lp in enumerate(s.loops()) if lp["active"] and s.handles(i)["hit"].all()
              and np.linalg.norm(s.handles(i)["points"].mean(axis=0)[:2] - [-0.6, 0.0]) < 0.5)
@@ -234,23 +205,21 @@ def test_a_light_inside_the_casters_bounds_gives_an_editable_shadow_that_renders
     s.drag(k, ((m - n // 5) % n, (m + n // 5) % n), m, target)
     s.commit()
     api.apply_shadow_edit(s)
-    after = ts._render(bpy, sc, tmp_path / "after.png")
+    after = ts.render(bpy, sc, tmp_path / "after.png")
     d = (h[m] - c) / np.linalg.norm(h[m] - c)
     px = ts.SIZE / 4.0
-    e0, e1 = ts._edge_along(before, c, d), ts._edge_along(after, c, d)
+    e0, e1 = ts.edge_along(before, c, d), ts.edge_along(after, c, d)
     want = np.linalg.norm(target - c)
     print(f"light inside the bounds: edge {e0 * px:.1f} px -> {e1 * px:.1f} px (target {want * px:.1f})")
     assert abs(e0 - np.linalg.norm(h[m] - c)) * px < 2.5
     assert abs(e1 - want) * px < 3.0
-    f0, f1 = ts._edge_along(before, c, -d), ts._edge_along(after, c, -d)
+    f0, f1 = ts.edge_along(before, c, -d), ts.edge_along(after, c, -d)
     assert abs(f1 - f0) * px < 1.5
 
 
 def test_a_light_inside_a_single_parts_bounds_stays_a_clear_error():
     bpy = pytest.importorskip("bpy")
-    import test_shadow as ts
-
-    bpy_, sc, ball, lamp, ground = ts._blender_scene()
+    bpy_, sc, ball, lamp, ground = ts.blender_scene()
     from rokeby import shadow
 
     lamp.location = (0.0, 0.0, 1.6)  # inside the ball

@@ -21,7 +21,7 @@ from pathlib import Path
 
 import numpy as np
 
-ADDON = str(Path(__file__).resolve().parents[1] / "addon" / "rokeby")
+ADDON = str(Path(__file__).resolve().parents[2] / "addon" / "rokeby")
 
 
 class InjectedFault(Exception):

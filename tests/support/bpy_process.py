@@ -6,20 +6,25 @@ makes the context (:func:`gpu_context`) and draws offscreen (:func:`offscreen_pi
 from __future__ import annotations
 
 import json
+import os
 import subprocess
 import sys
-from pathlib import Path
 
 import numpy as np
 
+from support import TESTS
+
 
 def run_check(script: str, timeout: int = 600, args=()) -> dict:
-    """Runs tests/``script`` with this Python and returns its RESULT (fails the test without one,
-    skips it when the result is ``{"skip": reason}``)."""
+    """Runs tests/``script`` (a path below tests/, e.g. ``"appearance/appearance_preview_check.py"``)
+    with this Python, tests/ on its PYTHONPATH (it imports ``support``), and returns its RESULT
+    (fails the test without one, skips it when the result is ``{"skip": reason}``)."""
     import pytest
 
-    path = Path(__file__).with_name(script)
-    r = subprocess.run([sys.executable, str(path), *map(str, args)], capture_output=True, text=True, timeout=timeout)
+    path = TESTS / script
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join(p for p in (str(TESTS), os.environ.get("PYTHONPATH")) if p)}
+    r = subprocess.run([sys.executable, str(path), *map(str, args)], capture_output=True, text=True, timeout=timeout,
+                       env=env)
     line = next((ln for ln in r.stdout.splitlines() if ln.startswith("RESULT ")), None)
     if line is None:
         pytest.fail(f"no result from {script} (rc {r.returncode}): {r.stdout[-1500:]} {r.stderr[-2500:]}")

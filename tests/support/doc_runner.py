@@ -23,7 +23,7 @@ import time
 import traceback
 from pathlib import Path
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 sys.path.insert(0, str(ROOT / "addon"))  # this checkout's add-on, whatever the environment points at
 
 MAX_CYCLES_SAMPLES = 4

@@ -15,7 +15,7 @@ import rokeby  # noqa: E402
 from rokeby import api  # noqa: E402
 from rokeby.meshio import load_obj  # noqa: E402
 
-from conftest import ROOT, mesh_path  # noqa: E402
+from support import ROOT, mesh_path  # noqa: E402
 
 
 def _snapshot():

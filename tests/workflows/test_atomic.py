@@ -15,9 +15,10 @@ import pytest
 bpy = pytest.importorskip("bpy")
 
 import rokeby  # noqa: E402
-from atomic_harness import each_fault, snapshot  # noqa: E402
-from conftest import cycles  # noqa: E402
-from rokeby import api, evaluate  # noqa: E402
+from support.atomic_harness import each_fault, snapshot  # noqa: E402
+from support import cycles  # noqa: E402
+from support.scenes import add_front_camera, add_point_lamp, empty_scene, plastic_material  # noqa: E402
+from rokeby import api  # noqa: E402
 
 
 def _sphere(name, segments=16, rings=8, radius=1.0):
@@ -59,30 +60,12 @@ def _check(*args, **kwargs):
 def _base(metallic=0.0):
     """A plastic ball (its Principled BSDF gets split) with a textured Specular IOR Level, a camera
     and a light; the add-on's state reset."""
-    bpy.ops.wm.read_factory_settings(use_empty=True)
-    rokeby.register()
-    evaluate.reset()
-    sc = cycles(bpy.context.scene, 24, 1)
+    sc = cycles(empty_scene(), 24, 1)
     ball = _sphere("Ball")
-    mat = bpy.data.materials.new("Plastic")
-    mat.use_nodes = True
-    nt = mat.node_tree
-    p = nt.nodes["Principled BSDF"]
-    p.inputs["Base Color"].default_value = (0.8, 0.2, 0.1, 1.0)
-    p.inputs["Roughness"].default_value = 0.2
-    p.inputs["Metallic"].default_value = metallic
-    p.inputs["Coat Weight"].default_value = 0.3
-    noise = nt.nodes.new("ShaderNodeTexNoise")
-    nt.links.new(noise.outputs["Fac"], p.inputs["Specular IOR Level"])
+    mat = plastic_material(metallic=metallic)
     ball.data.materials.append(mat)
-    cam = bpy.data.objects.new("Camera", bpy.data.cameras.new("Camera"))
-    sc.collection.objects.link(cam)
-    sc.camera = cam
-    cam.location = (0.0, -4.0, 0.0)
-    cam.rotation_euler = (math.pi / 2, 0.0, 0.0)
-    lamp = bpy.data.objects.new("Lamp", bpy.data.lights.new("Lamp", "POINT"))
-    lamp.location = (1.5, -2.0, 2.5)
-    sc.collection.objects.link(lamp)
+    add_front_camera(sc)
+    lamp = add_point_lamp(sc)
     sc.view_layers[0].update()
     return {"scene": sc, "ball": ball, "mat": mat, "lamp": lamp}
 

@@ -23,11 +23,11 @@ def big_frame(tmp_path_factory):
     """A multilayer EXR with the passes of setup_passes, blown up to 1536×1152 (each pixel of a
     tiny Cycles render repeated): the bilateral smoothing at σ = 50 takes tens of seconds on it."""
     import OpenEXR
-    from test_compositing import _scene
+    from support.compositing import pass_scene
 
     from rokeby import compositing as C
 
-    sc = _scene()
+    sc = pass_scene()
     sc.render.resolution_x, sc.render.resolution_y = 32, 24
     sc.cycles.samples = 2
     folder = tmp_path_factory.mktemp("cancel")
@@ -68,7 +68,7 @@ def test_cancel_from_a_timer_thread_leaves_the_scene_unchanged(big_frame):
     cancelled from another thread while its native smoothing runs, as Esc does
     (rokeby.native.cancel()): KeyboardInterrupt soon after, and the scene exactly as before (no
     image made or changed)."""
-    from atomic_harness import diff, snapshot
+    from support.atomic_harness import diff, snapshot
 
     from rokeby import api, compositing, native
 
@@ -99,7 +99,7 @@ def test_cancel_from_a_timer_thread_leaves_the_scene_unchanged(big_frame):
 def test_recomposite_operator_reports_cancelled(big_frame, capfd):
     """The Recomposite Render operator (synchronous here: no window) cancelled from a timer
     thread: {'CANCELLED'}, the report says so, and no image was made."""
-    from atomic_harness import diff, snapshot
+    from support.atomic_harness import diff, snapshot
 
     from rokeby import compositing, compositing_ui, native
 

@@ -16,7 +16,7 @@ OpenEXR = pytest.importorskip("OpenEXR")
 import rokeby  # noqa: E402
 from rokeby import api, compat, evaluate  # noqa: E402
 
-from conftest import cycles  # noqa: E402
+from support import cycles  # noqa: E402
 
 ENGINES = ("BLENDER_EEVEE_NEXT", "BLENDER_EEVEE")
 
@@ -75,9 +75,9 @@ def test_multilayer_exr_setting_writes_several_layers_and_single_layer_one(tmp_p
 
 
 def test_builtin_point_shader_draws_after_a_render_with_the_picked_engine():
-    from bpy_process import run_check
+    from support.bpy_process import run_check
 
-    res = run_check("compat_gpu_check.py")
+    res = run_check("workflows/compat_gpu_check.py")
     assert compat.is_eevee(res["engine"]) and res["engine"] == compat.eevee_engine()
     assert res["picked"] == ("POINT_FLAT_COLOR" if res["has_point_flat_color"] else "FLAT_COLOR"), res
     assert res["lit"] >= 9, res  # a fat point, not a pixel or nothing

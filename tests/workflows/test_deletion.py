@@ -3,23 +3,18 @@ region centres, the light of a highlight, the camera, the vertex group of a free
 Afterwards evaluation, the sidebar, a render and undo all still work, nothing non-finite is
 written, and the report says what is missing."""
 
-import math
-
 import numpy as np
 import pytest
 
 bpy = pytest.importorskip("bpy")
 
-import rokeby  # noqa: E402
-from rokeby import api, evaluate  # noqa: E402
-from test_scene import _Layout  # noqa: E402
+from rokeby import api  # noqa: E402
+from support.scenes import add_front_camera, add_point_lamp, empty_scene  # noqa: E402
+from support.ui import Layout  # noqa: E402
 
 
 def _scene():
-    bpy.ops.wm.read_factory_settings(use_empty=True)
-    rokeby.register()
-    evaluate.reset()
-    sc = bpy.context.scene
+    sc = empty_scene()
     sc.render.engine = "CYCLES"
     sc.cycles.samples = 1
     sc.render.resolution_x = sc.render.resolution_y = 16
@@ -31,14 +26,8 @@ def _scene():
     mat.node_tree.nodes["Principled BSDF"].inputs["Metallic"].default_value = 1.0
     ball.data.materials.append(mat)
     ball.vertex_groups.new(name="Patch").add(list(range(60)), 1.0, "REPLACE")
-    cam = bpy.data.objects.new("Camera", bpy.data.cameras.new("Camera"))
-    sc.collection.objects.link(cam)
-    sc.camera = cam
-    cam.location = (0.0, -4.0, 0.0)
-    cam.rotation_euler = (math.pi / 2, 0.0, 0.0)
-    lamp = bpy.data.objects.new("Lamp", bpy.data.lights.new("Lamp", "POINT"))
-    lamp.location = (1.5, -2.0, 2.5)
-    sc.collection.objects.link(lamp)
+    add_front_camera(sc)
+    lamp = add_point_lamp(sc)
     api.add_mirror(ball)
     api.add_constraint(ball, (0.0, -1.0, 0.0), (1.0, -3.0, 2.0))
     api.add_highlight_constraint(ball, lamp)
@@ -76,7 +65,7 @@ def _draw_panel():
     from rokeby.ui import ROKEBY_PT_main  # noqa: PLC0415
 
     log = []
-    ROKEBY_PT_main.draw(type("P", (), {"layout": _Layout(log)})(), bpy.context)
+    ROKEBY_PT_main.draw(type("P", (), {"layout": Layout(log)})(), bpy.context)
     return [t for kind, t in log if kind == "label"]
 
 

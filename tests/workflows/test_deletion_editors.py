@@ -13,9 +13,9 @@ import pytest
 bpy = pytest.importorskip("bpy")
 
 import rokeby  # noqa: E402
-import test_shadow as ts  # noqa: E402
+from support import shadow as ts  # noqa: E402
 from rokeby import appearance, shadow  # noqa: E402
-from test_scene import _Layout  # noqa: E402
+from support.ui import Layout  # noqa: E402
 
 
 @pytest.fixture
@@ -31,16 +31,16 @@ def _settle(sc):
 
 
 def _plain_render(tmp_path, without=None):
-    bpy_, sc, *_ = ts._blender_scene()
+    bpy_, sc, *_ = ts.blender_scene()
     if without is not None:
         bpy.data.objects.remove(bpy.data.objects[without], do_unlink=True)
-    return ts._render(bpy_, sc, tmp_path / "plain.png")
+    return ts.render(bpy_, sc, tmp_path / "plain.png")
 
 
 def _edited(tmp_path):
-    bpy_, sc, ball, lamp, ground, _s, ob, twin = ts._edited_scene()
+    bpy_, sc, ball, lamp, ground, _s, ob, twin = ts.edited_scene()
     _settle(sc)
-    edited = ts._render(bpy_, sc, tmp_path / "edited.png")
+    edited = ts.render(bpy_, sc, tmp_path / "edited.png")
     bpy.ops.ed.undo_push(message="shadow edit")
     return sc, edited
 
@@ -53,7 +53,7 @@ def _draw_shadow_panel():
     from rokeby.shadow_ui import ROKEBY_PT_shadow  # noqa: PLC0415
 
     log = []
-    ROKEBY_PT_shadow.draw(type("P", (), {"layout": _Layout(log)})(), bpy.context)
+    ROKEBY_PT_shadow.draw(type("P", (), {"layout": Layout(log)})(), bpy.context)
     return log
 
 
@@ -83,7 +83,7 @@ def test_delete_anything_a_shadow_edit_uses(role, registered, tmp_path):
     assert shadow.repair(sc) == []
     lamp = bpy.data.objects.get("Lamp")
     mesh = bpy.data.objects.get("Ball" + shadow.SHADOW_SUFFIX)
-    after = ts._render(bpy, sc, tmp_path / "after.png")
+    after = ts.render(bpy, sc, tmp_path / "after.png")
     assert np.isfinite(after).all()
     if role in ("twin light", "linking collection", "receiver"):
         # Derived parts are made again: the edit renders as before.
@@ -108,12 +108,12 @@ def test_delete_anything_a_shadow_edit_uses(role, registered, tmp_path):
     sc = bpy.context.scene
     _settle(sc)
     assert bpy.data.objects["Ball" + shadow.SHADOW_SUFFIX].visible_shadow and _twins() == ["Lamp" + shadow.TWIN_SUFFIX]
-    np.testing.assert_allclose(ts._render(bpy, sc, tmp_path / "undone.png"), edited, atol=1e-6)
+    np.testing.assert_allclose(ts.render(bpy, sc, tmp_path / "undone.png"), edited, atol=1e-6)
 
 
 def test_removing_a_shadow_edit_restores_the_lights_own_linking(registered, tmp_path):
-    bpy_, sc, ball, lamp, ground = ts._blender_scene()
-    plain = ts._render(bpy_, sc, tmp_path / "plain.png")
+    bpy_, sc, ball, lamp, ground = ts.blender_scene()
+    plain = ts.render(bpy_, sc, tmp_path / "plain.png")
     own = bpy.data.collections.new("artist receivers")
     lamp.light_linking.receiver_collection = own
     own.objects.link(ball)
@@ -131,7 +131,7 @@ def test_removing_a_shadow_edit_restores_the_lights_own_linking(registered, tmp_
     assert bpy.ops.rokeby.shadow_remove() == {"FINISHED"}
     assert lamp.light_linking.receiver_collection == own and lamp.light_linking.blocker_collection is None
     assert _twins() == [] and bpy.data.objects.get("Ball" + shadow.SHADOW_SUFFIX) is None
-    np.testing.assert_allclose(ts._render(bpy_, sc, tmp_path / "removed.png"), plain, atol=1e-6)
+    np.testing.assert_allclose(ts.render(bpy_, sc, tmp_path / "removed.png"), plain, atol=1e-6)
     with pytest.raises(shadow.ShadowEditError, match="has no shadow edit"):
         api.remove_shadow_edit(ball)
 
@@ -162,7 +162,7 @@ def _panel_log():
     from rokeby.appearance_ui import ROKEBY_PT_appearance  # noqa: PLC0415
 
     log = []
-    ROKEBY_PT_appearance.draw(type("P", (), {"layout": _Layout(log)})(), bpy.context)
+    ROKEBY_PT_appearance.draw(type("P", (), {"layout": Layout(log)})(), bpy.context)
     return log
 
 
@@ -229,9 +229,9 @@ def test_delete_anything_appearance_painting_uses(target, role, registered, tmp_
 @pytest.mark.parametrize("role", ["camera", "aov node", "view layer pass"])
 def test_delete_anything_compositing_uses(role, registered, tmp_path):
     from rokeby import compositing as comp  # noqa: PLC0415
-    from test_compositing import _scene  # noqa: PLC0415
+    from support.compositing import pass_scene
 
-    sc = _scene()
+    sc = pass_scene()
     rokeby.register()
     assert bpy.ops.rokeby.composite_setup_passes() == {"FINISHED"}
     bpy.ops.ed.undo_push(message="passes")

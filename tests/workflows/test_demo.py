@@ -9,7 +9,7 @@ bpy = pytest.importorskip("bpy")
 import rokeby  # noqa: E402
 from rokeby import api, compat, demo_scene as ds, evaluate  # noqa: E402
 
-from conftest import SHARED, mesh_path  # noqa: E402
+from support import SHARED, mesh_path  # noqa: E402
 
 
 @pytest.fixture

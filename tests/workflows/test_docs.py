@@ -28,7 +28,7 @@ from pathlib import Path
 
 import pytest
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 DOCS = [ROOT / "README.md", *sorted((ROOT / "docs").glob("*.md"))]
 PYTHON = {"python", "py", "python3"}
 FENCE = re.compile(r"^(?P<indent>[ \t]*)(?P<fence>`{3,}|~{3,})(?P<info>[^`]*)$")
@@ -124,7 +124,7 @@ def run_file(path: Path) -> dict:
     env = dict(os.environ)
     env["PYTHONPATH"] = os.pathsep.join([str(ROOT / "addon"), str(ROOT / "tests"), env.get("PYTHONPATH", "")])
     try:
-        r = subprocess.run([sys.executable, str(ROOT / "tests" / "doc_runner.py"), str(path.relative_to(ROOT)),
+        r = subprocess.run([sys.executable, str(ROOT / "tests" / "support" / "doc_runner.py"), str(path.relative_to(ROOT)),
                             str(work / "blocks.json"), str(work / "results.json")],
                            capture_output=True, text=True, cwd=work, env=env, timeout=PER_FILE_TIMEOUT)
     except subprocess.TimeoutExpired:

@@ -5,21 +5,17 @@ frame of an animated edit."""
 import os
 import subprocess
 import sys
-from pathlib import Path
 
 import numpy as np
 import pytest
-from conftest import cycles
+from support import SHARED, cycles
 
 bpy = pytest.importorskip("bpy")
 
-ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT / "blend_fixtures"))
-import make_fixtures  # noqa: E402
+import make_fixtures  # noqa: E402  (blend_fixtures/, on pytest's pythonpath)
 
 from rokeby import api, envmaps  # noqa: E402
 
-SHARED = Path(os.environ.get("ROKEBY_SHARED", ROOT.parent / "shared"))
 SIZE = 40
 
 WORKER = r"""

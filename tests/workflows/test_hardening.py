@@ -12,14 +12,13 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from conftest import ROOT, cycles
+from support import cycles
 
 bpy = pytest.importorskip("bpy")
 
 import rokeby  # noqa: E402
 from rokeby import api, evaluate, reflmap  # noqa: E402
 
-sys.path.insert(0, str(ROOT / "blend_fixtures"))
 import make_fixtures  # noqa: E402
 
 HERE = Path(__file__).resolve().parent
@@ -278,9 +277,9 @@ def frame_exr(tmp_path_factory):
     """A small valid multilayer EXR with the passes of setup_passes (a tiny Cycles render, as
     tests/test_compositing.py makes them), and its passes."""
     from rokeby import compositing as C
-    from test_compositing import _scene
+    from support.compositing import pass_scene
 
-    sc = _scene()
+    sc = pass_scene()
     sc.render.resolution_x, sc.render.resolution_y = 32, 24
     sc.cycles.samples = 4
     path = tmp_path_factory.mktemp("hardening") / "frame.exr"
@@ -351,11 +350,11 @@ def test_painting_a_huge_colour_is_refused_and_writes_nothing():
 
 def test_shadow_noise_amplitude_that_overflows_is_refused_and_writes_nothing():
     """Old main: the drag is accepted and apply writes inf into the shadow shape key."""
-    from test_shadow import _blender_scene
+    from support.shadow import blender_scene
 
     from rokeby import shadow
 
-    bpy_, sc, ball, lamp, ground = _blender_scene()
+    bpy_, sc, ball, lamp, ground = blender_scene()
     s = api.start_shadow_edit(ball, lamp, [ground], min_loop_vertices=10)
     h = s.handles(0)["points"].astype(np.float64)
     n, c, m = len(h), h.mean(axis=0), int(np.argmax(h[:, 0]))

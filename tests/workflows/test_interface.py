@@ -21,7 +21,7 @@ bpy = pytest.importorskip("bpy")
 import rokeby  # noqa: E402
 from rokeby import api, compat, evaluate, progress, words  # noqa: E402
 
-from conftest import ROOT  # noqa: E402
+from support import ROOT  # noqa: E402
 
 ADDON = ROOT / "addon" / "rokeby"
 
@@ -115,12 +115,12 @@ def test_sidebar_has_sub_panels_in_order(registered):
 
 
 def test_menus_name_every_operator(registered):
-    from test_scene import _Layout
+    from support.ui import Layout
 
     from rokeby import ui
 
     log = []
-    ui.VIEW3D_MT_rokeby.draw(type("M", (), {"layout": _Layout(log)})(), bpy.context)
+    ui.VIEW3D_MT_rokeby.draw(type("M", (), {"layout": Layout(log)})(), bpy.context)
     named = {idname for kind, idname in log if kind == "operator"}
     assert named == set(_operators()), set(_operators()) ^ named
     # Object ▸ Rokeby and the object context menu open that menu.
@@ -128,7 +128,7 @@ def test_menus_name_every_operator(registered):
         funcs = getattr(bpy.types, menu).draw._draw_funcs
         assert ui.draw_menu_entry in funcs, menu
         log = []
-        ui.draw_menu_entry(type("M", (), {"layout": _Layout(log)})(), bpy.context)
+        ui.draw_menu_entry(type("M", (), {"layout": Layout(log)})(), bpy.context)
         assert ("menu", "VIEW3D_MT_rokeby") in log
     rokeby.unregister()
     assert ui.draw_menu_entry not in bpy.types.VIEW3D_MT_object.draw._draw_funcs
@@ -229,7 +229,7 @@ def test_words_and_statuses():
 
 
 def test_status_line_reads_ok(registered):
-    from test_scene import draw_sidebar
+    from support.ui import draw_sidebar
 
     ball = _sphere()
     cam = bpy.data.objects.new("Camera", bpy.data.cameras.new("Camera"))
@@ -421,7 +421,7 @@ def test_preferences_work_as_an_extension(tmp_path):
 # --- the EXR sequence operator ---------------------------------------------------------------------
 
 def _render_frame(path):
-    from conftest import cycles
+    from support import cycles
 
     bpy.ops.wm.read_factory_settings(use_empty=True)
     sc = cycles(bpy.context.scene, 24, 4)

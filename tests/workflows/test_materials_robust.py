@@ -3,15 +3,14 @@ changed"): Remove Render Edits after Remove Mirror, after the original Principle
 deleted as "unused", after the Material Output or the split BSDF was renamed; a material swapped
 out of a mirror's slot; installs interrupted by an exception half way."""
 
-import math
-
 import numpy as np
 import pytest
 
 bpy = pytest.importorskip("bpy")
 
 import rokeby  # noqa: E402
-from conftest import cycles  # noqa: E402
+from support import cycles  # noqa: E402
+from support.scenes import add_front_camera, add_point_lamp, empty_scene, plastic_material  # noqa: E402
 from rokeby import api, refraction, rendering, shading  # noqa: E402
 
 
@@ -27,33 +26,14 @@ def _tree_state(tree):
 
 def _scene(metallic=0.0, alpha=1.0):
     """A plastic ball (its Principled BSDF gets split) with a textured roughness, a camera and a light."""
-    bpy.ops.wm.read_factory_settings(use_empty=True)
-    rokeby.register()
-    sc = cycles(bpy.context.scene, 24, 4)
+    sc = cycles(empty_scene(reset_state=False), 24, 4)
     bpy.ops.mesh.primitive_uv_sphere_add(segments=24, ring_count=12)
     ball = bpy.context.object
     ball.name = "Ball"
-    mat = bpy.data.materials.new("Plastic")
-    mat.use_nodes = True
-    nt = mat.node_tree
-    p = nt.nodes["Principled BSDF"]
-    p.inputs["Base Color"].default_value = (0.8, 0.2, 0.1, 1.0)
-    p.inputs["Roughness"].default_value = 0.2
-    p.inputs["Metallic"].default_value = metallic
-    p.inputs["Alpha"].default_value = alpha
-    p.inputs["Coat Weight"].default_value = 0.3
-    noise = nt.nodes.new("ShaderNodeTexNoise")
-    nt.links.new(noise.outputs["Fac"], p.inputs["Specular IOR Level"])
+    mat = plastic_material(metallic=metallic, alpha=alpha)
     ball.data.materials.append(mat)
-    cam = bpy.data.objects.new("Camera", bpy.data.cameras.new("Camera"))
-    sc.collection.objects.link(cam)
-    sc.camera = cam
-    cam.location = (0.0, -4.0, 0.0)
-    cam.rotation_euler = (math.pi / 2, 0.0, 0.0)
-    lamp = bpy.data.objects.new("Lamp", bpy.data.lights.new("Lamp", "POINT"))
-    lamp.data.energy = 800.0
-    lamp.location = (1.5, -2.0, 2.5)
-    sc.collection.objects.link(lamp)
+    add_front_camera(sc)
+    add_point_lamp(sc, energy=800.0)
     sc.view_layers[0].update()
     return sc, ball, mat
 

@@ -3,15 +3,14 @@ file as it was before the mirror was added (materials' node trees exactly, colle
 groups, handles; the render too), and a handle deleted with X is released (its row flagged, the
 object freed) instead of living on through the constraint's pointer."""
 
-import math
-
 import numpy as np
 import pytest
 
 bpy = pytest.importorskip("bpy")
 
 import rokeby  # noqa: E402
-from conftest import cycles  # noqa: E402
+from support import cycles  # noqa: E402
+from support.scenes import add_front_camera, add_point_lamp, empty_scene  # noqa: E402
 from rokeby import api  # noqa: E402
 
 
@@ -38,9 +37,7 @@ def _file_state():
 def _scene():
     """A ball with three materials (metallic Principled, plastic Principled that gets split,
     Glossy behind a bump map), an empty of the artist's own, a camera and a light."""
-    bpy.ops.wm.read_factory_settings(use_empty=True)
-    rokeby.register()
-    sc = cycles(bpy.context.scene, 24, 2)
+    sc = cycles(empty_scene(reset_state=False), 24, 2)
     bpy.ops.mesh.primitive_uv_sphere_add(segments=32, ring_count=16)
     ball = bpy.context.object
     ball.name = "Ball"
@@ -67,15 +64,8 @@ def _scene():
     mine = bpy.data.objects.new("My Empty", None)
     sc.collection.objects.link(mine)
     mine.location = (0.3, -1.0, 0.2)
-    cam = bpy.data.objects.new("Camera", bpy.data.cameras.new("Camera"))
-    sc.collection.objects.link(cam)
-    sc.camera = cam
-    cam.location = (0.0, -4.0, 0.0)
-    cam.rotation_euler = (math.pi / 2, 0.0, 0.0)
-    lamp = bpy.data.objects.new("Lamp", bpy.data.lights.new("Lamp", "POINT"))
-    lamp.data.energy = 800.0
-    lamp.location = (1.5, -2.0, 2.5)
-    sc.collection.objects.link(lamp)
+    add_front_camera(sc)
+    add_point_lamp(sc, energy=800.0)
     sc.view_layers[0].update()
     return sc, ball
 

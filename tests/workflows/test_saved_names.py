@@ -26,15 +26,13 @@ import pytest
 bpy = pytest.importorskip("bpy")
 from rokeby import compat  # noqa: E402
 
-HERE = Path(__file__).resolve().parent
+import feature_fixtures  # noqa: E402  (tests/blend_fixtures, on pytest's pythonpath)
+from support import DATA  # noqa: E402
+
 # One snapshot per Blender release: what a release itself names (its EXR pass names, the passes a
 # view layer has on by default) differs, and a file saved by one release must keep its meaning there.
 BLENDER = "%d.%d" % tuple(bpy.app.version[:2])
-SNAPSHOT = HERE / "data" / ("saved_names.json" if BLENDER == "4.5" else f"saved_names-blender-{BLENDER}.json")
-sys.path.insert(0, str(HERE / "blend_fixtures"))
-import feature_fixtures  # noqa: E402
-
-sys.path.pop(0)
+SNAPSHOT = DATA / ("saved_names.json" if BLENDER == "4.5" else f"saved_names-blender-{BLENDER}.json")
 
 # Per-scene random ids (reflection-map file stems) and the temporary folder, normalised away.
 _HEX_ID = re.compile(r"(?<![0-9a-f])[0-9a-f]{12}(?![0-9a-f])")

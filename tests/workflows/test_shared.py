@@ -9,7 +9,7 @@ Cycles traced, compared with what the mirror's own preview evaluates there.
 
 import numpy as np
 import pytest
-from test_wysiwyg import EYE, angles_deg, directions, hit_mask, new_scene, physical, render, sphere
+from support.wysiwyg import EYE, angles_deg, directions, hit_mask, new_scene, physical, render, sphere
 
 bpy = pytest.importorskip("bpy")
 

@@ -5,7 +5,6 @@ bpy's undo stack works in background mode, but operators called from Python ther
 their own undo step: the test pushes it after each one, as Blender's UI does for an operator
 with the UNDO flag (which every Rokeby operator that changes data carries; checked here)."""
 
-import math
 from pathlib import Path
 
 import numpy as np
@@ -14,8 +13,9 @@ import pytest
 bpy = pytest.importorskip("bpy")
 
 import rokeby  # noqa: E402
-from rokeby import api, compat, evaluate  # noqa: E402
+from rokeby import api, compat  # noqa: E402
 from rokeby.evaluate import ATTRIBUTE  # noqa: E402
+from support.scenes import add_front_camera, add_point_lamp, empty_scene  # noqa: E402
 
 
 def _rna(value, depth=0):
@@ -111,10 +111,7 @@ def snapshot():
 
 @pytest.fixture
 def scene():
-    bpy.ops.wm.read_factory_settings(use_empty=True)
-    rokeby.register()
-    evaluate.reset()
-    sc = bpy.context.scene
+    sc = empty_scene()
     bpy.ops.mesh.primitive_uv_sphere_add(segments=32, ring_count=16)
     ball = bpy.context.object
     ball.name = "Ball"
@@ -128,14 +125,8 @@ def scene():
     glass.node_tree.nodes["Principled BSDF"].inputs["Transmission Weight"].default_value = 1.0
     ball.data.materials.append(glass)
     ball.vertex_groups.new(name="Patch").add(list(range(40)), 1.0, "REPLACE")
-    cam = bpy.data.objects.new("Camera", bpy.data.cameras.new("Camera"))
-    sc.collection.objects.link(cam)
-    sc.camera = cam
-    cam.location = (0.0, -4.0, 0.0)
-    cam.rotation_euler = (math.pi / 2, 0.0, 0.0)
-    lamp = bpy.data.objects.new("Lamp", bpy.data.lights.new("Lamp", "POINT"))
-    lamp.location = (1.5, -2.0, 2.5)
-    sc.collection.objects.link(lamp)
+    add_front_camera(sc)
+    add_point_lamp(sc)
     bpy.context.view_layer.objects.active = ball
     bpy.ops.ed.undo_push(message="scene")
     return ball

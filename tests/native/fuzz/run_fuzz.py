@@ -1,6 +1,6 @@
 """Runs tests/fuzz/fuzz_native.py in this process under an address-space limit (issue 24):
 
-    python tests/fuzz/run_fuzz.py [--examples N] [--as-gib 4] [--max-alloc-gib 1] [pytest args...]
+    python tests/native/fuzz/run_fuzz.py [--examples N] [--as-gib 4] [--max-alloc-gib 1] [pytest args...]
 
 RLIMIT_AS (default 4 GiB) and ROKEBY_MAX_ALLOC_BYTES (default 1 GiB, read once per process by
 the native core) are set before rokeby_native is imported, so that a huge allocation becomes a
@@ -15,7 +15,7 @@ import sys
 from pathlib import Path
 
 HERE = Path(__file__).resolve().parent
-ROOT = HERE.parents[1]
+ROOT = HERE.parents[2]
 
 
 def main(argv=None) -> int:
