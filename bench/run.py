@@ -27,7 +27,7 @@ sys.path.insert(0, str(ROOT / "tests"))
 
 import rokeby_native as rn  # noqa: E402
 
-from reference import field_matrices, ortho as ortho_ref, quat_to_matrix, random_constraints, rot_angle  # noqa: E402
+from support.reference import field_matrices, ortho as ortho_ref, quat_to_matrix, random_constraints, rot_angle  # noqa: E402
 from rokeby.meshio import load_obj, subdivide_midpoint  # noqa: E402
 
 SHARED = Path(os.environ.get("ROKEBY_SHARED", ROOT.parent / "shared"))

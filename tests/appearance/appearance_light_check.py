@@ -1,4 +1,4 @@
-"""Run by tests/test_appearance_light.py in a fresh bpy process: Fraser's two preview views as
+"""Run by tests/appearance/test_appearance_light.py in a fresh bpy process: Fraser's two preview views as
 Blender compiles and draws them (gpu module, the viewport handler's draw_view), offscreen. A
 painted black plastic ball (radius 0.5, red specular colour) under the courtyard world and, beside
 it, a copy under the point light. Prints RESULT {...}."""

@@ -1,4 +1,4 @@
-"""Run by tests/test_appearance.py in a fresh bpy process: what the appearance preview keeps
+"""Run by tests/appearance/test_appearance.py in a fresh bpy process: what the appearance preview keeps
 between redraws, texture targets at texel resolution, and the global sliders, drawn through
 Blender's gpu module offscreen (a tiny EEVEE render makes the GPU context; llvmpipe here).
 Prints RESULT {...}."""

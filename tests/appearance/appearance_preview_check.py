@@ -1,4 +1,4 @@
-"""Run by tests/test_appearance.py in a fresh bpy process: the appearance preview as Blender
+"""Run by tests/appearance/test_appearance.py in a fresh bpy process: the appearance preview as Blender
 compiles and draws it (gpu module, GPUShaderCreateInfo), offscreen, against its numpy twin.
 A tiny EEVEE render creates the GPU context in background mode. Prints RESULT {...}."""
 

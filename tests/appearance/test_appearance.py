@@ -355,7 +355,7 @@ def test_viewport_preview_draws_through_blenders_gpu_module():
 
 
 def test_preview_keeps_its_batch_and_shows_texels():
-    """tests/appearance_preview_cache_check.py in a fresh bpy process, drawn offscreen through
+    """tests/appearance/appearance_preview_cache_check.py in a fresh bpy process, drawn offscreen through
     Blender's gpu module: a redraw reuses the batch and gives the same pixels; a stroke uploads
     the painted values again but keeps the batch, and changes the pixels at the dab only; moving
     the vertices rebuilds it. A texture target holding the per-point values draws the same image;

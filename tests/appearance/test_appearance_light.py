@@ -116,7 +116,7 @@ def test_render_difference_is_measured_not_claimed():
 
 
 def test_viewport_draws_the_point_lit_view_beside_the_environment_lit_one():
-    """tests/appearance_light_check.py in a fresh bpy process, through Blender's gpu module and
+    """tests/appearance/appearance_light_check.py in a fresh bpy process, through Blender's gpu module and
     the viewport handler's draw_view: 'BESIDE' draws the environment-lit ball unchanged and, to
     its right on screen, a copy under the point light that matches the numpy twin; the copy's
     highlight moves right, left and up with the light; a red specular colour turns it red."""

@@ -1,7 +1,7 @@
-"""Run by tests/test_recomposite_blender_gpu.py in a fresh bpy process: the recompositing shader
+"""Run by tests/compositing/test_recomposite_blender_gpu.py in a fresh bpy process: the recompositing shader
 (shaders/rokeby_recomposite_*.glsl) compiled and drawn by Blender's own gpu module
 (rokeby.recomposite_gpu), offscreen, against the Rust core on the frames of
-tests/test_recomposite_glsl.py. The GPU context comes from one tiny EEVEE render
+tests/compositing/test_recomposite_glsl.py. The GPU context comes from one tiny EEVEE render
 (recomposite_gpu.ensure_context). Prints RESULT {...} (JSON)."""
 
 import json

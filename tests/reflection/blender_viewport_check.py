@@ -1,4 +1,4 @@
-"""Run by tests/test_glsl.py in a fresh bpy process: the viewport preview as Blender compiles and
+"""Run by tests/reflection/test_glsl.py in a fresh bpy process: the viewport preview as Blender compiles and
 draws it (gpu module, GPUShaderCreateInfo from the same shaders/ files), offscreen.
 
 bpy as a module has no GPU context in background mode until a GPU engine has rendered once; a

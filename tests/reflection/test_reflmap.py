@@ -65,7 +65,7 @@ def _forest():
 
 @pytest.fixture
 def chrome_ball():
-    """The chrome ball of tests/test_render.py under the forest HDR (a distant environment)."""
+    """The chrome ball of tests/reflection/test_render.py under the forest HDR (a distant environment)."""
     sc = _scene_basics()
     _world_image(sc, _forest())
     ball, mat = _ball()

@@ -2,7 +2,7 @@
 (issue 18, problem 2): renaming the caster and the light keeps the edit (the render is the edited
 one, pixel for pixel), objects made later under the old names take nothing over and lose nothing,
 and a file saved when the links were names (as main wrote them before) loads with its shadow and
-then survives renames too. Tiny Cycles renders of tests/test_shadow.py's top view (96 px, 4
+then survives renames too. Tiny Cycles renders of tests/shadow/test_shadow.py's top view (96 px, 4
 samples, direct light only)."""
 
 import numpy as np
@@ -25,7 +25,7 @@ def _shadow_pixels(img):
 
 
 def _edited(tmp_path):
-    """The edited scene of tests/test_shadow.py, the ball hidden from the camera (the top view
+    """The edited scene of tests/shadow/test_shadow.py, the ball hidden from the camera (the top view
     then sees its whole shadow), its render and the render of the same scene without the edit."""
     bpy_, sc, ball, lamp, ground, _s, ob, twin = ts.edited_scene()
     ball.visible_camera = False

@@ -1,8 +1,8 @@
 """Runs the Python blocks of one Markdown file, in order and in one namespace (as a reader pastes
 them one after another into Blender's Python console), in this fresh bpy process; used by
-tests/test_docs.py.
+tests/workflows/test_docs.py.
 
-    python tests/doc_runner.py DOC.md BLOCKS.json RESULTS.json
+    python tests/support/doc_runner.py DOC.md BLOCKS.json RESULTS.json
 
 BLOCKS.json: [{"line": first code line (1-based), "code": the block's text}, ...]. Each block is
 compiled with the Markdown file's name and its own line numbers, so a traceback points into the

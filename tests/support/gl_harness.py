@@ -1,5 +1,5 @@
 """Runs the viewport preview's GLSL (shaders/) outside Blender: moderngl on a headless EGL context
-(Mesa llvmpipe on machines without a GPU). Shared by tests/test_glsl.py and bench/viewport.py.
+(Mesa llvmpipe on machines without a GPU). Shared by tests/reflection/test_glsl.py and bench/viewport.py.
 
 The shader is compiled from rokeby.glsl.standalone_sources(), i.e. the same files the Blender
 draw handler compiles; the field's inputs are packed by rokeby.glsl as in the add-on."""

@@ -1,5 +1,5 @@
-"""Frames and bad inputs shared by the GLSL recompositing tests: tests/test_recomposite_glsl.py
-(moderngl) and tests/recomposite_blender_gpu_check.py (Blender's gpu module)."""
+"""Frames and bad inputs shared by the GLSL recompositing tests: tests/compositing/test_recomposite_glsl.py
+(moderngl) and tests/compositing/recomposite_blender_gpu_check.py (Blender's gpu module)."""
 
 from __future__ import annotations
 

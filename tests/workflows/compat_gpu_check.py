@@ -1,4 +1,4 @@
-"""Run by tests/test_compat.py in a fresh bpy process: the built-in shader that ``rokeby.compat``
+"""Run by tests/workflows/test_compat.py in a fresh bpy process: the built-in shader that ``rokeby.compat``
 picks for round points draws here. Makes Blender's GPU context with one tiny render by the engine
 id compat picks (bpy_process.gpu_context), draws one fat point into an offscreen buffer and prints
 one JSON line: RESULT {...}."""

@@ -1,7 +1,7 @@
 """Documentation examples run as written (issue 18, problem 8).
 
 Every fenced ```python block of README.md and docs/*.md is extracted and executed: the blocks of
-one file run in order, in one namespace, in a fresh bpy process (tests/doc_runner.py: Blender's
+one file run in order, in one namespace, in a fresh bpy process (tests/support/doc_runner.py: Blender's
 default startup scene, small renders, at most 4 Cycles samples per render). A block that is not
 meant to run carries an HTML comment right before its fence,
 
@@ -139,6 +139,10 @@ def run_file(path: Path) -> dict:
     return out
 
 
+# Each file's blocks run in a fresh bpy process that renders (Cycles, small): marked by hand, the
+# automatic marks (tests/conftest.py) do not see into the documents.
+@pytest.mark.blender
+@pytest.mark.cycles
 @pytest.mark.parametrize("block", ALL_BLOCKS, ids=[b.name for b in ALL_BLOCKS])
 def test_doc_block_runs_as_written(block):
     if block.skip is not None:

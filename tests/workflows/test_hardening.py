@@ -275,7 +275,7 @@ def test_evaluate_after_a_script_edits_the_mesh_matches_a_fresh_evaluation(how):
 @pytest.fixture(scope="module")
 def frame_exr(tmp_path_factory):
     """A small valid multilayer EXR with the passes of setup_passes (a tiny Cycles render, as
-    tests/test_compositing.py makes them), and its passes."""
+    tests/compositing/test_compositing.py makes them), and its passes."""
     from rokeby import compositing as C
     from support.compositing import pass_scene
 

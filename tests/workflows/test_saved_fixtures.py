@@ -27,6 +27,9 @@ PREVIOUS_RELEASE = "59f8664"
 # 59f8664 was tested on 4.5 only; the next release adds 4.2, 5.0 and 5.3 (the matrix).
 PREVIOUS_RELEASE_BLENDERS = ("4.5",)
 FIELD_TOL = 1e-5
+# The fixtures script renders each feature in Cycles in its own bpy processes (the automatic marks of
+# tests/conftest.py do not see into it).
+pytestmark = [pytest.mark.blender, pytest.mark.cycles]
 # Same scene, same seed, same sample count: a render differs only by floating-point noise.
 PIXEL_MEAN_TOL = 2e-3
 PIXEL_MAX_TOL = 0.05

@@ -3,7 +3,7 @@
 Two mirrors sharing one mesh (Ctrl+L ▸ Link Object Data, Alt+D) used to write their fields into
 the one mesh: the last evaluated won, and Remove Mirror on one deleted the other's field. Copies
 (Shift+D, Alt+D) kept the original's handles. Here each is rendered in Cycles with the
-direction-coded world of tests/test_wysiwyg.py: each pixel reads back the reflected direction
+direction-coded world of tests/reflection/test_wysiwyg.py: each pixel reads back the reflected direction
 Cycles traced, compared with what the mirror's own preview evaluates there.
 """
 

@@ -298,13 +298,13 @@ def test_undo_and_redo_of_texture_strokes(scene):
 NOT_COVERED = {
     "return_to_view": "moves a 3D view, which background mode does not have (no scene data changes)",
     "update": "recomputes the field from the scene as it is: undoing it changes nothing",
-    "reflection_map": "a Cycles capture; tests/test_reflmap.py covers its data",
+    "reflection_map": "a Cycles capture; tests/reflection/test_reflmap.py covers its data",
     "appearance_preview": "switches a viewport draw handler on or off: no scene data changes",
-    "appearance_render_difference": "a measurement: stores the figure in the brush settings, edits nothing (tests/test_appearance_render_model.py)",
+    "appearance_render_difference": "a measurement: stores the figure in the brush settings, edits nothing (tests/appearance/test_appearance_render_model.py)",
     "shadow_start": "a shadow-editing session lives outside the file (no scene data changes until Apply)",
     "shadow_drag": "moves a handle of the session, outside the file; Apply is the undoable step",
     "shadow_stop": "ends the session; the scene's data does not change",
-    "composite_sequence": "writes recomposited frames to files outside the .blend (tests/test_interface.py)",
+    "composite_sequence": "writes recomposited frames to files outside the .blend (tests/workflows/test_interface.py)",
 }
 
 

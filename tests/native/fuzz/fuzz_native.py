@@ -1,8 +1,8 @@
 """Hypothesis fuzzing of every rokeby_native function and class method, and of the bpy-free file
 readers (issue 24). Not collected by the normal pytest run (the file name does not start with
-test_): tests/fuzz/run_fuzz.py runs it in a subprocess under an address-space limit (RLIMIT_AS)
+test_): tests/native/fuzz/run_fuzz.py runs it in a subprocess under an address-space limit (RLIMIT_AS)
 and ROKEBY_MAX_ALLOC_BYTES, so that an abort or a huge allocation cannot take pytest down.
-tests/test_fuzz_native.py launches it briefly; `make fuzz-py` runs it for longer.
+tests/native/test_fuzz_native.py launches it briefly; `make fuzz-py` runs it for longer.
 
 Each example builds mostly-valid arguments for one entry point, then, often, replaces one of them
 by something hostile (a random array of any shape and dtype, empty, non-contiguous, NaN/inf,
@@ -141,7 +141,7 @@ F32_MAX = float(np.finfo(np.float32).max)
 def _all_finite_inputs(obj) -> bool:
     """Whether every number in obj is finite as the core sees it. Float64 arrays are stored as
     float32 by the binding, so a float64 beyond float32's range counts as inf here (a known gap,
-    tests/test_native_contract.py::test_float64_beyond_float32_range_is_refused)."""
+    tests/native/test_native_contract.py::test_float64_beyond_float32_range_is_refused)."""
     if isinstance(obj, np.ndarray):
         if obj.dtype.kind == "c":
             return bool(np.isfinite(obj).all())
@@ -209,7 +209,7 @@ def _small_positive(x, limit):
         return False
 
 
-# Known native gaps, each with a strict xfail test in tests/test_native_contract.py: for these
+# Known native gaps, each with a strict xfail test in tests/native/test_native_contract.py: for these
 # inputs only the exception contract is checked here, not the finiteness of the result, so that
 # `make fuzz-py` keeps looking for new problems. Remove an entry when its xfail test passes.
 KNOWN_NONFINITE: dict = {}
