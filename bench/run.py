@@ -604,7 +604,7 @@ def roofline_section(emit):
 
     r = subprocess.run(["cargo", "run", "--quiet", "--release", "-p", "rokeby-core", "--example", "field_roofline"],
                        cwd=ROOT, capture_output=True, text=True, check=True)
-    emit(ROOFLINE_MARKER + " (issue 23)")
+    emit(ROOFLINE_MARKER)
     emit()
     emit("The per-pixel field (`edited_directions`) and the per-vertex field (`rotation_field`, view-blend output as")
     emit("the add-on writes it) per kernel: `scalar` is the f64 reference (the tests' oracle), the others are the f32")

@@ -371,7 +371,7 @@ REPRESENTATION_MARKER = "## What the render reads: "
 
 def representation_section(emit, peers=None):
     r = _measure("tradeoffs.py", ["representation"])
-    emit(REPRESENTATION_MARKER + "representations of the field, render against preview (issue 17)")
+    emit(REPRESENTATION_MARKER + "representations of the field, render against preview")
     emit()
     emit(_stamp())
     emit()

@@ -36,7 +36,7 @@ def rng():
 # helpers), with docstrings and comments left out, plus the *_check.py script a test runs in a
 # fresh bpy process. A parametrised render engine ("CYCLES", "EEVEE...") decides for its own case.
 # `slow` is put by hand (@pytest.mark.slow, measured) where a test takes more than about 20 s.
-# See docs/testing.md.
+# See docs/development.md, "Running the tests".
 
 TESTS = Path(__file__).resolve().parent
 _ENGINE_CYCLES = "CYCLES"
