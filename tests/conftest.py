@@ -47,11 +47,22 @@ _MARK_PATTERNS = {
     "gl": re.compile(r"\bmoderngl\b|\bgpu\b|gpu_context\(|offscreen_pixels\(|GLRecompositor|sphere_shader\(|gl_harness|create_context\("),
 }
 _CHECK_SCRIPT = re.compile(r"'([\w/]*_check\.py)'")
+_SPLIT = "\n#--- strings emptied ---\n"
+_CODE_ONLY = {"blender", "gl"}  # read in the string-free half of each text
+_MODERNGL_BACKEND = re.compile(r"'moderngl'")
+_IMPORTORSKIP_BPY = re.compile(r"importorskip\('bpy'\)")
 _BPY_AT_MODULE_LEVEL = re.compile(r"importorskip\('bpy'\)|^import bpy$|^from bpy\b", re.M)
 
 
+class _NoStrings(ast.NodeTransformer):
+    def visit_Constant(self, node):
+        return ast.Constant("") if isinstance(node.value, str) else node
+
+
 def _code_text(source: str) -> str:
-    """``source`` without docstrings and comments (ast round trip); '' when it does not parse."""
+    """``source`` without docstrings and comments (ast round trip), then the same code once more
+    with every string emptied (what the ``blender`` and ``gl`` patterns read: a string that only
+    mentions bpy or gpu is not a use); '' when it does not parse."""
     try:
         tree = ast.parse(textwrap.dedent(source))
     except SyntaxError:
@@ -61,7 +72,8 @@ def _code_text(source: str) -> str:
         if isinstance(body, list) and body and isinstance(body[0], ast.Expr) \
                 and isinstance(body[0].value, ast.Constant) and isinstance(body[0].value.value, str):
             body[0] = ast.Pass()
-    return ast.unparse(tree)
+    with_strings = ast.unparse(tree)
+    return with_strings + _SPLIT + ast.unparse(_NoStrings().visit(tree))
 
 
 def _in_tests(obj) -> bool:
@@ -127,7 +139,7 @@ def _reached_text(roots) -> str:
         text, refs = _text_and_refs(obj)
         texts.append(text)
         stack.extend(refs)
-    return "\n".join(texts)
+    return "\f".join(texts)
 
 
 def _bpy_at_module_level(path) -> bool:
@@ -144,9 +156,16 @@ def _auto_marks(item) -> set:
     for script in set(_CHECK_SCRIPT.findall(text)):
         for base in (TESTS, Path(item.path).parent):
             if (base / script).is_file():
-                text += "\n" + _code_text((base / script).read_text()) + "\nbpy"
+                text += "\f" + _code_text((base / script).read_text())
                 break
-    marks = {name for name, pattern in _MARK_PATTERNS.items() if pattern.search(text)}
+    with_strings = "\n".join(part.split(_SPLIT)[0] for part in text.split("\f"))
+    code_only = "\n".join(part.split(_SPLIT)[-1] for part in text.split("\f"))
+    marks = {name for name, pattern in _MARK_PATTERNS.items()
+             if pattern.search(code_only if name in _CODE_ONLY else with_strings)}
+    if _IMPORTORSKIP_BPY.search(with_strings):
+        marks.add("blender")
+    if _MODERNGL_BACKEND.search(with_strings):  # backend="moderngl", --backend moderngl
+        marks.add("gl")
     if _bpy_at_module_level(item.path):
         marks.add("blender")
     engines = {v for v in getattr(getattr(item, "callspec", None), "params", {}).values()
