@@ -94,7 +94,8 @@ def _render(tmp_path, name, engine="CYCLES"):
     return envmaps.read_exr(tmp_path / f"{name}.exr")[..., :3]
 
 
-@pytest.mark.parametrize("engine", ["CYCLES", pytest.param(compat.eevee_engine(), id="EEVEE")])
+# Measured over 20 s on the shared 2-core test machine (EEVEE compiles its shaders on llvmpipe).
+@pytest.mark.parametrize("engine", ["CYCLES", pytest.param(compat.eevee_engine(), id="EEVEE", marks=pytest.mark.slow)])
 def test_painted_roughness_renders_only_where_painted(ball, tmp_path, engine):
     """Chrome ball under the shipped courtyard world: blurring the right half (+X, the camera's
     right) changes the right half of the render, the far-left pixels stay as they were, in Cycles
@@ -342,6 +343,7 @@ def test_brdf_albedo_table():
     assert lut[0, 2, 1] > lut[0, -1, 1]  # bias larger at grazing
 
 
+@pytest.mark.slow  # a fresh bpy process and its GPU context: over 20 s on the shared 2-core machine
 def test_viewport_preview_draws_through_blenders_gpu_module():
     """appearance_preview.draw_object as Blender compiles it (GPUShaderCreateInfo) and draws it
     offscreen (fresh bpy process, GPU context from a tiny EEVEE render; llvmpipe here): a painted
@@ -354,6 +356,7 @@ def test_viewport_preview_draws_through_blenders_gpu_module():
     assert res["rel_turned"] > 5 * res["rel"], res
 
 
+@pytest.mark.slow  # a fresh bpy process and its GPU context: over 20 s on the shared 2-core machine
 def test_preview_keeps_its_batch_and_shows_texels():
     """tests/appearance/appearance_preview_cache_check.py in a fresh bpy process, drawn offscreen through
     Blender's gpu module: a redraw reuses the batch and gives the same pixels; a stroke uploads

@@ -115,6 +115,7 @@ def test_render_difference_is_measured_not_claimed():
         appearance_glsl.render_difference(im, "BLINN")
 
 
+@pytest.mark.slow  # a fresh bpy process and its GPU context: over 20 s on the shared 2-core machine
 def test_viewport_draws_the_point_lit_view_beside_the_environment_lit_one():
     """tests/appearance/appearance_light_check.py in a fresh bpy process, through Blender's gpu module and
     the viewport handler's draw_view: 'BESIDE' draws the environment-lit ball unchanged and, to

@@ -15,6 +15,10 @@ pytest.importorskip("rokeby_native")
 
 from support.bpy_process import run_check  # noqa: E402
 
+# The module's one fresh bpy process (its GPU context, every frame drawn) took about 30 s on the
+# shared 2-core machine.
+pytestmark = pytest.mark.slow
+
 OPTIONS = [{}, {"k_d": 0.7, "k_r": 1.3, "gamma": 2.2}, {"epsilon": 0.2}]
 
 
