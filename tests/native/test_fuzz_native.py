@@ -13,6 +13,7 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[2]
 
 
+@pytest.mark.slow  # 60 examples of every entry point in a subprocess: about 100 s on the shared 2-core machine
 def test_native_fuzz_suite_survives_under_an_address_space_limit():
     env = {k: v for k, v in os.environ.items() if k != "ROKEBY_MAX_ALLOC_BYTES"}
     t0 = time.perf_counter()
