@@ -291,6 +291,7 @@ def test_triangle_soup_rejects_bad_indices():
         glsl.triangle_soup(v, v, np.array([[0, 1, 3]]))
 
 
+@pytest.mark.slow  # a fresh bpy process, its GPU context and shader compile: 215 s measured on the shared 2-core machine
 def test_blender_compiles_and_draws_the_same_shader_offscreen():
     """The add-on's own draw path (rokeby.viewport: GPUShaderCreateInfo from shaders/, batches,
     uniform block, textures, overlays) in bpy, offscreen, against the Rust reference on the
