@@ -54,26 +54,32 @@ _IMPORTORSKIP_BPY = re.compile(r"importorskip\('bpy'\)")
 _BPY_AT_MODULE_LEVEL = re.compile(r"importorskip\('bpy'\)|^import bpy$|^from bpy\b", re.M)
 
 
-class _NoStrings(ast.NodeTransformer):
-    def visit_Constant(self, node):
-        return ast.Constant("") if isinstance(node.value, str) else node
+_STRING = re.compile(r"[rbuf]*'(?:[^'\\\n]|\\.)*'|[rbuf]*\"(?:[^\"\\\n]|\\.)*\"")  # string literals
 
 
-def _code_text(source: str) -> str:
-    """``source`` without docstrings and comments (ast round trip), then the same code once more
-    with every string emptied (what the ``blender`` and ``gl`` patterns read: a string that only
-    mentions bpy or gpu is not a use); '' when it does not parse."""
+def _parse(source: str):
+    """The syntax tree of ``source`` with docstrings dropped; None when it does not parse."""
     try:
         tree = ast.parse(textwrap.dedent(source))
     except SyntaxError:
-        return ""
+        return None
     for node in ast.walk(tree):
         body = getattr(node, "body", None)
         if isinstance(body, list) and body and isinstance(body[0], ast.Expr) \
                 and isinstance(body[0].value, ast.Constant) and isinstance(body[0].value.value, str):
             body[0] = ast.Pass()
+    return tree
+
+
+def _code_text(source, tree=None) -> str:
+    """``source`` without docstrings and comments (ast round trip), then the same code once more
+    with every string emptied (what the ``blender`` and ``gl`` patterns read: a string that only
+    mentions bpy or gpu is not a use); '' when it does not parse."""
+    tree = tree if tree is not None else _parse(source)
+    if tree is None:
+        return ""
     with_strings = ast.unparse(tree)
-    return with_strings + _SPLIT + ast.unparse(_NoStrings().visit(tree))
+    return with_strings + _SPLIT + _STRING.sub("''", with_strings)
 
 
 def _in_tests(obj) -> bool:
@@ -92,15 +98,15 @@ def _text_and_refs(obj):
     key = id(obj)
     if key in _OBJ_CACHE:
         return _OBJ_CACHE[key][1:]
-    text, refs = "", []
+    text, refs, tree = "", [], None
     if _in_tests(obj):
         try:
-            text = _code_text(inspect.getsource(obj))
+            tree = _parse(inspect.getsource(obj))
         except (OSError, TypeError):
-            text = ""
+            tree = None
+        text = _code_text(None, tree) if tree is not None else ""
     if text:
         scope = dict(getattr(obj, "__globals__", None) or vars(sys.modules.get(obj.__module__, object)))
-        tree = ast.parse(text)
         for node in ast.walk(tree):  # names a function body imports from support
             if isinstance(node, ast.ImportFrom) and node.module and node.module.split(".")[0] == "support":
                 try:
@@ -128,18 +134,41 @@ def _text_and_refs(obj):
     return text, refs
 
 
-def _reached_text(roots) -> str:
-    """The code text of ``roots`` and of every function or class of tests/ they name."""
-    seen, texts, stack = set(), [], [inspect.unwrap(r) for r in roots]
-    while stack:
-        obj = stack.pop()
-        if id(obj) in seen:
-            continue
-        seen.add(id(obj))
-        text, refs = _text_and_refs(obj)
-        texts.append(text)
-        stack.extend(refs)
-    return "\f".join(texts)
+def _text_marks(text: str, here: Path) -> set:
+    """The marks one code text (from _code_text) asks for, with the *_check.py scripts it runs
+    (found below tests/ or next to ``here``)."""
+    with_strings, _, code_only = text.partition(_SPLIT)
+    marks = {name for name, pattern in _MARK_PATTERNS.items()
+             if pattern.search(code_only if name in _CODE_ONLY else with_strings)}
+    if _IMPORTORSKIP_BPY.search(with_strings):
+        marks.add("blender")
+    if _MODERNGL_BACKEND.search(with_strings):  # backend="moderngl", --backend moderngl
+        marks.add("gl")
+    for script in set(_CHECK_SCRIPT.findall(with_strings)):
+        for base in (TESTS, here):
+            if (base / script).is_file():
+                marks |= _text_marks(_code_text((base / script).read_text()), base)
+                break
+    return marks
+
+
+_MARKS: dict = {}
+
+
+def _reached_marks(obj) -> set:
+    """The marks of ``obj`` and of every function or class of tests/ it reaches (memoised; a cycle
+    of helpers is cut where it closes)."""
+    key = id(obj)
+    if key in _MARKS:
+        return _MARKS[key][1]
+    marks: set = set()
+    _MARKS[key] = (obj, marks)  # in progress: a cycle sees what is known so far
+    text, refs = _text_and_refs(obj)
+    if text:
+        marks |= _text_marks(text, Path(inspect.getsourcefile(obj)).parent)
+    for ref in refs:
+        marks |= _reached_marks(ref)
+    return marks
 
 
 def _bpy_at_module_level(path) -> bool:
@@ -152,20 +181,9 @@ def _bpy_at_module_level(path) -> bool:
 
 def _auto_marks(item) -> set:
     fixtures = [fd.func for defs in item._fixtureinfo.name2fixturedefs.values() for fd in defs]
-    text = _reached_text([item.function, *fixtures])
-    for script in set(_CHECK_SCRIPT.findall(text)):
-        for base in (TESTS, Path(item.path).parent):
-            if (base / script).is_file():
-                text += "\f" + _code_text((base / script).read_text())
-                break
-    with_strings = "\n".join(part.split(_SPLIT)[0] for part in text.split("\f"))
-    code_only = "\n".join(part.split(_SPLIT)[-1] for part in text.split("\f"))
-    marks = {name for name, pattern in _MARK_PATTERNS.items()
-             if pattern.search(code_only if name in _CODE_ONLY else with_strings)}
-    if _IMPORTORSKIP_BPY.search(with_strings):
-        marks.add("blender")
-    if _MODERNGL_BACKEND.search(with_strings):  # backend="moderngl", --backend moderngl
-        marks.add("gl")
+    marks = set()
+    for root in (item.function, *fixtures):
+        marks |= _reached_marks(inspect.unwrap(root))
     if _bpy_at_module_level(item.path):
         marks.add("blender")
     engines = {v for v in getattr(getattr(item, "callspec", None), "params", {}).values()
