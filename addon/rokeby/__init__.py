@@ -21,10 +21,10 @@ def is_registered() -> bool:
 
 
 def _modules():
-    from . import appearance_ui, compositing_ui, handlers, operators, prefs, props, shadow_ui, ui, viewport
+    from . import appearance_ui, compositing_brush_ui, compositing_ui, handlers, operators, prefs, props, shadow_ui, ui, viewport
 
     # ui after every module with operators: its menus name them all.
-    return (prefs, props, operators, handlers, viewport, appearance_ui, compositing_ui, shadow_ui, ui)
+    return (prefs, props, operators, handlers, viewport, appearance_ui, compositing_ui, compositing_brush_ui, shadow_ui, ui)
 
 
 def register():

@@ -1135,6 +1135,24 @@ def use_in_compositor(image_name: str = "Rokeby Recomposited", *, scene=None):
     return comp.feed_compositor(_scene(scene), img)
 
 
+def open_normal_brush(path: str, image_name: str = "Rokeby Recomposited"):
+    """Opens the multilayer EXR ``path`` for painting normal edits on the Blender image
+    ``image_name`` (*Paint Normals*; ``rokeby.compositing_brush.open_brush``). Returns the
+    ``BrushSession`` that ``paint_normals`` takes."""
+    from . import compositing_brush  # noqa: PLC0415
+
+    return compositing_brush.open_brush(path, image_name)
+
+
+def paint_normals(session, points, *, radius: float = 20.0, strength: float = 0.5, mode: str = "emboss") -> dict:
+    """One brush stroke through ``points`` ((row, col) pixels, row 0 at the top): 'emboss', 'bump'
+    or 'smooth' of ``radius`` pixels and ``strength`` in (0, 1], recomposited into the session's
+    image (``rokeby.compositing_brush.paint_stroke``)."""
+    from . import compositing_brush  # noqa: PLC0415
+
+    return compositing_brush.paint_stroke(session, points, radius, strength, mode)
+
+
 def _recomposite_opened(opened, edit, amount, k_d, k_r, image_name):
     from . import compositing as comp  # noqa: PLC0415
 

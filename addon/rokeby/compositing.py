@@ -721,6 +721,26 @@ class RecompositeSession:
         self.timings = {"check": t1 - t0, "recomposite": t2 - t1, "total": t2 - t0}
         return out
 
+    def window(self, edited_normals, rows: slice, cols: slice, *, k_d: float = 1.0, k_r: float = 1.0) -> tuple[np.ndarray, dict]:
+        """Eqs. 3–5 on the pixels rows × cols only (``edited_normals``: those pixels' ñ), by the
+        Rust core whatever the backend: the equations are per pixel, so the result equals those
+        pixels of a whole-frame call. For a brush that changes a small part of the frame
+        (``rokeby.compositing_brush``)."""
+        win = (rows, cols)
+        a = self._args
+        e = np.asarray(edited_normals)
+        if e.shape != a[1][win].shape:
+            raise CompositingError(f"edited_normals: expected shape {a[1][win].shape} like the window, got {e.shape}")
+        _check_k(k_d, k_r)
+
+        def cut(x):
+            return x if x is None or np.ndim(x) < 2 else np.ascontiguousarray(x[win])
+
+        out = native.module().recomposite(*(cut(x) for x in a[:2]), np.ascontiguousarray(e), *(cut(x) for x in a[3:7]),
+                                          a[7], **{k: cut(v) for k, v in self._kw.items()}, k_d=k_d, k_r=k_r)
+        _check_output(out, a[6][win])
+        return out
+
     def _backend(self):
         if self.backend == "blender_gpu":
             from . import recomposite_gpu as in_blender  # noqa: PLC0415 - not the module-level recomposite_gpu below

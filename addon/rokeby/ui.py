@@ -325,6 +325,7 @@ MENU = (
     ("rokeby.composite_render", None, {}, "RENDER_STILL"),
     ("rokeby.composite_edit", None, {}, "IMAGE"),
     ("rokeby.composite_to_compositor", None, {}, "NODE_COMPOSITING"),
+    ("rokeby.composite_brush", None, {}, "BRUSH_DATA"),
     ("rokeby.composite_sequence", None, {}, "SEQUENCE"),
 )
 

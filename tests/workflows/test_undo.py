@@ -305,6 +305,7 @@ NOT_COVERED = {
     "shadow_drag": "moves a handle of the session, outside the file; Apply is the undoable step",
     "shadow_stop": "ends the session; the scene's data does not change",
     "composite_sequence": "writes recomposited frames to files outside the .blend (tests/workflows/test_interface.py)",
+    "composite_brush": "pushes one undo step per stroke itself (no UNDO flag); undo/redo tested in tests/compositing/test_compositing_brush.py",
 }
 
 
