@@ -267,7 +267,7 @@ def test_window_recompositing_and_steps_match_the_whole_frame_bit_for_bit():
     """No render: the synthetic frame of the GLSL tests (five kinds of patch, NaN pixels, view
     vectors per pixel). A stroke delivered in steps equals the stroke in one call; the windowed
     recompositing equals eqs. 3–5 on the whole frame; undo and replay (sync) restore the bits."""
-    from recomposite_frames import frame as synthetic, passes_and_reconstruction
+    from support.recomposite_frames import frame as synthetic, passes_and_reconstruction
 
     p, rec = passes_and_reconstruction(*synthetic(h=64, w=96))
     p.depth = np.linspace(1.0, 2.0, 64 * 96, dtype=np.float32).reshape(64, 96)
