@@ -159,11 +159,11 @@ fuzz: $(CARGO_FUZZ)
 
 # Hypothesis fuzzing (issue 24) of every rokeby_native function and method and the bpy-free file
 # readers, FUZZ_PY_EXAMPLES examples each, random seeds, in a subprocess under a 4 GiB address-space
-# limit with ROKEBY_MAX_ALLOC_BYTES at 1 GiB (tests/fuzz/run_fuzz.py). `make test` runs it briefly
-# with fixed seeds (tests/test_fuzz_native.py).
+# limit with ROKEBY_MAX_ALLOC_BYTES at 1 GiB (tests/native/fuzz/run_fuzz.py). `make test` runs it briefly
+# with fixed seeds (tests/native/test_fuzz_native.py).
 FUZZ_PY_EXAMPLES ?= 500
 fuzz-py: native
-	FUZZ_PY_RANDOM=1 $(PY) tests/fuzz/run_fuzz.py --examples $(FUZZ_PY_EXAMPLES)
+	FUZZ_PY_RANDOM=1 $(PY) tests/native/fuzz/run_fuzz.py --examples $(FUZZ_PY_EXAMPLES)
 
 clean:
 	rm -rf $(VENV) $(PEERS) $(LINT) .venv-bpy-* .py313 target dist out .tools rust/fuzz/target
