@@ -71,12 +71,28 @@ fn errors(got: &[f32], exact: &[f32], ring: &[bool]) -> (f64, f64) {
     (sum / n.max(1) as f64, mx)
 }
 
+/// The shared meshes under 20k faces (fandisk, homer, spot, teapot): exact geodesics take seconds.
 #[test]
-fn graph_is_within_half_a_percent_of_exact_on_every_shared_mesh() {
+fn graph_is_within_half_a_percent_of_exact_on_the_small_shared_meshes() {
+    within_half_a_percent(|faces| faces < 20_000);
+}
+
+/// nefertiti and the bunny: the exact reference takes minutes per source on 2 cores
+/// (`cargo test --release --test geodesic_graph -- --ignored`). Measured: nefertiti 0.35 %.
+#[test]
+#[ignore]
+fn graph_is_within_half_a_percent_of_exact_on_the_large_shared_meshes() {
+    within_half_a_percent(|faces| faces >= 20_000);
+}
+
+fn within_half_a_percent(take: impl Fn(usize) -> bool) {
     let mut report = Vec::new();
     let mut worst = 0.0f64;
     for path in shared_meshes() {
         let (v, f) = load_obj(&path);
+        if !take(f.len() / 3) {
+            continue;
+        }
         let s = GeodesicSolver::new(Mesh::new(&v, &f).unwrap());
         let m = s.mesh();
         let nv = m.vertices.len();
