@@ -117,7 +117,7 @@ a query near heat's on small meshes and faster on large ones, after a graph buil
 Dragging: Dijkstra (a millisecond on the shared meshes; 5-10% mean error, exact next to the handle),
 or the graph once built. Validation: exact (Rokeby's window propagation or pygeodesic's MMP), seconds
 to minutes per source. Heat (`boundary='neumann'` and 'average' are the same on closed meshes;
-'average' is the more accurate on meshes with a boundary, docs/geodesics.md) stays for files saved
+on meshes with a boundary neither is the more accurate in general, docs/geodesics.md) stays for files saved
 with it."""
 
 
@@ -135,7 +135,7 @@ def geodesic_section(emit, peers_python):
     emit()
     emit("Memory: peak resident memory of a fresh process holding the solver after one query, above the mesh")
     emit("itself (Rokeby's methods only; — where not measured). Rokeby's exact method is timed on one run of")
-    emit("the three sources (it has no precomputation) and skipped above 150k triangles.")
+    emit("the three sources (it has no precomputation) and skipped above 20k triangles (minutes per source).")
     emit()
     emit("| mesh | triangles | method | precompute (s) | query (ms) | mean error | max error | memory (MB) |")
     emit("|---|---:|---|---:|---:|---:|---:|---:|")
@@ -184,7 +184,7 @@ def geodesic_section(emit, peers_python):
             emit(f"| {name} | {len(f):,} | exact MMP (pygeodesic) | fails: {str(peers['exact_error']).splitlines()[0][:70]} | | | | |")
         results = []
         methods = [("rokeby graph (SVG)", "graph", "average"), ("rokeby heat", "heat", "average"), ("rokeby heat (neumann)", "heat", "neumann"), ("rokeby dijkstra", "dijkstra", "average")]
-        if len(f) <= 150_000:
+        if len(f) <= 20_000:
             methods.append(("rokeby exact", "exact", "average"))
         for label, method, boundary in methods:
             t = time.perf_counter()

@@ -1,7 +1,6 @@
 //! The saddle vertex graph method (issue 21): under 0.5 % mean error against exact geodesics.
 
-use glam::DVec3;
-use rokeby_core::geodesic::{GeodesicSolver, Mesh, Method, Source, SurfacePoint};
+use rokeby_core::geodesic::{GeodesicSolver, Mesh, Method, Source};
 use std::path::PathBuf;
 
 fn shared_meshes() -> Vec<PathBuf> {
