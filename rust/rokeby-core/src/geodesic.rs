@@ -9,6 +9,10 @@
 //!   sparse matrices are factored once per mesh (faer's sparse Cholesky) and reused by every query:
 //!   moving a handle costs two triangular solves, not a factorisation.
 //!
+//! * [`Method::Graph`]: Dijkstra on a saddle vertex graph of direct geodesics ([`crate::svg`],
+//!   Ying, Wang & He 2013): under 0.5 % mean error on the shared meshes, after a graph built once.
+//! * [`Method::Exact`]: exact polyhedral geodesics by window propagation ([`crate::exact`]).
+//!
 //! Sources are vertices or surface points (a face and barycentric coordinates), several per
 //! distance field (the distance to the nearest). Inside the source's own triangle the distance is
 //! the exact straight-line one, and so are the values on the 1-ring of a vertex source, where the
