@@ -237,7 +237,7 @@ def test_no_distance_is_shorter_than_the_straight_chord(name):
     pair = [[sources[6], sources[0]]]
     chord_pair = np.minimum(chord[6], chord[0])[None]
     scale = np.abs(v).max()
-    methods = ("dijkstra", "heat", "exact") if name in ("spot.obj", "teapot.obj") else ("dijkstra", "heat")
+    methods = ("dijkstra", "heat", "graph", "exact") if name in ("spot.obj", "teapot.obj") else ("dijkstra", "heat", "graph")
     for method in methods:
         for srcs, ch in ((sources, chord), (pair, chord_pair)):
             d = s.distances(srcs, method=method).astype(np.float64)
@@ -274,8 +274,58 @@ def test_mirror_geodesic_methods_keep_their_stored_numbers():
     with the same method after Exact (2) was added, and every item maps to a native method."""
     from rokeby import props
 
-    assert [(i[0], i[4]) for i in props.GEODESIC_METHODS] == [("HEAT", 0), ("DIJKSTRA", 1), ("EXACT", 2)]
+    assert sorted((i[0], i[4]) for i in props.GEODESIC_METHODS) == [("DIJKSTRA", 1), ("EXACT", 2), ("GRAPH", 3), ("HEAT", 0)]
     v, f = flat_grid(9)
     s = rn.GeodesicSolver(v, f)
-    for name in ("heat", "dijkstra", "exact"):
+    for name in ("heat", "dijkstra", "exact", "graph"):
         assert np.isfinite(s.distances([40], method=name)).all()
+
+
+def test_graph_method_is_within_half_a_percent_of_exact_mmp():
+    """Issue 21: the geodesic graph (new mirrors' default) against pygeodesic's exact MMP on spot:
+    under 0.5 % mean error outside the source's 1-ring, never below the exact distance (every
+    graph edge is a path on the surface), and exact next to the source."""
+    from pathlib import Path
+
+    ref = np.load(Path(__file__).parent / "data" / "spot_exact_geodesics.npz")
+    v, f = load_obj(mesh_path("spot.obj"))
+    s = rn.GeodesicSolver(v, f)
+    d = s.distances(ref["sources"], method="graph").astype(np.float64)
+    heat = s.distances(ref["sources"], method="heat").astype(np.float64)
+    errors, heat_errors = [], []
+    for k, src in enumerate(ref["sources"]):
+        ex = ref["distances"][k]
+        ring = np.unique(f[(f == src).any(axis=1)])
+        np.testing.assert_allclose(d[k][ring], ex[ring], rtol=1e-5, atol=1e-7)
+        mask = ex > 0
+        mask[ring] = False
+        assert np.all(d[k] >= ex * (1 - 1e-5) - 1e-7)
+        errors.append(np.mean(np.abs(d[k][mask] - ex[mask]) / ex[mask]))
+        heat_errors.append(np.mean(np.abs(heat[k][mask] - ex[mask]) / ex[mask]))
+    assert np.mean(errors) < 0.005, errors
+    assert np.mean(errors) < 0.5 * np.mean(heat_errors), (errors, heat_errors)
+
+
+def test_new_mirrors_use_the_graph_but_saved_files_keep_heat():
+    """A mirror made now measures on the geodesic graph; a file saved before the graph existed
+    (no stored setting) still reads the property's default, heat, so its renders do not change."""
+    bpy = pytest.importorskip("bpy")
+    import rokeby
+    from rokeby import api
+
+    rokeby.register()
+
+    def plane(name):
+        me = bpy.data.meshes.new(name)
+        me.from_pydata([(0, 0, 0), (1, 0, 0), (1, 1, 0), (0, 1, 0)], [], [(0, 1, 2, 3)])
+        ob = bpy.data.objects.new(name, me)
+        bpy.context.scene.collection.objects.link(ob)
+        return ob
+
+    new = plane("graph mirror")
+    api.add_mirror(new, metric="GEODESIC")
+    assert new.rokeby.geodesic_method == "GRAPH"
+    old = plane("older mirror")
+    assert old.rokeby.geodesic_method == "HEAT"  # what a file without the stored setting reads
+    with pytest.raises(Exception, match="geodesic_method"):
+        api.add_mirror(old, geodesic_method="SMOOTH")

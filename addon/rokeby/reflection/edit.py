@@ -244,8 +244,10 @@ def mirror_of(obj, scene=None):
 
 
 @transaction.atomic(materials=_of_mirrors)
-def add_mirror(obj, *, metric: str = "EUCLIDEAN", geodesic_method: str = "HEAT", polar: str = "FAST"):
-    """Make the mesh object ``obj`` a Rokeby mirror (its reflections become editable)."""
+def add_mirror(obj, *, metric: str = "EUCLIDEAN", geodesic_method: str = "GRAPH", polar: str = "FAST"):
+    """Make the mesh object ``obj`` a Rokeby mirror (its reflections become editable). New mirrors
+    measure geodesics on the geodesic graph (GRAPH); the property's own default, which files saved
+    without the setting read back, stays HEAT."""
     _check_mirror(obj)
     s = obj.rokeby
     for prop, value in (("metric", metric), ("geodesic_method", geodesic_method), ("polar", polar)):

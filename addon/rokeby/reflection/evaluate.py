@@ -1611,7 +1611,7 @@ def evaluate_mirror(obj, scene, depsgraph, *, force=False, reread_geometry=False
             kept.eye = report.eye
             return kept
         report.constraints_used = len(rows) + len(t_rows)
-        method = {"HEAT": "heat", "DIJKSTRA": "dijkstra", "EXACT": "exact"}[settings.geodesic_method]
+        method = {"HEAT": "heat", "DIJKSTRA": "dijkstra", "EXACT": "exact", "GRAPH": "graph"}[settings.geodesic_method]
         polar = "exact" if settings.polar == "EXACT" else "fast"
         distances = None
         if len(rows) + len(t_rows) and settings.metric == "GEODESIC":

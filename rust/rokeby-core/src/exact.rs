@@ -103,8 +103,12 @@ pub(crate) fn pseudo_source_vertices(mesh: &Mesh, adj: &Adjacency) -> Vec<bool> 
 struct Propagation<'a> {
     mesh: &'a Mesh,
     adj: &'a Adjacency,
-    pseudo: &'a [bool],
-    dist: Vec<f64>,
+    /// Vertices that become pseudo-sources; `None`: none do (paths stay straight, for the local
+    /// direct geodesics of [`crate::svg`]).
+    pseudo: Option<&'a [bool]>,
+    dist: &'a mut [f64],
+    /// Vertices whose distance went from +inf to finite, in that order.
+    touched: Vec<usize>,
     heap: BinaryHeap<Entry>,
 }
 
@@ -122,11 +126,22 @@ fn edge_frame(x: DVec2, y: DVec2, behind: DVec2) -> impl Fn(DVec2) -> DVec2 {
 impl Propagation<'_> {
     fn relax(&mut self, v: usize, d: f64) {
         if d < self.dist[v] {
+            if self.dist[v] == f64::INFINITY {
+                self.touched.push(v);
+            }
             self.dist[v] = d;
-            if self.pseudo[v] {
+            if self.pseudo.is_some_and(|p| p[v]) {
                 self.heap.push(Entry(d, Item::Vertex(v, d)));
             }
         }
+    }
+
+    /// A source vertex: distance 0, expanded by the caller (not queued as a pseudo-source).
+    fn set_source(&mut self, v: usize) {
+        if self.dist[v] == f64::INFINITY {
+            self.touched.push(v);
+        }
+        self.dist[v] = 0.0;
     }
 
     /// Xin & Wang's rules on the two ends of the window's edge.
@@ -294,32 +309,19 @@ impl Propagation<'_> {
     }
 }
 
-/// Exact geodesic distances from one set of sources to every vertex (+inf where none reaches).
-/// `max_items` bounds the work (an error past it, never a wrong answer).
-pub(crate) fn exact_distances(
-    mesh: &Mesh,
-    adj: &Adjacency,
-    pseudo: &[bool],
-    set: &[Source],
-    max_items: usize,
-) -> Result<Vec<f64>> {
-    let mut pr = Propagation {
-        mesh,
-        adj,
-        pseudo,
-        dist: vec![f64::INFINITY; mesh.vertices.len()],
-        heap: BinaryHeap::new(),
-    };
+/// Starts the propagation from a set of sources: their distances, and the first windows.
+fn start(pr: &mut Propagation, set: &[Source]) {
+    let (mesh, adj) = (pr.mesh, pr.adj);
     for src in set {
         match *src {
             Source::Vertex(v) => {
-                pr.dist[v] = 0.0;
+                pr.set_source(v);
                 pr.expand_vertex(v, 0.0);
             }
             Source::Point(sp) => {
                 let fv = mesh.faces[sp.face];
                 if let Some(k) = (0..3).find(|&k| sp.bary[k] >= 1.0 - 1e-12) {
-                    pr.dist[fv[k]] = 0.0;
+                    pr.set_source(fv[k]);
                     pr.expand_vertex(fv[k], 0.0);
                     continue;
                 }
@@ -357,6 +359,27 @@ pub(crate) fn exact_distances(
             }
         }
     }
+}
+
+/// Exact geodesic distances from one set of sources to every vertex (+inf where none reaches).
+/// `max_items` bounds the work (an error past it, never a wrong answer).
+pub(crate) fn exact_distances(
+    mesh: &Mesh,
+    adj: &Adjacency,
+    pseudo: &[bool],
+    set: &[Source],
+    max_items: usize,
+) -> Result<Vec<f64>> {
+    let mut dist = vec![f64::INFINITY; mesh.vertices.len()];
+    let mut pr = Propagation {
+        mesh,
+        adj,
+        pseudo: Some(pseudo),
+        dist: &mut dist,
+        touched: Vec::new(),
+        heap: BinaryHeap::new(),
+    };
+    start(&mut pr, set);
     let mut n = 0usize;
     while let Some(Entry(_, item)) = pr.heap.pop() {
         n += 1;
@@ -375,5 +398,49 @@ pub(crate) fn exact_distances(
             }
         }
     }
-    Ok(pr.dist)
+    Ok(dist)
+}
+
+/// *Direct* geodesics from a set of sources (paths that bend at no vertex: straight lines in the
+/// unfolding, Ying, Wang & He 2013, §3) to the vertices nearest to it: window propagation without
+/// pseudo-sources, in order of distance, stopped once `k` vertices have a distance. Every value
+/// is the length of a path on the surface (never shorter than the geodesic); values up to the
+/// last window's distance are the direct geodesic distances. `dist` is all +inf on entry and is
+/// left so (only the returned vertices are reset).
+pub(crate) fn direct_near(
+    mesh: &Mesh,
+    adj: &Adjacency,
+    set: &[Source],
+    k: usize,
+    dist: &mut [f64],
+) -> Vec<(usize, f64)> {
+    let mut pr = Propagation {
+        mesh,
+        adj,
+        pseudo: None,
+        dist,
+        touched: Vec::new(),
+        heap: BinaryHeap::new(),
+    };
+    start(&mut pr, set);
+    // A bound on the work for degenerate meshes (windows that split without end).
+    let mut budget = 200 * k + 10_000;
+    while let Some(Entry(_, item)) = pr.heap.pop() {
+        if pr.touched.len() >= k || budget == 0 {
+            break;
+        }
+        budget -= 1;
+        if let Item::Window(w) = item {
+            pr.process(w);
+        }
+    }
+    let touched = std::mem::take(&mut pr.touched);
+    touched
+        .into_iter()
+        .map(|v| {
+            let d = pr.dist[v];
+            pr.dist[v] = f64::INFINITY;
+            (v, d)
+        })
+        .collect()
 }

@@ -30,6 +30,7 @@ pub mod mls2d;
 pub mod normals;
 pub mod polar;
 pub mod prefilter;
+pub(crate) mod radix_heap;
 pub mod recomposite;
 pub mod reconstruct;
 pub mod region;
@@ -38,6 +39,7 @@ pub mod sh;
 pub mod shadow;
 pub mod shadow_mesh;
 pub mod silhouette;
+pub mod svg;
 pub mod unfold;
 
 pub use error::{Result, RokebyError};

@@ -116,7 +116,7 @@ fn no_distance_is_shorter_than_the_chord_on_any_shared_mesh() {
             .vertices
             .iter()
             .fold(0.0f64, |a, x| a.max(x.abs().max_element()));
-        for method in [Method::Dijkstra, Method::Heat] {
+        for method in [Method::Dijkstra, Method::Heat, Method::Graph] {
             let d = s.distances(&sets, method).unwrap();
             let (mut worst, mut bad, mut checked) = (0.0f64, 0usize, 0usize);
             for (r, set) in sets.iter().enumerate() {

@@ -856,7 +856,7 @@ fn parse_sources(obj: &Bound<'_, PyAny>) -> PyResult<Vec<Vec<Source>>> {
 fn parse_method(name: &str) -> PyResult<Method> {
     Method::parse(name).ok_or_else(|| {
         PyValueError::new_err(format!(
-            "method: unknown method {name:?} (expected 'heat', 'dijkstra' or 'exact')"
+            "method: unknown method {name:?} (expected 'heat', 'dijkstra', 'exact' or 'graph')"
         ))
     })
 }
