@@ -30,7 +30,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from . import native, transaction
+from . import compat, native, transaction
 
 SHADOW_SUFFIX = " Shadow Mesh"
 TWIN_SUFFIX = " (edited shadows)"
@@ -689,7 +689,7 @@ SELF_CUTOFF = 0.02  # self-shadow displacements under this fraction of the large
 
 def _local_displacement(session: ShadowSession, world: np.ndarray) -> np.ndarray:
     disp = np.asarray(world, np.float64) - session.rest_world
-    local = np.linalg.solve(session.matrix_world[:3, :3], disp.T).T
+    local = disp @ np.linalg.inv(session.matrix_world[:3, :3]).T  # one 3x3 inverse: fast per drag step
     with np.errstate(over="ignore", invalid="ignore"):
         if not (np.isfinite(world).all() and np.isfinite(local.astype(np.float32)).all()):
             raise ShadowEditError("the edited shadow mesh has non-finite or float32-overflowing positions (a drag too large?); "
@@ -1119,8 +1119,8 @@ def live_step(preview: LivePreview) -> None:
     kb = ob.data.shape_keys.key_blocks
     if kb.get(key_name) is None:
         raise ShadowEditError(f"'{ob.name}' has no key '{key_name}' any more; start the drag again")
-    kb[key_name].data.foreach_set("co", preview.rest + local.astype(np.float32).ravel())
-    ob.data.update()
+    compat.shape_key_points(kb[key_name]).foreach_set("co", preview.rest + local.astype(np.float32).ravel())
+    ob.data.update_tag()
     if s.has_self_edits():
         caster, light = s.caster_object(), s.light_object()
         linked = _live_self_blocker(ob) is not None

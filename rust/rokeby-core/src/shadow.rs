@@ -142,6 +142,11 @@ pub struct ShadowEditor {
     last_drag: Option<(DragKey, DVec2)>,
     /// Bumped whenever the base of the drags changes (commit, cancel, reset, another drag).
     epoch: u64,
+    /// Per loop: the handles of its committed silhouette (None until needed); a drag step casts
+    /// only its segment's rays and takes the others from here.
+    committed_handles: Vec<Option<Vec<Handle>>>,
+    /// Per loop: the handles of its uncommitted drag (None: no drag since the last commit).
+    current_handles: Vec<Option<Vec<Handle>>>,
     cache: Option<DragCache>,
 }
 
@@ -323,6 +328,7 @@ impl ShadowEditor {
             })
             .collect();
         let zeros: Vec<Vec<DVec2>> = loops.iter().map(|l| vec![DVec2::ZERO; l.len()]).collect();
+        let nloops = loops.len();
         let ed = ShadowEditor {
             caster,
             light,
@@ -346,6 +352,8 @@ impl ShadowEditor {
             last_drag: None,
             epoch: 0,
             cache: None,
+            committed_handles: vec![None; nloops],
+            current_handles: vec![None; nloops],
         };
         if ed.frame.is_none() && !ed.frames.iter().any(|f| f.is_some()) {
             let why = ed.frame_error.as_ref().map_or_else(
@@ -610,7 +618,28 @@ impl ShadowEditor {
                 return Err(res.err().unwrap_or_else(overflow));
             }
         };
-        let handles = self.cast_handles(&silhouette, k, None);
+        // Outside the segment the silhouette is the committed one: only the segment's rays are cast.
+        let mut handles = match self.committed_handles[k].take() {
+            Some(h) => h,
+            None => {
+                let committed: Vec<DVec3> = self.rest[k]
+                    .iter()
+                    .zip(&self.committed[k])
+                    .map(|(r, d)| frame.from_frustum(DVec3::new(r.x + d.x, r.y + d.y, r.z)))
+                    .collect();
+                self.cast_handles(&committed, k, None)
+            }
+        };
+        self.committed_handles[k] = Some(handles.clone());
+        let lp = &self.loops[k];
+        let fresh: Vec<Handle> = seg
+            .par_iter()
+            .map(|&i| self.cast_one(silhouette[i], lp.vertices[i].back, lp.vertices[i].front))
+            .collect();
+        for (&i, h) in seg.iter().zip(fresh) {
+            handles[i] = h;
+        }
+        self.current_handles[k] = Some(handles.clone());
         // The incremental shadow mesh (module documentation): valid while the same drag goes on.
         let key = DragKey {
             loop_index: k,
@@ -667,6 +696,15 @@ impl ShadowEditor {
     /// Makes the current state the base of the next drag (mouse release).
     pub fn commit(&mut self) {
         self.committed = self.current.clone();
+        for (c, h) in self
+            .committed_handles
+            .iter_mut()
+            .zip(&mut self.current_handles)
+        {
+            if let Some(h) = h.take() {
+                *c = Some(h);
+            }
+        }
         self.end_drag();
     }
 
@@ -679,6 +717,7 @@ impl ShadowEditor {
     /// Drops uncommitted changes.
     pub fn cancel(&mut self) {
         self.current = self.committed.clone();
+        self.current_handles.iter_mut().for_each(|h| *h = None);
         self.end_drag();
     }
 
@@ -688,6 +727,8 @@ impl ShadowEditor {
             *c = vec![DVec2::ZERO; l.len()];
         }
         self.current = self.committed.clone();
+        self.current_handles.iter_mut().for_each(|h| *h = None);
+        self.committed_handles.iter_mut().for_each(|h| *h = None);
         self.end_drag();
     }
 
@@ -756,11 +797,7 @@ impl ShadowEditor {
     /// every step after the first is incremental (module documentation).
     pub fn shadow_mesh(&mut self) -> Result<Vec<DVec3>> {
         self.factor()?;
-        let incremental = match self.last_drag {
-            Some(last) if self.frame.is_some() => Some(last),
-            _ => None,
-        };
-        let Some((key, f2)) = incremental else {
+        let Some((key, f2)) = self.last_drag.filter(|_| self.frame.is_some()) else {
             let off = self.offsets(&self.current);
             return self.solver.as_ref().expect("factored").solve_offsets(&off);
         };

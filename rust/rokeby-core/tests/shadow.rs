@@ -924,7 +924,9 @@ fn incremental_drag_steps_equal_a_direct_solve() {
         for (i, factor) in [1.1, 1.2, 1.35, 0.9].into_iter().enumerate() {
             let (mut d, _) = drag_radially(&mut ed, l, 3, factor);
             d.style = style;
-            ed.drag(&d).unwrap();
+            let r = ed.drag(&d).unwrap();
+            // Only the segment's rays are cast; the handles equal a full recast.
+            assert_eq!(r.handles, ed.handles(0, None).unwrap());
             last = ed.shadow_mesh().unwrap();
             if i == 3 {
                 fresh.drag(&d).unwrap();
@@ -950,7 +952,8 @@ fn incremental_drag_steps_equal_a_direct_solve() {
         ed.drag(&d).unwrap();
         ed.shadow_mesh().unwrap();
         let (d2, _) = drag_radially(&mut ed, l, 20, 1.25);
-        ed.drag(&d2).unwrap();
+        let r = ed.drag(&d2).unwrap();
+        assert_eq!(r.handles, ed.handles(0, None).unwrap());
         fresh.drag(&d2).unwrap();
         for (a, b) in ed
             .shadow_mesh()
