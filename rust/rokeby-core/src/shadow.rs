@@ -187,7 +187,7 @@ pub fn far_point_as_directional(light: Light, vertices: &[DVec3]) -> Light {
 impl ShadowEditor {
     /// A session for `caster` lit by `light` over receivers (`receiver_vertices` N×3 flat,
     /// `receiver_faces` F×3 flat; may be several objects merged). Errors: an open or non-manifold
-    /// caster, a light inside the caster's bounds, no receiver under the light (no handle of an
+    /// caster, a light inside the caster's volume, no receiver under the light (no handle of an
     /// active loop lands on a receiver).
     pub fn new(
         caster: ClosedMesh,
