@@ -845,9 +845,9 @@ fn a_light_inside_a_ring_gets_per_loop_frusta() {
         "{:?}",
         r.handles[m].position
     );
-    for i in 0..n {
+    for (i, h) in hs.iter().enumerate() {
         if !r.segment.contains(&i) {
-            assert!((r.handles[i].position - hs[i].position).length() < 1e-9);
+            assert!((r.handles[i].position - h.position).length() < 1e-9);
         }
     }
     ed.commit();
