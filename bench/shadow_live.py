@@ -1,8 +1,11 @@
 """Benchmark: the live shadow while dragging (issue 22; the paper's Fig. 3 B–D) in Blender.
 
 Per drag step the modal operator runs ``session.drag`` (MLS + handles, native) and
-``shadow.live_step`` (shadow mesh by back-substitution, written into the shadow object's shape
-key); the viewport then evaluates the depsgraph (``view_layer.update``: the shape key applied).
+``shadow.live_step`` (the shadow mesh, written into the shadow object's shape key); the viewport
+then evaluates the depsgraph (``view_layer.update``: the shape key applied). The first step of a
+drag back-substitutes three right-hand sides; the medians are of the steps after it, which update
+the shadow mesh incrementally (affine drags); ``full_solve_step_ms`` is a step of a rigid drag,
+which back-substitutes the whole system every step (the cost of every step before).
 Casters are bench/shadow.py's shared meshes (spot subdivided once, the bunny with its holes
 closed, nefertiti) at unit radius over the 80k-triangle terrain, a point light above; medians of
 ``--steps`` steps of one drag (the cursor moving outwards).
@@ -74,23 +77,39 @@ def main():
         t0 = time.perf_counter()
         live = shadow.live_begin(s)  # installs the edit (first shadow_mesh: the factorisation)
         row["begin_s"] = time.perf_counter() - t0
-        drag, step, update = [], [], []
-        for i in range(args.steps):
-            target = centre + (h["points"][mid] - centre) * (1.05 + 0.03 * i)
-            t0 = time.perf_counter()
-            s.drag(k, fixed, mid, target)
-            t1 = time.perf_counter()
-            shadow.live_step(live)
-            t2 = time.perf_counter()
-            sc.view_layers[0].update()
-            t3 = time.perf_counter()
-            drag.append(t1 - t0)
-            step.append(t2 - t1)
-            update.append(t3 - t2)
+
+        def steps(style, n):
+            drag, step, update, native = [], [], [], []
+            for i in range(n):
+                target = centre + (h["points"][mid] - centre) * (1.05 + 0.03 * i)
+                t0 = time.perf_counter()
+                s.drag(k, fixed, mid, target, style=style)
+                t1 = time.perf_counter()
+                shadow.live_step(live)
+                t2 = time.perf_counter()
+                sc.view_layers[0].update()
+                t3 = time.perf_counter()
+                s.shadow_mesh()  # the native part of the step alone (not in the totals)
+                t4 = time.perf_counter()
+                drag.append(t1 - t0)
+                step.append(t2 - t1)
+                update.append(t3 - t2)
+                native.append(t4 - t3)
+            s.cancel()
+            return drag, step, update, native
+
+        # The default (affine) drag: its first step back-substitutes three right-hand sides, every
+        # further step is incremental (ShadowEditor::shadow_mesh, O(V)).
+        drag, step, update, native = steps("affine", args.steps + 1)
+        row["first_step_ms"] = 1e3 * (drag[0] + step[0] + update[0])
+        drag, step, update, native = drag[1:], step[1:], update[1:], native[1:]
         row.update(drag_ms=1e3 * statistics.median(drag), live_step_ms=1e3 * statistics.median(step),
-                   depsgraph_ms=1e3 * statistics.median(update),
+                   depsgraph_ms=1e3 * statistics.median(update), native_mesh_ms=1e3 * statistics.median(native),
                    total_ms=1e3 * statistics.median(np.add(np.add(drag, step), update)))
-        s.cancel()
+        # Reference: a rigid drag is not affine in the dragged point, so every step back-substitutes
+        # the whole system (what every step cost before the incremental update).
+        _, rstep, _, _ = steps("rigid", max(3, args.steps // 2))
+        row["full_solve_step_ms"] = 1e3 * statistics.median(rstep)
         shadow.live_end(live, keep=False)
         rows.append(row)
         print(row, flush=True)

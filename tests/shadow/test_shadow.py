@@ -70,7 +70,7 @@ def test_falloff():
     "kwargs, words",
     [
         ({"faces": "open"}, "closed mesh"),
-        ({"light_position": [0.0, 0.0, 1.6]}, "inside the caster's bounding box"),
+        ({"light_position": [0.0, 0.0, 1.6]}, "inside the caster's volume"),
         ({"light_position": [0.0, 0.0, 0.5]}, "no receiver under the light"),
         ({"receivers": "none"}, "no receiver under the light"),
         ({"light_position": None}, "exactly one of light_position"),

@@ -173,8 +173,8 @@ def test_live_self_shadow_drag_links_the_self_shadow_mesh_and_cancel_removes_it(
 
 
 def test_a_light_inside_the_casters_bounds_gives_an_editable_shadow_that_renders(tmp_path):
-    """§5.2: a light inside the caster's bounding box (between its two parts) was refused; each part
-    now gets its own frustum. The nearer sphere's shadow on the ground, dragged, renders."""
+    """§5.2: a light inside the caster's bounding box (between its two parts) was refused; each
+    silhouette loop now gets its own frustum. The nearer sphere's shadow on the ground, dragged, renders."""
     bpy = pytest.importorskip("bpy")
     bpy_, sc, ball, lamp, ground = ts.blender_scene()
     from rokeby import api
@@ -217,7 +217,7 @@ def test_a_light_inside_the_casters_bounds_gives_an_editable_shadow_that_renders
     assert abs(f1 - f0) * px < 1.5
 
 
-def test_a_light_inside_a_single_parts_bounds_stays_a_clear_error():
+def test_a_light_inside_the_casters_volume_is_a_clear_error():
     bpy = pytest.importorskip("bpy")
     bpy_, sc, ball, lamp, ground = ts.blender_scene()
     from rokeby import shadow
@@ -225,7 +225,7 @@ def test_a_light_inside_a_single_parts_bounds_stays_a_clear_error():
     lamp.location = (0.0, 0.0, 1.6)  # inside the ball
     sc.view_layers[0].update()
     n = len(bpy.data.objects)
-    with pytest.raises(shadow.ShadowEditError, match="inside the caster's bounding box"):
+    with pytest.raises(shadow.ShadowEditError, match="inside the caster's volume"):
         shadow.start(ball, lamp, [ground])
     assert len(bpy.data.objects) == n
 

@@ -305,3 +305,10 @@ def stored_group(idblock, name: str):
         props = idblock.bl_system_properties_get()
         return props.get(name) if props is not None else None
     return idblock.get(name)
+
+
+def shape_key_points(key_block):
+    """The collection to foreach_get/foreach_set a mesh shape key's coordinates through:
+    ``ShapeKey.points`` (raw-array access, ~20x faster on large meshes) where Blender has it,
+    else ``ShapeKey.data`` (per-item access)."""
+    return key_block.points if hasattr(key_block, "points") else key_block.data

@@ -31,7 +31,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..core import native
-from ..blender import transaction
+from ..blender import compat, transaction
 from ..core import schema
 
 SHADOW_SUFFIX = " Shadow Mesh"
@@ -203,7 +203,7 @@ def start(caster, light, receivers=None, *, scene=None, min_loop_vertices: int =
           constraint_weight: float = 10.0) -> ShadowSession:
     """Starts editing the shadow of the closed mesh ``caster`` from ``light`` on ``receivers``
     (default: every other visible mesh of the scene). Errors (open caster, light inside the
-    caster's bounds, nothing under the light) are :class:`ShadowEditError` naming the cause."""
+    caster's volume, nothing under the light) are :class:`ShadowEditError` naming the cause."""
     import bpy  # noqa: PLC0415 - Blender only
 
     from ..blender import meshes  # noqa: PLC0415
@@ -235,144 +235,14 @@ def start(caster, light, receivers=None, *, scene=None, min_loop_vertices: int =
     rv, rf = _merged(rm)
     opts = {"min_loop_vertices": int(min_loop_vertices), "w_z": float(w_z), "constraint_weight": float(constraint_weight), **kw}
     try:
+        # A point light inside the caster's bounds gets one frustum per silhouette loop (§5.2).
         ed = native.module().ShadowEditor(cm.vertices, cm.triangles.astype(np.int64), rv, rf, normals=cm.normals, **opts)
     except ValueError as exc:
-        ed = None
-        if "inside the caster's bounding box" in str(exc):
-            # §5.2: "if the light is allowed to enter the bounding volume of a shadow caster ... a
-            # shadow frustum for each silhouette loop separately": one frustum per part.
-            ed = PartsEditor.build(cm.vertices, cm.triangles.astype(np.int64), cm.normals, rv, rf, opts)
-        if ed is None:
-            raise ShadowEditError(f"cannot edit the shadow of '{caster.name}' from '{light.name}': {exc}") from exc
+        raise ShadowEditError(f"cannot edit the shadow of '{caster.name}' from '{light.name}': {exc}") from exc
     m = np.array(caster.matrix_world, dtype=np.float64)
-    lv = kw.get("light_direction")
-    if lv is None:
-        lv = m[:3, 3] - kw["light_position"]
-    # Light direction in the caster's local frame (§6.2: relative changes of object and light).
-    lv_local = np.linalg.solve(m[:3, :3], lv)
-    return ShadowSession(ed, caster.session_uid, light.session_uid, [o.session_uid for o in receivers], lv_local / np.linalg.norm(lv_local),
+    return ShadowSession(ed, caster.session_uid, light.session_uid, [o.session_uid for o in receivers], _unit_light_vector(m, kw),
                          np.asarray(cm.vertices, np.float64), m, rest_normals=np.asarray(cm.normals, np.float64), light_kw=kw,
                          triangles=np.asarray(cm.triangles, np.int64))
-
-
-def connected_components(triangles: np.ndarray, n: int) -> np.ndarray:
-    """(n,) component number of every vertex of the triangle mesh (label propagation with
-    pointer jumping; numpy only)."""
-    tris = np.asarray(triangles, np.int64)
-    lab = np.arange(n)
-    while True:
-        new = lab.copy()
-        np.minimum.at(new, tris.ravel(), np.repeat(lab[tris].min(axis=1), 3))
-        new = new[new]
-        if np.array_equal(new, lab):
-            break
-        lab = new
-    return np.unique(lab, return_inverse=True)[1]
-
-
-class PartsEditor:
-    """A light inside the caster's bounding box (§5.2, per-loop frusta): the native editor builds
-    one light frustum around the whole caster and refuses such a light. When the caster is made of
-    several closed parts (connected components; a cap and a face, a chandelier's arms) whose own
-    bounds the light lies outside, each part gets its own editor and so its own frustum, with the
-    other parts among its receivers (their shadows on each other are self-shadows, their handles
-    ``on_caster``). Same interface as ``rokeby_native.ShadowEditor``; loop numbers run over the
-    parts in turn, shadow-mesh vertices are the caster's. A light inside one part's own bounds
-    stays refused (that needs per-loop frusta in the native editor)."""
-
-    def __init__(self, parts, n_vertices, rest):
-        self.parts = parts  # [(editor, vertex ids, number of other-part triangles among its receivers)]
-        self.n = n_vertices
-        self.rest = rest
-        self._index = [(p, k) for p, (ed, _, _) in enumerate(parts) for k in range(ed.num_loops)]
-
-    @classmethod
-    def build(cls, v, f, normals, rv, rf, opts):
-        comp = connected_components(f, len(v))
-        if comp.max() == 0:
-            return None
-        light = opts.get("light_position")
-        parts = []
-        for c in range(comp.max() + 1):
-            ids = np.nonzero(comp == c)[0]
-            lo, hi = v[ids].min(axis=0), v[ids].max(axis=0)
-            if light is not None and np.all(light >= lo) and np.all(light <= hi):
-                continue  # the light is inside this part's own bounds: not editable
-            remap = np.full(len(v), -1, np.int64)
-            remap[ids] = np.arange(len(ids))
-            mine = comp[f[:, 0]] == c
-            others = f[~mine]
-            recv_v = np.concatenate([np.asarray(v, np.float32), np.asarray(rv, np.float32)])
-            recv_f = np.concatenate([others, np.asarray(rf, np.int64) + len(v)])
-            try:
-                ed = native.module().ShadowEditor(np.asarray(v)[ids], remap[f[mine]], recv_v, recv_f,
-                                                  normals=np.asarray(normals)[ids], **opts)
-            except ValueError:
-                continue  # this part's shadow falls nowhere, or it is too small: the others stay editable
-            parts.append((ed, ids, len(others)))
-        if not parts:
-            return None
-        return cls(parts, len(v), np.asarray(v, np.float32))
-
-    @property
-    def num_loops(self) -> int:
-        return len(self._index)
-
-    @property
-    def factored(self) -> bool:
-        return all(ed.factored for ed, _, _ in self.parts)
-
-    def _at(self, loop):
-        loop = int(loop)
-        if not 0 <= loop < len(self._index):
-            raise ValueError(f"loop: loop {loop} does not exist (the caster has {len(self._index)})")
-        p, k = self._index[loop]
-        return self.parts[p], k
-
-    @staticmethod
-    def _mark(h, others):
-        h = dict(h)
-        on = np.asarray(h["on_caster"], bool).copy()
-        on |= np.asarray(h["hit"], bool) & ~on & (np.asarray(h["triangle"]) < others)
-        h["on_caster"] = on
-        return h
-
-    def loops(self):
-        out = []
-        for ed, ids, _ in self.parts:
-            for lp in ed.loops():
-                lp = dict(lp)
-                lp["edges"] = ids[np.asarray(lp["edges"], np.int64)]
-                out.append(lp)
-        return out
-
-    def handles(self, loop, eye=None):
-        (ed, _, others), k = self._at(loop)
-        return self._mark(ed.handles(k, eye), others)
-
-    def drag(self, loop, fixed, moved, target, **kwargs):
-        (ed, _, others), k = self._at(loop)
-        r = dict(ed.drag(k, fixed, moved, target, **kwargs))
-        r["handles"] = self._mark(r["handles"], others)
-        return r
-
-    def commit(self):
-        for ed, _, _ in self.parts:
-            ed.commit()
-
-    def cancel(self):
-        for ed, _, _ in self.parts:
-            ed.cancel()
-
-    def reset(self):
-        for ed, _, _ in self.parts:
-            ed.reset()
-
-    def shadow_mesh(self):
-        out = self.rest.copy()
-        for ed, ids, _ in self.parts:
-            out[ids] = ed.shadow_mesh()
-        return out
 
 
 # --- Links between the parts of an edit (props.RokebyShadowLinks, ``obj.rokeby_shadow``) -----------
@@ -819,7 +689,7 @@ SELF_CUTOFF = 0.02  # self-shadow displacements under this fraction of the large
 
 def _local_displacement(session: ShadowSession, world: np.ndarray) -> np.ndarray:
     disp = np.asarray(world, np.float64) - session.rest_world
-    local = np.linalg.solve(session.matrix_world[:3, :3], disp.T).T
+    local = disp @ np.linalg.inv(session.matrix_world[:3, :3]).T  # one 3x3 inverse: fast per drag step
     with np.errstate(over="ignore", invalid="ignore"):
         if not (np.isfinite(world).all() and np.isfinite(local.astype(np.float32)).all()):
             raise ShadowEditError("the edited shadow mesh has non-finite or float32-overflowing positions (a drag too large?); "
@@ -1099,14 +969,23 @@ def configuration_weights(shadow_object, light, beta: float = 0.0, *, caster=Non
     return w * fall
 
 
-def _current_light_vector(caster, light) -> np.ndarray:
-    kw = light_arguments(light)
-    m = np.array(caster.matrix_world, dtype=np.float64)
+def _unit_light_vector(m: np.ndarray, kw: dict) -> np.ndarray:
+    """The light direction in the caster's local frame (§6.2: relative changes of object and
+    light), from the light to the caster's origin. A light at the origin itself (possible now that
+    a light may be inside the caster's bounds, e.g. at a ring's centre) has no direction: the
+    local -z axis is used, so no NaN reaches the stored light vectors."""
     lv = kw.get("light_direction")
     if lv is None:
         lv = m[:3, 3] - kw["light_position"]
     cur = np.linalg.solve(m[:3, :3], lv)
-    return cur / np.linalg.norm(cur)
+    n = np.linalg.norm(cur)
+    if not (np.isfinite(n) and n > 1e-9 * max(1.0, float(np.abs(m[:3, 3]).max()))):
+        return np.array([0.0, 0.0, -1.0])
+    return cur / n
+
+
+def _current_light_vector(caster, light) -> np.ndarray:
+    return _unit_light_vector(np.array(caster.matrix_world, dtype=np.float64), light_arguments(light))
 
 
 def _set_key_values(ob, values) -> int:
@@ -1240,8 +1119,8 @@ def live_step(preview: LivePreview) -> None:
     kb = ob.data.shape_keys.key_blocks
     if kb.get(key_name) is None:
         raise ShadowEditError(f"'{ob.name}' has no key '{key_name}' any more; start the drag again")
-    kb[key_name].data.foreach_set("co", preview.rest + local.astype(np.float32).ravel())
-    ob.data.update()
+    compat.shape_key_points(kb[key_name]).foreach_set("co", preview.rest + local.astype(np.float32).ravel())
+    ob.data.update_tag()
     if s.has_self_edits():
         caster, light = s.caster_object(), s.light_object()
         linked = _live_self_blocker(ob) is not None

@@ -10,12 +10,26 @@
 //! where t is the half-opening (tangent) that just encloses the caster and [n, f] its depth range:
 //! the caster maps into x, y ∈ [−1, 1], z ∈ [0, 1] (the usual perspective divide up to an affine
 //! map). A directional light uses the orthographic frustum x = X/r, y = Y/r, z = (Z − n)/(f − n).
-//! A point light inside the caster's bounding box has no such frustum (the paper suggests a
-//! frustum per silhouette loop; that is not implemented): it is an error.
+//! A point light inside the caster's bounding box has no frustum around the whole caster. The
+//! paper's answer (§5.2: "if the light is allowed to enter the bounding volume of a shadow caster,
+//! a more robust solution is to automatically calculate a shadow frustum for each silhouette loop
+//! separately") is [`LightFrame::for_loop`]: a frustum around one loop's silhouette vertices, in
+//! which that loop is deformed. The shadow mesh (§6.1) then needs one space for the whole caster:
+//! [`LightSpace::Spherical`], the post-perspective depth laid along the rays from the light,
+//!
+//! Q(p) = u · (1 + z(r)/w_z),  u = (p − l)/r,  r = |p − l|,  z(r) = f/(f − n) · (1 − n/r),
+//!
+//! with [n, f] the caster's distance range from the light: like the frustum's space it maps every
+//! ray from the light to a straight line (a radial one) with the same depth term z, but it covers
+//! every direction around the light (one unit of Q across the rays is one radian).
 
 use crate::error::{Result, RokebyError};
 use crate::silhouette::Light;
 use glam::{DMat3, DVec3};
+
+/// The widest angle between a silhouette loop's vertices and its frustum's axis (§5.2, per-loop
+/// frusta); beyond it the perspective divide x = X/Z runs away.
+pub const MAX_LOOP_HALF_ANGLE_DEG: f64 = 80.0;
 
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct LightFrame {
@@ -143,6 +157,74 @@ impl LightFrame {
         }
     }
 
+    /// §5.2, per-loop frusta: the frustum of a point light around one silhouette loop's
+    /// vertices `points` (its axis the mean of the directions to them), for a light inside the
+    /// caster's bounds. A directional light's frustum is the caster's ([`Self::new`]). Error: a
+    /// loop reaching more than [`MAX_LOOP_HALF_ANGLE_DEG`] from that axis (it wraps round the
+    /// light; no perspective frustum holds it).
+    pub fn for_loop(light: Light, points: &[DVec3]) -> Result<Self> {
+        light.validate()?;
+        let Light::Point(l) = light else {
+            return Self::new(light, points);
+        };
+        if points.is_empty() {
+            return Err(RokebyError::invalid(
+                "loop",
+                "the silhouette loop has no vertices",
+            ));
+        }
+        let mut sum = DVec3::ZERO;
+        for &p in points {
+            let d = p - l;
+            let len = d.length();
+            if !(len.is_finite() && len > 0.0) {
+                return Err(RokebyError::invalid(
+                    "light",
+                    "the light lies on the caster's silhouette; move it off the caster's surface",
+                ));
+            }
+            sum += d / len;
+        }
+        let Some(axis) = sum.try_normalize() else {
+            return Err(RokebyError::invalid(
+                "light",
+                "a silhouette loop surrounds the light on every side (its directions from the light cancel); no frustum holds it",
+            ));
+        };
+        let basis = orthonormal_basis(axis);
+        let cos_max = MAX_LOOP_HALF_ANGLE_DEG.to_radians().cos();
+        let mut near = f64::INFINITY;
+        let mut far: f64 = 0.0;
+        let mut half: f64 = 0.0;
+        for &p in points {
+            let q = basis * (p - l);
+            if q.z <= cos_max * q.length() {
+                let deg = (q.z / q.length()).clamp(-1.0, 1.0).acos().to_degrees();
+                return Err(RokebyError::invalid(
+                    "light",
+                    format!("a silhouette loop reaches {deg:.0}° from its mean direction as seen from the light (more than {MAX_LOOP_HALF_ANGLE_DEG}°): it wraps round the light and no frustum holds it"),
+                ));
+            }
+            near = near.min(q.z);
+            far = far.max(q.z);
+            half = half.max(q.x.abs() / q.z).max(q.y.abs() / q.z);
+        }
+        if far - near < 1e-9 * far {
+            // A loop at one depth (a circle round the axis): any depth range around it will do;
+            // the loop's own depth is kept during a drag.
+            near *= 0.5;
+            far *= 2.0;
+        }
+        Ok(LightFrame {
+            light,
+            origin: l,
+            basis,
+            half: half.max(1e-12),
+            near,
+            far,
+        })
+    }
+
     /// Frustum coordinates → world point (the inverse of [`Self::to_frustum`]).
     pub fn from_frustum(&self, c: DVec3) -> DVec3 {
         let q = match self.light {
@@ -176,6 +258,75 @@ impl LightFrame {
         match self.light {
             Light::Point(l) => l + (e - l) * (za / ze),
             Light::Directional(d) => e - d.normalize() * (ze - za),
+        }
+    }
+}
+
+/// The space the shadow mesh is solved in (§6.1: post-perspective light space scaled by
+/// (1, 1, 1/w_z)): the light's frustum around the whole caster, or, for a point light inside the
+/// caster's bounds (per-loop frusta, §5.2), the spherical post-perspective space of the module
+/// documentation.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum LightSpace {
+    Frustum(LightFrame),
+    Spherical {
+        light: DVec3,
+        /// Nearest and farthest caster vertex from the light.
+        near: f64,
+        far: f64,
+    },
+}
+
+impl LightSpace {
+    /// The spherical space of a point light at `light` for the caster's `vertices`. Error: the
+    /// light on a vertex (no direction to it).
+    pub fn spherical(light: DVec3, vertices: &[DVec3]) -> Result<Self> {
+        let mut near = f64::INFINITY;
+        let mut far: f64 = 0.0;
+        for &p in vertices {
+            let r = (p - light).length();
+            near = near.min(r);
+            far = far.max(r);
+        }
+        if !(near.is_finite() && far.is_finite()) || near <= 1e-9 * far {
+            return Err(RokebyError::invalid(
+                "light",
+                "the light lies on the caster's surface (a vertex is at the light); move it off the caster",
+            ));
+        }
+        if far - near < 1e-9 * far {
+            far = near * 2.0;
+        }
+        Ok(LightSpace::Spherical { light, near, far })
+    }
+
+    /// World point → solve space, the light direction scaled by 1/`w_z` (§6.1).
+    pub fn to_space(&self, p: DVec3, w_z: f64) -> DVec3 {
+        match *self {
+            LightSpace::Frustum(fr) => fr.to_frustum(p) * DVec3::new(1.0, 1.0, 1.0 / w_z),
+            LightSpace::Spherical { light, near, far } => {
+                let d = p - light;
+                let r = d.length();
+                let z = far / (far - near) * (1.0 - near / r);
+                d / r * (1.0 + z / w_z)
+            }
+        }
+    }
+
+    /// Solve space → world point (the inverse of [`Self::to_space`]; non-finite where the point
+    /// has no world position, e.g. past the light).
+    pub fn from_space(&self, q: DVec3, w_z: f64) -> DVec3 {
+        match *self {
+            LightSpace::Frustum(fr) => fr.from_frustum(q * DVec3::new(1.0, 1.0, w_z)),
+            LightSpace::Spherical { light, near, far } => {
+                let rho = q.length();
+                let z = (rho - 1.0) * w_z;
+                let den = 1.0 - z * (far - near) / far;
+                if !(rho > 0.0 && den > 0.0) {
+                    return DVec3::splat(f64::NAN);
+                }
+                light + q / rho * (near / den)
+            }
         }
     }
 }

@@ -12,13 +12,26 @@
 //! shadow mesh ([`crate::shadow_mesh`], §6.1) is solved from all edited loops; loops with fewer
 //! than `min_loop_vertices` vertices are inactive (shown grey, not selectable, no constraints).
 //!
+//! A point light inside the caster's bounding box (a light under a hat's brim, inside a ring) has
+//! no frustum around the whole caster; as the paper suggests (§5.2), each silhouette loop then
+//! gets its own frustum ([`LightFrame::for_loop`]) in which it is deformed, and the shadow mesh is
+//! solved in the spherical light space ([`LightSpace::Spherical`]). A light inside the caster's
+//! volume (winding number ≥ ½) is an error: it lights only the caster's inside.
+//!
+//! While a drag is in progress ([`Self::shadow_mesh`] after [`Self::drag`]), the shadow mesh is
+//! updated incrementally: with the affine or similarity style and no noise the deformed segment,
+//! and so the shadow mesh (§6.1 is linear in the offsets), is an affine function of the dragged
+//! point f's frustum (x, y) (Schaefer et al.'s affine and similarity MLS are linear in the
+//! deformed control points). The first step of a drag back-substitutes three right-hand sides at
+//! once (f and f + h·eₓ, f + h·e_y); every further step of it is a combination of those, O(V).
+//!
 //! A silhouette vertex lies on a mesh edge, inside the smooth surface the normals describe, so
 //! its grazing shadow ray would immediately re-enter the polygonal caster through the faces
 //! around that edge; the faces incident to the edge's two vertices are skipped by its rays.
 
 use crate::bvh::{Bvh, Hit};
 use crate::error::{Result, RokebyError};
-use crate::light_space::LightFrame;
+use crate::light_space::{LightFrame, LightSpace};
 use crate::mls2d::{sinusoidal_noise, Mls2d, MlsStyle};
 use crate::shadow_mesh::{EdgePoint, ShadowMeshSolver};
 use crate::silhouette::{silhouettes, ClosedMesh, Light, SilhouetteLoop};
@@ -73,9 +86,42 @@ pub struct DragResult {
     pub moved_to: DVec3,
 }
 
+/// What identifies one drag (the same segment, dragged point and deformation) between steps.
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct DragKey {
+    loop_index: usize,
+    fixed: (usize, usize),
+    moved: usize,
+    style: MlsStyle,
+    mls_alpha: f64,
+}
+
+/// The incremental shadow mesh of one drag: x(f) = x₀ + Gₓ (f − f₀).x + G_y (f − f₀).y in the
+/// solve space.
+struct DragCache {
+    key: DragKey,
+    epoch: u64,
+    f0: DVec2,
+    x0: Vec<DVec3>,
+    gx: Vec<DVec3>,
+    gy: Vec<DVec3>,
+}
+
+/// Step (in frustum units) of the two extra right-hand sides of [`DragCache`]; the map is affine,
+/// so any step gives the same result up to rounding.
+const CACHE_STEP: f64 = 0.1;
+
 pub struct ShadowEditor {
     caster: ClosedMesh,
-    frame: LightFrame,
+    light: Light,
+    /// The frustum around the whole caster (None: per-loop frusta).
+    frame: Option<LightFrame>,
+    /// Per loop: its frustum (the caster's, or its own with per-loop frusta; None: a loop no
+    /// frustum holds, inactive).
+    frames: Vec<Option<LightFrame>>,
+    /// Why loops have no frustum (per-loop frusta), for the error when none is left.
+    frame_error: Option<RokebyError>,
+    space: LightSpace,
     bvh: Bvh,
     num_receiver_faces: usize,
     /// Caster vertex → incident caster faces (CSR).
@@ -91,6 +137,17 @@ pub struct ShadowEditor {
     w_z: f64,
     constraint_weight: f64,
     solver: Option<ShadowMeshSolver>,
+    /// The last drag step: its key and the dragged point's frustum (x, y); None when it is not
+    /// affine in that point (rigid style, noise) or nothing is being dragged.
+    last_drag: Option<(DragKey, DVec2)>,
+    /// Bumped whenever the base of the drags changes (commit, cancel, reset, another drag).
+    epoch: u64,
+    /// Per loop: the handles of its committed silhouette (None until needed); a drag step casts
+    /// only its segment's rays and takes the others from here.
+    committed_handles: Vec<Option<Vec<Handle>>>,
+    /// Per loop: the handles of its uncommitted drag (None: no drag since the last commit).
+    current_handles: Vec<Option<Vec<Handle>>>,
+    cache: Option<DragCache>,
 }
 
 /// A point light farther than this many caster radii from the caster's bounds centre is treated
@@ -130,7 +187,7 @@ pub fn far_point_as_directional(light: Light, vertices: &[DVec3]) -> Light {
 impl ShadowEditor {
     /// A session for `caster` lit by `light` over receivers (`receiver_vertices` N×3 flat,
     /// `receiver_faces` F×3 flat; may be several objects merged). Errors: an open or non-manifold
-    /// caster, a light inside the caster's bounds, no receiver under the light (no handle of an
+    /// caster, a light inside the caster's volume, no receiver under the light (no handle of an
     /// active loop lands on a receiver).
     pub fn new(
         caster: ClosedMesh,
@@ -202,7 +259,21 @@ impl ShadowEditor {
                 caster.vertices[f[2] as usize],
             ]);
         }
-        let frame = LightFrame::new(light, &caster.vertices)?;
+        // §5.2: the frustum around the caster, or (a point light inside its bounds) one per loop.
+        let (frame, space) = match (light, LightFrame::new(light, &caster.vertices)) {
+            (_, Ok(f)) => (Some(f), LightSpace::Frustum(f)),
+            (Light::Point(l), Err(_)) => {
+                let w = caster.winding_number(l);
+                if w.abs() >= 0.5 {
+                    return Err(RokebyError::invalid(
+                        "light",
+                        format!("the light at ({:.4}, {:.4}, {:.4}) is inside the caster's volume (winding number {w:.2}): it lights only the caster's inside and no silhouette of it is visible; move the light out of the caster (it may stay inside the caster's bounding box, e.g. under a brim or inside a ring)", l.x, l.y, l.z),
+                    ));
+                }
+                (None, LightSpace::spherical(l, &caster.vertices)?)
+            }
+            (_, Err(e)) => return Err(e),
+        };
         let bvh = Bvh::new(tris, "receivers")?;
         let (mn, mx) = bvh.bounds();
         let t_min = 1e-7 * (mx - mn).length().max(1e-300);
@@ -225,23 +296,46 @@ impl ShadowEditor {
             }
         }
         let loops = silhouettes(&caster, &light)?;
+        let mut frame_error = None;
+        let frames: Vec<Option<LightFrame>> = loops
+            .iter()
+            .map(|l| match frame {
+                Some(f) => Some(f),
+                None => match LightFrame::for_loop(light, &l.positions()) {
+                    Ok(f) => Some(f),
+                    Err(e) => {
+                        frame_error.get_or_insert(e);
+                        None
+                    }
+                },
+            })
+            .collect();
         let active: Vec<bool> = loops
             .iter()
-            .map(|l| l.len() >= min_loop_vertices.max(3))
+            .zip(&frames)
+            .map(|(l, f)| f.is_some() && l.len() >= min_loop_vertices.max(3))
             .collect();
         let rest: Vec<Vec<DVec3>> = loops
             .iter()
-            .map(|l| {
-                l.vertices
+            .zip(&frames)
+            .map(|(l, f)| match f {
+                Some(f) => l
+                    .vertices
                     .iter()
-                    .map(|s| frame.to_frustum(s.position))
-                    .collect()
+                    .map(|s| f.to_frustum(s.position))
+                    .collect(),
+                None => vec![DVec3::ZERO; l.len()],
             })
             .collect();
         let zeros: Vec<Vec<DVec2>> = loops.iter().map(|l| vec![DVec2::ZERO; l.len()]).collect();
+        let nloops = loops.len();
         let ed = ShadowEditor {
             caster,
+            light,
             frame,
+            frames,
+            frame_error,
+            space,
             bvh,
             num_receiver_faces,
             vf_start,
@@ -255,7 +349,22 @@ impl ShadowEditor {
             w_z,
             constraint_weight,
             solver: None,
+            last_drag: None,
+            epoch: 0,
+            cache: None,
+            committed_handles: vec![None; nloops],
+            current_handles: vec![None; nloops],
         };
+        if ed.frame.is_none() && !ed.frames.iter().any(|f| f.is_some()) {
+            let why = ed.frame_error.as_ref().map_or_else(
+                || "the caster has no silhouette as seen from the light".to_string(),
+                |e| e.to_string(),
+            );
+            return Err(RokebyError::invalid(
+                "light",
+                format!("no silhouette loop of the caster can be edited from this light inside its bounds ({why}); move the light"),
+            ));
+        }
         if !ed.active.iter().any(|&a| a) {
             return Err(RokebyError::invalid(
                 "min_loop_vertices",
@@ -284,8 +393,22 @@ impl ShadowEditor {
     pub fn caster(&self) -> &ClosedMesh {
         &self.caster
     }
-    pub fn frame(&self) -> &LightFrame {
-        &self.frame
+    /// The light's frustum around the whole caster (None: per-loop frusta, a point light inside
+    /// the caster's bounds).
+    pub fn frame(&self) -> Option<&LightFrame> {
+        self.frame.as_ref()
+    }
+    /// Loop `k`'s frustum (None for a loop no frustum holds).
+    pub fn loop_frame(&self, k: usize) -> Option<&LightFrame> {
+        self.frames.get(k).and_then(|f| f.as_ref())
+    }
+    /// Whether each loop has its own frustum (§5.2).
+    pub fn per_loop_frusta(&self) -> bool {
+        self.frame.is_none()
+    }
+    /// The light (a far point light already turned into the directional one it equals).
+    pub fn light(&self) -> Light {
+        self.light
     }
     pub fn loops(&self) -> &[SilhouetteLoop] {
         &self.loops
@@ -310,19 +433,19 @@ impl ShadowEditor {
     /// The current (edited, not necessarily committed) silhouette vertices of loop `k`.
     pub fn silhouette(&self, k: usize) -> Result<Vec<DVec3>> {
         self.check_loop(k)?;
+        let Some(frame) = self.frames[k] else {
+            return Ok(self.loops[k].positions());
+        };
         Ok(self.rest[k]
             .iter()
             .zip(&self.current[k])
-            .map(|(r, d)| {
-                self.frame
-                    .from_frustum(DVec3::new(r.x + d.x, r.y + d.y, r.z))
-            })
+            .map(|(r, d)| frame.from_frustum(DVec3::new(r.x + d.x, r.y + d.y, r.z)))
             .collect())
     }
 
     /// One shadow ray (§4.2) from `from` for the silhouette vertex on caster edge (b, f).
     fn cast_one(&self, from: DVec3, b: u32, f: u32) -> Handle {
-        let dir = self.frame.light.ray_dir(from);
+        let dir = self.light.ray_dir(from);
         let nr = self.num_receiver_faces;
         let near = |v: u32| {
             &self.vf_faces
@@ -460,23 +583,93 @@ impl ShadowEditor {
             return Err(RokebyError::invalid("target", "must be finite"));
         }
         let seg = self.segment(k, d.fixed.0, d.fixed.1, d.moved)?;
+        let frame = self.frames[k].expect("active loops have a frustum");
         let rest = &self.rest[k];
-        let cur: Vec<DVec2> = rest
-            .iter()
-            .zip(&self.committed[k])
-            .map(|(r, c)| DVec2::new(r.x + c.x, r.y + c.y))
-            .collect();
-        let a3 =
-            self.frame
-                .from_frustum(DVec3::new(cur[d.moved].x, cur[d.moved].y, rest[d.moved].z));
-        let f = self.frame.drag_target(a3, d.target);
-        let f2 = self.frame.to_frustum(f).truncate();
+        let a3 = frame.from_frustum(DVec3::new(
+            rest[d.moved].x + self.committed[k][d.moved].x,
+            rest[d.moved].y + self.committed[k][d.moved].y,
+            rest[d.moved].z,
+        ));
+        let f = frame.drag_target(a3, d.target);
+        let f2 = frame.to_frustum(f).truncate();
         if !f2.is_finite() {
             return Err(RokebyError::invalid(
                 "target",
                 "the dragged point has no position in the light's frustum (behind the light?)",
             ));
         }
+        let new = self.segment_offsets(k, &seg, d, f2)?;
+        // The fuzzer found drags (1e30 targets, 1e300 noise, w_z = 1e30) whose silhouette left f64:
+        // an error that changes nothing, not NaN points.
+        let overflow = || {
+            RokebyError::invalid(
+                "drag",
+                "the dragged boundary overflows f64 (target, noise amplitude or weights too large)",
+            )
+        };
+        if !f.is_finite() || !new.iter().all(|p| p.is_finite()) {
+            return Err(overflow());
+        }
+        let old = std::mem::replace(&mut self.current[k], new);
+        let silhouette = match self.silhouette(k) {
+            Ok(s) if s.iter().all(|p| p.is_finite()) => s,
+            res => {
+                self.current[k] = old;
+                return Err(res.err().unwrap_or_else(overflow));
+            }
+        };
+        // Outside the segment the silhouette is the committed one: only the segment's rays are cast.
+        let mut handles = match self.committed_handles[k].take() {
+            Some(h) => h,
+            None => {
+                let committed: Vec<DVec3> = self.rest[k]
+                    .iter()
+                    .zip(&self.committed[k])
+                    .map(|(r, d)| frame.from_frustum(DVec3::new(r.x + d.x, r.y + d.y, r.z)))
+                    .collect();
+                self.cast_handles(&committed, k, None)
+            }
+        };
+        self.committed_handles[k] = Some(handles.clone());
+        let lp = &self.loops[k];
+        let fresh: Vec<Handle> = seg
+            .par_iter()
+            .map(|&i| self.cast_one(silhouette[i], lp.vertices[i].back, lp.vertices[i].front))
+            .collect();
+        for (&i, h) in seg.iter().zip(fresh) {
+            handles[i] = h;
+        }
+        self.current_handles[k] = Some(handles.clone());
+        // The incremental shadow mesh (module documentation): valid while the same drag goes on.
+        let key = DragKey {
+            loop_index: k,
+            fixed: (seg[0], *seg.last().expect("segment has ends")),
+            moved: d.moved,
+            style: d.style,
+            mls_alpha: d.mls_alpha,
+        };
+        let affine = d.noise_amplitude == 0.0 && d.style != MlsStyle::Rigid;
+        if self.last_drag.map(|(k0, _)| k0) != Some(key) {
+            self.epoch += 1;
+        }
+        self.last_drag = affine.then_some((key, f2));
+        Ok(DragResult {
+            silhouette,
+            handles,
+            segment: seg,
+            moved_to: f,
+        })
+    }
+
+    /// Loop `k`'s offsets (frustum x, y per silhouette vertex) after deforming the segment `seg`
+    /// of its committed state so that the dragged vertex goes to `f2` (§5.2, §5.3).
+    fn segment_offsets(&self, k: usize, seg: &[usize], d: &Drag, f2: DVec2) -> Result<Vec<DVec2>> {
+        let rest = &self.rest[k];
+        let cur: Vec<DVec2> = rest
+            .iter()
+            .zip(&self.committed[k])
+            .map(|(r, c)| DVec2::new(r.x + c.x, r.y + c.y))
+            .collect();
         let (i0, i1) = (seg[0], *seg.last().expect("segment has ends"));
         let mls = Mls2d::new(
             vec![cur[i0], cur[i1], cur[d.moved]],
@@ -497,42 +690,35 @@ impl ShadowEditor {
         for (&i, p) in seg.iter().zip(&moved) {
             new[i] = DVec2::new(p.x - rest[i].x, p.y - rest[i].y);
         }
-        // The fuzzer found drags (1e30 targets, 1e300 noise, w_z = 1e30) whose silhouette left f64:
-        // an error that changes nothing, not NaN points.
-        let overflow = || {
-            RokebyError::invalid(
-                "drag",
-                "the dragged boundary overflows f64 (target, noise amplitude or weights too large)",
-            )
-        };
-        if !f.is_finite() || !new.iter().all(|p| p.is_finite()) {
-            return Err(overflow());
-        }
-        let old = std::mem::replace(&mut self.current[k], new);
-        let silhouette = match self.silhouette(k) {
-            Ok(s) if s.iter().all(|p| p.is_finite()) => s,
-            res => {
-                self.current[k] = old;
-                return Err(res.err().unwrap_or_else(overflow));
-            }
-        };
-        let handles = self.cast_handles(&silhouette, k, None);
-        Ok(DragResult {
-            silhouette,
-            handles,
-            segment: seg,
-            moved_to: f,
-        })
+        Ok(new)
     }
 
     /// Makes the current state the base of the next drag (mouse release).
     pub fn commit(&mut self) {
         self.committed = self.current.clone();
+        for (c, h) in self
+            .committed_handles
+            .iter_mut()
+            .zip(&mut self.current_handles)
+        {
+            if let Some(h) = h.take() {
+                *c = Some(h);
+            }
+        }
+        self.end_drag();
+    }
+
+    fn end_drag(&mut self) {
+        self.last_drag = None;
+        self.epoch += 1;
+        self.cache = None;
     }
 
     /// Drops uncommitted changes.
     pub fn cancel(&mut self) {
         self.current = self.committed.clone();
+        self.current_handles.iter_mut().for_each(|h| *h = None);
+        self.end_drag();
     }
 
     /// Forgets every edit.
@@ -541,6 +727,9 @@ impl ShadowEditor {
             *c = vec![DVec2::ZERO; l.len()];
         }
         self.current = self.committed.clone();
+        self.current_handles.iter_mut().for_each(|h| *h = None);
+        self.committed_handles.iter_mut().for_each(|h| *h = None);
+        self.end_drag();
     }
 
     /// Whether the shadow-mesh system has been factored (it is on the first [`Self::shadow_mesh`]).
@@ -562,8 +751,8 @@ impl ShadowEditor {
                     }));
                 }
             }
-            self.solver = Some(ShadowMeshSolver::new(
-                self.frame,
+            self.solver = Some(ShadowMeshSolver::in_space(
+                self.space,
                 &self.caster.vertices,
                 &self.caster.faces,
                 cons,
@@ -574,17 +763,98 @@ impl ShadowEditor {
         Ok(())
     }
 
+    /// The solve-space offsets of every active loop's constraints for the per-loop offsets
+    /// `per_loop` (frustum (x, y) of each silhouette vertex): (Δx, Δy, 0) in the caster's frustum;
+    /// with per-loop frusta the edited minus the rest silhouette point in the spherical space.
+    fn offsets(&self, per_loop: &[Vec<DVec2>]) -> Vec<DVec3> {
+        let solver = self.solver.as_ref().expect("factored");
+        let mut out = Vec::new();
+        for (k, d) in per_loop.iter().enumerate() {
+            if !self.active[k] {
+                continue;
+            }
+            match (self.frame, self.frames[k]) {
+                (Some(_), _) => out.extend(d.iter().map(|d| d.extend(0.0))),
+                (None, Some(f)) => {
+                    out.extend(self.rest[k].iter().zip(d).zip(&self.loops[k].vertices).map(
+                        |((r, d), s)| {
+                            if *d == DVec2::ZERO {
+                                return DVec3::ZERO;
+                            }
+                            let moved = f.from_frustum(DVec3::new(r.x + d.x, r.y + d.y, r.z));
+                            solver.to_space(moved) - solver.to_space(s.position)
+                        },
+                    ))
+                }
+                (None, None) => unreachable!("active loops have a frustum"),
+            }
+        }
+        out
+    }
+
     /// The shadow mesh (§6.1) for the current edits: the caster's vertices moved so that its
-    /// silhouettes follow the edited boundaries.
+    /// silhouettes follow the edited boundaries. During an affine drag in the caster's frustum
+    /// every step after the first is incremental (module documentation).
     pub fn shadow_mesh(&mut self) -> Result<Vec<DVec3>> {
         self.factor()?;
-        let deltas: Vec<DVec2> = self
-            .current
-            .iter()
-            .zip(&self.active)
-            .filter(|(_, &a)| a)
-            .flat_map(|(d, _)| d.iter().copied())
-            .collect();
-        self.solver.as_ref().expect("factored").solve(&deltas)
+        let Some((key, f2)) = self.last_drag.filter(|_| self.frame.is_some()) else {
+            let off = self.offsets(&self.current);
+            return self.solver.as_ref().expect("factored").solve_offsets(&off);
+        };
+        let solver = self.solver.as_ref().expect("factored");
+        if let Some(c) = &self.cache {
+            if c.key == key && c.epoch == self.epoch {
+                let (dx, dy) = (f2.x - c.f0.x, f2.y - c.f0.y);
+                let x: Vec<DVec3> =
+                    c.x0.iter()
+                        .zip(c.gx.iter().zip(&c.gy))
+                        .map(|(x0, (gx, gy))| *x0 + *gx * dx + *gy * dy)
+                        .collect();
+                return solver.to_world(&x);
+            }
+        }
+        // First step of this drag: the current offsets and the two displaced by h in x and y.
+        let d = Drag {
+            loop_index: key.loop_index,
+            fixed: key.fixed,
+            moved: key.moved,
+            target: DVec3::ZERO,
+            style: key.style,
+            mls_alpha: key.mls_alpha,
+            noise_amplitude: 0.0,
+            noise_frequency: 0.0,
+        };
+        let seg = self.segment(key.loop_index, key.fixed.0, key.fixed.1, key.moved)?;
+        let mut sets = Vec::with_capacity(3);
+        for h in [
+            DVec2::ZERO,
+            DVec2::new(CACHE_STEP, 0.0),
+            DVec2::new(0.0, CACHE_STEP),
+        ] {
+            let mut per_loop = self.current.clone();
+            if h != DVec2::ZERO {
+                per_loop[key.loop_index] =
+                    self.segment_offsets(key.loop_index, &seg, &d, f2 + h)?;
+            }
+            sets.push(self.offsets(&per_loop));
+        }
+        let refs: Vec<&[DVec3]> = sets.iter().map(|s| s.as_slice()).collect();
+        let mut xs = solver.solve_space(&refs)?;
+        let xy = xs.pop().expect("three solutions");
+        let xx = xs.pop().expect("three solutions");
+        let x0 = xs.pop().expect("three solutions");
+        let inv = 1.0 / CACHE_STEP;
+        let gx = xx.iter().zip(&x0).map(|(a, b)| (*a - *b) * inv).collect();
+        let gy = xy.iter().zip(&x0).map(|(a, b)| (*a - *b) * inv).collect();
+        let out = solver.to_world(&x0)?;
+        self.cache = Some(DragCache {
+            key,
+            epoch: self.epoch,
+            f0: f2,
+            x0,
+            gx,
+            gy,
+        });
+        Ok(out)
     }
 }

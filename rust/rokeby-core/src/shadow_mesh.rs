@@ -14,9 +14,15 @@
 //! (faer's sparse Cholesky) and every edit is three back-substitutions. The small ε anchors parts
 //! of the caster without silhouette constraints. With every Δ = 0 the solution is P itself.
 //! Afterwards the positions go back through the inverse scale and projection.
+//!
+//! For a point light inside the caster's bounds (per-loop frusta, §5.2) the space is
+//! [`LightSpace::Spherical`] and a constraint's offset is the difference of its edited and rest
+//! silhouette points there (a 3D offset; in the frustum it is (Δx, Δy, 0)). Every solution is
+//! linear in the offsets, which [`ShadowMeshSolver::solve_space`] exposes for incremental updates
+//! while dragging.
 
 use crate::error::{Result, RokebyError};
-use crate::light_space::LightFrame;
+use crate::light_space::{LightFrame, LightSpace};
 use faer::linalg::solvers::Solve;
 use faer::sparse::linalg::solvers::{Llt, SymbolicLlt};
 use faer::sparse::{SparseColMat, Triplet};
@@ -63,7 +69,7 @@ pub fn cotangent_weights(v: &[DVec3], faces: &[[u32; 3]]) -> Vec<(u32, u32, f64)
 
 /// The factored shadow-mesh system for one set of silhouette constraints.
 pub struct ShadowMeshSolver {
-    frame: LightFrame,
+    space: LightSpace,
     w_z: f64,
     /// Rest positions in scaled post-perspective light space.
     rest: Vec<DVec3>,
@@ -88,6 +94,25 @@ impl ShadowMeshSolver {
         w_z: f64,
         constraint_weight: f64,
     ) -> Result<Self> {
+        Self::in_space(
+            LightSpace::Frustum(frame),
+            vertices,
+            faces,
+            constraints,
+            w_z,
+            constraint_weight,
+        )
+    }
+
+    /// [`Self::new`] in any [`LightSpace`].
+    pub fn in_space(
+        space: LightSpace,
+        vertices: &[DVec3],
+        faces: &[[u32; 3]],
+        constraints: Vec<EdgePoint>,
+        w_z: f64,
+        constraint_weight: f64,
+    ) -> Result<Self> {
         if !(w_z.is_finite() && w_z > 0.0) {
             return Err(RokebyError::invalid(
                 "w_z",
@@ -106,11 +131,7 @@ impl ShadowMeshSolver {
                 return Err(RokebyError::invalid("constraints", format!("constraint {k} refers to edge ({}, {}) with α = {} outside the mesh or [0, 1]", c.back, c.front, c.alpha)));
             }
         }
-        let scale = DVec3::new(1.0, 1.0, 1.0 / w_z);
-        let rest: Vec<DVec3> = vertices
-            .iter()
-            .map(|&p| frame.to_frustum(p) * scale)
-            .collect();
+        let rest: Vec<DVec3> = vertices.iter().map(|&p| space.to_space(p, w_z)).collect();
         if let Some(i) = rest.iter().position(|p| !p.is_finite()) {
             return Err(RokebyError::invalid(
                 "vertices",
@@ -184,7 +205,7 @@ impl ShadowMeshSolver {
         let llt = Llt::try_new_with_symbolic(symbolic, m.as_ref(), Side::Lower)
             .map_err(|e| RokebyError::invalid("faces", format!("the shadow-mesh system is not positive definite ({e:?}); is the caster degenerate?")))?;
         let mut s = ShadowMeshSolver {
-            frame,
+            space,
             w_z,
             rest,
             lap,
@@ -194,7 +215,7 @@ impl ShadowMeshSolver {
             llt,
             rhs_rest: Mat::zeros(n, 3),
         };
-        s.rhs_rest = s.rhs(&vec![DVec2::ZERO; s.constraints.len()]);
+        s.rhs_rest = s.rhs(&vec![DVec3::ZERO; s.constraints.len()]);
         Ok(s)
     }
 
@@ -202,11 +223,24 @@ impl ShadowMeshSolver {
         self.constraints.len()
     }
 
-    pub fn frame(&self) -> &LightFrame {
-        &self.frame
+    /// The light's frustum around the caster (None in the spherical space).
+    pub fn frame(&self) -> Option<&LightFrame> {
+        match &self.space {
+            LightSpace::Frustum(f) => Some(f),
+            LightSpace::Spherical { .. } => None,
+        }
     }
 
-    fn rhs(&self, deltas: &[DVec2]) -> Mat<f64> {
+    pub fn space(&self) -> &LightSpace {
+        &self.space
+    }
+
+    /// World point → the solve space (scaled by 1/w_z along the light).
+    pub fn to_space(&self, p: DVec3) -> DVec3 {
+        self.space.to_space(p, self.w_z)
+    }
+
+    fn rhs(&self, deltas: &[DVec3]) -> Mat<f64> {
         let n = self.rest.len();
         let mut r = Mat::<f64>::zeros(n, 3);
         // δ = L P, then Lᵀδ = L δ.
@@ -229,7 +263,7 @@ impl ShadowMeshSolver {
         }
         for (c, d) in self.constraints.iter().zip(deltas) {
             let (b, f, a) = (c.back as usize, c.front as usize, c.alpha);
-            let t = self.rest[b] * (1.0 - a) + self.rest[f] * a + DVec3::new(d.x, d.y, 0.0);
+            let t = self.rest[b] * (1.0 - a) + self.rest[f] * a + *d;
             for (idx, w) in [(b, 1.0 - a), (f, a)] {
                 let v = t * (self.lambda2 * w);
                 r[(idx, 0)] += v.x;
@@ -243,34 +277,65 @@ impl ShadowMeshSolver {
     /// The shadow mesh's world-space vertices for the silhouette offsets `deltas` (one per
     /// constraint, in frustum (x, y) units).
     pub fn solve(&self, deltas: &[DVec2]) -> Result<Vec<DVec3>> {
-        if deltas.len() != self.constraints.len() {
-            return Err(RokebyError::invalid(
-                "deltas",
-                format!(
-                    "expected {} offsets (one per silhouette constraint), got {}",
-                    self.constraints.len(),
-                    deltas.len()
-                ),
-            ));
+        let d3: Vec<DVec3> = deltas.iter().map(|d| d.extend(0.0)).collect();
+        self.solve_offsets(&d3)
+    }
+
+    /// [`Self::solve`] for offsets in the solve space (3D; see the module documentation).
+    pub fn solve_offsets(&self, offsets: &[DVec3]) -> Result<Vec<DVec3>> {
+        let x = self.solve_space(&[offsets])?;
+        self.to_world(&x[0])
+    }
+
+    /// The solutions in the solve space for several sets of offsets, back-substituted together
+    /// (one pass over the factor for all of them).
+    pub fn solve_space(&self, sets: &[&[DVec3]]) -> Result<Vec<Vec<DVec3>>> {
+        let n = self.rest.len();
+        for d in sets {
+            if d.len() != self.constraints.len() {
+                return Err(RokebyError::invalid(
+                    "deltas",
+                    format!(
+                        "expected {} offsets (one per silhouette constraint), got {}",
+                        self.constraints.len(),
+                        d.len()
+                    ),
+                ));
+            }
+            if !d.iter().all(|d| d.is_finite()) {
+                return Err(RokebyError::invalid("deltas", "offsets must be finite"));
+            }
         }
-        if !deltas.iter().all(|d| d.is_finite()) {
-            return Err(RokebyError::invalid("deltas", "offsets must be finite"));
+        let mut x = Mat::<f64>::zeros(n, 3 * sets.len());
+        for (s, d) in sets.iter().enumerate() {
+            let r = if d.iter().all(|d| *d == DVec3::ZERO) {
+                self.rhs_rest.clone()
+            } else {
+                self.rhs(d)
+            };
+            for c in 0..3 {
+                for i in 0..n {
+                    x[(i, 3 * s + c)] = r[(i, c)];
+                }
+            }
         }
-        let mut x = if deltas.iter().all(|d| *d == DVec2::ZERO) {
-            self.rhs_rest.clone()
-        } else {
-            self.rhs(deltas)
-        };
         self.llt.solve_in_place(x.as_mut());
-        let inv = DVec3::new(1.0, 1.0, self.w_z);
-        let out: Vec<DVec3> = (0..self.rest.len())
-            .map(|i| {
-                self.frame
-                    .from_frustum(DVec3::new(x[(i, 0)], x[(i, 1)], x[(i, 2)]) * inv)
+        Ok((0..sets.len())
+            .map(|s| {
+                (0..n)
+                    .map(|i| DVec3::new(x[(i, 3 * s)], x[(i, 3 * s + 1)], x[(i, 3 * s + 2)]))
+                    .collect()
             })
+            .collect())
+    }
+
+    /// Solve-space positions → the shadow mesh's world vertices. An error, not NaN vertices:
+    /// the fuzzer found w_z = weight = 1e30 with a drag of 1e300 noise overflowing the solve.
+    pub fn to_world(&self, x: &[DVec3]) -> Result<Vec<DVec3>> {
+        let out: Vec<DVec3> = x
+            .iter()
+            .map(|&q| self.space.from_space(q, self.w_z))
             .collect();
-        // An error, not NaN vertices: the fuzzer found w_z = weight = 1e30 with a drag of 1e300
-        // noise overflowing the solve.
         if let Some(i) = out.iter().position(|p| !p.is_finite()) {
             return Err(RokebyError::invalid("deltas", format!("the shadow mesh overflowed at vertex {i}: the silhouette offsets or the weights (w_z, constraint_weight) are too large")));
         }

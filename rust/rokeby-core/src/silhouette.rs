@@ -183,6 +183,23 @@ impl ClosedMesh {
         })
     }
 
+    /// The generalised winding number of the closed mesh around `p` (Σ of the faces' signed
+    /// solid angles / 4π, Van Oosterom–Strackee): 1 inside an outward-oriented closed surface,
+    /// 0 outside (±½ on it). A light inside the caster's volume (|w| ≥ ½) lights only its inside.
+    pub fn winding_number(&self, p: DVec3) -> f64 {
+        let mut sum = 0.0;
+        for f in &self.faces {
+            let a = self.vertices[f[0] as usize] - p;
+            let b = self.vertices[f[1] as usize] - p;
+            let c = self.vertices[f[2] as usize] - p;
+            let (la, lb, lc) = (a.length(), b.length(), c.length());
+            let num = a.dot(b.cross(c));
+            let den = la * lb * lc + a.dot(b) * lc + a.dot(c) * lb + b.dot(c) * la;
+            sum += 2.0 * num.atan2(den);
+        }
+        sum / (4.0 * std::f64::consts::PI)
+    }
+
     /// Axis-aligned bounds of the vertices.
     pub fn bounds(&self) -> (DVec3, DVec3) {
         self.vertices.iter().fold(

@@ -532,7 +532,7 @@ fn bad_inputs_are_errors() {
     .err()
     .unwrap()
     .to_string();
-    assert!(e.contains("inside the caster's bounding box"), "{e}");
+    assert!(e.contains("inside the caster's volume"), "{e}");
     // No receiver under the light (the plane is above the sphere, the light below it).
     let e = ShadowEditor::new(
         mesh.clone(),
@@ -675,7 +675,7 @@ fn far_point_lights_are_directional() {
             10.0,
         )
         .unwrap();
-        assert!(matches!(ed.frame().light, Light::Directional(_)), "{far}");
+        assert!(matches!(ed.light(), Light::Directional(_)), "{far}");
         let (a, b) = (ed.handles(0, None).unwrap(), sun.handles(0, None).unwrap());
         assert_eq!(a.len(), b.len());
         for (x, y) in a.iter().zip(&b) {
@@ -723,7 +723,7 @@ fn far_point_lights_are_directional() {
         10.0,
     )
     .unwrap();
-    assert!(matches!(near.frame().light, Light::Point(_)));
+    assert!(matches!(near.light(), Light::Point(_)));
 }
 
 /// Solver weights outside [1e-6, 1e6] are refused by name (w² beside Laplacian entries ~1 would
@@ -765,5 +765,213 @@ fn extreme_solver_weights_are_bounded() {
         ed.commit();
         let sm = ed.shadow_mesh().unwrap();
         assert!(sm.iter().all(|p| p.is_finite()), "w_z {wz}, weight {cw}");
+    }
+}
+
+/// A torus round the z axis (major radius `big`, tube radius `small`) centred at `c`, faces
+/// counter-clockwise from outside.
+fn torus(c: DVec3, big: f64, small: f64, nu: usize, nv: usize) -> (Vec<f32>, Vec<i64>) {
+    let mut v = Vec::new();
+    for i in 0..nu {
+        let u = 2.0 * std::f64::consts::PI * i as f64 / nu as f64;
+        for j in 0..nv {
+            let w = 2.0 * std::f64::consts::PI * j as f64 / nv as f64;
+            let r = big + small * w.cos();
+            v.push(c + DVec3::new(r * u.cos(), r * u.sin(), small * w.sin()));
+        }
+    }
+    let id = |i: usize, j: usize| ((i % nu) * nv + j % nv) as i64;
+    let mut f = Vec::new();
+    for i in 0..nu {
+        for j in 0..nv {
+            let (a, b, cc, d) = (id(i, j), id(i + 1, j), id(i + 1, j + 1), id(i, j + 1));
+            f.extend_from_slice(&[a, b, cc, a, cc, d]);
+        }
+    }
+    let vf = v
+        .iter()
+        .flat_map(|p| [p.x as f32, p.y as f32, p.z as f32])
+        .collect();
+    (vf, f)
+}
+
+/// §5.2 per-loop frusta: a point light at the centre of a ring (inside its bounding box, outside
+/// its volume) lights the ground through the ring's hole. The lower silhouette loop (tangent
+/// circle of the tube, 17.5° below the light) bounds the lit disc on the ground; its handles are
+/// the analytic ones, a drag lands where the cursor is, the shadow mesh follows and rests at rest.
+#[test]
+fn a_light_inside_a_ring_gets_per_loop_frusta() {
+    let c = DVec3::new(0.0, 0.0, 1.0);
+    let (v, f) = torus(c, 1.0, 0.3, 96, 24);
+    assert!(signed_volume(&v, &f) > 0.0);
+    let mesh = ClosedMesh::new(&v, &f, None).unwrap();
+    assert!(mesh.winding_number(c).abs() < 1e-6);
+    assert!((mesh.winding_number(DVec3::new(1.0, 0.0, 1.0)) - 1.0).abs() < 1e-6);
+    assert!(LightFrame::new(Light::Point(c), &mesh.vertices).is_err());
+    let (pv, pf) = plane(0.0, 20.0);
+    let mut ed = ShadowEditor::new(mesh, &pv, &pf, Light::Point(c), 20, 2.5, 10.0).unwrap();
+    assert!(ed.per_loop_frusta() && ed.frame().is_none());
+    let k = (0..ed.loops().len())
+        .find(|&k| ed.active()[k] && ed.handles(k, None).unwrap().iter().all(|h| h.hit))
+        .expect("the lower loop reaches the ground");
+    assert!(ed.loop_frame(k).unwrap().basis.row(2).z < -0.99);
+    let hs = ed.handles(k, None).unwrap();
+    // Tangent from the light to the tube: 17.46° below the horizon, so radius 1/tan on the ground
+    // (the polygonal tube is a little smaller than the smooth one).
+    let want = 1.0 / (0.3f64).asin().tan();
+    for h in &hs {
+        let r = h.position.truncate().length();
+        assert!(
+            !h.on_caster && (r - want).abs() < 0.03 * want,
+            "{r} vs {want}"
+        );
+    }
+    let n = hs.len();
+    let m = 0;
+    let e = hs[m].position * 1.15;
+    let d = Drag {
+        loop_index: k,
+        fixed: ((n - n / 6) % n, n / 6),
+        moved: m,
+        target: DVec3::new(e.x, e.y, 0.0),
+        style: MlsStyle::Affine,
+        mls_alpha: 1.0,
+        noise_amplitude: 0.0,
+        noise_frequency: 0.0,
+    };
+    let r = ed.drag(&d).unwrap();
+    assert!(
+        (r.handles[m].position - d.target).length() < 1e-6,
+        "{:?}",
+        r.handles[m].position
+    );
+    for (i, h) in hs.iter().enumerate() {
+        if !r.segment.contains(&i) {
+            assert!((r.handles[i].position - h.position).length() < 1e-9);
+        }
+    }
+    ed.commit();
+    let sm = ed.shadow_mesh().unwrap();
+    let rest = ed.caster().vertices.clone();
+    let moved: Vec<f64> = sm
+        .iter()
+        .zip(&rest)
+        .map(|(a, b)| (*a - *b).length())
+        .collect();
+    let most = moved.iter().cloned().fold(0.0, f64::max);
+    assert!(most > 0.01 && most < 0.5, "the shadow mesh moved {most}");
+    // The ring's far side (opposite the drag) hardly moves.
+    let dir = hs[m].position.truncate().normalize();
+    let far = (0..rest.len())
+        .filter(|&i| (rest[i] - c).truncate().normalize().dot(dir) < -0.9)
+        .map(|i| moved[i])
+        .fold(0.0, f64::max);
+    assert!(far < 0.05 * most, "far side moved {far} of {most}");
+    // The shadow mesh's own silhouette casts the edit: its lower loop's handle near m moved out.
+    let sm_f32: Vec<f32> = sm
+        .iter()
+        .flat_map(|p| [p.x as f32, p.y as f32, p.z as f32])
+        .collect();
+    let mesh2 = ClosedMesh::new(&sm_f32, &f, None).unwrap();
+    let ed2 = ShadowEditor::new(mesh2, &pv, &pf, Light::Point(c), 20, 2.5, 10.0).unwrap();
+    let hs2 = (0..ed2.loops().len())
+        .filter_map(|k| ed2.handles(k, None).ok())
+        .find(|h| h.iter().all(|h| h.hit))
+        .unwrap();
+    let best = hs2
+        .iter()
+        .map(|h| h.position)
+        .max_by(|a, b| a.truncate().dot(dir).total_cmp(&b.truncate().dot(dir)))
+        .unwrap();
+    let reach = best.truncate().dot(dir);
+    assert!(
+        (reach - d.target.truncate().length()).abs() < 0.25 * (d.target.truncate().length() - want),
+        "the shadow mesh's boundary reaches {reach}, the drag {}",
+        d.target.truncate().length()
+    );
+    ed.reset();
+    for (a, b) in ed.shadow_mesh().unwrap().iter().zip(&rest) {
+        assert!((*a - *b).length() < 1e-9);
+    }
+}
+
+/// A light inside the caster's volume is refused by name, also when it is not at the centre.
+#[test]
+fn a_light_inside_the_casters_volume_is_a_clear_error() {
+    let (v, f) = torus(DVec3::ZERO, 1.0, 0.3, 48, 16);
+    let (pv, pf) = plane(-2.0, 20.0);
+    let mesh = ClosedMesh::new(&v, &f, None).unwrap();
+    for l in [DVec3::new(1.0, 0.0, 0.0), DVec3::new(0.0, -1.1, 0.1)] {
+        let e = ShadowEditor::new(mesh.clone(), &pv, &pf, Light::Point(l), 10, 2.5, 10.0)
+            .err()
+            .unwrap()
+            .to_string();
+        assert!(
+            e.contains("light") && e.contains("inside the caster's volume"),
+            "{e}"
+        );
+    }
+}
+
+/// While one drag goes on, steps after the first are incremental (affine in the dragged point);
+/// they give the shadow mesh a fresh editor solves directly, for the affine and similarity styles.
+#[test]
+fn incremental_drag_steps_equal_a_direct_solve() {
+    for style in [MlsStyle::Affine, MlsStyle::Similarity] {
+        let (mut ed, l) = scene(32, 48);
+        let (mut fresh, _) = scene(32, 48);
+        let mut last = Vec::new();
+        for (i, factor) in [1.1, 1.2, 1.35, 0.9].into_iter().enumerate() {
+            let (mut d, _) = drag_radially(&mut ed, l, 3, factor);
+            d.style = style;
+            let r = ed.drag(&d).unwrap();
+            // Only the segment's rays are cast; the handles equal a full recast.
+            assert_eq!(r.handles, ed.handles(0, None).unwrap());
+            last = ed.shadow_mesh().unwrap();
+            if i == 3 {
+                fresh.drag(&d).unwrap();
+            }
+        }
+        let want = fresh.shadow_mesh().unwrap();
+        let most = want
+            .iter()
+            .zip(&ed.caster().vertices)
+            .map(|(a, b)| (*a - *b).length())
+            .fold(0.0, f64::max);
+        assert!(most > 1e-3);
+        for (a, b) in last.iter().zip(&want) {
+            assert!(
+                (*a - *b).length() < 1e-9 * (1.0 + most),
+                "{style:?}: {a:?} vs {b:?}"
+            );
+        }
+        // Committed, another drag: the base moved, still exact.
+        ed.commit();
+        fresh.commit();
+        let (d, _) = drag_radially(&mut ed, l, 20, 1.2);
+        ed.drag(&d).unwrap();
+        ed.shadow_mesh().unwrap();
+        let (d2, _) = drag_radially(&mut ed, l, 20, 1.25);
+        let r = ed.drag(&d2).unwrap();
+        assert_eq!(r.handles, ed.handles(0, None).unwrap());
+        fresh.drag(&d2).unwrap();
+        for (a, b) in ed
+            .shadow_mesh()
+            .unwrap()
+            .iter()
+            .zip(&fresh.shadow_mesh().unwrap())
+        {
+            assert!((*a - *b).length() < 1e-9 * (1.0 + most));
+        }
+        ed.cancel();
+        fresh.cancel();
+        for (a, b) in ed
+            .shadow_mesh()
+            .unwrap()
+            .iter()
+            .zip(&fresh.shadow_mesh().unwrap())
+        {
+            assert!((*a - *b).length() < 1e-9 * (1.0 + most));
+        }
     }
 }
