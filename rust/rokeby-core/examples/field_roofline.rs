@@ -4,7 +4,8 @@
 //! view-blend output) per kernel, with the largest angle from the scalar f64 reference.
 //!
 //! `cargo run --release -p rokeby-core --example field_roofline [-- --quick] [-- --json]`
-//! `--callgrind K KERNEL`: one small per-pixel evaluation only (for instruction counts).
+//! `--callgrind K KERNEL [--points]`: one small evaluation only, ten rows of the image (for
+//! instruction counts).
 
 use glam::{DQuat, DVec3};
 use rokeby_core::field::{Distances, Field, FieldOutput, Kernel};
@@ -195,14 +196,20 @@ fn main() {
     if let Some(i) = args.iter().position(|a| a == "--callgrind") {
         let k: usize = args[i + 1].parse().unwrap();
         let kernel = Kernel::parse(&args[i + 2]).unwrap();
-        let (p, n) = surface(128, 96);
+        // Ten rows from the middle of the 1280×960 image (the warm start sees the real spacing).
+        let (p, n) = surface(1280, 960);
+        let rows = 475 * 1280 * 3..485 * 1280 * 3;
+        let (p, n) = (p[rows.clone()].to_vec(), n[rows].to_vec());
         if args.iter().any(|a| a == "--points") {
+            // 40 rows of the 317 × 317 vertex grid of the per-vertex benchmark.
+            let (p, _) = surface(317, 317);
+            let p = &p[140 * 317 * 3..180 * 317 * 3];
             let f = Field::new(&constraints(k), vec![])
                 .unwrap()
                 .with_kernel(kernel);
             let out = f
                 .rotation_field_as(
-                    &p,
+                    p,
                     Distances::Euclidean,
                     None,
                     PolarMethod::Iterative,
@@ -222,7 +229,7 @@ fn main() {
                 EYE,
                 Distances::Euclidean,
                 PolarMethod::Iterative,
-                128,
+                1280,
             )
             .unwrap();
         println!("{} {}", f.kernel().name(), out[0]);
