@@ -20,7 +20,7 @@ help:
 	@echo "make demo   build everything and run the demonstration"
 	@echo "make test   cargo tests + pytest (bpy in background mode)"
 	@echo "make test-blender BPY=4.2.23  the whole pytest suite on another bpy, in .venv-bpy-<version>"
-	@echo "make test-matrix  test-blender for each of MATRIX (4.2.23 5.0.1 5.3.0), as CI runs it"
+	@echo "make test-matrix  test-blender for each of MATRIX (4.2.23 5.0.1 5.3.0), as CI runs it (CPython 3.11 legs: -m blender)"
 	@echo "make bench  benchmarks, printed next to the reference numbers"
 	@echo "make dist   the installable Blender extension zip, dist/rokeby-<version>.zip"
 	@echo "make lint   ruff (errors), cargo fmt --check, and the add-on checked against the newest Blender API stubs"
@@ -120,12 +120,17 @@ test-blender: native $(EXTRA_WHEELS)/.done $(BPY_VENV)/.deps
 	$(BPY_RUN) $(BPY_PY) -m pytest $(PYTEST_ARGS)
 
 # Every leg CI runs after `make test` (4.5 LTS): the other LTS, 5.0 and the newest 5.x. Each leg runs
-# to the end; the target fails if any did, and prints what each cost.
+# to the end; the target fails if any did, and prints what each cost. Legs on CPython 3.11 (bpy up to
+# 5.0) run the tests marked `blender` (MATRIX_CP311_ARGS): the others never import bpy, and run on the
+# same CPython, numpy and wheel in `make test` already. Legs on CPython 3.13 (5.1+) run every test:
+# there the Python and numpy differ too.
 MATRIX ?= 4.2.23 5.0.1 5.3.0
+MATRIX_CP311_ARGS ?= -q -m blender
 test-matrix: native $(EXTRA_WHEELS)/.done
 	@failed=""; for v in $(MATRIX); do \
 		s=$$(date +%s); \
-		$(MAKE) --no-print-directory test-blender BPY=$$v || failed="$$failed $$v"; \
+		case $$v in 4.*|5.0|5.0.*) args="$(MATRIX_CP311_ARGS)";; *) args="$(PYTEST_ARGS)";; esac; \
+		$(MAKE) --no-print-directory test-blender BPY=$$v PYTEST_ARGS="$$args" || failed="$$failed $$v"; \
 		echo "== leg bpy $$v: $$(( $$(date +%s) - s )) s"; \
 	done; \
 	if [ -n "$$failed" ]; then echo "== failed legs:$$failed"; exit 1; fi
@@ -159,11 +164,11 @@ fuzz: $(CARGO_FUZZ)
 
 # Hypothesis fuzzing (issue 24) of every rokeby_native function and method and the bpy-free file
 # readers, FUZZ_PY_EXAMPLES examples each, random seeds, in a subprocess under a 4 GiB address-space
-# limit with ROKEBY_MAX_ALLOC_BYTES at 1 GiB (tests/fuzz/run_fuzz.py). `make test` runs it briefly
-# with fixed seeds (tests/test_fuzz_native.py).
+# limit with ROKEBY_MAX_ALLOC_BYTES at 1 GiB (tests/native/fuzz/run_fuzz.py). `make test` runs it briefly
+# with fixed seeds (tests/native/test_fuzz_native.py).
 FUZZ_PY_EXAMPLES ?= 500
 fuzz-py: native
-	FUZZ_PY_RANDOM=1 $(PY) tests/fuzz/run_fuzz.py --examples $(FUZZ_PY_EXAMPLES)
+	FUZZ_PY_RANDOM=1 $(PY) tests/native/fuzz/run_fuzz.py --examples $(FUZZ_PY_EXAMPLES)
 
 clean:
 	rm -rf $(VENV) $(PEERS) $(LINT) .venv-bpy-* .py313 target dist out .tools rust/fuzz/target

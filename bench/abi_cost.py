@@ -28,7 +28,7 @@ def workload(site: str, part: str) -> None:
     sys.path.insert(0, str(HERE.parent / "tests"))
     import numpy as np
     import rokeby_native as rn
-    from reference import random_constraints
+    from support.reference import random_constraints
 
     assert Path(rn.__file__).resolve().is_relative_to(Path(site).resolve()), rn.__file__
     rng = np.random.default_rng(7)

@@ -67,7 +67,7 @@ MESH_SIZE = {"teapot": 2.0}
 CAMERA_ROTATION = (1.3, 0.0, 0.35)
 
 
-# --- the comparison with the true environment (no Blender needed; tests/test_compositing_validation.py) ---
+# --- the comparison with the true environment (no Blender needed; tests/compositing/test_compositing_validation.py) ---
 
 def fibonacci_sphere(n: int) -> np.ndarray:
     """n nearly uniform unit directions (float64)."""

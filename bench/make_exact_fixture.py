@@ -1,5 +1,5 @@
 """Regenerate tests/data/spot_exact_geodesics.npz: exact polyhedral geodesic distances (pygeodesic's
-MMP) on spot.obj from three source vertices, the ground truth of tests/test_geodesic.py.
+MMP) on spot.obj from three source vertices, the ground truth of tests/reflection/test_geodesic.py.
 
 Runs in .venv-peers (pygeodesic needs numpy >= 2; the test environment has bpy's numpy < 2):
 

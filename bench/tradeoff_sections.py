@@ -241,7 +241,7 @@ def precision_section(emit, peers=None):
     emit(_stamp())
     emit()
     emit(f"{r['points']:,} vertices not on a constraint. Error: rotation angle against the float64 numpy reference")
-    emit("(tests/reference.py: eq. 5 summed in float64, batched numpy SVD); for rokeby_native.ortho, against numpy's SVD of")
+    emit("(tests/support/reference.py: eq. 5 summed in float64, batched numpy SVD); for rokeby_native.ortho, against numpy's SVD of")
     emit("the same float64 matrices (coherent: vertices sorted along y then x, like neighbouring pixels). Medians of 5.")
     emit()
     emit("| what | time (ns / point) | mean error (rad) | 99th pct (rad) | max error (rad) |")
@@ -371,7 +371,7 @@ REPRESENTATION_MARKER = "## What the render reads: "
 
 def representation_section(emit, peers=None):
     r = _measure("tradeoffs.py", ["representation"])
-    emit(REPRESENTATION_MARKER + "representations of the field, render against preview (issue 17)")
+    emit(REPRESENTATION_MARKER + "representations of the field, render against preview")
     emit()
     emit(_stamp())
     emit()
@@ -383,7 +383,7 @@ def representation_section(emit, peers=None):
     emit("a Euclidean sphere of radius 0.9 with a 0.5 border; the plane has ±170° edits (121 vertices). Update: the")
     emit("native call plus the numpy conversion to what is stored, medians of 3 (the add-on then writes it with")
     emit("foreach_set). Memory: what is stored per mirror. Eye-dependent: must be recomputed when the camera moves.")
-    emit("The add-on's own Cycles renders agree with these figures (tests/test_wysiwyg.py).")
+    emit("The add-on's own Cycles renders agree with these figures (tests/reflection/test_wysiwyg.py).")
     emit()
     emit("Goal (issue 17): render against preview, 99th percentile under 1° on a ~2k-vertex sphere with and without a")
     emit("region and on the ±170° plane.")

@@ -261,12 +261,12 @@ def holefill_section(sizes=(32, 64, 128, 256, 512)):
 def precision_section(k=8):
     """Per-point field on the largest shared mesh, K constraints: rokeby_native.rotation_field
     (float32 storage) with polar='exact' / 'fast', against the float64 numpy reference of
-    tests/reference.py (batched SVD), which is also timed; and rokeby_native.ortho on the float64
+    tests/support/reference.py (batched SVD), which is also timed; and rokeby_native.ortho on the float64
     matrices of that field, exact / fast, coherent and shuffled order."""
     import rokeby_native as rn
 
     sys.path.insert(0, str(ROOT / "tests"))
-    from reference import field_matrices, ortho as ortho_ref, quat_to_matrix, random_constraints, rot_angle
+    from support.reference import field_matrices, ortho as ortho_ref, quat_to_matrix, random_constraints, rot_angle
     from rokeby.meshio import load_obj
 
     shared = Path(os.environ.get("ROKEBY_SHARED", ROOT.parent / "shared"))
@@ -278,7 +278,7 @@ def precision_section(k=8):
     pts = v[off]
     load0 = os.getloadavg()[0]
     t_ref, want = best_time(lambda: field_matrices(pts.astype(np.float64), c.astype(np.float64)), 3)
-    rows = [{"what": "numpy float64 reference (batched SVD, tests/reference.py)", "ns_per_point": 1e9 * t_ref / len(pts), "mean": 0.0, "p99": 0.0, "max": 0.0}]
+    rows = [{"what": "numpy float64 reference (batched SVD, tests/support/reference.py)", "ns_per_point": 1e9 * t_ref / len(pts), "mean": 0.0, "p99": 0.0, "max": 0.0}]
     for polar in ("exact", "fast"):
         t, q = best_time(lambda: rn.rotation_field(pts, c, polar=polar), 5)
         e = rot_angle(quat_to_matrix(q), want)
@@ -313,7 +313,7 @@ def field_section(k=8, n_pixels=1280 * 960, levels=(0, 1, 2, 3)):
     import rokeby_native as rn
 
     sys.path.insert(0, str(ROOT / "tests"))
-    from reference import random_constraints
+    from support.reference import random_constraints
     from rokeby.meshio import load_obj, subdivide_midpoint
 
     shared = Path(os.environ.get("ROKEBY_SHARED", ROOT.parent / "shared"))

@@ -22,8 +22,8 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "tests"))
 
 import rokeby_native as rn  # noqa: E402
-from gl_harness import Renderer, create_context, look_at, perspective  # noqa: E402
-from reference import random_constraints  # noqa: E402
+from support.gl_harness import Renderer, create_context, look_at, perspective  # noqa: E402
+from support.reference import random_constraints  # noqa: E402
 from rokeby import glsl  # noqa: E402
 from rokeby.meshio import load_obj, vertex_normals  # noqa: E402
 

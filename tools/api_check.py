@@ -18,7 +18,7 @@ function taking `scene`, `scene.node_tree` is invisible to it. Dynamic enums (re
 covered at run time by the Blender test matrix (`make test-blender`), which is the real guard.
 
 Code that must name an older release's API on purpose lives in the compatibility module
-(addon/rokeby/compat.py); its diagnostics are listed for information and do not fail the check.
+(addon/rokeby/blender/compat.py); its diagnostics are listed for information and do not fail the check.
 
     python tools/api_check.py [--json OUT]
 """

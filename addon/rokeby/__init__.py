@@ -13,6 +13,19 @@ from __future__ import annotations
 
 __all__ = ["register", "unregister", "is_registered"]
 
+from . import _legacy
+
+_legacy.install(__name__)  # old module paths (rokeby.evaluate, rokeby.shading, ...) name the moved modules
+
+
+def __getattr__(name: str):
+    """``rokeby.shading`` and the other old module names as attributes (they moved: rokeby._legacy)."""
+    if name in _legacy.MOVED:
+        import importlib
+
+        return importlib.import_module(f"{__name__}.{name}")
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+
 _registered = False
 
 
@@ -20,11 +33,31 @@ def is_registered() -> bool:
     return _registered
 
 
-def _modules():
-    from . import appearance_ui, compositing_ui, handlers, operators, prefs, props, shadow_ui, ui, viewport
+def _features():
+    from .appearance import addon as appearance
+    from .blender import prefs
+    from .compositing import addon as compositing
+    from .reflection import addon as reflection
+    from .reflection import ui as reflection_ui
+    from .shadow import addon as shadow
 
-    # ui after every module with operators: its menus name them all.
-    return (prefs, props, operators, handlers, viewport, appearance_ui, compositing_ui, shadow_ui, ui)
+    # Each feature registers itself (props, operators, UI, hooks). The reflection sidebar's menus
+    # name every feature's operators: it goes last.
+    return (prefs, reflection, appearance, compositing, shadow, reflection_ui)
+
+
+def _modules():
+    """The modules that declare the add-on's Blender classes (preferences, properties, operators,
+    panels), in the order the features register them."""
+    from .appearance import ui as appearance_ui
+    from .blender import prefs
+    from .compositing import brush_ui as compositing_brush_ui
+    from .compositing import ui as compositing_ui
+    from .reflection import handlers, operators, props, ui
+    from .reflection.viewport import draw as viewport
+    from .shadow import ui as shadow_ui
+
+    return (prefs, props, operators, handlers, viewport, appearance_ui, compositing_ui, compositing_brush_ui, shadow_ui, ui)
 
 
 def register():
@@ -34,7 +67,7 @@ def register():
         return
     done = []
     try:
-        for module in _modules():
+        for module in _features():
             module.register()
             done.append(module)
     except Exception:
@@ -66,6 +99,6 @@ def _unregister_at_exit():
 
 def unregister():
     global _registered
-    for module in reversed(_modules()):
+    for module in reversed(_features()):
         module.unregister()
     _registered = False

@@ -35,7 +35,7 @@ import time
 import numpy as np
 
 from . import compositing as C
-from . import transaction
+from .blender import transaction
 
 
 def _pair(text: str) -> tuple[float, float]:
@@ -98,7 +98,7 @@ def main(argv=None) -> int:
     or value, an unwritable output or a resource limit (issue 24: never a traceback for those)."""
     import signal  # noqa: PLC0415
 
-    from . import native  # noqa: PLC0415
+    from .core import native  # noqa: PLC0415
 
     def interrupted(_sig, _frame):
         native.cancel()  # a native call in flight stops at its next row

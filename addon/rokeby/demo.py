@@ -82,7 +82,7 @@ def venus(args) -> int:
     import rokeby
 
     from . import demo_scene as ds
-    from . import native
+    from .core import native
 
     shared = _shared_dir(args.shared)
     if not (shared / "meshes" / "homer.obj").exists():
@@ -141,7 +141,8 @@ def api_turn(demo) -> float:
 def field_tour(args) -> int:
     import bpy
 
-    from . import api, native
+    from . import api
+    from .core import native
 
     path = _shared_dir(args.shared) / "meshes" / args.mesh
     if not path.exists():

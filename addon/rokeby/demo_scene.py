@@ -310,7 +310,7 @@ def side_by_side(before: Path, after: Path, out: Path, labels=("", "")) -> tuple
     Returns its (width, height)."""
     import bpy
 
-    from . import compat
+    from .blender import compat
 
     pics = []
     for path in (before, after):

@@ -120,7 +120,7 @@ def both(mirror):
 
 def main(quick=False):
     rows = []
-    # 1. A chrome ball on an emissive checker floor, with the edit of tests/test_render.py:
+    # 1. A chrome ball on an emissive checker floor, with the edit of tests/reflection/test_render.py:
     #    the same edit in both modes; the floor shows the parallax.
     sc, cam = scene()
     cam.location = (0.0, -4.0, 0.0)

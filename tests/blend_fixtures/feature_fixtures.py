@@ -5,11 +5,11 @@ tiny Cycles renders) in ``fixtures.json``.
     python feature_fixtures.py write OUTDIR   # build, save OUTDIR/<feature>.blend and OUTDIR/fixtures.json
     python feature_fixtures.py load OUTDIR    # open each OUTDIR/<feature>.blend, print RESULT {json} of the same figures
 
-tests/test_saved_fixtures.py runs ``write`` with the previous release's add-on (a git worktree of
+tests/workflows/test_saved_fixtures.py runs ``write`` with the previous release's add-on (a git worktree of
 an earlier commit, its addon/ on PYTHONPATH) and ``load`` with the current one, and compares.
 This script must use only entry points that existed at that commit (rokeby.api, rokeby.appearance,
 rokeby.compositing, rokeby.reflmap): it is copied into the old tree when the old tree lacks it.
-``scenes()`` is also how tests/test_saved_names.py builds its scenes.
+``scenes()`` is also how tests/workflows/test_saved_names.py builds its scenes.
 """
 
 from __future__ import annotations

@@ -1,0 +1,1816 @@
+"""Evaluation of Rokeby mirrors: scene → arrays → rokeby_native → one mesh attribute.
+
+For each mirror the evaluator gathers, as numpy arrays, the evaluated mesh in world space, one
+constraint row [p, r, e] per constraint (p: the red handle projected onto the surface, r: the
+physical reflection of the ray from the constraint's generating eye, e: towards the green handle),
+and the region weights. It then computes the rotation field R(q) (paper eq. 5 and 7) per vertex
+and writes it as the rotation vector (axis × angle) point attribute ``rokeby_rotation`` of the
+mirror's mesh with a single ``foreach_set``.
+
+Refraction constraints (``kind == 'REFRACTION'``, paper §7.1) give a second, independent field from
+rows [p, t, e_t]: t = refract(view, N, 1/η) the physical transmitted direction at p from the
+generating eye (η: the mirror's ``ior``), e_t towards the green handle. It uses the same distances,
+regions and caches and is written as ``rokeby_refraction``; the attribute is removed while the
+mirror has no usable refraction constraint. Each field is recomputed only when its own rows change.
+
+Dirty tracking: the inputs of a mirror are condensed into a fingerprint (handle positions, view
+eyes, region settings, the mirror's transform and, when Blender reports that its geometry changed
+or the frame changed, its evaluated vertex positions). When the fingerprint is unchanged nothing is
+recomputed; ``stats()`` counts both cases. Geodesic distances are cached per constraint surface
+point, and the geodesic solver (with its factorisation) per mesh, so a handle move costs one solve
+for the handle that moved.
+
+Shared meshes (Alt+D copies, Ctrl+L ▸ Link Object Data): a mesh used by more than one object
+holds no field. Each mirror using it writes its field to a carrier of its own ("Rokeby field:
+<mirror>", owned by that mirror) that its "Rokeby field" modifier copies onto its evaluated mesh,
+so one mirror's edit never overwrites another's and removing one never deletes another's
+(``shares_mesh``, ``ensure_carrier``). Copies of a mirror get handles of their own
+(rokeby.duplicates).
+
+Nothing here raises into Blender's handlers: a mirror that cannot be evaluated gets an ERROR
+report (shown in the sidebar) and keeps its previous attribute values; every other mirror still
+evaluates. Values are checked to be finite before they are written.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import os
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ..blender import meshes
+from ..core import native, vecmath, words
+from ..core import schema
+
+ATTRIBUTE = schema.ROTATION_ATTRIBUTE
+# What final renders read (rokeby.shading): the field's view-independent parts per vertex (per
+# face corner where a polygon's quaternions straddle the antipodal seam),
+# the region rotation R as a unit quaternion (x, y, z in RENDER_ATTRIBUTE; w and the region weight
+# a in RENDER_ATTRIBUTE_WA as (w, a, 0)). The render nodes form eq. 7's R_a r per shading point for
+# the render camera's (or the frozen eye's) own r, as the per-pixel preview does. The corners of
+# each polygon are kept in one hemisphere of the quaternion sphere, so interpolation across a face
+# never crosses the antipodal seam that rotation vectors have at half turns.
+RENDER_ATTRIBUTE = schema.RENDER_ATTRIBUTE
+RENDER_ATTRIBUTE_WA = schema.RENDER_ATTRIBUTE_WA
+# The render/preview agreement the status promises (degrees, 99th percentile at triangle centres).
+AGREEMENT_DEGREES = 1.0
+# A camera and a constraint's generating eye that see its target this far apart are reported.
+EYE_MISMATCH_DEGREES = 3.0
+# A larger share of the visible surface reflecting below itself is reported.
+FOLDED_SHARE = 0.05
+# While the artist drags, the estimate runs at most this often (seconds), and once after.
+ESTIMATE_INTERVAL = 0.4
+# At most this many triangles are sampled for the interpolation-error estimate.
+AGREEMENT_SAMPLES = 4000
+# The second field, from refraction constraints [p, t, e_t] (present only while the mirror has some).
+REFRACTION_ATTRIBUTE = schema.REFRACTION_ATTRIBUTE
+REGION_ATTRIBUTE_PREFIX = schema.REGION_ATTRIBUTE_PREFIX
+VG_NODE_GROUP = schema.VG_NODE_GROUP
+VG_MODIFIER_PREFIX = schema.VG_MODIFIER_PREFIX
+# A red handle farther than this fraction of the mirror's size from its surface is reported.
+OFF_SURFACE_TOLERANCE = 1e-3
+
+
+from ..core.errors import RokebyError  # noqa: E402, F401 - evaluate.RokebyError, as before
+
+
+@dataclass
+class MirrorReport:
+    """What the last evaluation of one mirror did: shown in the sidebar, returned by the API."""
+
+    mirror: str
+    status: str = "OK"  # OK | WARNING | ERROR | DISABLED
+    messages: list = field(default_factory=list)
+    recomputed: bool = False
+    constraints_used: int = 0
+    vertices: int = 0
+    field_mesh: str = "evaluated"  # evaluated | base
+    python_ms: float = 0.0
+    native_ms: float = 0.0
+    # The eye the render field is evaluated for: "camera", "frozen" or "none" (view-independent).
+    eye: str = "none"
+    # What F12 shows: filled in by rokeby.rendering (True: the edit renders; False: why not).
+    renders: "bool | None" = None
+    render_note: str = ""
+    # Estimated render-vs-preview difference between vertices, degrees: (99th percentile, max).
+    interpolation_error: "tuple | None" = None
+    # A free-form region's reader modifier was (re)made or repointed: the weights are read at the
+    # next evaluation of the mesh; until then the previous field stays (the status says why).
+    pending: bool = False
+    # Geodesic distances: (pieces of the mesh no constraint reaches over the surface, pieces).
+    unreached_pieces: "tuple | None" = None
+
+    # Messages that do not change the status (see note()).
+    notes: list = field(default_factory=list)
+
+    def note(self, text: str):
+        """A message that does not change the status (a documented rule at work, not a problem)."""
+        self.messages.append(text)
+        self.notes.append(text)
+
+    def warn(self, text: str):
+        self.messages.append(text)
+        if self.status == "OK":
+            self.status = "WARNING"
+
+    def summary(self) -> str:
+        head = {"OK": "ok", "WARNING": "warning", "ERROR": "error", "DISABLED": "disabled"}[self.status]
+        return f"{self.mirror}: {head}" + (": " + "; ".join(self.messages) if self.messages else "")
+
+
+class _Geometry:
+    """The field mesh of a mirror in world space, with what the projections need."""
+
+    def __init__(self, vertices, normals, triangles, tri_poly, source):
+        self.vertices = vertices
+        self.normals = normals
+        self.triangles = triangles
+        self.tri_poly = tri_poly  # polygon of each loop triangle (sorted), for closest-point lookups
+        self.source = source  # "evaluated" or "transfer" (see read_geometry)
+        self.local = None  # object-space positions (V, 3) float32, for the surface queries
+        self.uses = 0  # evaluations that used this shape (a BVH pays off from the second on)
+        self.queries = 0  # surface queries answered by nearest_triangle
+        self.max_edge = None  # longest triangle edge in object space, for nearest_triangle
+        self.size = float(np.linalg.norm(vertices.max(0) - vertices.min(0))) if len(vertices) else 0.0
+        self.region_weights: dict[str, np.ndarray] = {}
+        self.region_problems: dict[str, str] = {}  # vertex group → why it could not be read
+        self.bvh = None
+        self._poly_start = None
+        self.edges = None  # mesh_edges(triangles), made on first use
+        self.shared = False  # the mesh had other users when read (see shares_mesh)
+
+    def triangles_of_polygon(self, poly: int) -> range:
+        if self._poly_start is None:
+            # loop triangles are stored polygon by polygon: one searchsorted for all polygons
+            n_poly = int(self.tri_poly[-1]) + 1 if len(self.tri_poly) else 0
+            self._poly_start = np.searchsorted(self.tri_poly, np.arange(n_poly + 1))
+        if not 0 <= poly < len(self._poly_start) - 1:
+            return range(0)
+        return range(int(self._poly_start[poly]), int(self._poly_start[poly + 1]))
+
+    def same_positions(self, other: "_Geometry | None") -> bool:
+        return (
+            other is not None
+            and other.source == self.source
+            and other.vertices.shape == self.vertices.shape
+            and other.triangles.shape == self.triangles.shape
+            and np.array_equal(other.vertices, self.vertices)
+            and np.array_equal(other.triangles, self.triangles)
+            and other.region_weights.keys() == self.region_weights.keys()
+            and all(np.array_equal(other.region_weights[k], v) for k, v in self.region_weights.items())
+        )
+
+
+class _State:
+    """Runtime state of one mirror (not saved: rebuilt after a reload)."""
+
+    def __init__(self):
+        self.fingerprint: bytes | None = None
+        self.geometry: _Geometry | None = None
+        self.geometry_version = 0
+        self.solver = None
+        self.solver_version = -1
+        self.distance_cache: dict = {}
+        self.region_cache: dict = {}
+        self.report: MirrorReport | None = None
+        self.rotations: np.ndarray | None = None
+        # What the render nodes read, per vertex of the field mesh: (parts (V, 6), ramp form).
+        self.view_parts: tuple | None = None
+        self.refractions: np.ndarray | None = None
+        self.field_fingerprints: dict = {}
+        # What the reflection field was last computed from (rows, distances or None, regions),
+        # for the viewport preview, which evaluates the same field per pixel (rokeby.viewport).
+        self.field_inputs: tuple | None = None
+        # What the interpolation-error estimate found (kept with the report while nothing changes),
+        # when it last ran, and what a deferred one will estimate (None: nothing pending).
+        self.field_notes: list = []
+        self.estimate_time = -1e9
+        self.estimate_args = None
+        self.corner_topology = None
+        # Geodesic metric: (geometry version, piece label per vertex), and the status line about
+        # pieces no constraint reaches (kept with the report while nothing changes).
+        self.pieces = None
+        self.reach_note: "str | None" = None
+        # What the mirror's own mesh data held when api.evaluate last looked (mesh_fingerprint).
+        self.mesh_fingerprint: bytes | None = None
+
+
+_STATE: dict[int, _State] = {}
+_DIRTY: set[int] = set()
+_STATS = {"checks": 0, "recomputations": 0, "skipped": 0, "errors": 0}
+
+
+def stats() -> dict:
+    """Counters since the last reset: checks (mirror evaluations asked for), recomputations
+    (fields actually computed and written), skipped (nothing had changed), errors."""
+    return dict(_STATS)
+
+
+def reset_stats():
+    for k in _STATS:
+        _STATS[k] = 0
+
+
+def reset():
+    """Forget all runtime state (after loading a file); the next update recomputes everything."""
+    _STATE.clear()
+    _DIRTY.clear()
+
+
+def mark_dirty(obj):
+    """Ask for a re-read of this mirror's geometry at the next update (property callbacks)."""
+    try:
+        _DIRTY.add(obj.session_uid)
+    except (AttributeError, ReferenceError):
+        pass
+    from . import registry  # noqa: PLC0415
+
+    registry.pointers_changed()
+
+
+def report_of(obj) -> MirrorReport | None:
+    st = _STATE.get(obj.session_uid)
+    return st.report if st else None
+
+
+def state_of(obj) -> "_State | None":
+    """The evaluator's runtime state of a mirror (geometry, field inputs, report), or None."""
+    try:
+        return _STATE.get(obj.session_uid)
+    except (AttributeError, ReferenceError):
+        return None
+
+
+def rotations_of(obj) -> np.ndarray | None:
+    """The last computed field of a mirror as (V, 4) quaternions (x, y, z, w)."""
+    st = _STATE.get(obj.session_uid)
+    return quaternions(st.rotations) if st is not None and st.rotations is not None else None
+
+
+def refractions_of(obj) -> np.ndarray | None:
+    """The last computed refraction field of a mirror as (V, 4) quaternions (None: no refraction
+    constraint)."""
+    st = _STATE.get(obj.session_uid)
+    return quaternions(st.refractions) if st is not None and st.refractions is not None else None
+
+
+def quaternions(rotvec: np.ndarray) -> np.ndarray:
+    """(N, 3) rotation vectors → (N, 4) unit quaternions (x, y, z, w), w >= 0."""
+    v = np.asarray(rotvec, dtype=np.float64)
+    angle = np.linalg.norm(v, axis=1)
+    half = 0.5 * angle
+    scale = np.where(angle > 1e-12, np.sin(half) / np.maximum(angle, 1e-300), 0.5)
+    return np.concatenate([v * scale[:, None], np.cos(half)[:, None]], axis=1).astype(np.float32)
+
+
+class _NativeTimer:
+    def __init__(self):
+        self.seconds = 0.0
+
+    def __call__(self, fn, *args, **kwargs):
+        t0 = time.perf_counter()
+        try:
+            return fn(*args, **kwargs)
+        finally:
+            self.seconds += time.perf_counter() - t0
+
+
+# --- reading the scene ---------------------------------------------------------------------------
+
+
+def _finite_matrix(m, what: str) -> np.ndarray:
+    a = np.array(m, dtype=np.float64)
+    if not np.all(np.isfinite(a)):
+        raise RokebyError(f"{what} has a non-finite transform (NaN or inf)")
+    return a
+
+
+def object_in_scene(obj, scene) -> bool:
+    """Whether ``obj`` (a handle or region centre) is still there: not removed, and linked into
+    some collection. Deleting with X only unlinks an object that a constraint's pointer still
+    uses, so an object whose only users are pointers counts as deleted. Costs no scan of
+    ``scene.objects`` (rokeby.registry); ``scene`` is kept for callers."""
+    if obj is None:
+        return False
+    try:
+        users = obj.users - int(obj.use_fake_user)
+    except ReferenceError:
+        return False
+    return users > _pointer_users(obj)
+
+
+def _pointer_users(obj) -> int:
+    """How many of the users of ``obj`` are the add-on's own pointers (constraints, regions, a
+    map origin) of the mirrors in the file."""
+    from . import registry  # noqa: PLC0415
+
+    return registry.pointer_counts().get(obj.session_uid, 0)
+
+
+def to_world(co, nrm, matrix, what: str):
+    """Object-space positions and normals to world space (rokeby.blender.meshes.to_world); a
+    singular or non-finite result is a RokebyError naming ``what``."""
+    return meshes.to_world(co, nrm, matrix, what, RokebyError)
+
+
+def shares_mesh(obj) -> bool:
+    """Whether ``obj``'s mesh is used by other objects too (Alt+D, Ctrl+L ▸ Link Object Data):
+    its field then lives in a carrier of its own, never in the shared mesh."""
+    me = obj.data
+    return me is not None and me.users - int(me.use_fake_user) > 1
+
+
+def read_geometry(obj, depsgraph, mirror_matrix: np.ndarray, freeform_groups=()) -> _Geometry:
+    """The mirror's mesh in world space: always the evaluated mesh (modifiers, shape keys,
+    armatures), the surface the render shows. When a modifier changes the vertex count
+    (Subdivision), or the mesh is shared with other objects, source is "transfer": the field goes
+    to the mirror's own carrier mesh of that topology, which the 'Rokeby field' modifier at the
+    end of the stack copies onto the evaluated mesh."""
+    ob_eval = obj.evaluated_get(depsgraph)
+    me = ob_eval.data
+    shared = shares_mesh(obj)
+    source = "evaluated" if len(me.vertices) == len(obj.data.vertices) and not shared else "transfer"
+    nv = len(me.vertices)
+    if nv == 0 or len(me.polygons) == 0:
+        raise RokebyError(f"mirror '{obj.name}' has no faces")
+    co = np.empty(nv * 3, dtype=np.float32)
+    me.vertices.foreach_get("co", co)
+    nrm = np.empty(nv * 3, dtype=np.float32)
+    me.vertex_normals.foreach_get("vector", nrm)
+    nt = len(me.loop_triangles)
+    if nt == 0:
+        me.calc_loop_triangles()
+        nt = len(me.loop_triangles)
+    tri = np.empty(nt * 3, dtype=np.int32)
+    me.loop_triangles.foreach_get("vertices", tri)
+    tri_poly = np.empty(nt, dtype=np.int32)
+    me.loop_triangle_polygons.foreach_get("value", tri_poly)
+    v, n = to_world(co, nrm, mirror_matrix, f"mirror '{obj.name}'")
+    geo = _Geometry(v, n, tri.reshape(-1, 3), tri_poly, source)
+    geo.shared = shared
+    geo.local = co.reshape(-1, 3)
+    for group in freeform_groups:
+        # A group that cannot be read is the region's problem (a warning naming the group, the
+        # region left out), not the mirror's: the other regions and constraints still evaluate.
+        try:
+            geo.region_weights[group] = _vertex_group_weights(obj, me, group)
+        except RokebyError as exc:
+            geo.region_problems[group] = str(exc)
+    return geo
+
+
+def _vertex_group_weights(obj, me, group: str) -> np.ndarray:
+    """Per-vertex weights of a vertex group, read without a Python loop: the reader modifier
+    (a Geometry Nodes 'Store Named Attribute') copies the group into a float point attribute of
+    the evaluated mesh. Only a live, enabled reader counts: a copy of the weights baked into the
+    mesh (the reader applied, Convert ▸ Mesh) would no longer follow the painting."""
+    if obj.vertex_groups.get(group) is None:
+        raise RokebyError(f"vertex group '{group}' was deleted (or renamed while the add-on could not follow)")
+    mod = find_reader(obj, group)
+    if mod is None:
+        raise RokebyError(f"vertex group '{group}' has no reader modifier '{VG_MODIFIER_PREFIX}{group}'")
+    if not mod.show_viewport:
+        raise RokebyError(f"the reader modifier '{mod.name}' of vertex group '{group}' is disabled in the viewport; enable it")
+    attr = me.attributes.get(REGION_ATTRIBUTE_PREFIX + group)
+    if attr is None or attr.domain != "POINT" or attr.data_type != "FLOAT":
+        raise RokebyError(f"the reader modifier '{mod.name}' of vertex group '{group}' gave no weights (is a modifier above it removing them?)")
+    w = np.empty(len(me.vertices), dtype=np.float32)
+    attr.data.foreach_get("value", w)
+    return np.clip(np.nan_to_num(w, nan=0.0), 0.0, 1.0)
+
+
+# --- free-form regions: the painted vertex group, followed through renames ----------------------
+# Vertex groups have no pointer, so a region stores its group's name (what the sidebar shows)
+# and index, and the mirror the names of all its groups as of the last update
+# (``vertex_group_names``, JSON). A name that disappeared while the group count stayed the same
+# and another name, new to the list, took its index, is a rename: the region follows it. Anything
+# else (a deleted group, groups added and removed at once) leaves the name as it is, and the
+# region warns naming it.
+
+
+def _reader_tree(ng) -> bool:
+    return ng is not None and ng.bl_idname == "GeometryNodeTree" and ng.name.split(".")[0] == VG_NODE_GROUP
+
+
+def vertex_group_reader():
+    """The Geometry Nodes group that copies a vertex group into a float point attribute, so the
+    evaluator reads painted weights with foreach_get instead of a loop over vertices."""
+    import bpy  # noqa: PLC0415
+
+    ng = bpy.data.node_groups.get(VG_NODE_GROUP)
+    if ng is not None and ng.bl_idname == "GeometryNodeTree" and ng.library is None:
+        return ng
+    ng = bpy.data.node_groups.new(VG_NODE_GROUP, "GeometryNodeTree")
+    ng.interface.new_socket("Geometry", in_out="INPUT", socket_type="NodeSocketGeometry")
+    ng.interface.new_socket("Vertex Group", in_out="INPUT", socket_type="NodeSocketString")
+    ng.interface.new_socket("Attribute", in_out="INPUT", socket_type="NodeSocketString")
+    ng.interface.new_socket("Geometry", in_out="OUTPUT", socket_type="NodeSocketGeometry")
+    gi = ng.nodes.new("NodeGroupInput")
+    go = ng.nodes.new("NodeGroupOutput")
+    named = ng.nodes.new("GeometryNodeInputNamedAttribute")
+    named.data_type = "FLOAT"
+    store = ng.nodes.new("GeometryNodeStoreNamedAttribute")
+    store.data_type = "FLOAT"
+    store.domain = "POINT"
+    ng.links.new(gi.outputs["Geometry"], store.inputs["Geometry"])
+    ng.links.new(gi.outputs["Vertex Group"], named.inputs["Name"])
+    ng.links.new(gi.outputs["Attribute"], store.inputs["Name"])
+    ng.links.new(named.outputs["Attribute"], store.inputs["Value"])
+    ng.links.new(store.outputs["Geometry"], go.inputs["Geometry"])
+    return ng
+
+
+def _reader_ids(mod) -> dict:
+    return {item.name: item.identifier for item in mod.node_group.interface.items_tree if getattr(item, "in_out", "") == "INPUT"}
+
+
+def _reader_group(mod) -> "str | None":
+    """The vertex group a reader modifier reads (None: none set)."""
+    from ..blender import compat  # noqa: PLC0415
+
+    ident = _reader_ids(mod).get("Vertex Group")
+    return compat.modifier_input(mod, ident) if ident is not None else None
+
+
+def find_reader(obj, group: str):
+    """The reader modifier of ``group`` on ``obj`` (found by what it reads, not by its name,
+    which Blender may have shortened), or None."""
+    for mod in obj.modifiers:
+        if mod.type == "NODES" and _reader_tree(mod.node_group) and _reader_group(mod) == group:
+            return mod
+    return None
+
+
+def _readers(obj) -> list:
+    return [mod for mod in obj.modifiers if mod.type == "NODES" and _reader_tree(mod.node_group)]
+
+
+def ensure_reader(obj, group: str, renamed_from: "str | None" = None) -> "str | None":
+    """Make sure ``group`` has a live reader modifier: made when missing (a reader that was
+    applied, e.g. by Convert ▸ Mesh, leaves a baked copy of the weights in the mesh: it is
+    removed), repointed after a rename. Returns what changed when the evaluated mesh must be
+    evaluated again before the weights can be read (None: nothing)."""
+    from ..blender import compat  # noqa: PLC0415
+
+    attribute = REGION_ATTRIBUTE_PREFIX + group
+    mod = find_reader(obj, group)
+    why = None
+    if mod is None and renamed_from is not None:
+        mod = find_reader(obj, renamed_from)
+        why = f"vertex group '{renamed_from}' was renamed to '{group}'; its free-form region follows it"
+    if mod is None:
+        baked = obj.data.attributes.get(attribute)
+        if baked is not None:
+            obj.data.attributes.remove(baked)
+            why = f"the reader modifier of vertex group '{group}' was applied, which froze its weights; it was added again so the region follows the painting"
+        else:
+            why = f"vertex group '{group}' had no reader modifier; it was added"
+        mod = obj.modifiers.new(VG_MODIFIER_PREFIX + group, "NODES")
+        mod.node_group = vertex_group_reader()
+        mod.show_in_editmode = False
+    ids = _reader_ids(mod)
+    if compat.modifier_input(mod, ids["Vertex Group"]) != group or compat.modifier_input(mod, ids["Attribute"]) != attribute:
+        compat.set_modifier_input(mod, ids["Vertex Group"], group)
+        compat.set_modifier_input(mod, ids["Attribute"], attribute)
+        why = why or f"the reader modifier of vertex group '{group}' was repointed"
+    if renamed_from is not None and mod.name.startswith(VG_MODIFIER_PREFIX):
+        mod.name = VG_MODIFIER_PREFIX + group
+    if why is not None:
+        obj.update_tag()
+    return why
+
+
+def drop_unused_readers(obj, used=None):
+    """Remove the reader modifiers of groups no free-form region uses (and their copies)."""
+    if used is None:
+        used = {rg.vertex_group for rg in obj.rokeby.regions if rg.kind == "FREEFORM" and rg.vertex_group}
+    seen = set()
+    for mod in _readers(obj):
+        group = _reader_group(mod)
+        if group not in used or group in seen:
+            obj.modifiers.remove(mod)
+        else:
+            seen.add(group)
+
+
+def _renamed(old: str, index: int, names: list, snapshot: "list | None") -> "str | None":
+    """The new name of group ``old`` (at ``index`` at the last update) when it was renamed, else None."""
+    if snapshot is None or not 0 <= index < len(names) or len(names) != len(snapshot) or snapshot[index] != old:
+        return None
+    new = names[index]
+    return new if new not in snapshot else None
+
+
+def _group_names(obj) -> "list | None":
+    import json  # noqa: PLC0415
+
+    raw = obj.rokeby.vertex_group_names
+    try:
+        names = json.loads(raw) if raw else None
+    except ValueError:
+        return None
+    return names if isinstance(names, list) else None
+
+
+def remember_groups(obj):
+    """Store the names of ``obj``'s vertex groups as they are now (what rename detection compares with)."""
+    import json  # noqa: PLC0415
+
+    now = json.dumps([vg.name for vg in obj.vertex_groups])
+    if obj.rokeby.vertex_group_names != now:
+        obj.rokeby.vertex_group_names = now
+
+
+def sync_freeform_regions(obj) -> list:
+    """Free-form regions follow their vertex group: renames are followed (see above) and every
+    used group gets a live reader modifier. Returns what changed that needs the mirror's mesh
+    evaluated again before the weights can be read (empty: the weights can be read now)."""
+    s = obj.rokeby
+    free = [rg for rg in s.regions if rg.kind == "FREEFORM"]
+    if not free and not _readers(obj):
+        return []
+    names = [vg.name for vg in obj.vertex_groups]
+    snapshot = _group_names(obj)
+    changes, renamed = [], {}
+    for rg in free:
+        old = rg.vertex_group
+        if not old:
+            continue
+        if old in names:
+            index = names.index(old)
+        else:
+            new = _renamed(old, rg.vertex_group_index, names, snapshot)
+            if new is None:
+                continue  # the region warns naming the group (_region_inputs)
+            rg.vertex_group, index = new, names.index(new)
+            renamed[new] = old
+        if rg.vertex_group_index != index:
+            rg.vertex_group_index = index
+    used = {rg.vertex_group for rg in free if rg.vertex_group in names}
+    for group in sorted(used):
+        why = ensure_reader(obj, group, renamed.get(group))
+        if why is not None:
+            changes.append(why)
+    # Readers no region uses any more (the group was deleted, the region changed kind or group)
+    # go; like every change here, the mirror is then pending (nothing of the evaluated mesh at
+    # hand is touched again: it may refer to the removed modifier).
+    unused = [mod for mod in _readers(obj) if _reader_group(mod) not in used]
+    if unused:
+        changes.append("removed the reader modifier" + ("s " if len(unused) > 1 else " ") + ", ".join(f"'{m.name}'" for m in unused) + " that no free-form region uses")
+        drop_unused_readers(obj, used)
+    if free:
+        remember_groups(obj)
+    return changes
+
+
+def _bvh(geo: _Geometry):
+    """A BVH over the triangles of ``geo`` in object space (kept while the local positions and
+    triangles are unchanged, also across transforms), built from the copied arrays: surface
+    queries never touch Blender's evaluated mesh, which another handler's ID removal in the same
+    update can free under us (issue 24)."""
+    if geo.bvh is None:
+        from mathutils.bvhtree import BVHTree  # noqa: PLC0415
+
+        pts = geo.local if geo.local is not None else geo.vertices
+        geo.bvh = BVHTree.FromPolygons(pts.tolist(), geo.triangles.tolist(), all_triangles=True)
+    return geo.bvh
+
+
+# Surface queries on a new shape answered without a BVH; beyond them the BVH is built.
+NUMPY_QUERIES = 16
+
+
+def nearest_triangle(geo: _Geometry, query) -> int:
+    """Index of a triangle of ``geo`` nearest the object-space point ``query``, with numpy and no
+    acceleration structure (O(V + T) per query, about 2 ms at 100k vertices): for a shape that is
+    queried once or twice (a deforming mirror on a frame change), where building a BVH would
+    cost far more. The nearest surface point lies in a triangle with a vertex within d + L of
+    the query (d: distance to the nearest vertex, L: the longest edge), so only those are
+    measured exactly."""
+    pts = geo.local if geo.local is not None else geo.vertices
+    tri = geo.triangles
+    x = np.asarray(query, np.float64)
+    d2 = np.einsum("ij,ij->i", pts - x.astype(np.float32), pts - x.astype(np.float32)).astype(np.float64)
+    if geo.max_edge is None:
+        a, b, c = (pts[tri[:, k]] for k in range(3))
+        geo.max_edge = float(np.sqrt(max(np.einsum("ij,ij->i", b - a, b - a).max(), np.einsum("ij,ij->i", c - b, c - b).max(),
+                                         np.einsum("ij,ij->i", a - c, a - c).max()))) if len(tri) else 0.0
+    reach = float(np.sqrt(d2.min())) + geo.max_edge
+    near = d2 <= reach * reach * (1.0 + 1e-6) + 1e-30
+    cand = np.flatnonzero(near[tri].any(axis=1))
+    if len(cand) == 0:
+        cand = np.arange(len(tri))
+    a, b, c = (pts[tri[cand, k]].astype(np.float64) for k in range(3))
+    best = np.full(len(cand), np.inf)
+    # The three edges (segments), then the interior (projection onto the plane, when inside).
+    for p0, p1 in ((a, b), (b, c), (c, a)):
+        e = p1 - p0
+        ee = np.einsum("ij,ij->i", e, e)
+        t = np.clip(np.einsum("ij,ij->i", x - p0, e) / np.maximum(ee, 1e-300), 0.0, 1.0)
+        q = p0 + t[:, None] * e
+        best = np.minimum(best, np.einsum("ij,ij->i", x - q, x - q))
+    n = np.cross(b - a, c - a)
+    nn = np.einsum("ij,ij->i", n, n)
+    ok = nn > 1e-300
+    h = np.einsum("ij,ij->i", x - a, n) / np.where(ok, nn, 1.0)
+    p = x - h[:, None] * n
+    inside = ok.copy()
+    for p0, p1 in ((a, b), (b, c), (c, a)):
+        inside &= np.einsum("ij,ij->i", np.cross(p1 - p0, p - p0), n) >= 0.0
+    plane = h * h * nn
+    best = np.where(inside, np.minimum(best, plane), best)
+    return int(cand[int(np.argmin(best))])
+
+
+def _barycentric(p, a, b, c) -> np.ndarray:
+    v0, v1, v2 = b - a, c - a, p - a
+    d00, d01, d11 = v0 @ v0, v0 @ v1, v1 @ v1
+    d20, d21 = v2 @ v0, v2 @ v1
+    den = d00 * d11 - d01 * d01
+    if abs(den) < 1e-300:
+        return np.array([1.0, 0.0, 0.0])
+    v = (d11 * d20 - d01 * d21) / den
+    w = (d00 * d21 - d01 * d20) / den
+    bary = np.clip(np.array([1.0 - v - w, v, w]), 0.0, 1.0)
+    return bary / bary.sum()
+
+
+@dataclass
+class SurfacePoint:
+    point: np.ndarray  # world position on the surface
+    normal: np.ndarray  # smooth (interpolated) unit normal there
+    triangle: int
+    bary: np.ndarray
+    offset: float  # distance of the queried point from the surface
+
+
+def project_to_surface(obj, depsgraph, geo: _Geometry, world_point, mirror_matrix) -> SurfacePoint:
+    """The surface point of the mirror nearest ``world_point``: triangle, barycentric coordinates
+    and the interpolated vertex normal (the normal the renderers shade with)."""
+    x = np.asarray(world_point, dtype=np.float64)
+    if not np.all(np.isfinite(x)):
+        raise RokebyError(f"mirror '{getattr(obj, 'name', '?')}': the point to project is not finite")
+    if geo.local is not None:
+        inv = np.linalg.inv(mirror_matrix)
+        query = inv[:3, :3] @ x + inv[:3, 3]
+    else:
+        query = x
+    if geo.bvh is None and geo.uses < 2 and geo.queries < NUMPY_QUERIES:
+        geo.queries += 1
+        tri_index = nearest_triangle(geo, query)  # a new shape: no BVH yet (see nearest_triangle)
+    else:
+        _loc, _n, tri_index, _d = _bvh(geo).find_nearest(query.tolist())
+    if tri_index is None:
+        raise RokebyError(f"mirror '{getattr(obj, 'name', '?')}': no surface point found")
+    # The nearest triangle in object space, and its neighbours of the same polygon (in world
+    # space the nearest may differ under a non-uniform scale).
+    candidates = geo.triangles_of_polygon(int(geo.tri_poly[tri_index])) if len(geo.tri_poly) > tri_index else [tri_index]
+    if len(candidates) == 0:
+        candidates = [tri_index]
+    best = None
+    for t in candidates:
+        ia, ib, ic = geo.triangles[t]
+        a, b, c = (geo.vertices[i].astype(np.float64) for i in (ia, ib, ic))
+        bary = _barycentric(x, a, b, c)
+        p = bary[0] * a + bary[1] * b + bary[2] * c
+        d = float(np.linalg.norm(p - x))
+        if best is None or d < best[0]:
+            best = (d, t, bary, p)
+    d, t, bary, p = best
+    n = bary @ geo.normals[geo.triangles[t]].astype(np.float64)
+    nn = np.linalg.norm(n)
+    if not nn > 1e-20:  # opposite normals cancel (a sliver fold): use the face normal
+        ia, ib, ic = geo.triangles[t]
+        n = np.cross(geo.vertices[ib] - geo.vertices[ia], geo.vertices[ic] - geo.vertices[ia]).astype(np.float64)
+        nn = max(np.linalg.norm(n), 1e-300)
+    return SurfacePoint(p, n / nn, int(t), bary, d)
+
+
+def reflect(incident, normal):
+    return vecmath.reflect(incident, normal)
+
+
+def refract(incident, normal, eta):
+    """Snell refraction of unit ``incident`` (pointing at the surface, against unit ``normal``)
+    with eta = η_outside / η_inside; None on total internal reflection (the one rule:
+    rokeby.core.vecmath.total_internal_reflection)."""
+    if vecmath.total_internal_reflection(incident, normal, eta):
+        return None
+    return vecmath.refract(incident, normal, eta)
+
+
+def valid_ior(value) -> float:
+    """The IOR as a float, or a RokebyError saying why it cannot be used."""
+    ior = float(value)
+    if not (np.isfinite(ior) and ior > 0.0):
+        raise RokebyError(f"IOR must be finite and > 0, got {ior}")
+    return ior
+
+
+def check_mirror(obj):
+    """A RokebyError unless ``obj`` is a local mesh object with faces (one a mirror can be)."""
+    if obj is None:
+        raise RokebyError("mirror: is None")
+    try:
+        name, kind = obj.name, obj.type
+    except ReferenceError:
+        raise RokebyError("mirror: the object was deleted") from None
+    if kind != "MESH":
+        raise RokebyError(f"mirror: '{name}' is {words.kind(kind)}, not a mesh")
+    if len(obj.data.polygons) == 0:
+        raise RokebyError(f"mirror: '{name}' has no faces")
+    if obj.library is not None or obj.data.library is not None:
+        raise RokebyError(f"mirror: '{name}' is linked from a library; make it local (or a library override with local mesh data)")
+    return obj
+
+
+def require_mirror(obj):
+    """``obj`` if it is a Rokeby mirror (check_mirror and is_mirror), else a RokebyError."""
+    check_mirror(obj)
+    if not obj.rokeby.is_mirror:
+        raise RokebyError(f"mirror: '{obj.name}' is not a Rokeby mirror: make it one with Add Mirror (Object ▸ Rokeby ▸ Add Mirror)")
+    return obj
+
+
+# --- one mirror ----------------------------------------------------------------------------------
+
+
+def render_eye(obj, scene, depsgraph, size: float = 1.0):
+    """The eye final renders see ``obj`` from, as (point or None, kind): the frozen eye of a
+    frozen mirror ("frozen"), else the scene camera ("camera"; an orthographic camera's eye is
+    placed far behind it along its view axis), else (None, "none")."""
+    s = obj.rokeby
+    if s.freeze:
+        eye = np.array(s.freeze_eye, dtype=np.float64)
+        if not np.all(np.isfinite(eye)):
+            raise RokebyError(f"mirror '{obj.name}': its frozen eye is not finite")
+        return eye, "frozen"
+    cam = scene.camera
+    if cam is None:
+        return None, "none"
+    m = _finite_matrix(cam.evaluated_get(depsgraph).matrix_world, f"camera '{cam.name}'")
+    eye = m[:3, 3].copy()
+    if cam.type == "CAMERA" and cam.data.type == "ORTHO":
+        back = m[:3, 2] / max(np.linalg.norm(m[:3, 2]), 1e-300)  # a camera looks along its local −Z
+        eye = eye + back * 1e4 * max(size, float(cam.data.ortho_scale), 1e-6)
+    return eye, "camera"
+
+
+def _angle_deg(a, b) -> float:
+    return float(np.degrees(np.arccos(np.clip(np.dot(a, b) / max(np.linalg.norm(a) * np.linalg.norm(b), 1e-300), -1.0, 1.0))))
+
+
+def _constraint_inputs(obj, scene, depsgraph, geo, mirror_matrix, report, kind="REFLECTION", ior=None, eye_now=None):
+    """Constraint rows [p, r, e] (``kind`` REFLECTION) or [p, t, e_t] (REFRACTION, with the
+    mirror's ``ior``) and their surface points; bad constraints are reported and skipped.
+
+    r is the physical direction seen from ``eye_now`` (the render eye) when the mirror's
+    generating eye is the scene camera, else from each constraint's stored eye; in that case a
+    render eye that sees the target more than EYE_MISMATCH_DEGREES away is reported."""
+    rows, points = [], []
+    refraction = kind == "REFRACTION"
+    from_camera = getattr(obj.rokeby, "eye_source", "CREATION") == "CAMERA" and eye_now is not None
+    for k, c in enumerate(obj.rokeby.constraints):
+        label = f"constraint {k + 1} ('{c.name}')" if c.name else f"constraint {k + 1}"
+        if not c.enabled or getattr(c, "kind", "REFLECTION") != kind:
+            continue
+        try:
+            red, green = c.surface_handle, c.target_handle
+            if not object_in_scene(red, scene):
+                raise RokebyError(f"{label}: its red (surface) handle was deleted")
+            if not object_in_scene(green, scene):
+                raise RokebyError(f"{label}: its green ({'transmitted' if refraction else 'reflected'}) handle was deleted")
+            if getattr(c, "light_name", "") and green.parent is None:
+                report.warn(f"{label}: the light '{c.light_name}' its green handle followed was deleted or unparented; the handle stays where it is")
+            kept_on = shrinkwrap_target(red)
+            if kept_on is not None and kept_on != obj:
+                report.warn(f"{label}: red handle '{red.name}' is kept on '{kept_on.name}' (its Shrinkwrap), not on this mirror; "
+                            "give this mirror its own constraint, or set the Shrinkwrap's target to it")
+            red_m = _finite_matrix(red.evaluated_get(depsgraph).matrix_world, f"{label}: red handle '{red.name}'")
+            green_m = _finite_matrix(green.evaluated_get(depsgraph).matrix_world, f"{label}: green handle '{green.name}'")
+            eye = np.array(eye_now if from_camera else c.eye, dtype=np.float64)
+            if not np.all(np.isfinite(eye)):
+                raise RokebyError(f"{label}: its generating eye is not finite")
+            sp = project_to_surface(obj, depsgraph, geo, red_m[:3, 3], mirror_matrix)
+            if sp.offset > OFF_SURFACE_TOLERANCE * max(geo.size, 1e-12):
+                parent = red.parent
+                why = f" (it is parented to '{parent.name}')" if parent is not None and parent != obj else ""
+                report.warn(f"{label}: red handle '{red.name}' is {sp.offset:.3g} off the surface{why}; the nearest surface point is used")
+            view = sp.point - eye
+            if not np.linalg.norm(view) > 1e-12 * max(geo.size, 1e-30):
+                raise RokebyError(f"{label}: the generating eye lies on the surface point")
+            if refraction:
+                r = _transmitted(view / np.linalg.norm(view), sp.normal, ior, label)
+            else:
+                r = reflect(view / np.linalg.norm(view), sp.normal)
+            to_green = green_m[:3, 3] - sp.point
+            if not np.linalg.norm(to_green) > 1e-9 * max(geo.size, 1e-30):
+                raise RokebyError(f"{label}: the green handle sits on the surface point, so it gives no direction")
+            e = to_green / np.linalg.norm(to_green)
+            if not refraction and e @ sp.normal < 0.0:
+                if getattr(c, "light_name", ""):
+                    report.warn(f"{label}: no light reaches the red handle (the light is {np.degrees(np.arcsin(min(1.0, -e @ sp.normal))):.0f}° behind the surface there), so no highlight shows; move the red handle to the lit side")
+                else:
+                    report.warn(f"{label}: the green handle is {np.degrees(np.arcsin(min(1.0, -e @ sp.normal))):.0f}° behind the surface at the red handle; renders fold the reflection back above it, so it cannot show that point")
+            if not from_camera and eye_now is not None and not refraction:
+                view_now = sp.point - eye_now
+                if np.linalg.norm(view_now) > 0.0:
+                    off = _angle_deg(reflect(view_now / np.linalg.norm(view_now), sp.normal), r)
+                    if off > EYE_MISMATCH_DEGREES:
+                        report.warn(f"{label}: from the render eye its reflection lands {off:.1f}° away from the green handle (it was made from another view); set Generating Eye to Scene Camera, or render from its view (Return to View)")
+            rows.append(np.concatenate([sp.point, r / np.linalg.norm(r), e]))
+            points.append(sp)
+        except RokebyError as exc:
+            report.warn(str(exc))
+    return (np.array(rows, dtype=np.float32).reshape(-1, 9), points)
+
+
+SHRINKWRAP_NAME = schema.SHRINKWRAP_NAME
+
+
+def shrinkwrap_target(handle):
+    """The object a handle's "Rokeby: stay on mirror" Shrinkwrap keeps it on (None: it has none,
+    or no target)."""
+    for con in handle.constraints:
+        if con.type == "SHRINKWRAP" and con.name.startswith(SHRINKWRAP_NAME):
+            return con.target
+    return None
+
+
+def _transmitted(incident, normal, ior, label):
+    """Physical transmitted direction t at a refraction constraint, or a RokebyError saying why
+    there is none."""
+    if incident @ normal > 0.0:
+        raise RokebyError(f"{label}: the generating eye sees the back of the surface at the red handle; refraction constraints edit where rays enter (the side the normals face)")
+    t = refract(incident, normal, 1.0 / ior)
+    if t is None:
+        raise RokebyError(f"{label}: total internal reflection at the red handle (IOR {ior:g} < 1 at this angle), so there is no transmitted ray to edit")
+    return t
+
+
+def _region_inputs(obj, scene, depsgraph, geo, mirror_matrix, report):
+    """Region specs as plain tuples (for the fingerprint) — the weights are made later."""
+    specs = []
+    for k, rg in enumerate(obj.rokeby.regions):
+        label = f"region {k + 1} ('{rg.name}')" if rg.name else f"region {k + 1}"
+        if not rg.enabled:
+            continue
+        try:
+            radius, border = float(rg.radius), float(rg.border)
+            if not (np.isfinite(radius) and np.isfinite(border) and radius >= 0 and border >= 0):
+                raise RokebyError(f"{label}: radius and border must be finite and >= 0")
+            if rg.kind == "FREEFORM":
+                if not rg.vertex_group:
+                    raise RokebyError(f"{label}: no vertex group chosen (Regions ▸ Vertex group); the region is left out")
+                if obj.vertex_groups.get(rg.vertex_group) is None:
+                    raise RokebyError(f"{label}: vertex group '{rg.vertex_group}' was deleted; the region is left out until you choose a group")
+                if rg.vertex_group not in geo.region_weights:
+                    why = geo.region_problems.get(rg.vertex_group, f"vertex group '{rg.vertex_group}' could not be read")
+                    raise RokebyError(f"{label}: {why}; the region is left out")
+                specs.append(("FREEFORM", rg.vertex_group, border))
+                continue
+            if not object_in_scene(rg.center, scene):
+                raise RokebyError(f"{label}: its centre empty was deleted")
+            cm = _finite_matrix(rg.center.evaluated_get(depsgraph).matrix_world, f"{label}: centre '{rg.center.name}'")
+            if rg.kind == "EUCLIDEAN":
+                specs.append(("EUCLIDEAN", tuple(cm[:3, 3]), radius, border))
+            else:
+                sp = project_to_surface(obj, depsgraph, geo, cm[:3, 3], mirror_matrix)
+                specs.append(("GEODESIC", sp.triangle, tuple(sp.bary), radius, border))
+        except RokebyError as exc:
+            report.warn(str(exc))
+    return specs
+
+
+def _fingerprint(obj, geo_version, mirror_matrix, rows, regions, extra=()) -> bytes:
+    s = obj.rokeby
+    h = hashlib.blake2b(digest_size=20)
+    h.update(repr((s.enabled, s.metric, s.geodesic_method, s.polar, geo_version, regions, extra)).encode())
+    h.update(np.ascontiguousarray(mirror_matrix).tobytes())
+    h.update(np.ascontiguousarray(rows).tobytes())
+    return h.digest()
+
+
+def _solver(state: _State, geo: _Geometry, timer):
+    """The mirror's GeodesicSolver, kept while its geometry version is unchanged (no hashing of
+    the mesh per handle move); its factorisation is made on the first heat query."""
+    if state.solver is None or state.solver_version != state.geometry_version:
+        state.solver = timer(native.module().GeodesicSolver, geo.vertices, geo.triangles)
+        state.solver_version = state.geometry_version
+    return state.solver
+
+
+def _geodesic_distances(state: _State, geo: _Geometry, points, method: str, timer) -> np.ndarray:
+    """(K, V) distances from each constraint's surface point, cached per point: only a moved
+    handle costs a solve."""
+    out = np.empty((len(points), len(geo.vertices)), dtype=np.float32)
+    missing = []
+    for k, sp in enumerate(points):
+        key = (method, sp.triangle, sp.bary.tobytes())
+        d = state.distance_cache.get(key)
+        if d is None:
+            missing.append((k, key, sp))
+        else:
+            out[k] = d
+    if missing:
+        sources = [(sp.triangle, tuple(float(b) for b in sp.bary)) for _, _, sp in missing]
+        solved = timer(_solver(state, geo, timer).distances, sources, method=method)
+        for (k, key, _), d in zip(missing, solved):
+            out[k] = d
+            state.distance_cache[key] = d
+    # Bound the cache: keep what the current constraints use.
+    used = {(method, sp.triangle, sp.bary.tobytes()) for sp in points}
+    if len(state.distance_cache) > 4 * max(len(points), 8):
+        state.distance_cache = {k: v for k, v in state.distance_cache.items() if k in used}
+    return out
+
+
+# --- geodesic distances on meshes of several pieces ----------------------------------------------
+# Geodesic distances do not cross gaps: a vertex on a piece (connected component) of the mesh that
+# no constraint is on is at +inf from every constraint. Rokeby's rule, the same for any number of
+# constraints K: where no constraint of a group (all constraints, or the constraints of one
+# region) reaches a vertex over the surface, that group blends its constraints there by
+# straight-line (Euclidean) distance, exactly as with Distance: Euclidean. With K = 1 that is the
+# constant rotation the one constraint gives everywhere (what the core did already); with K >= 2
+# the unreached pieces no longer fall back to no edit. Pieces that some constraints reach keep
+# their geodesic blend of those.
+
+
+def _region_falloff(d: np.ndarray, radius: float, border: float) -> np.ndarray:
+    """rokeby_core's region falloff (1 in the core, a smooth step over the border, 0 outside)."""
+    return vecmath.region_falloff(d, radius, border)
+
+
+def constraint_groups(rows: np.ndarray, regions=None) -> list:
+    """The constraints that blend together (index arrays), as the core forms them: all of them
+    without regions, else per region those at which the region's weight is above 0."""
+    k = len(rows)
+    if not regions:
+        return [np.arange(k)] if k else []
+    p = np.asarray(rows, dtype=np.float64)[:, :3]
+    groups = []
+    for reg in regions:
+        if reg["kind"] == "euclidean":
+            a = _region_falloff(np.linalg.norm(p - np.asarray(reg["center"], dtype=np.float64), axis=1), float(reg["radius"]), float(reg["border"]))
+        else:
+            a = np.asarray(reg["at_constraints"], dtype=np.float64)
+        members = np.flatnonzero(a > 0.0)
+        if len(members):
+            groups.append(members)
+    return groups
+
+
+def unreached_fallback(distances: np.ndarray, rows: np.ndarray, vertices: np.ndarray, regions=None) -> np.ndarray:
+    """(K, V) geodesic distances with Rokeby's rule for unreached pieces applied (see above):
+    where no constraint of a group reaches a vertex, its constraints' distances there become
+    straight-line distances. A constraint in several groups keeps +inf where one of them is
+    reached (it must not enter that group's geodesic blend). Returns a new array when anything
+    changed (the cached distances are never modified)."""
+    d = np.asarray(distances, dtype=np.float32)
+    unreached = ~np.isfinite(d)
+    if not unreached.any() or not len(rows):
+        return d
+    allow = np.zeros_like(unreached)
+    first = np.ones(len(rows), dtype=bool)
+    for g in constraint_groups(rows, regions):
+        nobody = unreached[g].all(axis=0)
+        allow[g] = np.where(first[g][:, None], nobody[None, :], allow[g] & nobody[None, :])
+        first[g] = False
+    fallback = unreached & allow
+    if not fallback.any():
+        return d
+    out = d.copy()
+    cols = np.flatnonzero(fallback.any(axis=0))
+    p = np.asarray(rows, dtype=np.float64)[:, :3]
+    v = np.asarray(vertices, dtype=np.float64)
+    for n in np.flatnonzero(fallback.any(axis=1)):
+        c = cols[fallback[n, cols]]
+        out[n, c] = np.linalg.norm(v[c] - p[n], axis=1)
+    return out
+
+
+def mesh_pieces(triangles: np.ndarray, n_vertices: int) -> np.ndarray:
+    """Connected component (piece) of each vertex over the triangles' edges, labelled by its
+    smallest vertex index; -1 for vertices in no triangle. Union by hooking roots to the smaller
+    label and pointer jumping: a few numpy passes, no Python loop over vertices."""
+    lab = np.arange(n_vertices, dtype=np.int64)
+    tri = np.asarray(triangles, dtype=np.int64)
+    if len(tri):
+        a = tri.ravel()
+        b = tri[:, [1, 2, 0]].ravel()
+        while True:
+            la, lb = lab[a], lab[b]
+            diff = la != lb
+            if not diff.any():
+                break
+            lo, hi = np.minimum(la[diff], lb[diff]), np.maximum(la[diff], lb[diff])
+            np.minimum.at(lab, hi, lo)
+            while True:
+                nxt = lab[lab]
+                if np.array_equal(nxt, lab):
+                    break
+                lab = nxt
+    used = np.zeros(n_vertices, dtype=bool)
+    used[tri.ravel()] = True
+    return np.where(used, lab, -1)
+
+
+def _unreached_pieces(state, geo, distances) -> "tuple | None":
+    """(pieces no constraint reaches over the surface, pieces of the mesh), or None when every
+    piece is reached."""
+    nobody = ~np.isfinite(distances).any(axis=0)
+    if not nobody.any():
+        return None
+    if state.pieces is None or state.pieces[0] != state.geometry_version:
+        state.pieces = (state.geometry_version, mesh_pieces(geo.triangles, len(geo.vertices)))
+    labels = state.pieces[1]
+    total = len(np.unique(labels[labels >= 0]))
+    hit = labels[nobody & (labels >= 0)]
+    return int(len(np.unique(hit))), int(total)
+
+
+def _regions_for_native(state, geo, specs, points, method, timer):
+    regions = []
+    face_index = np.array([sp.triangle for sp in points], dtype=np.int64)
+    bary = np.array([sp.bary for sp in points], dtype=np.float64).reshape(-1, 3)
+
+    def at_constraints(values):
+        if len(points) == 0:
+            return np.zeros(0, dtype=np.float32)
+        return timer(native.module().interpolate, values, geo.triangles, face_index, bary)[0]
+
+    for spec in specs:
+        if spec[0] == "EUCLIDEAN":
+            _, centre, radius, border = spec
+            regions.append({"kind": "euclidean", "center": list(centre), "radius": radius, "border": border})
+            continue
+        key = (spec, method)
+        values = state.region_cache.get(key)
+        if values is None:  # region weights are kept until the region or the mesh changes
+            solver = _solver(state, geo, timer)
+            if spec[0] == "GEODESIC":
+                _, tri, b, radius, border = spec
+                values = timer(solver.geodesic_region, (tri, b), radius, border, method)
+            else:
+                _, group, border = spec
+                values = timer(solver.freeform_region, geo.region_weights[group], border, method)
+            state.region_cache[key] = values
+        regions.append({"kind": "weights", "values": values, "at_constraints": at_constraints(values)})
+    used = {(spec, method) for spec in specs}
+    for k in [k for k in state.region_cache if k not in used]:
+        del state.region_cache[k]
+    return regions
+
+
+def write_attribute(obj, values: np.ndarray, name: str = ATTRIBUTE, *, update: bool = True):
+    """Write (V, 3) rotation vectors to the mirror mesh's point attribute ``name`` in one foreach_set."""
+    me = obj.data
+    if me.library is not None or not getattr(me, "is_editable", True):
+        where = f" from library '{me.library.filepath}'" if me.library is not None else ""
+        raise RokebyError(f"mesh '{me.name}' is linked{where} and cannot store the field: make it local or a library override")
+    if not np.all(np.isfinite(values)):
+        raise RokebyError("the computed field is not finite (not written)")
+    if len(values) != len(me.vertices):
+        raise RokebyError(f"field has {len(values)} values, mesh '{me.name}' has {len(me.vertices)} vertices")
+    _vector_attribute(me, name, "POINT").data.foreach_set("vector", np.ascontiguousarray(values, dtype=np.float32).ravel())
+    if update:
+        # Attribute-only: tag the mesh for re-evaluation; me.update() would also recompute its
+        # normals and caches (8-12 ms at 100k vertices in the drag loop, issue 23).
+        me.update_tag()
+
+
+def _vector_attribute(me, name: str, domain: str):
+    """The FLOAT_VECTOR attribute ``name`` on ``domain`` of ``me``, made (or remade, when one of
+    another type or domain has that name) for writing."""
+    attr = me.attributes.get(name)
+    if attr is not None and (attr.domain != domain or attr.data_type != "FLOAT_VECTOR"):
+        me.attributes.remove(attr)
+        attr = None
+    return attr if attr is not None else me.attributes.new(name, "FLOAT_VECTOR", domain)
+
+
+def _corner_topology(me, state):
+    """(corner → vertex, corner → its polygon's first corner's vertex), read once per topology
+    (of the mirror's mesh, or of its carrier: their corner counts differ)."""
+    key = (me.name, len(me.loops), len(me.polygons), state.geometry_version if state is not None else None)
+    if state is not None and state.corner_topology is not None and state.corner_topology[0] == key:
+        return state.corner_topology[1]
+    corner_vert = np.empty(len(me.loops), dtype=np.int32)
+    me.loops.foreach_get("vertex_index", corner_vert)
+    start = np.empty(len(me.polygons), dtype=np.int32)
+    total = np.empty(len(me.polygons), dtype=np.int32)
+    me.polygons.foreach_get("loop_start", start)
+    me.polygons.foreach_get("loop_total", total)
+    # Corners are stored polygon by polygon (contiguous offsets), so repeating each polygon's
+    # first corner gives every corner its polygon's first corner. (int64: what the core takes.)
+    corner_vert = corner_vert.astype(np.int64)
+    ref_vert = corner_vert[np.repeat(start, total)]
+    topo = (corner_vert, ref_vert)
+    if state is not None:
+        state.corner_topology = (key, topo)
+    return topo
+
+
+def write_render_attribute(obj, parts: np.ndarray, state=None, *, ramp: bool = False, update: bool = True, timer=None):
+    """Write the field's view-independent parts (V, 6) = (x, y, z, w, a, u) for renders
+    (RENDER_ATTRIBUTE: x, y, z; RENDER_ATTRIBUTE_WA: (w, a, 0), or with ``ramp`` (one Euclidean
+    region) (w, −1, u): the nodes then take a = smoothstep(u) per shading point), what
+    rokeby.shading's node group reads, in two foreach_set calls: per vertex while every
+    polygon's quaternions share a hemisphere, per face corner otherwise (half turns)."""
+    me = obj.data
+    if not np.all(np.isfinite(parts)):
+        raise RokebyError("the computed field is not finite (not written)")
+    if len(parts) != len(me.vertices):
+        raise RokebyError(f"field has {len(parts)} values, mesh '{me.name}' has {len(me.vertices)} vertices")
+    run = timer if timer is not None else (lambda fn, *a, **k: fn(*a, **k))
+    per_corner, xyz, wa = run(native.view_blend_render_rows, parts, *_corner_topology(me, state), ramp=ramp)
+    domain = "CORNER" if per_corner else "POINT"
+    for name, values in ((RENDER_ATTRIBUTE, xyz), (RENDER_ATTRIBUTE_WA, wa)):
+        _vector_attribute(me, name, domain).data.foreach_set("vector", np.ascontiguousarray(values, dtype=np.float32).ravel())
+    if update:
+        me.update_tag()  # attribute-only, as in write_attribute
+
+
+def remove_render_attribute(obj) -> bool:
+    me = obj.data
+    found = False
+    for name in (RENDER_ATTRIBUTE, RENDER_ATTRIBUTE_WA):
+        attr = me.attributes.get(name) if me is not None else None
+        if attr is not None:
+            if me.library is not None:
+                raise RokebyError(f"mesh '{me.name}' is linked and its attribute '{name}' cannot be removed")
+            me.attributes.remove(attr)
+            found = True
+    if found:
+        me.update()
+    return found
+
+
+def _has_render_attribute(obj) -> bool:
+    me = obj.data
+    return all(
+        (a := me.attributes.get(name)) is not None and a.data_type == "FLOAT_VECTOR"
+        and len(a.data) == {"CORNER": len(me.loops), "POINT": len(me.vertices)}.get(a.domain, -1)
+        for name in (RENDER_ATTRIBUTE, RENDER_ATTRIBUTE_WA)
+    )
+
+
+def rotate(quats: np.ndarray, vectors: np.ndarray) -> np.ndarray:
+    """Apply unit quaternions (..., 4) as (x, y, z, w) to vectors (..., 3), vectorised."""
+    q = np.asarray(quats, dtype=np.float64)
+    v = np.asarray(vectors, dtype=np.float64)
+    u, w = q[..., :3], q[..., 3:4]
+    t = 2.0 * np.cross(u, v)
+    return v + w * t + np.cross(u, t)
+
+
+def mesh_edges(triangles: np.ndarray) -> np.ndarray:
+    """Every directed edge (i, j) of the triangles, both directions, (6F, 2)."""
+    e = np.concatenate([triangles[:, [0, 1]], triangles[:, [1, 2]], triangles[:, [2, 0]]])
+    return np.concatenate([e, e[:, ::-1]])
+
+
+def extend_rotations_outward(parts: np.ndarray, edges: np.ndarray, rings: int = 2) -> np.ndarray:
+    """Vertices where no region acts (a = 0) take R from a neighbour where one does, ``rings``
+    edges out (``edges``: ``mesh_edges`` of the triangles). Their weight stays 0, so nothing changes there; but a triangle across a region's
+    edge then interpolates the region's rotation, as the preview sees it, instead of blending it
+    with the identity (which a weight of a few tenths would turn into a visible error)."""
+    out = np.array(parts, dtype=np.float32)
+    e = edges
+    if len(e) == 0:
+        return out
+    outside = (out[:, 4] <= 0.0) & (out[:, 5] <= 0.0)
+    filled = ~outside
+    for _ in range(rings):
+        take = outside[e[:, 0]] & filled[e[:, 1]] & ~filled[e[:, 0]]
+        if not take.any():
+            break
+        dst, src = e[take, 0], e[take, 1]
+        out[dst, :4] = out[src, :4]
+        filled[dst] = True
+    return out
+
+
+def ramp_form(specs) -> bool:
+    """Whether the region weight reaches renders as the border ramp u (one Euclidean region with
+    a border): see rokeby_core's FieldOutput::ViewBlend."""
+    return len(specs) == 1 and specs[0][0] == "EUCLIDEAN" and specs[0][3] > 0.0 and specs[0][2] > 0.0
+
+
+def _interpolation_error(geo, parts, eye, rows, kwargs, timer, ramp=False):
+    """How far the renderer's interpolation of the per-corner field between vertices lands from
+    the per-pixel field (what the viewport preview evaluates), in degrees at the centres of the
+    triangles that face the eye: (99th percentile, max, samples). The region weights and
+    distances are interpolated there as the preview does."""
+    tri = geo.triangles
+    if len(tri) == 0 or len(rows) == 0:
+        return None
+    if len(tri) > AGREEMENT_SAMPLES:
+        tri = tri[np.linspace(0, len(tri) - 1, AGREEMENT_SAMPLES).astype(np.int64)]
+    c = geo.vertices[tri].astype(np.float64).mean(1)
+    n = geo.normals[tri].astype(np.float64).sum(1)
+    nl = np.linalg.norm(n, axis=1)
+    incident = c - eye
+    il = np.linalg.norm(incident, axis=1)
+    ok = (nl > 1e-6) & (il > 1e-12)
+    ok[ok] &= np.einsum("ij,ij->i", n[ok], incident[ok]) < 0.0  # seen from the front
+    if not ok.any():
+        return None
+    tri, c, n, incident = tri[ok], c[ok], n[ok] / nl[ok, None], incident[ok] / il[ok, None]
+    q = parts[tri].astype(np.float64)  # (S, 3, 6)
+    sign = np.where(np.einsum("sij,sj->si", q[..., :4], q[:, 0, :4]) < 0.0, -1.0, 1.0)
+    q[..., :4] *= sign[..., None]
+    qi = q.mean(1)  # the renderer's interpolation at the centre: (q, a) averaged
+    qi[:, :4] /= np.maximum(np.linalg.norm(qi[:, :4], axis=1, keepdims=True), 1e-300)
+    r = incident - 2.0 * np.einsum("ij,ij->i", incident, n)[:, None] * n
+    got = np.asarray(timer(native.view_blend, qi.astype(np.float32), r.astype(np.float32), ramp=ramp), dtype=np.float64)
+    dkw = {"polar": kwargs["polar"]}
+    if kwargs.get("distances") is not None:
+        dkw["distances"] = np.ascontiguousarray(np.asarray(kwargs["distances"])[:, tri].mean(2), dtype=np.float32)
+    if kwargs.get("regions"):
+        regs = []
+        for reg in kwargs["regions"]:
+            if reg["kind"] == "weights":
+                reg = dict(reg, values=np.ascontiguousarray(np.asarray(reg["values"])[tri].mean(1), dtype=np.float32))
+            regs.append(reg)
+        dkw["regions"] = regs
+    want = timer(native.edited_directions, c.astype(np.float32), n.astype(np.float32), tuple(float(x) for x in eye), rows, **dkw)
+    want = np.asarray(want, dtype=np.float64)
+    cos = np.einsum("ij,ij->i", got, want) / np.maximum(np.linalg.norm(got, axis=1), 1e-300)
+    ang = np.degrees(np.arccos(np.clip(cos, -1.0, 1.0)))
+    # Where e points below the surface, renders fold it back above (rokeby.shading) while the
+    # preview looks it up as it is: those samples are counted apart.
+    below = np.einsum("ij,ij->i", want, n) < 0.0
+    kept = ang[~below] if (~below).any() else np.zeros(1)
+    # Their share of the picture: each triangle weighted by the solid angle it covers from the eye.
+    v = geo.vertices[tri].astype(np.float64)
+    area = 0.5 * np.linalg.norm(np.cross(v[:, 1] - v[:, 0], v[:, 2] - v[:, 0]), axis=1)
+    seen = area * np.abs(np.einsum("ij,ij->i", n, incident)) / np.maximum(il[ok] ** 2, 1e-300)
+    share = float(seen[below].sum() / seen.sum()) if seen.sum() > 0 else 0.0
+    return float(np.percentile(kept, 99)), float(kept.max()), int(len(ang)), share
+
+
+# --- modifiers that change the vertex count: the field on the evaluated surface ----------------
+CARRIER_PREFIX = schema.CARRIER_PREFIX
+TRANSFER_GROUP = schema.TRANSFER_GROUP
+TRANSFER_MODIFIER = schema.TRANSFER_MODIFIER
+# 2: the refraction field is copied too (zeros, read as the identity, where the carrier has none).
+TRANSFER_VERSION = 2
+FIELD_ATTRIBUTES = (ATTRIBUTE, RENDER_ATTRIBUTE, RENDER_ATTRIBUTE_WA, REFRACTION_ATTRIBUTE)
+
+
+def carrier_of(obj):
+    """The carrier object of ``obj`` (a mesh of the evaluated topology holding its field), or
+    None. A carrier owned by another mirror (``obj`` is a Shift+D or Alt+D copy of it) is not
+    ``obj``'s: it gets its own. (Carriers saved before owners existed are claimed at load time,
+    ``claim_carriers``.)"""
+    c = getattr(obj.rokeby, "field_carrier", None)
+    try:
+        if c is None or c.type != "MESH":
+            return None
+        owner = c.parent
+        return c if owner is None or owner == obj else None
+    except ReferenceError:
+        return None
+
+
+def strip_field(me) -> bool:
+    """Remove the field attributes from the mesh ``me`` (a shared mesh holds none: each mirror
+    using it carries its own); returns whether there were any."""
+    if me is None or me.library is not None:
+        return False
+    found = False
+    for name in FIELD_ATTRIBUTES:
+        # Looked up anew each time: removing an attribute invalidates Python references to the
+        # others (a list of them removed the wrong ones and left rokeby_render_rotation behind).
+        attr = me.attributes.get(name)
+        if attr is not None:
+            me.attributes.remove(attr)
+            found = True
+    if found:
+        me.update()
+    return found
+
+
+def claim_carriers():
+    """Load-time migration: a carrier saved without an owner (before copies were handled) is
+    claimed by the mirror it is named after, else by the first mirror pointing at it; the others
+    (copies that shared it) get their own at their next evaluation."""
+    import bpy  # noqa: PLC0415
+
+    users: dict = {}
+    for ob in bpy.data.objects:
+        s = getattr(ob, "rokeby", None)
+        c = s.field_carrier if s is not None else None
+        if c is not None and ob.library is None and c.library is None and c.parent is None:
+            users.setdefault(c.name, (c, []))[1].append(ob)
+    for c, obs in users.values():
+        named = [o for o in obs if c.name == CARRIER_PREFIX + o.name]
+        c.parent = (named or obs)[0]
+
+
+def _transfer_group():
+    """"Rokeby Field Transfer": copies the render rows and the rotation vectors (reflection and
+    refraction) of the Source object's mesh onto the modified geometry, by index (the carrier has
+    the same topology), on face corners (a point attribute of the carrier adapts to its corners).
+    An attribute the carrier lacks arrives as zeros, which the render nodes read as a missing
+    one: the identity."""
+    import bpy  # noqa: PLC0415
+
+    ng = bpy.data.node_groups.get(TRANSFER_GROUP)
+    if ng is not None and ng.bl_idname == "GeometryNodeTree" and ng.get(schema.VERSION_KEY) == TRANSFER_VERSION:
+        return ng
+    if ng is None or ng.bl_idname != "GeometryNodeTree":
+        ng = bpy.data.node_groups.new(TRANSFER_GROUP, "GeometryNodeTree")
+    ng.nodes.clear()
+    ng.interface.clear()
+    ng.interface.new_socket("Geometry", in_out="INPUT", socket_type="NodeSocketGeometry")
+    ng.interface.new_socket("Source", in_out="INPUT", socket_type="NodeSocketObject")
+    ng.interface.new_socket("Geometry", in_out="OUTPUT", socket_type="NodeSocketGeometry")
+    gin, gout = ng.nodes.new("NodeGroupInput"), ng.nodes.new("NodeGroupOutput")
+    info = ng.nodes.new("GeometryNodeObjectInfo")
+    ng.links.new(gin.outputs["Source"], info.inputs["Object"])
+    index = ng.nodes.new("GeometryNodeInputIndex")
+    geometry = gin.outputs["Geometry"]
+    for name, domain in ((RENDER_ATTRIBUTE, "CORNER"), (RENDER_ATTRIBUTE_WA, "CORNER"), (ATTRIBUTE, "POINT"), (REFRACTION_ATTRIBUTE, "POINT")):
+        read = ng.nodes.new("GeometryNodeInputNamedAttribute")
+        read.data_type = "FLOAT_VECTOR"
+        read.inputs["Name"].default_value = name
+        sample = ng.nodes.new("GeometryNodeSampleIndex")
+        sample.data_type, sample.domain = "FLOAT_VECTOR", domain
+        ng.links.new(info.outputs["Geometry"], sample.inputs["Geometry"])
+        ng.links.new(read.outputs["Attribute"], sample.inputs["Value"])
+        ng.links.new(index.outputs["Index"], sample.inputs["Index"])
+        store = ng.nodes.new("GeometryNodeStoreNamedAttribute")
+        store.data_type, store.domain = "FLOAT_VECTOR", domain
+        store.inputs["Name"].default_value = name
+        ng.links.new(geometry, store.inputs["Geometry"])
+        ng.links.new(sample.outputs[0], store.inputs["Value"])
+        geometry = store.outputs["Geometry"]
+    ng.links.new(geometry, gout.inputs["Geometry"])
+    ng[schema.VERSION_KEY] = TRANSFER_VERSION
+    return ng
+
+
+def ensure_carrier(obj, depsgraph):
+    """The carrier of ``obj`` with the evaluated mesh's topology (rebuilt when it changes), and
+    the 'Rokeby field' modifier at the end of the stack reading it. A copy of a mirror gets a
+    carrier of its own (one owned by another mirror is left to it)."""
+    import bpy  # noqa: PLC0415
+
+    ob_eval = obj.evaluated_get(depsgraph)
+    me_eval = ob_eval.data
+    carrier = carrier_of(obj)
+    if carrier is None or len(carrier.data.vertices) != len(me_eval.vertices) or len(carrier.data.loops) != len(me_eval.loops):
+        mesh = bpy.data.meshes.new_from_object(ob_eval, preserve_all_data_layers=False)
+        mesh.name = CARRIER_PREFIX + obj.name
+        if carrier is None:
+            carrier = bpy.data.objects.new(CARRIER_PREFIX + obj.name, mesh)  # in no scene: never drawn
+            carrier.parent = obj
+        else:
+            old = carrier.data
+            carrier.data = mesh
+            if old.users == 0:
+                bpy.data.meshes.remove(old)
+        obj.rokeby.field_carrier = carrier
+    if carrier.parent is None:
+        carrier.parent = obj
+    mod = obj.modifiers.get(TRANSFER_MODIFIER)
+    if mod is None or mod.type != "NODES":
+        mod = obj.modifiers.new(TRANSFER_MODIFIER, "NODES")
+        mod.show_in_editmode = False
+    if mod.node_group is None or mod.node_group.name != TRANSFER_GROUP or mod.node_group.get(schema.VERSION_KEY) != TRANSFER_VERSION:
+        mod.node_group = _transfer_group()
+    from ..blender import compat  # noqa: PLC0415
+
+    ident = next(i.identifier for i in mod.node_group.interface.items_tree if getattr(i, "in_out", "") == "INPUT" and i.name == "Source")
+    if compat.modifier_input(mod, ident) != carrier:
+        compat.set_modifier_input(mod, ident, carrier)
+    return carrier
+
+
+def remove_carrier(obj) -> bool:
+    """Remove the transfer modifier and the carrier of ``obj`` (the vertex count matches again,
+    or the mirror goes)."""
+    import bpy  # noqa: PLC0415
+
+    found = False
+    mod = obj.modifiers.get(TRANSFER_MODIFIER)
+    if mod is not None:
+        obj.modifiers.remove(mod)
+        found = True
+    carrier = carrier_of(obj)
+    if carrier is None and obj.rokeby.field_carrier is not None:
+        obj.rokeby.field_carrier = None  # another mirror's (this one is its copy): left to it
+    if carrier is not None:
+        mesh = carrier.data
+        obj.rokeby.field_carrier = None
+        from ..blender import transaction  # noqa: PLC0415
+
+        transaction.remove(carrier)
+        if mesh is not None:
+            transaction.remove_unused(mesh)
+        found = True
+    return found
+
+
+def remove_attribute(obj, name: str) -> bool:
+    """Remove the point attribute ``name`` from the mirror's mesh (if it has it)."""
+    me = obj.data
+    attr = me.attributes.get(name) if me is not None else None
+    if attr is None:
+        return False
+    if me.library is not None:
+        raise RokebyError(f"mesh '{me.name}' is linked and its attribute '{name}' cannot be removed")
+    me.attributes.remove(attr)
+    me.update()
+    return True
+
+
+def _has_attribute(obj, name: str) -> bool:
+    attr = obj.data.attributes.get(name)
+    return attr is not None and attr.domain == "POINT" and attr.data_type == "FLOAT_VECTOR" and len(attr.data) == len(obj.data.vertices)
+
+
+def read_attribute(obj, name: str = ATTRIBUTE) -> np.ndarray | None:
+    """The stored rotation vectors (V, 3) of a mirror (``name``: which field), or None."""
+    me = obj.data
+    attr = me.attributes.get(name) if me is not None else None
+    if attr is None:
+        return None
+    out = np.empty(len(me.vertices) * 3, dtype=np.float32)
+    attr.data.foreach_get("vector", out)
+    return out.reshape(-1, 3)
+
+
+def _estimate(state, args, timer=None):
+    """Run the render-vs-preview estimate (``_interpolation_error``) and turn it into the notes
+    the report carries; returns the figures."""
+    geo, parts, eye, rows, kwargs, ramp = args
+    est = _interpolation_error(geo, parts, eye, rows, kwargs, timer or (lambda fn, *a, **k: fn(*a, **k)), ramp)
+    notes = []
+    if est is not None and est[0] > AGREEMENT_DEGREES:
+        notes.append(
+            f"the mesh is too coarse for this field: between vertices renders differ from the per-pixel preview by up to {est[1]:.1f}° "
+            f"(99th percentile {est[0]:.1f}° over {est[2]:,} triangles); subdivide the mirror's mesh where the reflection changes fast, or widen the region border")
+    if est is not None and est[3] > FOLDED_SHARE:
+        notes.append(
+            f"on {100 * est[3]:.0f}% of the mirror as the render eye sees it the edited reflection points below the surface: renders fold it back "
+            "above (no black), the preview shows it unfolded; make that edit smaller or confine it with a region")
+    state.field_notes, state.estimate_args = notes, None
+    state.estimate_time = time.perf_counter()
+    return est
+
+
+def _defer_estimate(obj, state, args):
+    """Estimate once the updates pause (``ESTIMATE_INTERVAL`` after the last one), then refresh
+    the mirror's report; a render or an API evaluation estimates at once instead."""
+    first = state.estimate_args is None
+    state.estimate_args = args
+    if not first:
+        return
+    uid = obj.session_uid
+
+    def later():
+        st = _STATE.get(uid)
+        if st is None or st.estimate_args is None:
+            return None
+        if time.perf_counter() - st.estimate_time < ESTIMATE_INTERVAL:
+            return ESTIMATE_INTERVAL  # still dragging: look again later
+        est = _estimate(st, st.estimate_args)
+        rep = st.report
+        if rep is not None and rep.status != "ERROR":
+            rep.interpolation_error = est
+            base = [m for m in rep.messages if not (m.startswith("the mesh is too coarse") or " the edited reflection points below the surface" in m)]
+            warned = [m for m in base if m not in rep.notes]
+            rep.messages, rep.status = base, ("DISABLED" if rep.status == "DISABLED" else "OK" if not warned else rep.status)
+            for msg in st.field_notes:
+                rep.warn(msg)
+        import bpy  # noqa: PLC0415
+
+        for window in getattr(bpy.context.window_manager, "windows", ()):
+            for area in window.screen.areas:
+                if area.type == "VIEW_3D":
+                    area.tag_redraw()
+        return None
+
+    _schedule(later, ESTIMATE_INTERVAL)
+
+
+def _schedule(fn, seconds: float):
+    """Run ``fn`` from Blender's event loop after ``seconds`` (again after what it returns)."""
+    import bpy  # noqa: PLC0415
+
+    bpy.app.timers.register(fn, first_interval=seconds)
+
+
+def evaluate_mirror(obj, scene, depsgraph, *, force=False, reread_geometry=False, interactive=False) -> MirrorReport:
+    """Evaluate one mirror if its inputs changed (or ``force``); never raises. ``interactive``
+    (the depsgraph handler, while the artist drags): the render-vs-preview estimate runs at most
+    every ESTIMATE_INTERVAL seconds, and once more when the updates pause."""
+    t0 = time.perf_counter()
+    timer = _NativeTimer()
+    _STATS["checks"] += 1
+    name = getattr(obj, "name", "?")
+    report = MirrorReport(name)
+    uid = obj.session_uid
+    state = _STATE.setdefault(uid, _State())
+    try:
+        if obj.type != "MESH":
+            raise RokebyError(f"mirror '{name}' is {words.kind(obj.type)}, not a mesh")
+        if obj.library is not None:
+            # Read-only: its field cannot follow this scene's camera or edits (no carrier, no
+            # attribute can be written to it); a library override is a mirror of its own.
+            raise RokebyError(f"mirror '{name}' is linked from library '{obj.library.filepath}' and cannot store the field: "
+                              "make it local or a library override")
+        settings = obj.rokeby
+        if obj.mode == "EDIT":
+            # Edit Mode writes its own mesh back on exit; the field follows when it does.
+            report.warn("paused while the mirror is in Edit Mode")
+            _DIRTY.add(uid)
+            state.report = report
+            return report
+        changes = sync_freeform_regions(obj)
+        if changes:
+            # The reader's weights are in the next evaluation of the mesh; the ones at hand are
+            # stale, so nothing is computed now and the previous field stays, as the status says.
+            _DIRTY.add(uid)
+            state.fingerprint = None
+            for msg in changes:
+                report.warn(f"{msg}; the field follows at the next update (until then renders show the previous one)")
+            report.pending = True
+            state.report = report
+            return report
+        mirror_matrix = _finite_matrix(obj.evaluated_get(depsgraph).matrix_world, f"mirror '{name}'")
+        groups = sorted({rg.vertex_group for rg in settings.regions if rg.enabled and rg.kind == "FREEFORM" and rg.vertex_group})
+        geo = state.geometry
+        if (geo is None or reread_geometry or force or uid in _DIRTY or geo.shared != shares_mesh(obj)
+                or not np.array_equal(getattr(geo, "matrix", None), mirror_matrix)):
+            _DIRTY.discard(uid)
+            try:
+                new = read_geometry(obj, depsgraph, mirror_matrix, groups)
+            except RokebyError:
+                state.geometry = None
+                raise
+            new.matrix = mirror_matrix
+            if not new.same_positions(geo):
+                state.geometry_version += 1
+                state.distance_cache.clear()
+                state.region_cache.clear()
+            else:
+                new.bvh, new._poly_start, new.edges = geo.bvh, geo._poly_start, geo.edges
+                new.uses, new.max_edge = geo.uses, geo.max_edge
+            if new.bvh is None and geo is not None and geo.local is not None \
+                    and np.array_equal(geo.local, new.local) and np.array_equal(geo.triangles, new.triangles):
+                # moved, not reshaped: the object-space BVH (or the count towards one) still holds
+                new.bvh, new.uses, new.max_edge = geo.bvh, geo.uses, geo.max_edge
+            state.geometry = geo = new
+        geo.uses += 1
+        report.vertices = len(geo.vertices)
+        report.field_mesh = geo.source
+        eye_now, report.eye = render_eye(obj, scene, depsgraph, geo.size)
+        if settings.freeze and not getattr(settings, "freeze_eye_set", True):
+            report.warn("frozen, but no eye was stored (it had no constraint and the scene no camera): renders reflect from the frozen eye "
+                        f"{tuple(round(float(x), 3) for x in settings.freeze_eye)}; unfreeze and freeze again, or set the frozen eye")
+        t_rows, t_points, ior = np.zeros((0, 9), np.float32), [], None
+        if not settings.enabled:
+            rows, points, specs = np.zeros((0, 9), np.float32), [], []
+        else:
+            rows, points = _constraint_inputs(obj, scene, depsgraph, geo, mirror_matrix, report, eye_now=eye_now)
+            specs = _region_inputs(obj, scene, depsgraph, geo, mirror_matrix, report)
+            if eye_now is None and len(settings.constraints):
+                report.warn("the scene has no camera, so the render eye is unknown: constraints use the views they were made from and region borders blend view-independently; set a scene camera (or freeze the mirror)")
+            if any(c.enabled and getattr(c, "kind", "REFLECTION") == "REFRACTION" for c in settings.constraints):
+                try:
+                    ior = valid_ior(settings.ior)
+                except RokebyError as exc:
+                    report.warn(f"mirror '{name}': {exc}; its refraction constraints are skipped")
+                else:
+                    t_rows, t_points = _constraint_inputs(obj, scene, depsgraph, geo, mirror_matrix, report, "REFRACTION", ior, eye_now=eye_now)
+        # The stored field does not depend on the eye (renders blend eq. 7 per pixel); the rows
+        # carry it when constraints are seen from the camera.
+        fp_reflection = _fingerprint(obj, state.geometry_version, mirror_matrix, rows, specs)
+        fp_refraction = _fingerprint(obj, state.geometry_version, mirror_matrix, t_rows, specs, (ior,))
+        fp = fp_reflection + fp_refraction
+        if fp == state.fingerprint and not force and state.report is not None and state.report.status != "ERROR":
+            _STATS["skipped"] += 1
+            if geo.shared:
+                strip_field(obj.data)  # e.g. left by this mirror before its mesh was linked to another object
+            kept = state.report
+            kept.recomputed = False
+            # Same field, but the warnings describe the scene as it is now (e.g. a deleted light
+            # whose highlight handle stayed where it was).
+            kept.messages, kept.status, kept.notes = list(report.messages), report.status, list(report.notes)
+            if state.reach_note is not None:
+                kept.note(state.reach_note)
+            for msg in state.field_notes:
+                kept.warn(msg)
+            kept.eye = report.eye
+            return kept
+        report.constraints_used = len(rows) + len(t_rows)
+        method = {"HEAT": "heat", "DIJKSTRA": "dijkstra", "EXACT": "exact"}[settings.geodesic_method]
+        polar = "exact" if settings.polar == "EXACT" else "fast"
+        distances = None
+        if len(rows) + len(t_rows) and settings.metric == "GEODESIC":
+            # One query for both kinds: the per-point cache keeps every current constraint's solve.
+            distances = _geodesic_distances(state, geo, points + t_points, method, timer)
+            if np.all(np.isinf(distances)):
+                report.warn("no constraint reaches this mesh over its surface; it takes the field of straight-line distances")
+            report.unreached_pieces = _unreached_pieces(state, geo, distances)
+        state.reach_note = None
+        if report.unreached_pieces is not None:
+            n, total = report.unreached_pieces
+            state.reach_note = (
+                f"{n} of {total} pieces of the mesh have no constraint on them: geodesic distances do not cross gaps, "
+                "so there the constraints blend by straight-line distance")
+            report.note(state.reach_note)
+        old = state.field_fingerprints
+        transfer = geo.source == "transfer"
+        target = carrier_of(obj) if transfer else obj
+        stored = target is not None and _has_attribute(target, ATTRIBUTE) and _has_render_attribute(target)
+        if force or old.get(ATTRIBUTE) != fp_reflection or not stored:
+            kwargs = {"polar": polar}
+            if specs:
+                kwargs["regions"] = _regions_for_native(state, geo, specs, points, method, timer)
+            if distances is not None and len(rows):
+                kwargs["distances"] = unreached_fallback(distances[: len(rows)], rows, geo.vertices, kwargs.get("regions"))
+            # One field for the preview and the render: the parts of eq. 7 that do not depend on
+            # the view, blended towards r rᵀ per shading point by the render nodes.
+            parts = timer(native.rotation_field, geo.vertices, rows, output="view_blend", **kwargs)
+            if specs:
+                if geo.edges is None:
+                    geo.edges = mesh_edges(geo.triangles)
+                parts = extend_rotations_outward(parts, geo.edges)
+            # The view-independent form for scripts and tools (eq. 7 towards I).
+            rv = timer(native.view_blend_rotation_vectors, parts)
+            ramp = ramp_form(specs)
+            if transfer:
+                target = ensure_carrier(obj, depsgraph)
+            else:
+                remove_carrier(obj)
+            write_attribute(target, rv, update=False)
+            write_render_attribute(target, parts, state, ramp=ramp, timer=timer)
+            state.view_parts = (parts, ramp)
+            state.rotations = rv
+            state.field_inputs = (rows, kwargs.get("distances"), kwargs.get("regions") or [])
+            report.interpolation_error = None
+            if eye_now is None or not len(rows):
+                state.field_notes, state.estimate_args = [], None
+            else:
+                args = (geo, parts, eye_now, rows, kwargs, ramp)
+                if interactive and time.perf_counter() - state.estimate_time < ESTIMATE_INTERVAL:
+                    # In the middle of a drag: the last estimate stands, a new one follows when
+                    # the updates pause (a timer), so each drag step pays only for the field.
+                    report.interpolation_error = state.report.interpolation_error if state.report is not None else None
+                    _defer_estimate(obj, state, args)
+                else:
+                    report.interpolation_error = _estimate(state, args, timer)
+            for msg in state.field_notes:
+                report.warn(msg)
+            old[ATTRIBUTE] = fp_reflection
+        elif state.report is not None:
+            report.interpolation_error = state.report.interpolation_error
+            for msg in state.field_notes:
+                report.warn(msg)
+        # The refraction field goes where the reflection field went (the mirror's own carrier when
+        # the mesh is shared or its vertex count changes).
+        target = (carrier_of(obj) or ensure_carrier(obj, depsgraph)) if transfer else obj
+        if not len(t_rows):
+            old.pop(REFRACTION_ATTRIBUTE, None)
+            state.refractions = None
+            remove_attribute(target, REFRACTION_ATTRIBUTE)
+        elif force or old.get(REFRACTION_ATTRIBUTE) != fp_refraction or not _has_attribute(target, REFRACTION_ATTRIBUTE):
+            kwargs = {"polar": polar}
+            if specs:
+                kwargs["regions"] = _regions_for_native(state, geo, specs, t_points, method, timer)
+            if distances is not None:
+                kwargs["distances"] = unreached_fallback(distances[len(rows):], t_rows, geo.vertices, kwargs.get("regions"))
+            tv = timer(native.rotation_field, geo.vertices, t_rows, output="rotation_vector", **kwargs)
+            write_attribute(target, tv, REFRACTION_ATTRIBUTE)
+            state.refractions = tv
+            old[REFRACTION_ATTRIBUTE] = fp_refraction
+        if transfer and geo.shared:
+            # Every object using a shared mesh carries its own field: none stays in the mesh,
+            # where it would render on objects that are not (or no longer) this mirror.
+            strip_field(obj.data)
+        state.fingerprint = fp
+        report.recomputed = True
+        if not settings.enabled:
+            report.status = "DISABLED"
+        _STATS["recomputations"] += 1
+    except RokebyError as exc:
+        report.status = "ERROR"
+        report.messages.append(str(exc))
+        state.fingerprint = None
+        _STATS["errors"] += 1
+    except native.NativeUnavailable as exc:
+        report.status = "ERROR"
+        report.messages.append(str(exc))
+        _STATS["errors"] += 1
+    except (ValueError, TypeError, RuntimeError, ReferenceError) as exc:
+        report.status = "ERROR"
+        report.messages.append(f"{type(exc).__name__}: {exc}")
+        state.fingerprint = None
+        _STATS["errors"] += 1
+    report.native_ms = timer.seconds * 1e3
+    report.python_ms = (time.perf_counter() - t0) * 1e3 - report.native_ms
+    state.report = report
+    return report
+
+
+def mesh_fingerprint(obj) -> bytes:
+    """A cheap digest of ``obj``'s own mesh data (positions, corners, polygons, shape keys): a
+    script that edits them (``foreach_set``, ``bmesh.to_mesh``) tags nothing that the API sees."""
+    me = obj.data
+    h = hashlib.blake2b(digest_size=16)
+    nv, nl, npoly = len(me.vertices), len(me.loops), len(me.polygons)
+    h.update(repr((me.session_uid, nv, nl, npoly)).encode())
+    co = np.empty(nv * 3, np.float32)
+    me.vertices.foreach_get("co", co)
+    h.update(co.tobytes())
+    idx = np.empty(nl, np.int32)
+    me.loops.foreach_get("vertex_index", idx)
+    h.update(idx.tobytes())
+    start = np.empty(npoly, np.int32)
+    me.polygons.foreach_get("loop_start", start)
+    h.update(start.tobytes())
+    keys = me.shape_keys
+    if keys is not None:
+        for kb in keys.key_blocks:
+            kco = np.empty(len(kb.data) * 3, np.float32)
+            kb.data.foreach_get("co", kco)
+            h.update(kb.name.encode() + kco.tobytes())
+    return h.digest()
+
+
+def edited_meshes(scene) -> set:
+    """Mirrors of ``scene`` whose mesh data changed since the last call (or were never seen):
+    their meshes are tagged so the next depsgraph update re-evaluates them from the edited data,
+    and the caller re-reads their geometry. For ``rokeby.api.evaluate``, which runs with the
+    handlers suspended and so never sees Blender's geometry updates."""
+    out = set()
+    for ob in mirrors_of(scene):
+        try:
+            if ob.type != "MESH" or ob.mode == "EDIT" or ob.library is not None or ob.data.library is not None:
+                continue
+            fp = mesh_fingerprint(ob)
+        except (AttributeError, ReferenceError):
+            continue
+        state = _STATE.setdefault(ob.session_uid, _State())
+        if state.mesh_fingerprint != fp:
+            ob.data.update_tag()
+            state.mesh_fingerprint = fp
+            out.add(ob)
+    return out
+
+
+def mirrors_of(scene) -> list:
+    """The mirrors linked into ``scene``, from the add-on's registry (no scan of its objects)."""
+    from . import registry  # noqa: PLC0415
+
+    return registry.mirrors(scene)
+
+
+def evaluate_scene(scene, depsgraph, *, force=False, geometry_changed=None, all_geometry=False, interactive=False, settle=True) -> dict:
+    """Evaluate every mirror of ``scene``; ``geometry_changed``: original IDs Blender reported
+    with new geometry (their meshes are re-read), ``all_geometry``: re-read every mirror's mesh
+    (a frame change can deform any of them); ``interactive``: see ``evaluate_mirror``;
+    ``settle``: when a mirror is pending (a free-form region's reader modifier was remade or
+    repointed), update ``depsgraph`` and evaluate it again at once, so the status never describes
+    weights older than the painting. Blender would re-evaluate the tagged mesh after the
+    depsgraph handler anyway, but without calling the handlers again, so the field would wait
+    for the next edit."""
+    out = {}
+    changed = geometry_changed or set()
+    mirrors = mirrors_of(scene)
+    from . import duplicates  # noqa: PLC0415
+
+    # Shift+D / Alt+D copies get handles of their own before anything reads them.
+    if duplicates.separate_copies(mirrors):
+        depsgraph.update()  # the new handles are evaluated (their Shrinkwrap, their parent)
+    local_names = {ob.name for ob in mirrors if ob.library is None}
+    for ob in mirrors:
+        reread = all_geometry or ob in changed or (ob.type == "MESH" and ob.data in changed)
+        rep = evaluate_mirror(ob, scene, depsgraph, force=force, reread_geometry=reread, interactive=interactive)
+        # A mirror linked from a library shares its name with its library override, which keeps
+        # the plain name; the linked one is listed with its library's file name.
+        key = ob.name if ob.library is None or ob.name not in local_names else f"{ob.name} ({os.path.basename(ob.library.filepath)})"
+        out[key] = rep
+    pending = [name for name, rep in out.items() if rep.pending]
+    if settle and pending:
+        depsgraph.update()  # our own handlers are guarded against re-entrance (handlers._busy)
+        by_name = {ob.name: ob for ob in mirrors}
+        for name in pending:
+            ob = by_name.get(name)
+            if ob is not None:
+                out[name] = evaluate_mirror(ob, scene, depsgraph, force=force, reread_geometry=True, interactive=interactive)
+    # Forget objects that are no longer mirrors (deleted, or Remove Mirror).
+    from . import registry  # noqa: PLC0415
+
+    live = {ob.session_uid for ob in registry.mirrors()}
+    for uid in [u for u in _STATE if u not in live]:
+        del _STATE[uid]
+    return out
