@@ -31,6 +31,7 @@ use crate::polar::{self, min_rotation, PolarMethod};
 use crate::region::Region;
 use glam::{DMat3, DQuat, DVec3};
 use rayon::prelude::*;
+use std::sync::atomic::{AtomicU64, Ordering};
 
 mod lanes;
 mod simd;
@@ -761,6 +762,7 @@ impl Field {
             let left = lanes::run(self.kernel, &inputs, start, chunk);
             let mut s = self.scratch();
             let mut nonfinite = false;
+            FALLBACK_LANES.fetch_add(left.points.len() as u64, Ordering::Relaxed);
             for (i, q) in left.points {
                 s.warm_from(q);
                 let o = &mut chunk[(i - start) * width..(i - start + 1) * width];
@@ -933,6 +935,7 @@ impl Field {
             let left = lanes::run(self.kernel, &inputs, start, chunk);
             let mut s = self.scratch();
             let mut nonfinite = false;
+            FALLBACK_LANES.fetch_add(left.points.len() as u64, Ordering::Relaxed);
             for (i, q) in left.points {
                 s.warm_from(q);
                 let o = &mut chunk[(i - start) * 3..(i - start + 1) * 3];
@@ -949,6 +952,16 @@ impl Field {
         }
         Ok(out)
     }
+}
+
+/// Points or pixels the lanes handed to the scalar f64 path since the process started (what
+/// `make bench` reports as the fallback share).
+static FALLBACK_LANES: AtomicU64 = AtomicU64::new(0);
+
+/// How many points or pixels the f32 lanes have handed to the scalar f64 path so far (those next
+/// to a constraint, at region borders, or too ill-conditioned for f32; see `lanes`).
+pub fn fallback_lanes() -> u64 {
+    FALLBACK_LANES.load(Ordering::Relaxed)
 }
 
 /// Points up to which a call runs on the calling thread: waking the pool costs more than it

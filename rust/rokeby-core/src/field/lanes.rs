@@ -1,5 +1,5 @@
 //! The field of eq. 5 over lanes of points: structure-of-arrays blocks of W points in f32, W = 16
-//! (AVX-512), 8 (AVX2 + FMA) or 8 without target features (the portable path), chosen at run time.
+//! (AVX-512), 8 (AVX2 + FMA) or 4 without target features (the portable path), chosen at run time.
 //!
 //! Per block: M = Σₙ wₙ eₙrₙᵀ with scale-free weights wₙ = d²_min / d²ₙ ∈ (0, 1] (the nearest
 //! constraint weighs 1; ortho is scale-invariant, so this is eq. 3's 1/d² up to a per-point factor,
@@ -25,7 +25,7 @@ use glam::{DQuat, DVec3};
 pub enum Kernel {
     /// The scalar f64 reference, point by point.
     Scalar,
-    /// f32 lanes of 8 without target features (SSE2 on x86-64, NEON on aarch64).
+    /// f32 lanes of 4 without target features (SSE2 on x86-64, NEON on aarch64).
     Portable,
     /// f32 lanes of 8 with AVX2 and FMA.
     Avx2,
@@ -111,6 +111,8 @@ const COND_POINTS: f32 = 0.02;
 const COND_PIXELS: f32 = 0.002;
 /// Newton steps per block before the remaining lanes go to the scalar path.
 const MAX_ITER: usize = 10;
+/// Error (rad) the last Newton step may leave, estimated as (‖M‖ / λ_min) |ω|².
+const STEP_ERR: f32 = 1e-7;
 
 /// A constraint row as the lanes read it: p and eₙrₙᵀ (row-major), broadcast to every lane.
 #[derive(Clone, Copy)]
@@ -300,22 +302,15 @@ fn dot3<S: Simd>(a: [L<S>; 3], b: [L<S>; 3]) -> L<S> {
 #[inline(always)]
 #[allow(clippy::needless_range_loop)]
 fn load3<S: Simd>(a: &[f32], base: usize, count: usize) -> [L<S>; 3] {
-    let mut r = [[0.0f32; 16]; 3];
     if count == S::W {
-        // One bounds check for the block.
-        let s = &a[3 * base..3 * (base + S::W)];
-        for l in 0..S::W {
-            r[0][l] = s[3 * l];
-            r[1][l] = s[3 * l + 1];
-            r[2][l] = s[3 * l + 2];
-        }
-    } else {
-        for l in 0..S::W {
-            let i = base + l.min(count - 1);
-            r[0][l] = a[3 * i];
-            r[1][l] = a[3 * i + 1];
-            r[2][l] = a[3 * i + 2];
-        }
+        return S::load3(&a[3 * base..3 * (base + S::W)]).map(L);
+    }
+    let mut r = [[0.0f32; 16]; 3];
+    for l in 0..S::W {
+        let i = base + l.min(count - 1);
+        r[0][l] = a[3 * i];
+        r[1][l] = a[3 * i + 1];
+        r[2][l] = a[3 * i + 2];
     }
     [
         L::from_array(&r[0]),
@@ -327,6 +322,10 @@ fn load3<S: Simd>(a: &[f32], base: usize, count: usize) -> [L<S>; 3] {
 /// Stores lanes 0..count of a 3-vector into an (N, 3) block.
 #[inline(always)]
 fn store3<S: Simd>(o: &mut [f32], v: &[L<S>; 3], count: usize) {
+    if count == S::W {
+        S::store3(o, [v[0].0, v[1].0, v[2].0]);
+        return;
+    }
     let (x, y, z) = (v[0].arr(), v[1].arr(), v[2].arr());
     let o = &mut o[..3 * count];
     for l in 0..count {
@@ -386,41 +385,50 @@ fn ortho_lanes<S: Simd>(m: &[L<S>; 9], mut q: Q<S>, cond_min: f32) -> (Q<S>, Mk<
         let a12 = h01 * h02 - h00 * h12;
         let det = h00.mul_add(a00, h01.mul_add(a01, h02 * a02));
         let newton = h00.gt(tol).and(a22.gt(tol2)).and(det.gt(tol3));
-        let inv = L::splat(1.0) / det;
-        let damp = L::splat(1.0) / (tr.abs() + scale * L::splat(1e-12));
+        // Newton: ω = H⁻¹ g = adj(H) g / det H; elsewhere a damped gradient step g / (|tr| + ε).
+        // One division for both.
+        let inv = L::splat(1.0) / L::select(newton, det, tr.abs() + scale * L::splat(1e-12));
         let w = [
             L::select(
                 newton,
-                a00.mul_add(g[0], a01.mul_add(g[1], a02 * g[2])) * inv,
-                g[0] * damp,
-            ),
+                a00.mul_add(g[0], a01.mul_add(g[1], a02 * g[2])),
+                g[0],
+            ) * inv,
             L::select(
                 newton,
-                a01.mul_add(g[0], a11.mul_add(g[1], a12 * g[2])) * inv,
-                g[1] * damp,
-            ),
+                a01.mul_add(g[0], a11.mul_add(g[1], a12 * g[2])),
+                g[1],
+            ) * inv,
             L::select(
                 newton,
-                a02.mul_add(g[0], a12.mul_add(g[1], a22 * g[2])) * inv,
-                g[2] * damp,
-            ),
+                a02.mul_add(g[0], a12.mul_add(g[1], a22 * g[2])),
+                g[2],
+            ) * inv,
         ];
         let w2 = dot3(w, w);
-        let small = newton.and(w2.lt(L::splat(1e-8)));
         // λ_min(H) ≥ 4 det H / tr(H)² (the other two eigenvalues' product is at most tr²/4).
         let trh = tr + tr;
-        let cond = (L::splat(4.0) * det).ge(L::splat(cond_min) * scale * trh * trh);
+        let four_det = L::splat(4.0) * det;
+        let s_trh2 = scale * trh * trh;
+        let cond = four_det.ge(L::splat(cond_min) * s_trh2);
+        // Newton converges quadratically: the step taken now leaves an error of about
+        // (‖M‖ / λ_min) |ω|², so a lane is done once that is below `STEP_ERR` (and the step is
+        // inside the quadratic regime), usually one step after a warm start.
+        let small = newton
+            .and(w2.lt(L::splat(1e-4)))
+            .and((w2 * s_trh2).lt(L::splat(STEP_ERR) * four_det));
         // A lane's verdict is taken at its first small Newton step.
         good = good.or(done.andnot(small.and(cond)));
         done = done.or(small);
-        // At most a quarter turn per step.
+        // At most a quarter turn per step (rare after the first block: a branch, not a division
+        // per step).
         let qt = std::f32::consts::FRAC_PI_2;
-        let clamp = L::select(
-            w2.gt(L::splat(qt * qt)),
-            L::splat(qt) / w2.sqrt(),
-            L::splat(1.0),
-        );
-        let hw = clamp * half;
+        let big = w2.gt(L::splat(qt * qt));
+        let hw = if big.bits() != 0 {
+            L::select(big, L::splat(qt) * w2.rsqrt(), L::splat(1.0)) * half
+        } else {
+            half
+        };
         let w = w.map(|c| c * hw);
         // q ← q · (ω/2, 1), normalised.
         let qv = [q.x, q.y, q.z];
@@ -430,7 +438,7 @@ fn ortho_lanes<S: Simd>(m: &[L<S>; 9], mut q: Q<S>, cond_min: f32) -> (Q<S>, Mk<
         let nz = q.w.mul_add(w[2], q.z) + c[2];
         let nw = q.w - dot3(qv, w);
         let len2 = nx.mul_add(nx, ny.mul_add(ny, nz.mul_add(nz, nw * nw)));
-        let il = L::splat(1.0) / len2.sqrt();
+        let il = len2.rsqrt();
         q = Q {
             x: nx * il,
             y: ny * il,
@@ -463,7 +471,6 @@ fn run_lanes<S: Simd>(inp: &Inputs, start: usize, out: &mut [f32]) -> Leftover {
     let zero = L::<S>::splat(0.0);
     let one = L::<S>::splat(1.0);
     let mut warm = Q::<S>::splat([0.0, 0.0, 0.0, 1.0]);
-    let mut d2s = vec![zero; plan.rows.len()];
     let mut b = 0;
     while b < count_all {
         let base = start + b;
@@ -476,9 +483,13 @@ fn run_lanes<S: Simd>(inp: &Inputs, start: usize, out: &mut [f32]) -> Leftover {
         let q = if let Some(c) = plan.constant {
             Q::splat(c)
         } else {
+            // One pass over the rows: M' = Σₙ eₙrₙᵀ / d²ₙ, then M = d²_min M' (the scale-free
+            // weights d²_min / d²ₙ; the lanes accept only 1e-30 < d²_min < 1e30, where 1/d²ₙ and
+            // K/d²_min stay inside f32's range).
             let mut dmin2 = L::splat(f32::INFINITY);
-            for (row, d2) in plan.rows.iter().zip(d2s.iter_mut()) {
-                *d2 = match inp.dist {
+            let mut m = [zero; 9];
+            for row in plan.rows.iter() {
+                let d2 = match inp.dist {
                     None => {
                         let dx = qp[0] - L::splat(row.p[0]);
                         let dy = qp[1] - L::splat(row.p[1]);
@@ -501,20 +512,18 @@ fn run_lanes<S: Simd>(inp: &Inputs, start: usize, out: &mut [f32]) -> Leftover {
                         v * v
                     }
                 };
-                dmin2 = dmin2.min(*d2);
+                dmin2 = dmin2.min(d2);
+                let w = one / d2;
+                for (e, &er) in m.iter_mut().zip(&row.er) {
+                    *e = w.mul_add(L::splat(er), *e);
+                }
             }
             // Zero (on a constraint: interpolation), unreachable, or outside the range where
             // f32 weights are exact enough: the scalar path.
             ok = ok
                 .and(dmin2.gt(L::splat(1e-30)))
                 .and(dmin2.lt(L::splat(1e30)));
-            let mut m = [zero; 9];
-            for (row, d2) in plan.rows.iter().zip(&d2s) {
-                let w = dmin2 / *d2;
-                for (e, &er) in m.iter_mut().zip(&row.er) {
-                    *e = w.mul_add(L::splat(er), *e);
-                }
-            }
+            let m = m.map(|e| e * dmin2);
             let (q, good) = ortho_lanes(&m, warm, cond);
             ok = ok.and(good);
             // Warm start: accepted lanes carry on, the others restart from the identity.
@@ -559,9 +568,9 @@ fn run_lanes<S: Simd>(inp: &Inputs, start: usize, out: &mut [f32]) -> Leftover {
                     .and(n2.gt(L::splat(1e-30)))
                     .and(i2.gt(L::splat(1e-30)));
                 suspect |= !fine.bits();
-                let inl = one / n2.sqrt();
+                let inl = n2.rsqrt();
                 let nv = nv.map(|c| c * inl);
-                let iil = one / i2.sqrt();
+                let iil = i2.rsqrt();
                 let iv = iv.map(|c| c * iil);
                 let k = dot3(iv, nv);
                 let k2 = -(k + k);
@@ -570,10 +579,9 @@ fn run_lanes<S: Simd>(inp: &Inputs, start: usize, out: &mut [f32]) -> Leftover {
                     k2.mul_add(nv[1], iv[1]),
                     k2.mul_add(nv[2], iv[2]),
                 ];
-                let rl = one / dot3(r, r).sqrt();
-                let r = r.map(|c| c * rl);
+                // |r| = 1 up to rounding (i, n unit); e is normalised once, below.
                 let e = q.rotate(r);
-                let el = one / dot3(e, e).sqrt();
+                let el = dot3(e, e).rsqrt();
                 let e = e.map(|c| c * el);
                 let accepted = ok_bits & finite(&e).bits() & fine.bits();
                 let blk = &mut out[3 * b..3 * (b + count)];
@@ -603,6 +611,28 @@ fn run_lanes<S: Simd>(inp: &Inputs, start: usize, out: &mut [f32]) -> Leftover {
                     let l = need.trailing_zeros() as usize;
                     need &= need - 1;
                     left.points.push((base + l, q.lane(l)));
+                }
+            }
+            Job::Points { output, .. }
+                if region.is_none() && *output != FieldOutput::RotationVector =>
+            {
+                // No region: a = u = 1 everywhere, every lane takes R; one plain copy per point.
+                let (qx, qy, qz, qw) = (q.x.arr(), q.y.arr(), q.z.arr(), q.w.arr());
+                let blk = &mut out[width * b..width * (b + count)];
+                if width == 6 {
+                    for (l, o) in blk.chunks_exact_mut(6).enumerate() {
+                        o.copy_from_slice(&[qx[l], qy[l], qz[l], qw[l], 1.0, 1.0]);
+                    }
+                } else {
+                    for (l, o) in blk.chunks_exact_mut(4).enumerate() {
+                        o.copy_from_slice(&[qx[l], qy[l], qz[l], qw[l]]);
+                    }
+                }
+                let mut need = (!ok_bits | suspect) & lanes;
+                while need != 0 {
+                    let l = need.trailing_zeros() as usize;
+                    need &= need - 1;
+                    left.points.push((base + l, [qx[l], qy[l], qz[l], qw[l]]));
                 }
             }
             Job::Points { output, view, ramp } => {

@@ -1,5 +1,6 @@
 //! Lane vectors for the field kernels: one trait, three implementations (AVX-512: 16 × f32,
-//! AVX2 + FMA: 8 × f32, portable: 8 × f32 in plain arrays). The kernels are written once against
+//! AVX2 + FMA: 8 × f32, portable: 4 × f32 in plain arrays, which compilers keep in one 128-bit
+//! register: SSE2 on x86-64, NEON on aarch64). The kernels are written once against
 //! [`L`] / [`Mk`] and instantiated inside `#[target_feature]` functions, so the intrinsics inline
 //! into code compiled for those features.
 
@@ -37,6 +38,35 @@ pub(super) trait Simd: Copy {
     fn none() -> Self::M;
     /// Bit l = lane l.
     fn bits(m: Self::M) -> u32;
+    /// 1 / √a to about 1e-7 relative (an estimate refined by one Newton step where the target
+    /// has one; exact otherwise). Only for a > 0 and finite.
+    #[inline(always)]
+    fn rsqrt(a: Self::V) -> Self::V {
+        Self::div(Self::splat(1.0), Self::sqrt(a))
+    }
+    /// W points of an (N, 3) array starting at `a[0]` (3W values) as x, y, z lanes.
+    #[inline(always)]
+    fn load3(a: &[f32]) -> [Self::V; 3] {
+        let a = &a[..3 * Self::W];
+        let mut r = [[0.0f32; 16]; 3];
+        for l in 0..Self::W {
+            r[0][l] = a[3 * l];
+            r[1][l] = a[3 * l + 1];
+            r[2][l] = a[3 * l + 2];
+        }
+        [Self::load(&r[0]), Self::load(&r[1]), Self::load(&r[2])]
+    }
+    /// x, y, z lanes into W points of an (N, 3) array at `o[0]` (3W values).
+    #[inline(always)]
+    fn store3(o: &mut [f32], v: [Self::V; 3]) {
+        let o = &mut o[..3 * Self::W];
+        let (x, y, z) = (Self::store(v[0]), Self::store(v[1]), Self::store(v[2]));
+        for l in 0..Self::W {
+            o[3 * l] = x[l];
+            o[3 * l + 1] = y[l];
+            o[3 * l + 2] = z[l];
+        }
+    }
 }
 
 // ---- portable -------------------------------------------------------------------------------
@@ -45,21 +75,21 @@ pub(super) trait Simd: Copy {
 pub(super) struct Portable;
 
 impl Simd for Portable {
-    const W: usize = 8;
-    type V = [f32; 8];
-    type M = [bool; 8];
+    const W: usize = 4;
+    type V = [f32; 4];
+    type M = [u32; 4];
     #[inline(always)]
     fn splat(x: f32) -> Self::V {
-        [x; 8]
+        [x; 4]
     }
     #[inline(always)]
     fn load(a: &[f32]) -> Self::V {
-        a[..8].try_into().unwrap()
+        a[..4].try_into().unwrap()
     }
     #[inline(always)]
     fn store(v: Self::V) -> [f32; 16] {
         let mut r = [0.0; 16];
-        r[..8].copy_from_slice(&v);
+        r[..4].copy_from_slice(&v);
         r
     }
     #[inline(always)]
@@ -96,15 +126,15 @@ impl Simd for Portable {
     }
     #[inline(always)]
     fn lt(a: Self::V, b: Self::V) -> Self::M {
-        std::array::from_fn(|l| a[l] < b[l])
+        std::array::from_fn(|l| 0u32.wrapping_sub((a[l] < b[l]) as u32))
     }
     #[inline(always)]
     fn le(a: Self::V, b: Self::V) -> Self::M {
-        std::array::from_fn(|l| a[l] <= b[l])
+        std::array::from_fn(|l| 0u32.wrapping_sub((a[l] <= b[l]) as u32))
     }
     #[inline(always)]
     fn eq(a: Self::V, b: Self::V) -> Self::M {
-        std::array::from_fn(|l| a[l] == b[l])
+        std::array::from_fn(|l| 0u32.wrapping_sub((a[l] == b[l]) as u32))
     }
     #[inline(always)]
     fn and(a: Self::M, b: Self::M) -> Self::M {
@@ -120,17 +150,17 @@ impl Simd for Portable {
     }
     #[inline(always)]
     fn select(m: Self::M, a: Self::V, b: Self::V) -> Self::V {
-        std::array::from_fn(|l| if m[l] { a[l] } else { b[l] })
+        std::array::from_fn(|l| f32::from_bits((m[l] & a[l].to_bits()) | (!m[l] & b[l].to_bits())))
     }
     #[inline(always)]
     fn none() -> Self::M {
-        [false; 8]
+        [0; 4]
     }
     #[inline(always)]
     fn bits(m: Self::M) -> u32 {
         m.iter()
             .enumerate()
-            .fold(0, |b, (l, &x)| b | ((x as u32) << l))
+            .fold(0, |b, (l, &x)| b | ((x & 1) << l))
     }
 }
 
@@ -231,6 +261,59 @@ impl Simd for Avx2 {
     fn bits(m: Self::M) -> u32 {
         unsafe { _mm256_movemask_ps(m) as u32 }
     }
+    #[inline(always)]
+    fn rsqrt(a: Self::V) -> Self::V {
+        // y₀ ≈ 1/√a to 12 bits, then y₁ = y₀ (1.5 − 0.5 a y₀²): about 23 bits.
+        unsafe {
+            let y = _mm256_rsqrt_ps(a);
+            let hay = _mm256_mul_ps(_mm256_mul_ps(_mm256_set1_ps(0.5), a), y);
+            _mm256_mul_ps(y, _mm256_fnmadd_ps(hay, y, _mm256_set1_ps(1.5)))
+        }
+    }
+    #[inline(always)]
+    fn load3(a: &[f32]) -> [Self::V; 3] {
+        // Three loads of x0 y0 z0 x1 | x4 y4 z4 x5, y1 z1 x2 y2 | y5 z5 x6 y6,
+        // z2 x3 y3 z3 | z6 x7 y7 z7, then five shuffles per 128-bit half.
+        let a = &a[..24];
+        unsafe {
+            let p = a.as_ptr();
+            let m03 = _mm256_insertf128_ps::<1>(
+                _mm256_castps128_ps256(_mm_loadu_ps(p)),
+                _mm_loadu_ps(p.add(12)),
+            );
+            let m14 = _mm256_insertf128_ps::<1>(
+                _mm256_castps128_ps256(_mm_loadu_ps(p.add(4))),
+                _mm_loadu_ps(p.add(16)),
+            );
+            let m25 = _mm256_insertf128_ps::<1>(
+                _mm256_castps128_ps256(_mm_loadu_ps(p.add(8))),
+                _mm_loadu_ps(p.add(20)),
+            );
+            let xy = _mm256_shuffle_ps::<0b10_01_11_10>(m14, m25); // x2 y2 x3 y3
+            let yz = _mm256_shuffle_ps::<0b01_00_10_01>(m03, m14); // y0 z0 y1 z1
+            let x = _mm256_shuffle_ps::<0b10_00_11_00>(m03, xy); // x0 x1 x2 x3
+            let y = _mm256_shuffle_ps::<0b11_01_10_00>(yz, xy); // y0 y1 y2 y3
+            let z = _mm256_shuffle_ps::<0b11_00_11_01>(yz, m25); // z0 z1 z2 z3
+            [x, y, z]
+        }
+    }
+    #[inline(always)]
+    fn store3(o: &mut [f32], v: [Self::V; 3]) {
+        let o = &mut o[..24];
+        let [x, y, z] = v;
+        unsafe {
+            let rxy = _mm256_shuffle_ps::<0b10_00_10_00>(x, y); // x0 x2 y0 y2
+            let ryz = _mm256_shuffle_ps::<0b11_01_11_01>(y, z); // y1 y3 z1 z3
+            let rzx = _mm256_shuffle_ps::<0b11_01_10_00>(z, x); // z0 z2 x1 x3
+            let r03 = _mm256_shuffle_ps::<0b10_00_10_00>(rxy, rzx); // x0 y0 z0 x1
+            let r14 = _mm256_shuffle_ps::<0b11_01_10_00>(ryz, rxy); // y1 z1 x2 y2
+            let r25 = _mm256_shuffle_ps::<0b11_01_11_01>(rzx, ryz); // z2 x3 y3 z3
+            let p = o.as_mut_ptr();
+            _mm256_storeu_ps(p, _mm256_permute2f128_ps::<0x20>(r03, r14));
+            _mm256_storeu_ps(p.add(8), _mm256_permute2f128_ps::<0x30>(r25, r03));
+            _mm256_storeu_ps(p.add(16), _mm256_permute2f128_ps::<0x31>(r14, r25));
+        }
+    }
 }
 
 // ---- AVX-512F -------------------------------------------------------------------------------
@@ -327,6 +410,15 @@ impl Simd for Avx512 {
     fn bits(m: Self::M) -> u32 {
         m as u32
     }
+    #[inline(always)]
+    fn rsqrt(a: Self::V) -> Self::V {
+        // 14-bit estimate, one Newton step: about 24 bits.
+        unsafe {
+            let y = _mm512_rsqrt14_ps(a);
+            let hay = _mm512_mul_ps(_mm512_mul_ps(_mm512_set1_ps(0.5), a), y);
+            _mm512_mul_ps(y, _mm512_fnmadd_ps(hay, y, _mm512_set1_ps(1.5)))
+        }
+    }
 }
 
 // ---- operators ------------------------------------------------------------------------------
@@ -383,6 +475,11 @@ impl<S: Simd> L<S> {
     #[inline(always)]
     pub fn sqrt(self) -> Self {
         L(S::sqrt(self.0))
+    }
+    /// 1 / √self (see `Simd::rsqrt`).
+    #[inline(always)]
+    pub fn rsqrt(self) -> Self {
+        L(S::rsqrt(self.0))
     }
     #[inline(always)]
     pub fn abs(self) -> Self {
