@@ -23,7 +23,7 @@ help:
 	@echo "make test-matrix  test-blender for each of MATRIX (4.2.23 5.0.1 5.3.0), as CI runs it (CPython 3.11 legs: -m blender)"
 	@echo "make bench  benchmarks, printed next to the reference numbers"
 	@echo "make dist   the installable Blender extension zip, dist/rokeby-<version>.zip"
-	@echo "make lint   ruff (errors), cargo fmt --check, and the add-on checked against the newest Blender API stubs"
+	@echo "make lint   ruff (errors), cargo fmt --check, cargo clippy -D warnings, and the add-on checked against the newest Blender API stubs"
 	@echo "make fuzz-py  hypothesis fuzzing of rokeby_native and the file readers (FUZZ_PY_EXAMPLES=500)"
 
 # --- bootstrap -------------------------------------------------------------------------------
@@ -86,6 +86,7 @@ $(LINT)/.deps: requirements-lint.txt
 lint: $(LINT)/.deps
 	$(LINT)/bin/ruff check --select E9,F63,F7,F82 addon tests bench tools
 	cargo fmt --all --check
+	cargo clippy --workspace --all-targets -- -D warnings
 	$(LINT)/bin/python tools/api_check.py
 
 # --- the Blender matrix (issue 19) -------------------------------------------------------------

@@ -545,7 +545,7 @@ fn check_dims(
     let n = [layout.faces(), height, width, channels]
         .iter()
         .try_fold(1usize, |a, &b| a.checked_mul(b));
-    if n.map_or(true, |n| n > MAX_VALUES) {
+    if n.is_none_or(|n| n > MAX_VALUES) {
         return Err(RokebyError::invalid(
             arg,
             format!("a {} map of {}×{height}×{width}×{channels} values is more than {MAX_VALUES} (4 GiB of float32)", layout.name(), layout.faces()),

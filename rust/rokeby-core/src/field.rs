@@ -1067,10 +1067,9 @@ fn check_eye(points: &[f32], eye: DVec3) -> Result<()> {
 /// bug becomes an error message, not NaN in Blender data.
 fn check_output(out: &[f32]) -> Result<()> {
     if let Some(i) = first_index(out, |x| !x.is_finite()) {
-        return Err(RokebyError::invalid(
-            "internal",
-            format!("non-finite result at flat index {i}; please report this input"),
-        ));
+        return Err(RokebyError::internal(format!(
+            "the rotation field has a non-finite result at flat index {i}"
+        )));
     }
     Ok(())
 }

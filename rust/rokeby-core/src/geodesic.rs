@@ -20,10 +20,11 @@
 //! unreferenced vertices) get +inf.
 
 use crate::error::{Result, RokebyError};
+use crate::laplacian::{face_cotangents, FaceCotangents};
+use crate::numerical::{self, SparseMatrix, SymbolicCholesky, Triplet};
 use faer::linalg::solvers::Solve;
-use faer::sparse::linalg::solvers::{Llt, SymbolicLlt};
-use faer::sparse::{SparseColMat, Triplet};
-use faer::{Mat, Side};
+use faer::sparse::linalg::solvers::Llt;
+use faer::Mat;
 use glam::DVec3;
 use rayon::prelude::*;
 use std::cmp::Ordering;
@@ -266,7 +267,7 @@ fn lower_matrix(
     edges: &[(u32, u32, f64)],
     off_scale: f64,
     diag: &[f64],
-) -> Result<SparseColMat<u32, f64>> {
+) -> Result<SparseMatrix> {
     let mut t: Vec<Triplet<u32, u32, f64>> = Vec::with_capacity(edges.len() + n);
     t.extend(
         edges
@@ -278,8 +279,7 @@ fn lower_matrix(
             .enumerate()
             .map(|(i, &d)| Triplet::new(i as u32, i as u32, d)),
     );
-    SparseColMat::try_new_from_triplets(n, n, &t)
-        .map_err(|e| RokebyError::invalid("mesh", format!("sparse assembly failed: {e:?}")))
+    numerical::assemble(n, &t, "heat")
 }
 
 impl GeodesicSolver {
@@ -533,17 +533,14 @@ impl GeodesicSolver {
         let mut ldiag = vec![0.0f64; nv];
         let mut total_area = 0.0;
         for (f, l) in tri.faces.iter().zip(&tri.lengths) {
-            let area = crate::intrinsic::area_from_lengths(l[0], l[1], l[2]);
-            let longest = l.iter().fold(0.0f64, |m, x| m.max(*x));
             // Faces without area (repeated vertices, collinear corners) have no stiffness: skip.
-            if !(area > 1e-12 * longest * longest) || f[0] == f[1] || f[1] == f[2] || f[0] == f[2] {
+            if f[0] == f[1] || f[1] == f[2] || f[0] == f[2] {
                 continue;
             }
+            let Some(FaceCotangents { area, cot }) = face_cotangents(*l) else {
+                continue;
+            };
             total_area += area;
-            // l[k] is the edge from corner k to k+1, so the edge opposite corner k is l[(k+1)%3].
-            let cot = [0, 1, 2].map(|k| {
-                crate::intrinsic::cot_opposite(l[(k + 1) % 3], l[k], l[(k + 2) % 3], area)
-            });
             for k in 0..3 {
                 mass[f[k]] += area / 3.0;
                 let (j, m) = (f[(k + 1) % 3], f[(k + 2) % 3]);
@@ -610,12 +607,8 @@ impl GeodesicSolver {
         // All three matrices share one sparsity pattern: one symbolic factorisation (ordering and
         // elimination tree) serves them all, which saves its memory and time twice over.
         let heat_m = lower_matrix(nv, &edges, t, &heat_diag)?;
-        let symbolic = SymbolicLlt::try_new(heat_m.symbolic(), Side::Lower)
-            .map_err(|e| factor_error("symbolic", format!("{e:?}")))?;
-        let factor = |m: SparseColMat<u32, f64>, what: &str| {
-            Llt::try_new_with_symbolic(symbolic.clone(), m.as_ref(), Side::Lower)
-                .map_err(|e| factor_error(what, format!("{e:?}")))
-        };
+        let symbolic = SymbolicCholesky::new(&heat_m, "heat")?;
+        let factor = |m: SparseMatrix, what: &str| symbolic.factor(&m, what);
         let heat_dirichlet = if self.average_boundary && boundary.iter().any(|&b| b) {
             // u = 0 on the boundary by a penalty 1e8 times the largest diagonal entry.
             let big = 1e8 * heat_diag.iter().fold(0.0f64, |m, x| m.max(*x)).max(1e-300);
@@ -870,6 +863,86 @@ fn chord_to(pts: &[DVec3], x: DVec3) -> f64 {
         .fold(f64::INFINITY, f64::min)
 }
 
+/// [`interpolate`] from flat arrays as the binding receives them, validated: `values` holds rows
+/// of `n_vertices` (no NaN), `faces` F×3 vertex indices below `n_vertices`, `face_index` one face
+/// per point and `bary` three finite barycentric coordinates per point. Errors name the argument
+/// and the entry at fault.
+pub fn interpolate_at(
+    values: &[f32],
+    n_vertices: usize,
+    faces: &[i64],
+    face_index: &[i64],
+    bary: &[f32],
+) -> Result<Vec<f32>> {
+    if values.len() % n_vertices.max(1) != 0 || (n_vertices == 0 && !values.is_empty()) {
+        return Err(RokebyError::invalid(
+            "values",
+            format!("expected rows of {n_vertices} values, got {}", values.len()),
+        ));
+    }
+    if values.iter().any(|x| x.is_nan()) {
+        return Err(RokebyError::invalid("values", "contains NaN"));
+    }
+    if faces.len() % 3 != 0 {
+        return Err(RokebyError::invalid(
+            "faces",
+            format!("expected 3 indices per face, got {}", faces.len()),
+        ));
+    }
+    if let Some(i) = faces
+        .iter()
+        .position(|&x| x < 0 || x as u64 >= n_vertices as u64)
+    {
+        return Err(RokebyError::invalid(
+            "faces",
+            format!(
+                "face {} refers to vertex {} but values has {} vertices",
+                i / 3,
+                faces[i],
+                n_vertices
+            ),
+        ));
+    }
+    if bary.len() != 3 * face_index.len() {
+        return Err(RokebyError::invalid(
+            "bary",
+            format!(
+                "expected 3 values for each of {} points, got {}",
+                face_index.len(),
+                bary.len()
+            ),
+        ));
+    }
+    let nf = faces.len() / 3;
+    let faces3: Vec<[usize; 3]> = faces
+        .chunks_exact(3)
+        .map(|c| [c[0] as usize, c[1] as usize, c[2] as usize])
+        .collect();
+    let mut pts = Vec::with_capacity(face_index.len());
+    for (k, (&face, bc)) in face_index.iter().zip(bary.chunks_exact(3)).enumerate() {
+        if face < 0 || face as u64 >= nf as u64 {
+            return Err(RokebyError::invalid(
+                "face_index",
+                format!(
+                    "entry {k} = {face} is out of range (0..{})",
+                    nf.saturating_sub(1)
+                ),
+            ));
+        }
+        if bc.iter().any(|x| !x.is_finite()) {
+            return Err(RokebyError::invalid(
+                "bary",
+                format!("row {k} is not finite"),
+            ));
+        }
+        pts.push(SurfacePoint {
+            face: face as usize,
+            bary: [bc[0] as f64, bc[1] as f64, bc[2] as f64],
+        });
+    }
+    interpolate(values, n_vertices, &faces3, &pts)
+}
+
 /// Values at surface points by barycentric interpolation of per-vertex values (paper §6.2: the
 /// per-vertex distance field drawn with smooth shading). `values` holds `rows` rows of
 /// `n_vertices`; the result is (rows, points). A vertex whose weight is exactly 0 does not
@@ -909,19 +982,4 @@ pub fn interpolate(
         }
     }
     Ok(out)
-}
-
-/// A failed sparse factorisation: out of memory is [`RokebyError::OutOfMemory`] (faer reports it
-/// as such), anything else a numerical failure of the named system.
-pub(crate) fn factor_error(what: &str, debug: String) -> RokebyError {
-    if debug.contains("OutOfMemory") {
-        RokebyError::out_of_memory(format!("the {what} factorisation"), None, None)
-    } else if what == "symbolic" {
-        RokebyError::numerical("mesh", format!("symbolic factorisation failed ({debug})"))
-    } else {
-        RokebyError::numerical(
-            "mesh",
-            format!("the {what} system is not positive definite ({debug})"),
-        )
-    }
 }

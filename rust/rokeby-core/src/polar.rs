@@ -18,6 +18,7 @@
 //! after a second-order optimality test and otherwise recomputed with the SVD, so it never returns
 //! a non-optimal rotation.
 
+use crate::error::{Result, RokebyError};
 use glam::{DMat3, DQuat, DVec3};
 
 /// Which algorithm computes `ortho`.
@@ -352,9 +353,60 @@ pub fn ortho(
     q
 }
 
+/// `ortho` of a batch of row-major 3×3 matrices (`matrices`: 9 values each, numpy's (i, j) order),
+/// warm-started from one matrix to the next: canonical unit quaternions (x, y, z, w), w ≥ 0,
+/// 4 values per matrix. A matrix with a non-finite entry is refused by its index.
+pub fn ortho_batch(matrices: &[f32], method: PolarMethod) -> Result<Vec<f32>> {
+    if matrices.len() % 9 != 0 {
+        return Err(RokebyError::invalid(
+            "matrices",
+            format!("expected 9 values per matrix, got {}", matrices.len()),
+        ));
+    }
+    if let Some(i) = matrices.iter().position(|x| !x.is_finite()) {
+        return Err(RokebyError::invalid(
+            "matrices",
+            format!("matrix {} has a non-finite entry", i / 9),
+        ));
+    }
+    let mut warm = DQuat::IDENTITY;
+    let mut out = crate::alloc::with_capacity::<f32>("ortho output", &[matrices.len() / 9, 4])?;
+    for c in matrices.chunks_exact(9) {
+        // Row-major (i, j) → column-major glam.
+        let m = DMat3::from_cols_array(&[
+            c[0] as f64,
+            c[3] as f64,
+            c[6] as f64,
+            c[1] as f64,
+            c[4] as f64,
+            c[7] as f64,
+            c[2] as f64,
+            c[5] as f64,
+            c[8] as f64,
+        ]);
+        let q = canonical(ortho(&m, || None, method, &mut warm));
+        out.extend_from_slice(&[q.x as f32, q.y as f32, q.z as f32, q.w as f32]);
+    }
+    Ok(out)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn ortho_batch_reads_row_major_and_refuses_non_finite() {
+        // A rotation by 90° about z, row-major: [[0, -1, 0], [1, 0, 0], [0, 0, 1]].
+        let m = [0.0f32, -1.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0];
+        let q = ortho_batch(&m, PolarMethod::Svd).unwrap();
+        let s = std::f32::consts::FRAC_1_SQRT_2;
+        assert!((q[2] - s).abs() < 1e-6 && (q[3] - s).abs() < 1e-6, "{q:?}");
+        let mut bad = m;
+        bad[4] = f32::NAN;
+        let e = ortho_batch(&[m, bad].concat(), PolarMethod::Iterative).unwrap_err();
+        assert!(e.to_string().starts_with("matrices: matrix 1"), "{e}");
+        assert!(matches!(e, RokebyError::InvalidArgument { .. }));
+    }
 
     fn is_rotation(q: DQuat) -> bool {
         let r = DMat3::from_quat(q);

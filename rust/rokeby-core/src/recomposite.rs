@@ -1523,7 +1523,7 @@ mod tests {
     fn recomposite_identity_is_bit_exact() {
         let mut g = Rng(0x1234_5678_9abc_def1);
         let n = 2500;
-        let ids: Vec<i32> = (0..n).map(|i| (i % 4) as i32 - 1).collect();
+        let ids: Vec<i32> = (0..n).map(|i| (i % 4) - 1).collect();
         let v3 = |g: &mut Rng| -> Vec<f32> { (0..3 * n).map(|_| 2.0 * g.next() - 0.5).collect() };
         let normals = v3(&mut g);
         let view = v3(&mut g);

@@ -33,8 +33,8 @@
 //! Storage is f32; barycentric coordinates, weights, accumulations and the solve are f64.
 
 use crate::error::{Result, RokebyError};
+use crate::numerical::Triplet;
 use faer::linalg::solvers::Solve;
-use faer::sparse::{SparseColMat, Triplet};
 use faer::Mat;
 use glam::DVec3;
 use rayon::prelude::*;
@@ -1286,15 +1286,9 @@ pub fn fill_holes(maps: &mut [&mut ParaboloidMap], covered: &[bool]) -> Result<u
             b[(r, k)] = v;
         }
     }
-    let a = SparseColMat::<u32, f64>::try_new_from_triplets(nv, nv, &trip)
-        .map_err(|e| RokebyError::invalid("covered", format!("sparse assembly failed: {e:?}")))?;
+    let a = crate::numerical::assemble(nv, &trip, "hole filling")?;
     crate::cancel::check()?;
-    let lu = a.sp_lu().map_err(|e| {
-        RokebyError::invalid(
-            "covered",
-            format!("hole-filling factorisation failed ({e:?})"),
-        )
-    })?;
+    let lu = crate::numerical::lu(&a, "hole filling")?;
     crate::cancel::check()?; // the sparse factorisation and solve run to completion once started
     let x = lu.solve(&b);
     for (r, &t) in vars.iter().enumerate() {
@@ -1474,6 +1468,8 @@ pub fn regularize(
 #[derive(Debug, Clone)]
 pub struct ReflectionEnv {
     pub map: ParaboloidMap,
+    /// The texels the partial map covered (eq. 2), before hole filling.
+    pub covered: Vec<bool>,
     pub coverage: f64,
     pub triangles: usize,
     pub filled_texels: usize,
@@ -1507,6 +1503,7 @@ pub fn reconstruct(
     fill_beyond_equator(&mut p.map);
     Ok(ReflectionEnv {
         map: p.map,
+        covered: p.covered,
         coverage: p.coverage,
         triangles: p.triangles,
         filled_texels: filled,

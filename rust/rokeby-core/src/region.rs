@@ -7,6 +7,7 @@
 //! each constraint, which decides which constraints are *inside* the region (a(pₙ) > 0).
 
 use crate::error::{Result, RokebyError};
+use crate::geodesic::{GeodesicSolver, Method, Source};
 use glam::DVec3;
 
 /// Hermite smooth step: 0 for t ≤ 0, 1 for t ≥ 1, 3t² − 2t³ between (C¹ at both ends).
@@ -149,23 +150,6 @@ impl Region {
     }
 }
 
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn falloff_is_smooth_and_bounded() {
-        assert_eq!(falloff(0.0, 1.0, 0.2), 1.0);
-        assert_eq!(falloff(0.8, 1.0, 0.2), 1.0);
-        assert!((falloff(0.9, 1.0, 0.2) - 0.5).abs() < 1e-12);
-        assert_eq!(falloff(1.0, 1.0, 0.2), 0.0);
-        assert_eq!(falloff(0.99, 1.0, 0.0), 1.0);
-        assert_eq!(falloff(1.0, 1.0, 0.0), 0.0);
-        // border wider than the radius is clamped: falls from the centre.
-        assert!(falloff(0.5, 1.0, 5.0) > 0.0 && falloff(0.5, 1.0, 5.0) < 1.0);
-    }
-}
-
 /// Geodesic region (paper §4): a(q) from geodesic distances to the region's surface centre, with
 /// the same border convention as Euclidean regions. Unreachable points (+inf: other connected
 /// components) get 0.
@@ -192,26 +176,11 @@ pub fn freeform_weights(
     distance_to_outside: &[f32],
     border: f64,
 ) -> Result<Vec<f32>> {
-    if !(border.is_finite() && border >= 0.0) {
-        return Err(RokebyError::invalid(
-            "border",
-            format!("must be finite and >= 0, got {border}"),
-        ));
-    }
+    check_freeform(weights, border)?;
     if weights.len() != distance_to_outside.len() {
         return Err(RokebyError::invalid(
             "weights",
             "must have one entry per vertex",
-        ));
-    }
-    if let Some((i, w)) = weights
-        .iter()
-        .enumerate()
-        .find(|(_, w)| !(w.is_finite() && (0.0..=1.0).contains(*w)))
-    {
-        return Err(RokebyError::invalid(
-            "weights",
-            format!("weights[{i}] = {w} is not in [0, 1]"),
         ));
     }
     Ok(weights
@@ -229,6 +198,75 @@ pub fn freeform_weights(
         .collect())
 }
 
+fn check_freeform(weights: &[f32], border: f64) -> Result<()> {
+    if !(border.is_finite() && border >= 0.0) {
+        return Err(RokebyError::invalid(
+            "border",
+            format!("must be finite and >= 0, got {border}"),
+        ));
+    }
+    if let Some((i, w)) = weights
+        .iter()
+        .enumerate()
+        .find(|(_, w)| !(w.is_finite() && (0.0..=1.0).contains(*w)))
+    {
+        return Err(RokebyError::invalid(
+            "weights",
+            format!("weights[{i}] = {w} is not in [0, 1]"),
+        ));
+    }
+    Ok(())
+}
+
+/// A geodesic region of interest on `solver`'s mesh (paper §4): 1 within `radius − border` of
+/// the surface point `centre`, measured over the surface by `method`, a smooth step to 0 at
+/// `radius`, and 0 on other connected components ([`geodesic_weights`]).
+pub fn geodesic_region(
+    solver: &GeodesicSolver,
+    centre: Source,
+    radius: f64,
+    border: f64,
+    method: Method,
+) -> Result<Vec<f32>> {
+    check_radius_border(radius, border)?;
+    let d = solver.distances(&[vec![centre]], method)?;
+    geodesic_weights(&d, radius, border)
+}
+
+/// A free-form region from painted per-vertex weights in [0, 1] (a vertex group, paper §4):
+/// [`freeform_weights`] with the geodesic distance from the set of unpainted vertices (weight ≤ 0)
+/// measured by `method`; without unpainted vertices, or with `border` 0, no distance is needed.
+pub fn freeform_region(
+    solver: &GeodesicSolver,
+    weights: &[f32],
+    border: f64,
+    method: Method,
+) -> Result<Vec<f32>> {
+    let nv = solver.mesh().vertices.len();
+    if weights.len() != nv {
+        return Err(RokebyError::invalid(
+            "weights",
+            format!(
+                "expected {nv} values, one per vertex, got {}",
+                weights.len()
+            ),
+        ));
+    }
+    check_freeform(weights, border)?;
+    let outside: Vec<Source> = weights
+        .iter()
+        .enumerate()
+        .filter(|(_, &x)| !(x > 0.0))
+        .map(|(i, _)| Source::Vertex(i))
+        .collect();
+    let d = if outside.is_empty() || border == 0.0 {
+        vec![f32::INFINITY; nv]
+    } else {
+        solver.distances(&[outside], method)?
+    };
+    freeform_weights(weights, &d, border)
+}
+
 fn check_radius_border(radius: f64, border: f64) -> Result<()> {
     if !(radius.is_finite() && radius > 0.0) {
         return Err(RokebyError::invalid(
@@ -243,4 +281,59 @@ fn check_radius_border(radius: f64, border: f64) -> Result<()> {
         ));
     }
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn square() -> GeodesicSolver {
+        // Two triangles of the unit square.
+        let v = [
+            0.0f32, 0.0, 0.0, 1.0, 0.0, 0.0, 1.0, 1.0, 0.0, 0.0, 1.0, 0.0,
+        ];
+        let f = [0i64, 1, 2, 0, 2, 3];
+        GeodesicSolver::new(crate::geodesic::Mesh::new(&v, &f).unwrap())
+    }
+
+    #[test]
+    fn freeform_region_fades_in_from_the_unpainted_vertices() {
+        let s = square();
+        let a = freeform_region(&s, &[0.0, 1.0, 1.0, 1.0], 10.0, Method::Dijkstra).unwrap();
+        assert_eq!(a[0], 0.0);
+        // Vertex 1 is 1 away from vertex 0, vertex 2 is √2 away: a smooth step of d/10.
+        assert!(a[1] > 0.0 && a[1] < a[2] && a[2] < 1.0, "{a:?}");
+        // Every vertex painted: no border to fade over.
+        let full = freeform_region(&s, &[0.5; 4], 10.0, Method::Dijkstra).unwrap();
+        assert_eq!(full, vec![0.5; 4]);
+        let e = freeform_region(&s, &[1.0; 3], 0.0, Method::Heat).unwrap_err();
+        assert!(
+            e.to_string().starts_with("weights: expected 4 values"),
+            "{e}"
+        );
+        let e = freeform_region(&s, &[2.0; 4], 0.0, Method::Heat).unwrap_err();
+        assert!(e.to_string().starts_with("weights: weights[0] = 2"), "{e}");
+    }
+
+    #[test]
+    fn geodesic_region_validates_before_solving() {
+        let s = square();
+        let e = geodesic_region(&s, Source::Vertex(0), -1.0, 0.0, Method::Heat).unwrap_err();
+        assert!(e.to_string().starts_with("radius"), "{e}");
+        assert!(!s.is_factored());
+        let a = geodesic_region(&s, Source::Vertex(0), 1.2, 0.0, Method::Dijkstra).unwrap();
+        assert_eq!(a, vec![1.0, 1.0, 0.0, 1.0]);
+    }
+
+    #[test]
+    fn falloff_is_smooth_and_bounded() {
+        assert_eq!(falloff(0.0, 1.0, 0.2), 1.0);
+        assert_eq!(falloff(0.8, 1.0, 0.2), 1.0);
+        assert!((falloff(0.9, 1.0, 0.2) - 0.5).abs() < 1e-12);
+        assert_eq!(falloff(1.0, 1.0, 0.2), 0.0);
+        assert_eq!(falloff(0.99, 1.0, 0.0), 1.0);
+        assert_eq!(falloff(1.0, 1.0, 0.0), 0.0);
+        // border wider than the radius is clamped: falls from the centre.
+        assert!(falloff(0.5, 1.0, 5.0) > 0.0 && falloff(0.5, 1.0, 5.0) < 1.0);
+    }
 }

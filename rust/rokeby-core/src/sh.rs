@@ -322,6 +322,81 @@ pub fn fit(normals: &[f32], values: &[f32], channels: usize, method: Fit) -> Res
     fit_with_tolerance(normals, values, channels, method, &[])
 }
 
+/// A fit over the usable rows of one patch's pixels.
+#[derive(Debug, Clone)]
+pub struct PatchFit {
+    pub fit: ShFit,
+    /// Rows used: finite, non-zero normal and finite values.
+    pub pixels: usize,
+    /// Rows left out (a non-finite or zero normal, or a non-finite value).
+    pub masked: usize,
+}
+
+/// [`fit_with_tolerance`] over the rows of a patch that can be used: rows with a non-finite or
+/// zero normal (|n|² ≤ 10⁻²⁴) or a non-finite value are left out (background and masked pixels
+/// of a render), and counted. An error when no row is usable. `tolerance`: empty, one value for
+/// every channel, or one per channel.
+pub fn fit_patch(
+    normals: &[f32],
+    values: &[f32],
+    channels: usize,
+    method: Fit,
+    tolerance: &[f64],
+) -> Result<PatchFit> {
+    if channels == 0 || normals.len() % 3 != 0 || values.len() / channels != normals.len() / 3 {
+        return Err(RokebyError::invalid(
+            "values",
+            format!(
+                "expected {} rows of {channels} channels (one per normal), got {} values",
+                normals.len() / 3,
+                values.len()
+            ),
+        ));
+    }
+    let rows = normals.len() / 3;
+    let usable = |i: usize| {
+        let nr = &normals[3 * i..3 * i + 3];
+        let l2 = nr.iter().map(|x| (*x as f64) * (*x as f64)).sum::<f64>();
+        nr.iter()
+            .chain(&values[channels * i..channels * (i + 1)])
+            .all(|x| x.is_finite())
+            && l2 > 1e-24
+    };
+    // One pass counts the unusable rows; a filtered copy is made only when there are some (a
+    // render's patch usually has none, and the copy cost a third of the least-squares fit).
+    let masked = (0..rows).filter(|&i| !usable(i)).count();
+    if masked == rows {
+        return Err(RokebyError::invalid(
+            "normals",
+            format!(
+                "no usable pixel ({masked} of {rows} have a non-finite or zero normal or value)"
+            ),
+        ));
+    }
+    let (keep_n, keep_v): (std::borrow::Cow<[f32]>, std::borrow::Cow<[f32]>) = if masked == 0 {
+        (normals.into(), values.into())
+    } else {
+        let mut kn = Vec::with_capacity(3 * (rows - masked));
+        let mut kv = Vec::with_capacity(channels * (rows - masked));
+        for i in (0..rows).filter(|&i| usable(i)) {
+            kn.extend_from_slice(&normals[3 * i..3 * i + 3]);
+            kv.extend_from_slice(&values[channels * i..channels * (i + 1)]);
+        }
+        (kn.into(), kv.into())
+    };
+    let tolerance = if tolerance.len() == 1 && channels > 1 {
+        vec![tolerance[0]; channels]
+    } else {
+        tolerance.to_vec()
+    };
+    let fit = fit_with_tolerance(&keep_n, &keep_v, channels, method, &tolerance)?;
+    Ok(PatchFit {
+        fit,
+        pixels: rows - masked,
+        masked,
+    })
+}
+
 /// [`fit`] with the QP's constraints relaxed by a per-channel noise tolerance τ_c ≥ 0:
 /// D(n(x)) ≥ D0(x) − τ_c. The paper's QP (τ = 0) treats every pixel as exact, so on a
 /// path-traced render the fit rises until the noisiest pixel sits below it; τ of about two noise
@@ -425,7 +500,7 @@ pub fn fit_with_tolerance(
         h[i][i] += 1e-9 * trace / SH_COEFFS as f64;
     }
     let chol = Chol::new(&h)
-        .ok_or_else(|| RokebyError::invalid("normals", "normal equations are singular"))?;
+        .ok_or_else(|| RokebyError::numerical("SH fit", "the normal equations are singular"))?;
     let x0: Vec<[f64; SH_COEFFS]> = (0..channels)
         .map(|c| {
             let mut g = [0.0; SH_COEFFS];
@@ -782,9 +857,9 @@ impl GiState {
             loop {
                 self.steps += 1;
                 if self.steps > max_steps {
-                    return Err(RokebyError::invalid(
-                        "values",
-                        "constrained SH fit did not converge",
+                    return Err(RokebyError::numerical(
+                        "SH fit",
+                        "the constrained fit did not converge",
                     ));
                 }
                 // z = H⁻¹n − H⁻¹N r,  r = (NᵀH⁻¹N)⁻¹ NᵀH⁻¹n.
@@ -801,8 +876,11 @@ impl GiState {
                         .map(|i| (0..q).map(|k| dot9(&a[active[i]], &hcols[k])).collect())
                         .collect();
                     let rhs: Vec<f64> = (0..q).map(|i| dot9(&a[active[i]], &hn)).collect();
-                    let sol = solve_small(m, rhs).ok_or_else(|| {
-                        RokebyError::invalid("values", "constrained SH fit: degenerate active set")
+                    let sol = crate::numerical::solve_dense(m, rhs).ok_or_else(|| {
+                        RokebyError::numerical(
+                            "SH fit",
+                            "the constrained fit's active set is degenerate",
+                        )
                     })?;
                     r[..q].copy_from_slice(&sol);
                     for k in 0..q {
@@ -948,7 +1026,7 @@ pub(crate) fn fit_reference_tolerance(
         h[i][i] += 1e-9 * trace / SH_COEFFS as f64;
     }
     let chol = Chol::new(&h)
-        .ok_or_else(|| RokebyError::invalid("normals", "normal equations are singular"))?;
+        .ok_or_else(|| RokebyError::numerical("SH fit", "the normal equations are singular"))?;
     let per_channel: Vec<Result<([f64; SH_COEFFS], usize)>> = (0..channels)
         .into_par_iter()
         .map(|c| {
@@ -1007,80 +1085,7 @@ fn dot9(a: &[f64; SH_COEFFS], b: &[f64; SH_COEFFS]) -> f64 {
 }
 
 /// Cholesky factor of the 9×9 Hessian.
-struct Chol {
-    l: [[f64; SH_COEFFS]; SH_COEFFS],
-}
-
-impl Chol {
-    fn new(h: &[[f64; SH_COEFFS]; SH_COEFFS]) -> Option<Chol> {
-        let mut l = [[0.0; SH_COEFFS]; SH_COEFFS];
-        for i in 0..SH_COEFFS {
-            for j in 0..=i {
-                let mut s = h[i][j];
-                for k in 0..j {
-                    s -= l[i][k] * l[j][k];
-                }
-                if i == j {
-                    if !(s > 0.0) {
-                        return None;
-                    }
-                    l[i][i] = s.sqrt();
-                } else {
-                    l[i][j] = s / l[j][j];
-                }
-            }
-        }
-        Some(Chol { l })
-    }
-
-    /// H⁻¹ b.
-    fn solve(&self, b: &[f64; SH_COEFFS]) -> [f64; SH_COEFFS] {
-        let l = &self.l;
-        let mut y = *b;
-        for i in 0..SH_COEFFS {
-            for k in 0..i {
-                y[i] -= l[i][k] * y[k];
-            }
-            y[i] /= l[i][i];
-        }
-        for i in (0..SH_COEFFS).rev() {
-            for k in i + 1..SH_COEFFS {
-                y[i] -= l[k][i] * y[k];
-            }
-            y[i] /= l[i][i];
-        }
-        y
-    }
-}
-
-/// Solves the small dense system M x = b (Gaussian elimination, partial pivoting). None if singular.
-fn solve_small(mut m: Vec<Vec<f64>>, mut b: Vec<f64>) -> Option<Vec<f64>> {
-    let q = b.len();
-    for col in 0..q {
-        let piv = (col..q).max_by(|&i, &j| m[i][col].abs().total_cmp(&m[j][col].abs()))?;
-        if m[piv][col].abs() < 1e-300 {
-            return None;
-        }
-        m.swap(col, piv);
-        b.swap(col, piv);
-        for r in col + 1..q {
-            let f = m[r][col] / m[col][col];
-            for k in col..q {
-                m[r][k] -= f * m[col][k];
-            }
-            b[r] -= f * b[col];
-        }
-    }
-    let mut x = vec![0.0; q];
-    for i in (0..q).rev() {
-        let mut s = b[i];
-        for k in i + 1..q {
-            s -= m[i][k] * x[k];
-        }
-        x[i] = s / m[i][i];
-    }
-    Some(x)
-}
+type Chol = crate::numerical::DenseCholesky<SH_COEFFS>;
 
 /// Goldfarb–Idnani dual active-set method for
 ///   min ½ cᵀHc − gᵀc   s.t.  aᵢᵀc ≥ bᵢ  (i = 1..N),
@@ -1118,9 +1123,9 @@ fn goldfarb_idnani(
         loop {
             steps += 1;
             if steps > max_steps {
-                return Err(RokebyError::invalid(
-                    "values",
-                    "constrained SH fit did not converge",
+                return Err(RokebyError::numerical(
+                    "SH fit",
+                    "the constrained fit did not converge",
                 ));
             }
             // z = H⁻¹n − H⁻¹N r,  r = (NᵀH⁻¹N)⁻¹ NᵀH⁻¹n.
@@ -1135,8 +1140,11 @@ fn goldfarb_idnani(
                     .map(|i| (0..q).map(|k| dot9(&a[active[i]], &hcols[k])).collect())
                     .collect();
                 let rhs: Vec<f64> = (0..q).map(|i| dot9(&a[active[i]], &hn)).collect();
-                r = solve_small(m, rhs).ok_or_else(|| {
-                    RokebyError::invalid("values", "constrained SH fit: degenerate active set")
+                r = crate::numerical::solve_dense(m, rhs).ok_or_else(|| {
+                    RokebyError::numerical(
+                        "SH fit",
+                        "the constrained fit's active set is degenerate",
+                    )
                 })?;
                 for k in 0..q {
                     for d in 0..SH_COEFFS {
@@ -1201,6 +1209,23 @@ fn goldfarb_idnani(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn fit_patch_leaves_out_unusable_rows() {
+        let (ns, vs) = scene(200, 3, 0.0, 0.0, 5);
+        let mut n2 = ns.clone();
+        let mut v2 = vs.clone();
+        n2.extend_from_slice(&[0.0, 0.0, 0.0, f32::NAN, 0.0, 1.0]);
+        v2.extend_from_slice(&[1.0, 1.0, 1.0, 1.0, 1.0, 1.0]);
+        let p = fit_patch(&n2, &v2, 3, Fit::LeastSquares, &[]).unwrap();
+        assert_eq!((p.pixels, p.masked), (ns.len() / 3, 2));
+        assert_eq!(
+            p.fit.coeffs,
+            fit(&ns, &vs, 3, Fit::LeastSquares).unwrap().coeffs
+        );
+        let e = fit_patch(&[0.0; 3], &[1.0; 3], 3, Fit::Constrained, &[]).unwrap_err();
+        assert!(e.to_string().starts_with("normals: no usable pixel"), "{e}");
+    }
 
     /// Deterministic pseudo-random numbers in [0, 1) (splitmix64).
     fn rand01(state: &mut u64) -> f64 {

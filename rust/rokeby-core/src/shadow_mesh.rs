@@ -22,11 +22,12 @@
 //! while dragging.
 
 use crate::error::{Result, RokebyError};
+use crate::laplacian::{self, edge_lengths};
 use crate::light_space::{LightFrame, LightSpace};
+use crate::numerical::{self, Triplet};
 use faer::linalg::solvers::Solve;
-use faer::sparse::linalg::solvers::{Llt, SymbolicLlt};
-use faer::sparse::{SparseColMat, Triplet};
-use faer::{Mat, Side};
+use faer::sparse::linalg::solvers::Llt;
+use faer::Mat;
 use glam::{DVec2, DVec3};
 
 pub const DEFAULT_W_Z: f64 = 2.5;
@@ -43,28 +44,12 @@ pub struct EdgePoint {
     pub alpha: f64,
 }
 
-/// Cotangent weights per undirected edge (i < j), summed over the edge's faces.
+/// Cotangent weights per undirected edge (i < j), summed over the edge's faces
+/// ([`crate::laplacian::cotangent_weights`] on the faces' edge lengths).
 pub fn cotangent_weights(v: &[DVec3], faces: &[[u32; 3]]) -> Vec<(u32, u32, f64)> {
-    let mut e: Vec<(u32, u32, f64)> = Vec::with_capacity(faces.len() * 3);
-    for f in faces {
-        for k in 0..3 {
-            let (i, j, o) = (f[k], f[(k + 1) % 3], f[(k + 2) % 3]);
-            let a = v[i as usize] - v[o as usize];
-            let b = v[j as usize] - v[o as usize];
-            let cr = a.cross(b).length();
-            let cot = if cr > 0.0 { a.dot(b) / cr } else { 0.0 };
-            e.push((i.min(j), i.max(j), 0.5 * cot));
-        }
-    }
-    e.sort_unstable_by(|a, b| (a.0, a.1).cmp(&(b.0, b.1)));
-    let mut out: Vec<(u32, u32, f64)> = Vec::with_capacity(e.len() / 2 + 1);
-    for (i, j, w) in e {
-        match out.last_mut() {
-            Some(l) if l.0 == i && l.1 == j => l.2 += w,
-            _ => out.push((i, j, w)),
-        }
-    }
-    out
+    let faces: Vec<[usize; 3]> = faces.iter().map(|f| f.map(|i| i as usize)).collect();
+    let lengths: Vec<[f64; 3]> = faces.iter().map(|&f| edge_lengths(v, f)).collect();
+    laplacian::cotangent_weights(&faces, &lengths)
 }
 
 /// The factored shadow-mesh system for one set of silhouette constraints.
@@ -197,13 +182,8 @@ impl ShadowMeshSolver {
         for i in 0..n as u32 {
             trip.push(Triplet::new(i, i, eps2));
         }
-        let m = SparseColMat::try_new_from_triplets(n, n, &trip)
-            .map_err(|e| RokebyError::invalid("faces", format!("sparse assembly failed: {e:?}")))?;
-        let symbolic = SymbolicLlt::try_new(m.symbolic(), Side::Lower).map_err(|e| {
-            RokebyError::invalid("faces", format!("symbolic factorisation failed ({e:?})"))
-        })?;
-        let llt = Llt::try_new_with_symbolic(symbolic, m.as_ref(), Side::Lower)
-            .map_err(|e| RokebyError::invalid("faces", format!("the shadow-mesh system is not positive definite ({e:?}); is the caster degenerate?")))?;
+        let m = numerical::assemble(n, &trip, "shadow mesh")?;
+        let llt = numerical::cholesky(&m, "shadow mesh")?;
         let mut s = ShadowMeshSolver {
             space,
             w_z,

@@ -396,15 +396,7 @@ fn overflowing_shadow_solve_is_an_error() {
 fn brute_force_of_a_vanishing_lobe_is_the_lookup() {
     use rokeby_core::envmap::{EnvMap, Layout};
     use rokeby_core::prefilter::brute_force;
-    let env = EnvMap::new(
-        Layout::LatLong,
-        2,
-        4,
-        1,
-        vec![-2.7443809509277344; 8],
-        "image",
-    )
-    .unwrap();
+    let env = EnvMap::new(Layout::LatLong, 2, 4, 1, vec![-2.744_381; 8], "image").unwrap();
     for lobe in [
         Lobe::torrance_sparrow(1e-300).unwrap(),
         Lobe::phong(1e300).unwrap(),

@@ -1,32 +1,11 @@
 //! Geodesic distances against closed forms: a flat grid (Euclidean), a cylinder (unrolled), a
 //! sphere (great circles); surface-point sources; and every bad input.
 
+mod common;
+
+use common::grid;
 use glam::DVec3;
 use rokeby_core::geodesic::{GeodesicSolver, Mesh, Method, Source, SurfacePoint};
-
-/// A grid of n×n vertices on [0,1]², triangulated with alternating diagonals (no directional bias).
-fn grid(n: usize, map: impl Fn(f64, f64) -> DVec3) -> (Vec<f32>, Vec<i64>) {
-    let mut v = Vec::new();
-    for j in 0..n {
-        for i in 0..n {
-            let p = map(i as f64 / (n - 1) as f64, j as f64 / (n - 1) as f64);
-            v.extend_from_slice(&[p.x as f32, p.y as f32, p.z as f32]);
-        }
-    }
-    let mut f = Vec::new();
-    for j in 0..n - 1 {
-        for i in 0..n - 1 {
-            let a = (j * n + i) as i64;
-            let (b, c, d) = (a + 1, a + n as i64, a + n as i64 + 1);
-            if (i + j) % 2 == 0 {
-                f.extend_from_slice(&[a, b, d, a, d, c]);
-            } else {
-                f.extend_from_slice(&[a, b, c, b, d, c]);
-            }
-        }
-    }
-    (v, f)
-}
 
 fn solver(v: &[f32], f: &[i64]) -> GeodesicSolver {
     GeodesicSolver::new(Mesh::new(v, f).unwrap())

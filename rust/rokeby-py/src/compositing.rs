@@ -1,11 +1,11 @@
 //! Bindings of local shape editing at the compositing stage (Zubiaga et al. 2016): the SH diffuse
 //! fit, the dual-paraboloid reflection environment and recompositing. Same house style as the
 //! parent module: float arrays in (float32/float64), shapes checked with messages naming the
-//! argument, the GIL released, core errors as ValueError.
+//! argument, the GIL released, core errors mapped by kind (`core_err`).
 
 use super::{f32_array, run_cancellable, run_detached, shape_str, F32Array};
-use numpy::ndarray::{ArrayD, IxDyn};
-use numpy::{IntoPyArray, PyArrayDyn, PyArrayMethods, PyUntypedArrayMethods};
+use crate::convert::{array_f32, array_f64};
+use numpy::{PyArrayDyn, PyArrayMethods, PyUntypedArrayMethods};
 use pyo3::exceptions::{PyRuntimeError, PyTypeError, PyValueError};
 use pyo3::prelude::*;
 use pyo3::types::{PyDict, PyList};
@@ -13,26 +13,6 @@ use rokeby_core::normals;
 use rokeby_core::recomposite::{self as core_recomposite, Buffers, Params, Patch};
 use rokeby_core::reconstruct::{self, ParaboloidMap, ReflectionParams};
 use rokeby_core::sh::{self, Fit, SH_COEFFS};
-
-fn array_f32<'py>(
-    py: Python<'py>,
-    shape: &[usize],
-    data: Vec<f32>,
-) -> PyResult<Bound<'py, PyArrayDyn<f32>>> {
-    let arr = ArrayD::from_shape_vec(IxDyn(shape), data)
-        .map_err(|e| PyRuntimeError::new_err(e.to_string()))?;
-    Ok(arr.into_pyarray(py))
-}
-
-fn array_f64<'py>(
-    py: Python<'py>,
-    shape: &[usize],
-    data: Vec<f64>,
-) -> PyResult<Bound<'py, PyArrayDyn<f64>>> {
-    let arr = ArrayD::from_shape_vec(IxDyn(shape), data)
-        .map_err(|e| PyRuntimeError::new_err(e.to_string()))?;
-    Ok(arr.into_pyarray(py))
-}
 
 /// A float array, or a boolean one read as 0/1 (masks).
 fn mask_array<'py>(obj: &Bound<'py, PyAny>, name: &str) -> PyResult<F32Array<'py>> {
@@ -181,45 +161,8 @@ pub fn sh_fit<'py>(
         )));
     }
     let (nsl, vsl) = (n.slice(), v.slice());
-    let usable = |i: usize| {
-        let nr = &nsl[3 * i..3 * i + 3];
-        let l2 = nr.iter().map(|x| (*x as f64) * (*x as f64)).sum::<f64>();
-        nr.iter()
-            .chain(&vsl[channels * i..channels * (i + 1)])
-            .all(|x| x.is_finite())
-            && l2 > 1e-24
-    };
-    // One pass counts the unusable rows; a filtered copy is made only when there are some (a
-    // render's patch usually has none, and the copy cost a third of the least-squares fit).
-    let masked = py.detach(|| (0..ns[0]).filter(|&i| !usable(i)).count());
-    if masked == ns[0] {
-        return Err(PyValueError::new_err(format!(
-            "normals: no usable pixel ({masked} of {} have a non-finite or zero normal or value)",
-            ns[0]
-        )));
-    }
-    let (keep_n, keep_v): (std::borrow::Cow<[f32]>, std::borrow::Cow<[f32]>) = if masked == 0 {
-        (nsl.into(), vsl.into())
-    } else {
-        py.detach(|| {
-            let mut kn = Vec::with_capacity(3 * (ns[0] - masked));
-            let mut kv = Vec::with_capacity(channels * (ns[0] - masked));
-            for i in (0..ns[0]).filter(|&i| usable(i)) {
-                kn.extend_from_slice(&nsl[3 * i..3 * i + 3]);
-                kv.extend_from_slice(&vsl[channels * i..channels * (i + 1)]);
-            }
-            (kn.into(), kv.into())
-        })
-    };
-    let pixels = ns[0] - masked;
-    let tolerance = if tolerance.len() == 1 && channels > 1 {
-        vec![tolerance[0]; channels]
-    } else {
-        tolerance
-    };
-    let r = run_detached(py, || {
-        sh::fit_with_tolerance(&keep_n, &keep_v, channels, fit, &tolerance)
-    })?;
+    let p = run_detached(py, || sh::fit_patch(nsl, vsl, channels, fit, &tolerance))?;
+    let r = p.fit;
     // The arrays are read in place (no copy): the caller must not write them while the call runs.
     // Validated rows that changed under the fit would surface here as non-finite coefficients.
     if r.coeffs.iter().flatten().any(|x| !x.is_finite()) {
@@ -237,8 +180,8 @@ pub fn sh_fit<'py>(
     d.set_item("max_residual", array_f64(py, &[channels], r.max_residual)?)?;
     d.set_item("rms_residual", array_f64(py, &[channels], r.rms_residual)?)?;
     d.set_item("iterations", r.iterations)?;
-    d.set_item("pixels", pixels)?;
-    d.set_item("masked", masked)?;
+    d.set_item("pixels", p.pixels)?;
+    d.set_item("masked", p.masked)?;
     Ok(d)
 }
 
@@ -371,23 +314,15 @@ pub fn reflection_env<'py>(
             let p = reconstruct::partial(w, h, rs, vs, 3, ms, ds, &params)?;
             Ok((p.map, p.covered, p.coverage, p.triangles, 0, 0))
         } else {
-            let mut p = reconstruct::partial(w, h, rs, vs, 3, ms, ds, &params)?;
-            let covered = p.covered.clone();
-            if p.coverage < params.min_coverage {
-                return Err(rokeby_core::RokebyError::invalid(
-                    "mask",
-                    format!(
-                        "the patch's reflections cover {:.2}% of the sphere of directions ({} triangles), below min_coverage = {:.2}%: holes would cover nearly all of it",
-                        100.0 * p.coverage,
-                        p.triangles,
-                        100.0 * params.min_coverage
-                    ),
-                ));
-            }
-            let filled = reconstruct::fill_holes(&mut [&mut p.map, &mut p.positions], &p.covered)?;
-            let blurred = reconstruct::regularize(&mut p.map, &p.positions, params.blur_sigma)?;
-            reconstruct::fill_beyond_equator(&mut p.map);
-            Ok((p.map, covered, p.coverage, p.triangles, filled, blurred))
+            let e = reconstruct::reconstruct(w, h, rs, vs, 3, ms, ds, &params)?;
+            Ok((
+                e.map,
+                e.covered,
+                e.coverage,
+                e.triangles,
+                e.filled_texels,
+                e.blurred_texels,
+            ))
         }
     })?;
     let s = map.size;

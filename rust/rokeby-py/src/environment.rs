@@ -1,41 +1,22 @@
 //! Bindings of the environment-map toolkit and its prefiltering (issue 8; rokeby_core::envmap,
 //! rokeby_core::prefilter). Same house style as the parent module: float arrays in
 //! (float32/float64), shapes and values checked with messages naming the argument, the GIL
-//! released around the work, core errors as ValueError.
+//! released around the work, core errors mapped by kind (`core_err`).
 //!
 //! Array shapes per layout (row 0 = the top row of the image file):
 //! latlong (H, W, C) · cube (6, S, S, C) in the order +X, −X, +Y, −Y, +Z, −Z · sphere (S, S, C) ·
 //! paraboloid (2, S, S, C), face 0 looking along +Z.
 
-use super::{f32_array, run_cancellable, run_detached, shape_str};
-use numpy::ndarray::{ArrayD, IxDyn};
-use numpy::{IntoPyArray, PyArrayDyn};
-use pyo3::exceptions::{PyRuntimeError, PyValueError};
+use super::{core_err, f32_array, run_cancellable, run_detached, shape_str};
+use crate::convert::{array_f32, array_f64};
+use numpy::PyArrayDyn;
+use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
 use pyo3::types::{PyBytes, PyDict, PyList};
 use rokeby_core::envmap::{EnvMap, Layout};
 use rokeby_core::prefilter::{self, Lobe, PrefilterParams, A_HAT};
 use rokeby_core::sh::SH_COEFFS;
-
-fn array_f32<'py>(
-    py: Python<'py>,
-    shape: &[usize],
-    data: Vec<f32>,
-) -> PyResult<Bound<'py, PyArrayDyn<f32>>> {
-    let arr = ArrayD::from_shape_vec(IxDyn(shape), data)
-        .map_err(|e| PyRuntimeError::new_err(e.to_string()))?;
-    Ok(arr.into_pyarray(py))
-}
-
-fn array_f64<'py>(
-    py: Python<'py>,
-    shape: &[usize],
-    data: Vec<f64>,
-) -> PyResult<Bound<'py, PyArrayDyn<f64>>> {
-    let arr = ArrayD::from_shape_vec(IxDyn(shape), data)
-        .map_err(|e| PyRuntimeError::new_err(e.to_string()))?;
-    Ok(arr.into_pyarray(py))
-}
+use rokeby_core::RokebyError;
 
 fn parse_layout(name: &str, arg: &str) -> PyResult<Layout> {
     Layout::parse(name).ok_or_else(|| {
@@ -85,8 +66,7 @@ fn env_from(obj: &Bound<'_, PyAny>, layout: Layout, arg: &str) -> PyResult<EnvMa
             (s[1], s[2], s[3])
         }
     };
-    EnvMap::new(layout, h, w, c, a.slice().to_vec(), arg)
-        .map_err(|e| PyValueError::new_err(e.to_string()))
+    EnvMap::new(layout, h, w, c, a.slice().to_vec(), arg).map_err(core_err)
 }
 
 fn out_array<'py>(py: Python<'py>, m: EnvMap) -> PyResult<Bound<'py, PyArrayDyn<f32>>> {
@@ -119,7 +99,10 @@ fn parse_lobe(kind: &str, p: f64, arg: &str) -> PyResult<Lobe> {
             )))
         }
     };
-    r.map_err(|e| PyValueError::new_err(format!("{arg}: {e}")))
+    r.map_err(|e| match e {
+        RokebyError::InvalidArgument { .. } => PyValueError::new_err(format!("{arg}: {e}")),
+        e => core_err(e),
+    })
 }
 
 /// The same environment on another layout. `size` is the output height (lat-long: width 2·size)
