@@ -16,32 +16,22 @@
 //!   shadow boundary editing (Mattausch, Igarashi, Wimmer): smooth silhouettes from the light,
 //!   shadow handles by ray casting, 2D MLS boundary deformation, the Laplacian shadow mesh.
 
+// Grouped by feature (one folder each); the flat paths (`rokeby_core::geodesic`, ...) stay.
 pub mod alloc;
-pub mod bvh;
 pub mod cancel;
-pub mod envmap;
+pub mod compositing;
+pub mod envmaps;
 pub mod error;
-pub mod exact;
-pub mod field;
-pub mod geodesic;
-pub mod intrinsic;
-pub mod laplacian;
-pub mod light_space;
-pub mod mls2d;
-pub mod normals;
+pub mod geometry;
 pub mod numerical;
-pub mod polar;
-pub mod prefilter;
-pub(crate) mod radix_heap;
-pub mod recomposite;
-pub mod reconstruct;
-pub mod region;
-pub mod rgbe;
-pub mod sh;
-pub mod shadow;
-pub mod shadow_mesh;
-pub mod silhouette;
-pub mod svg;
-pub mod unfold;
+pub mod reflection;
+pub mod shadows;
+
+pub use compositing::{normals, recomposite, reconstruct, sh};
+pub use envmaps::{envmap, prefilter, rgbe};
+pub(crate) use geometry::radix_heap;
+pub use geometry::{bvh, exact, geodesic, intrinsic, laplacian, svg, unfold};
+pub use reflection::{field, polar, region};
+pub use shadows::{light_space, mls2d, shadow, shadow_mesh, silhouette};
 
 pub use error::{Result, RokebyError};

@@ -1,0 +1,12 @@
+//! Surface geometry: the one cotangent Laplacian, geodesic distances (heat, Dijkstra, the saddle
+//! vertex graph, exact window propagation, exact unfolding near the source, intrinsic Delaunay
+//! flips) and the bounding-volume hierarchy for ray casts.
+
+pub mod bvh;
+pub mod exact;
+pub mod geodesic;
+pub mod intrinsic;
+pub mod laplacian;
+pub(crate) mod radix_heap;
+pub mod svg;
+pub mod unfold;
