@@ -25,17 +25,18 @@ import bpy
 
 from ..blender import registry as index
 from ..blender import transaction
-from ..blender.compat import stored_group
 from ..blender.registry import ensure, in_scene, note_depsgraph, pinned  # noqa: F401 - the index, as before
 from ..core import schema
+from . import pointers
+from .pointers import (  # noqa: F401 - the mirrors and their pointers, as before
+    MIRROR_KIND, _is_mirror, _pointers, _refcounts, invalidate, mirrors, of_mirrors, pointer_counts, pointers_changed)
+from .render import rendering
 
 # On handles and region centres the add-on made (api); older files: membership of HANDLE_COLLECTION.
 MADE_KEY = schema.MADE_KEY
 HANDLE_COLLECTION = schema.HANDLE_COLLECTION
-MIRROR_KIND = "mirror"  # this feature's kind in the object index (blender.registry)
 
 _records: dict = {}  # mirror uid -> (its name, what it uses: dict of lists)
-_counts = None  # (index generation, {object uid: how many Rokeby pointers use it}); None: recount
 _STATS = {"released": 0, "removed": 0}
 
 
@@ -52,51 +53,10 @@ def reset_stats():
         _STATS[k] = 0
 
 
-def invalidate():
-    """Rokeby data was added or removed: rebuild at the next use."""
-    global _counts
-    _counts = None
-    index.invalidate()
-
-
-def pointers_changed():
-    """A constraint, region or mirror setting changed (property update): recount pointer users."""
-    global _counts
-    _counts = None
-
-
-def pointer_counts() -> dict:
-    """How many of the add-on's pointers use each object (by ``session_uid``)."""
-    global _counts
-    found = mirrors()
-    if _counts is None or _counts[0] != index.generation():
-        _counts = (index.generation(), _refcounts(found))
-    return _counts[1]
-
-
 def reset():
     """After loading a file or undo/redo: forget everything (the file is the truth again)."""
-    global _counts
-    _counts = None
     _records.clear()
-    index.reset()
-
-
-def _is_mirror(ob) -> bool:
-    group = stored_group(ob, schema.OBJECT_PROP)
-    return group is not None and hasattr(group, "get") and bool(group.get("is_mirror", 0))
-
-
-index.add_kind(MIRROR_KIND, _is_mirror, order=0)
-
-
-def mirrors(scene=None) -> list:
-    """Every mirror in the file, or those linked into ``scene``."""
-    found = [ob for ob in index.objects(MIRROR_KIND) if ob.rokeby.is_mirror]
-    if scene is None:
-        return found
-    inside = {ob.session_uid for ob in index.objects(MIRROR_KIND, scene)}
-    return [ob for ob in found if ob.session_uid in inside]
+    pointers.reset()
 
 
 def has_data() -> bool:
@@ -108,26 +68,7 @@ def has_data() -> bool:
 # --- what each mirror uses ---------------------------------------------------------------------
 
 
-def _pointers(mirror):
-    """(row, attribute, object) of every object pointer of ``mirror``'s Rokeby data."""
-    s = mirror.rokeby
-    out = []
-    for c in s.constraints:
-        for attr in ("surface_handle", "target_handle"):
-            ob = getattr(c, attr)
-            if ob is not None:
-                out.append((c, attr, ob))
-    for rg in s.regions:
-        if rg.center is not None:
-            out.append((rg, "center", rg.center))
-    if s.map_origin is not None:
-        out.append((s, "map_origin", s.map_origin))
-    return out
-
-
 def _uses(mirror) -> dict:
-    from .render import rendering  # noqa: PLC0415
-
     carrier = getattr(mirror.rokeby, "field_carrier", None)
     return {
         "objects": [ob for _row, _attr, ob in _pointers(mirror)],
@@ -153,14 +94,6 @@ def made_by_addon(ob) -> bool:
         return True
     coll = bpy.data.collections.get(HANDLE_COLLECTION)
     return coll is not None and any(o == ob for o in coll.objects)
-
-
-def _refcounts(found) -> dict:
-    counts: dict = {}
-    for m in found:
-        for _row, _attr, ob in _pointers(m):
-            counts[ob.session_uid] = counts.get(ob.session_uid, 0) + 1
-    return counts
 
 
 def release_deleted(found=None) -> list:
@@ -229,8 +162,6 @@ def release(found, objects=(), carrier=(), materials=()) -> None:
     """Remove what no mirror of ``found`` uses any more: add-on-made handles and centres in
     ``objects``, unused ``carrier`` objects, the render nodes of ``materials`` no mirror keeps;
     then the handle collection when empty and the add-on's unused node groups."""
-    from .render import rendering  # noqa: PLC0415
-
     used = _refcounts(found)
     for ob in dict.fromkeys(o for o in objects if _alive(o)):
         if ob.library is None and used.get(ob.session_uid, 0) == 0 and made_by_addon(ob):
@@ -284,16 +215,3 @@ def drop_unused_node_groups() -> int:
         for ng in doomed:
             bpy.data.node_groups.remove(ng)
             removed += 1
-
-
-def of_mirrors(obj=None, *_args, **_kwargs) -> list:
-    """For ``transaction.atomic(materials=registry.of_mirrors)``: the materials of ``obj`` and of every mirror (the
-    render nodes of all of them may be synced)."""
-    obs = [*mirrors(), obj]
-    out = []
-    for ob in obs:
-        try:
-            out += [s.material for s in ob.material_slots if s.material is not None]
-        except (AttributeError, ReferenceError):
-            continue
-    return out
