@@ -40,16 +40,7 @@ NATIVE_HOME = f"{PACKAGE}.core.native"
 # Edges that break the rules today, each with the reason it is not yet fixed. The test requires
 # the found violations to be exactly these: a new violation fails, and so does a fixed one that is
 # still listed (remove it from here).
-KNOWN: dict[str, str] = {
-    "rokeby.shadow -> rokeby.reflection.registry":
-        "the registry of what the add-on owns indexes shadow objects too: split it into a feature-agnostic object index "
-        "in blender/ and reflection's records (handles, carriers, tidy)",
-    "cycle: rokeby.reflection.duplicates rokeby.reflection.evaluate rokeby.reflection.handlers rokeby.reflection.props "
-    "rokeby.reflection.registry rokeby.reflection.render.reflmap rokeby.reflection.render.rendering":
-        "inside the reflection feature, modules still call each other both ways through function-level imports "
-        "(evaluate <-> registry <-> rendering, reflmap -> handlers.suspended, props -> evaluate/registry, "
-        "evaluate <-> duplicates)",
-}
+KNOWN: dict[str, str] = {}
 
 
 def _modules(root: Path, package: str) -> dict[str, tuple[Path, bool]]:

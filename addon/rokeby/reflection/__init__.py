@@ -2,6 +2,7 @@
 
 ``evaluate`` (scene → arrays → the Rust core → the rotation field), ``props`` (the saved scene
 model of mirrors), ``operators``, ``ui``, ``handlers`` (live updates), ``registry`` (what the
-add-on owns in the open file), ``duplicates``; ``render/`` (final renders: shader node groups,
+mirrors use, tidied after deletions), ``pointers`` (the mirrors and their pointers, below the
+evaluator), ``guard`` (suspending the live update), ``duplicates``; ``render/`` (final renders: shader node groups,
 refraction, reflection maps) and ``viewport/`` (the live GPU preview).
 """

@@ -23,7 +23,18 @@ the mirror is a copy found by the rule above.
 
 from __future__ import annotations
 
-from .evaluate import SHRINKWRAP_NAME, shrinkwrap_target
+from ..core import schema
+
+SHRINKWRAP_NAME = schema.SHRINKWRAP_NAME
+
+
+def shrinkwrap_target(handle):
+    """The object a handle's "Rokeby: stay on mirror" Shrinkwrap keeps it on (None: it has none,
+    or no target)."""
+    for con in handle.constraints:
+        if con.type == "SHRINKWRAP" and con.name.startswith(SHRINKWRAP_NAME):
+            return con.target
+    return None
 
 
 def _handles(mirror):

@@ -44,6 +44,7 @@ import numpy as np
 from ..blender import meshes
 from ..core import native, vecmath, words
 from ..core import schema
+from .duplicates import shrinkwrap_target  # noqa: F401 - the handles' Shrinkwrap (duplicates: the copies' rule)
 
 ATTRIBUTE = schema.ROTATION_ATTRIBUTE
 # What final renders read (rokeby.shading): the field's view-independent parts per vertex (per
@@ -226,9 +227,9 @@ def mark_dirty(obj):
         _DIRTY.add(obj.session_uid)
     except (AttributeError, ReferenceError):
         pass
-    from . import registry  # noqa: PLC0415
+    from . import pointers  # noqa: PLC0415
 
-    registry.pointers_changed()
+    pointers.pointers_changed()
 
 
 def report_of(obj) -> MirrorReport | None:
@@ -305,9 +306,9 @@ def object_in_scene(obj, scene) -> bool:
 def _pointer_users(obj) -> int:
     """How many of the users of ``obj`` are the add-on's own pointers (constraints, regions, a
     map origin) of the mirrors in the file."""
-    from . import registry  # noqa: PLC0415
+    from . import pointers  # noqa: PLC0415
 
-    return registry.pointer_counts().get(obj.session_uid, 0)
+    return pointers.pointer_counts().get(obj.session_uid, 0)
 
 
 def to_world(co, nrm, matrix, what: str):
@@ -829,15 +830,6 @@ def _constraint_inputs(obj, scene, depsgraph, geo, mirror_matrix, report, kind="
 
 
 SHRINKWRAP_NAME = schema.SHRINKWRAP_NAME
-
-
-def shrinkwrap_target(handle):
-    """The object a handle's "Rokeby: stay on mirror" Shrinkwrap keeps it on (None: it has none,
-    or no target)."""
-    for con in handle.constraints:
-        if con.type == "SHRINKWRAP" and con.name.startswith(SHRINKWRAP_NAME):
-            return con.target
-    return None
 
 
 def _transmitted(incident, normal, ior, label):
@@ -1769,9 +1761,9 @@ def edited_meshes(scene) -> set:
 
 def mirrors_of(scene) -> list:
     """The mirrors linked into ``scene``, from the add-on's registry (no scan of its objects)."""
-    from . import registry  # noqa: PLC0415
+    from . import pointers  # noqa: PLC0415
 
-    return registry.mirrors(scene)
+    return pointers.mirrors(scene)
 
 
 def evaluate_scene(scene, depsgraph, *, force=False, geometry_changed=None, all_geometry=False, interactive=False, settle=True) -> dict:
@@ -1808,9 +1800,9 @@ def evaluate_scene(scene, depsgraph, *, force=False, geometry_changed=None, all_
             if ob is not None:
                 out[name] = evaluate_mirror(ob, scene, depsgraph, force=force, reread_geometry=True, interactive=interactive)
     # Forget objects that are no longer mirrors (deleted, or Remove Mirror).
-    from . import registry  # noqa: PLC0415
+    from . import pointers  # noqa: PLC0415
 
-    live = {ob.session_uid for ob in registry.mirrors()}
+    live = {ob.session_uid for ob in pointers.mirrors()}
     for uid in [u for u in _STATE if u not in live]:
         del _STATE[uid]
     return out

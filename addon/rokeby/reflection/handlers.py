@@ -26,32 +26,20 @@ cleared, row flagged, object freed) and what only a deleted mirror used goes wit
 
 from __future__ import annotations
 
-import contextlib
-
 import bpy
 from bpy.app.handlers import persistent
 
 from ..blender import compat, hooks
-from . import evaluate, registry
+from . import evaluate, guard, registry
+from .guard import suspended  # noqa: F401 - handlers.suspended(), as before
 from .render import rendering, shading
 
 _busy = False
-_suspend = 0
-
-
-@contextlib.contextmanager
-def suspended():
-    global _suspend
-    _suspend += 1
-    try:
-        yield
-    finally:
-        _suspend -= 1
 
 
 def _run(scene, depsgraph, materials=(), **kwargs):
     global _busy
-    if _busy or _suspend or scene is None:
+    if _busy or guard.active() or scene is None:
         return
     _busy = True
     try:
@@ -94,7 +82,7 @@ def _redraw():
 @persistent
 def on_depsgraph_update(scene, depsgraph):
     registry.note_depsgraph(depsgraph)
-    if _busy or _suspend:
+    if _busy or guard.active():
         return
     with registry.pinned():  # objects counted once per update
         if registry.has_data():  # else nothing is looked at: heavy scenes pay nothing
@@ -176,7 +164,7 @@ def on_frame_change(scene, depsgraph):
 def on_render_pre(scene, *_args):
     """Before a final render (F12, an animation frame, a farm job): every mirror is brought up
     to date for the render camera, so a render never shows a field from an older state."""
-    if _busy or _suspend or scene is None:
+    if _busy or guard.active() or scene is None:
         return
     try:
         view_layer = scene.view_layers[0] if bpy.context.scene != scene or bpy.context.view_layer is None else bpy.context.view_layer

@@ -69,9 +69,9 @@ def _is_mirror_changed(self, context):
     # only files saved before DATA_VERSION existed load with 0 (handlers.on_load migrates them).
     if self.is_mirror and self.data_version < DATA_VERSION:
         self.data_version = DATA_VERSION
-    from . import registry
+    from . import pointers
 
-    registry.invalidate()  # the add-on's registry of mirrors (no scan of scene.objects per update)
+    pointers.invalidate()  # the add-on's registry of mirrors (no scan of scene.objects per update)
     _touch(self, context)
 
 

@@ -32,6 +32,7 @@ import numpy as np
 
 from ..core import native
 from ..blender import compat, transaction
+from ..blender import registry as index
 from ..core import schema
 
 SHADOW_SUFFIX = " Shadow Mesh"
@@ -300,15 +301,26 @@ def _stored(o) -> bool:
     return compat.stored_group(o, schema.OBJECT_SHADOW_PROP) is not None
 
 
-def _parts():
-    """(shadow meshes, twin lights, lights holding links) in the file, from the registry of what
-    the add-on owns (no pass over every object)."""
-    from ..reflection import registry  # noqa: PLC0415
+INDEX_KIND = "shadow"  # this feature's kind in the add-on's object index (blender.registry)
 
+
+def _is_shadow_part(ob) -> bool:
+    """Shadow meshes, twin lights and lights holding links (``Object.rokeby_shadow``), and in files
+    not yet migrated the custom properties of ``schema.SHADOW_LEGACY_KEYS`` (before shadow links
+    were pointers: migrate)."""
+    return compat.stored_group(ob, schema.OBJECT_SHADOW_PROP) is not None or any(key in ob for key in schema.SHADOW_LEGACY_KEYS)
+
+
+index.add_kind(INDEX_KIND, _is_shadow_part, order=1)  # after the reflection feature's mirrors
+
+
+def _parts():
+    """(shadow meshes, twin lights, lights holding links) in the file, from the add-on's object
+    index (no pass over every object)."""
     meshes, twins, lights = [], [], []
     if not _registered():
         return meshes, twins, lights
-    for o in registry.shadow_objects():
+    for o in index.objects(INDEX_KIND):
         if not _stored(o) or transaction.doomed(o):
             continue
         links = o.rokeby_shadow
@@ -323,12 +335,10 @@ def _parts():
 
 
 def _self_blockers():
-    """Self-shadow meshes in the file (from the registry)."""
-    from ..reflection import registry  # noqa: PLC0415
-
+    """Self-shadow meshes in the file (from the add-on's object index)."""
     if not _registered():
         return []
-    return [o for o in registry.shadow_objects() if _stored(o) and o.rokeby_shadow.role == "SELF_BLOCKER"]
+    return [o for o in index.objects(INDEX_KIND) if _stored(o) and o.rokeby_shadow.role == "SELF_BLOCKER"]
 
 
 def _linking_collection(existing, name: str, role: str):
@@ -1037,10 +1047,8 @@ def sync_falloffs(scene) -> int:
     meshes whose light or caster is gone keep their values."""
 
     written = 0
-    from ..reflection import registry  # noqa: PLC0415
-
     for ob in _parts()[0]:
-        if not registry.in_scene(ob, scene):
+        if not index.in_scene(ob, scene):
             continue
         light = ob.rokeby_shadow.light
         keys = ob.data.shape_keys

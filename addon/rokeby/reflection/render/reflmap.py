@@ -160,9 +160,9 @@ def prefilter(px: np.ndarray, roughness_levels=ROUGHNESS_LEVELS) -> list:
 
 def _of_mirrors(*args, **kwargs) -> list:
     """The materials an operation on mirrors may edit (registry.of_mirrors)."""
-    from .. import registry  # noqa: PLC0415
+    from .. import pointers  # noqa: PLC0415
 
-    return registry.of_mirrors(*args, **kwargs)
+    return pointers.of_mirrors(*args, **kwargs)
 
 
 def image_name(mirror, level: int = 0) -> str:
@@ -327,7 +327,7 @@ def _render_panorama(scene, mirror, origin, width: int, samples: int) -> np.ndar
     import bpy  # noqa: PLC0415
 
     from ...blender import compat  # noqa: PLC0415
-    from .. import handlers  # noqa: PLC0415
+    from .. import guard  # noqa: PLC0415 - the live-update handlers' suspension
 
     height = width // 2
     tmp = tempfile.mkdtemp(prefix="rokeby_capture_")
@@ -335,7 +335,7 @@ def _render_panorama(scene, mirror, origin, width: int, samples: int) -> np.ndar
     cam_data = cam = None
     undo = _Restorer()
     try:
-        with handlers.suspended():
+        with guard.suspended():
             cam_data = bpy.data.cameras.new("Rokeby capture")
             cam_data.type = "PANO"
             cam_data.panorama_type = "EQUIRECTANGULAR"
@@ -493,7 +493,7 @@ def capture(mirror, *, resolution=None, samples=None, storage: str = "AUTO", sce
     if not isinstance(samples, (int, np.integer)) or samples < 1:
         raise RokebyError(f"samples: expected a whole number >= 1, got {samples!r}")
     storage = _storage(storage)
-    from .. import registry  # noqa: PLC0415
+    from ...blender import registry  # noqa: PLC0415
 
     if not registry.in_scene(mirror, scene):
         raise RokebyError(f"mirror: '{mirror.name}' is not in scene '{scene.name}'")

@@ -109,9 +109,9 @@ def sync_scene(scene, reports=None, *, changed_materials=(), force=False) -> boo
     fills each mirror's report (``renders``, ``render_note``). ``changed_materials``: materials
     or node trees Blender reported as edited (their nodes are checked again). Returns whether
     anything was (re)installed or removed. Never raises: problems go into the reports."""
-    from .. import registry  # noqa: PLC0415 - what the add-on owns: no pass over the scene's objects
+    from .. import pointers  # noqa: PLC0415 - what the add-on owns: no pass over the scene's objects
 
-    mirrors = [ob for ob in registry.mirrors(scene) if ob.type == "MESH" and (reports is None or ob.name in reports)]
+    mirrors = [ob for ob in pointers.mirrors(scene) if ob.type == "MESH" and (reports is None or ob.name in reports)]
     done = _KEYS.setdefault(scene.session_uid, {})
     if not mirrors and not done and not force:
         return False  # nothing to do: no cost in scenes without mirrors
@@ -138,7 +138,7 @@ def sync_scene(scene, reports=None, *, changed_materials=(), force=False) -> boo
         # Candidates: this scene's mirrors' materials, and materials no mirror in the file uses
         # any more; a material edited for a mirror of another scene is that scene's business.
         elsewhere, elsewhere_wanted = set(), set()
-        for ob in registry.mirrors():
+        for ob in pointers.mirrors():
             if ob.type == "MESH" and ob not in mirrors:
                 mats = edited_materials(ob)
                 elsewhere.update(mats)
