@@ -9,7 +9,7 @@ One home each for the rules the features must agree on:
   there the refracted direction is the zero vector. The render node groups (Cycles, EEVEE) use
   GLSL's ``refract``, so the Python twins agree with the renders at the boundary too;
 - :func:`smooth_step` and :func:`region_falloff` — the region border, as ``rokeby_core::region``
-  defines it (rust/rokeby-core/src/region.rs ``smooth_step``/``falloff``), NaN distances
+  defines it (rust/rokeby-core/src/reflection/region.rs ``smooth_step``/``falloff``), NaN distances
   (unreachable points) included: they get weight 0.
 """
 
