@@ -287,7 +287,7 @@ def test_graph_method_is_within_half_a_percent_of_exact_mmp():
     graph edge is a path on the surface), and exact next to the source."""
     from pathlib import Path
 
-    ref = np.load(Path(__file__).parent / "data" / "spot_exact_geodesics.npz")
+    ref = np.load(DATA / "spot_exact_geodesics.npz")
     v, f = load_obj(mesh_path("spot.obj"))
     s = rn.GeodesicSolver(v, f)
     d = s.distances(ref["sources"], method="graph").astype(np.float64)
