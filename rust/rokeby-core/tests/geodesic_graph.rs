@@ -1,53 +1,10 @@
 //! The saddle vertex graph method (issue 21): under 0.5 % mean error against exact geodesics.
 
+mod common;
+
+use common::{load_obj, shared_meshes};
 use rokeby_core::geodesic::{GeodesicSolver, Mesh, Method, Source};
 use std::path::PathBuf;
-
-fn shared_meshes() -> Vec<PathBuf> {
-    let root = std::env::var("ROKEBY_SHARED").map_or_else(
-        |_| PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../../shared"),
-        PathBuf::from,
-    );
-    let dir = root.join("meshes");
-    let mut out: Vec<PathBuf> = std::fs::read_dir(&dir)
-        .unwrap_or_else(|e| panic!("shared meshes at {dir:?}: {e} (set ROKEBY_SHARED)"))
-        .filter_map(|e| e.ok().map(|e| e.path()))
-        .filter(|p| p.extension().is_some_and(|x| x == "obj"))
-        .collect();
-    out.sort();
-    assert!(!out.is_empty(), "no .obj in {dir:?}");
-    out
-}
-
-/// A minimal OBJ reader: `v` lines and `f` lines (polygons fanned, `a/b/c` and negative indices).
-fn load_obj(path: &PathBuf) -> (Vec<f32>, Vec<i64>) {
-    let text = std::fs::read_to_string(path).unwrap();
-    let (mut v, mut f) = (Vec::new(), Vec::new());
-    for line in text.lines() {
-        let mut it = line.split_whitespace();
-        match it.next() {
-            Some("v") => v.extend(it.take(3).map(|x| x.parse::<f32>().unwrap())),
-            Some("f") => {
-                let nv = (v.len() / 3) as i64;
-                let idx: Vec<i64> = it
-                    .map(|t| {
-                        let i: i64 = t.split('/').next().unwrap().parse().unwrap();
-                        if i < 0 {
-                            nv + i
-                        } else {
-                            i - 1
-                        }
-                    })
-                    .collect();
-                for k in 1..idx.len().saturating_sub(1) {
-                    f.extend_from_slice(&[idx[0], idx[k], idx[k + 1]]);
-                }
-            }
-            _ => {}
-        }
-    }
-    (v, f)
-}
 
 /// Mean and max relative error outside the source's 1-ring, over the vertices exact reaches.
 fn errors(got: &[f32], exact: &[f32], ring: &[bool]) -> (f64, f64) {
