@@ -169,10 +169,11 @@ def test_node_custom_properties_survive_reload(tmp_path):
         mat.use_nodes = True
     node = mat.node_tree.nodes.new("ShaderNodeTexCoord")
     node["rokeby_tag"] = "kept"
+    name = node.name  # `node` points into the old file's memory once another file is opened
     path = tmp_path / "nodes.blend"
     bpy.ops.wm.save_as_mainfile(filepath=str(path))
     bpy.ops.wm.open_mainfile(filepath=str(path))
-    node = bpy.data.materials["tagged"].node_tree.nodes[node.name]
+    node = bpy.data.materials["tagged"].node_tree.nodes[name]
     assert node.get("rokeby_tag") == "kept"
 
 
