@@ -12,7 +12,7 @@ export ROKEBY_SHARED := $(SHARED)
 
 RUST_SRC := Cargo.toml pyproject.toml $(wildcard rust/*/Cargo.toml) $(shell find rust -name '*.rs' 2>/dev/null)
 
-.PHONY: all demo dist test test-blender test-matrix bench cargo-test pytest native venv clean help fuzz fuzz-py lint
+.PHONY: ci-phase2 all demo dist test test-blender test-matrix bench cargo-test pytest native venv clean help fuzz fuzz-py lint
 
 all: native
 
@@ -141,6 +141,16 @@ matrix-leg-%:
 	case $* in 4.*|5.0|5.0.*) args="$(MATRIX_CP311_ARGS)";; *) args="$(PYTEST_ARGS)";; esac; \
 	$(MAKE) --no-print-directory test-blender BPY=$* PYTEST_ARGS="$$args"; rc=$$?; \
 	echo "== leg bpy $*: $$(( $$(date +%s) - s )) s$$( [ $$rc = 0 ] || echo ', FAILED')"; \
+	exit $$rc
+
+# What .ci/run's second phase runs, CI_JOBS at once (the longest first): the first matrix leg, the
+# whole suite on 4.5 (`make pytest`), the other legs, then lint; each prints its cost.
+ci-phase2: $(addprefix matrix-leg-,$(firstword $(MATRIX))) timed-pytest $(addprefix matrix-leg-,$(wordlist 2,99,$(MATRIX))) timed-lint
+
+timed-%:
+	@s=$$(date +%s); \
+	$(MAKE) --no-print-directory $*; rc=$$?; \
+	echo "== make $*: $$(( $$(date +%s) - s )) s$$( [ $$rc = 0 ] || echo ', FAILED')"; \
 	exit $$rc
 
 # Peers of the benchmark (exact MMP geodesics, potpourri3d, libigl, matplotlib) live in their

@@ -35,18 +35,29 @@ def run_check(script: str, timeout: int = 600, args=()) -> dict:
 
 
 def gpu_context(scene) -> None:
-    """Blender's GPU context in background mode: a camera and one 8×8 EEVEE render of ``scene``."""
+    """Blender's GPU context in background mode: one 8×8 render, with ``compat.eevee_engine()``, of an
+    empty scene made for it (then removed). The scene is empty so that EEVEE compiles no material of
+    the test's own: on llvmpipe that compilation took minutes, and the context is all a check needs.
+    ``scene`` (the check's own) is neither rendered nor changed."""
     import bpy
 
-    if scene.camera is None:
-        cam = bpy.data.objects.new("cam", bpy.data.cameras.new("cam"))
-        scene.collection.objects.link(cam)
-        scene.camera = cam
     from rokeby import compat
 
-    scene.render.engine = compat.eevee_engine()
-    scene.render.resolution_x = scene.render.resolution_y = 8
-    bpy.ops.render.render()
+    tmp = bpy.data.scenes.new("gpu context")
+    try:
+        cam = bpy.data.objects.new("gpu context camera", bpy.data.cameras.new("gpu context camera"))
+        tmp.collection.objects.link(cam)
+        tmp.camera = cam
+        tmp.render.engine = compat.eevee_engine()
+        tmp.render.resolution_x = tmp.render.resolution_y = 8
+        bpy.ops.render.render(scene=tmp.name)
+    finally:
+        cams = [o for o in tmp.collection.objects if o.type == "CAMERA"]
+        bpy.data.scenes.remove(tmp)
+        for o in cams:
+            data = o.data
+            bpy.data.objects.remove(o)
+            bpy.data.cameras.remove(data)
 
 
 def offscreen_pixels(draw, width: int, height: int) -> np.ndarray:
