@@ -18,7 +18,10 @@ eyes, region settings, the mirror's transform and, when Blender reports that its
 or the frame changed, its evaluated vertex positions). When the fingerprint is unchanged nothing is
 recomputed; ``stats()`` counts both cases. Geodesic distances are cached per constraint surface
 point, and the geodesic solver (with its factorisation) per mesh, so a handle move costs one solve
-for the handle that moved.
+for the handle that moved. While a red handle is dragged in a window (``interactive``), that solve
+uses the fast DRAG_METHOD (a drag preview, said in the report); the mirror's own method follows
+when the drag ends, and before any render or save (rokeby.handlers), so only the accurate field is
+ever rendered or saved.
 
 Shared meshes (Alt+D copies, Ctrl+L ▸ Link Object Data): a mesh used by more than one object
 holds no field. Each mirror using it writes its field to a carrier of its own ("Rokeby field:
@@ -64,6 +67,12 @@ EYE_MISMATCH_DEGREES = 3.0
 FOLDED_SHARE = 0.05
 # While the artist drags, the estimate runs at most this often (seconds), and once after.
 ESTIMATE_INTERVAL = 0.4
+# While the artist drags a red handle (interactive updates), the moved constraint's geodesic
+# distances come from this method (the fastest at 100k vertices, bench/addon_update.py); the
+# mirror's own method recomputes them when the updates pause, before any render and before a save.
+DRAG_METHOD = "dijkstra"
+# Updates this far apart (seconds) end a drag: the accurate distances follow (rokeby.handlers).
+SETTLE_INTERVAL = 0.25
 # At most this many triangles are sampled for the interpolation-error estimate.
 AGREEMENT_SAMPLES = 4000
 # The second field, from refraction constraints [p, t, e_t] (present only while the mirror has some).
@@ -103,6 +112,9 @@ class MirrorReport:
     pending: bool = False
     # Geodesic distances: (pieces of the mesh no constraint reaches over the surface, pieces).
     unreached_pieces: "tuple | None" = None
+    # The shown field is a drag preview: the moved constraints' distances came from DRAG_METHOD;
+    # the mirror's own method replaces them when the drag ends (renders and saves never see it).
+    drag_preview: bool = False
 
     # Messages that do not change the status (see note()).
     notes: list = field(default_factory=list)
@@ -197,6 +209,14 @@ class _State:
         self.reach_note: "str | None" = None
         # What the mirror's own mesh data held when api.evaluate last looked (mesh_fingerprint).
         self.mesh_fingerprint: bytes | None = None
+        # The stored fields used drag-time distances (DRAG_METHOD) for moved constraints; the
+        # next non-interactive evaluation recomputes them with the mirror's method. When the
+        # last interactive evaluation ran (perf_counter), for the end-of-drag timer.
+        self.preview = False
+        self.interactive_time = -1e9
+        # (geometry version, method) of the last distances computed all by the mirror's method:
+        # an interactive update after that is a handle being moved (see _geodesic_distances).
+        self.distances_ready = None
 
 
 _STATE: dict[int, _State] = {}
@@ -895,29 +915,40 @@ def _solver(state: _State, geo: _Geometry, timer):
     return state.solver
 
 
-def _geodesic_distances(state: _State, geo: _Geometry, points, method: str, timer) -> np.ndarray:
+def _geodesic_distances(state: _State, geo: _Geometry, points, method: str, timer, drag: bool = False):
     """(K, V) distances from each constraint's surface point, cached per point: only a moved
-    handle costs a solve."""
+    handle costs a solve. ``drag`` (an interactive update of a mirror whose distances are cached
+    already, so a handle is being moved): the points not in the cache are solved by DRAG_METHOD
+    instead of ``method``. Returns (distances, whether any row is such a drag-time one)."""
     out = np.empty((len(points), len(geo.vertices)), dtype=np.float32)
+    fast = drag and method != DRAG_METHOD and state.distances_ready == (state.geometry_version, method)
     missing = []
+    previewed = False
     for k, sp in enumerate(points):
         key = (method, sp.triangle, sp.bary.tobytes())
         d = state.distance_cache.get(key)
+        if d is None and fast:
+            d = state.distance_cache.get((DRAG_METHOD,) + key[1:])
+            previewed |= d is not None
         if d is None:
             missing.append((k, key, sp))
         else:
             out[k] = d
     if missing:
+        solve_with = DRAG_METHOD if fast else method
         sources = [(sp.triangle, tuple(float(b) for b in sp.bary)) for _, _, sp in missing]
-        solved = timer(_solver(state, geo, timer).distances, sources, method=method)
+        solved = timer(_solver(state, geo, timer).distances, sources, method=solve_with)
         for (k, key, _), d in zip(missing, solved):
             out[k] = d
-            state.distance_cache[key] = d
+            state.distance_cache[(solve_with,) + key[1:]] = d
+        previewed |= fast
+    if not previewed:
+        state.distances_ready = (state.geometry_version, method)
     # Bound the cache: keep what the current constraints use.
-    used = {(method, sp.triangle, sp.bary.tobytes()) for sp in points}
+    used = {(m, sp.triangle, sp.bary.tobytes()) for sp in points for m in (method, DRAG_METHOD)}
     if len(state.distance_cache) > 4 * max(len(points), 8):
         state.distance_cache = {k: v for k, v in state.distance_cache.items() if k in used}
-    return out
+    return out, previewed
 
 
 # --- geodesic distances on meshes of several pieces ----------------------------------------------
@@ -1492,6 +1523,29 @@ def _defer_estimate(obj, state, args):
     _schedule(later, ESTIMATE_INTERVAL)
 
 
+def _preview_note(obj) -> str:
+    method = obj.rokeby.geodesic_method.lower()
+    return (f"drag preview: the moved handles' geodesic distances are {DRAG_METHOD}'s until the drag ends, "
+            f"then {method}'s (renders and saved files always use {method})")
+
+
+def previews(scene=None) -> list:
+    """The mirrors (of ``scene``, or any) whose stored field is a drag preview."""
+    from . import pointers  # noqa: PLC0415
+
+    out = []
+    for ob in (mirrors_of(scene) if scene is not None else pointers.mirrors()):
+        st = state_of(ob)
+        if st is not None and st.preview:
+            out.append(ob)
+    return out
+
+
+def last_interactive_update() -> float:
+    """perf_counter() of the latest interactive evaluation of any mirror (-1e9: none)."""
+    return max((st.interactive_time for st in _STATE.values()), default=-1e9)
+
+
 def _schedule(fn, seconds: float):
     """Run ``fn`` from Blender's event loop after ``seconds`` (again after what it returns)."""
     import bpy  # noqa: PLC0415
@@ -1502,7 +1556,9 @@ def _schedule(fn, seconds: float):
 def evaluate_mirror(obj, scene, depsgraph, *, force=False, reread_geometry=False, interactive=False) -> MirrorReport:
     """Evaluate one mirror if its inputs changed (or ``force``); never raises. ``interactive``
     (the depsgraph handler, while the artist drags): the render-vs-preview estimate runs at most
-    every ESTIMATE_INTERVAL seconds, and once more when the updates pause."""
+    every ESTIMATE_INTERVAL seconds, and once more when the updates pause; a moved red handle's
+    geodesic distances come from DRAG_METHOD (a drag preview, ``report.drag_preview``). Any
+    evaluation that is not interactive recomputes a preview with the mirror's own method."""
     t0 = time.perf_counter()
     timer = _NativeTimer()
     _STATS["checks"] += 1
@@ -1587,7 +1643,12 @@ def evaluate_mirror(obj, scene, depsgraph, *, force=False, reread_geometry=False
         fp_reflection = _fingerprint(obj, state.geometry_version, mirror_matrix, rows, specs)
         fp_refraction = _fingerprint(obj, state.geometry_version, mirror_matrix, t_rows, specs, (ior,))
         fp = fp_reflection + fp_refraction
-        if fp == state.fingerprint and not force and state.report is not None and state.report.status != "ERROR":
+        # The drag has ended (or a render, a save or the API asks): fields shown with drag-time
+        # distances are recomputed with the mirror's own method, whatever else changed.
+        settle = state.preview and not interactive
+        if interactive:
+            state.interactive_time = time.perf_counter()
+        if fp == state.fingerprint and not force and not settle and state.report is not None and state.report.status != "ERROR":
             _STATS["skipped"] += 1
             if geo.shared:
                 strip_field(obj.data)  # e.g. left by this mirror before its mesh was linked to another object
@@ -1598,6 +1659,8 @@ def evaluate_mirror(obj, scene, depsgraph, *, force=False, reread_geometry=False
             kept.messages, kept.status, kept.notes = list(report.messages), report.status, list(report.notes)
             if state.reach_note is not None:
                 kept.note(state.reach_note)
+            if state.preview:
+                kept.note(_preview_note(obj))
             for msg in state.field_notes:
                 kept.warn(msg)
             kept.eye = report.eye
@@ -1606,9 +1669,10 @@ def evaluate_mirror(obj, scene, depsgraph, *, force=False, reread_geometry=False
         method = {"HEAT": "heat", "DIJKSTRA": "dijkstra", "EXACT": "exact", "GRAPH": "graph"}[settings.geodesic_method]
         polar = "exact" if settings.polar == "EXACT" else "fast"
         distances = None
+        previewed = False
         if len(rows) + len(t_rows) and settings.metric == "GEODESIC":
             # One query for both kinds: the per-point cache keeps every current constraint's solve.
-            distances = _geodesic_distances(state, geo, points + t_points, method, timer)
+            distances, previewed = _geodesic_distances(state, geo, points + t_points, method, timer, drag=interactive)
             if np.all(np.isinf(distances)):
                 report.warn("no constraint reaches this mesh over its surface; it takes the field of straight-line distances")
             report.unreached_pieces = _unreached_pieces(state, geo, distances)
@@ -1623,7 +1687,7 @@ def evaluate_mirror(obj, scene, depsgraph, *, force=False, reread_geometry=False
         transfer = geo.source == "transfer"
         target = carrier_of(obj) if transfer else obj
         stored = target is not None and _has_attribute(target, ATTRIBUTE) and _has_render_attribute(target)
-        if force or old.get(ATTRIBUTE) != fp_reflection or not stored:
+        if force or settle or old.get(ATTRIBUTE) != fp_reflection or not stored:
             kwargs = {"polar": polar}
             if specs:
                 kwargs["regions"] = _regions_for_native(state, geo, specs, points, method, timer)
@@ -1674,7 +1738,7 @@ def evaluate_mirror(obj, scene, depsgraph, *, force=False, reread_geometry=False
             old.pop(REFRACTION_ATTRIBUTE, None)
             state.refractions = None
             remove_attribute(target, REFRACTION_ATTRIBUTE)
-        elif force or old.get(REFRACTION_ATTRIBUTE) != fp_refraction or not _has_attribute(target, REFRACTION_ATTRIBUTE):
+        elif force or settle or old.get(REFRACTION_ATTRIBUTE) != fp_refraction or not _has_attribute(target, REFRACTION_ATTRIBUTE):
             kwargs = {"polar": polar}
             if specs:
                 kwargs["regions"] = _regions_for_native(state, geo, specs, t_points, method, timer)
@@ -1689,6 +1753,9 @@ def evaluate_mirror(obj, scene, depsgraph, *, force=False, reread_geometry=False
             # where it would render on objects that are not (or no longer) this mirror.
             strip_field(obj.data)
         state.fingerprint = fp
+        state.preview = report.drag_preview = previewed
+        if previewed:
+            report.note(_preview_note(obj))
         report.recomputed = True
         if not settings.enabled:
             report.status = "DISABLED"
