@@ -71,13 +71,21 @@ def _differs(a, b):
     return max(float(np.abs(a[n] - b[n]).max()) for n in FIELDS)
 
 
-def test_a_drag_shows_a_preview_and_the_release_stores_the_accurate_field(window):
+@pytest.mark.parametrize("preview", ["update", "dijkstra"])
+def test_a_drag_shows_a_preview_and_the_release_stores_the_accurate_field(window, monkeypatch, preview):
+    """Either preview: the accurate distances updated from the drag's start (evaluate.DRAG_UPDATE),
+    or a Dijkstra solve (where the update is no fair guess, or with DRAG_UPDATE off)."""
+    monkeypatch.setattr(evaluate, "DRAG_UPDATE", preview == "update")
     ball = _mirror()
     for to in STEPS:
         _drag_red(ball, to)
         rep = api.report(ball)
         assert rep.recomputed and rep.drag_preview and rep.status != "ERROR", rep.summary()
         assert any(m.startswith("drag preview:") and "dijkstra" in m and "graph" in m for m in rep.messages)
+    # Which preview ran: updates ("drag"; the last step is beyond DRAG_UPDATE_REACH of the start,
+    # so Dijkstra solves there), or Dijkstra only.
+    kinds = {key[0] for key in evaluate.state_of(ball).distance_cache}
+    assert kinds == ({"graph", "drag", "dijkstra"} if preview == "update" else {"graph", "dijkstra"}), kinds
     settle = [fn for fn in window if fn is handlers._settle_timer]
     assert len(settle) == 1, "the end of the drag was not scheduled (once)"
     preview = _stored(ball)

@@ -68,9 +68,19 @@ FOLDED_SHARE = 0.05
 # While the artist drags, the estimate runs at most this often (seconds), and once after.
 ESTIMATE_INTERVAL = 0.4
 # While the artist drags a red handle (interactive updates), the moved constraint's geodesic
-# distances come from this method (the fastest at 100k vertices, bench/addon_update.py); the
-# mirror's own method recomputes them when the updates pause, before any render and before a save.
+# distances are a preview (the mirror's own method recomputes them when the updates pause, before
+# any render and before a save). DRAG_UPDATE: the accurate distances d₀ from where the handle was
+# last solved, p₀, updated by the change of the straight-line distances,
+#   d(v) ≈ max(d₀(v) + |v − p| − |v − p₀|, |v − p|),
+# exact next to the handle and never off by more than 2 |p − p₀| (triangle inequality), a
+# millisecond at 100k vertices. Where that is not a fair guess (the handle moved more than
+# DRAG_UPDATE_REACH of the mirror's size from p₀, or across a fold: d₀(p) more than
+# DRAG_UPDATE_BEND times |p − p₀|), and with DRAG_UPDATE off, DRAG_METHOD solves instead
+# (bench/addon_update.py measures both at 100k vertices).
 DRAG_METHOD = "dijkstra"
+DRAG_UPDATE = True
+DRAG_UPDATE_REACH = 0.15
+DRAG_UPDATE_BEND = 1.2
 # Updates this far apart (seconds) end a drag: the accurate distances follow (rokeby.handlers).
 SETTLE_INTERVAL = 0.25
 # At most this many triangles are sampled for the interpolation-error estimate.
@@ -217,6 +227,9 @@ class _State:
         # (geometry version, method) of the last distances computed all by the mirror's method:
         # an interactive update after that is a handle being moved (see _geodesic_distances).
         self.distances_ready = None
+        # Per constraint point (in query order), the last accurate (point, distance row): what a
+        # drag preview updates (DRAG_UPDATE).
+        self.anchors: list = []
 
 
 _STATE: dict[int, _State] = {}
@@ -928,7 +941,11 @@ def _geodesic_distances(state: _State, geo: _Geometry, points, method: str, time
         key = (method, sp.triangle, sp.bary.tobytes())
         d = state.distance_cache.get(key)
         if d is None and fast:
-            d = state.distance_cache.get((DRAG_METHOD,) + key[1:])
+            d = state.distance_cache.get(("drag",) + key[1:])
+            if d is None:
+                d = state.distance_cache.get((DRAG_METHOD,) + key[1:])
+            if d is None and DRAG_UPDATE:
+                d = _drag_update(state, geo, k, sp)
             previewed |= d is not None
         if d is None:
             missing.append((k, key, sp))
@@ -944,11 +961,32 @@ def _geodesic_distances(state: _State, geo: _Geometry, points, method: str, time
         previewed |= fast
     if not previewed:
         state.distances_ready = (state.geometry_version, method)
+        state.anchors = [(sp.point, out[k]) for k, sp in enumerate(points)]
     # Bound the cache: keep what the current constraints use.
-    used = {(m, sp.triangle, sp.bary.tobytes()) for sp in points for m in (method, DRAG_METHOD)}
+    used = {(m, sp.triangle, sp.bary.tobytes()) for sp in points for m in (method, DRAG_METHOD, "drag")}
     if len(state.distance_cache) > 4 * max(len(points), 8):
         state.distance_cache = {k: v for k, v in state.distance_cache.items() if k in used}
     return out, previewed
+
+
+def _drag_update(state: _State, geo: _Geometry, k: int, sp):
+    """The drag preview of point ``k`` updated from its anchor (see DRAG_UPDATE), cached; None
+    where that is not a fair guess (then DRAG_METHOD solves)."""
+    if k >= len(state.anchors):
+        return None
+    p0, d0 = state.anchors[k]
+    p = np.asarray(sp.point, dtype=np.float32)
+    moved = float(np.linalg.norm(p - p0))
+    tri = geo.triangles[sp.triangle]
+    along = float(np.dot(sp.bary, d0[tri]))  # d₀ at the new point: the distance dragged over the surface
+    if not np.isfinite(along) or moved > DRAG_UPDATE_REACH * geo.size or along > DRAG_UPDATE_BEND * moved + 1e-6 * geo.size:
+        return None
+    v = geo.vertices
+    near = np.sqrt(np.einsum("ij,ij->i", v - p, v - p))
+    was = np.sqrt(np.einsum("ij,ij->i", v - p0, v - p0))
+    d = np.maximum(d0 + (near - was), near).astype(np.float32)  # +inf stays +inf (other pieces)
+    state.distance_cache[("drag", sp.triangle, sp.bary.tobytes())] = d
+    return d
 
 
 # --- geodesic distances on meshes of several pieces ----------------------------------------------
@@ -1525,8 +1563,8 @@ def _defer_estimate(obj, state, args):
 
 def _preview_note(obj) -> str:
     method = obj.rokeby.geodesic_method.lower()
-    return (f"drag preview: the moved handles' geodesic distances are {DRAG_METHOD}'s until the drag ends, "
-            f"then {method}'s (renders and saved files always use {method})")
+    return (f"drag preview: the moved handles' geodesic distances are estimated (updated from where the drag started, "
+            f"or by {DRAG_METHOD}) until the drag ends, then {method}'s (renders and saved files always use {method})")
 
 
 def previews(scene=None) -> list:
