@@ -73,7 +73,7 @@ ESTIMATE_INTERVAL = 0.4
 # last solved, p₀, updated by the change of the straight-line distances,
 #   d(v) ≈ max(d₀(v) + |v − p| − |v − p₀|, |v − p|),
 # exact next to the handle and never off by more than 2 |p − p₀| (triangle inequality), a
-# millisecond at 100k vertices. Where that is not a fair guess (the handle moved more than
+# few milliseconds at 100k vertices. Where that is not a fair guess (the handle moved more than
 # DRAG_UPDATE_REACH of the mirror's size from p₀, or across a fold: d₀(p) more than
 # DRAG_UPDATE_BEND times |p − p₀|), and with DRAG_UPDATE off, DRAG_METHOD solves instead
 # (bench/addon_update.py measures both at 100k vertices).
@@ -961,7 +961,7 @@ def _geodesic_distances(state: _State, geo: _Geometry, points, method: str, time
         previewed |= fast
     if not previewed:
         state.distances_ready = (state.geometry_version, method)
-        state.anchors = [(sp.point, out[k]) for k, sp in enumerate(points)]
+        state.anchors = [[np.asarray(sp.point, dtype=np.float32), out[k], None] for k, sp in enumerate(points)]
     # Bound the cache: keep what the current constraints use.
     used = {(m, sp.triangle, sp.bary.tobytes()) for sp in points for m in (method, DRAG_METHOD, "drag")}
     if len(state.distance_cache) > 4 * max(len(points), 8):
@@ -969,22 +969,32 @@ def _geodesic_distances(state: _State, geo: _Geometry, points, method: str, time
     return out, previewed
 
 
+def _distances_to(geo: _Geometry, point) -> np.ndarray:
+    """|v − point| for every vertex, as |v|² − 2 v·point + |point|² in f64 (one matrix-vector
+    product; |v|² kept with the mesh)."""
+    if getattr(geo, "_v64", None) is None:
+        geo._v64 = np.asarray(geo.vertices, dtype=np.float64)
+        geo._vv = np.einsum("ij,ij->i", geo._v64, geo._v64)
+    q = np.asarray(point, dtype=np.float64)
+    return np.sqrt(np.maximum(geo._vv - 2.0 * (geo._v64 @ q) + q @ q, 0.0))
+
+
 def _drag_update(state: _State, geo: _Geometry, k: int, sp):
     """The drag preview of point ``k`` updated from its anchor (see DRAG_UPDATE), cached; None
     where that is not a fair guess (then DRAG_METHOD solves)."""
     if k >= len(state.anchors):
         return None
-    p0, d0 = state.anchors[k]
+    p0, d0, _ = state.anchors[k]
     p = np.asarray(sp.point, dtype=np.float32)
     moved = float(np.linalg.norm(p - p0))
     tri = geo.triangles[sp.triangle]
     along = float(np.dot(sp.bary, d0[tri]))  # d₀ at the new point: the distance dragged over the surface
     if not np.isfinite(along) or moved > DRAG_UPDATE_REACH * geo.size or along > DRAG_UPDATE_BEND * moved + 1e-6 * geo.size:
         return None
-    v = geo.vertices
-    near = np.sqrt(np.einsum("ij,ij->i", v - p, v - p))
-    was = np.sqrt(np.einsum("ij,ij->i", v - p0, v - p0))
-    d = np.maximum(d0 + (near - was), near).astype(np.float32)  # +inf stays +inf (other pieces)
+    near = _distances_to(geo, p)
+    if state.anchors[k][2] is None:  # |v − p₀|: once per drag
+        state.anchors[k][2] = _distances_to(geo, p0)
+    d = np.maximum(d0 + (near - state.anchors[k][2]), near).astype(np.float32)  # +inf stays +inf (other pieces)
     state.distance_cache[("drag", sp.triangle, sp.bary.tobytes())] = d
     return d
 
