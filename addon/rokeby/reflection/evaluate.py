@@ -688,7 +688,13 @@ def project_to_surface(obj, depsgraph, geo: _Geometry, world_point, mirror_matri
     if not np.all(np.isfinite(x)):
         raise RokebyError(f"mirror '{getattr(obj, 'name', '?')}': the point to project is not finite")
     if geo.local is not None:
-        inv = np.linalg.inv(mirror_matrix)
+        # One inverse per mirror transform, not per handle (a small LAPACK call costs milliseconds
+        # whenever numpy's BLAS threads are awake on a busy machine).
+        key = np.asarray(mirror_matrix, dtype=np.float64).tobytes()
+        cached = getattr(geo, "_inverse", None)
+        if cached is None or cached[0] != key:
+            geo._inverse = cached = (key, np.linalg.inv(mirror_matrix))
+        inv = cached[1]
         query = inv[:3, :3] @ x + inv[:3, 3]
     else:
         query = x
@@ -970,13 +976,23 @@ def _geodesic_distances(state: _State, geo: _Geometry, points, method: str, time
 
 
 def _distances_to(geo: _Geometry, point) -> np.ndarray:
-    """|v − point| for every vertex, as |v|² − 2 v·point + |point|² in f64 (one matrix-vector
-    product; |v|² kept with the mesh)."""
-    if getattr(geo, "_v64", None) is None:
-        geo._v64 = np.asarray(geo.vertices, dtype=np.float64)
-        geo._vv = np.einsum("ij,ij->i", geo._v64, geo._v64)
+    """|v − point| for every vertex, as |v|² − 2 v·point + |point|² in f64 (|v|² and the
+    coordinate columns kept with the mesh). Elementwise, not ``@``: a BLAS matrix-vector product
+    wakes OpenBLAS's threads, which then spin against Blender's (and slowed every small numpy
+    call after it: 5 ms for a 4×4 inverse, measured in the drag loop on 2 cores)."""
+    if getattr(geo, "_columns", None) is None:
+        v = np.asarray(geo.vertices, dtype=np.float64)
+        geo._columns = (np.ascontiguousarray(v[:, 0]), np.ascontiguousarray(v[:, 1]), np.ascontiguousarray(v[:, 2]))
+        geo._vv = np.einsum("ij,ij->i", v, v)
     q = np.asarray(point, dtype=np.float64)
-    return np.sqrt(np.maximum(geo._vv - 2.0 * (geo._v64 @ q) + q @ q, 0.0))
+    x, y, z = geo._columns
+    t = x * (-2.0 * q[0])
+    t += y * (-2.0 * q[1])
+    t += z * (-2.0 * q[2])
+    t += geo._vv
+    t += float(q @ q)
+    np.maximum(t, 0.0, out=t)
+    return np.sqrt(t, out=t)
 
 
 def _drag_update(state: _State, geo: _Geometry, k: int, sp):
