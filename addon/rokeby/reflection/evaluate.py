@@ -951,7 +951,7 @@ def _geodesic_distances(state: _State, geo: _Geometry, points, method: str, time
             d = state.distance_cache.get(("drag",) + key[1:])
             if d is None:
                 d = state.distance_cache.get((DRAG_METHOD,) + key[1:])
-            if d is None and DRAG_UPDATE:
+            if d is None and DRAG_UPDATE and len(state.anchors) == len(points):  # same constraints as at the start
                 d = _drag_update(state, geo, k, sp)
             previewed |= d is not None
         if d is None:
