@@ -19,7 +19,7 @@ or the frame changed, its evaluated vertex positions). When the fingerprint is u
 recomputed; ``stats()`` counts both cases. Geodesic distances are cached per constraint surface
 point, and the geodesic solver (with its factorisation) per mesh, so a handle move costs one solve
 for the handle that moved. While a red handle is dragged in a window (``interactive``), that solve
-uses the fast DRAG_METHOD (a drag preview, said in the report); the mirror's own method follows
+is replaced by a fast preview (DRAG_UPDATE, else DRAG_METHOD; said in the report); the mirror's own method follows
 when the drag ends, and before any render or save (rokeby.handlers), so only the accurate field is
 ever rendered or saved.
 
@@ -122,8 +122,9 @@ class MirrorReport:
     pending: bool = False
     # Geodesic distances: (pieces of the mesh no constraint reaches over the surface, pieces).
     unreached_pieces: "tuple | None" = None
-    # The shown field is a drag preview: the moved constraints' distances came from DRAG_METHOD;
-    # the mirror's own method replaces them when the drag ends (renders and saves never see it).
+    # The shown field is a drag preview: the moved constraints' distances are DRAG_UPDATE's or
+    # DRAG_METHOD's; the mirror's own method replaces them when the drag ends (renders and saves
+    # never see it).
     drag_preview: bool = False
 
     # Messages that do not change the status (see note()).
@@ -219,7 +220,7 @@ class _State:
         self.reach_note: "str | None" = None
         # What the mirror's own mesh data held when api.evaluate last looked (mesh_fingerprint).
         self.mesh_fingerprint: bytes | None = None
-        # The stored fields used drag-time distances (DRAG_METHOD) for moved constraints; the
+        # The stored fields used drag-time distances (a preview) for moved constraints; the
         # next non-interactive evaluation recomputes them with the mirror's method. When the
         # last interactive evaluation ran (perf_counter), for the end-of-drag timer.
         self.preview = False
@@ -938,8 +939,9 @@ def _solver(state: _State, geo: _Geometry, timer):
 def _geodesic_distances(state: _State, geo: _Geometry, points, method: str, timer, drag: bool = False):
     """(K, V) distances from each constraint's surface point, cached per point: only a moved
     handle costs a solve. ``drag`` (an interactive update of a mirror whose distances are cached
-    already, so a handle is being moved): the points not in the cache are solved by DRAG_METHOD
-    instead of ``method``. Returns (distances, whether any row is such a drag-time one)."""
+    already, so a handle is being moved): the points not in the cache get a preview instead of a
+    solve by ``method``: DRAG_UPDATE's update of their anchor, else a DRAG_METHOD solve. Returns
+    (distances, whether any row is such a preview)."""
     out = np.empty((len(points), len(geo.vertices)), dtype=np.float32)
     fast = drag and method != DRAG_METHOD and state.distances_ready == (state.geometry_version, method)
     missing = []
