@@ -6,7 +6,14 @@ depsgraph handler, as when dragging in the viewport. Prints the evaluator's own 
 reading handles and the mesh, projecting the red handles, converting and writing the attribute;
 Rust: rokeby_native) and the whole view_layer.update() including Blender's depsgraph work.
 
-    python bench/addon_update.py [--json OUT]
+Red-handle drags with geodesic distances (issue 23): the red handle of one constraint moves per
+step (each step a new surface point, so a new solve); during the drag the moved constraint's
+distances come from evaluate.DRAG_METHOD (a preview), and on release (``handlers.settle_previews``,
+what the end-of-drag timer runs) the mirror's own method recomputes them. Printed: the drag step,
+the release, one accurate solve by itself, and a step that solves accurately every time (what a
+drag cost before the preview).
+
+    python bench/addon_update.py [--json OUT] [--quick] [--red-only]
 """
 
 from __future__ import annotations
@@ -104,6 +111,109 @@ def measure(kind: str, shared: Path, metric: str, method: str, polar: str, steps
     }
 
 
+def measure_red(shared: Path, method: str, update: bool = True, steps: int = 20, accurate_steps: int = 5) -> dict:
+    """A red-handle drag on the 100k sphere with geodesic distances by ``method``; the preview
+    updates the accurate distances (``update``, evaluate.DRAG_UPDATE) or solves by DRAG_METHOD."""
+    import bpy
+
+    from rokeby import api, evaluate, handlers
+
+    evaluate.DRAG_UPDATE = update
+    mirror, size = _scene("sphere", shared)
+    handlers.WINDOW_UPDATES = True
+    evaluate._schedule = lambda fn, seconds: None  # the end-of-drag timer is run by hand below
+    mirror.rokeby.metric, mirror.rokeby.geodesic_method, mirror.rokeby.polar = "GEODESIC", method, "FAST"
+    api.evaluate(force=True)  # graph / factorisation and caches
+    red = mirror.rokeby.constraints[3].surface_handle
+
+    def drag(n, interactive):
+        handlers.WINDOW_UPDATES = interactive
+        py, rs, total, cpu = [], [], [], []
+        for _ in range(n):
+            red.location.x += 0.004 * size  # a new surface point each step: a new solve
+            t0, c0 = time.perf_counter(), time.process_time()
+            bpy.context.view_layer.update()
+            total.append((time.perf_counter() - t0) * 1e3)
+            cpu.append((time.process_time() - c0) * 1e3)
+            rep = api.report(mirror)
+            assert rep.recomputed and rep.status != "ERROR" and rep.drag_preview == interactive, rep.summary()
+            py.append(rep.python_ms)
+            rs.append(rep.native_ms)
+            bpy.context.view_layer.update()  # the update the attribute write tagged
+        return float(np.median(py)), float(np.median(rs)), float(np.median(total)), float(np.median(cpu))
+
+    step = drag(steps, True)
+    # How far the preview's distances of the moved constraint are from the accurate ones, at the
+    # end of the drag (0.28 of the radius from where it started).
+    preview_row = np.array(evaluate.state_of(mirror).field_inputs[1][3])
+    handlers.settle_previews()
+    accurate_row = np.array(evaluate.state_of(mirror).field_inputs[1][3])
+    ok = np.isfinite(accurate_row) & (accurate_row > 1e-6 * size)
+    err = np.abs(preview_row[ok] - accurate_row[ok]) / accurate_row[ok]
+    drag(1, True)
+    releases, release_cpu = [], []
+    for _ in range(3):
+        t0, c0 = time.perf_counter(), time.process_time()
+        assert handlers.settle_previews() == 1
+        releases.append((time.perf_counter() - t0) * 1e3)
+        release_cpu.append((time.process_time() - c0) * 1e3)
+        rel = api.report(mirror)
+        assert not rel.drag_preview and rel.recomputed, rel.summary()
+        drag(1, True)  # a preview again, for the next release
+    handlers.settle_previews()
+    accurate = drag(accurate_steps, False)
+    # One accurate solve by itself (the solver of the mirror, its graph or factorisation made).
+    solver = evaluate.state_of(mirror).solver
+    tri = evaluate.state_of(mirror).geometry.triangles
+    rng = np.random.default_rng(7)
+    solves, solve_cpu, drag_solves, drag_cpu = [], [], [], []
+    for f in rng.choice(len(tri), 7, replace=False):
+        for m, wall, cpu in ((method.lower(), solves, solve_cpu), (evaluate.DRAG_METHOD, drag_solves, drag_cpu)):
+            t0, c0 = time.perf_counter(), time.process_time()
+            solver.distances([(int(f), (0.2, 0.3, 0.5))], method=m)
+            wall.append((time.perf_counter() - t0) * 1e3)
+            cpu.append((time.process_time() - c0) * 1e3)
+    handlers.WINDOW_UPDATES = None
+    return {
+        "mesh": "sphere",
+        "vertices": len(mirror.data.vertices),
+        "method": method,
+        "drag_method": "update" if update else evaluate.DRAG_METHOD,
+        "preview_error_mean": float(err.mean()),
+        "preview_error_p99": float(np.percentile(err, 99)),
+        "solver": evaluate.DRAG_METHOD,
+        "step_python_ms": step[0],
+        "step_rust_ms": step[1],
+        "step_update_ms": step[2],
+        # CPU time of the process (all threads) over the step: steadier than wall time on a
+        # loaded machine, and above it only when several threads work (or idle ones spin).
+        "step_cpu_ms": step[3],
+        "release_cpu_ms": float(np.median(release_cpu)),
+        "solve_cpu_ms": float(np.median(solve_cpu)),
+        "drag_solve_ms": float(np.median(drag_solves)),
+        "drag_solve_cpu_ms": float(np.median(drag_cpu)),
+        "release_ms": float(np.median(releases)),
+        "release_rust_ms": float(rel.native_ms),
+        "solve_ms": float(np.median(solves)),
+        "accurate_step_update_ms": accurate[2],
+        "accurate_step_rust_ms": accurate[1],
+        "accurate_step_cpu_ms": accurate[3],
+        "load_average": os.getloadavg()[0],
+    }
+
+
+def print_red(r):
+    print(f"red-handle drag, sphere {r['vertices']:,} v, geodesic {r['method'].lower()} (preview: {r['drag_method']}), wall/CPU ms: "
+          f"step {r['step_update_ms']:.1f}/{r['step_cpu_ms']:.1f} (Python {r['step_python_ms']:.1f}, Rust {r['step_rust_ms']:.1f}; goal 16)  "
+          f"release {r['release_ms']:.1f}/{r['release_cpu_ms']:.1f}  one accurate solve {r['solve_ms']:.1f}/{r['solve_cpu_ms']:.1f} (goal 50)  "
+          f"one {r['solver']} solve {r['drag_solve_ms']:.1f}/{r['drag_solve_cpu_ms']:.1f}  "
+          f"accurate every step {r['accurate_step_update_ms']:.1f}/{r['accurate_step_cpu_ms']:.1f}  "
+          f"preview vs accurate {100 * r['preview_error_mean']:.2f}% mean, {100 * r['preview_error_p99']:.2f}% p99  (load {r['load_average']:.1f})", flush=True)
+
+
+# (mirror's method, preview by update): the update, and Dijkstra's solve, on the default graph.
+RED_METHODS = (("GRAPH", True), ("GRAPH", False), ("HEAT", True))
+
 CONFIGS = [
     ("EUCLIDEAN", "HEAT", "FAST"),
     ("EUCLIDEAN", "HEAT", "EXACT"),
@@ -117,15 +227,21 @@ def main(argv=None) -> int:
     ap.add_argument("--json", type=Path)
     ap.add_argument("--shared", type=Path, default=Path(os.environ.get("ROKEBY_SHARED", ROOT.parent / "shared")))
     ap.add_argument("--quick", action="store_true", help="the 100k sphere only, Euclidean and geodesic (heat), fast polar")
+    ap.add_argument("--red-only", action="store_true", help="only the red-handle drags (issue 23)")
     args = ap.parse_args(argv)
     rows = []
-    for kind in ("sphere",) if args.quick else ("sphere", "nefertiti"):
+    red = []
+    for method, update in RED_METHODS[:1] if args.quick else RED_METHODS:
+        r = measure_red(args.shared, method, update)
+        red.append(r)
+        print_red(r)
+    for kind in () if args.red_only else ("sphere",) if args.quick else ("sphere", "nefertiti"):
         for metric, method, polar in [CONFIGS[0], CONFIGS[3]] if args.quick else CONFIGS:
             r = measure(kind, args.shared, metric, method, polar)
             rows.append(r)
             print(f"{kind:>9} {r['vertices']:>7,} v  {metric:<9} {method if metric == 'GEODESIC' else '':<8} {polar:<5}  python {r['python_ms']:6.2f} ms  rust {r['rust_ms']:6.2f} ms  whole update {r['update_ms']:6.2f} ms  re-evaluation {r['after_ms']:6.2f} ms", flush=True)
     if args.json:
-        args.json.write_text(json.dumps(rows, indent=1))
+        args.json.write_text(json.dumps({"green": rows, "red": red}, indent=1))
     return 0
 
 

@@ -62,7 +62,8 @@ def addon_section(emit):
     with tempfile.TemporaryDirectory() as tmp:
         out = Path(tmp) / "addon.json"
         subprocess.run([sys.executable, str(ROOT / "bench" / "addon_update.py"), "--json", str(out)], check=True, stdout=subprocess.DEVNULL)
-        rows = json.loads(out.read_text())
+        data = json.loads(out.read_text())
+    rows, red = data["green"], data["red"]
     emit("## Add-on: from a handle move to the updated field attribute, 8 constraints")
     emit()
     emit("The green handle of one of 8 constraints moves; `view_layer.update()` runs the depsgraph handler,")
@@ -85,5 +86,30 @@ def addon_section(emit):
     emit("On this shared 2-core machine the same configuration varies by up to about 40% between runs.")
     emit()
     emit("Geodesic distances are cached per constraint, so a green-handle move costs no solve; moving a red")
-    emit("handle costs one solve (heat or Dijkstra) for that constraint only.")
+    emit("handle costs one solve for that constraint only.")
+    emit()
+    emit("### Red-handle drags with geodesic distances (issue 23)")
+    emit()
+    emit("The red handle of one of 8 constraints moves to a new surface point each step on the 100k sphere. During")
+    emit("the drag (interactive updates) the moved constraint's distances come from the drag method, a preview the")
+    emit("status names; on release (the end-of-drag timer, `handlers.settle_previews`; also before any render or")
+    emit("save) the mirror's own method recomputes them, so renders and saved files hold only the accurate field.")
+    emit("Drag step: the whole `view_layer.update()` with the add-on's split; release: the accurate re-evaluation;")
+    emit("one solve: `GeodesicSolver.distances` for one surface point by itself; accurate every step: what each step")
+    emit("cost when it solved with the mirror's method (before the preview). Medians (20 steps, 3 releases, 7 solves,")
+    emit("5 accurate steps).")
+    emit()
+    emit("Each figure is wall / CPU time (the process's, all threads: steadier on a shared machine).")
+    emit()
+    emit("Preview: `update` (the accurate distances from where the drag started, updated by the change of the")
+    emit("straight-line distances, `evaluate.DRAG_UPDATE`) or a Dijkstra solve; its error: the moved constraint's")
+    emit("preview distances against the accurate ones at the end of the drag (0.28 of the radius long), relative,")
+    emit("mean and 99th percentile over the vertices. One Dijkstra solve is printed for comparison.")
+    emit()
+    emit("| method (preview) | drag step (ms) | Python (ms) | Rust (ms) | goal (ms) | release (ms) | one accurate solve (ms) | goal (ms) | one Dijkstra solve (ms) | accurate every step (ms) | preview error mean / p99 | load |")
+    emit("|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|")
+    for r in red:
+        emit(f"| geodesic {r['method'].lower()} ({r['drag_method']}) | {r['step_update_ms']:.1f} / {r['step_cpu_ms']:.1f} | {r['step_python_ms']:.1f} | {r['step_rust_ms']:.1f} | 16 "
+             f"| {r['release_ms']:.1f} / {r['release_cpu_ms']:.1f} | {r['solve_ms']:.1f} / {r['solve_cpu_ms']:.1f} | 50 | {r['drag_solve_ms']:.1f} / {r['drag_solve_cpu_ms']:.1f} "
+             f"| {r['accurate_step_update_ms']:.1f} / {r['accurate_step_cpu_ms']:.1f} | {100 * r['preview_error_mean']:.2f}% / {100 * r['preview_error_p99']:.2f}% | {r['load_average']:.1f} |")
     emit()

@@ -18,7 +18,10 @@ eyes, region settings, the mirror's transform and, when Blender reports that its
 or the frame changed, its evaluated vertex positions). When the fingerprint is unchanged nothing is
 recomputed; ``stats()`` counts both cases. Geodesic distances are cached per constraint surface
 point, and the geodesic solver (with its factorisation) per mesh, so a handle move costs one solve
-for the handle that moved.
+for the handle that moved. While a red handle is dragged in a window (``interactive``), that solve
+is replaced by a fast preview (DRAG_UPDATE, else DRAG_METHOD; said in the report); the mirror's own method follows
+when the drag ends, and before any render or save (rokeby.handlers), so only the accurate field is
+ever rendered or saved.
 
 Shared meshes (Alt+D copies, Ctrl+L ▸ Link Object Data): a mesh used by more than one object
 holds no field. Each mirror using it writes its field to a carrier of its own ("Rokeby field:
@@ -64,6 +67,22 @@ EYE_MISMATCH_DEGREES = 3.0
 FOLDED_SHARE = 0.05
 # While the artist drags, the estimate runs at most this often (seconds), and once after.
 ESTIMATE_INTERVAL = 0.4
+# While the artist drags a red handle (interactive updates), the moved constraint's geodesic
+# distances are a preview (the mirror's own method recomputes them when the updates pause, before
+# any render and before a save). DRAG_UPDATE: the accurate distances d₀ from where the handle was
+# last solved, p₀, updated by the change of the straight-line distances,
+#   d(v) ≈ max(d₀(v) + |v − p| − |v − p₀|, |v − p|),
+# exact next to the handle and never off by more than 2 |p − p₀| (triangle inequality), a
+# few milliseconds at 100k vertices. Where that is not a fair guess (the handle moved more than
+# DRAG_UPDATE_REACH of the mirror's size from p₀, or across a fold: d₀(p) more than
+# DRAG_UPDATE_BEND times |p − p₀|), and with DRAG_UPDATE off, DRAG_METHOD solves instead
+# (bench/addon_update.py measures both at 100k vertices).
+DRAG_METHOD = "dijkstra"
+DRAG_UPDATE = True
+DRAG_UPDATE_REACH = 0.15
+DRAG_UPDATE_BEND = 1.2
+# Updates this far apart (seconds) end a drag: the accurate distances follow (rokeby.handlers).
+SETTLE_INTERVAL = 0.25
 # At most this many triangles are sampled for the interpolation-error estimate.
 AGREEMENT_SAMPLES = 4000
 # The second field, from refraction constraints [p, t, e_t] (present only while the mirror has some).
@@ -103,6 +122,10 @@ class MirrorReport:
     pending: bool = False
     # Geodesic distances: (pieces of the mesh no constraint reaches over the surface, pieces).
     unreached_pieces: "tuple | None" = None
+    # The shown field is a drag preview: the moved constraints' distances are DRAG_UPDATE's or
+    # DRAG_METHOD's; the mirror's own method replaces them when the drag ends (renders and saves
+    # never see it).
+    drag_preview: bool = False
 
     # Messages that do not change the status (see note()).
     notes: list = field(default_factory=list)
@@ -197,6 +220,17 @@ class _State:
         self.reach_note: "str | None" = None
         # What the mirror's own mesh data held when api.evaluate last looked (mesh_fingerprint).
         self.mesh_fingerprint: bytes | None = None
+        # The stored fields used drag-time distances (a preview) for moved constraints; the
+        # next non-interactive evaluation recomputes them with the mirror's method. When the
+        # last interactive evaluation ran (perf_counter), for the end-of-drag timer.
+        self.preview = False
+        self.interactive_time = -1e9
+        # (geometry version, method) of the last distances computed all by the mirror's method:
+        # an interactive update after that is a handle being moved (see _geodesic_distances).
+        self.distances_ready = None
+        # Per constraint point (in query order), the last accurate (point, distance row): what a
+        # drag preview updates (DRAG_UPDATE).
+        self.anchors: list = []
 
 
 _STATE: dict[int, _State] = {}
@@ -655,7 +689,14 @@ def project_to_surface(obj, depsgraph, geo: _Geometry, world_point, mirror_matri
     if not np.all(np.isfinite(x)):
         raise RokebyError(f"mirror '{getattr(obj, 'name', '?')}': the point to project is not finite")
     if geo.local is not None:
-        inv = np.linalg.inv(mirror_matrix)
+        # One inverse per mirror transform, not per handle: numpy's OpenBLAS wakes its threads
+        # even for a 4×4 inverse, which on a busy machine took milliseconds of waiting (4 ms
+        # median after an idle pause, 0.01 ms in a tight loop, load average 7 on 2 cores).
+        key = np.asarray(mirror_matrix, dtype=np.float64).tobytes()
+        cached = getattr(geo, "_inverse", None)
+        if cached is None or cached[0] != key:
+            geo._inverse = cached = (key, np.linalg.inv(mirror_matrix))
+        inv = cached[1]
         query = inv[:3, :3] @ x + inv[:3, 3]
     else:
         query = x
@@ -895,29 +936,87 @@ def _solver(state: _State, geo: _Geometry, timer):
     return state.solver
 
 
-def _geodesic_distances(state: _State, geo: _Geometry, points, method: str, timer) -> np.ndarray:
+def _geodesic_distances(state: _State, geo: _Geometry, points, method: str, timer, drag: bool = False):
     """(K, V) distances from each constraint's surface point, cached per point: only a moved
-    handle costs a solve."""
+    handle costs a solve. ``drag`` (an interactive update of a mirror whose distances are cached
+    already, so a handle is being moved): the points not in the cache get a preview instead of a
+    solve by ``method``: DRAG_UPDATE's update of their anchor, else a DRAG_METHOD solve. Returns
+    (distances, whether any row is such a preview)."""
     out = np.empty((len(points), len(geo.vertices)), dtype=np.float32)
+    fast = drag and method != DRAG_METHOD and state.distances_ready == (state.geometry_version, method)
     missing = []
+    previewed = False
     for k, sp in enumerate(points):
         key = (method, sp.triangle, sp.bary.tobytes())
         d = state.distance_cache.get(key)
+        if d is None and fast:
+            d = state.distance_cache.get(("drag",) + key[1:])
+            if d is None:
+                d = state.distance_cache.get((DRAG_METHOD,) + key[1:])
+            if d is None and DRAG_UPDATE and len(state.anchors) == len(points):  # same constraints as at the start
+                d = _drag_update(state, geo, k, sp)
+            previewed |= d is not None
         if d is None:
             missing.append((k, key, sp))
         else:
             out[k] = d
     if missing:
+        solve_with = DRAG_METHOD if fast else method
         sources = [(sp.triangle, tuple(float(b) for b in sp.bary)) for _, _, sp in missing]
-        solved = timer(_solver(state, geo, timer).distances, sources, method=method)
+        solved = timer(_solver(state, geo, timer).distances, sources, method=solve_with)
         for (k, key, _), d in zip(missing, solved):
             out[k] = d
-            state.distance_cache[key] = d
+            state.distance_cache[(solve_with,) + key[1:]] = d
+        previewed |= fast
+    if not previewed:
+        state.distances_ready = (state.geometry_version, method)
+        state.anchors = [[np.asarray(sp.point, dtype=np.float32), out[k], None] for k, sp in enumerate(points)]
     # Bound the cache: keep what the current constraints use.
-    used = {(method, sp.triangle, sp.bary.tobytes()) for sp in points}
+    used = {(m, sp.triangle, sp.bary.tobytes()) for sp in points for m in (method, DRAG_METHOD, "drag")}
     if len(state.distance_cache) > 4 * max(len(points), 8):
         state.distance_cache = {k: v for k, v in state.distance_cache.items() if k in used}
-    return out
+    return out, previewed
+
+
+def _distances_to(geo: _Geometry, point) -> np.ndarray:
+    """|v − point| for every vertex, as |v|² − 2 v·point + |point|² in f64 (|v|² and the
+    coordinate columns kept with the mesh). Elementwise, not ``@``: numpy's OpenBLAS hands a
+    matrix-vector product to its threads, and on a busy 2-core machine waiting for them to be
+    scheduled cost milliseconds per call in the drag loop (profiled: the Python share of a step
+    fell by half without it and the per-handle inverse below)."""
+    if getattr(geo, "_columns", None) is None:
+        v = np.asarray(geo.vertices, dtype=np.float64)
+        geo._columns = (np.ascontiguousarray(v[:, 0]), np.ascontiguousarray(v[:, 1]), np.ascontiguousarray(v[:, 2]))
+        geo._vv = np.einsum("ij,ij->i", v, v)
+    q = np.asarray(point, dtype=np.float64)
+    x, y, z = geo._columns
+    t = x * (-2.0 * q[0])
+    t += y * (-2.0 * q[1])
+    t += z * (-2.0 * q[2])
+    t += geo._vv
+    t += float(q @ q)
+    np.maximum(t, 0.0, out=t)
+    return np.sqrt(t, out=t)
+
+
+def _drag_update(state: _State, geo: _Geometry, k: int, sp):
+    """The drag preview of point ``k`` updated from its anchor (see DRAG_UPDATE), cached; None
+    where that is not a fair guess (then DRAG_METHOD solves)."""
+    if k >= len(state.anchors):
+        return None
+    p0, d0, _ = state.anchors[k]
+    p = np.asarray(sp.point, dtype=np.float32)
+    moved = float(np.linalg.norm(p - p0))
+    tri = geo.triangles[sp.triangle]
+    along = float(np.dot(sp.bary, d0[tri]))  # d₀ at the new point: the distance dragged over the surface
+    if not np.isfinite(along) or moved > DRAG_UPDATE_REACH * geo.size or along > DRAG_UPDATE_BEND * moved + 1e-6 * geo.size:
+        return None
+    near = _distances_to(geo, p)
+    if state.anchors[k][2] is None:  # |v − p₀|: once per drag
+        state.anchors[k][2] = _distances_to(geo, p0)
+    d = np.maximum(d0 + (near - state.anchors[k][2]), near).astype(np.float32)  # +inf stays +inf (other pieces)
+    state.distance_cache[("drag", sp.triangle, sp.bary.tobytes())] = d
+    return d
 
 
 # --- geodesic distances on meshes of several pieces ----------------------------------------------
@@ -1492,6 +1591,29 @@ def _defer_estimate(obj, state, args):
     _schedule(later, ESTIMATE_INTERVAL)
 
 
+def _preview_note(obj) -> str:
+    method = obj.rokeby.geodesic_method.lower()
+    return (f"drag preview: the moved handles' geodesic distances are estimated (updated from where the drag started, "
+            f"or by {DRAG_METHOD}) until the drag ends, then {method}'s (renders and saved files always use {method})")
+
+
+def previews(scene=None) -> list:
+    """The mirrors (of ``scene``, or any) whose stored field is a drag preview."""
+    from . import pointers  # noqa: PLC0415
+
+    out = []
+    for ob in (mirrors_of(scene) if scene is not None else pointers.mirrors()):
+        st = state_of(ob)
+        if st is not None and st.preview:
+            out.append(ob)
+    return out
+
+
+def last_interactive_update() -> float:
+    """perf_counter() of the latest interactive evaluation of any mirror (-1e9: none)."""
+    return max((st.interactive_time for st in _STATE.values()), default=-1e9)
+
+
 def _schedule(fn, seconds: float):
     """Run ``fn`` from Blender's event loop after ``seconds`` (again after what it returns)."""
     import bpy  # noqa: PLC0415
@@ -1502,7 +1624,9 @@ def _schedule(fn, seconds: float):
 def evaluate_mirror(obj, scene, depsgraph, *, force=False, reread_geometry=False, interactive=False) -> MirrorReport:
     """Evaluate one mirror if its inputs changed (or ``force``); never raises. ``interactive``
     (the depsgraph handler, while the artist drags): the render-vs-preview estimate runs at most
-    every ESTIMATE_INTERVAL seconds, and once more when the updates pause."""
+    every ESTIMATE_INTERVAL seconds, and once more when the updates pause; a moved red handle's
+    geodesic distances come from DRAG_METHOD (a drag preview, ``report.drag_preview``). Any
+    evaluation that is not interactive recomputes a preview with the mirror's own method."""
     t0 = time.perf_counter()
     timer = _NativeTimer()
     _STATS["checks"] += 1
@@ -1587,7 +1711,12 @@ def evaluate_mirror(obj, scene, depsgraph, *, force=False, reread_geometry=False
         fp_reflection = _fingerprint(obj, state.geometry_version, mirror_matrix, rows, specs)
         fp_refraction = _fingerprint(obj, state.geometry_version, mirror_matrix, t_rows, specs, (ior,))
         fp = fp_reflection + fp_refraction
-        if fp == state.fingerprint and not force and state.report is not None and state.report.status != "ERROR":
+        # The drag has ended (or a render, a save or the API asks): fields shown with drag-time
+        # distances are recomputed with the mirror's own method, whatever else changed.
+        settle = state.preview and not interactive
+        if interactive:
+            state.interactive_time = time.perf_counter()
+        if fp == state.fingerprint and not force and not settle and state.report is not None and state.report.status != "ERROR":
             _STATS["skipped"] += 1
             if geo.shared:
                 strip_field(obj.data)  # e.g. left by this mirror before its mesh was linked to another object
@@ -1598,6 +1727,8 @@ def evaluate_mirror(obj, scene, depsgraph, *, force=False, reread_geometry=False
             kept.messages, kept.status, kept.notes = list(report.messages), report.status, list(report.notes)
             if state.reach_note is not None:
                 kept.note(state.reach_note)
+            if state.preview:
+                kept.note(_preview_note(obj))
             for msg in state.field_notes:
                 kept.warn(msg)
             kept.eye = report.eye
@@ -1606,9 +1737,10 @@ def evaluate_mirror(obj, scene, depsgraph, *, force=False, reread_geometry=False
         method = {"HEAT": "heat", "DIJKSTRA": "dijkstra", "EXACT": "exact", "GRAPH": "graph"}[settings.geodesic_method]
         polar = "exact" if settings.polar == "EXACT" else "fast"
         distances = None
+        previewed = False
         if len(rows) + len(t_rows) and settings.metric == "GEODESIC":
             # One query for both kinds: the per-point cache keeps every current constraint's solve.
-            distances = _geodesic_distances(state, geo, points + t_points, method, timer)
+            distances, previewed = _geodesic_distances(state, geo, points + t_points, method, timer, drag=interactive)
             if np.all(np.isinf(distances)):
                 report.warn("no constraint reaches this mesh over its surface; it takes the field of straight-line distances")
             report.unreached_pieces = _unreached_pieces(state, geo, distances)
@@ -1623,7 +1755,7 @@ def evaluate_mirror(obj, scene, depsgraph, *, force=False, reread_geometry=False
         transfer = geo.source == "transfer"
         target = carrier_of(obj) if transfer else obj
         stored = target is not None and _has_attribute(target, ATTRIBUTE) and _has_render_attribute(target)
-        if force or old.get(ATTRIBUTE) != fp_reflection or not stored:
+        if force or settle or old.get(ATTRIBUTE) != fp_reflection or not stored:
             kwargs = {"polar": polar}
             if specs:
                 kwargs["regions"] = _regions_for_native(state, geo, specs, points, method, timer)
@@ -1674,7 +1806,7 @@ def evaluate_mirror(obj, scene, depsgraph, *, force=False, reread_geometry=False
             old.pop(REFRACTION_ATTRIBUTE, None)
             state.refractions = None
             remove_attribute(target, REFRACTION_ATTRIBUTE)
-        elif force or old.get(REFRACTION_ATTRIBUTE) != fp_refraction or not _has_attribute(target, REFRACTION_ATTRIBUTE):
+        elif force or settle or old.get(REFRACTION_ATTRIBUTE) != fp_refraction or not _has_attribute(target, REFRACTION_ATTRIBUTE):
             kwargs = {"polar": polar}
             if specs:
                 kwargs["regions"] = _regions_for_native(state, geo, specs, t_points, method, timer)
@@ -1689,6 +1821,9 @@ def evaluate_mirror(obj, scene, depsgraph, *, force=False, reread_geometry=False
             # where it would render on objects that are not (or no longer) this mirror.
             strip_field(obj.data)
         state.fingerprint = fp
+        state.preview = report.drag_preview = previewed
+        if previewed:
+            report.note(_preview_note(obj))
         report.recomputed = True
         if not settings.enabled:
             report.status = "DISABLED"

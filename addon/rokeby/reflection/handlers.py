@@ -6,6 +6,11 @@
 - ``frame_change_post``: on every frame change (playback, scrubbing, final renders); every mirror's
   mesh is re-read because animation can deform it.
 - ``render_pre``: before every final render the mirrors are evaluated for the render camera.
+- Drag previews: while a red handle is dragged in a window, the moved constraint's geodesic
+  distances come from a fast method (``evaluate.DRAG_METHOD``); when the updates pause for
+  ``evaluate.SETTLE_INTERVAL`` (the drag ended) a timer recomputes them with the mirror's own
+  method. ``render_pre``, ``save_pre`` and every non-interactive evaluation (API, frame change) do
+  the same at once, so renders and saved files never hold the drag-time field.
 - After each evaluation, ``rendering.sync_scene`` keeps the render nodes in the mirrors'
   materials (new and swapped materials included), so F12 shows the edit with no extra step.
 - ``load_post`` / ``undo_post`` / ``redo_post``: runtime state is rebuilt from the file's data
@@ -25,6 +30,8 @@ cleared, row flagged, object freed) and what only a deleted mirror used goes wit
 """
 
 from __future__ import annotations
+
+import time
 
 import bpy
 from bpy.app.handlers import persistent
@@ -63,6 +70,8 @@ def _run(scene, depsgraph, materials=(), **kwargs):
             moved += step(scene) or 0
         if moved or any(r.recomputed for r in reports.values()):
             _redraw()
+        if kwargs.get("interactive") and any(r.drag_preview for r in reports.values()):
+            _settle_later()
     except Exception as exc:  # noqa: BLE001 - a handler must never take Blender down
         print(f"Rokeby: update failed: {type(exc).__name__}: {exc}")
     finally:
@@ -160,24 +169,78 @@ def on_frame_change(scene, depsgraph):
             _run(scene, depsgraph, all_geometry=True)
 
 
+def _depsgraph_of(scene):
+    try:
+        view_layer = scene.view_layers[0] if bpy.context.scene != scene or bpy.context.view_layer is None else bpy.context.view_layer
+        return view_layer.depsgraph
+    except (AttributeError, IndexError, ReferenceError):
+        return None
+
+
 @persistent
 def on_render_pre(scene, *_args):
     """Before a final render (F12, an animation frame, a farm job): every mirror is brought up
-    to date for the render camera, so a render never shows a field from an older state."""
+    to date for the render camera, so a render never shows a field from an older state (nor a
+    drag preview: this evaluation is not interactive)."""
     if _busy or guard.active() or scene is None:
         return
-    try:
-        view_layer = scene.view_layers[0] if bpy.context.scene != scene or bpy.context.view_layer is None else bpy.context.view_layer
-        depsgraph = view_layer.depsgraph
-    except (AttributeError, IndexError, ReferenceError):
+    depsgraph = _depsgraph_of(scene)
+    if depsgraph is None:
         return
     with registry.pinned():
         if registry.has_data():
             _run(scene, depsgraph, all_geometry=True)
 
 
+# --- drag previews: the accurate distances follow when the drag ends ---------------------------
+
+_settle_pending = False
+
+
+def _settle_later():
+    """Once per drag: a timer that settles the previews when the updates pause."""
+    global _settle_pending
+    if not _settle_pending:
+        _settle_pending = True
+        evaluate._schedule(_settle_timer, evaluate.SETTLE_INTERVAL)
+
+
+def _settle_timer():
+    global _settle_pending
+    wait = evaluate.SETTLE_INTERVAL - (time.perf_counter() - evaluate.last_interactive_update())
+    if wait > 0 or _busy or guard.active():
+        return max(wait, 0.05)  # still dragging (or the API is at work): look again later
+    _settle_pending = False
+    settle_previews()
+    return None
+
+
+def settle_previews(scene=None) -> int:
+    """Recompute every mirror (of ``scene``, or of every scene) whose stored field is a drag
+    preview with its own geodesic method, as when the drag ends; returns how many were."""
+    done = 0
+    for sc in [scene] if scene is not None else list(bpy.data.scenes):
+        mirrors = evaluate.previews(sc)
+        depsgraph = _depsgraph_of(sc) if mirrors else None
+        if depsgraph is None:
+            continue
+        with registry.pinned():
+            _run(sc, depsgraph)
+        done += len(mirrors) - len(evaluate.previews(sc))
+    return done
+
+
+@persistent
+def on_save_pre(*_args):
+    """A saved file holds the accurate field, never a drag preview."""
+    if not _busy and not guard.active():
+        settle_previews()
+
+
 @persistent
 def on_load(*_args):
+    global _settle_pending
+    _settle_pending = False  # loading a file drops the timers (and the previews go with the state)
     registry.reset()
     migrate_file()
     evaluate.reset()
@@ -223,6 +286,7 @@ _HANDLERS = (
     ("frame_change_post", on_frame_change),
     ("load_post", on_load),
     ("render_pre", on_render_pre),
+    ("save_pre", on_save_pre),
     ("undo_post", on_undo_redo),
     ("redo_post", on_undo_redo),
 )
