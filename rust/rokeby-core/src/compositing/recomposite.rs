@@ -1818,7 +1818,7 @@ mod tests {
     /// shading passes, α's, I, colours) and four patches (SH + map, SH, map, nothing).
     #[allow(clippy::type_complexity)]
     fn session_frame(w: usize, h: usize) -> (Vec<i32>, Vec<Vec<f32>>, Vec<Vec<f32>>, Vec<Patch>) {
-        let mut g = Rng(0x5eed_0f_7e57);
+        let mut g = Rng(0x005e_ed0f_7e57);
         let n = w * h;
         let ids: Vec<i32> = (0..n).map(|i| ((i / 37) % 5) as i32 - 1).collect();
         let mut v3 = |lo: f32, hi: f32| -> Vec<f32> {
