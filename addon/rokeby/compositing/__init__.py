@@ -655,7 +655,27 @@ def recomposite(p: Passes, rec: Reconstruction, edited_normals: np.ndarray, *, k
     context with one 8×8 EEVEE render) or 'moderngl' (the same shader on a headless EGL context).
     All three agree within 1e-4 relative and give unmodified normals back bit for bit. For many
     edits of one frame (a slider), ``RecompositeSession`` packs and uploads the passes once."""
+    if backend == "cpu":  # one frame: the passes read in place, not copied into a session's core
+        h, w = p.shape
+        e = np.asarray(edited_normals)
+        if e.shape != (h, w, 3):
+            raise CompositingError(f"edited_normals: expected shape {(h, w, 3)} like the passes, got {e.shape}")
+        _check_k(k_d, k_r)
+        a, kw = _recomposite_args(p, rec, use_occlusion)
+        out = native.module().recomposite(a[0], a[1], e, *a[3:], **kw, k_d=k_d, k_r=k_r)
+        _check_output(out, a[6])
+        return out
     return RecompositeSession(p, rec, use_occlusion=use_occlusion, backend=backend)(edited_normals, k_d=k_d, k_r=k_r)
+
+
+def _recomposite_args(p: Passes, rec: Reconstruction, use_occlusion: bool) -> tuple[tuple, dict]:
+    """``rokeby_native.recomposite``'s arguments (edited_normals None) and keywords for a frame."""
+    ao = p.ao.mean(-1) if p.ao.ndim == 3 else p.ao
+    args = (rec.ids, rec.normals, None, rec.view, p.diff_dir + p.diff_ind, p.gloss_dir + p.gloss_ind, p.image, rec.patches)
+    kw = {"alpha_d": np.clip(ao, 0, 1) if use_occlusion else None,
+          "alpha_r": np.clip(p.reflocc, 0, 1) if use_occlusion else None,
+          "diffuse_color": p.diff_col, "reflection_color": p.gloss_col}
+    return args, kw
 
 
 class RecompositeSession:
@@ -676,12 +696,7 @@ class RecompositeSession:
             raise CompositingError(f"backend: unknown {backend!r} (expected one of {', '.join(map(repr, RECOMPOSITE_BACKENDS))})")
         self.shape = p.shape
         self.backend = backend
-        ao = p.ao.mean(-1) if p.ao.ndim == 3 else p.ao
-        self._args = (rec.ids, rec.normals, None, rec.view, p.diff_dir + p.diff_ind, p.gloss_dir + p.gloss_ind,
-                      p.image, rec.patches)
-        self._kw = {"alpha_d": np.clip(ao, 0, 1) if use_occlusion else None,
-                    "alpha_r": np.clip(p.reflocc, 0, 1) if use_occlusion else None,
-                    "diffuse_color": p.diff_col, "reflection_color": p.gloss_col}
+        self._args, self._kw = _recomposite_args(p, rec, use_occlusion)
         self._frame = None  # the GLSL backends' packed frame, made on the first call
         self._buffer = None
         self._native = None
