@@ -197,6 +197,38 @@ def shadow_silhouettes(
     normals: _Array | None = None,
 ) -> list[dict[str, Any]]: ...
 
+class Recompositor:
+    def __new__(
+        cls,
+        ids: _Array,
+        normals: _Array,
+        view: _Array,
+        diffuse: _Array,
+        reflection: _Array,
+        image: _Array,
+        patches: Sequence[dict[str, Any] | None],
+        *,
+        alpha_d: _Array | None = None,
+        alpha_r: _Array | None = None,
+        alpha: _Array | None = None,
+        diffuse_color: _Array | None = None,
+        reflection_color: _Array | None = None,
+        gamma: float = 1.0,
+        epsilon: float = ...,
+    ) -> Recompositor: ...
+    def run(
+        self,
+        out: _F32,
+        edited_normals: _Array | None = None,
+        rows: slice | tuple[int, int] | None = None,
+        cols: slice | tuple[int, int] | None = None,
+        k_d: float = 1.0,
+        k_r: float = 1.0,
+    ) -> dict[str, int]: ...
+    def set_patches(self, patches: Sequence[dict[str, Any] | None]) -> None: ...
+    @property
+    def shape(self) -> tuple[int, int]: ...
+
 class ShadowEditor:
     def __new__(
         cls,

@@ -12,7 +12,7 @@ holes, as with real objects), shaded by a known smooth environment; 20% of its p
 * recompositing (eqs. 3-5) of a 1920x1080 frame with ten patches, each with an SH and a 128² map,
   half the pixels edited; and the process's peak memory for it.
 
-    python bench/compositing.py [--json OUT] [--sizes 512,1024]
+    python bench/compositing.py [--json OUT] [--sizes 512,1024] [--edit-only]
 
 Threads: RAYON_NUM_THREADS (set it before starting; 1 = the paper's single core).
 """
@@ -173,12 +173,57 @@ def recomposite_bench(rng, w=1920, h=1080, patches=10, env_size=128, repeat=5):
         run()
         ts.append(time.perf_counter() - t)
     t_id = median_time(lambda: rn.recomposite(ids, n, n, view, d0, r0, img, pts, alpha_d=a, alpha_r=a), repeat)[0]
+    edit = session_bench(args, kw)
     peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
     return {"width": w, "height": h, "patches": patches, "env_size": env_size, "edited_fraction": 0.5 * (h - 160) / h,
             "recomposite_ms": 1e3 * float(np.median(ts)), "recomposite_identity_ms": 1e3 * t_id,
             "peak_rss_mb": peak / 1024, "rss_before_mb": before / 1024,
             "inputs_mb": sum(x.nbytes for x in (ids, n, e, view, d0, r0, img, a, a)) / 2 ** 20,
-            **glsl_bench(run, args, kw, repeat)}
+            **edit, **glsl_bench(run, args, kw, repeat)}
+
+
+EDIT_GOAL_MS = 8.0  # issue 23: one recompositing edit of a 1080p frame with ten patches, on 2 threads
+
+
+def session_bench(args, kw, repeat=9):
+    """Per-edit time of an artist's loop (issue 23): ``rokeby_native.Recompositor`` holding the
+    passes, each edit passing only the edited normals and writing into the same buffer, against
+    the former per-edit path in the same run (``rokeby_native.recompose`` converting every pass
+    and the patches again, a new image, and the add-on's pass over it for non-finite pixels),
+    medians of ``repeat`` alternating runs. And the memory-bound estimate: the bytes one edit has
+    to move (every pixel's ids, n, ñ and I read, I~ written; the edited pixels' shading,
+    reflectance and α's read) at the bandwidth of a large numpy copy measured here."""
+    import rokeby_native as rn
+
+    ids, n, e, view, d0, r0, img, pts = args
+    s = rn.Recompositor(ids, n, view, d0, r0, img, pts, **kw)
+    out = np.empty_like(img)
+
+    def old():
+        o, _ = rn.recomposite(*args, **kw)
+        np.isfinite(o).all()
+
+    new = lambda: s.run(out, e)  # noqa: E731
+    ref, _ = rn.recomposite(*args, **kw)
+    new()
+    same = out.tobytes() == ref.tobytes()
+    t_new, t_old = [], []
+    for _ in range(repeat):  # alternating: both see the same load
+        for fn, ts in ((new, t_new), (old, t_old)):
+            t = time.perf_counter()
+            fn()
+            ts.append(time.perf_counter() - t)
+    edited = int(((ids >= 0) & (e != n).any(-1)).sum())
+    px = ids.size
+    moved = px * (4 + 12 * 4) + edited * (12 * 4 + 4 * 3)  # ids, n, ñ, I, I~; D0, R0, c_D, c_R, α's
+    src = np.ones(2 ** 25 // 4, np.float32)  # 32 MB: beyond the caches
+    dst = np.empty_like(src)
+    t_copy, _ = median_time(lambda: np.copyto(dst, src), 5)
+    bandwidth = 2 * src.nbytes / t_copy  # bytes read + written per second
+    return {"edit_ms": 1e3 * float(np.median(t_new)), "edit_old_ms": 1e3 * float(np.median(t_old)),
+            "edit_runs": repeat, "edit_same_bits": same, "edit_goal_ms": EDIT_GOAL_MS,
+            "edit_bytes_mb": moved / 2 ** 20, "bandwidth_gbs": bandwidth / 1e9,
+            "edit_memory_bound_ms": 1e3 * moved / bandwidth}
 
 
 def glsl_bench(run_cpu, args, kw, repeat):
@@ -216,8 +261,16 @@ def main():
     ap.add_argument("--json")
     ap.add_argument("--sizes", default="512,1024")
     ap.add_argument("--env-size", type=int, default=128)
+    ap.add_argument("--edit-only", action="store_true", help="only the per-edit times (session_bench) at 1920x1080")
     args = ap.parse_args()
     rng = np.random.default_rng(2016)
+    if args.edit_only:
+        out = {"threads": os.environ.get("RAYON_NUM_THREADS", str(os.cpu_count())), "edit": session_bench(*hd_frame(rng))}
+        text = json.dumps(out, indent=1)
+        if args.json:
+            Path(args.json).write_text(text)
+        print(text)
+        return
     rows = [stages(int(s), rng, args.env_size) for s in args.sizes.split(",")]
     rows.append(stages(int(args.sizes.split(",")[0]), rng, 256))
     rows.append(stages(int(args.sizes.split(",")[-1]), rng, 256, "quarter"))

@@ -3,8 +3,10 @@ normal buffer interactively where compositors work).
 
 The brush edits the frame's screen-space normal buffer under a stroke with the compositing
 tools of ``rokeby.compositing`` (the Rust core's ``normals`` module) and recomposites only the
-pixels the stroke reached (``RecompositeSession.window``: eqs. 3–5 are per pixel), so each
-stroke step costs the dab's window, not the frame:
+pixels the stroke reached (``RecompositeSession.window``: eqs. 3–5 are per pixel; the Rust
+core holds the passes, reads the window of the normal-edit layer and writes the window of the
+image in place, nothing repacked per dab), so each stroke step costs the dab's window, not the
+frame:
 
 * ``emboss``: the core's emboss (n_z → β n_z, β = ``EMBOSS_BETA``) blended in by strength × falloff:
   the surface under the stroke bulges, its shading gains contrast.
@@ -277,8 +279,10 @@ class BrushSession:
         inner = (slice(rows.start - rin.start, rows.stop - rin.start), slice(cols.start - cin.start, cols.stop - cin.start))
         self.layer[rows, cols] = edited[inner]
         t1 = time.perf_counter()
-        out, _stats = self.opened.session.window(self.layer[rows, cols], rows, cols)
-        self._put(rows, cols, out)
+        # The core reads the window of the layer and writes it straight into the image.
+        self.opened.session.window(self.layer, rows, cols, out=self.image)
+        h = self.shape[0]
+        self.rgba[h - rows.stop:h - rows.start, cols, :3] = self.image[rows, cols][::-1]
         box = a["box"]
         a["box"] = (rows, cols) if box is None else (slice(min(box[0].start, rows.start), max(box[0].stop, rows.stop)),
                                                       slice(min(box[1].start, cols.start), max(box[1].stop, cols.stop)))

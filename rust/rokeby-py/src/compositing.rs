@@ -463,38 +463,10 @@ fn parse_patches(obj: &Bound<'_, PyAny>) -> PyResult<Vec<Patch>> {
     Ok(out)
 }
 
-/// Recompositing, eqs. 3–5. ids (H, W): patch index per pixel (< 0: none), normals and
-/// edited_normals (H, W, 3) screen space, view (H, W, 3) or (3,), diffuse D0 and reflection R0
-/// (H, W, 3) (illumination when diffuse_color/reflection_color are given), image I (H, W, 3);
-/// alpha_d, alpha_r, alpha (H, W) default 1. patches: list of {'sh', 'env'} per id.
-/// Returns (image (H, W, 3) float32, {"edited": pixels recomposited, "masked": pixels left as I
-/// because an input was not finite or their patch has no reconstruction}).
-#[pyfunction]
-#[pyo3(signature = (ids, normals, edited_normals, view, diffuse, reflection, image, patches, alpha_d = None, alpha_r = None, alpha = None, diffuse_color = None, reflection_color = None, k_d = 1.0, k_r = 1.0, gamma = 1.0, epsilon = core_recomposite::EPSILON))]
-#[allow(clippy::too_many_arguments)]
-pub fn recomposite<'py>(
-    py: Python<'py>,
-    ids: &Bound<'py, PyAny>,
-    normals: &Bound<'py, PyAny>,
-    edited_normals: &Bound<'py, PyAny>,
-    view: &Bound<'py, PyAny>,
-    diffuse: &Bound<'py, PyAny>,
-    reflection: &Bound<'py, PyAny>,
-    image: &Bound<'py, PyAny>,
-    patches: &Bound<'py, PyAny>,
-    alpha_d: Option<&Bound<'py, PyAny>>,
-    alpha_r: Option<&Bound<'py, PyAny>>,
-    alpha: Option<&Bound<'py, PyAny>>,
-    diffuse_color: Option<&Bound<'py, PyAny>>,
-    reflection_color: Option<&Bound<'py, PyAny>>,
-    k_d: f64,
-    k_r: f64,
-    gamma: f64,
-    epsilon: f64,
-) -> PyResult<(Bound<'py, PyArrayDyn<f32>>, Bound<'py, PyDict>)> {
-    let (n, h, w) = image3(normals, "normals", None)?;
-    // int32 ids (what rokeby.compositing makes) are read directly; anything else through floats.
-    let ids_i: Vec<i32> = match ids.cast::<PyArrayDyn<i32>>() {
+/// Patch ids (H, W): int32 read directly (what rokeby.compositing makes), anything else through
+/// floats; negative or non-finite → -1 (no patch).
+fn ids_vec(ids: &Bound<'_, PyAny>, h: usize, w: usize) -> PyResult<Vec<i32>> {
+    Ok(match ids.cast::<PyArrayDyn<i32>>() {
         Ok(a) if a.readonly().is_c_contiguous() => {
             let ro = a.readonly();
             if ro.shape() != [h, w] {
@@ -529,7 +501,40 @@ pub fn recomposite<'py>(
                 })
                 .collect()
         }
-    };
+    })
+}
+
+/// Recompositing, eqs. 3–5. ids (H, W): patch index per pixel (< 0: none), normals and
+/// edited_normals (H, W, 3) screen space, view (H, W, 3) or (3,), diffuse D0 and reflection R0
+/// (H, W, 3) (illumination when diffuse_color/reflection_color are given), image I (H, W, 3);
+/// alpha_d, alpha_r, alpha (H, W) default 1. patches: list of {'sh', 'env'} per id.
+/// Returns (image (H, W, 3) float32, {"edited": pixels recomposited, "masked": pixels left as I
+/// because an input was not finite or their patch has no reconstruction}).
+#[pyfunction]
+#[pyo3(signature = (ids, normals, edited_normals, view, diffuse, reflection, image, patches, alpha_d = None, alpha_r = None, alpha = None, diffuse_color = None, reflection_color = None, k_d = 1.0, k_r = 1.0, gamma = 1.0, epsilon = core_recomposite::EPSILON))]
+#[allow(clippy::too_many_arguments)]
+pub fn recomposite<'py>(
+    py: Python<'py>,
+    ids: &Bound<'py, PyAny>,
+    normals: &Bound<'py, PyAny>,
+    edited_normals: &Bound<'py, PyAny>,
+    view: &Bound<'py, PyAny>,
+    diffuse: &Bound<'py, PyAny>,
+    reflection: &Bound<'py, PyAny>,
+    image: &Bound<'py, PyAny>,
+    patches: &Bound<'py, PyAny>,
+    alpha_d: Option<&Bound<'py, PyAny>>,
+    alpha_r: Option<&Bound<'py, PyAny>>,
+    alpha: Option<&Bound<'py, PyAny>>,
+    diffuse_color: Option<&Bound<'py, PyAny>>,
+    reflection_color: Option<&Bound<'py, PyAny>>,
+    k_d: f64,
+    k_r: f64,
+    gamma: f64,
+    epsilon: f64,
+) -> PyResult<(Bound<'py, PyArrayDyn<f32>>, Bound<'py, PyDict>)> {
+    let (n, h, w) = image3(normals, "normals", None)?;
+    let ids_i = ids_vec(ids, h, w)?;
     let (e, _, _) = image3(edited_normals, "edited_normals", Some((h, w)))?;
     let v = f32_array(view, "view")?;
     if v.shape() != [3] && v.shape() != [h, w, 3] {
@@ -579,6 +584,221 @@ pub fn recomposite<'py>(
     stats.set_item("edited", st.edited)?;
     stats.set_item("masked", st.masked)?;
     Ok((array_f32(py, &[h, w, 3], out)?, stats))
+}
+
+/// A window bound (rows or cols): None (the whole extent), a slice with step 1, or (start, stop).
+fn bound(
+    obj: Option<&Bound<'_, PyAny>>,
+    name: &str,
+    len: usize,
+) -> PyResult<std::ops::Range<usize>> {
+    let Some(obj) = obj.filter(|o| !o.is_none()) else {
+        return Ok(0..len);
+    };
+    let bad = || {
+        PyValueError::new_err(format!(
+            "{name}: expected a slice with step 1 or (start, stop) inside 0..{len}, got {obj}"
+        ))
+    };
+    let (a, b) = if let Ok(sl) = obj.cast::<pyo3::types::PySlice>() {
+        let ind = sl.indices(len as isize)?;
+        if ind.step != 1 {
+            return Err(bad());
+        }
+        (ind.start, ind.stop)
+    } else {
+        obj.extract::<(isize, isize)>().map_err(|_| bad())?
+    };
+    if a < 0 || b > len as isize || a >= b {
+        return Err(bad());
+    }
+    Ok(a as usize..b as usize)
+}
+
+/// Recompositor(ids, normals, view, diffuse, reflection, image, patches, *, alpha_d=None,
+/// alpha_r=None, alpha=None, diffuse_color=None, reflection_color=None, gamma=1.0, epsilon=ε)
+///
+/// One rendered frame held for many recompositings (eqs. 3–5; an artist's slider or brush): the
+/// passes (as for `recomposite`, without edited_normals) are checked and copied into the core
+/// once; each `run` takes only the edited normals (the whole frame, read in place, or a window)
+/// and k_D, k_R, and writes I~ into the caller's float32 buffer, the GIL released. Gives
+/// `recomposite`'s values bit for bit. Methods: run(...), set_patches(patches); `shape` (H, W).
+#[pyclass(frozen, name = "Recompositor", module = "rokeby_native")]
+pub struct PyRecompositor {
+    inner: std::sync::Mutex<core_recomposite::Recompositor>,
+    shape: (usize, usize),
+}
+
+#[pymethods]
+impl PyRecompositor {
+    #[new]
+    #[pyo3(signature = (ids, normals, view, diffuse, reflection, image, patches, *, alpha_d = None, alpha_r = None, alpha = None, diffuse_color = None, reflection_color = None, gamma = 1.0, epsilon = core_recomposite::EPSILON))]
+    #[allow(clippy::too_many_arguments)]
+    fn new(
+        py: Python<'_>,
+        ids: &Bound<'_, PyAny>,
+        normals: &Bound<'_, PyAny>,
+        view: &Bound<'_, PyAny>,
+        diffuse: &Bound<'_, PyAny>,
+        reflection: &Bound<'_, PyAny>,
+        image: &Bound<'_, PyAny>,
+        patches: &Bound<'_, PyAny>,
+        alpha_d: Option<&Bound<'_, PyAny>>,
+        alpha_r: Option<&Bound<'_, PyAny>>,
+        alpha: Option<&Bound<'_, PyAny>>,
+        diffuse_color: Option<&Bound<'_, PyAny>>,
+        reflection_color: Option<&Bound<'_, PyAny>>,
+        gamma: f64,
+        epsilon: f64,
+    ) -> PyResult<Self> {
+        let (n, h, w) = image3(normals, "normals", None)?;
+        let ids_i = ids_vec(ids, h, w)?;
+        let v = f32_array(view, "view")?;
+        if v.shape() != [3] && v.shape() != [h, w, 3] {
+            return Err(PyValueError::new_err(format!(
+                "view: expected shape (3,) or ({h}, {w}, 3), got {}",
+                shape_str(&v.shape())
+            )));
+        }
+        let (dd, _, _) = image3(diffuse, "diffuse", Some((h, w)))?;
+        let (rr, _, _) = image3(reflection, "reflection", Some((h, w)))?;
+        let (ii, _, _) = image3(image, "image", Some((h, w)))?;
+        let ad = image1(alpha_d, "alpha_d", h, w)?;
+        let ar = image1(alpha_r, "alpha_r", h, w)?;
+        let al = image1(alpha, "alpha", h, w)?;
+        let dc = opt_image3(diffuse_color, "diffuse_color", h, w)?;
+        let rc = opt_image3(reflection_color, "reflection_color", h, w)?;
+        let pts = parse_patches(patches)?;
+        let empty: &[f32] = &[];
+        let adv: &[f32] = ad.as_ref().map(|x| x.slice()).unwrap_or(empty);
+        let arv: &[f32] = ar.as_ref().map(|x| x.slice()).unwrap_or(empty);
+        let alv: &[f32] = al.as_ref().map(|x| x.slice()).unwrap_or(empty);
+        let dcv: &[f32] = dc.as_ref().map(|x| x.slice()).unwrap_or(empty);
+        let rcv: &[f32] = rc.as_ref().map(|x| x.slice()).unwrap_or(empty);
+        let bufs = Buffers {
+            ids: &ids_i,
+            normals: n.slice(),
+            edited: n.slice(),
+            view: v.slice(),
+            diffuse: dd.slice(),
+            reflection: rr.slice(),
+            alpha_d: adv,
+            alpha_r: arv,
+            alpha: alv,
+            image: ii.slice(),
+            diffuse_color: dcv,
+            reflection_color: rcv,
+        };
+        let inner = run_detached(py, || {
+            core_recomposite::Recompositor::new(w, h, &bufs, pts, gamma, epsilon)
+        })?;
+        Ok(PyRecompositor {
+            inner: std::sync::Mutex::new(inner),
+            shape: (h, w),
+        })
+    }
+
+    /// (H, W) of the frame.
+    #[getter]
+    fn shape(&self) -> (usize, usize) {
+        self.shape
+    }
+
+    /// New reconstructions: a list of {'sh': (3, 9) or None, 'env': (2, S, S, 3) or None} per
+    /// patch id (as for `recomposite`); the passes stay.
+    fn set_patches(&self, py: Python<'_>, patches: &Bound<'_, PyAny>) -> PyResult<()> {
+        let pts = parse_patches(patches)?;
+        run_detached(py, || {
+            let mut g = self.inner.lock().unwrap_or_else(|p| p.into_inner());
+            g.set_patches(pts)
+        })
+    }
+
+    /// Eqs. 3–5 on the window rows × cols (None: the whole frame; a slice with step 1 or (start,
+    /// stop)) into `out`: float32, C-contiguous, writable, (H, W, 3) — only the window's pixels
+    /// are written — or the window's shape (rh, rw, 3). edited_normals: (H, W, 3) (the window's
+    /// pixels are read; the whole frame is read in place), (rh, rw, 3) (the window's ñ), or None
+    /// (the ñ last given for those pixels with a window; n before any). The ñ given with a window
+    /// is kept for later calls. Returns {"edited", "masked"} as `recomposite`. A finite I giving a
+    /// non-finite I~ (k_d, k_r or the edit too large for float32) raises ValueError naming the
+    /// pixel; `out`'s window then holds no useful values.
+    #[pyo3(signature = (out, edited_normals = None, rows = None, cols = None, k_d = 1.0, k_r = 1.0))]
+    #[allow(clippy::too_many_arguments)]
+    fn run<'py>(
+        &self,
+        py: Python<'py>,
+        out: &Bound<'py, PyAny>,
+        edited_normals: Option<&Bound<'py, PyAny>>,
+        rows: Option<&Bound<'py, PyAny>>,
+        cols: Option<&Bound<'py, PyAny>>,
+        k_d: f64,
+        k_r: f64,
+    ) -> PyResult<Bound<'py, PyDict>> {
+        let (h, w) = self.shape;
+        let win = core_recomposite::Window {
+            rows: bound(rows, "rows", h)?,
+            cols: bound(cols, "cols", w)?,
+        };
+        let whole = win.rows.len() == h && win.cols.len() == w;
+        let wshape = [win.rows.len(), win.cols.len(), 3];
+        let e = match edited_normals.filter(|o| !o.is_none()) {
+            Some(o) => {
+                let a = f32_array(o, "edited_normals")?;
+                let s = a.shape();
+                if s != [h, w, 3] && s != wshape {
+                    return Err(PyValueError::new_err(format!(
+                        "edited_normals: expected shape ({h}, {w}, 3) or the window's {}, got {}",
+                        shape_str(&wshape),
+                        shape_str(&s)
+                    )));
+                }
+                Some((s == [h, w, 3], a))
+            }
+            None => None,
+        };
+        let arr = out.cast::<PyArrayDyn<f32>>().map_err(|_| {
+            PyTypeError::new_err(
+                "out: must be a float32 numpy array (H, W, 3) or the window's shape",
+            )
+        })?;
+        let mut rw = arr.try_readwrite().map_err(|e| {
+            PyValueError::new_err(format!(
+                "out: must be writable and not one of the inputs ({e})"
+            ))
+        })?;
+        let os = rw.shape().to_vec();
+        let out_full = os == [h, w, 3];
+        if !out_full && os != wshape {
+            return Err(PyValueError::new_err(format!(
+                "out: expected shape ({h}, {w}, 3) or the window's {}, got {}",
+                shape_str(&wshape),
+                shape_str(&os)
+            )));
+        }
+        if !rw.is_c_contiguous() {
+            return Err(PyValueError::new_err("out: must be C-contiguous"));
+        }
+        let o = rw
+            .as_slice_mut()
+            .map_err(|e| PyValueError::new_err(format!("out: {e}")))?;
+        let e: Option<(bool, &[f32])> = e.as_ref().map(|(full, a)| (*full, a.slice()));
+        let st = run_detached(py, || {
+            let mut g = self.inner.lock().unwrap_or_else(|p| p.into_inner());
+            match e {
+                // The whole frame given for the whole frame: read in place.
+                Some((true, a)) if whole => g.run(&win, Some(a), k_d, k_r, o, out_full),
+                Some((full, a)) => {
+                    g.set_edited(&win, a, full)?;
+                    g.run(&win, None, k_d, k_r, o, out_full)
+                }
+                None => g.run(&win, None, k_d, k_r, o, out_full),
+            }
+        })?;
+        let stats = PyDict::new(py);
+        stats.set_item("edited", st.edited)?;
+        stats.set_item("masked", st.masked)?;
+        Ok(stats)
+    }
 }
 
 /// The edit mask of the normal tools: None, or (H, W) bool/float (> 0.5: may be edited).
@@ -707,5 +927,6 @@ pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(fill_holes, m)?)?;
     m.add_function(wrap_pyfunction!(envmap_lookup, m)?)?;
     m.add_function(wrap_pyfunction!(recomposite, m)?)?;
+    m.add_class::<PyRecompositor>()?;
     Ok(())
 }

@@ -629,6 +629,31 @@ def test_geodesic_solver(data):
 
 
 @given(data=st.data())
+def test_recompositor(data):
+    kw = data.draw(k_recomposite())
+    h, w = kw["ids"].shape
+    for k in ("edited_normals", "k_d", "k_r"):
+        kw.pop(k)
+    s = call(rn.Recompositor, **data.draw(mutated(kw)))
+    if s is None:
+        return
+    assert s.shape == (h, w)
+    for _ in range(data.draw(st.integers(1, 4))):
+        if data.draw(st.integers(0, 4)) == 0:
+            call(s.set_patches, **data.draw(mutated(dict(patches=data.draw(k_recomposite())["patches"]))))
+            continue
+        r0, c0 = data.draw(st.integers(0, h - 1)), data.draw(st.integers(0, w - 1))
+        rows = data.draw(st.one_of(st.none(), st.just(slice(r0, data.draw(st.integers(r0 + 1, h)))), st.tuples(NASTY_INTS, NASTY_INTS)))
+        cols = data.draw(st.one_of(st.none(), st.just((c0, data.draw(st.integers(c0 + 1, w)))), st.tuples(NASTY_INTS, NASTY_INTS)))
+        args = dict(out=np.zeros((h, w, 3), np.float32), edited_normals=data.draw(st.one_of(st.none(), normals_img(h, w))),
+                    rows=rows, cols=cols, k_d=data.draw(st.one_of(st.floats(-2, 2), NASTY_FLOATS)), k_r=data.draw(st.floats(-2, 2)))
+        args = data.draw(mutated(args))
+        if call(s.run, **args) is not None and isinstance(args["out"], np.ndarray) and _all_finite_inputs(kw) \
+                and _all_finite_inputs(args):
+            assert np.isfinite(args["out"]).all(), "Recompositor.run: non-finite pixels out of finite input"
+
+
+@given(data=st.data())
 def test_shadow_editor(data):
     light = data.draw(st.tuples(st.floats(-1.5, 1.5), st.floats(-1.5, 1.5), st.floats(4.0, 8.0)))
     kw = dict(vertices=SPHERE_V, faces=SPHERE_F, receiver_vertices=PLANE_V, receiver_faces=PLANE_F,
@@ -740,9 +765,10 @@ def test_every_native_entry_point_is_fuzzed():
     """A new rokeby_native function or method must get a fuzz test here."""
     fuzzed = {n[len("test_"):] for n in globals() if n.startswith("test_")}
     public = {n for n in dir(rn) if not n.startswith("_") and n not in ("NumericalError", "rokeby_native")}
-    missing = {n for n in public if n not in fuzzed and n != "GeodesicSolver" and n != "ShadowEditor"}
+    missing = {n for n in public if n not in fuzzed and n not in ("GeodesicSolver", "ShadowEditor", "Recompositor")}
     assert not missing, f"not fuzzed: {sorted(missing)}"
-    for cls, test in ((rn.GeodesicSolver, test_geodesic_solver), (rn.ShadowEditor, test_shadow_editor)):
+    for cls, test in ((rn.GeodesicSolver, test_geodesic_solver), (rn.ShadowEditor, test_shadow_editor),
+                      (rn.Recompositor, test_recompositor)):
         src = test.hypothesis.inner_test.__code__.co_consts + test.hypothesis.inner_test.__code__.co_names
         for m in (m for m in dir(cls) if not m.startswith("_")):
             assert any(m in str(c) for c in src), f"{cls.__name__}.{m} not fuzzed"

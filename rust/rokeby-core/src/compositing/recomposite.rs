@@ -96,6 +96,9 @@ pub struct Stats {
     pub masked: usize,
     /// Pixels recomposited (normal edited, or k_D, k_R ≠ 1).
     pub edited: usize,
+    /// Values (channels) of recomposited pixels that are not finite where I's are (eq. 5
+    /// overflowed float32).
+    pub overflow: usize,
 }
 
 fn check(name: &str, v: &[f32], want: usize, optional: bool) -> Result<()> {
@@ -200,6 +203,12 @@ fn validate(b: &Buffers, patches: &[Patch], p: &Params) -> Result<()> {
     if !(p.k_d.is_finite() && p.k_r.is_finite()) {
         return Err(RokebyError::invalid("k_d", "k_d and k_r must be finite"));
     }
+    validate_patches(patches)
+}
+
+/// The patches' reflection maps: 3 channels, 2·size²·3 values, size ≥ 1 (SH coefficients are
+/// finite by type: the callers check them).
+fn validate_patches(patches: &[Patch]) -> Result<()> {
     if let Some(e) = patches
         .iter()
         .filter_map(|q| q.env.as_ref())
@@ -228,17 +237,9 @@ fn validate(b: &Buffers, patches: &[Patch], p: &Params) -> Result<()> {
     Ok(())
 }
 
-/// [`recomposite`] with the AVX2 instantiation allowed (`simd`) or not: both give the same bits
-/// (no FMA contraction, the same operations in the same order).
-fn recomposite_with(
-    b: &Buffers,
-    patches: &[Patch],
-    p: &Params,
-    simd: bool,
-) -> Result<(Vec<f32>, Stats)> {
-    let n = b.ids.len();
-    validate(b, patches, p)?;
-    let f = Frame {
+/// The per-frame constants of eqs. 3–5 for buffers `b` (already validated) and `patches`.
+fn frame<'a>(b: &'a Buffers<'a>, patches: &'a [Patch], p: &Params, simd: bool) -> Frame<'a> {
+    Frame {
         b,
         sh: patches
             .iter()
@@ -284,7 +285,85 @@ fn recomposite_with(
             .iter()
             .filter_map(|q| q.env.as_ref())
             .all(|e| e.size <= 32767),
+    }
+}
+
+fn add(x: Stats, y: Stats) -> Stats {
+    Stats {
+        masked: x.masked + y.masked,
+        edited: x.edited + y.edited,
+        overflow: x.overflow + y.overflow,
+    }
+}
+
+/// Eqs. 3–5 for the pixels `base..base + o.len()/3` (consecutive, row-major) into `o`, chunks
+/// of [`CHUNK`] pixels in parallel. Every element of `o` is written.
+fn run_range(f: &Frame, base: usize, o: &mut [MaybeUninit<f32>]) -> Stats {
+    o.par_chunks_mut(3 * CHUNK)
+        .enumerate()
+        // The lane arrays of the batches: one set per rayon job, not per chunk.
+        .map_init(Work::new, |w, (chunk, o)| {
+            run_chunk(f, base + chunk * CHUNK, o, w)
+        })
+        .reduce(Stats::default, add)
+}
+
+/// Eqs. 3–5 for the pixels of window `win` of a `width`-pixel-wide frame into `o`: the window's
+/// pixels only (rows of `win.cols.len()` pixels) when `o_full` is false, else the whole frame
+/// (H·W×3), of which only the window's pixels are written. Rows in parallel; a window of whole
+/// rows runs as one range.
+fn run_window(
+    f: &Frame,
+    width: usize,
+    win: &Window,
+    o: &mut [MaybeUninit<f32>],
+    o_full: bool,
+) -> Stats {
+    let (r0, r1, c0, c1) = (win.rows.start, win.rows.end, win.cols.start, win.cols.end);
+    let cw = c1 - c0;
+    if c0 == 0 && c1 == width {
+        let o = if o_full {
+            &mut o[3 * r0 * width..3 * r1 * width]
+        } else {
+            o
+        };
+        return run_range(f, r0 * width, o);
+    }
+    let (stride, off) = if o_full {
+        (3 * width, 3 * c0)
+    } else {
+        (3 * cw, 0)
     };
+    let o = if o_full {
+        &mut o[3 * r0 * width..3 * r1 * width]
+    } else {
+        o
+    };
+    o.par_chunks_mut(stride)
+        .enumerate()
+        .map_init(Work::new, |w, (k, row)| {
+            let base = (r0 + k) * width + c0;
+            let row = &mut row[off..off + 3 * cw];
+            let mut st = Stats::default();
+            for (q, piece) in row.chunks_mut(3 * CHUNK).enumerate() {
+                st = add(st, run_chunk(f, base + q * CHUNK, piece, w));
+            }
+            st
+        })
+        .reduce(Stats::default, add)
+}
+
+/// [`recomposite`] with the AVX2 instantiation allowed (`simd`) or not: both give the same bits
+/// (no FMA contraction, the same operations in the same order).
+fn recomposite_with(
+    b: &Buffers,
+    patches: &[Patch],
+    p: &Params,
+    simd: bool,
+) -> Result<(Vec<f32>, Stats)> {
+    let n = b.ids.len();
+    validate(b, patches, p)?;
+    let f = frame(b, patches, p, simd);
     // Chunks of rows in parallel; every pixel starts as I (one copy), and only pixels whose normal
     // or material changed run eqs. 3–5 — in f32 (the buffers' precision), in batches: with ñ = n
     // the formulas still give I bit for bit (zero SH difference, zero chord, identical shade and
@@ -292,22 +371,243 @@ fn recomposite_with(
     // The copy of I is made by the tasks too, into memory that is written once (not zeroed
     // first), in parallel.
     let mut out: Vec<f32> = Vec::with_capacity(3 * n);
-    let stats = out.spare_capacity_mut()[..3 * n]
-        .par_chunks_mut(3 * CHUNK)
-        .enumerate()
-        // The lane arrays of the batches: one set per rayon job, not per chunk.
-        .map_init(Work::new, |w, (chunk, o)| {
-            run_chunk(&f, chunk * CHUNK, o, w)
-        })
-        .reduce(Stats::default, |x, y| Stats {
-            masked: x.masked + y.masked,
-            edited: x.edited + y.edited,
-        });
+    let stats = run_range(&f, 0, &mut out.spare_capacity_mut()[..3 * n]);
     // SAFETY: the chunks cover all 3n elements and each chunk was initialised by its task (a panic
     // there would have unwound past this line, leaving the length 0).
     unsafe { out.set_len(3 * n) };
-    check_overflow(&out, b.image, p)?;
+    if p.gamma != 1.0 && stats.overflow > 0 {
+        return Err(overflow_error(
+            first_overflow(&out, b.image).unwrap_or(0),
+            p,
+        ));
+    }
     Ok((out, stats))
+}
+
+/// A rectangle of pixels: rows × cols (half-open ranges).
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Window {
+    pub rows: std::ops::Range<usize>,
+    pub cols: std::ops::Range<usize>,
+}
+
+/// One rendered frame held for many recompositings (an artist's edit loop: a slider, a brush).
+///
+/// The passes are checked and copied once, when it is made; each edit then gives only what
+/// changed — the edited normals ñ (the whole frame, borrowed, or a window of them, copied into
+/// the frame's ñ kept here), k_D, k_R, or new patches — and eqs. 3–5 write I~ into a buffer of
+/// the caller (the whole frame or only a window of it), with nothing allocated per edit. The
+/// result equals [`recomposite`]'s on the same inputs bit for bit (the same kernel), and
+/// overflow (a finite I giving a non-finite I~, whatever γ) is refused naming the pixel.
+pub struct Recompositor {
+    width: usize,
+    height: usize,
+    ids: Vec<i32>,
+    normals: Vec<f32>,
+    /// ñ of the frame as last given by [`Recompositor::set_edited`] (starts as n).
+    edited: Vec<f32>,
+    view: Vec<f32>,
+    diffuse: Vec<f32>,
+    reflection: Vec<f32>,
+    alpha_d: Vec<f32>,
+    alpha_r: Vec<f32>,
+    alpha: Vec<f32>,
+    image: Vec<f32>,
+    diffuse_color: Vec<f32>,
+    reflection_color: Vec<f32>,
+    patches: Vec<Patch>,
+    gamma: f64,
+    epsilon: f64,
+}
+
+impl Recompositor {
+    /// The frame (`width`×`height`, `b` as for [`recomposite`]; `b.edited` is ignored: ñ starts
+    /// as n) checked and copied.
+    pub fn new(
+        width: usize,
+        height: usize,
+        b: &Buffers,
+        patches: Vec<Patch>,
+        gamma: f64,
+        epsilon: f64,
+    ) -> Result<Self> {
+        if width.checked_mul(height) != Some(b.ids.len()) {
+            return Err(RokebyError::invalid(
+                "ids",
+                format!("expected {width}×{height} values, got {}", b.ids.len()),
+            ));
+        }
+        let p = Params {
+            gamma,
+            epsilon,
+            ..Params::default()
+        };
+        validate(
+            &Buffers {
+                edited: b.normals,
+                ..*b
+            },
+            &patches,
+            &p,
+        )?;
+        Ok(Recompositor {
+            width,
+            height,
+            ids: b.ids.to_vec(),
+            normals: b.normals.to_vec(),
+            edited: b.normals.to_vec(),
+            view: b.view.to_vec(),
+            diffuse: b.diffuse.to_vec(),
+            reflection: b.reflection.to_vec(),
+            alpha_d: b.alpha_d.to_vec(),
+            alpha_r: b.alpha_r.to_vec(),
+            alpha: b.alpha.to_vec(),
+            image: b.image.to_vec(),
+            diffuse_color: b.diffuse_color.to_vec(),
+            reflection_color: b.reflection_color.to_vec(),
+            patches,
+            gamma,
+            epsilon,
+        })
+    }
+
+    pub fn width(&self) -> usize {
+        self.width
+    }
+
+    pub fn height(&self) -> usize {
+        self.height
+    }
+
+    /// The whole frame as a window.
+    pub fn full(&self) -> Window {
+        Window {
+            rows: 0..self.height,
+            cols: 0..self.width,
+        }
+    }
+
+    /// The rendered image I (H·W×3).
+    pub fn image(&self) -> &[f32] {
+        &self.image
+    }
+
+    /// New reconstructions (one per patch id); the passes stay.
+    pub fn set_patches(&mut self, patches: Vec<Patch>) -> Result<()> {
+        validate_patches(&patches)?;
+        self.patches = patches;
+        Ok(())
+    }
+
+    fn check_window(&self, win: &Window) -> Result<()> {
+        let ok = win.rows.start < win.rows.end
+            && win.rows.end <= self.height
+            && win.cols.start < win.cols.end
+            && win.cols.end <= self.width;
+        if ok {
+            Ok(())
+        } else {
+            Err(RokebyError::invalid(
+                "window",
+                format!(
+                    "rows {:?} × cols {:?} is empty or not inside the {}×{} frame",
+                    win.rows, win.cols, self.height, self.width
+                ),
+            ))
+        }
+    }
+
+    /// ñ of the pixels of `win` from `values`: the window's pixels (rows of `win.cols.len()`)
+    /// or, with `full`, a whole H·W×3 frame of which the window is read.
+    pub fn set_edited(&mut self, win: &Window, values: &[f32], full: bool) -> Result<()> {
+        self.check_window(win)?;
+        let (cw, w) = (win.cols.len(), self.width);
+        let want = if full {
+            3 * w * self.height
+        } else {
+            3 * cw * win.rows.len()
+        };
+        check("edited_normals", values, want, false)?;
+        for (k, r) in win.rows.clone().enumerate() {
+            let src = if full {
+                (r * w + win.cols.start) * 3
+            } else {
+                3 * k * cw
+            };
+            let dst = (r * w + win.cols.start) * 3;
+            self.edited[dst..dst + 3 * cw].copy_from_slice(&values[src..src + 3 * cw]);
+        }
+        Ok(())
+    }
+
+    /// Eqs. 3–5 on the pixels of `win` into `out`: only the window's pixels (rows of
+    /// `win.cols.len()`, `out_full` false) or a whole H·W×3 frame of which only the window is
+    /// written. ñ: `edited` (a whole H·W×3 frame, read in place) or, when None, the one kept
+    /// here ([`Recompositor::set_edited`]). On error `out`'s window holds no useful values.
+    pub fn run(
+        &self,
+        win: &Window,
+        edited: Option<&[f32]>,
+        k_d: f64,
+        k_r: f64,
+        out: &mut [f32],
+        out_full: bool,
+    ) -> Result<Stats> {
+        self.check_window(win)?;
+        let edited = edited.unwrap_or(&self.edited);
+        check(
+            "edited_normals",
+            edited,
+            3 * self.width * self.height,
+            false,
+        )?;
+        let want = if out_full {
+            3 * self.width * self.height
+        } else {
+            3 * win.rows.len() * win.cols.len()
+        };
+        check("out", out, want, false)?;
+        if !(k_d.is_finite() && k_r.is_finite()) {
+            return Err(RokebyError::invalid("k_d", "k_d and k_r must be finite"));
+        }
+        let p = Params {
+            k_d,
+            k_r,
+            gamma: self.gamma,
+            epsilon: self.epsilon,
+        };
+        let b = Buffers {
+            ids: &self.ids,
+            normals: &self.normals,
+            edited,
+            view: &self.view,
+            diffuse: &self.diffuse,
+            reflection: &self.reflection,
+            alpha_d: &self.alpha_d,
+            alpha_r: &self.alpha_r,
+            alpha: &self.alpha,
+            image: &self.image,
+            diffuse_color: &self.diffuse_color,
+            reflection_color: &self.reflection_color,
+        };
+        let f = frame(&b, &self.patches, &p, true);
+        // SAFETY: f32 and MaybeUninit<f32> have the same layout; the kernel only writes.
+        let o = unsafe { &mut *(out as *mut [f32] as *mut [MaybeUninit<f32>]) };
+        let st = run_window(&f, self.width, win, o, out_full);
+        if st.overflow > 0 {
+            // The first overflowing pixel of the window, named by its index in the frame.
+            let (w, cw) = (self.width, win.cols.len());
+            for (k, r) in win.rows.clone().enumerate() {
+                let px = r * w + win.cols.start;
+                let o = if out_full { 3 * px } else { 3 * k * cw };
+                let img = &self.image[3 * px..3 * px + 3 * cw];
+                if let Some(c) = first_overflow(&out[o..o + 3 * cw], img) {
+                    return Err(overflow_error(px + c, &p));
+                }
+            }
+        }
+        Ok(st)
+    }
 }
 
 /// The gamma range [`recomposite`] accepts: display gammas, far from where x^(1/γ) of a finite HDR
@@ -315,34 +615,26 @@ fn recomposite_with(
 pub const MIN_GAMMA: f64 = 0.1;
 pub const MAX_GAMMA: f64 = 10.0;
 
-/// Finite input never gives inf or NaN out: with γ ≠ 1 the power of eq. 5 can still overflow for
-/// extreme pixel values, and that is refused naming the pixel (γ = 1 sums finite terms whose
-/// bounds the callers check).
-fn check_overflow(out: &[f32], image: &[f32], p: &Params) -> Result<()> {
-    if p.gamma == 1.0 {
-        return Ok(());
-    }
-    let bad = out
-        .par_chunks(3 * 4096)
-        .zip(image.par_chunks(3 * 4096))
-        .enumerate()
-        .find_map_any(|(c, (o, im))| {
-            o.iter()
-                .zip(im)
-                .position(|(x, y)| !x.is_finite() && y.is_finite())
-                .map(|k| c * 3 * 4096 + k)
-        });
-    match bad {
-        Some(i) => Err(RokebyError::invalid(
-            "image",
-            format!(
-                "pixel {} overflows float32 after the power 1/γ (γ = {}): its values are too large for this gamma",
-                i / 3,
-                p.gamma
-            ),
-        )),
-        None => Ok(()),
-    }
+/// The first value of `out` that is not finite where `image`'s is (the same pixels), as a
+/// pixel offset.
+fn first_overflow(out: &[f32], image: &[f32]) -> Option<usize> {
+    out.iter()
+        .zip(image)
+        .position(|(x, y)| !x.is_finite() && y.is_finite())
+        .map(|i| i / 3)
+}
+
+/// Finite input never gives inf or NaN out: the power of eq. 5 (γ ≠ 1), or large k_D, k_R, can
+/// still overflow for extreme pixel values. The kernel counts such values ([`Stats::overflow`]);
+/// this refuses them naming the first pixel (row-major index in the frame).
+fn overflow_error(pixel: usize, p: &Params) -> RokebyError {
+    RokebyError::invalid(
+        "image",
+        format!(
+            "pixel {pixel} overflows float32 in eq. 5 (γ = {}, k_D = {}, k_R = {}): its values are too large for this gamma and these factors",
+            p.gamma, p.k_d, p.k_r
+        ),
+    )
 }
 
 #[cfg(target_arch = "x86_64")]
@@ -979,11 +1271,17 @@ fn batch(f: &Frame, base: usize, ks: &[u32], o: &mut [f32], st: &mut Stats, w: &
     if run.is_some() && w.ok[..nb].iter().all(|&x| x) {
         st.edited += LANES;
         let q = &mut o[3 * w.k[0]..3 * w.k[0] + 3 * LANES];
+        // Overflow (finite I, non-finite I~) counted in the same pass as the store.
+        let mut bad = 0u32;
         for l in 0..nb {
             for c in 0..3 {
-                q[3 * l + c] += w.a[l] * (w.shade[c][l] - w.shade0[c][l]);
+                let i = q[3 * l + c];
+                let x = i + w.a[l] * (w.shade[c][l] - w.shade0[c][l]);
+                q[3 * l + c] = x;
+                bad += u32::from(i.is_finite() & !x.is_finite());
             }
         }
+        st.overflow += bad as usize;
         return;
     }
     for l in 0..nb {
@@ -991,7 +1289,9 @@ fn batch(f: &Frame, base: usize, ks: &[u32], o: &mut [f32], st: &mut Stats, w: &
             st.edited += 1;
             let q = &mut o[3 * w.k[l]..3 * w.k[l] + 3];
             for c in 0..3 {
-                q[c] += w.a[l] * (w.shade[c][l] - w.shade0[c][l]);
+                let i = q[c];
+                q[c] = i + w.a[l] * (w.shade[c][l] - w.shade0[c][l]);
+                st.overflow += usize::from(i.is_finite() & !q[c].is_finite());
             }
         } else {
             st.masked += 1;
@@ -1265,10 +1565,7 @@ mod tests {
                 }
                 st
             })
-            .reduce(Stats::default, |x, y| Stats {
-                masked: x.masked + y.masked,
-                edited: x.edited + y.edited,
-            });
+            .reduce(Stats::default, add);
         Ok((out, stats))
     }
 
@@ -1515,6 +1812,264 @@ mod tests {
         }
         assert_eq!(cases, 15);
         eprintln!("largest difference from the scalar reference: {worst:.3e}");
+    }
+
+    /// A random frame for the [`Recompositor`] tests: (w, h, ids, normals, edited, view, the
+    /// shading passes, α's, I, colours) and four patches (SH + map, SH, map, nothing).
+    #[allow(clippy::type_complexity)]
+    fn session_frame(w: usize, h: usize) -> (Vec<i32>, Vec<Vec<f32>>, Vec<Vec<f32>>, Vec<Patch>) {
+        let mut g = Rng(0x005e_ed0f_7e57);
+        let n = w * h;
+        let ids: Vec<i32> = (0..n).map(|i| ((i / 37) % 5) as i32 - 1).collect();
+        let mut v3 = |lo: f32, hi: f32| -> Vec<f32> {
+            (0..3 * n).map(|_| lo + (hi - lo) * g.next()).collect()
+        };
+        let normals: Vec<f32> = v3(-1.0, 1.0)
+            .chunks(3)
+            .flat_map(|c| [c[0], c[1], c[2].abs() + 0.3])
+            .collect();
+        let mut edited = normals.clone();
+        for (i, x) in edited.iter_mut().enumerate() {
+            if (i / 3) % 3 != 0 {
+                *x += 0.2 * ((i % 7) as f32 - 3.0) / 3.0;
+            }
+        }
+        let view: Vec<f32> = (0..n)
+            .flat_map(|i| [0.01 * (i % 5) as f32, -0.1, 1.0])
+            .collect();
+        let threes = vec![
+            v3(0.0, 2.0),
+            v3(0.0, 2.0),
+            v3(0.0, 3.0),
+            v3(0.0, 1.0),
+            v3(0.0, 1.0),
+        ];
+        let ones: Vec<Vec<f32>> = (0..3).map(|_| (0..n).map(|_| g.next()).collect()).collect();
+        let map = |g: &mut Rng, size: usize| ParaboloidMap {
+            size,
+            channels: 3,
+            data: (0..2 * size * size * 3).map(|_| g.next()).collect(),
+        };
+        let sh = |g: &mut Rng| -> [[f64; SH_COEFFS]; 3] {
+            std::array::from_fn(|_| std::array::from_fn(|_| g.next() as f64 - 0.5))
+        };
+        let patches = vec![
+            Patch {
+                sh: Some(sh(&mut g)),
+                env: Some(map(&mut g, 8)),
+            },
+            Patch {
+                sh: Some(sh(&mut g)),
+                env: None,
+            },
+            Patch {
+                sh: None,
+                env: Some(map(&mut g, 4)),
+            },
+            Patch::default(),
+        ];
+        let mut vecs = vec![normals, edited, view];
+        vecs.extend(threes);
+        (ids, vecs, ones, patches)
+    }
+
+    /// The session object against [`recomposite`] (the oracle): the whole frame, windows into a
+    /// window-shaped and a frame-shaped buffer (only the window written), ñ borrowed or kept,
+    /// k_D, k_R ≠ 1, γ = 2.2, new patches — the same bits.
+    #[test]
+    fn recompositor_matches_recomposite() {
+        let (w, h) = (83, 29);
+        let (ids, v, a, patches) = session_frame(w, h);
+        let (normals, edited, view) = (&v[0], &v[1], &v[2]);
+        for gamma in [1.0, 2.2] {
+            let b = Buffers {
+                ids: &ids,
+                normals,
+                edited,
+                view,
+                diffuse: &v[3],
+                reflection: &v[4],
+                alpha_d: &a[0],
+                alpha_r: &a[1],
+                alpha: &a[2],
+                image: &v[5],
+                diffuse_color: &v[6],
+                reflection_color: &v[7],
+            };
+            let mut rc = Recompositor::new(w, h, &b, patches.clone(), gamma, EPSILON).unwrap();
+            for (k_d, k_r) in [(1.0, 1.0), (1.3, 0.6)] {
+                let p = Params {
+                    k_d,
+                    k_r,
+                    gamma,
+                    ..Params::default()
+                };
+                let (want, st0) = recomposite(&b, &patches, &p).unwrap();
+                assert!(st0.edited > 0);
+                // The whole frame, ñ borrowed.
+                let mut out = vec![f32::NAN; 3 * w * h];
+                let st = rc
+                    .run(&rc.full(), Some(edited), k_d, k_r, &mut out, true)
+                    .unwrap();
+                assert_eq!((st.edited, st.masked), (st0.edited, st0.masked));
+                assert!(out
+                    .iter()
+                    .zip(&want)
+                    .all(|(x, y)| x.to_bits() == y.to_bits()));
+                // A window: ñ kept here, set from the whole frame; window- and frame-shaped out.
+                let win = Window {
+                    rows: 3..17,
+                    cols: 10..71,
+                };
+                rc.set_edited(&win, edited, true).unwrap();
+                let mut small = vec![0.0f32; 3 * 14 * 61];
+                rc.run(&win, None, k_d, k_r, &mut small, false).unwrap();
+                let mut big = vec![-7.0f32; 3 * w * h];
+                rc.run(&win, None, k_d, k_r, &mut big, true).unwrap();
+                for r in 0..h {
+                    for c in 0..w {
+                        let i = 3 * (r * w + c);
+                        let inside = win.rows.contains(&r) && win.cols.contains(&c);
+                        for ch in 0..3 {
+                            if inside {
+                                let j = 3 * ((r - 3) * 61 + c - 10) + ch;
+                                assert_eq!(small[j].to_bits(), want[i + ch].to_bits());
+                                assert_eq!(big[i + ch].to_bits(), want[i + ch].to_bits());
+                            } else {
+                                assert_eq!(big[i + ch], -7.0, "outside the window: untouched");
+                            }
+                        }
+                    }
+                }
+                // Whole rows as a window, ñ given window-shaped.
+                let rows = Window {
+                    rows: 20..29,
+                    cols: 0..w,
+                };
+                rc.set_edited(&rows, &edited[3 * 20 * w..], false).unwrap();
+                let mut part = vec![0.0f32; 3 * 9 * w];
+                rc.run(&rows, None, k_d, k_r, &mut part, false).unwrap();
+                assert!(part
+                    .iter()
+                    .zip(&want[3 * 20 * w..])
+                    .all(|(x, y)| x.to_bits() == y.to_bits()));
+            }
+            // New patches: the oracle with the same.
+            let swapped: Vec<Patch> = patches.iter().rev().cloned().collect();
+            rc.set_patches(swapped.clone()).unwrap();
+            let (want, _) = recomposite(
+                &b,
+                &swapped,
+                &Params {
+                    gamma,
+                    ..Params::default()
+                },
+            )
+            .unwrap();
+            let mut out = vec![0.0f32; 3 * w * h];
+            rc.run(&rc.full(), Some(edited), 1.0, 1.0, &mut out, true)
+                .unwrap();
+            assert!(out
+                .iter()
+                .zip(&want)
+                .all(|(x, y)| x.to_bits() == y.to_bits()));
+        }
+    }
+
+    /// Bad input to the session object: wrong lengths, windows outside the frame, non-finite
+    /// k's, bad maps — errors naming the argument; overflow refused naming the pixel, at γ = 1
+    /// too.
+    #[test]
+    fn recompositor_refuses_bad_input() {
+        let (w, h) = (16, 8);
+        let (ids, v, a, patches) = session_frame(w, h);
+        let b = Buffers {
+            ids: &ids,
+            normals: &v[0],
+            edited: &v[1],
+            view: &v[2],
+            diffuse: &v[3],
+            reflection: &v[4],
+            alpha_d: &a[0],
+            alpha_r: &a[1],
+            alpha: &a[2],
+            image: &v[5],
+            diffuse_color: &[],
+            reflection_color: &[],
+        };
+        let arg = |e: RokebyError| match e {
+            RokebyError::InvalidArgument { arg, .. } => arg,
+            e => panic!("{e}"),
+        };
+        let e = Recompositor::new(w + 1, h, &b, patches.clone(), 1.0, EPSILON)
+            .err()
+            .unwrap();
+        assert_eq!(arg(e), "ids");
+        let short = Buffers {
+            diffuse: &v[3][3..],
+            ..b
+        };
+        let e = Recompositor::new(w, h, &short, patches.clone(), 1.0, EPSILON)
+            .err()
+            .unwrap();
+        assert_eq!(arg(e), "diffuse");
+        let e = Recompositor::new(w, h, &b, patches.clone(), f64::NAN, EPSILON)
+            .err()
+            .unwrap();
+        assert_eq!(arg(e), "gamma");
+        let mut rc = Recompositor::new(w, h, &b, patches.clone(), 1.0, EPSILON).unwrap();
+        let mut out = vec![0.0f32; 3 * w * h];
+        let full = rc.full();
+        let e = rc
+            .run(&full, Some(&v[1][3..]), 1.0, 1.0, &mut out, true)
+            .err()
+            .unwrap();
+        assert_eq!(arg(e), "edited_normals");
+        let e = rc
+            .run(&full, None, 1.0, 1.0, &mut out[3..], true)
+            .err()
+            .unwrap();
+        assert_eq!(arg(e), "out");
+        let e = rc
+            .run(&full, None, f64::NAN, 1.0, &mut out, true)
+            .err()
+            .unwrap();
+        assert_eq!(arg(e), "k_d");
+        for win in [
+            Window {
+                rows: 0..h + 1,
+                cols: 0..w,
+            },
+            Window {
+                rows: 2..2,
+                cols: 0..w,
+            },
+            Window {
+                rows: 0..h,
+                cols: 5..w + 3,
+            },
+        ] {
+            let e = rc.run(&win, None, 1.0, 1.0, &mut out, true).err().unwrap();
+            assert_eq!(arg(e), "window");
+            let e = rc.set_edited(&win, &v[1], true).err().unwrap();
+            assert_eq!(arg(e), "window");
+        }
+        let bad = Patch {
+            sh: None,
+            env: Some(ParaboloidMap {
+                size: 4,
+                channels: 3,
+                data: vec![0.0; 5],
+            }),
+        };
+        assert_eq!(arg(rc.set_patches(vec![bad]).err().unwrap()), "patches");
+        // k_D = 3e38 overflows float32 in eq. 5 at γ = 1 (D~ ≥ 1.2 somewhere): refused, naming a
+        // pixel.
+        let e = rc
+            .run(&full, Some(&v[1]), 3e38, 1.0, &mut out, true)
+            .err()
+            .unwrap();
+        assert!(e.to_string().contains("overflows"), "{e}");
     }
 
     /// Unmodified normals with k_D = k_R = 1 give I bit for bit (any γ, view, NaN inputs), on both
