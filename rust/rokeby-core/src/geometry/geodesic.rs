@@ -29,7 +29,7 @@ use glam::DVec3;
 use rayon::prelude::*;
 use std::cmp::Ordering;
 use std::collections::BinaryHeap;
-use std::sync::OnceLock;
+use std::sync::{Mutex, OnceLock};
 
 /// A place on the surface: a face and barycentric coordinates (normalised to sum 1).
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -133,48 +133,167 @@ impl Mesh {
     }
 }
 
-/// Edge graph in compressed rows: neighbours and edge lengths of each vertex (unique edges).
+/// Edge graph in compressed rows (CSR), built once per mesh: neighbours and edge lengths of each
+/// vertex (unique edges). The rows are stored in *cache order*, the vertices sorted along a Morton
+/// (Z-order) curve of their positions, so that a Dijkstra front, which moves across the surface,
+/// reads and writes nearby memory; meshes come in any order (midpoint subdivision, for one, puts
+/// neighbours hundreds of thousands of indices apart). `rank` and `order` map between mesh vertex
+/// ids and cache positions.
 struct Graph {
+    /// Row of cache position p: `edges[start[p]..start[p + 1]]`.
     start: Vec<usize>,
-    /// Compact (u32 indices) so that Dijkstra's inner loop streams half the memory.
-    nbr: Vec<u32>,
-    /// Edge lengths stored as f32 (relative rounding 6e-8), summed along paths in f64.
-    len: Vec<f32>,
+    /// (neighbour's cache position, edge length): compact (u32 index, f32 length, relative rounding
+    /// 6e-8; summed along paths in f64) and interleaved, so that a row is one read.
+    edges: Vec<(u32, f32)>,
+    /// order[p]: the mesh vertex at cache position p.
+    order: Vec<u32>,
+    /// rank[v]: the cache position of mesh vertex v.
+    rank: Vec<u32>,
+    /// Mean edge length (summed over the edges in mesh order).
+    mean_edge: f64,
+    /// Dijkstra's queue keys: distance × key_scale, rounded down (see [`Graph::key`]).
+    key_scale: f64,
+    /// The keys the longest edge spans, plus 2: the bucket queue's window.
+    key_span: usize,
+}
+
+/// Queue keys per short edge: the quantum of Dijkstra's keys is a quarter of the 10th percentile
+/// of the edge lengths. Vertices whose distances share a quantum pop in any order, which costs a
+/// second settling only across an edge shorter than the quantum (rare by this choice), and an
+/// edge spans a few keys, so that a bucket queue with a short window holds the whole front.
+const KEYS_PER_SHORT_EDGE: f64 = 4.0;
+
+/// Interleaves the low 21 bits of `x` with two zero bits between each (for a 63-bit Morton code).
+fn spread3(x: u64) -> u64 {
+    let mut x = x & 0x1f_ffff;
+    x = (x | x << 32) & 0x001f_0000_0000_ffff;
+    x = (x | x << 16) & 0x001f_0000_ff00_00ff;
+    x = (x | x << 8) & 0x100f_00f0_0f00_f00f;
+    x = (x | x << 4) & 0x10c3_0c30_c30c_30c3;
+    x = (x | x << 2) & 0x1249_2492_4924_9249;
+    x
+}
+
+/// Mesh vertices sorted along the Morton curve of their positions (ties by index).
+fn morton_order(vertices: &[DVec3]) -> Vec<u32> {
+    let lo = vertices.iter().fold(DVec3::INFINITY, |m, &x| m.min(x));
+    let hi = vertices.iter().fold(DVec3::NEG_INFINITY, |m, &x| m.max(x));
+    let scale = (((1u64 << 21) - 1) as f64) / (hi - lo).max_element().max(1e-300);
+    let mut keyed: Vec<(u64, u32)> = vertices
+        .par_iter()
+        .enumerate()
+        .map(|(i, &x)| {
+            let q = ((x - lo) * scale).max(DVec3::ZERO);
+            let code = spread3(q.x as u64) | spread3(q.y as u64) << 1 | spread3(q.z as u64) << 2;
+            (code, i as u32)
+        })
+        .collect();
+    keyed.par_sort_unstable();
+    keyed.into_iter().map(|(_, i)| i).collect()
 }
 
 impl Graph {
     fn new(mesh: &Mesh) -> Self {
         let nv = mesh.vertices.len();
-        let mut edges: Vec<(usize, usize)> = Vec::with_capacity(mesh.faces.len() * 6);
+        let mut edges: Vec<(u32, u32)> = Vec::with_capacity(mesh.faces.len() * 6);
         for f in &mesh.faces {
             for k in 0..3 {
                 let (a, b) = (f[k], f[(k + 1) % 3]);
                 if a != b {
-                    edges.push((a, b));
-                    edges.push((b, a));
+                    edges.push((a as u32, b as u32));
+                    edges.push((b as u32, a as u32));
                 }
             }
         }
         edges.par_sort_unstable();
         edges.dedup();
-        let mut start = vec![0usize; nv + 1];
+        let length = |(a, b): (u32, u32)| {
+            mesh.vertices[a as usize].distance(mesh.vertices[b as usize]) as f32
+        };
+        let mean_edge = if edges.is_empty() {
+            0.0
+        } else {
+            edges.iter().map(|&e| length(e) as f64).sum::<f64>() / edges.len() as f64
+        };
+        // Rows of the mesh order (edges are sorted by their first vertex).
+        let mut mesh_start = vec![0usize; nv + 1];
         for &(a, _) in &edges {
-            start[a + 1] += 1;
+            mesh_start[a as usize + 1] += 1;
         }
         for i in 0..nv {
-            start[i + 1] += start[i];
+            mesh_start[i + 1] += mesh_start[i];
         }
-        let nbr: Vec<u32> = edges.iter().map(|e| e.1 as u32).collect();
-        let len = edges
-            .iter()
-            .map(|&(a, b)| mesh.vertices[a].distance(mesh.vertices[b]) as f32)
-            .collect();
-        Graph { start, nbr, len }
+        let order = morton_order(&mesh.vertices);
+        let mut rank = vec![0u32; nv];
+        for (p, &v) in order.iter().enumerate() {
+            rank[v as usize] = p as u32;
+        }
+        let mut start = Vec::with_capacity(nv + 1);
+        start.push(0);
+        let mut out: Vec<(u32, f32)> = Vec::with_capacity(edges.len());
+        for &v in &order {
+            let row = out.len();
+            let v = v as usize;
+            out.extend(
+                edges[mesh_start[v]..mesh_start[v + 1]]
+                    .iter()
+                    .map(|&e| (rank[e.1 as usize], length(e))),
+            );
+            out[row..].sort_unstable_by_key(|e| e.0);
+            start.push(out.len());
+        }
+        let short_edge = if out.is_empty() {
+            0.0
+        } else {
+            let mut l: Vec<f32> = out.iter().map(|e| e.1).collect();
+            let k = l.len() / 10;
+            *l.select_nth_unstable_by(k, f32::total_cmp).1 as f64
+        };
+        let quantum = if short_edge > 0.0 {
+            short_edge / KEYS_PER_SHORT_EDGE
+        } else {
+            mean_edge / (2.0 * KEYS_PER_SHORT_EDGE)
+        };
+        let key_scale = if quantum > 0.0 { 1.0 / quantum } else { 0.0 };
+        let longest = out.iter().fold(0.0f32, |m, e| m.max(e.1)) as f64;
+        Graph {
+            start,
+            edges: out,
+            order,
+            rank,
+            mean_edge,
+            key_scale,
+            // Beyond 2^16 buckets the longest edges go through the queue's overflow instead.
+            key_span: ((longest * key_scale) as usize).min(1 << 16) + 2,
+        }
     }
 
-    fn neighbours(&self, v: usize) -> impl Iterator<Item = (usize, f64)> + '_ {
-        (self.start[v]..self.start[v + 1]).map(move |k| (self.nbr[k] as usize, self.len[k] as f64))
+    /// Dijkstra's queue key of distance `d`: non-decreasing in d (a rounded-down multiple of the
+    /// quantum, saturating at u32::MAX), which is all the bucket queue and the label-correcting
+    /// loop need; ties and keys that saturate only cost a vertex being settled again.
+    #[inline]
+    fn key(&self, d: f64) -> u32 {
+        (d * self.key_scale) as u32
     }
+
+    /// Neighbours of mesh vertex `v` and the edge lengths, as mesh vertex ids.
+    fn neighbours(&self, v: usize) -> impl Iterator<Item = (usize, f64)> + '_ {
+        let p = self.rank[v] as usize;
+        self.edges[self.start[p]..self.start[p + 1]]
+            .iter()
+            .map(move |&(q, l)| (self.order[q as usize] as usize, l as f64))
+    }
+}
+
+/// Buffers of one Dijkstra query, kept by the solver between queries (no allocation per query).
+/// Between queries every entry of `dist` and `near` is +inf and `touched` is empty.
+struct DijkstraWork {
+    /// Distances in the graph's cache order.
+    dist: Vec<f64>,
+    /// The unfolded distances next to the sources, in mesh order ([`crate::unfold::near_source`]).
+    near: Vec<f64>,
+    touched: Vec<usize>,
+    queue: crate::radix_heap::BucketQueue,
 }
 
 /// A heap entry: an f32 key (8-byte entries keep the heap in cache) and the vertex. The exact f64
@@ -256,6 +375,8 @@ pub struct GeodesicSolver {
     pseudo_sources: OnceLock<Vec<bool>>,
     /// The saddle vertex graph, made on the first [`Method::Graph`] query.
     saddle_graph: OnceLock<crate::svg::SaddleGraph>,
+    /// Dijkstra's buffers, one per query running at once, reused by later queries.
+    dijkstra_work: Mutex<Vec<DijkstraWork>>,
 }
 
 /// The lower triangle (which is all a Cholesky factorisation with `Side::Lower` reads) of
@@ -312,11 +433,7 @@ impl GeodesicSolver {
             }
             next += 1;
         }
-        let mean_edge = if graph.len.is_empty() {
-            0.0
-        } else {
-            graph.len.iter().map(|&x| x as f64).sum::<f64>() / graph.len.len() as f64
-        };
+        let mean_edge = graph.mean_edge;
         let adjacency = crate::unfold::Adjacency::new(&mesh);
         GeodesicSolver {
             adjacency,
@@ -328,6 +445,7 @@ impl GeodesicSolver {
             component,
             heat: OnceLock::new(),
             mean_edge,
+            dijkstra_work: Mutex::new(Vec::new()),
         }
     }
 
@@ -391,7 +509,17 @@ impl GeodesicSolver {
     pub fn distances(&self, sets: &[Vec<Source>], method: Method) -> Result<Vec<f32>> {
         let sets = self.check_sources(sets)?;
         let rows: Vec<Vec<f64>> = match method {
-            Method::Dijkstra => sets.par_iter().map(|s| self.dijkstra(s)).collect(),
+            Method::Dijkstra => {
+                // Straight into the output: one row per set, the sets in parallel.
+                let nv = self.mesh.vertices.len();
+                let mut out = vec![0.0f32; sets.len() * nv];
+                out.par_chunks_mut(nv)
+                    .zip(sets.par_iter())
+                    .for_each(|(row, set)| {
+                        self.dijkstra_with(set, |v, d| row[v] = d as f32);
+                    });
+                return Ok(out);
+            }
             Method::Heat => self.heat_method(&sets)?,
             Method::Exact => {
                 let pseudo = self.pseudo_sources.get_or_init(|| {
@@ -473,32 +601,80 @@ impl GeodesicSolver {
             .collect()
     }
 
-    /// Multi-source Dijkstra along edges, with a radix heap ([`crate::radix_heap`]).
+    /// Multi-source Dijkstra along edges (the distance to the nearest source of the set, in mesh
+    /// vertex order).
     pub fn dijkstra(&self, set: &[Source]) -> Vec<f64> {
-        let nv = self.mesh.vertices.len();
-        let mut dist = vec![f64::INFINITY; nv];
-        let mut heap = crate::radix_heap::RadixHeap::new();
-        for (v, d, _) in self.seeds(set) {
-            if d < dist[v] {
-                dist[v] = d;
-                heap.push(d as f32, v as u32);
+        let mut out = vec![f64::INFINITY; self.mesh.vertices.len()];
+        self.dijkstra_with(set, |v, d| out[v] = d);
+        out
+    }
+
+    /// Multi-source Dijkstra along the edges of the cache-ordered graph, with a bucket queue of
+    /// quantised keys ([`crate::radix_heap::BucketQueue`]) and buffers kept between queries; `emit(v, d)` receives the
+    /// distance of every mesh vertex v (+inf where no source reaches).
+    ///
+    /// Seeds: the unfolded straight-line distances next to the sources ([`crate::unfold`]). The
+    /// result is, for every vertex, the smallest over those seeds u and edge paths from u of
+    /// near(u) + the path's edge lengths, summed in f64 from u outward. Rounding is monotone, so
+    /// that smallest value is the one fixed point of the relaxation whatever the order in which
+    /// vertices are settled (the quantised heap keys can only make a vertex be settled again, never
+    /// stop short of it): it does not depend on the vertex order, and for a set of sources it is the
+    /// minimum of the fields of each source alone.
+    fn dijkstra_with(&self, set: &[Source], mut emit: impl FnMut(usize, f64)) {
+        let g = &self.graph;
+        let mut w = {
+            let mut pool = self.dijkstra_work.lock().unwrap_or_else(|e| e.into_inner());
+            pool.pop()
+        }
+        .unwrap_or_else(|| {
+            let nv = self.mesh.vertices.len();
+            DijkstraWork {
+                dist: vec![f64::INFINITY; nv],
+                near: vec![f64::INFINITY; nv],
+                touched: Vec::new(),
+                queue: crate::radix_heap::BucketQueue::new(g.key_span),
+            }
+        });
+        let DijkstraWork {
+            dist,
+            near,
+            touched,
+            queue,
+        } = &mut w;
+        crate::unfold::near_source(&self.mesh, &self.adjacency, set, near, touched);
+        queue.clear();
+        for &v in touched.iter() {
+            let (p, d) = (g.rank[v] as usize, near[v]);
+            near[v] = f64::INFINITY;
+            if d < dist[p] {
+                dist[p] = d;
+                queue.push(g.key(d), p as u32);
             }
         }
-        while let Some((key, v)) = heap.pop() {
-            let v = v as usize;
-            let d = dist[v];
-            if key > d as f32 {
-                continue; // stale entry
+        touched.clear();
+        while let Some((key, p)) = queue.pop() {
+            let p = p as usize;
+            let d = dist[p];
+            if key > g.key(d) {
+                continue; // stale entry: p has a shorter distance, with its own entry
             }
-            for (w, l) in self.graph.neighbours(v) {
-                let nd = d + l;
-                if nd < dist[w] {
-                    dist[w] = nd;
-                    heap.push(nd as f32, w as u32);
+            for &(q, l) in &g.edges[g.start[p]..g.start[p + 1]] {
+                let nd = d + l as f64;
+                let dq = &mut dist[q as usize];
+                if nd < *dq {
+                    *dq = nd;
+                    queue.push(g.key(nd), q);
                 }
             }
         }
-        dist
+        for (p, d) in dist.iter_mut().enumerate() {
+            emit(g.order[p] as usize, *d);
+            *d = f64::INFINITY;
+        }
+        self.dijkstra_work
+            .lock()
+            .unwrap_or_else(|e| e.into_inner())
+            .push(w);
     }
 
     fn heat_factors(&self) -> Result<&Heat> {
@@ -982,4 +1158,240 @@ pub fn interpolate(
         }
     }
     Ok(out)
+}
+
+#[cfg(test)]
+mod tests {
+    //! The Dijkstra before issue 21's rewrite (a graph in mesh order, fresh buffers and a seeding
+    //! pass per query) kept as the oracle: the rewrite must give the same bits.
+    use super::*;
+    use std::path::PathBuf;
+
+    struct ReferenceGraph {
+        start: Vec<usize>,
+        nbr: Vec<u32>,
+        len: Vec<f32>,
+    }
+
+    impl ReferenceGraph {
+        fn new(mesh: &Mesh) -> Self {
+            let nv = mesh.vertices.len();
+            let mut edges: Vec<(usize, usize)> = Vec::new();
+            for f in &mesh.faces {
+                for k in 0..3 {
+                    let (a, b) = (f[k], f[(k + 1) % 3]);
+                    if a != b {
+                        edges.push((a, b));
+                        edges.push((b, a));
+                    }
+                }
+            }
+            edges.sort_unstable();
+            edges.dedup();
+            let mut start = vec![0usize; nv + 1];
+            for &(a, _) in &edges {
+                start[a + 1] += 1;
+            }
+            for i in 0..nv {
+                start[i + 1] += start[i];
+            }
+            let nbr = edges.iter().map(|e| e.1 as u32).collect();
+            let len = edges
+                .iter()
+                .map(|&(a, b)| mesh.vertices[a].distance(mesh.vertices[b]) as f32)
+                .collect();
+            ReferenceGraph { start, nbr, len }
+        }
+
+        fn neighbours(&self, v: usize) -> impl Iterator<Item = (usize, f64)> + '_ {
+            (self.start[v]..self.start[v + 1])
+                .map(move |k| (self.nbr[k] as usize, self.len[k] as f64))
+        }
+    }
+
+    /// The former `seeds` and `dijkstra`, verbatim but for the graph they read.
+    fn reference_dijkstra(s: &GeodesicSolver, g: &ReferenceGraph, set: &[Source]) -> Vec<f64> {
+        let nv = s.mesh.vertices.len();
+        let mut dist = vec![f64::INFINITY; nv];
+        let mut touched = Vec::new();
+        crate::unfold::near_source(&s.mesh, &s.adjacency, set, &mut dist, &mut touched);
+        let mut straight = vec![false; nv];
+        let mut heap = BinaryHeap::with_capacity(touched.len());
+        for &v in &touched {
+            straight[v] = true;
+            heap.push(HeapItem(dist[v] as f32, v as u32));
+        }
+        let mut reached = touched.clone();
+        while let Some(HeapItem(key, v)) = heap.pop() {
+            let v = v as usize;
+            if key > dist[v] as f32 || !straight[v] {
+                continue;
+            }
+            for (w, l) in g.neighbours(v) {
+                let nd = dist[v] + l;
+                if nd < dist[w] {
+                    if dist[w] == f64::INFINITY {
+                        reached.push(w);
+                    }
+                    dist[w] = nd;
+                    heap.push(HeapItem(nd as f32, w as u32));
+                }
+            }
+        }
+        let seeds: Vec<(usize, f64)> = reached.into_iter().map(|v| (v, dist[v])).collect();
+        let mut dist = vec![f64::INFINITY; nv];
+        let mut heap = crate::radix_heap::RadixHeap::new();
+        for (v, d) in seeds {
+            if d < dist[v] {
+                dist[v] = d;
+                heap.push(d as f32, v as u32);
+            }
+        }
+        while let Some((key, v)) = heap.pop() {
+            let v = v as usize;
+            let d = dist[v];
+            if key > d as f32 {
+                continue;
+            }
+            for (w, l) in g.neighbours(v) {
+                let nd = d + l;
+                if nd < dist[w] {
+                    dist[w] = nd;
+                    heap.push(nd as f32, w as u32);
+                }
+            }
+        }
+        dist
+    }
+
+    fn shared_mesh(name: &str) -> Option<Mesh> {
+        let root = std::env::var("ROKEBY_SHARED").map_or_else(
+            |_| PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../../shared"),
+            PathBuf::from,
+        );
+        let text = std::fs::read_to_string(root.join("meshes").join(name)).ok()?;
+        let (mut v, mut f) = (Vec::new(), Vec::new());
+        for line in text.lines() {
+            let mut it = line.split_whitespace();
+            match it.next() {
+                Some("v") => v.extend(it.take(3).map(|x| x.parse::<f32>().unwrap())),
+                Some("f") => {
+                    let idx: Vec<i64> = it
+                        .map(|t| t.split('/').next().unwrap().parse::<i64>().unwrap() - 1)
+                        .collect();
+                    for k in 1..idx.len() - 1 {
+                        f.extend_from_slice(&[idx[0], idx[k], idx[k + 1]]);
+                    }
+                }
+                _ => {}
+            }
+        }
+        Some(Mesh::new(&v, &f).unwrap())
+    }
+
+    /// A bumpy, jittered grid with a hole of unreferenced vertices and a second component.
+    fn bumpy_grid(n: usize) -> Mesh {
+        let mut v = Vec::new();
+        let mut x = 987654321u64;
+        let mut rnd = || {
+            x ^= x << 13;
+            x ^= x >> 7;
+            x ^= x << 17;
+            (x % 10_000) as f32 / 10_000.0 - 0.5
+        };
+        for j in 0..n {
+            for i in 0..n {
+                let (u, w) = (i as f32 + 0.3 * rnd(), j as f32 + 0.3 * rnd());
+                v.extend([u, w, 0.4 * (0.7 * u).sin() * (0.5 * w).cos() + 0.05 * rnd()]);
+            }
+        }
+        let mut f = Vec::new();
+        for j in 0..n - 1 {
+            for i in 0..n - 1 {
+                if (n / 3..n / 2).contains(&i) && (n / 3..n / 2).contains(&j) {
+                    continue;
+                }
+                let a = (j * n + i) as i64;
+                let (b, c, d) = (a + 1, a + n as i64, a + n as i64 + 1);
+                f.extend_from_slice(&[a, b, d, a, d, c]);
+            }
+        }
+        // A separate triangle far away.
+        let k = (v.len() / 3) as i64;
+        v.extend([100.0, 0.0, 0.0, 101.0, 0.0, 0.0, 100.0, 1.0, 0.0]);
+        f.extend([k, k + 1, k + 2]);
+        Mesh::new(&v, &f).unwrap()
+    }
+
+    fn source_sets(mesh: &Mesh) -> Vec<Vec<Source>> {
+        let (nv, nf) = (mesh.vertices.len(), mesh.faces.len());
+        let p = |face: usize, bary: [f64; 3]| Source::Point(SurfacePoint { face, bary });
+        vec![
+            vec![Source::Vertex(0)],
+            vec![Source::Vertex(nv / 2)],
+            vec![p(nf / 3, [0.2, 0.3, 0.5])],
+            vec![p(nf / 5, [0.0, 0.4, 0.6]), p(nf / 5, [1.0, 0.0, 0.0])],
+            [0, nv / 4, nv / 2, 3 * nv / 4].map(Source::Vertex).to_vec(),
+            vec![
+                Source::Vertex(nv - 1),
+                p(nf / 2, [0.1, 0.1, 0.8]),
+                p(2 * nf / 3, [0.5, 0.5, 0.0]),
+                Source::Vertex(nv / 7),
+            ],
+        ]
+    }
+
+    fn check_against_reference(mesh: Mesh, what: &str) {
+        let solver = GeodesicSolver::new(mesh);
+        let g = ReferenceGraph::new(&solver.mesh);
+        let sets = solver.check_sources(&source_sets(&solver.mesh)).unwrap();
+        let nv = solver.mesh.vertices.len();
+        // Twice, so that the second round runs on reused buffers.
+        for round in 0..2 {
+            let all = solver.distances(&sets, Method::Dijkstra).unwrap();
+            for (s, set) in sets.iter().enumerate() {
+                let want = reference_dijkstra(&solver, &g, set);
+                assert!(want.iter().any(|d| d.is_finite() && *d > 0.0));
+                let got = solver.dijkstra(set);
+                for v in 0..nv {
+                    assert_eq!(
+                        got[v].to_bits(),
+                        want[v].to_bits(),
+                        "{what}, set {s}, vertex {v}, round {round}: {} vs {}",
+                        got[v],
+                        want[v]
+                    );
+                    assert_eq!(all[s * nv + v].to_bits(), (want[v] as f32).to_bits());
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn geodesic_dijkstra_matches_the_former_implementation_bit_for_bit() {
+        check_against_reference(bumpy_grid(60), "bumpy grid");
+        let mut any = false;
+        for name in ["spot.obj", "fandisk.obj", "homer.obj", "teapot.obj"] {
+            if let Some(mesh) = shared_mesh(name) {
+                check_against_reference(mesh, name);
+                any = true;
+            }
+        }
+        assert!(any, "no shared mesh found (set ROKEBY_SHARED)");
+    }
+
+    /// The distance field of a set of sources is the minimum of each source's own field, to the
+    /// bit: the sources of a set may run as independent queries.
+    #[test]
+    fn geodesic_dijkstra_of_a_set_is_the_minimum_of_its_sources() {
+        let solver = GeodesicSolver::new(bumpy_grid(50));
+        for set in solver.check_sources(&source_sets(&solver.mesh)).unwrap() {
+            let joint = solver.dijkstra(&set);
+            let singles: Vec<Vec<f64>> = set.iter().map(|s| solver.dijkstra(&[*s])).collect();
+            for (v, &d) in joint.iter().enumerate() {
+                let m = singles.iter().map(|r| r[v]).fold(f64::INFINITY, f64::min);
+                assert_eq!(d.to_bits(), m.to_bits(), "vertex {v}");
+            }
+        }
+    }
 }
