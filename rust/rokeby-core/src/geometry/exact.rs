@@ -16,7 +16,8 @@
 
 use crate::error::{Result, RokebyError};
 use crate::geodesic::{Mesh, Source};
-use crate::unfold::{layout, unfold_corner, Adjacency};
+use crate::mesh::Adjacency;
+use crate::unfold::{layout, unfold_corner};
 use glam::DVec2;
 use std::cmp::Ordering;
 use std::collections::BinaryHeap;
@@ -68,7 +69,7 @@ pub(crate) fn pseudo_source_vertices(mesh: &Mesh, adj: &Adjacency) -> Vec<bool> 
     let mut boundary = vec![false; nv];
     let mut out = vec![false; nv];
     for (fi, f) in mesh.faces.iter().enumerate() {
-        if f[0] == f[1] || f[1] == f[2] || f[0] == f[2] {
+        if !crate::mesh::is_proper(f) {
             continue;
         }
         let p = f.map(|v| mesh.vertices[v]);

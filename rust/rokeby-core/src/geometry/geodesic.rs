@@ -20,6 +20,7 @@
 //! unreferenced vertices) get +inf.
 
 use crate::error::{Result, RokebyError};
+pub use crate::geometry::mesh::{Mesh, SurfacePoint};
 use crate::laplacian::{face_cotangents, FaceCotangents};
 use crate::numerical::{self, SparseMatrix, SymbolicCholesky, Triplet};
 use faer::linalg::solvers::Solve;
@@ -30,13 +31,6 @@ use rayon::prelude::*;
 use std::cmp::Ordering;
 use std::collections::BinaryHeap;
 use std::sync::OnceLock;
-
-/// A place on the surface: a face and barycentric coordinates (normalised to sum 1).
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct SurfacePoint {
-    pub face: usize,
-    pub bary: [f64; 3],
-}
 
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub enum Source {
@@ -64,72 +58,6 @@ impl Method {
             "graph" => Some(Method::Graph),
             _ => None,
         }
-    }
-}
-
-/// A validated triangle mesh in f64.
-#[derive(Debug, Clone)]
-pub struct Mesh {
-    pub vertices: Vec<DVec3>,
-    pub faces: Vec<[usize; 3]>,
-}
-
-impl Mesh {
-    /// `vertices` (V×3 flattened), `faces` (F×3 flattened, any integer type converted to i64).
-    pub fn new(vertices: &[f32], faces: &[i64]) -> Result<Self> {
-        if vertices.len() % 3 != 0 || faces.len() % 3 != 0 {
-            return Err(RokebyError::invalid(
-                "vertices",
-                "vertices and faces must have 3 columns",
-            ));
-        }
-        if vertices.is_empty() {
-            return Err(RokebyError::invalid("vertices", "the mesh has no vertices"));
-        }
-        if faces.is_empty() {
-            return Err(RokebyError::invalid("faces", "the mesh has no faces"));
-        }
-        if let Some(i) = vertices.iter().position(|x| !x.is_finite()) {
-            return Err(RokebyError::invalid(
-                "vertices",
-                format!("vertex {} is not finite", i / 3),
-            ));
-        }
-        let nv = vertices.len() / 3;
-        if nv >= u32::MAX as usize {
-            return Err(RokebyError::invalid(
-                "vertices",
-                format!("{nv} vertices is more than this solver supports (2^32 - 1)"),
-            ));
-        }
-        if let Some(i) = faces.iter().position(|&x| x < 0 || x as u64 >= nv as u64) {
-            return Err(RokebyError::invalid(
-                "faces",
-                format!(
-                    "face {} refers to vertex {} but the mesh has vertices 0..{}",
-                    i / 3,
-                    faces[i],
-                    nv - 1
-                ),
-            ));
-        }
-        let v = vertices
-            .chunks_exact(3)
-            .map(|c| DVec3::new(c[0] as f64, c[1] as f64, c[2] as f64))
-            .collect();
-        let f = faces
-            .chunks_exact(3)
-            .map(|c| [c[0] as usize, c[1] as usize, c[2] as usize])
-            .collect();
-        Ok(Mesh {
-            vertices: v,
-            faces: f,
-        })
-    }
-
-    pub fn point(&self, p: &SurfacePoint) -> DVec3 {
-        let [a, b, c] = self.faces[p.face];
-        self.vertices[a] * p.bary[0] + self.vertices[b] * p.bary[1] + self.vertices[c] * p.bary[2]
     }
 }
 
@@ -251,7 +179,7 @@ pub struct GeodesicSolver {
     heat: OnceLock<std::result::Result<Heat, RokebyError>>,
     mean_edge: f64,
     /// Faces across each edge and around each vertex, for the unfolding next to sources.
-    adjacency: crate::unfold::Adjacency,
+    adjacency: crate::mesh::Adjacency,
     /// Vertices where exact shortest paths may bend (saddles, boundary), made on first use.
     pseudo_sources: OnceLock<Vec<bool>>,
     /// The saddle vertex graph, made on the first [`Method::Graph`] query.
@@ -317,7 +245,7 @@ impl GeodesicSolver {
         } else {
             graph.len.iter().map(|&x| x as f64).sum::<f64>() / graph.len.len() as f64
         };
-        let adjacency = crate::unfold::Adjacency::new(&mesh);
+        let adjacency = crate::mesh::Adjacency::new(&mesh);
         GeodesicSolver {
             adjacency,
             pseudo_sources: OnceLock::new(),

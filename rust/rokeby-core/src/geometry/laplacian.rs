@@ -39,7 +39,7 @@ pub fn edge_lengths(v: &[DVec3], f: [usize; 3]) -> [f64; 3] {
 pub fn cotangent_weights(faces: &[[usize; 3]], lengths: &[[f64; 3]]) -> Vec<(u32, u32, f64)> {
     let mut e: Vec<(u32, u32, f64)> = Vec::with_capacity(faces.len() * 3);
     for (f, l) in faces.iter().zip(lengths) {
-        if f[0] == f[1] || f[1] == f[2] || f[0] == f[2] {
+        if !crate::mesh::is_proper(f) {
             continue;
         }
         let Some(fc) = face_cotangents(*l) else {
