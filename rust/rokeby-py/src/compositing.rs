@@ -276,6 +276,7 @@ fn map_from(obj: &Bound<'_, PyAny>, name: &str) -> PyResult<ParaboloidMap> {
 /// min_coverage of the sphere.
 #[pyfunction]
 #[pyo3(signature = (reflected, values, mask, depth = None, size = 128, max_edge_angle = 0.5, max_depth_jump = 0.05, blur_sigma = 2.0, min_coverage = 0.01, stage = "full"))]
+// One argument per Python (keyword) argument of the pyo3 signature above.
 #[allow(clippy::too_many_arguments)]
 pub fn reflection_env<'py>(
     py: Python<'py>,
@@ -471,6 +472,7 @@ fn parse_patches(obj: &Bound<'_, PyAny>) -> PyResult<Vec<Patch>> {
 /// because an input was not finite or their patch has no reconstruction}).
 #[pyfunction]
 #[pyo3(signature = (ids, normals, edited_normals, view, diffuse, reflection, image, patches, alpha_d = None, alpha_r = None, alpha = None, diffuse_color = None, reflection_color = None, k_d = 1.0, k_r = 1.0, gamma = 1.0, epsilon = core_recomposite::EPSILON))]
+// One argument per Python (keyword) argument of the pyo3 signature above.
 #[allow(clippy::too_many_arguments)]
 pub fn recomposite<'py>(
     py: Python<'py>,
@@ -678,6 +680,7 @@ pub fn normals_bilateral<'py>(
 /// (x, y) pixels): heights (H, W) float32 in pixels, within about ±size/4.
 #[pyfunction]
 #[pyo3(signature = (height, width, size, octaves, seed, center, radius))]
+// One argument per Python (keyword) argument of the pyo3 signature above.
 #[allow(clippy::too_many_arguments)]
 pub fn normals_noise_decal<'py>(
     py: Python<'py>,

@@ -154,7 +154,7 @@ impl Propagation<'_> {
     }
 
     fn push(&mut self, w: Window) {
-        if !(w.len > 0.0) || !(w.s.y < 0.0) || !(w.b1 > w.b0) {
+        if !(w.len > 0.0 && w.s.y < 0.0 && w.b1 > w.b0) {
             return;
         }
         let tol = 1e-9 * w.len;
@@ -173,6 +173,8 @@ impl Propagation<'_> {
     }
 
     /// A window into the face across edge X→Y of a face laid out in the current frame.
+    // A propagation step: the face, the edge ends and the window ends in the current frame, each
+    // its own argument as in the window propagation of Chen & Han; a struct would only repack them.
     #[allow(clippy::too_many_arguments)]
     fn window_on(
         &mut self,
@@ -184,7 +186,7 @@ impl Propagation<'_> {
         sigma: f64,
     ) {
         let len = px.distance(py);
-        if !(len > 0.0) {
+        if len.is_nan() || len <= 0.0 {
             return;
         }
         let to = edge_frame(px, py, behind);

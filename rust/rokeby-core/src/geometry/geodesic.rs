@@ -299,7 +299,7 @@ impl GeodesicSolver {
                             return Err(RokebyError::invalid("sources", format!("source {s}: face {} is out of range (0..{})", p.face, nf - 1)));
                         }
                         let sum: f64 = p.bary.iter().sum();
-                        if p.bary.iter().any(|b| !b.is_finite() || *b < -1e-6) || !(sum > 1e-12) {
+                        if p.bary.iter().any(|b| !b.is_finite() || *b < -1e-6) || sum.is_nan() || sum <= 1e-12 {
                             return Err(RokebyError::invalid(
                                 "sources",
                                 format!("source {s}: barycentric coordinates {:?} must be finite, >= 0 and not all 0", p.bary),
@@ -500,7 +500,7 @@ impl GeodesicSolver {
         // Vertices without area (isolated, unreferenced, only on degenerate faces) get a tiny mass
         // so that both systems stay positive definite; no source reaches them through heat anyway.
         for m in &mut mass {
-            if !(*m > 1e-12 * mean_mass) {
+            if m.is_nan() || *m <= 1e-12 * mean_mass {
                 *m = 1e-12 * mean_mass;
             }
         }
@@ -592,7 +592,7 @@ impl GeodesicSolver {
         // Each front reaches about ln(1e30) ≈ 69 √t (edge lengths) further: 250 cover ~17,000.
         for _level in 0..250 {
             let peak = current.iter().fold(0.0f64, |m, &x| m.max(x));
-            if !(peak > 0.0) {
+            if peak.is_nan() || peak <= 0.0 {
                 break;
             }
             let ok: Vec<bool> = current.iter().map(|&x| x > RESOLVED * peak).collect();
@@ -802,7 +802,7 @@ pub fn interpolate_at(
     face_index: &[i64],
     bary: &[f32],
 ) -> Result<Vec<f32>> {
-    if values.len() % n_vertices.max(1) != 0 || (n_vertices == 0 && !values.is_empty()) {
+    if !values.len().is_multiple_of(n_vertices.max(1)) || (n_vertices == 0 && !values.is_empty()) {
         return Err(RokebyError::invalid(
             "values",
             format!("expected rows of {n_vertices} values, got {}", values.len()),
@@ -811,7 +811,7 @@ pub fn interpolate_at(
     if values.iter().any(|x| x.is_nan()) {
         return Err(RokebyError::invalid("values", "contains NaN"));
     }
-    if faces.len() % 3 != 0 {
+    if !faces.len().is_multiple_of(3) {
         return Err(RokebyError::invalid(
             "faces",
             format!("expected 3 indices per face, got {}", faces.len()),

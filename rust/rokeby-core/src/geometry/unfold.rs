@@ -74,6 +74,8 @@ impl Walk<'_> {
     /// Crosses halfedge `h` (vertices at `pa`, `pb` in the plane, `q` a point on the near side)
     /// into every other face on that edge, through the window `w0`–`w1` (ordered so that
     /// cross(w0 − s, w1 − s) > 0).
+    // An unfolding step: the halfedge, its ends in the plane, the near point and the window, each
+    // its own argument; a struct would only repack them.
     #[allow(clippy::too_many_arguments)]
     fn cross_edge(
         &mut self,
@@ -144,7 +146,7 @@ impl Walk<'_> {
                 }
             }
         }
-        if !(t1 - t0 > 1e-9) {
+        if (t1 - t0).is_nan() || t1 - t0 <= 1e-9 {
             return None;
         }
         let (p0, p1) = (x + e * t0, x + e * t1);

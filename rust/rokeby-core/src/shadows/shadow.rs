@@ -197,7 +197,7 @@ impl ShadowEditor {
     ) -> Result<Self> {
         light.validate()?;
         let light = far_point_as_directional(light, &caster.vertices);
-        if receiver_vertices.len() % 3 != 0 {
+        if !receiver_vertices.len().is_multiple_of(3) {
             return Err(RokebyError::invalid(
                 "receiver_vertices",
                 format!(
@@ -206,7 +206,7 @@ impl ShadowEditor {
                 ),
             ));
         }
-        if receiver_faces.len() % 3 != 0 {
+        if !receiver_faces.len().is_multiple_of(3) {
             return Err(RokebyError::invalid(
                 "receiver_faces",
                 format!("expected F×3 indices, got {} values", receiver_faces.len()),
