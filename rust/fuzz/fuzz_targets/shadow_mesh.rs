@@ -54,7 +54,7 @@ fuzz_target!(|data: &[u8]| {
             let k = inp.below(3);
             let adv = inp.byte() % 16 == 0;
             let fc = mesh.faces[fi];
-            EdgePoint { back: if adv { inp.u16() as u32 } else { fc[k] }, front: fc[(k + 1) % 3], alpha: if adv { inp.f64_in(2.0) } else { inp.range(0.0, 1.0) } }
+            EdgePoint { back: if adv { inp.u16() as u32 } else { fc[k] as u32 }, front: fc[(k + 1) % 3] as u32, alpha: if adv { inp.f64_in(2.0) } else { inp.range(0.0, 1.0) } }
         })
         .collect();
     let (wz, cw) = if inp.byte() % 8 == 0 { (inp.f64_in(5.0), inp.f64_in(50.0)) } else { (inp.range(0.1, 10.0), inp.range(0.1, 100.0)) };

@@ -30,7 +30,7 @@ pub mod shadows;
 pub use compositing::{normals, recomposite, reconstruct, sh};
 pub use envmaps::{envmap, prefilter, rgbe};
 pub(crate) use geometry::radix_heap;
-pub use geometry::{bvh, exact, geodesic, intrinsic, laplacian, svg, unfold};
+pub use geometry::{bvh, exact, geodesic, intrinsic, laplacian, mesh, svg, unfold};
 pub use reflection::{field, polar, region};
 pub use shadows::{light_space, mls2d, shadow, shadow_mesh, silhouette};
 

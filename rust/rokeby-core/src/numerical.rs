@@ -109,11 +109,11 @@ impl<const N: usize> DenseCholesky<N> {
         for i in 0..N {
             for j in 0..=i {
                 let mut s = h[i][j];
-                for k in 0..j {
-                    s -= l[i][k] * l[j][k];
+                for (a, b) in l[i][..j].iter().zip(&l[j][..j]) {
+                    s -= a * b;
                 }
                 if i == j {
-                    if !(s > 0.0) {
+                    if s.is_nan() || s <= 0.0 {
                         return None;
                     }
                     l[i][i] = s.sqrt();
@@ -157,6 +157,8 @@ pub fn solve_dense(mut m: Vec<Vec<f64>>, mut b: Vec<f64>) -> Option<Vec<f64>> {
         b.swap(col, piv);
         for r in col + 1..q {
             let f = m[r][col] / m[col][col];
+            // Row r minus f · row col: two rows of one matrix, one subscript.
+            #[allow(clippy::needless_range_loop)]
             for k in col..q {
                 m[r][k] -= f * m[col][k];
             }

@@ -53,8 +53,8 @@ proptest! {
                 prop_assert!(e < 1e-5, "{method:?}: error {e} at {n:?}");
             }
             if !hemi {
-                for k in 0..SH_COEFFS {
-                    prop_assert!((f.coeffs[0][k] - c[k]).abs() < 1e-5);
+                for (fk, ck) in f.coeffs[0].iter().zip(&c) {
+                    prop_assert!((fk - ck).abs() < 1e-5);
                 }
             }
         }
@@ -211,8 +211,8 @@ fn partial_map_reproduces_known_environment() {
                     continue;
                 }
                 let e = env(d);
-                for c in 0..3 {
-                    worst = worst.max((pm.map.data[t * 3 + c] as f64 - e[c]).abs());
+                for (c, ec) in e.iter().enumerate() {
+                    worst = worst.max((pm.map.data[t * 3 + c] as f64 - ec).abs());
                 }
                 count += 1;
             }
@@ -343,11 +343,8 @@ fn reconstruct_sphere_and_refuse_small_coverage() {
     assert!(e.to_string().contains("min_coverage"), "{e}");
 }
 
-fn random_scene(
-    w: usize,
-    h: usize,
-    seed: u64,
-) -> (
+/// A random recompositing scene's planes: (ids, normals, diffuse, reflection, α_D, α_R, image).
+type Scene = (
     Vec<i32>,
     Vec<f32>,
     Vec<f32>,
@@ -355,7 +352,9 @@ fn random_scene(
     Vec<f32>,
     Vec<f32>,
     Vec<f32>,
-) {
+);
+
+fn random_scene(w: usize, h: usize, seed: u64) -> Scene {
     let mut state = seed | 1;
     let mut rnd = || {
         state ^= state << 13;

@@ -192,8 +192,8 @@ fn conversions_round_trip() {
                     continue; // the disk's rim squeezes the back hemisphere: see docs/envmaps.md
                 }
                 let want = smooth(d);
-                for c in 0..3 {
-                    worst = worst.max((back.texel(0, i, j)[c] - want[c]).abs());
+                for (c, w) in want.iter().enumerate() {
+                    worst = worst.max((back.texel(0, i, j)[c] - w).abs());
                 }
             }
         }

@@ -278,6 +278,7 @@ fn lanes_refuse_bad_input_with_the_reference_errors() {
     d[2 * w * h + 17] = -1.0;
     let mut d_nan = vec![1.0f32; 4 * w * h];
     d_nan[w * h + 3] = f32::NAN;
+    // The test cases' (positions, normals, distances) triples, written out once.
     #[allow(clippy::type_complexity)]
     let cases: Vec<(Vec<f32>, Vec<f32>, Option<&[f32]>)> = vec![
         (bad_p, n.clone(), None),

@@ -11,7 +11,7 @@ fn errors(got: &[f32], exact: &[f32], ring: &[bool]) -> (f64, f64) {
     let (mut sum, mut n, mut mx) = (0.0f64, 0usize, 0.0f64);
     for i in 0..exact.len() {
         let e = exact[i] as f64;
-        if ring[i] || !(e > 0.0) || !e.is_finite() {
+        if ring[i] || !(e > 0.0 && e.is_finite()) {
             continue;
         }
         let g = got[i] as f64;

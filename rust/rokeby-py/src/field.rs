@@ -152,6 +152,7 @@ fn parse_distances<'py>(
 /// "view_blend" (N, 6): eq. 7's view-independent parts (x, y, z, w, a, u) for `view_blend`.
 #[pyfunction]
 #[pyo3(signature = (points, constraints, *, distances=None, regions=None, normals=None, eye=None, polar="exact", output="quaternion"))]
+// One argument per Python (keyword) argument of the pyo3 signature above.
 #[allow(clippy::too_many_arguments)]
 fn rotation_field<'py>(
     py: Python<'py>,
@@ -277,6 +278,7 @@ fn parts_array<'py>(parts: &Bound<'py, PyAny>) -> PyResult<F32Array<'py>> {
 /// (first_vert[c]: that corner's vertex).
 #[pyfunction]
 #[pyo3(signature = (parts, corner_vert, first_vert, *, ramp=false))]
+// Returns the Python tuple of arrays the docstring lists.
 #[allow(clippy::type_complexity)]
 fn view_blend_render_rows<'py>(
     py: Python<'py>,
@@ -370,6 +372,7 @@ fn view_blend_rotation_vectors<'py>(
 /// the unit of parallel work). K = 0 returns the unedited reflections r(q).
 #[pyfunction]
 #[pyo3(signature = (positions, normals, eye, constraints, *, distances=None, regions=None, polar="fast"))]
+// One argument per Python (keyword) argument of the pyo3 signature above.
 #[allow(clippy::too_many_arguments)]
 fn edited_directions<'py>(
     py: Python<'py>,

@@ -225,6 +225,7 @@ impl PyShadowEditor {
 impl PyShadowEditor {
     #[new]
     #[pyo3(signature = (vertices, faces, receiver_vertices, receiver_faces, *, light_position=None, light_direction=None, normals=None, min_loop_vertices=20, w_z=2.5, constraint_weight=10.0))]
+    // One argument per Python (keyword) argument of the pyo3 signature above.
     #[allow(clippy::too_many_arguments)]
     fn new(
         py: Python<'_>,
@@ -325,6 +326,7 @@ impl PyShadowEditor {
     /// follows the receiver point `target` (3,). style: "affine", "similarity" or "rigid".
     /// Returns dict: silhouette (K, 3), handles (dict), segment (S,) int64, moved_to (3,).
     #[pyo3(signature = (r#loop, fixed, moved, target, *, style="affine", mls_alpha=1.0, noise_amplitude=0.0, noise_frequency=0.0))]
+    // One argument per Python (keyword) argument of the pyo3 signature above.
     #[allow(clippy::too_many_arguments)]
     fn drag<'py>(
         &self,

@@ -197,7 +197,7 @@ fn validate(b: &Buffers, patches: &[Patch], p: &Params) -> Result<()> {
             ),
         ));
     }
-    if !(p.epsilon > 0.0) {
+    if p.epsilon.is_nan() || p.epsilon <= 0.0 {
         return Err(RokebyError::invalid("epsilon", "must be positive"));
     }
     if !(p.k_d.is_finite() && p.k_r.is_finite()) {
@@ -763,7 +763,7 @@ fn chunk(f: &Frame, base: usize, o: &mut [MaybeUninit<f32>], w: &mut Work) -> St
 fn copy_streaming(src: &[f32], o: &mut [MaybeUninit<f32>]) {
     assert_eq!(src.len(), o.len());
     #[cfg(target_arch = "x86_64")]
-    if (o.as_ptr() as usize) % 16 == 0 {
+    if (o.as_ptr() as usize).is_multiple_of(16) {
         use std::arch::x86_64::{_mm_loadu_ps, _mm_sfence, _mm_stream_ps};
         let n4 = o.len() / 4 * 4;
         let (d, s) = (o.as_mut_ptr() as *mut f32, src.as_ptr());
@@ -956,6 +956,9 @@ fn reflect_lanes(v: &[Lanes; 3], n: &[Lanes; 3], r: &mut [Lanes; 3], nb: usize) 
 /// 0, ∞ for ∞), within 1 ulp (tested). log2 (atanh series) and exp2 (Taylor series) in f64,
 /// relative error about 1e-11 before the rounding to f32 — the lanes vectorise, where powf is a
 /// call per value.
+// The lane loops run `for l in 0..nb` (a run-time count, which LLVM vectorises; see `batch`) and
+// keep that one shape in every kernel, whether they index one lane array or several.
+#[allow(clippy::needless_range_loop)]
 #[inline(always)]
 fn pow_lanes(x: &mut Lanes, p: f64, nb: usize) {
     let nb = nb.min(LANES);
@@ -983,6 +986,9 @@ fn pow_lanes(x: &mut Lanes, p: f64, nb: usize) {
         let l2 = e as f64 + (2.0 * std::f64::consts::LOG2_E) * (t * s);
         // 2^y = 2^i · e^(f ln 2), i = round(y), |f| ≤ ½: Taylor terms to (f ln 2)^10 (the next
         // is below 3e-13).
+        // Not `clamp`: a NaN exponent (p·l2 with p = ±∞ at x = 1) must go to a bound, as
+        // `max`/`min` send it, and never reach the bit tricks below.
+        #[allow(clippy::manual_clamp)]
         let y = (p * l2).max(-1000.0).min(1000.0);
         let big = y + MAGIC;
         let f = y - (big - MAGIC);
@@ -1018,6 +1024,9 @@ fn pow_lanes(x: &mut Lanes, p: f64, nb: usize) {
 /// Eqs. 3–5 for up to [`LANES`] pixels `ks` (offsets from `base`) of one chunk, structure of
 /// arrays in `w`: the buffers are gathered into lanes, computed lane-wise, and I~ is stored for
 /// the pixels that pass the masks (unit n, ñ and v; finite shading, reflectance and α's).
+// Lane loops (see `pow_lanes`): one subscript l over the nb lanes of several arrays (w.k, w.px,
+// w.id, ...), as eqs. 3–5 are written per pixel.
+#[allow(clippy::needless_range_loop)]
 #[inline(always)]
 fn batch(f: &Frame, base: usize, ks: &[u32], o: &mut [f32], st: &mut Stats, w: &mut Work) {
     let b = f.b;
@@ -1086,7 +1095,8 @@ fn batch(f: &Frame, base: usize, ks: &[u32], o: &mut [f32], st: &mut Stats, w: &
             w.r[2][l] - w.re[2][l],
         ];
         w.chord[l] = (dr[0] * dr[0] + dr[1] * dr[1] + dr[2] * dr[2]).sqrt();
-        short |= !(w.chord[l] >= f.chord_eps);
+        // chord_eps comes from the validated ε (never NaN); a NaN chord counts as short.
+        short |= w.chord[l].is_nan() || w.chord[l] < f.chord_eps;
     }
     // wgt = v α_R.
     if short {

@@ -128,8 +128,8 @@ impl ParaboloidMap {
         }
         for (i, j, w) in taps {
             let k = self.idx(face, i, j);
-            for ch in 0..c {
-                out[ch] += w * self.data[k + ch] as f64;
+            for (acc, &x) in out[..c].iter_mut().zip(&self.data[k..k + c]) {
+                *acc += w * x as f64;
             }
         }
     }
@@ -183,7 +183,7 @@ pub struct PartialMap {
 /// NaN (NaN in, NaN out); pixels whose n or v is zero (background pixels of a normal pass) give
 /// the zero vector: they have no direction, and finite input never gives NaN.
 pub fn reflect_dirs(normals: &[f32], view: &[f32]) -> Result<Vec<f32>> {
-    if normals.len() % 3 != 0 {
+    if !normals.len().is_multiple_of(3) {
         return Err(RokebyError::invalid("normals", "expected N×3 values"));
     }
     if view.len() != normals.len() && view.len() != 3 {
@@ -250,6 +250,7 @@ fn rectify(r: DVec3) -> Option<DVec3> {
 }
 
 /// Checks the arguments of [`partial`].
+// The arguments of `partial`, one by one as it receives them.
 #[allow(clippy::too_many_arguments)]
 fn check_partial_args(
     width: usize,
@@ -311,7 +312,7 @@ fn check_partial_args(
             ),
         ));
     }
-    if !(params.max_depth_jump >= 0.0) {
+    if params.max_depth_jump.is_nan() || params.max_depth_jump < 0.0 {
         return Err(RokebyError::invalid(
             "max_depth_jump",
             format!("must be ≥ 0, got {}", params.max_depth_jump),
@@ -419,21 +420,6 @@ fn fmax(a: f64, b: f64) -> f64 {
     }
 }
 
-/// Partial reconstruction (eq. 2) of one patch.
-///
-/// * `refl`: H·W×3 reflected directions r (screen space, unit);
-/// * `values`: H·W×C reflection shading R0;
-/// * `mask`: H·W, > 0.5 where the pixel belongs to the patch and is unoccluded (α_R);
-/// * `depth`: H·W or empty (no depth discontinuities).
-///
-/// Eq. 2 is evaluated per texel over the polygons containing its direction, in the polygons'
-/// order (image rows, then columns), as in the paper's grid query; the search runs the other way
-/// round for speed: the texel centres are binned on a grid over (n'_x, n'_y), and each 2×2 block
-/// of pixels, as it is formed, looks up the centres in its padded box (both triangles of a quad at
-/// once) and then tests those in each triangle's own box. The hits come out in the polygons'
-/// order (fixed tasks of block rows) and are accumulated per texel in that order (each texel by
-/// one task), so the map does not depend on the number of threads.
-#[allow(clippy::too_many_arguments)]
 /// Whether neighbouring pixels a, b (reflected directions ra, rb) lie on one smooth piece of the
 /// surface: their directions within the edge angle (cos_edge) and, with a depth pass, their
 /// depths within max_depth_jump relative of each other (eq. 2's quads stop at discontinuities).
@@ -459,6 +445,23 @@ fn no_discontinuity(
     true
 }
 
+/// Partial reconstruction (eq. 2) of one patch.
+///
+/// * `refl`: H·W×3 reflected directions r (screen space, unit);
+/// * `values`: H·W×C reflection shading R0;
+/// * `mask`: H·W, > 0.5 where the pixel belongs to the patch and is unoccluded (α_R);
+/// * `depth`: H·W or empty (no depth discontinuities).
+///
+/// Eq. 2 is evaluated per texel over the polygons containing its direction, in the polygons'
+/// order (image rows, then columns), as in the paper's grid query; the search runs the other way
+/// round for speed: the texel centres are binned on a grid over (n'_x, n'_y), and each 2×2 block
+/// of pixels, as it is formed, looks up the centres in its padded box (both triangles of a quad at
+/// once) and then tests those in each triangle's own box. The hits come out in the polygons'
+/// order (fixed tasks of block rows) and are accumulated per texel in that order (each texel by
+/// one task), so the map does not depend on the number of threads.
+// Entry point: the G-buffer planes of the reflection pass (refl, values, mask, depth), their size
+// and channels, one argument each as the binding hands them over (shared by `check_partial_args`).
+#[allow(clippy::too_many_arguments)]
 pub fn partial(
     width: usize,
     height: usize,
@@ -484,10 +487,10 @@ pub fn partial(
         .for_each(|(y, ((ro, no), ko))| {
             for x in 0..width {
                 let p = y * width + x;
-                if !(mask[p] > 0.5)
-                    || !values[p * channels..(p + 1) * channels]
+                if !(mask[p] > 0.5
+                    && values[p * channels..(p + 1) * channels]
                         .iter()
-                        .all(|v| v.is_finite())
+                        .all(|v| v.is_finite()))
                 {
                     continue;
                 }
@@ -638,7 +641,7 @@ pub fn partial(
                 continue;
             }
             let sum = l[0] + l[1] + l[2];
-            if !(sum > 0.0) {
+            if sum.is_nan() || sum <= 0.0 {
                 continue;
             }
             let lw = *logw.get_or_insert_with(|| log_weight(poly));
@@ -829,6 +832,7 @@ pub fn partial(
 /// The former partial reconstruction (grid of triangles queried per texel), kept as the
 /// reference of the tests.
 #[cfg(test)]
+// The same arguments as `partial` (the test reference).
 #[allow(clippy::too_many_arguments)]
 pub(crate) fn partial_reference(
     width: usize,
@@ -850,10 +854,10 @@ pub(crate) fn partial_reference(
     let pix: Vec<Option<(DVec3, DVec3)>> = (0..np)
         .into_par_iter()
         .map(|p| {
-            if !(mask[p] > 0.5)
-                || !values[p * channels..(p + 1) * channels]
+            if !(mask[p] > 0.5
+                && values[p * channels..(p + 1) * channels]
                     .iter()
-                    .all(|v| v.is_finite())
+                    .all(|v| v.is_finite()))
             {
                 return None;
             }
@@ -1031,7 +1035,7 @@ pub(crate) fn partial_reference(
                         continue;
                     }
                     let sum = l[0] + l[1] + l[2];
-                    if !(sum > 0.0) {
+                    if sum.is_nan() || sum <= 0.0 {
                         continue;
                     }
                     // Online log-sum of weights: rescale when a larger one appears.
@@ -1221,7 +1225,10 @@ pub fn fill_holes(maps: &mut [&mut ParaboloidMap], covered: &[bool]) -> Result<u
             disk_taps(s, face, u, v)
         }
     };
-    let rows: Vec<(Vec<(usize, f64)>, Vec<f64>)> = vars
+    // One equation per unknown texel: its (unknown, coefficient) terms and a right-hand side per
+    // channel.
+    type Row = (Vec<(usize, f64)>, Vec<f64>);
+    let rows: Vec<Row> = vars
         .par_iter()
         .map(|&t| {
             let face = t / (s * s);
@@ -1331,8 +1338,8 @@ pub fn fill_beyond_equator(m: &mut ParaboloidMap) {
                     *t = 0.0;
                 }
                 for (tt, w) in taps {
-                    for k in 0..c {
-                        tmp[k] += w * view.data[tt * c + k] as f64;
+                    for (acc, &x) in tmp[..c].iter_mut().zip(&view.data[tt * c..tt * c + c]) {
+                        *acc += w * x as f64;
                     }
                 }
                 for k in 0..c {
@@ -1448,8 +1455,8 @@ pub fn regularize(
                         }
                         let w = (-((di * di + dj * dj) as f64) / (2.0 * sigma * sigma)).exp();
                         let k = ((f * s + ii as usize) * s + jj as usize) * c;
-                        for ch in 0..c {
-                            acc[ch] += w * src[k + ch] as f64;
+                        for (a, &x) in acc[..c].iter_mut().zip(&src[k..k + c]) {
+                            *a += w * x as f64;
                         }
                         wsum += w;
                     }
@@ -1476,6 +1483,9 @@ pub struct ReflectionEnv {
     pub blurred_texels: usize,
 }
 
+// Entry point: the G-buffer planes of the reflection pass (refl, values, mask, depth), their size
+// and channels, one argument each as the binding hands them over (shared by `check_partial_args`).
+#[allow(clippy::too_many_arguments)]
 pub fn reconstruct(
     width: usize,
     height: usize,

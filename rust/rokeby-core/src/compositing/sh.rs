@@ -62,7 +62,7 @@ pub fn eval(coeffs: &[f64; SH_COEFFS], n: [f64; 3]) -> f64 {
 /// N×C values, row-major. A zero or non-finite normal is an error naming its row (it has no
 /// direction, and would give NaN).
 pub fn eval_many(coeffs: &[[f64; SH_COEFFS]], normals: &[f32]) -> Result<Vec<f32>> {
-    if normals.len() % 3 != 0 {
+    if !normals.len().is_multiple_of(3) {
         return Err(RokebyError::invalid("normals", "expected N×3 values"));
     }
     let ch = coeffs.len();
@@ -135,7 +135,7 @@ pub struct ShFit {
 /// Normal unit vectors (N×3) must be finite and non-zero; they are normalised in f64.
 #[cfg(test)]
 fn unit_normals(normals: &[f32], arg: &str) -> Result<Vec<[f64; 3]>> {
-    if normals.len() % 3 != 0 {
+    if !normals.len().is_multiple_of(3) {
         return Err(RokebyError::invalid(
             arg,
             format!("expected N×3 values, got {}", normals.len()),
@@ -343,7 +343,10 @@ pub fn fit_patch(
     method: Fit,
     tolerance: &[f64],
 ) -> Result<PatchFit> {
-    if channels == 0 || normals.len() % 3 != 0 || values.len() / channels != normals.len() / 3 {
+    if channels == 0
+        || !normals.len().is_multiple_of(3)
+        || values.len() / channels != normals.len() / 3
+    {
         return Err(RokebyError::invalid(
             "values",
             format!(
@@ -413,7 +416,7 @@ pub fn fit_with_tolerance(
     if channels == 0 {
         return Err(RokebyError::invalid("values", "need at least one channel"));
     }
-    if normals.len() % 3 != 0 {
+    if !normals.len().is_multiple_of(3) {
         return Err(RokebyError::invalid(
             "normals",
             format!("expected N×3 values, got {}", normals.len()),
@@ -496,8 +499,8 @@ pub fn fit_with_tolerance(
         h[j][i] = hu[k];
     }
     let trace: f64 = (0..SH_COEFFS).map(|i| h[i][i]).sum();
-    for i in 0..SH_COEFFS {
-        h[i][i] += 1e-9 * trace / SH_COEFFS as f64;
+    for (i, row) in h.iter_mut().enumerate() {
+        row[i] += 1e-9 * trace / SH_COEFFS as f64;
     }
     let chol = Chol::new(&h)
         .ok_or_else(|| RokebyError::numerical("SH fit", "the normal equations are singular"))?;
@@ -524,6 +527,8 @@ pub fn fit_with_tolerance(
 }
 
 /// One chunk of [`residual_pass`] (chunk index `ci`), dispatched like [`normal_equations_chunk`].
+// Returns the pass's two results as one tuple: per channel (largest residual, sum of squares),
+// per watched channel the (pixel, slack) list.
 #[allow(clippy::type_complexity)]
 fn residual_chunk(
     ci: usize,
@@ -543,6 +548,8 @@ fn residual_chunk(
 
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2")]
+// Returns the pass's two results as one tuple: per channel (largest residual, sum of squares),
+// per watched channel the (pixel, slack) list.
 #[allow(clippy::type_complexity)]
 unsafe fn residual_chunk_avx2(
     ci: usize,
@@ -556,6 +563,8 @@ unsafe fn residual_chunk_avx2(
 }
 
 #[inline(always)]
+// Returns the pass's two results as one tuple: per channel (largest residual, sum of squares),
+// per watched channel the (pixel, slack) list.
 #[allow(clippy::type_complexity)]
 fn residual_chunk_any(
     ci: usize,
@@ -622,6 +631,8 @@ fn residual_chunk_any(
 /// D0 − D(n), sum of squared residuals), and, for the channels listed in `watch` as (c, θ, τ),
 /// the pixels whose slack D(n) − (D0 − τ) is below θ (index, slack), in pixel order. The slack
 /// is the one [GI83] computes (`GiState::run`: dot9(a, x) − b with b = D0 − τ), bit for bit.
+// Returns the pass's two results as one tuple: per channel (largest residual, sum of squares),
+// per watched channel the (pixel, slack) list.
 #[allow(clippy::type_complexity)]
 fn residual_pass(
     normals: &[f32],
@@ -667,6 +678,7 @@ const SCREEN_BATCH: usize = 512;
 /// therefore the optimum of the whole QP (strictly convex: the optimum is unique). Same result as
 /// running [GI83] on all N constraints at once, at two or three passes over the pixels instead of
 /// one per step.
+// The per-channel results of the screened QP as one tuple, as `fit` returns them.
 #[allow(clippy::type_complexity)]
 fn qp_screened(
     chol: &Chol,
@@ -778,6 +790,8 @@ const CANDIDATE_MARGIN: f64 = 1e9;
 
 /// Adds the most violated `SCREEN_BATCH` of the (pixel, slack) list `v` to channel c's working
 /// set, in pixel order (ties by pixel index); whether there was any.
+// Channel c's working-set state of [GI83], passed piecewise (its parts live in separate per-
+// channel vectors of the caller).
 #[allow(clippy::too_many_arguments)]
 fn add_most_violated(
     v: &mut Vec<(u32, f64)>,
@@ -1019,6 +1033,8 @@ pub(crate) fn fit_reference_tolerance(
             },
         );
     let trace: f64 = (0..SH_COEFFS).map(|i| h[i][i]).sum();
+    // Mirrors the upper triangle into the lower one: h[i][j] = h[j][i] reads another row.
+    #[allow(clippy::needless_range_loop)]
     for i in 0..SH_COEFFS {
         for j in 0..i {
             h[i][j] = h[j][i];
@@ -1290,7 +1306,7 @@ mod tests {
         let ls = fit(&ns, &vs, 3, Fit::LeastSquares).unwrap();
         let tau = [0.06; 3];
         let tol = fit_with_tolerance(&ns, &vs, 3, Fit::Constrained, &tau).unwrap();
-        for c in 0..3 {
+        for (c, &tau_c) in tau.iter().enumerate() {
             let (e_qp, e_ls, e_tol) = (
                 error_vs_truth(&qp, c),
                 error_vs_truth(&ls, c),
@@ -1303,12 +1319,12 @@ mod tests {
                 "ch {c}: tolerant {e_tol} qp {e_qp} ls {e_ls}"
             );
             assert!(
-                tol.max_residual[c] <= tau[c] + 1e-9,
+                tol.max_residual[c] <= tau_c + 1e-9,
                 "D0 − D(n) ≤ τ: {}",
                 tol.max_residual[c]
             );
             assert!(
-                tol.max_residual[c] > 0.5 * tau[c],
+                tol.max_residual[c] > 0.5 * tau_c,
                 "the tolerance is used: {}",
                 tol.max_residual[c]
             );
@@ -1439,11 +1455,11 @@ mod tests {
             let r = fit_reference(&ns, &vs, 1, Fit::Constrained).unwrap();
             let x = f.coeffs[0];
             // The same optimum as the former solver (unique: H is positive definite).
-            for k in 0..SH_COEFFS {
+            for (k, &xk) in x.iter().enumerate() {
                 assert!(
-                    (x[k] - r.coeffs[0][k]).abs() < 1e-9,
+                    (xk - r.coeffs[0][k]).abs() < 1e-9,
                     "k {k}: {} vs {}",
-                    x[k],
+                    xk,
                     r.coeffs[0][k]
                 );
             }
@@ -1464,8 +1480,8 @@ mod tests {
                 }
             }
             let trace: f64 = (0..SH_COEFFS).map(|i| h[i][i]).sum();
-            for i in 0..SH_COEFFS {
-                h[i][i] += 1e-9 * trace / SH_COEFFS as f64;
+            for (i, row) in h.iter_mut().enumerate() {
+                row[i] += 1e-9 * trace / SH_COEFFS as f64;
             }
             let slack: Vec<f64> = rows
                 .iter()

@@ -382,15 +382,15 @@ impl EnvMap {
                     &mut heap
                 };
                 self.bilinear_clamped(f, x2, y2, v);
-                for ch in 0..c {
-                    out[ch] += wt * v[ch];
+                for (acc, &x) in out[..c].iter_mut().zip(&v[..c]) {
+                    *acc += wt * x;
                 }
                 return;
             }
             _ => self.offset(face, i.clamp(0, h - 1) as usize, j.clamp(0, w - 1) as usize),
         };
-        for ch in 0..c {
-            out[ch] += wt * self.data[k + ch];
+        for (acc, &x) in out[..c].iter_mut().zip(&self.data[k..k + c]) {
+            *acc += wt * x;
         }
     }
 
@@ -412,8 +412,8 @@ impl EnvMap {
             (i0 + 1, j0 + 1, fx * fy),
         ] {
             let k = self.offset(face, i.clamp(0, h - 1) as usize, j.clamp(0, w - 1) as usize);
-            for ch in 0..c {
-                out[ch] += wt * self.data[k + ch];
+            for (acc, &x) in out[..c].iter_mut().zip(&self.data[k..k + c]) {
+                *acc += wt * x;
             }
         }
     }
@@ -577,7 +577,7 @@ fn check_dims(
 
 /// N×3 directions, finite and non-zero.
 pub fn finite_dirs(dirs: &[f32], arg: &str) -> Result<Vec<DVec3>> {
-    if dirs.len() % 3 != 0 {
+    if !dirs.len().is_multiple_of(3) {
         return Err(RokebyError::invalid(
             arg,
             format!("expected N×3 values, got {}", dirs.len()),

@@ -148,7 +148,7 @@ impl Lobe {
             cum[i] = cum[i - 1] + 0.5 * (f(i) + f(i - 1)) * (g(i) - g(i - 1));
         }
         let total = cum[N];
-        if !(total > 0.0) {
+        if total.is_nan() || total <= 0.0 {
             return (0.0, 0.0);
         }
         let find = |frac: f64| -> f64 {
@@ -360,7 +360,7 @@ fn ring_pass(src: &EnvMap, lobe: &Lobe, r_in: Option<f64>, r_out: Option<f64>, c
                     // texel there by the part of it above (a linear ramp over its width).
                     let cover = ((cosg + half) / (2.0 * half)).clamp(0.0, 1.0);
                     let wt = lobe.kernel(cosg.max(1e-12)) * cover * window(g) * omega;
-                    if !(wt > 0.0) {
+                    if wt.is_nan() || wt <= 0.0 {
                         continue;
                     }
                     let wt32 = wt as f32;
@@ -554,8 +554,8 @@ pub fn brute_force(env: &EnvMap, lobe: &Lobe, directions: &[f32]) -> Result<Vec<
             }
             let k = lobe.kernel(cosg) * wt;
             den += k;
-            for ch in 0..c {
-                o[ch] += k * env.data[t * c + ch] as f64;
+            for (acc, &x) in o[..c].iter_mut().zip(&env.data[t * c..t * c + c]) {
+                *acc += k * x as f64;
             }
         }
         if den > 0.0 {
@@ -671,8 +671,8 @@ pub fn brute_force_irradiance(env: &EnvMap, normals: &[f32]) -> Result<Vec<f64>>
         for (t, (d, &wt)) in dirs.iter().zip(&wts).enumerate() {
             let cosg = n.dot(*d);
             if cosg > 0.0 {
-                for ch in 0..c {
-                    o[ch] += cosg * wt * env.data[t * c + ch] as f64;
+                for (acc, &x) in o[..c].iter_mut().zip(&env.data[t * c..t * c + c]) {
+                    *acc += cosg * wt * x as f64;
                 }
             }
         }

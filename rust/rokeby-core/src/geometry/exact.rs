@@ -16,7 +16,8 @@
 
 use crate::error::{Result, RokebyError};
 use crate::geodesic::{Mesh, Source};
-use crate::unfold::{layout, unfold_corner, Adjacency};
+use crate::mesh::Adjacency;
+use crate::unfold::{layout, unfold_corner};
 use glam::DVec2;
 use std::cmp::Ordering;
 use std::collections::BinaryHeap;
@@ -68,7 +69,7 @@ pub(crate) fn pseudo_source_vertices(mesh: &Mesh, adj: &Adjacency) -> Vec<bool> 
     let mut boundary = vec![false; nv];
     let mut out = vec![false; nv];
     for (fi, f) in mesh.faces.iter().enumerate() {
-        if f[0] == f[1] || f[1] == f[2] || f[0] == f[2] {
+        if !crate::mesh::is_proper(f) {
             continue;
         }
         let p = f.map(|v| mesh.vertices[v]);
@@ -153,7 +154,7 @@ impl Propagation<'_> {
     }
 
     fn push(&mut self, w: Window) {
-        if !(w.len > 0.0) || !(w.s.y < 0.0) || !(w.b1 > w.b0) {
+        if !(w.len > 0.0 && w.s.y < 0.0 && w.b1 > w.b0) {
             return;
         }
         let tol = 1e-9 * w.len;
@@ -172,6 +173,8 @@ impl Propagation<'_> {
     }
 
     /// A window into the face across edge X→Y of a face laid out in the current frame.
+    // A propagation step: the face, the edge ends and the window ends in the current frame, each
+    // its own argument as in the window propagation of Chen & Han; a struct would only repack them.
     #[allow(clippy::too_many_arguments)]
     fn window_on(
         &mut self,
@@ -183,7 +186,7 @@ impl Propagation<'_> {
         sigma: f64,
     ) {
         let len = px.distance(py);
-        if !(len > 0.0) {
+        if len.is_nan() || len <= 0.0 {
             return;
         }
         let to = edge_frame(px, py, behind);

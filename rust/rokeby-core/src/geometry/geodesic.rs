@@ -20,6 +20,7 @@
 //! unreferenced vertices) get +inf.
 
 use crate::error::{Result, RokebyError};
+pub use crate::geometry::mesh::{Mesh, SurfacePoint};
 use crate::laplacian::{face_cotangents, FaceCotangents};
 use crate::numerical::{self, SparseMatrix, SymbolicCholesky, Triplet};
 use faer::linalg::solvers::Solve;
@@ -30,13 +31,6 @@ use rayon::prelude::*;
 use std::cmp::Ordering;
 use std::collections::BinaryHeap;
 use std::sync::{Mutex, OnceLock};
-
-/// A place on the surface: a face and barycentric coordinates (normalised to sum 1).
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct SurfacePoint {
-    pub face: usize,
-    pub bary: [f64; 3],
-}
 
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub enum Source {
@@ -64,72 +58,6 @@ impl Method {
             "graph" => Some(Method::Graph),
             _ => None,
         }
-    }
-}
-
-/// A validated triangle mesh in f64.
-#[derive(Debug, Clone)]
-pub struct Mesh {
-    pub vertices: Vec<DVec3>,
-    pub faces: Vec<[usize; 3]>,
-}
-
-impl Mesh {
-    /// `vertices` (V×3 flattened), `faces` (F×3 flattened, any integer type converted to i64).
-    pub fn new(vertices: &[f32], faces: &[i64]) -> Result<Self> {
-        if vertices.len() % 3 != 0 || faces.len() % 3 != 0 {
-            return Err(RokebyError::invalid(
-                "vertices",
-                "vertices and faces must have 3 columns",
-            ));
-        }
-        if vertices.is_empty() {
-            return Err(RokebyError::invalid("vertices", "the mesh has no vertices"));
-        }
-        if faces.is_empty() {
-            return Err(RokebyError::invalid("faces", "the mesh has no faces"));
-        }
-        if let Some(i) = vertices.iter().position(|x| !x.is_finite()) {
-            return Err(RokebyError::invalid(
-                "vertices",
-                format!("vertex {} is not finite", i / 3),
-            ));
-        }
-        let nv = vertices.len() / 3;
-        if nv >= u32::MAX as usize {
-            return Err(RokebyError::invalid(
-                "vertices",
-                format!("{nv} vertices is more than this solver supports (2^32 - 1)"),
-            ));
-        }
-        if let Some(i) = faces.iter().position(|&x| x < 0 || x as u64 >= nv as u64) {
-            return Err(RokebyError::invalid(
-                "faces",
-                format!(
-                    "face {} refers to vertex {} but the mesh has vertices 0..{}",
-                    i / 3,
-                    faces[i],
-                    nv - 1
-                ),
-            ));
-        }
-        let v = vertices
-            .chunks_exact(3)
-            .map(|c| DVec3::new(c[0] as f64, c[1] as f64, c[2] as f64))
-            .collect();
-        let f = faces
-            .chunks_exact(3)
-            .map(|c| [c[0] as usize, c[1] as usize, c[2] as usize])
-            .collect();
-        Ok(Mesh {
-            vertices: v,
-            faces: f,
-        })
-    }
-
-    pub fn point(&self, p: &SurfacePoint) -> DVec3 {
-        let [a, b, c] = self.faces[p.face];
-        self.vertices[a] * p.bary[0] + self.vertices[b] * p.bary[1] + self.vertices[c] * p.bary[2]
     }
 }
 
@@ -370,7 +298,7 @@ pub struct GeodesicSolver {
     heat: OnceLock<std::result::Result<Heat, RokebyError>>,
     mean_edge: f64,
     /// Faces across each edge and around each vertex, for the unfolding next to sources.
-    adjacency: crate::unfold::Adjacency,
+    adjacency: crate::mesh::Adjacency,
     /// Vertices where exact shortest paths may bend (saddles, boundary), made on first use.
     pseudo_sources: OnceLock<Vec<bool>>,
     /// The saddle vertex graph, made on the first [`Method::Graph`] query.
@@ -434,7 +362,7 @@ impl GeodesicSolver {
             next += 1;
         }
         let mean_edge = graph.mean_edge;
-        let adjacency = crate::unfold::Adjacency::new(&mesh);
+        let adjacency = crate::mesh::Adjacency::new(&mesh);
         GeodesicSolver {
             adjacency,
             pseudo_sources: OnceLock::new(),
@@ -489,7 +417,7 @@ impl GeodesicSolver {
                             return Err(RokebyError::invalid("sources", format!("source {s}: face {} is out of range (0..{})", p.face, nf - 1)));
                         }
                         let sum: f64 = p.bary.iter().sum();
-                        if p.bary.iter().any(|b| !b.is_finite() || *b < -1e-6) || !(sum > 1e-12) {
+                        if p.bary.iter().any(|b| !b.is_finite() || *b < -1e-6) || sum.is_nan() || sum <= 1e-12 {
                             return Err(RokebyError::invalid(
                                 "sources",
                                 format!("source {s}: barycentric coordinates {:?} must be finite, >= 0 and not all 0", p.bary),
@@ -748,7 +676,7 @@ impl GeodesicSolver {
         // Vertices without area (isolated, unreferenced, only on degenerate faces) get a tiny mass
         // so that both systems stay positive definite; no source reaches them through heat anyway.
         for m in &mut mass {
-            if !(*m > 1e-12 * mean_mass) {
+            if m.is_nan() || *m <= 1e-12 * mean_mass {
                 *m = 1e-12 * mean_mass;
             }
         }
@@ -840,7 +768,7 @@ impl GeodesicSolver {
         // Each front reaches about ln(1e30) ≈ 69 √t (edge lengths) further: 250 cover ~17,000.
         for _level in 0..250 {
             let peak = current.iter().fold(0.0f64, |m, &x| m.max(x));
-            if !(peak > 0.0) {
+            if peak.is_nan() || peak <= 0.0 {
                 break;
             }
             let ok: Vec<bool> = current.iter().map(|&x| x > RESOLVED * peak).collect();
@@ -1050,7 +978,7 @@ pub fn interpolate_at(
     face_index: &[i64],
     bary: &[f32],
 ) -> Result<Vec<f32>> {
-    if values.len() % n_vertices.max(1) != 0 || (n_vertices == 0 && !values.is_empty()) {
+    if !values.len().is_multiple_of(n_vertices.max(1)) || (n_vertices == 0 && !values.is_empty()) {
         return Err(RokebyError::invalid(
             "values",
             format!("expected rows of {n_vertices} values, got {}", values.len()),
@@ -1059,7 +987,7 @@ pub fn interpolate_at(
     if values.iter().any(|x| x.is_nan()) {
         return Err(RokebyError::invalid("values", "contains NaN"));
     }
-    if faces.len() % 3 != 0 {
+    if !faces.len().is_multiple_of(3) {
         return Err(RokebyError::invalid(
             "faces",
             format!("expected 3 indices per face, got {}", faces.len()),

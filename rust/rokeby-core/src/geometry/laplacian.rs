@@ -21,7 +21,8 @@ pub struct FaceCotangents {
 pub fn face_cotangents(l: [f64; 3]) -> Option<FaceCotangents> {
     let area = area_from_lengths(l[0], l[1], l[2]);
     let longest = l.iter().fold(0.0f64, |m, x| m.max(*x));
-    if !(area > 1e-12 * longest * longest) {
+    // `longest` is never NaN (f64::max skips NaN); a NaN area has no area.
+    if area.is_nan() || area <= 1e-12 * longest * longest {
         return None;
     }
     // The edge opposite corner k is l[(k+1)%3], between l[k] and l[(k+2)%3].
@@ -39,7 +40,7 @@ pub fn edge_lengths(v: &[DVec3], f: [usize; 3]) -> [f64; 3] {
 pub fn cotangent_weights(faces: &[[usize; 3]], lengths: &[[f64; 3]]) -> Vec<(u32, u32, f64)> {
     let mut e: Vec<(u32, u32, f64)> = Vec::with_capacity(faces.len() * 3);
     for (f, l) in faces.iter().zip(lengths) {
-        if f[0] == f[1] || f[1] == f[2] || f[0] == f[2] {
+        if !crate::mesh::is_proper(f) {
             continue;
         }
         let Some(fc) = face_cotangents(*l) else {

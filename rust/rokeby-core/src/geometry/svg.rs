@@ -17,8 +17,8 @@
 
 use crate::exact::direct_near;
 use crate::geodesic::{Mesh, Source};
+use crate::mesh::Adjacency;
 use crate::radix_heap::RadixHeap;
-use crate::unfold::Adjacency;
 use rayon::prelude::*;
 
 /// Vertices each vertex is linked to. Measured against exact geodesics on the shared meshes

@@ -17,94 +17,12 @@
 //!   saddle; there the unfolded value is an upper bound).
 
 use crate::geodesic::{Mesh, Source};
+use crate::mesh::Adjacency;
 use glam::DVec2;
 
 /// Edge crossings from the source's faces that the unfolding follows. 3 reaches the 2-ring of a
 /// vertex source and two rings of faces around a surface point in a regular mesh.
 pub const NEAR_DEPTH: usize = 3;
-
-const NONE: usize = usize::MAX;
-
-/// Faces glued along edges (any number of faces per edge: non-manifold edges keep all of them) and
-/// the faces around each vertex. Faces with a repeated vertex are left out.
-pub(crate) struct Adjacency {
-    /// Halfedges (corner k → k+1 of face f, as 3f + k) sorted by their undirected edge.
-    sorted: Vec<(u32, u32, usize)>,
-    /// Where halfedge h sits in `sorted` (NONE for faces with a repeated vertex).
-    pos: Vec<usize>,
-    vf_start: Vec<usize>,
-    vf: Vec<usize>,
-}
-
-impl Adjacency {
-    pub fn new(mesh: &Mesh) -> Self {
-        let nf = mesh.faces.len();
-        let nv = mesh.vertices.len();
-        let proper = |f: &[usize; 3]| f[0] != f[1] && f[1] != f[2] && f[0] != f[2];
-        let mut sorted: Vec<(u32, u32, usize)> = Vec::with_capacity(3 * nf);
-        let mut vf_start = vec![0usize; nv + 1];
-        for (fi, f) in mesh.faces.iter().enumerate() {
-            if !proper(f) {
-                continue;
-            }
-            for k in 0..3 {
-                let (a, b) = (f[k], f[(k + 1) % 3]);
-                sorted.push((a.min(b) as u32, a.max(b) as u32, 3 * fi + k));
-                vf_start[f[k] + 1] += 1;
-            }
-        }
-        sorted.sort_unstable();
-        let mut pos = vec![NONE; 3 * nf];
-        for (i, e) in sorted.iter().enumerate() {
-            pos[e.2] = i;
-        }
-        for i in 0..nv {
-            vf_start[i + 1] += vf_start[i];
-        }
-        let mut fill = vf_start.clone();
-        let mut vf = vec![0usize; vf_start[nv]];
-        for (fi, f) in mesh.faces.iter().enumerate() {
-            if proper(f) {
-                for &v in f {
-                    vf[fill[v]] = fi;
-                    fill[v] += 1;
-                }
-            }
-        }
-        Adjacency {
-            sorted,
-            pos,
-            vf_start,
-            vf,
-        }
-    }
-
-    /// The other faces on the edge of halfedge `h`, each as a halfedge of that face.
-    pub(crate) fn across(&self, h: usize) -> impl Iterator<Item = usize> + '_ {
-        let p = self.pos[h];
-        let (lo, hi) = if p == NONE {
-            (0, 0)
-        } else {
-            let key = (self.sorted[p].0, self.sorted[p].1);
-            let mut lo = p;
-            while lo > 0 && (self.sorted[lo - 1].0, self.sorted[lo - 1].1) == key {
-                lo -= 1;
-            }
-            let mut hi = p + 1;
-            while hi < self.sorted.len() && (self.sorted[hi].0, self.sorted[hi].1) == key {
-                hi += 1;
-            }
-            (lo, hi)
-        };
-        (lo..hi)
-            .map(move |i| self.sorted[i].2)
-            .filter(move |&g| g != h)
-    }
-
-    pub(crate) fn faces_around(&self, v: usize) -> &[usize] {
-        &self.vf[self.vf_start[v]..self.vf_start[v + 1]]
-    }
-}
 
 #[inline]
 pub(crate) fn cross(a: DVec2, b: DVec2) -> f64 {
@@ -156,6 +74,8 @@ impl Walk<'_> {
     /// Crosses halfedge `h` (vertices at `pa`, `pb` in the plane, `q` a point on the near side)
     /// into every other face on that edge, through the window `w0`–`w1` (ordered so that
     /// cross(w0 − s, w1 − s) > 0).
+    // An unfolding step: the halfedge, its ends in the plane, the near point and the window, each
+    // its own argument; a struct would only repack them.
     #[allow(clippy::too_many_arguments)]
     fn cross_edge(
         &mut self,
@@ -226,7 +146,7 @@ impl Walk<'_> {
                 }
             }
         }
-        if !(t1 - t0 > 1e-9) {
+        if (t1 - t0).is_nan() || t1 - t0 <= 1e-9 {
             return None;
         }
         let (p0, p1) = (x + e * t0, x + e * t1);

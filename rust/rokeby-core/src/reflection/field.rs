@@ -109,7 +109,7 @@ fn unit(v: DVec3, arg: &str, what: &str) -> Result<DVec3> {
         return Err(RokebyError::invalid(arg, format!("{what} is not finite")));
     }
     let len = v.length();
-    if !(len > 1e-20) {
+    if len.is_nan() || len <= 1e-20 {
         return Err(RokebyError::invalid(arg, format!("{what} has zero length")));
     }
     Ok(v / len)
@@ -172,7 +172,10 @@ pub fn view_blend(rot: DQuat, a: f64, r: DVec3) -> DVec3 {
 /// and unit directions r (N×3), both flattened; the weight is a, or `smooth_step(u)` when
 /// `ramp` (the single-Euclidean-region form). Returns the edited directions (N×3).
 pub fn view_blend_directions(parts: &[f32], r: &[f32], ramp: bool) -> Result<Vec<f32>> {
-    if parts.len() % 6 != 0 || r.len() % 3 != 0 || parts.len() / 6 != r.len() / 3 {
+    if !parts.len().is_multiple_of(6)
+        || !r.len().is_multiple_of(3)
+        || parts.len() / 6 != r.len() / 3
+    {
         return Err(RokebyError::invalid(
             "parts",
             format!(
@@ -213,7 +216,7 @@ pub fn view_blend_directions(parts: &[f32], r: &[f32], ramp: bool) -> Result<Vec
 }
 
 fn check_parts(parts: &[f32]) -> Result<usize> {
-    if parts.len() % 6 != 0 {
+    if !parts.len().is_multiple_of(6) {
         return Err(RokebyError::invalid(
             "parts",
             format!("expected (N, 6) rows, got {} values", parts.len()),
@@ -364,7 +367,7 @@ impl Field {
     /// `rows` is the (K, 9) constraint array flattened; `regions` may be empty (all constraints act
     /// everywhere).
     pub fn new(rows: &[f32], regions: Vec<Region>) -> Result<Self> {
-        if rows.len() % CONSTRAINT_STRIDE != 0 {
+        if !rows.len().is_multiple_of(CONSTRAINT_STRIDE) {
             return Err(RokebyError::invalid(
                 "constraints",
                 "must have 9 columns [p, r, e]",
@@ -459,6 +462,8 @@ impl Field {
     /// f64's range holds 1/d² for any distance that float32 coordinates can produce (down to
     /// ~1e-90), so no normalisation pass is needed. A zero distance (q on a constraint) switches
     /// to the interpolation branch.
+    // A kernel of eqs. 2–7: the point, its constraints, distances, regions and scratch, each its own
+    // argument as the paper's terms; a struct would only repack them.
     #[allow(clippy::too_many_arguments)]
     fn solve_group(
         &self,
@@ -530,6 +535,8 @@ impl Field {
 
     /// Σⱼ aⱼ(q) Rⱼ(q) over the regions acting at q (eq. 7's sum), with Σⱼ aⱼ, how many act and
     /// the last one's (Rⱼ, aⱼ). Needs regions.
+    // A kernel of eqs. 2–7: the point, its constraints, distances, regions and scratch, each its own
+    // argument as the paper's terms; a struct would only repack them.
     #[allow(clippy::too_many_arguments)]
     fn region_sum_at(
         &self,
@@ -562,6 +569,8 @@ impl Field {
     }
 
     /// R(q) (or R_a(q) inside regions) at one point. `r_view` is r(q) when the view is known.
+    // A kernel of eqs. 2–7: the point, its constraints, distances, regions and scratch, each its own
+    // argument as the paper's terms; a struct would only repack them.
     #[allow(clippy::too_many_arguments)]
     fn rotation_at(
         &self,
@@ -797,6 +806,8 @@ impl Field {
     }
 
     /// One point of `rotation_field_as` by the scalar f64 path (the reference).
+    // A kernel of eqs. 2–7: the point, its constraints, distances, regions and scratch, each its own
+    // argument as the paper's terms; a struct would only repack them.
     #[allow(clippy::too_many_arguments)]
     fn point_scalar(
         &self,
@@ -845,6 +856,8 @@ impl Field {
     }
 
     /// One pixel of `edited_directions` by the scalar f64 path (the reference).
+    // A kernel of eqs. 2–7: the point, its constraints, distances, regions and scratch, each its own
+    // argument as the paper's terms; a struct would only repack them.
     #[allow(clippy::too_many_arguments)]
     fn pixel_scalar(
         &self,
@@ -1041,7 +1054,8 @@ fn check_finite(a: &[f32], arg: &str) -> Result<()> {
 fn check_nonzero_dirs(a: &[f32], arg: &str) -> Result<()> {
     check_finite(a, arg)?;
     if let Some(i) = first_bad_row(a, |r| {
-        !(DVec3::new(r[0] as f64, r[1] as f64, r[2] as f64).length_squared() > 1e-40)
+        let l2 = DVec3::new(r[0] as f64, r[1] as f64, r[2] as f64).length_squared();
+        l2.is_nan() || l2 <= 1e-40
     }) {
         return Err(RokebyError::invalid(
             arg,

@@ -163,7 +163,9 @@ fn best_twist(axis: DVec3, c: &DMat3) -> DQuat {
     // (e.g. every other constraint asks for the same r → e: B ∝ u uᵀ after R₀); an absolute
     // threshold let that noise pick an arbitrary twist.
     let scale = c.to_cols_array().iter().fold(0.0f64, |m, x| m.max(x.abs()));
-    if !(a.abs() + s.abs() > 1e-10 * scale) {
+    // `scale` is never NaN (f64::max skips NaN); a NaN part gives no preference either.
+    let part = a.abs() + s.abs();
+    if part.is_nan() || part <= 1e-10 * scale {
         return DQuat::IDENTITY;
     }
     DQuat::from_axis_angle(u, s.atan2(a))
@@ -182,7 +184,7 @@ pub fn ortho_svd(m: &DMat3) -> DQuat {
 pub fn ortho_tiebreak(m: &DMat3, b: Option<&DMat3>) -> DQuat {
     let svd = svd3(m);
     let [s1, s2, _s3] = svd.sigma;
-    if !(s1 > 1e-300) || !s1.is_finite() {
+    if !(s1 > 1e-300 && s1.is_finite()) {
         return match b {
             Some(b) => ortho_tiebreak(b, None),
             None => DQuat::IDENTITY,
@@ -276,7 +278,7 @@ pub enum Iterated {
 pub fn ortho_iterative(m: &DMat3, init: DQuat, max_iter: usize) -> Iterated {
     let scale =
         (m.x_axis.length_squared() + m.y_axis.length_squared() + m.z_axis.length_squared()).sqrt();
-    if !(scale > 1e-300) || !scale.is_finite() {
+    if !(scale > 1e-300 && scale.is_finite()) {
         return Iterated::Failed;
     }
     let mut q = init;
@@ -357,7 +359,7 @@ pub fn ortho(
 /// warm-started from one matrix to the next: canonical unit quaternions (x, y, z, w), w ≥ 0,
 /// 4 values per matrix. A matrix with a non-finite entry is refused by its index.
 pub fn ortho_batch(matrices: &[f32], method: PolarMethod) -> Result<Vec<f32>> {
-    if matrices.len() % 9 != 0 {
+    if !matrices.len().is_multiple_of(9) {
         return Err(RokebyError::invalid(
             "matrices",
             format!("expected 9 values per matrix, got {}", matrices.len()),

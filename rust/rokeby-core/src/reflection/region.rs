@@ -13,7 +13,7 @@ use glam::DVec3;
 /// Hermite smooth step: 0 for t ≤ 0, 1 for t ≥ 1, 3t² − 2t³ between (C¹ at both ends).
 #[inline]
 pub fn smooth_step(t: f64) -> f64 {
-    if !(t > 0.0) {
+    if t.is_nan() || t <= 0.0 {
         return 0.0; // t ≤ 0, and NaN (found by fuzzing: a NaN distance gave a NaN weight)
     }
     let t = t.min(1.0);
@@ -26,8 +26,8 @@ pub fn smooth_step(t: f64) -> f64 {
 #[inline]
 pub fn falloff(d: f64, radius: f64, border: f64) -> f64 {
     let border = border.min(radius);
-    // `!(d < radius)` also sends a NaN distance (an unreachable point) to 0 (found by fuzzing).
-    if !(d < radius) {
+    // A NaN distance (an unreachable point) goes to 0 too (found by fuzzing).
+    if d.is_nan() || radius.is_nan() || d >= radius {
         return 0.0;
     }
     let inner = radius - border;
@@ -256,7 +256,7 @@ pub fn freeform_region(
     let outside: Vec<Source> = weights
         .iter()
         .enumerate()
-        .filter(|(_, &x)| !(x > 0.0))
+        .filter(|(_, &x)| x.is_nan() || x <= 0.0)
         .map(|(i, _)| Source::Vertex(i))
         .collect();
     let d = if outside.is_empty() || border == 0.0 {

@@ -124,9 +124,6 @@ pub struct ShadowEditor {
     space: LightSpace,
     bvh: Bvh,
     num_receiver_faces: usize,
-    /// Caster vertex → incident caster faces (CSR).
-    vf_start: Vec<u32>,
-    vf_faces: Vec<u32>,
     loops: Vec<SilhouetteLoop>,
     active: Vec<bool>,
     /// Per loop: rest (x, y, z) of each silhouette vertex in frustum coordinates.
@@ -200,7 +197,7 @@ impl ShadowEditor {
     ) -> Result<Self> {
         light.validate()?;
         let light = far_point_as_directional(light, &caster.vertices);
-        if receiver_vertices.len() % 3 != 0 {
+        if !receiver_vertices.len().is_multiple_of(3) {
             return Err(RokebyError::invalid(
                 "receiver_vertices",
                 format!(
@@ -209,7 +206,7 @@ impl ShadowEditor {
                 ),
             ));
         }
-        if receiver_faces.len() % 3 != 0 {
+        if !receiver_faces.len().is_multiple_of(3) {
             return Err(RokebyError::invalid(
                 "receiver_faces",
                 format!("expected F×3 indices, got {} values", receiver_faces.len()),
@@ -253,11 +250,7 @@ impl ShadowEditor {
         }
         let num_receiver_faces = tris.len();
         for f in &caster.faces {
-            tris.push([
-                caster.vertices[f[0] as usize],
-                caster.vertices[f[1] as usize],
-                caster.vertices[f[2] as usize],
-            ]);
+            tris.push(f.map(|i| caster.vertices[i]));
         }
         // §5.2: the frustum around the caster, or (a point light inside its bounds) one per loop.
         let (frame, space) = match (light, LightFrame::new(light, &caster.vertices)) {
@@ -277,24 +270,6 @@ impl ShadowEditor {
         let bvh = Bvh::new(tris, "receivers")?;
         let (mn, mx) = bvh.bounds();
         let t_min = 1e-7 * (mx - mn).length().max(1e-300);
-        let nv = caster.vertices.len();
-        let mut vf_start = vec![0u32; nv + 1];
-        for f in &caster.faces {
-            for &v in f {
-                vf_start[v as usize + 1] += 1;
-            }
-        }
-        for i in 0..nv {
-            vf_start[i + 1] += vf_start[i];
-        }
-        let mut fill = vf_start.clone();
-        let mut vf_faces = vec![0u32; vf_start[nv] as usize];
-        for (fi, f) in caster.faces.iter().enumerate() {
-            for &v in f {
-                vf_faces[fill[v as usize] as usize] = fi as u32;
-                fill[v as usize] += 1;
-            }
-        }
         let loops = silhouettes(&caster, &light)?;
         let mut frame_error = None;
         let frames: Vec<Option<LightFrame>> = loops
@@ -338,8 +313,6 @@ impl ShadowEditor {
             space,
             bvh,
             num_receiver_faces,
-            vf_start,
-            vf_faces,
             loops,
             active,
             rest,
@@ -447,14 +420,11 @@ impl ShadowEditor {
     fn cast_one(&self, from: DVec3, b: u32, f: u32) -> Handle {
         let dir = self.light.ray_dir(from);
         let nr = self.num_receiver_faces;
-        let near = |v: u32| {
-            &self.vf_faces
-                [self.vf_start[v as usize] as usize..self.vf_start[v as usize + 1] as usize]
-        };
+        let near = |v: u32| self.caster.adjacency().faces_around(v as usize);
         let (nb, nf) = (near(b), near(f));
         let skip = |t: usize| {
             t >= nr && {
-                let c = (t - nr) as u32;
+                let c = t - nr;
                 nb.contains(&c) || nf.contains(&c)
             }
         };

@@ -46,10 +46,9 @@ pub struct EdgePoint {
 
 /// Cotangent weights per undirected edge (i < j), summed over the edge's faces
 /// ([`crate::laplacian::cotangent_weights`] on the faces' edge lengths).
-pub fn cotangent_weights(v: &[DVec3], faces: &[[u32; 3]]) -> Vec<(u32, u32, f64)> {
-    let faces: Vec<[usize; 3]> = faces.iter().map(|f| f.map(|i| i as usize)).collect();
+pub fn cotangent_weights(v: &[DVec3], faces: &[[usize; 3]]) -> Vec<(u32, u32, f64)> {
     let lengths: Vec<[f64; 3]> = faces.iter().map(|&f| edge_lengths(v, f)).collect();
-    laplacian::cotangent_weights(&faces, &lengths)
+    laplacian::cotangent_weights(faces, &lengths)
 }
 
 /// The factored shadow-mesh system for one set of silhouette constraints.
@@ -74,7 +73,7 @@ impl ShadowMeshSolver {
     pub fn new(
         frame: LightFrame,
         vertices: &[DVec3],
-        faces: &[[u32; 3]],
+        faces: &[[usize; 3]],
         constraints: Vec<EdgePoint>,
         w_z: f64,
         constraint_weight: f64,
@@ -93,7 +92,7 @@ impl ShadowMeshSolver {
     pub fn in_space(
         space: LightSpace,
         vertices: &[DVec3],
-        faces: &[[u32; 3]],
+        faces: &[[usize; 3]],
         constraints: Vec<EdgePoint>,
         w_z: f64,
         constraint_weight: f64,

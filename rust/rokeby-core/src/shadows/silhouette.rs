@@ -17,8 +17,8 @@
 //! from outside the surface.
 
 use crate::error::{Result, RokebyError};
+use crate::mesh::{Adjacency, Mesh};
 use glam::DVec3;
-use std::collections::HashMap;
 
 /// A light as the shadow editing sees it.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -59,97 +59,24 @@ impl Light {
     }
 }
 
-/// A validated closed, consistently oriented triangle mesh (the shadow caster).
+/// A validated closed, consistently oriented triangle mesh (the shadow caster): a [`Mesh`] that
+/// passed [`Mesh::require_closed`], with its vertex normals. It dereferences to the [`Mesh`].
 #[derive(Debug, Clone)]
 pub struct ClosedMesh {
-    pub vertices: Vec<DVec3>,
-    pub faces: Vec<[u32; 3]>,
+    mesh: Mesh,
+    adjacency: Adjacency,
     pub normals: Vec<DVec3>,
 }
 
 impl ClosedMesh {
-    /// Checks the caster: finite vertices, indices in range, no degenerate index triples, every
-    /// edge shared by exactly two faces in opposite directions (closed, manifold, oriented).
-    /// `normals`, when given, are the vertex normals (normalised here); otherwise area-weighted
-    /// face normals are averaged.
+    /// Checks the caster: a valid [`Mesh`] (finite vertices, indices in range) that is closed,
+    /// manifold and oriented ([`Mesh::require_closed`]: no face repeats a vertex, every edge is
+    /// shared by exactly two faces in opposite directions). `normals`, when given, are the vertex
+    /// normals (normalised here); otherwise area-weighted face normals are averaged.
     pub fn new(vertices: &[f32], faces: &[i64], normals: Option<&[f32]>) -> Result<Self> {
-        if vertices.len() % 3 != 0 {
-            return Err(RokebyError::invalid(
-                "vertices",
-                format!("expected N×3 coordinates, got {} values", vertices.len()),
-            ));
-        }
-        if faces.len() % 3 != 0 {
-            return Err(RokebyError::invalid(
-                "faces",
-                format!("expected F×3 indices, got {} values", faces.len()),
-            ));
-        }
-        let nv = vertices.len() / 3;
-        if nv >= u32::MAX as usize {
-            return Err(RokebyError::invalid(
-                "vertices",
-                format!("{nv} vertices is more than supported"),
-            ));
-        }
-        if faces.is_empty() {
-            return Err(RokebyError::invalid("faces", "the caster has no faces"));
-        }
-        if let Some(i) = vertices.iter().position(|x| !x.is_finite()) {
-            return Err(RokebyError::invalid(
-                "vertices",
-                format!("vertex {} has a non-finite coordinate", i / 3),
-            ));
-        }
-        let verts: Vec<DVec3> = vertices
-            .chunks_exact(3)
-            .map(|c| DVec3::new(c[0] as f64, c[1] as f64, c[2] as f64))
-            .collect();
-        let mut fs = Vec::with_capacity(faces.len() / 3);
-        for (fi, c) in faces.chunks_exact(3).enumerate() {
-            for &x in c {
-                if x < 0 || x as usize >= nv {
-                    return Err(RokebyError::invalid(
-                        "faces",
-                        format!("face {fi} has vertex index {x} outside 0..{nv}"),
-                    ));
-                }
-            }
-            if c[0] == c[1] || c[1] == c[2] || c[0] == c[2] {
-                return Err(RokebyError::invalid(
-                    "faces",
-                    format!("face {fi} repeats a vertex ({}, {}, {})", c[0], c[1], c[2]),
-                ));
-            }
-            fs.push([c[0] as u32, c[1] as u32, c[2] as u32]);
-        }
-        // Directed edges: each must appear once, and its reverse once.
-        let mut directed: HashMap<(u32, u32), u32> = HashMap::with_capacity(fs.len() * 3);
-        for (fi, f) in fs.iter().enumerate() {
-            for k in 0..3 {
-                let e = (f[k], f[(k + 1) % 3]);
-                if directed.insert(e, fi as u32).is_some() {
-                    return Err(RokebyError::invalid(
-                        "faces",
-                        format!("the caster is not a consistently oriented manifold: edge ({}, {}) is used twice in the same direction (face {fi})", e.0, e.1),
-                    ));
-                }
-            }
-        }
-        let open = directed
-            .keys()
-            .filter(|&&(a, b)| !directed.contains_key(&(b, a)))
-            .count();
-        if open > 0 {
-            let &(a, b) = directed
-                .keys()
-                .find(|&&(a, b)| !directed.contains_key(&(b, a)))
-                .expect("counted");
-            return Err(RokebyError::invalid(
-                "faces",
-                format!("the caster must be a closed mesh: {open} boundary edges (e.g. ({a}, {b})); close the holes or use a solid caster"),
-            ));
-        }
+        let mesh = Mesh::new(vertices, faces)?;
+        let adjacency = mesh.require_closed()?;
+        let nv = mesh.vertices.len();
         let normals = match normals {
             Some(n) => {
                 if n.len() != vertices.len() {
@@ -174,52 +101,31 @@ impl ClosedMesh {
                 }
                 out
             }
-            None => vertex_normals(&verts, &fs),
+            None => mesh.vertex_normals(),
         };
         Ok(ClosedMesh {
-            vertices: verts,
-            faces: fs,
+            mesh,
+            adjacency,
             normals,
         })
     }
 
-    /// The generalised winding number of the closed mesh around `p` (Σ of the faces' signed
-    /// solid angles / 4π, Van Oosterom–Strackee): 1 inside an outward-oriented closed surface,
-    /// 0 outside (±½ on it). A light inside the caster's volume (|w| ≥ ½) lights only its inside.
-    pub fn winding_number(&self, p: DVec3) -> f64 {
-        let mut sum = 0.0;
-        for f in &self.faces {
-            let a = self.vertices[f[0] as usize] - p;
-            let b = self.vertices[f[1] as usize] - p;
-            let c = self.vertices[f[2] as usize] - p;
-            let (la, lb, lc) = (a.length(), b.length(), c.length());
-            let num = a.dot(b.cross(c));
-            let den = la * lb * lc + a.dot(b) * lc + a.dot(c) * lb + b.dot(c) * la;
-            sum += 2.0 * num.atan2(den);
-        }
-        sum / (4.0 * std::f64::consts::PI)
+    /// The mesh (also reached by dereferencing).
+    pub fn mesh(&self) -> &Mesh {
+        &self.mesh
     }
 
-    /// Axis-aligned bounds of the vertices.
-    pub fn bounds(&self) -> (DVec3, DVec3) {
-        self.vertices.iter().fold(
-            (DVec3::splat(f64::INFINITY), DVec3::splat(f64::NEG_INFINITY)),
-            |(a, b), &p| (a.min(p), b.max(p)),
-        )
+    /// The faces glued along each edge and around each vertex.
+    pub fn adjacency(&self) -> &Adjacency {
+        &self.adjacency
     }
 }
 
-/// Area-weighted averages of the face normals (zero for unreferenced vertices).
-pub fn vertex_normals(v: &[DVec3], f: &[[u32; 3]]) -> Vec<DVec3> {
-    let mut n = vec![DVec3::ZERO; v.len()];
-    for t in f {
-        let (a, b, c) = (v[t[0] as usize], v[t[1] as usize], v[t[2] as usize]);
-        let fnrm = (b - a).cross(c - a);
-        for &i in t {
-            n[i as usize] += fnrm;
-        }
+impl std::ops::Deref for ClosedMesh {
+    type Target = Mesh;
+    fn deref(&self) -> &Mesh {
+        &self.mesh
     }
-    n.into_iter().map(|x| x.normalize_or_zero()).collect()
 }
 
 /// One silhouette vertex: on edge (`back`, `front`) at s = (1 − α) v_back + α v_front.
@@ -280,39 +186,35 @@ pub fn silhouettes(mesh: &ClosedMesh, light: &Light) -> Result<Vec<SilhouetteLoo
         .zip(n)
         .map(|(&p, &nn)| nn.dot(light.to_light(p)) > 0.0)
         .collect();
-    // Silhouette vertex per sign-changing undirected edge.
-    let mut index: HashMap<(u32, u32), u32> = HashMap::new();
+    // Silhouette vertex per sign-changing edge, stored at the lower of the edge's two halfedges
+    // (3f + k: corner k → k+1 of face f; on a closed mesh each has exactly one across).
+    let adj = mesh.adjacency();
+    let mut index = vec![u32::MAX; 3 * mesh.faces.len()];
     let mut pts: Vec<SilhouetteVertex> = Vec::new();
     let mut next: Vec<u32> = Vec::new();
-    let mut point_of =
-        |a: u32, b: u32, pts: &mut Vec<SilhouetteVertex>, next: &mut Vec<u32>| -> u32 {
-            let key = (a.min(b), a.max(b));
-            *index.entry(key).or_insert_with(|| {
-                let (vb, vf) = if front[a as usize] { (b, a) } else { (a, b) };
-                let alpha = silhouette_alpha(
-                    light,
-                    v[vb as usize],
-                    n[vb as usize],
-                    v[vf as usize],
-                    n[vf as usize],
-                );
-                let position = v[vb as usize] * (1.0 - alpha) + v[vf as usize] * alpha;
-                pts.push(SilhouetteVertex {
-                    back: vb,
-                    front: vf,
-                    alpha,
-                    position,
-                });
-                next.push(u32::MAX);
-                (pts.len() - 1) as u32
-            })
-        };
-    for f in &mesh.faces {
-        let s = [
-            front[f[0] as usize],
-            front[f[1] as usize],
-            front[f[2] as usize],
-        ];
+    let mut point_of = |h: usize,
+                        (a, b): (usize, usize),
+                        pts: &mut Vec<SilhouetteVertex>,
+                        next: &mut Vec<u32>|
+     -> u32 {
+        let key = adj.across(h).fold(h, usize::min);
+        if index[key] == u32::MAX {
+            let (vb, vf) = if front[a] { (b, a) } else { (a, b) };
+            let alpha = silhouette_alpha(light, v[vb], n[vb], v[vf], n[vf]);
+            let position = v[vb] * (1.0 - alpha) + v[vf] * alpha;
+            pts.push(SilhouetteVertex {
+                back: vb as u32,
+                front: vf as u32,
+                alpha,
+                position,
+            });
+            next.push(u32::MAX);
+            index[key] = (pts.len() - 1) as u32;
+        }
+        index[key]
+    };
+    for (fi, f) in mesh.faces.iter().enumerate() {
+        let s = f.map(|i| front[i]);
         if s[0] == s[1] && s[1] == s[2] {
             continue;
         }
@@ -322,12 +224,12 @@ pub fn silhouettes(mesh: &ClosedMesh, light: &Light) -> Result<Vec<SilhouetteLoo
         let mut start = u32::MAX;
         let mut end = u32::MAX;
         for k in 0..3 {
-            let (a, b) = (f[k], f[(k + 1) % 3]);
+            let e = (f[k], f[(k + 1) % 3]);
             let (sa, sb) = (s[k], s[(k + 1) % 3]);
             if !sa && sb {
-                start = point_of(a, b, &mut pts, &mut next);
+                start = point_of(3 * fi + k, e, &mut pts, &mut next);
             } else if sa && !sb {
-                end = point_of(a, b, &mut pts, &mut next);
+                end = point_of(3 * fi + k, e, &mut pts, &mut next);
             }
         }
         next[start as usize] = end;

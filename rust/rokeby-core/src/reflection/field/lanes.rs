@@ -300,6 +300,7 @@ fn dot3<S: Simd>(a: [L<S>; 3], b: [L<S>; 3]) -> L<S> {
 
 /// Loads lanes of an (N, 3) array at points base..base + count (padding repeats the last point).
 #[inline(always)]
+// Gathers three lane arrays from one (N, 3) row index per lane: one subscript, three arrays.
 #[allow(clippy::needless_range_loop)]
 fn load3<S: Simd>(a: &[f32], base: usize, count: usize) -> [L<S>; 3] {
     if count == S::W {
@@ -337,6 +338,7 @@ fn store3<S: Simd>(o: &mut [f32], v: &[L<S>; 3], count: usize) {
 
 /// Lanes whose values are all finite.
 #[inline(always)]
+// `x − x` is deliberate: 0 for finite lanes, NaN for ±∞ and NaN (the finiteness test).
 #[allow(clippy::eq_op)]
 fn finite<S: Simd>(v: &[L<S>]) -> Mk<S> {
     // x − x is 0 for finite x and NaN otherwise.

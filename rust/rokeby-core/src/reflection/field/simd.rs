@@ -4,6 +4,8 @@
 //! [`L`] / [`Mk`] and instantiated inside `#[target_feature]` functions, so the intrinsics inline
 //! into code compiled for those features.
 
+// Every unsafe fn here is a `#[target_feature]` kernel: safe to call exactly when the CPU has
+// that feature, which the dispatcher checks first; the condition is not repeated on each fn.
 #![allow(clippy::missing_safety_doc)]
 
 #[cfg(target_arch = "x86_64")]
