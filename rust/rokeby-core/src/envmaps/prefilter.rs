@@ -451,10 +451,9 @@ pub fn prefilter(env: &EnvMap, lobes: &[Lobe], params: &PrefilterParams) -> Resu
     let rings = lobes
         .iter()
         .any(|l| !l.is_mirror() && !matches!(l, Lobe::Gaussian { .. }));
-    while rings {
-        match downsample(mips.last().expect("non-empty")) {
-            Some(m) => mips.push(m),
-            None => break,
+    if rings {
+        while let Some(m) = downsample(mips.last().expect("non-empty")) {
+            mips.push(m);
         }
     }
     let texel = |m: usize| PI / mips[m].height as f64;
