@@ -374,6 +374,8 @@ def test_environment_adversarial(data, bad, layout):
     raises_naming("params[0]", rn.env_prefilter, ll, "phong", [bad])
     raises_naming("params[1]", rn.env_prefilter, ll, "ggx", [0.5, 1.5])
     raises_naming("params[0]", rn.env_prefilter, ll, "torrance_sparrow", [-0.1])
+    raises_naming("params[0]", rn.env_prefilter, ll, "gaussian", [bad])
+    raises_naming("image", rn.env_prefilter, np.ones((4, 9, 3), np.float32), "gaussian", [0.3])  # odd width
     raises_naming("texels_per_radius", rn.env_prefilter, ll, "phong", [1.0], texels_per_radius=0.0)
     raises_naming("tail", rn.env_prefilter, ll, "phong", [1.0], tail=bad)
     raises_naming("image", rn.env_prefilter, np.ones((4, 4, 3), np.float32)[:1], "phong", [1.0])
@@ -384,10 +386,10 @@ def test_environment_adversarial(data, bad, layout):
 
 
 @FEW
-@given(seed=seeds, lobe=st.sampled_from(["phong", "ggx", "torrance_sparrow"]), h=st.sampled_from([8, 16]), c=st.integers(1, 3))
+@given(seed=seeds, lobe=st.sampled_from(["phong", "ggx", "torrance_sparrow", "gaussian"]), h=st.sampled_from([8, 16]), c=st.integers(1, 3))
 def test_env_prefilter_and_reference_are_normalised_means(seed, lobe, h, c):
     rng = np.random.default_rng(seed)
-    params = {"phong": [0.0, 5.0, 200.0], "ggx": [0.0, 0.3, 1.0], "torrance_sparrow": [0.0, 0.2, 0.8]}[lobe]  # σ = 0 Phong: uniform
+    params = {"phong": [0.0, 5.0, 200.0], "ggx": [0.0, 0.3, 1.0], "torrance_sparrow": [0.0, 0.2, 0.8], "gaussian": [0.0, 0.3, 1.0]}[lobe]  # σ = 0 Phong: uniform
     k = rng.uniform(0.1, 2, c).astype(np.float32)
     const = np.broadcast_to(k, (h, 2 * h, c)).copy()
     levels = rn.env_prefilter(const, lobe, params)

@@ -90,6 +90,11 @@ REFLMAP_TAG = "rokeby_reflection_map"
 REFLMAP_VERSION_KEY = "rokeby_reflmap_version"
 REFLMAP_BSDF_KEY = "rokeby_bsdf"  # on a map node: the BSDF it feeds
 REFLMAP_SAVED_KEY = "rokeby_saved"  # on a map group node: the BSDF inputs it switched off (JSON)
+# Roughness of each captured level (level 0 the capture itself): written into files as the level
+# images' names (" r0.25") and cache file names ("_r0.25.exr") and as the shared group's blend
+# factors (Map Range From Min/Max), and each level image holds the blur of its roughness. Never
+# change it: files keep the levels they were captured with.
+REFLMAP_ROUGHNESS_LEVELS = (0.0, 0.25, 0.5, 1.0)
 FRAME_REFLECTION_MAP = "Rokeby: reflection map"
 
 # --- Appearance painting (appearance/) -----------------------------------------------------------

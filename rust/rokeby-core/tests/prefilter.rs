@@ -242,3 +242,67 @@ fn bad_parameters_are_errors() {
     )
     .is_err());
 }
+
+/// The reflection maps' levels (σ = √2·r² for roughness r = ¼, ½, 1): a constant stays constant,
+/// each level has the width the rule gives (smallest power of two ≥ 8π/σ, at least 32, never
+/// wider than the input), the blur keeps the sum of the texels (each pass is a circular
+/// convolution with a kernel of unit sum), and a point light spreads to an RMS angle of σ√2.
+#[test]
+fn prefilter_gaussian_levels_keep_constants_and_energy_and_spread_by_sigma() {
+    let sigmas: Vec<f64> = [0.25f64, 0.5, 1.0]
+        .iter()
+        .map(|r| 2f64.sqrt() * r * r)
+        .collect();
+    let lobes: Vec<Lobe> = sigmas.iter().map(|&s| Lobe::gaussian(s).unwrap()).collect();
+    let params = PrefilterParams::default();
+    let konst = latlong(128, |_| [0.25, 1.0, 7.5]);
+    for lv in prefilter::prefilter(&konst, &lobes, &params).unwrap() {
+        for t in lv.map.data.chunks(3) {
+            for (a, b) in t.iter().zip([0.25f32, 1.0, 7.5]) {
+                assert!((a - b).abs() < 1e-5 * b, "{a} vs {b}");
+            }
+        }
+    }
+    let (h, w) = (128usize, 256usize);
+    let mut point = EnvMap::zeros(Layout::LatLong, h, w, 1).unwrap();
+    point.data[(h / 2) * w + w / 2] = 1.0;
+    let levels = prefilter::prefilter(&point, &lobes, &params).unwrap();
+    let widths: Vec<usize> = levels.iter().map(|l| l.map.width).collect();
+    assert_eq!(widths, [256, 128, 32]);
+    for (lv, &sigma) in levels.iter().zip(&sigmas) {
+        let (hh, ww) = (lv.map.height, lv.map.width);
+        let scale = (w * h) as f64 / (ww * hh) as f64;
+        let total: f64 = lv.map.data.iter().map(|&v| v as f64).sum::<f64>() * scale;
+        assert!((total - 1.0).abs() < 1e-4, "σ = {sigma}: sum {total}");
+        assert!(lv.map.data.iter().all(|v| v.is_finite()));
+        let (mut num, mut den) = (0.0, 0.0);
+        for i in 0..hh {
+            for j in 0..ww {
+                let d = lv.map.texel_direction(0, i, j);
+                let om = rokeby_core::envmap::latlong_texel_solid_angle(hh, ww, i);
+                let v = lv.map.data[i * ww + j] as f64 * om;
+                num += v * d.x.clamp(-1.0, 1.0).acos().powi(2);
+                den += v;
+            }
+        }
+        let rms = (num / den).sqrt();
+        if sigma < 0.5 {
+            let want = sigma * 2f64.sqrt();
+            assert!(
+                (rms - want).abs() < 0.15 * want,
+                "σ = {sigma}: RMS {rms} vs {want}"
+            );
+        }
+    }
+    // σ = 0 is the map itself; a negative σ, or an odd width, is refused naming what is wrong.
+    let same = prefilter::prefilter(&point, &[Lobe::gaussian(0.0).unwrap()], &params).unwrap();
+    assert_eq!(same[0].map.data, point.data);
+    assert!(Lobe::gaussian(-0.1)
+        .unwrap_err()
+        .to_string()
+        .contains("≥ 0"));
+    assert!(Lobe::gaussian(f64::NAN).is_err());
+    let odd = EnvMap::zeros(Layout::LatLong, 4, 9, 3).unwrap();
+    let e = prefilter::prefilter(&odd, &[Lobe::gaussian(0.3).unwrap()], &params).unwrap_err();
+    assert!(e.to_string().contains("width must be even"), "{e}");
+}

@@ -93,9 +93,10 @@ fn parse_lobe(kind: &str, p: f64, arg: &str) -> PyResult<Lobe> {
         "phong" => Lobe::phong(p),
         "ggx" => Lobe::ggx_roughness(p),
         "torrance_sparrow" | "torrance-sparrow" | "ts" => Lobe::torrance_sparrow(p),
+        "gaussian" => Lobe::gaussian(p),
         _ => {
             return Err(PyValueError::new_err(format!(
-                "lobe: unknown lobe {kind:?} (expected 'phong', 'ggx' or 'torrance_sparrow')"
+                "lobe: unknown lobe {kind:?} (expected 'phong', 'ggx', 'torrance_sparrow' or 'gaussian')"
             )))
         }
     };
@@ -152,8 +153,9 @@ pub fn env_sample<'py>(
 }
 
 /// Specular prefiltering of a lat-long (H, W, C) image: one (H_k, W_k, C) lat-long array per
-/// value of `params` (Phong exponents σ, GGX roughness, or Torrance–Sparrow σ), each at its own
-/// resolution (the input's for sharp lobes, a coarser mip for rough ones).
+/// value of `params` (Phong exponents σ, GGX roughness, Torrance–Sparrow σ, or the reflection
+/// maps' separable Gaussian σ in radians), each at its own resolution (the input's for sharp
+/// lobes, a coarser one for rough ones).
 #[pyfunction]
 #[pyo3(signature = (image, lobe, params, texels_per_radius = 6.0, tail = 1e-5))]
 pub fn env_prefilter<'py>(

@@ -259,7 +259,7 @@ def env_shape(layout, size, c):
 
 
 LAYOUTS = ["latlong", "cube", "sphere", "paraboloid"]
-LOBES = ["phong", "ggx", "torrance_sparrow"]
+LOBES = ["phong", "ggx", "torrance_sparrow", "gaussian"]
 
 # --- per function ------------------------------------------------------------------------------
 

@@ -6,7 +6,8 @@ centre (or from the object in ``rokeby.map_origin``), with the mirror itself hid
 setting the capture changes (camera, resolution, engine, output format, the mirror's visibility)
 is put back afterwards, also when the render fails; the temporary camera is deleted. The result
 is a float image datablock "Rokeby Map <mirror>" plus a few blurred copies for rough materials
-(one per roughness in ROUGHNESS_LEVELS, made with numpy), stored
+(one per roughness in ROUGHNESS_LEVELS, blurred by the Rust core's prefilter with its separable
+Gaussian lobe, through :func:`rokeby.envmaps.prefilter`), stored
 
 * as OpenEXR files in ``//rokeby_maps/`` next to the .blend when the file is saved (what an artist
   expects of a cache: small .blend, maps on disk, refreshed by "Capture"), or
@@ -43,6 +44,7 @@ import uuid
 import numpy as np
 
 from . import shading
+from ... import envmaps
 from ...blender import transaction
 from .. import evaluate
 from ..evaluate import RokebyError
@@ -54,8 +56,8 @@ DEFAULT_RESOLUTION = 512
 MIN_RESOLUTION, MAX_RESOLUTION = 32, 8192
 DEFAULT_SAMPLES = 32
 # Roughness of each stored level: level 0 is the capture itself; rougher materials blend between
-# the two nearest levels.
-ROUGHNESS_LEVELS = (0.0, 0.25, 0.5, 1.0)
+# the two nearest levels. Saved data (image and file names, the shared group's blend factors).
+ROUGHNESS_LEVELS = schema.REFLMAP_ROUGHNESS_LEVELS
 CACHE_DIR = schema.REFLMAP_CACHE_DIR
 # File names in the cache: <sanitised mirror name, at most STEM_CHARS>-<map id, ID_CHARS hex>.exr
 STEM_CHARS = 40
@@ -108,51 +110,16 @@ def lobe_width(roughness: float) -> float:
     return math.sqrt(2.0) * roughness * roughness
 
 
-def _box_down(px: np.ndarray, factor: int) -> np.ndarray:
-    if factor == 1:
-        return px
-    h, w, c = px.shape
-    return px.reshape(h // factor, factor, w // factor, factor, c).mean(axis=(1, 3))
-
-
-def blur(px: np.ndarray, sigma: float) -> np.ndarray:
-    """Blur a lat-long image (H, W, C) by a Gaussian of ``sigma`` radians on the sphere, made
-    separable: along each meridian (a meridian and its opposite one form a great circle, so the
-    blur wraps over the poles) and along each parallel (wrapping at the seam, its width in pixels
-    growing as 1/cos(latitude)). Both passes are FFT convolutions, no loops over pixels."""
-    h, w, c = px.shape
-    if sigma <= 0:
-        return px.copy()
-    # Meridians: column x (bottom → top) followed by column x + W/2 (top → bottom).
-    half = w // 2
-    ring = np.concatenate([px[:, :half], px[::-1, half:]], axis=0)  # (2H, W/2, C)
-    k = np.fft.rfftfreq(2 * h)  # cycles per sample; one sample = π/H radians
-    s_px = sigma / (np.pi / h)
-    ring = np.fft.irfft(np.fft.rfft(ring, axis=0) * np.exp(-2 * (np.pi * k * s_px) ** 2)[:, None, None], n=2 * h, axis=0)
-    out = np.empty_like(px)
-    out[:, :half] = ring[:h]
-    out[:, half:] = ring[h:][::-1]
-    # Parallels: per-row width sigma / (2π cos(lat) / W) pixels.
-    lat = ((np.arange(h) + 0.5) / h - 0.5) * np.pi
-    s_row = sigma / np.maximum(2 * np.pi * np.cos(lat) / w, 1e-9)
-    kx = np.fft.rfftfreq(w)
-    gain = np.exp(-2 * (np.pi * kx[None, :] * s_row[:, None]) ** 2)
-    out = np.fft.irfft(np.fft.rfft(out, axis=1) * gain[:, :, None], n=w, axis=1)
-    return out.astype(px.dtype)
-
-
 def prefilter(px: np.ndarray, roughness_levels=ROUGHNESS_LEVELS) -> list:
-    """The capture ``px`` (H, W, C) and one blurred copy per further roughness level. Each copy
-    is made at a resolution where its blur spans about 7 texels (≥ 32 wide): rough levels are
-    small."""
-    out = [px]
-    h, w, _ = px.shape
-    for r in roughness_levels[1:]:
-        sigma = lobe_width(r)
-        target = 1 << max(5, math.ceil(math.log2(8 * math.pi / sigma)))
-        factor = max(1, w // min(w, target))
-        out.append(blur(_box_down(px, factor), sigma))
-    return out
+    """The capture ``px`` (H, W, C) and one blurred copy per further roughness level: a Gaussian
+    of :func:`lobe_width` radians on the sphere (the Rust core's ``Lobe::Gaussian``: made
+    separable along meridians, wrapping over the poles, and parallels, wrapping at the seam), each
+    at a resolution where σ spans 4 to 8 texels along the equator (≥ 32 wide): rough levels are
+    small. Level 0 is ``px`` itself."""
+    px = np.asarray(px)
+    sigmas = [lobe_width(r) for r in roughness_levels[1:]]
+    blurred = envmaps.prefilter(np.ascontiguousarray(px, dtype=np.float32), "gaussian", sigmas) if sigmas else []
+    return [px] + [lv.astype(px.dtype, copy=False) for lv in blurred]
 
 
 # --- capture -----------------------------------------------------------------------------------

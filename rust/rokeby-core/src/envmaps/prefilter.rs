@@ -59,6 +59,12 @@ pub enum Lobe {
     Ggx { alpha: f64 },
     /// Fraser's simplified Torrance–Sparrow, σ ≥ 0 (radians of half-angle; larger is rougher).
     TorranceSparrow { sigma: f64 },
+    /// The reflection maps' blur (`reflection/render/reflmap.py`, the levels of a captured
+    /// panorama): a Gaussian of angular standard deviation σ ≥ 0 radians about r, applied
+    /// separably on the lat-long grid at its own resolution (see [`gaussian_level`]). Its
+    /// [`Lobe::kernel`], exp(−γ²/2σ²), is the spherical Gaussian it approximates (for
+    /// [`brute_force`]).
+    Gaussian { sigma: f64 },
 }
 
 impl Lobe {
@@ -94,6 +100,16 @@ impl Lobe {
         Ok(Lobe::TorranceSparrow { sigma })
     }
 
+    pub fn gaussian(sigma: f64) -> Result<Lobe> {
+        if !sigma.is_finite() || sigma < 0.0 {
+            return Err(RokebyError::invalid(
+                "sigma",
+                format!("Gaussian σ must be finite and ≥ 0 (radians), got {sigma}"),
+            ));
+        }
+        Ok(Lobe::Gaussian { sigma })
+    }
+
     /// A delta lobe (GGX α ≤ 1e-12, or σ_TS = 0): the prefiltered map is the environment itself.
     pub fn is_mirror(&self) -> bool {
         match *self {
@@ -101,7 +117,7 @@ impl Lobe {
             // Below 1e-12 rad the lobe is a delta at any resolution, and its peak 1/(πα²) would
             // overflow (the fuzzer found α = 2.3e-10 giving k(1) = inf before the stable t below).
             Lobe::Ggx { alpha } => alpha <= 1e-12,
-            Lobe::TorranceSparrow { sigma } => sigma <= 0.0,
+            Lobe::TorranceSparrow { sigma } | Lobe::Gaussian { sigma } => sigma <= 0.0,
         }
     }
 
@@ -130,6 +146,10 @@ impl Lobe {
             Lobe::TorranceSparrow { sigma } => {
                 let th = (0.5 * (1.0 + c)).sqrt().min(1.0).acos();
                 (-(th / sigma) * (th / sigma)).exp()
+            }
+            Lobe::Gaussian { sigma } => {
+                let g = c.acos() / sigma;
+                (-0.5 * g * g).exp()
             }
         }
     }
@@ -192,7 +212,8 @@ pub struct Level {
     /// Half-energy angle R₀ and the cut-off angle of the lobe (radians).
     pub core_radius: f64,
     pub cut_radius: f64,
-    /// Rings evaluated (0 for a mirror level, which copies the input).
+    /// Rings evaluated (0 for a mirror level, which copies the input, and for a
+    /// [`Lobe::Gaussian`] level, which is blurred separably).
     pub rings: usize,
 }
 
@@ -426,14 +447,24 @@ pub fn prefilter(env: &EnvMap, lobes: &[Lobe], params: &PrefilterParams) -> Resu
         &[lobes.len() + 1, env.data.len()],
     )?;
     let mut mips = vec![env.clone()];
-    while let Some(m) = downsample(mips.last().expect("non-empty")) {
-        mips.push(m);
+    // Only the ring convolution uses the mip chain.
+    let rings = lobes
+        .iter()
+        .any(|l| !l.is_mirror() && !matches!(l, Lobe::Gaussian { .. }));
+    if rings {
+        while let Some(m) = downsample(mips.last().expect("non-empty")) {
+            mips.push(m);
+        }
     }
     let texel = |m: usize| PI / mips[m].height as f64;
     let kk = params.texels_per_radius;
     let mut levels = Vec::with_capacity(lobes.len());
     for lobe in lobes {
         crate::cancel::check()?;
+        if let (Lobe::Gaussian { sigma }, false) = (*lobe, lobe.is_mirror()) {
+            levels.push(gaussian_level(env, sigma)?);
+            continue;
+        }
         let (r0, cut) = if lobe.is_mirror() {
             (0.0, 0.0)
         } else {
@@ -514,6 +545,171 @@ pub fn prefilter(env: &EnvMap, lobes: &[Lobe], params: &PrefilterParams) -> Resu
         });
     }
     Ok(levels)
+}
+
+/// The narrowest level a [`Lobe::Gaussian`] is blurred at (texels across).
+pub const GAUSSIAN_MIN_WIDTH: usize = 32;
+
+/// The width a [`Lobe::Gaussian`] of σ radians is blurred at: the smallest power of two ≥ 8π/σ
+/// (σ spans 4 texels along the equator), at least [`GAUSSIAN_MIN_WIDTH`].
+fn gaussian_target_width(sigma: f64) -> usize {
+    let e = (8.0 * PI / sigma).log2().ceil();
+    let e = if e.is_nan() { 62.0 } else { e.clamp(5.0, 62.0) };
+    (1usize << e as u32).max(GAUSSIAN_MIN_WIDTH)
+}
+
+/// The circular convolution kernel g (length n) whose discrete Fourier transform is the real,
+/// even `gain` (gain[j] for frequencies j = 0 ..= n/2 cycles per n samples, decreasing):
+/// g[m] = (1/n)·(G₀ + 2 Σ_{0<j<n/2} G_j cos(2πjm/n) + G_{n/2} (−1)^m [n even]). Convolving with g
+/// is multiplying the spectrum by the gain (numpy's rfft · gain · irfft) exactly.
+fn circular_kernel(gain: &[f64], n: usize) -> Vec<f64> {
+    let cos: Vec<f64> = (0..n).map(|k| (TAU * k as f64 / n as f64).cos()).collect();
+    // Frequencies whose gain is below 1e-18 add nothing a float can hold.
+    let top = gain.iter().position(|&x| x < 1e-18).unwrap_or(gain.len());
+    (0..n)
+        .map(|m| {
+            let mut s = gain[0];
+            for (j, &gj) in gain.iter().enumerate().take(top).skip(1) {
+                let nyquist = n % 2 == 0 && 2 * j == n;
+                s += if nyquist { 1.0 } else { 2.0 } * gj * cos[(j * m) % n];
+            }
+            s / n as f64
+        })
+        .collect()
+}
+
+/// `out[m] = Σ_d g[d]·r[(m − d) mod n]` for an (n, c) interleaved signal `r` (f64).
+fn circular_convolve(r: &[f64], g: &[f64], c: usize) -> Vec<f64> {
+    let n = g.len();
+    let mut r2 = Vec::with_capacity(2 * n * c);
+    r2.extend_from_slice(r);
+    r2.extend_from_slice(r);
+    let gmax = g.iter().fold(0.0f64, |a, &b| a.max(b.abs()));
+    let mut out = vec![0.0f64; n * c];
+    for (d, &gd) in g.iter().enumerate() {
+        // The Gaussian's far tail (|g| below 1e-13 of its peak) changes no f32 result.
+        if gd.abs() <= 1e-13 * gmax {
+            continue;
+        }
+        let src = &r2[(n - d) * c..(2 * n - d) * c];
+        for (o, s) in out.iter_mut().zip(src) {
+            *o += gd * s;
+        }
+    }
+    out
+}
+
+/// Gains exp(−2(π f s)²) of a Gaussian of `s` samples at frequencies f = j/n, j = 0 ..= n/2.
+fn gaussian_gain(n: usize, s: f64) -> Vec<f64> {
+    (0..=n / 2)
+        .map(|j| {
+            let x = PI * (j as f64 / n as f64) * s;
+            (-2.0 * x * x).exp()
+        })
+        .collect()
+}
+
+/// A [`Lobe::Gaussian`] level: the map box-averaged (plain f×f means) down to
+/// [`gaussian_target_width`] (never upsampled), then blurred by a Gaussian of σ radians made
+/// separable on the lat-long grid:
+///
+/// 1. along each meridian — column x followed by column x + W/2 reversed form a great circle
+///    through both poles, so the blur wraps over the poles: a circular convolution of 2H samples
+///    of π/H radians with a Gaussian of σH/π samples;
+/// 2. along each parallel — a circular convolution (wrapping at the seam) with a Gaussian of
+///    σ / (2π cos λ / W) samples, λ the row's latitude (wider towards the poles; cos λ ≥ 1e-9·…).
+///
+/// Each convolution multiplies the spectrum by the Gaussian's gain exp(−2(π f s)²) exactly
+/// ([`circular_kernel`]), in f64; the meridian pass's result is rounded to f32 before the parallel
+/// pass. This is the blur `reflmap.py` computed with numpy FFTs up to its first release
+/// (tests/reflection/test_reflmap.py compares the two). Rows may be top-down or bottom-up: both
+/// passes are symmetric about the equator.
+pub fn gaussian_level(env: &EnvMap, sigma: f64) -> Result<Level> {
+    check_latlong(env, "image")?;
+    let (h, w, c) = (env.height, env.width, env.channels);
+    if w % 2 != 0 {
+        return Err(RokebyError::invalid(
+            "image",
+            format!("the Gaussian lobe pairs each meridian with the opposite one: the width must be even, got {w}"),
+        ));
+    }
+    let mut f = (w / w.min(gaussian_target_width(sigma))).max(1);
+    while f > 1 && (h % f != 0 || w % f != 0 || (w / f) % 2 != 0) {
+        f -= 1;
+    }
+    let (h2, w2) = (h / f, w / f);
+    // Box average (f32 values, as stored).
+    let mut px = vec![0.0f32; h2 * w2 * c];
+    px.par_chunks_mut(w2 * c).enumerate().for_each(|(i, row)| {
+        let inv = 1.0 / (f * f) as f64;
+        for j in 0..w2 {
+            for ch in 0..c {
+                let mut s = 0.0f64;
+                for ii in i * f..(i + 1) * f {
+                    for jj in j * f..(j + 1) * f {
+                        s += env.data[(ii * w + jj) * c + ch] as f64;
+                    }
+                }
+                row[j * c + ch] = (s * inv) as f32;
+            }
+        }
+    });
+    crate::cancel::check()?;
+    // 1. Meridians: ring of column x (rows 0 → H−1), then column x + W/2 (rows H−1 → 0).
+    let half = w2 / 2;
+    let n = 2 * h2;
+    let g = circular_kernel(&gaussian_gain(n, sigma / (PI / h2 as f64)), n);
+    let rings: Vec<Vec<f64>> = (0..half)
+        .into_par_iter()
+        .map(|x| {
+            let mut ring = vec![0.0f64; n * c];
+            for i in 0..h2 {
+                for ch in 0..c {
+                    ring[i * c + ch] = px[(i * w2 + x) * c + ch] as f64;
+                    ring[(h2 + i) * c + ch] = px[((h2 - 1 - i) * w2 + x + half) * c + ch] as f64;
+                }
+            }
+            circular_convolve(&ring, &g, c)
+        })
+        .collect();
+    let mut mid = vec![0.0f32; h2 * w2 * c];
+    for (x, ring) in rings.iter().enumerate() {
+        for i in 0..h2 {
+            for ch in 0..c {
+                mid[(i * w2 + x) * c + ch] = ring[i * c + ch] as f32;
+                mid[((h2 - 1 - i) * w2 + x + half) * c + ch] = ring[(h2 + i) * c + ch] as f32;
+            }
+        }
+    }
+    drop(rings);
+    crate::cancel::check()?;
+    // 2. Parallels: per row a Gaussian of σ / (2π cos λ / W) samples, wrapping at the seam.
+    let mut data = vec![0.0f32; h2 * w2 * c];
+    data.par_chunks_mut(w2 * c)
+        .zip(mid.par_chunks(w2 * c))
+        .enumerate()
+        .for_each(|(i, (orow, irow))| {
+            let lat = ((i as f64 + 0.5) / h2 as f64 - 0.5) * PI;
+            let s_row = sigma / (TAU * lat.cos() / w2 as f64).max(1e-9);
+            let g = circular_kernel(&gaussian_gain(w2, s_row), w2);
+            let r: Vec<f64> = irow.iter().map(|&v| v as f64).collect();
+            for (o, v) in orow.iter_mut().zip(circular_convolve(&r, &g, c)) {
+                *o = v as f32;
+            }
+        });
+    Ok(Level {
+        map: EnvMap {
+            layout: Layout::LatLong,
+            height: h2,
+            width: w2,
+            channels: c,
+            data,
+        },
+        // Half the energy of a narrow 2D Gaussian lies within σ√(2 ln 2); it reaches everywhere.
+        core_radius: sigma * (2.0 * std::f64::consts::LN_2).sqrt(),
+        cut_radius: PI,
+        rings: 0,
+    })
 }
 
 /// Texel directions and the seed's weights sin θ (π/M)(2π/N) of a lat-long map (Fraser, eq. 2).
