@@ -570,7 +570,7 @@ fn circular_kernel(gain: &[f64], n: usize) -> Vec<f64> {
         .map(|m| {
             let mut s = gain[0];
             for (j, &gj) in gain.iter().enumerate().take(top).skip(1) {
-                let nyquist = n % 2 == 0 && 2 * j == n;
+                let nyquist = n.is_multiple_of(2) && 2 * j == n;
                 s += if nyquist { 1.0 } else { 2.0 } * gj * cos[(j * m) % n];
             }
             s / n as f64
