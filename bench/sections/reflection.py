@@ -270,7 +270,7 @@ def geodesic_section(emit, peers_python):
                 mean, err = None, "— | —"
             emit(f"| {name} | {len(f):,} | {label} | {pre:.3f} | {query * 1e3:.1f} | {err} | {'—' if mem is None else f'{mem:.0f}'} |")
             rows.append({"mesh": name.split(" ")[0], "method": label, "query_ms": query * 1e3, "mean_err": mean})
-        if exact is not None and original is None:
+        if "exact_pre" in peers and original is None:  # pygeodesic's own row, where it ran
             emit(f"| {name} | {len(f):,} | exact MMP (pygeodesic) | {float(peers['exact_pre']):.3f} | {float(peers['exact_query']) * 1e3:.1f} | 0 | 0 | — |")
     emit()
     if big is not None:
