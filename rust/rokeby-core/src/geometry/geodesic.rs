@@ -1198,22 +1198,7 @@ mod tests {
             PathBuf::from,
         );
         let text = std::fs::read_to_string(root.join("meshes").join(name)).ok()?;
-        let (mut v, mut f) = (Vec::new(), Vec::new());
-        for line in text.lines() {
-            let mut it = line.split_whitespace();
-            match it.next() {
-                Some("v") => v.extend(it.take(3).map(|x| x.parse::<f32>().unwrap())),
-                Some("f") => {
-                    let idx: Vec<i64> = it
-                        .map(|t| t.split('/').next().unwrap().parse::<i64>().unwrap() - 1)
-                        .collect();
-                    for k in 1..idx.len() - 1 {
-                        f.extend_from_slice(&[idx[0], idx[k], idx[k + 1]]);
-                    }
-                }
-                _ => {}
-            }
-        }
+        let (v, f) = crate::mesh::parse_obj(&text).unwrap();
         Some(Mesh::new(&v, &f).unwrap())
     }
 

@@ -22,6 +22,48 @@ pub struct Mesh {
     pub faces: Vec<[usize; 3]>,
 }
 
+/// Reads the `v` and `f` lines of Wavefront OBJ text: flattened vertices (V×3) and triangles
+/// (F×3, 0-based; polygons fanned from their first corner, `a/b/c` corners and negative, relative
+/// indices read). Other lines are ignored. A number that does not parse is an error naming its
+/// line. The one OBJ reader of the Rust side (tests, examples); the add-on reads OBJ in Python
+/// (`rokeby.meshio`).
+pub fn parse_obj(text: &str) -> Result<(Vec<f32>, Vec<i64>)> {
+    let (mut v, mut f) = (Vec::new(), Vec::new());
+    for (n, line) in text.lines().enumerate() {
+        let bad = |what: &str| RokebyError::invalid("obj", format!("line {}: {what}", n + 1));
+        let mut it = line.split_whitespace();
+        match it.next() {
+            Some("v") => {
+                for t in it.take(3) {
+                    v.push(
+                        t.parse::<f32>()
+                            .map_err(|_| bad("a vertex coordinate is not a number"))?,
+                    );
+                }
+            }
+            Some("f") => {
+                let nv = (v.len() / 3) as i64;
+                let idx = it
+                    .map(|t| {
+                        let i: i64 = t
+                            .split('/')
+                            .next()
+                            .unwrap_or("")
+                            .parse()
+                            .map_err(|_| bad("a face index is not an integer"))?;
+                        Ok(if i < 0 { nv + i } else { i - 1 })
+                    })
+                    .collect::<Result<Vec<i64>>>()?;
+                for k in 1..idx.len().saturating_sub(1) {
+                    f.extend_from_slice(&[idx[0], idx[k], idx[k + 1]]);
+                }
+            }
+            _ => {}
+        }
+    }
+    Ok((v, f))
+}
+
 impl Mesh {
     /// `vertices` (V×3 flattened), `faces` (F×3 flattened, any integer type converted to i64).
     pub fn new(vertices: &[f32], faces: &[i64]) -> Result<Self> {
@@ -258,5 +300,33 @@ impl Adjacency {
     /// The faces around vertex `v`, in increasing order.
     pub fn faces_around(&self, v: usize) -> &[usize] {
         &self.vf[self.vf_start[v]..self.vf_start[v + 1]]
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn parse_obj_fans_polygons_and_reads_relative_indices() {
+        let text = "# a quad and a triangle\nv 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nvn 0 0 1\n\
+                    f 1/1/1 2/2/1 3/3/1 4/4/1\nf -4 -2 -1\n";
+        let (v, f) = parse_obj(text).unwrap();
+        assert_eq!(v.len(), 12);
+        assert_eq!(f, vec![0, 1, 2, 0, 2, 3, 0, 2, 3]);
+    }
+
+    #[test]
+    fn parse_obj_names_the_line_of_a_bad_number() {
+        let err = parse_obj("v 0 0 0\nv 1 x 0\n").unwrap_err().to_string();
+        assert!(
+            err.contains("line 2") && err.contains("vertex coordinate"),
+            "{err}"
+        );
+        let err = parse_obj("v 0 0 0\nf 1 a 1\n").unwrap_err().to_string();
+        assert!(
+            err.contains("line 2") && err.contains("face index"),
+            "{err}"
+        );
     }
 }

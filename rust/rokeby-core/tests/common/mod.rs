@@ -46,32 +46,8 @@ pub fn shared_meshes() -> Vec<PathBuf> {
     out
 }
 
-/// A minimal OBJ reader: `v` lines and `f` lines (polygons fanned, `a/b/c` and negative indices).
+/// The vertices and triangles of an OBJ file ([`rokeby_core::mesh::parse_obj`]).
 pub fn load_obj(path: &PathBuf) -> (Vec<f32>, Vec<i64>) {
-    let text = std::fs::read_to_string(path).unwrap();
-    let (mut v, mut f) = (Vec::new(), Vec::new());
-    for line in text.lines() {
-        let mut it = line.split_whitespace();
-        match it.next() {
-            Some("v") => v.extend(it.take(3).map(|x| x.parse::<f32>().unwrap())),
-            Some("f") => {
-                let nv = (v.len() / 3) as i64;
-                let idx: Vec<i64> = it
-                    .map(|t| {
-                        let i: i64 = t.split('/').next().unwrap().parse().unwrap();
-                        if i < 0 {
-                            nv + i
-                        } else {
-                            i - 1
-                        }
-                    })
-                    .collect();
-                for k in 1..idx.len().saturating_sub(1) {
-                    f.extend_from_slice(&[idx[0], idx[k], idx[k + 1]]);
-                }
-            }
-            _ => {}
-        }
-    }
-    (v, f)
+    let text = std::fs::read_to_string(path).unwrap_or_else(|e| panic!("{path:?}: {e}"));
+    rokeby_core::mesh::parse_obj(&text).unwrap_or_else(|e| panic!("{path:?}: {e}"))
 }
