@@ -504,6 +504,93 @@ fn ids_vec(ids: &Bound<'_, PyAny>, h: usize, w: usize) -> PyResult<Vec<i32>> {
     })
 }
 
+/// The passes of one frame as `recomposite` and `Recompositor` take them, checked against each
+/// other's (H, W) in the order of the Python signature: ids, normals, edited normals (absent for a
+/// `Recompositor`, which takes them per run), view (H, W, 3) or (3,), diffuse, reflection and
+/// image (H, W, 3), then the optional alpha_d, alpha_r, alpha (H, W) and diffuse_color,
+/// reflection_color (H, W, 3). Borrowed where the arrays are float32 and contiguous.
+struct Passes<'py> {
+    h: usize,
+    w: usize,
+    ids: Vec<i32>,
+    normals: F32Array<'py>,
+    edited: Option<F32Array<'py>>,
+    view: F32Array<'py>,
+    /// diffuse, reflection, image.
+    planes: [F32Array<'py>; 3],
+    /// alpha_d, alpha_r, alpha, diffuse_color, reflection_color.
+    optional: [Option<F32Array<'py>>; 5],
+}
+
+impl<'py> Passes<'py> {
+    fn read(
+        ids: &Bound<'py, PyAny>,
+        normals: &Bound<'py, PyAny>,
+        edited: Option<&Bound<'py, PyAny>>,
+        view: &Bound<'py, PyAny>,
+        planes: [&Bound<'py, PyAny>; 3],
+        optional: [Option<&Bound<'py, PyAny>>; 5],
+    ) -> PyResult<Self> {
+        let (normals, h, w) = image3(normals, "normals", None)?;
+        let ids = ids_vec(ids, h, w)?;
+        let edited = match edited {
+            Some(e) => Some(image3(e, "edited_normals", Some((h, w)))?.0),
+            None => None,
+        };
+        let view = f32_array(view, "view")?;
+        if view.shape() != [3] && view.shape() != [h, w, 3] {
+            return Err(PyValueError::new_err(format!(
+                "view: expected shape (3,) or ({h}, {w}, 3), got {}",
+                shape_str(&view.shape())
+            )));
+        }
+        let [d, r, i] = planes;
+        let planes = [
+            image3(d, "diffuse", Some((h, w)))?.0,
+            image3(r, "reflection", Some((h, w)))?.0,
+            image3(i, "image", Some((h, w)))?.0,
+        ];
+        let [ad, ar, al, dc, rc] = optional;
+        let optional = [
+            image1(ad, "alpha_d", h, w)?,
+            image1(ar, "alpha_r", h, w)?,
+            image1(al, "alpha", h, w)?,
+            opt_image3(dc, "diffuse_color", h, w)?,
+            opt_image3(rc, "reflection_color", h, w)?,
+        ];
+        Ok(Passes {
+            h,
+            w,
+            ids,
+            normals,
+            edited,
+            view,
+            planes,
+            optional,
+        })
+    }
+
+    /// The core's view of the passes (absent optional ones as empty slices, no edited normals
+    /// as the normals themselves), borrowed, not copied.
+    fn buffers(&self) -> Buffers<'_> {
+        let opt = |k: usize| self.optional[k].as_ref().map_or(&[][..], |x| x.slice());
+        Buffers {
+            ids: &self.ids,
+            normals: self.normals.slice(),
+            edited: self.edited.as_ref().unwrap_or(&self.normals).slice(),
+            view: self.view.slice(),
+            diffuse: self.planes[0].slice(),
+            reflection: self.planes[1].slice(),
+            alpha_d: opt(0),
+            alpha_r: opt(1),
+            alpha: opt(2),
+            image: self.planes[2].slice(),
+            diffuse_color: opt(3),
+            reflection_color: opt(4),
+        }
+    }
+}
+
 /// Recompositing, eqs. 3–5. ids (H, W): patch index per pixel (< 0: none), normals and
 /// edited_normals (H, W, 3) screen space, view (H, W, 3) or (3,), diffuse D0 and reflection R0
 /// (H, W, 3) (illumination when diffuse_color/reflection_color are given), image I (H, W, 3);
@@ -533,46 +620,17 @@ pub fn recomposite<'py>(
     gamma: f64,
     epsilon: f64,
 ) -> PyResult<(Bound<'py, PyArrayDyn<f32>>, Bound<'py, PyDict>)> {
-    let (n, h, w) = image3(normals, "normals", None)?;
-    let ids_i = ids_vec(ids, h, w)?;
-    let (e, _, _) = image3(edited_normals, "edited_normals", Some((h, w)))?;
-    let v = f32_array(view, "view")?;
-    if v.shape() != [3] && v.shape() != [h, w, 3] {
-        return Err(PyValueError::new_err(format!(
-            "view: expected shape (3,) or ({h}, {w}, 3), got {}",
-            shape_str(&v.shape())
-        )));
-    }
-    let (dd, _, _) = image3(diffuse, "diffuse", Some((h, w)))?;
-    let (rr, _, _) = image3(reflection, "reflection", Some((h, w)))?;
-    let (ii, _, _) = image3(image, "image", Some((h, w)))?;
-    let ad = image1(alpha_d, "alpha_d", h, w)?;
-    let ar = image1(alpha_r, "alpha_r", h, w)?;
-    let al = image1(alpha, "alpha", h, w)?;
-    let dc = opt_image3(diffuse_color, "diffuse_color", h, w)?;
-    let rc = opt_image3(reflection_color, "reflection_color", h, w)?;
+    let p = Passes::read(
+        ids,
+        normals,
+        Some(edited_normals),
+        view,
+        [diffuse, reflection, image],
+        [alpha_d, alpha_r, alpha, diffuse_color, reflection_color],
+    )?;
+    let (h, w) = (p.h, p.w);
     let pts = parse_patches(patches)?;
-    let empty: &[f32] = &[];
-    // Borrowed, not copied: optional buffers are empty slices when absent.
-    let adv: &[f32] = ad.as_ref().map(|x| x.slice()).unwrap_or(empty);
-    let arv: &[f32] = ar.as_ref().map(|x| x.slice()).unwrap_or(empty);
-    let alv: &[f32] = al.as_ref().map(|x| x.slice()).unwrap_or(empty);
-    let dcv: &[f32] = dc.as_ref().map(|x| x.slice()).unwrap_or(empty);
-    let rcv: &[f32] = rc.as_ref().map(|x| x.slice()).unwrap_or(empty);
-    let bufs = Buffers {
-        ids: &ids_i,
-        normals: n.slice(),
-        edited: e.slice(),
-        view: v.slice(),
-        diffuse: dd.slice(),
-        reflection: rr.slice(),
-        alpha_d: adv,
-        alpha_r: arv,
-        alpha: alv,
-        image: ii.slice(),
-        diffuse_color: dcv,
-        reflection_color: rcv,
-    };
+    let bufs = p.buffers();
     let params = Params {
         k_d,
         k_r,
@@ -651,44 +709,17 @@ impl PyRecompositor {
         gamma: f64,
         epsilon: f64,
     ) -> PyResult<Self> {
-        let (n, h, w) = image3(normals, "normals", None)?;
-        let ids_i = ids_vec(ids, h, w)?;
-        let v = f32_array(view, "view")?;
-        if v.shape() != [3] && v.shape() != [h, w, 3] {
-            return Err(PyValueError::new_err(format!(
-                "view: expected shape (3,) or ({h}, {w}, 3), got {}",
-                shape_str(&v.shape())
-            )));
-        }
-        let (dd, _, _) = image3(diffuse, "diffuse", Some((h, w)))?;
-        let (rr, _, _) = image3(reflection, "reflection", Some((h, w)))?;
-        let (ii, _, _) = image3(image, "image", Some((h, w)))?;
-        let ad = image1(alpha_d, "alpha_d", h, w)?;
-        let ar = image1(alpha_r, "alpha_r", h, w)?;
-        let al = image1(alpha, "alpha", h, w)?;
-        let dc = opt_image3(diffuse_color, "diffuse_color", h, w)?;
-        let rc = opt_image3(reflection_color, "reflection_color", h, w)?;
+        let p = Passes::read(
+            ids,
+            normals,
+            None,
+            view,
+            [diffuse, reflection, image],
+            [alpha_d, alpha_r, alpha, diffuse_color, reflection_color],
+        )?;
+        let (h, w) = (p.h, p.w);
         let pts = parse_patches(patches)?;
-        let empty: &[f32] = &[];
-        let adv: &[f32] = ad.as_ref().map(|x| x.slice()).unwrap_or(empty);
-        let arv: &[f32] = ar.as_ref().map(|x| x.slice()).unwrap_or(empty);
-        let alv: &[f32] = al.as_ref().map(|x| x.slice()).unwrap_or(empty);
-        let dcv: &[f32] = dc.as_ref().map(|x| x.slice()).unwrap_or(empty);
-        let rcv: &[f32] = rc.as_ref().map(|x| x.slice()).unwrap_or(empty);
-        let bufs = Buffers {
-            ids: &ids_i,
-            normals: n.slice(),
-            edited: n.slice(),
-            view: v.slice(),
-            diffuse: dd.slice(),
-            reflection: rr.slice(),
-            alpha_d: adv,
-            alpha_r: arv,
-            alpha: alv,
-            image: ii.slice(),
-            diffuse_color: dcv,
-            reflection_color: rcv,
-        };
+        let bufs = p.buffers();
         let inner = run_detached(py, || {
             core_recomposite::Recompositor::new(w, h, &bufs, pts, gamma, epsilon)
         })?;
