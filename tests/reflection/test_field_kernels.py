@@ -75,3 +75,23 @@ def test_per_vertex_field_as_the_addon_writes_it_matches_the_f64_reference(monke
     e_got = rn.view_blend(got, r.astype(np.float32))
     e_want = rn.view_blend(want, r.astype(np.float32))
     assert np.max(dir_angle(e_got, e_want)) <= TOL
+
+
+@pytest.mark.parametrize("kernel", KERNELS)
+def test_exact_polar_by_the_f64_lanes_is_the_scalar_svd(monkeypatch, rng, kernel):
+    """polar="exact" through a vector kernel (f64 lanes of Newton's method, verified to about 1e-13
+    rad of the SVD, the SVD elsewhere) gives the scalar SVD's answer: the same f64 rotation rounded
+    to float32 twice, so within 3e-7 rad."""
+    pos, nrm = mirror(29, 31)
+    eye = np.array([0.25, -2.5, 3.0], np.float32)
+    pts = pos.reshape(-1, 3)
+    c = random_constraints(rng, 8, spread=0.8, max_edit=0.8)
+    c[:, :3] = pts[rng.choice(len(pts), 8, replace=False)]
+    monkeypatch.setenv("ROKEBY_SIMD", "scalar")
+    want_px = rn.edited_directions(pos, nrm, eye, c, polar="exact")
+    want_pt = rn.rotation_field(pts, c, output="view_blend", polar="exact")
+    force(monkeypatch, kernel)
+    got_px = rn.edited_directions(pos, nrm, eye, c, polar="exact")
+    got_pt = rn.rotation_field(pts, c, output="view_blend", polar="exact")
+    assert np.max(dir_angle(got_px.reshape(-1, 3), want_px.reshape(-1, 3))) <= 3e-7
+    assert np.max(rot_angle(quat_to_matrix(got_pt[:, :4]), quat_to_matrix(want_pt[:, :4]))) <= 3e-7

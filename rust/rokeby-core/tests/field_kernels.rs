@@ -331,3 +331,87 @@ fn kernels_resolve_to_what_the_cpu_runs() {
     assert_eq!(Kernel::resolve(Kernel::Scalar), Kernel::Scalar);
     assert_eq!(Kernel::resolve(Kernel::Portable), Kernel::Portable);
 }
+
+/// The exact polar method by the f64 lanes (Newton's method verified to about 1e-13 rad of the SVD,
+/// the SVD where they cannot vouch) against the scalar f64 SVD: the same f64 rotation rounded to
+/// f32 twice, so within two f32 roundings: 3e-7 rad for a quaternion or a direction (each unit
+/// component rounded by at most 6e-8 relative), and 3e-7 × |v| + 1e-7 for a rotation vector v.
+/// Per pixel and per point, with given distances, a region, a point on a constraint, and tails.
+#[test]
+fn exact_polar_lanes_match_the_scalar_svd() {
+    const EXACT_TOL: f64 = 3e-7;
+    let (w, h) = (67, 41);
+    let (p, n) = surface(w, h);
+    let on = Some([p[3 * 700], p[3 * 700 + 1], p[3 * 700 + 2]]);
+    let npx = w * h;
+    let rows = constraints(8, 21, 0.6, on);
+    let d: Vec<f32> = (0..8 * npx)
+        .map(|j| {
+            let (c, i) = (j / npx, j % npx);
+            let q = DVec3::new(p[3 * i] as f64, p[3 * i + 1] as f64, p[3 * i + 2] as f64);
+            let pc = DVec3::new(
+                rows[9 * c] as f64,
+                rows[9 * c + 1] as f64,
+                rows[9 * c + 2] as f64,
+            );
+            (1.2 * q.distance(pc)) as f32
+        })
+        .collect();
+    let region = || vec![Region::euclidean([0.1, 0.0, 0.0], 0.7, 0.3, "regions[0]").unwrap()];
+    for (what, regs, given) in [
+        ("plain", vec![], false),
+        ("given", vec![], true),
+        ("region", region(), false),
+    ] {
+        let dist = if given {
+            Distances::Given(&d)
+        } else {
+            Distances::Euclidean
+        };
+        let want = reference_pixels(&rows, regs.clone(), &p, &n, dist, w);
+        for kern in lanes() {
+            let f = Field::new(&rows, regs.clone()).unwrap().with_kernel(kern);
+            let got = f
+                .edited_directions(&p, &n, EYE, dist, PolarMethod::Svd, w)
+                .unwrap();
+            for (i, (a, b)) in got.chunks_exact(3).zip(want.chunks_exact(3)).enumerate() {
+                let err = dir_angle(a, b);
+                assert!(
+                    err <= EXACT_TOL,
+                    "{} {what}: pixel {i} differs by {err:e}",
+                    kern.name()
+                );
+            }
+            for output in [
+                FieldOutput::Quaternion,
+                FieldOutput::ViewBlend,
+                FieldOutput::RotationVector,
+            ] {
+                let field = |k: Kernel| {
+                    Field::new(&rows, regs.clone())
+                        .unwrap()
+                        .with_kernel(k)
+                        .rotation_field_as(&p, dist, None, PolarMethod::Svd, output)
+                        .unwrap()
+                };
+                let (got, want) = (field(kern), field(Kernel::Scalar));
+                let wd = rokeby_core::field::output_width(output);
+                for (i, (a, b)) in got.chunks_exact(wd).zip(want.chunks_exact(wd)).enumerate() {
+                    let (err, tol) = match output {
+                        FieldOutput::RotationVector => {
+                            let va = DVec3::new(a[0] as f64, a[1] as f64, a[2] as f64);
+                            let vb = DVec3::new(b[0] as f64, b[1] as f64, b[2] as f64);
+                            ((va - vb).length(), EXACT_TOL * vb.length() + 1e-7)
+                        }
+                        _ => (quat_angle(a, b), EXACT_TOL),
+                    };
+                    assert!(
+                        err <= tol,
+                        "{} {what} {output:?}: point {i} differs by {err:e}",
+                        kern.name()
+                    );
+                }
+            }
+        }
+    }
+}

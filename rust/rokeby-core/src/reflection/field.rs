@@ -35,6 +35,7 @@ use std::sync::atomic::{AtomicU64, Ordering};
 
 mod lanes;
 mod simd;
+mod wide;
 pub use lanes::Kernel;
 
 /// Row length of a constraint: [p (3), r (3), e (3)].
@@ -83,20 +84,27 @@ struct Scratch {
     warm: Vec<DQuat>,
     blend_warm: DQuat,
     d2: Vec<f64>,
+    /// The (one) group's rotation at the next point, solved by the f64 lanes (`wide`).
+    given: Option<DQuat>,
 }
 
 impl Scratch {
     /// Warm-starts the (one) group's Newton iteration from a lane's f32 rotation.
     fn warm_from(&mut self, q: [f32; 4]) {
-        let q = DQuat::from_xyzw(q[0] as f64, q[1] as f64, q[2] as f64, q[3] as f64);
-        let len = q.length();
         if let Some(w) = self.warm.first_mut() {
-            *w = if len.is_finite() && len > 0.5 {
-                q / len
-            } else {
-                DQuat::IDENTITY
-            };
+            *w = warm_quat(q);
         }
+    }
+}
+
+/// A lane's f32 rotation as an f64 warm start (the identity if it is not one).
+fn warm_quat(q: [f32; 4]) -> DQuat {
+    let q = DQuat::from_xyzw(q[0] as f64, q[1] as f64, q[2] as f64, q[3] as f64);
+    let len = q.length();
+    if len.is_finite() && len > 0.5 {
+        q / len
+    } else {
+        DQuat::IDENTITY
     }
 }
 
@@ -453,6 +461,7 @@ impl Field {
             warm: vec![DQuat::IDENTITY; self.groups.len()],
             blend_warm: DQuat::IDENTITY,
             d2: vec![0.0; max_members],
+            given: None,
         }
     }
 
@@ -478,6 +487,11 @@ impl Field {
         let g = &self.groups[gi];
         if let Some(c) = g.constant {
             return c;
+        }
+        if let Some(q) = s.given.take() {
+            // Solved by the f64 lanes for this point (only fields of one group use them).
+            s.warm[gi] = q;
+            return q;
         }
         let d2 = &mut s.d2[..g.members.len()];
         let mut m = DMat3::ZERO;
@@ -725,39 +739,50 @@ impl Field {
         };
         let width = output_width(output);
         let mut out = vec![0f32; n * width];
+        let given = match dist {
+            Distances::Given(d) => Some(d),
+            Distances::Euclidean => None,
+        };
         let plan = self.lanes_plan(polar, dist);
         let Some(plan) = plan else {
             check_finite(points, "points")?;
             self.check_distance_values(dist, n)?;
+            // The exact method: the f64 lanes, the scalar path where they cannot vouch.
+            let rows = self.wide_rows(self.exact_plan(polar).as_ref());
+            let ctx = rows.as_deref().map(|rows| wide::Ctx {
+                rows,
+                points,
+                dist: given,
+                n,
+                exact: wide::Exactness::Exact,
+            });
             const CHUNK: usize = 2048;
             par_chunks_if_large(&mut out, CHUNK * width, n, |ci, chunk| {
                 let mut s = self.scratch();
-                for (j, o) in chunk.chunks_exact_mut(width).enumerate() {
-                    self.point_scalar(
-                        ci * CHUNK + j,
-                        n,
-                        points,
-                        dist,
-                        eye,
-                        polar,
-                        output,
-                        o,
-                        &mut s,
-                    );
-                }
+                let count = chunk.len() / width;
+                let at = |j: usize| (ci * CHUNK + j, None::<[f32; 4]>);
+                self.with_wide(ctx.as_ref(), count, at, &mut s, |i, s| {
+                    let o = &mut chunk[(i - ci * CHUNK) * width..(i - ci * CHUNK + 1) * width];
+                    self.point_scalar(i, n, points, dist, eye, polar, output, o, s);
+                });
                 (false, false)
             });
             check_output(&out)?;
             return Ok(out);
         };
+        let rows = self.wide_rows(Some(&plan));
+        let ctx = rows.as_deref().map(|rows| wide::Ctx {
+            rows,
+            points,
+            dist: given,
+            n,
+            exact: wide::Exactness::Fast,
+        });
         let inputs = lanes::Inputs {
             field: self,
             plan: &plan,
             points,
-            dist: match dist {
-                Distances::Given(d) => Some(d),
-                Distances::Euclidean => None,
-            },
+            dist: given,
             n,
             job: lanes::Job::Points {
                 output,
@@ -772,12 +797,13 @@ impl Field {
             let mut s = self.scratch();
             let mut nonfinite = false;
             FALLBACK_LANES.fetch_add(left.points.len() as u64, Ordering::Relaxed);
-            for (i, q) in left.points {
-                s.warm_from(q);
+            let pts = &left.points;
+            let at = |j: usize| (pts[j].0, Some(pts[j].1));
+            self.with_wide(ctx.as_ref(), pts.len(), at, &mut s, |i, s| {
                 let o = &mut chunk[(i - start) * width..(i - start + 1) * width];
-                self.point_scalar(i, n, points, dist, eye, polar, output, o, &mut s);
+                self.point_scalar(i, n, points, dist, eye, polar, output, o, s);
                 nonfinite |= !o.iter().all(|x| x.is_finite());
-            }
+            });
             (left.suspect, nonfinite)
         });
         if suspect {
@@ -791,8 +817,8 @@ impl Field {
         Ok(out)
     }
 
-    /// The lanes' plan when this call can use them: a vector kernel, Newton's polar method (the
-    /// exact one stays the f64 SVD), and one group.
+    /// The f32 lanes' plan when this call can use them: a vector kernel, Newton's polar method (the
+    /// exact one runs the f64 lanes alone, `exact_plan`), and one group.
     fn lanes_plan(&self, polar: PolarMethod, dist: Distances) -> Option<lanes::Plan> {
         if self.kernel == Kernel::Scalar || polar != PolarMethod::Iterative {
             return None;
@@ -803,6 +829,70 @@ impl Field {
             return None;
         }
         Some(plan)
+    }
+
+    /// The plan of the exact polar method's f64 lanes: a vector kernel and one group.
+    fn exact_plan(&self, polar: PolarMethod) -> Option<lanes::Plan> {
+        if self.kernel == Kernel::Scalar || polar != PolarMethod::Svd {
+            return None;
+        }
+        self.plan()
+    }
+
+    /// The f64 lanes' rows for `plan`, unless its group is one constraint (a constant rotation).
+    fn wide_rows(&self, plan: Option<&lanes::Plan>) -> Option<Vec<wide::Row64>> {
+        let plan = plan?;
+        (self.kernel != Kernel::Scalar && plan.constant.is_none()).then(|| wide::rows64(self, plan))
+    }
+
+    /// `each(i, s)` (the scalar path of point i) for the points `at(0..count)` in order. With
+    /// `ctx`, the group's rotation at each point is first solved by the f64 lanes in blocks of 4
+    /// and handed to the scalar path in `s.given` (None: the scalar path solves it). Warm starts:
+    /// the f32 lane's rotation `at(j).1`, else the lane's previous result (the point 4 before).
+    fn with_wide(
+        &self,
+        ctx: Option<&wide::Ctx>,
+        count: usize,
+        at: impl Fn(usize) -> (usize, Option<[f32; 4]>),
+        s: &mut Scratch,
+        mut each: impl FnMut(usize, &mut Scratch),
+    ) {
+        let Some(ctx) = ctx else {
+            for j in 0..count {
+                let (i, q) = at(j);
+                if let Some(q) = q {
+                    s.warm_from(q);
+                    SCALAR_LANES.fetch_add(1, Ordering::Relaxed);
+                }
+                each(i, s);
+            }
+            return;
+        };
+        let mut chain = [DQuat::IDENTITY; 4];
+        let mut scalar = 0;
+        for b in (0..count).step_by(4) {
+            let len = 4.min(count - b);
+            let lanes: [(usize, Option<[f32; 4]>); 4] =
+                std::array::from_fn(|l| at(b + l.min(len - 1)));
+            let warm = std::array::from_fn(|l| lanes[l].1.map_or(chain[l], warm_quat));
+            let got = wide::solve4(self.kernel, ctx, lanes.map(|x| x.0), warm);
+            for l in 0..len {
+                let (i, q) = lanes[l];
+                match got[l] {
+                    Some(g) => chain[l] = g,
+                    None => {
+                        if let Some(q) = q {
+                            s.warm_from(q);
+                        }
+                        scalar += q.is_some() as u64;
+                    }
+                }
+                s.given = got[l];
+                each(i, s);
+                s.given = None;
+            }
+        }
+        SCALAR_LANES.fetch_add(scalar, Ordering::Relaxed);
     }
 
     /// One point of `rotation_field_as` by the scalar f64 path (the reference).
@@ -916,27 +1006,46 @@ impl Field {
         };
         let row_len = row_len.clamp(1, 1 << 16);
         let mut out = vec![0f32; n * 3];
+        let given = match dist {
+            Distances::Given(d) => Some(d),
+            Distances::Euclidean => None,
+        };
         let Some(plan) = self.lanes_plan(polar, dist) else {
             checks()?;
+            // The exact method: the f64 lanes, the scalar path where they cannot vouch.
+            let rows = self.wide_rows(self.exact_plan(polar).as_ref());
+            let ctx = rows.as_deref().map(|rows| wide::Ctx {
+                rows,
+                points: positions,
+                dist: given,
+                n,
+                exact: wide::Exactness::Exact,
+            });
             par_chunks_if_large(&mut out, row_len * 3, n, |ci, chunk| {
                 let mut s = self.scratch();
-                for (j, o) in chunk.chunks_exact_mut(3).enumerate() {
-                    let i = ci * row_len + j;
-                    self.pixel_scalar(i, n, positions, normals, eye, dist, polar, o, &mut s);
-                }
+                let at = |j: usize| (ci * row_len + j, None::<[f32; 4]>);
+                self.with_wide(ctx.as_ref(), chunk.len() / 3, at, &mut s, |i, s| {
+                    let o = &mut chunk[(i - ci * row_len) * 3..(i - ci * row_len + 1) * 3];
+                    self.pixel_scalar(i, n, positions, normals, eye, dist, polar, o, s);
+                });
                 (false, false)
             });
             check_output(&out)?;
             return Ok(out);
         };
+        let rows = self.wide_rows(Some(&plan));
+        let ctx = rows.as_deref().map(|rows| wide::Ctx {
+            rows,
+            points: positions,
+            dist: given,
+            n,
+            exact: wide::Exactness::Fast,
+        });
         let inputs = lanes::Inputs {
             field: self,
             plan: &plan,
             points: positions,
-            dist: match dist {
-                Distances::Given(d) => Some(d),
-                Distances::Euclidean => None,
-            },
+            dist: given,
             n,
             job: lanes::Job::Pixels {
                 normals,
@@ -949,12 +1058,13 @@ impl Field {
             let mut s = self.scratch();
             let mut nonfinite = false;
             FALLBACK_LANES.fetch_add(left.points.len() as u64, Ordering::Relaxed);
-            for (i, q) in left.points {
-                s.warm_from(q);
+            let pts = &left.points;
+            let at = |j: usize| (pts[j].0, Some(pts[j].1));
+            self.with_wide(ctx.as_ref(), pts.len(), at, &mut s, |i, s| {
                 let o = &mut chunk[(i - start) * 3..(i - start + 1) * 3];
-                self.pixel_scalar(i, n, positions, normals, eye, dist, polar, o, &mut s);
+                self.pixel_scalar(i, n, positions, normals, eye, dist, polar, o, s);
                 nonfinite |= !o.iter().all(|x| x.is_finite());
-            }
+            });
             (left.suspect, nonfinite)
         });
         if suspect {
@@ -971,10 +1081,19 @@ impl Field {
 /// `make bench` reports as the fallback share).
 static FALLBACK_LANES: AtomicU64 = AtomicU64::new(0);
 
-/// How many points or pixels the f32 lanes have handed to the scalar f64 path so far (those next
-/// to a constraint, at region borders, or too ill-conditioned for f32; see `lanes`).
+/// How many points or pixels the f32 lanes have handed to f64 so far (those next to a constraint,
+/// at region borders, or too ill-conditioned for f32; see `lanes`): to the f64 lanes (`wide`) and,
+/// where those cannot vouch either, to the scalar path.
 pub fn fallback_lanes() -> u64 {
     FALLBACK_LANES.load(Ordering::Relaxed)
+}
+
+/// Of `fallback_lanes`, those the f64 lanes left to the scalar f64 path (points on a constraint,
+/// M numerically rank 1, region borders).
+static SCALAR_LANES: AtomicU64 = AtomicU64::new(0);
+
+pub fn scalar_fallback_lanes() -> u64 {
+    SCALAR_LANES.load(Ordering::Relaxed)
 }
 
 /// Points up to which a call runs on the calling thread: waking the pool costs more than it

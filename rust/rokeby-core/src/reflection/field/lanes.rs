@@ -10,8 +10,9 @@
 //! rounding cannot move the rotation by more than about 1e-6 rad: λ_min(H) ≥ `COND` ‖M‖_F, H having
 //! eigenvalues σ₂+σ₃, σ₁+σ₃, σ₁+σ₂ at the optimum, so this bounds δR ≈ δM / λ_min. Every other
 //! lane (near a constraint, rank-deficient M, unreachable points, a region border, non-finite or
-//! suspicious input) is recomputed by the scalar f64 path, which stays the reference (the oracle of
-//! the tests; `ROKEBY_SIMD=scalar` uses it everywhere).
+//! suspicious input) is recomputed in f64: by the f64 lanes of `wide` in blocks of 4, and by the
+//! scalar f64 path where those cannot vouch. The scalar path stays the reference (the oracle of the
+//! tests; `ROKEBY_SIMD=scalar` uses it everywhere).
 
 #[cfg(target_arch = "x86_64")]
 use super::simd::{Avx2, Avx512};
@@ -128,6 +129,13 @@ pub(super) struct Plan {
     rows: Vec<Row>,
     /// The group's rotation when it is the same everywhere (one constraint).
     pub(super) constant: Option<[f32; 4]>,
+}
+
+impl Plan {
+    /// The group's constraints, in the order the scalar path sums them.
+    pub(super) fn members(&self) -> impl Iterator<Item = usize> + '_ {
+        self.rows.iter().map(|r| r.k)
+    }
 }
 
 impl Field {
