@@ -75,36 +75,64 @@ fn time(reps: usize, mut f: impl FnMut()) -> f64 {
     )
 }
 
-/// f32 FMA peak: 12 independent accumulators of 16 lanes per thread.
-#[inline(always)]
-fn fma_loop<const F: bool>(iters: usize) -> f32 {
+/// f32 peak without vector FMA (the portable fallback): 12 accumulators of 16 lanes per thread.
+fn fma_loop(iters: usize) -> f32 {
     let mut acc = [[1.0f32; 16]; 12];
     let b = [0.999_999f32; 16];
     let c = [1e-7f32; 16];
     for _ in 0..iters {
         for a in acc.iter_mut() {
             for l in 0..16 {
-                a[l] = if F {
-                    a[l].mul_add(b[l], c[l])
-                } else {
-                    a[l] * b[l] + c[l]
-                };
+                a[l] = a[l] * b[l] + c[l];
             }
         }
     }
     acc.iter().flatten().sum()
 }
 
+// The vector peaks are written with intrinsics: left to the auto-vectoriser, the 12 × 16 array
+// above was vectorised across the accumulators with gathers and scatters (1 GFLOP/s on a Zen 4).
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx512f,fma")]
 unsafe fn fma_avx512(iters: usize) -> f32 {
-    fma_loop::<true>(iters)
+    use std::arch::x86_64::*;
+    let b = _mm512_set1_ps(0.999_999);
+    let c = _mm512_set1_ps(1e-7);
+    let mut acc = [_mm512_set1_ps(1.0); 12];
+    for _ in 0..iters {
+        for a in acc.iter_mut() {
+            *a = _mm512_fmadd_ps(*a, b, c);
+        }
+    }
+    let mut s = _mm512_setzero_ps();
+    for a in acc {
+        s = _mm512_add_ps(s, a);
+    }
+    _mm512_reduce_add_ps(s)
 }
 
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2,fma")]
 unsafe fn fma_avx2(iters: usize) -> f32 {
-    fma_loop::<true>(iters)
+    use std::arch::x86_64::*;
+    let b = _mm256_set1_ps(0.999_999);
+    let c = _mm256_set1_ps(1e-7);
+    // 12 accumulators of 8 lanes, twice per iteration: the same 12 × 16 flops as the others.
+    let mut acc = [_mm256_set1_ps(1.0); 12];
+    for _ in 0..iters {
+        for _ in 0..2 {
+            for a in acc.iter_mut() {
+                *a = _mm256_fmadd_ps(*a, b, c);
+            }
+        }
+    }
+    let mut s = _mm256_setzero_ps();
+    for a in acc {
+        s = _mm256_add_ps(s, a);
+    }
+    let mut lanes = [0f32; 8];
+    _mm256_storeu_ps(lanes.as_mut_ptr(), s);
+    lanes.iter().sum()
 }
 
 fn fma_any(iters: usize) -> f32 {
@@ -117,7 +145,7 @@ fn fma_any(iters: usize) -> f32 {
             return unsafe { fma_avx2(iters) };
         }
     }
-    fma_loop::<false>(iters)
+    fma_loop(iters)
 }
 
 /// GFLOP/s over all threads (2 flops per FMA).
