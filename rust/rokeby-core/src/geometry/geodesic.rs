@@ -573,23 +573,27 @@ impl GeodesicSolver {
         let sets = self.check_sources(sets)?;
         let rows: Vec<Vec<f64>> = match method {
             Method::Dijkstra | Method::Graph => {
-                // Straight into the output: one row per set, the sets in parallel.
+                // Straight into the output: one row per set, the sets in parallel (one set on
+                // the calling thread: handing it to a pool thread only adds the wake-up).
                 let nv = self.mesh.vertices.len();
                 let mut out = vec![0.0f32; sets.len() * nv];
-                let rows = out.par_chunks_mut(nv.max(1)).zip(sets.par_iter());
-                if method == Method::Dijkstra {
-                    rows.for_each(|(row, set)| self.dijkstra_with(set, |v, d| row[v] = d as f32));
+                let graph = (method == Method::Graph).then(|| self.saddle_graph());
+                let run = |row: &mut [f32], set: &[Source]| match graph {
+                    None => self.dijkstra_with(set, |v, d| row[v] = d as f32),
+                    Some(g) => g.distances_with(
+                        &self.mesh,
+                        &self.adjacency,
+                        set,
+                        crate::svg::SOURCE_NEIGHBOURS,
+                        |v, d| row[v] = d as f32,
+                    ),
+                };
+                if sets.len() == 1 {
+                    run(&mut out, &sets[0]);
                 } else {
-                    let g = self.saddle_graph();
-                    rows.for_each(|(row, set)| {
-                        g.distances_with(
-                            &self.mesh,
-                            &self.adjacency,
-                            set,
-                            crate::svg::SOURCE_NEIGHBOURS,
-                            |v, d| row[v] = d as f32,
-                        )
-                    });
+                    out.par_chunks_mut(nv.max(1))
+                        .zip(sets.par_iter())
+                        .for_each(|(row, set)| run(row, set));
                 }
                 return Ok(out);
             }
