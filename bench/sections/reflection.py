@@ -178,6 +178,33 @@ on meshes with a boundary neither is the more accurate in general, docs/geodesic
 with it."""
 
 
+def graph_heat_query_ratios(emit, runs=201):
+    """Issue 21: the graph's query against heat's on every shared mesh, in one process: the
+    section's query (one source, `distances(sources[:1])` after the precomputation), the two
+    methods alternating, medians of `runs` each and their ratio (on a shared machine the ratio is
+    steadier than either time)."""
+    emit("Graph against heat, query only (issue 21's goal: the graph's query no slower than heat's): the query above,")
+    emit(f"the two methods alternating in one process, median of {runs} each.")
+    emit()
+    emit("| mesh | vertices | graph query (ms) | heat query (ms) | graph / heat |")
+    emit("|---|---:|---:|---:|---:|")
+    for p in sorted((SHARED / "meshes").glob("*.obj"), key=lambda p: p.stat().st_size):
+        v, f = load_obj(p)
+        src = [int(f[len(f) // 4, 0])]
+        solver = rn.GeodesicSolver(v, f)
+        for method in ("graph", "heat"):
+            solver.distances(src, method=method)
+        times = {"graph": [], "heat": []}
+        for _ in range(runs):
+            for method in times:
+                t = time.perf_counter()
+                solver.distances(src, method=method)
+                times[method].append(time.perf_counter() - t)
+        g, h = (float(np.median(times[m])) for m in ("graph", "heat"))
+        emit(f"| {p.name} | {len(v):,} | {g * 1e3:.2f} | {h * 1e3:.2f} | {g / h:.2f} |")
+    emit()
+
+
 def geodesic_section(emit, peers_python):
     emit("## Geodesic distances: speed and accuracy against exact polyhedral geodesics")
     emit()
@@ -275,6 +302,7 @@ def geodesic_section(emit, peers_python):
         if "exact_pre" in peers and original is None:  # pygeodesic's own row, where it ran
             emit(f"| {name} | {len(f):,} | exact MMP (pygeodesic) | {float(peers['exact_pre']):.3f} | {float(peers['exact_query']) * 1e3:.1f} | 0 | 0 | — |")
     emit()
+    graph_heat_query_ratios(emit)
     if big is not None:
         v, f = big
         solver = rn.GeodesicSolver(v, f)

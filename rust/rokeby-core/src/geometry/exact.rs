@@ -35,13 +35,17 @@ struct Window {
     sigma: f64,
 }
 
+#[derive(Clone, Copy)]
 enum Item {
     Window(Window),
     /// A vertex whose distance was lowered, as a pseudo-source of that distance.
     Vertex(usize, f64),
 }
 
-struct Entry(f64, Item);
+/// A queue entry: the key and the item's slot in [`Queue::items`] (16 bytes, where an item is 80:
+/// the heap moves entries, not items). Ordered by the key alone, as when the entry held the item,
+/// so that the heap pops the same items in the same order.
+struct Entry(f64, u32);
 impl PartialEq for Entry {
     fn eq(&self, o: &Self) -> bool {
         self.0 == o.0
@@ -101,6 +105,44 @@ pub(crate) fn pseudo_source_vertices(mesh: &Mesh, adj: &Adjacency) -> Vec<bool> 
     out
 }
 
+/// The priority queue of windows and vertices, in order of distance: a binary heap of (key, slot)
+/// over the items in slots, reused between queries ([`direct_near`]).
+#[derive(Default)]
+pub(crate) struct Queue {
+    heap: BinaryHeap<Entry>,
+    items: Vec<Item>,
+    /// Slots of popped items, for reuse.
+    free: Vec<u32>,
+}
+
+impl Queue {
+    fn push(&mut self, key: f64, item: Item) {
+        let slot = match self.free.pop() {
+            Some(i) => {
+                self.items[i as usize] = item;
+                i
+            }
+            None => {
+                self.items.push(item);
+                (self.items.len() - 1) as u32
+            }
+        };
+        self.heap.push(Entry(key, slot));
+    }
+
+    fn pop(&mut self) -> Option<Item> {
+        let Entry(_, slot) = self.heap.pop()?;
+        self.free.push(slot);
+        Some(self.items[slot as usize])
+    }
+
+    fn clear(&mut self) {
+        self.heap.clear();
+        self.items.clear();
+        self.free.clear();
+    }
+}
+
 struct Propagation<'a> {
     mesh: &'a Mesh,
     adj: &'a Adjacency,
@@ -110,7 +152,7 @@ struct Propagation<'a> {
     dist: &'a mut [f64],
     /// Vertices whose distance went from +inf to finite, in that order.
     touched: Vec<usize>,
-    heap: BinaryHeap<Entry>,
+    heap: &'a mut Queue,
 }
 
 /// The frame of edge X→Y with `behind` on y < 0: maps a point of the current frame into it.
@@ -132,7 +174,7 @@ impl Propagation<'_> {
             }
             self.dist[v] = d;
             if self.pseudo.is_some_and(|p| p[v]) {
-                self.heap.push(Entry(d, Item::Vertex(v, d)));
+                self.heap.push(d, Item::Vertex(v, d));
             }
         }
     }
@@ -169,7 +211,7 @@ impl Propagation<'_> {
         }
         let x = w.s.x.clamp(w.b0, w.b1);
         let key = w.sigma + w.s.distance(DVec2::new(x, 0.0));
-        self.heap.push(Entry(key, Item::Window(w)));
+        self.heap.push(key, Item::Window(w));
     }
 
     /// A window into the face across edge X→Y of a face laid out in the current frame.
@@ -254,8 +296,8 @@ impl Propagation<'_> {
         // Where the ray from s through p (y > −s.y side) crosses the edge, as a numerator that is
         // ≥ 0 where the crossing is at or beyond x = bnd (the denominator p.y + k is positive).
         let num = |p: DVec2, bnd: f64| (p.x - w.s.x) * k - (bnd - w.s.x) * (p.y + k);
-        let others: Vec<usize> = self.adj.across(w.h).collect();
-        for g in others {
+        let adj = self.adj;
+        for g in adj.across(w.h) {
             let gf = self.mesh.faces[g / 3];
             let j = g % 3;
             let c = gf[(j + 2) % 3];
@@ -374,17 +416,18 @@ pub(crate) fn exact_distances(
     max_items: usize,
 ) -> Result<Vec<f64>> {
     let mut dist = vec![f64::INFINITY; mesh.vertices.len()];
+    let mut queue = Queue::default();
     let mut pr = Propagation {
         mesh,
         adj,
         pseudo: Some(pseudo),
         dist: &mut dist,
         touched: Vec::new(),
-        heap: BinaryHeap::new(),
+        heap: &mut queue,
     };
     start(&mut pr, set);
     let mut n = 0usize;
-    while let Some(Entry(_, item)) = pr.heap.pop() {
+    while let Some(item) = pr.heap.pop() {
         n += 1;
         if n > max_items {
             return Err(RokebyError::numerical(
@@ -408,27 +451,32 @@ pub(crate) fn exact_distances(
 /// unfolding, Ying, Wang & He 2013, §3) to the vertices nearest to it: window propagation without
 /// pseudo-sources, in order of distance, stopped once `k` vertices have a distance. Every value
 /// is the length of a path on the surface (never shorter than the geodesic); values up to the
-/// last window's distance are the direct geodesic distances. `dist` is all +inf on entry and is
-/// left so (only the returned vertices are reset).
+/// last window's distance are the direct geodesic distances. `dist` is all +inf and `touched`
+/// empty on entry; on return `touched` holds the vertices reached (in the order they were first
+/// reached) and `dist` their distances, which the caller resets to +inf. `queue`: the window
+/// queue's buffers, kept by the caller between calls.
 pub(crate) fn direct_near(
     mesh: &Mesh,
     adj: &Adjacency,
     set: &[Source],
     k: usize,
     dist: &mut [f64],
-) -> Vec<(usize, f64)> {
+    touched: &mut Vec<usize>,
+    queue: &mut Queue,
+) {
+    queue.clear();
     let mut pr = Propagation {
         mesh,
         adj,
         pseudo: None,
         dist,
-        touched: Vec::new(),
-        heap: BinaryHeap::new(),
+        touched: std::mem::take(touched),
+        heap: queue,
     };
     start(&mut pr, set);
     // A bound on the work for degenerate meshes (windows that split without end).
     let mut budget = 200 * k + 10_000;
-    while let Some(Entry(_, item)) = pr.heap.pop() {
+    while let Some(item) = pr.heap.pop() {
         if pr.touched.len() >= k || budget == 0 {
             break;
         }
@@ -437,13 +485,5 @@ pub(crate) fn direct_near(
             pr.process(w);
         }
     }
-    let touched = std::mem::take(&mut pr.touched);
-    touched
-        .into_iter()
-        .map(|v| {
-            let d = pr.dist[v];
-            pr.dist[v] = f64::INFINITY;
-            (v, d)
-        })
-        .collect()
+    *touched = pr.touched;
 }

@@ -61,13 +61,14 @@ impl Method {
     }
 }
 
-/// Edge graph in compressed rows (CSR), built once per mesh: neighbours and edge lengths of each
-/// vertex (unique edges). The rows are stored in *cache order*, the vertices sorted along a Morton
+/// A graph on the mesh vertices in compressed rows (CSR), built once per mesh, and its Dijkstra:
+/// the edge graph of [`Method::Dijkstra`] and the saddle vertex graph of [`Method::Graph`]
+/// ([`crate::svg`]). The rows are stored in *cache order*, the vertices sorted along a Morton
 /// (Z-order) curve of their positions, so that a Dijkstra front, which moves across the surface,
 /// reads and writes nearby memory; meshes come in any order (midpoint subdivision, for one, puts
 /// neighbours hundreds of thousands of indices apart). `rank` and `order` map between mesh vertex
 /// ids and cache positions.
-struct Graph {
+pub(crate) struct Graph {
     /// Row of cache position p: `edges[start[p]..start[p + 1]]`.
     start: Vec<usize>,
     /// (neighbour's cache position, edge length): compact (u32 index, f32 length, relative rounding
@@ -77,12 +78,12 @@ struct Graph {
     order: Vec<u32>,
     /// rank[v]: the cache position of mesh vertex v.
     rank: Vec<u32>,
-    /// Mean edge length (summed over the edges in mesh order).
-    mean_edge: f64,
     /// Dijkstra's queue keys: distance × key_scale, rounded down (see [`Graph::key`]).
     key_scale: f64,
     /// The keys the longest edge spans, plus 2: the bucket queue's window.
     key_span: usize,
+    /// Dijkstra's buffers, one per query running at once, reused by later queries.
+    work: Mutex<Vec<DijkstraWork>>,
 }
 
 /// Queue keys per short edge: the quantum of Dijkstra's keys is a quarter of the 10th percentile
@@ -120,55 +121,78 @@ fn morton_order(vertices: &[DVec3]) -> Vec<u32> {
     keyed.into_iter().map(|(_, i)| i).collect()
 }
 
-impl Graph {
-    fn new(mesh: &Mesh) -> Self {
-        let nv = mesh.vertices.len();
-        let mut edges: Vec<(u32, u32)> = Vec::with_capacity(mesh.faces.len() * 6);
-        for f in &mesh.faces {
-            for k in 0..3 {
-                let (a, b) = (f[k], f[(k + 1) % 3]);
-                if a != b {
-                    edges.push((a as u32, b as u32));
-                    edges.push((b as u32, a as u32));
-                }
+/// The unique edges of the mesh's faces, both directions, sorted, and the mean edge length
+/// (summed over them in this order).
+fn mesh_edges(mesh: &Mesh) -> (Vec<(u32, u32)>, f64) {
+    let mut edges: Vec<(u32, u32)> = Vec::with_capacity(mesh.faces.len() * 6);
+    for f in &mesh.faces {
+        for k in 0..3 {
+            let (a, b) = (f[k], f[(k + 1) % 3]);
+            if a != b {
+                edges.push((a as u32, b as u32));
+                edges.push((b as u32, a as u32));
             }
         }
-        edges.par_sort_unstable();
-        edges.dedup();
-        let length = |(a, b): (u32, u32)| {
-            mesh.vertices[a as usize].distance(mesh.vertices[b as usize]) as f32
-        };
-        let mean_edge = if edges.is_empty() {
-            0.0
-        } else {
-            edges.iter().map(|&e| length(e) as f64).sum::<f64>() / edges.len() as f64
-        };
+    }
+    edges.par_sort_unstable();
+    edges.dedup();
+    let mean_edge = if edges.is_empty() {
+        0.0
+    } else {
+        edges
+            .iter()
+            .map(|&(a, b)| edge_length(mesh, a, b) as f64)
+            .sum::<f64>()
+            / edges.len() as f64
+    };
+    (edges, mean_edge)
+}
+
+fn edge_length(mesh: &Mesh, a: u32, b: u32) -> f32 {
+    mesh.vertices[a as usize].distance(mesh.vertices[b as usize]) as f32
+}
+
+impl Graph {
+    /// The edge graph of the mesh (unique edges, their lengths) and the mean edge length.
+    fn edge_graph(mesh: &Mesh) -> (Self, f64) {
+        let nv = mesh.vertices.len();
+        let (edges, mean_edge) = mesh_edges(mesh);
         // Rows of the mesh order (edges are sorted by their first vertex).
-        let mut mesh_start = vec![0usize; nv + 1];
+        let mut start = vec![0usize; nv + 1];
         for &(a, _) in &edges {
-            mesh_start[a as usize + 1] += 1;
+            start[a as usize + 1] += 1;
         }
         for i in 0..nv {
-            mesh_start[i + 1] += mesh_start[i];
+            start[i + 1] += start[i];
         }
-        let order = morton_order(&mesh.vertices);
-        let mut rank = vec![0u32; nv];
+        let rows: Vec<(u32, f32)> = edges
+            .iter()
+            .map(|&(a, b)| (b, edge_length(mesh, a, b)))
+            .collect();
+        (Graph::new(&mesh.vertices, &start, &rows), mean_edge)
+    }
+
+    /// The graph of the out-edges `rows[start[v]..start[v + 1]]` (mesh vertex, length) of each
+    /// mesh vertex v, laid out in cache order.
+    pub(crate) fn new(vertices: &[DVec3], start: &[usize], rows: &[(u32, f32)]) -> Self {
+        let order = morton_order(vertices);
+        let mut rank = vec![0u32; vertices.len()];
         for (p, &v) in order.iter().enumerate() {
             rank[v as usize] = p as u32;
         }
-        let mut start = Vec::with_capacity(nv + 1);
-        start.push(0);
-        let mut out: Vec<(u32, f32)> = Vec::with_capacity(edges.len());
+        let mut cache_start = Vec::with_capacity(vertices.len() + 1);
+        cache_start.push(0);
+        let mut out: Vec<(u32, f32)> = Vec::with_capacity(rows.len());
         for &v in &order {
             let row = out.len();
             let v = v as usize;
             out.extend(
-                edges[mesh_start[v]..mesh_start[v + 1]]
+                rows[start[v]..start[v + 1]]
                     .iter()
-                    .map(|&e| (rank[e.1 as usize], length(e))),
+                    .map(|&(w, l)| (rank[w as usize], l)),
             );
             out[row..].sort_unstable_by_key(|e| e.0);
-            start.push(out.len());
+            cache_start.push(out.len());
         }
         let short_edge = if out.is_empty() {
             0.0
@@ -179,21 +203,29 @@ impl Graph {
         };
         let quantum = if short_edge > 0.0 {
             short_edge / KEYS_PER_SHORT_EDGE
+        } else if !out.is_empty() {
+            let mean = out.iter().map(|e| e.1 as f64).sum::<f64>() / out.len() as f64;
+            mean / (2.0 * KEYS_PER_SHORT_EDGE)
         } else {
-            mean_edge / (2.0 * KEYS_PER_SHORT_EDGE)
+            0.0
         };
         let key_scale = if quantum > 0.0 { 1.0 / quantum } else { 0.0 };
         let longest = out.iter().fold(0.0f32, |m, e| m.max(e.1)) as f64;
         Graph {
-            start,
+            start: cache_start,
             edges: out,
             order,
             rank,
-            mean_edge,
             key_scale,
             // Beyond 2^16 buckets the longest edges go through the queue's overflow instead.
             key_span: ((longest * key_scale) as usize).min(1 << 16) + 2,
+            work: Mutex::new(Vec::new()),
         }
+    }
+
+    /// Edges stored.
+    pub(crate) fn edges(&self) -> usize {
+        self.edges.len()
     }
 
     /// Dijkstra's queue key of distance `d`: non-decreasing in d (a rounded-down multiple of the
@@ -204,6 +236,31 @@ impl Graph {
         (d * self.key_scale) as u32
     }
 
+    /// Asks the processor to bring the row of cache position `p` into its cache while the current
+    /// row is relaxed: Dijkstra reads the rows in the order of distance, not of memory, so the
+    /// hardware's own prefetching does not foresee them, and on the saddle vertex graph (32 edges,
+    /// 256 bytes a row, the whole graph beyond the core's cache on meshes of a few thousand
+    /// vertices) the wait for each row was most of a query's time.
+    #[inline(always)]
+    fn prefetch_row(&self, p: usize) {
+        #[cfg(target_arch = "x86_64")]
+        {
+            use std::arch::x86_64::{_mm_prefetch, _MM_HINT_T0};
+            let row = &self.edges[self.start[p]..self.start[p + 1]];
+            let bytes = std::mem::size_of_val(row);
+            let first = row.as_ptr().cast::<i8>();
+            let mut off = 0;
+            while off < bytes + 63 {
+                // SAFETY: a prefetch is a hint that never faults nor changes memory, whatever the
+                // address (here inside or one line past the row); SSE is part of x86_64.
+                unsafe { _mm_prefetch::<_MM_HINT_T0>(first.wrapping_add(off)) };
+                off += 64;
+            }
+        }
+        #[cfg(not(target_arch = "x86_64"))]
+        let _ = p;
+    }
+
     /// Neighbours of mesh vertex `v` and the edge lengths, as mesh vertex ids.
     fn neighbours(&self, v: usize) -> impl Iterator<Item = (usize, f64)> + '_ {
         let p = self.rank[v] as usize;
@@ -211,15 +268,97 @@ impl Graph {
             .iter()
             .map(move |&(q, l)| (self.order[q as usize] as usize, l as f64))
     }
+
+    /// Multi-source Dijkstra with a bucket queue of quantised keys
+    /// ([`crate::radix_heap::BucketQueue`]) and buffers kept between queries. `seed(near, touched)`
+    /// writes the seeds' distances into `near` (mesh order, all +inf on entry) and the vertices it
+    /// set into `touched` (empty on entry); `emit(v, d)` receives the distance of every mesh
+    /// vertex v (+inf where no seed reaches).
+    ///
+    /// The result is, for every vertex, the smallest over the seeds u and graph paths from u of
+    /// near(u) + the path's edge lengths, summed in f64 from u outward. Rounding is monotone, so
+    /// that smallest value is the one fixed point of the relaxation whatever the order in which
+    /// vertices are settled (the quantised keys can only make a vertex be settled again, never
+    /// stop short of it): it depends neither on the vertex order nor on the queue, and for a set
+    /// of sources it is the minimum of the fields of each source alone.
+    pub(crate) fn dijkstra(
+        &self,
+        seed: impl FnOnce(&mut [f64], &mut Vec<usize>),
+        mut emit: impl FnMut(usize, f64),
+    ) {
+        let mut w = {
+            let mut pool = self.work.lock().unwrap_or_else(|e| e.into_inner());
+            pool.pop()
+        }
+        .unwrap_or_else(|| {
+            let nv = self.order.len();
+            DijkstraWork {
+                dist: vec![f64::INFINITY; nv],
+                near: vec![f64::INFINITY; nv],
+                settled: vec![false; nv],
+                touched: Vec::new(),
+                queue: crate::radix_heap::BucketQueue::new(self.key_span),
+            }
+        });
+        let DijkstraWork {
+            dist,
+            near,
+            settled,
+            touched,
+            queue,
+        } = &mut w;
+        seed(near, touched);
+        queue.clear();
+        for &v in touched.iter() {
+            let (p, d) = (self.rank[v] as usize, near[v]);
+            near[v] = f64::INFINITY;
+            if d < dist[p] {
+                dist[p] = d;
+                queue.push(self.key(d), p as u32);
+            }
+        }
+        touched.clear();
+        while let Some((key, p)) = queue.pop() {
+            let p = p as usize;
+            let d = dist[p];
+            if settled[p] || key > self.key(d) {
+                // Settled with this very distance already (two entries of one key), or a stale
+                // entry: p has a shorter distance, with its own entry.
+                continue;
+            }
+            settled[p] = true;
+            for &next in queue.peek(2) {
+                self.prefetch_row(next as usize);
+            }
+            for &(q, l) in &self.edges[self.start[p]..self.start[p + 1]] {
+                let nd = d + l as f64;
+                let q = q as usize;
+                if nd < dist[q] {
+                    dist[q] = nd;
+                    settled[q] = false;
+                    queue.push(self.key(nd), q as u32);
+                }
+            }
+        }
+        for (p, d) in dist.iter_mut().enumerate() {
+            emit(self.order[p] as usize, *d);
+            *d = f64::INFINITY;
+        }
+        settled.fill(false);
+        self.work.lock().unwrap_or_else(|e| e.into_inner()).push(w);
+    }
 }
 
-/// Buffers of one Dijkstra query, kept by the solver between queries (no allocation per query).
-/// Between queries every entry of `dist` and `near` is +inf and `touched` is empty.
+/// Buffers of one Dijkstra query, kept by the graph between queries (no allocation per query).
+/// Between queries every entry of `dist` and `near` is +inf, of `settled` false, and `touched` is
+/// empty.
 struct DijkstraWork {
     /// Distances in the graph's cache order.
     dist: Vec<f64>,
-    /// The unfolded distances next to the sources, in mesh order ([`crate::unfold::near_source`]).
+    /// The seeds' distances, in mesh order.
     near: Vec<f64>,
+    /// Whether a vertex's outgoing edges were relaxed from its current distance (cache order).
+    settled: Vec<bool>,
     touched: Vec<usize>,
     queue: crate::radix_heap::BucketQueue,
 }
@@ -303,8 +442,6 @@ pub struct GeodesicSolver {
     pseudo_sources: OnceLock<Vec<bool>>,
     /// The saddle vertex graph, made on the first [`Method::Graph`] query.
     saddle_graph: OnceLock<crate::svg::SaddleGraph>,
-    /// Dijkstra's buffers, one per query running at once, reused by later queries.
-    dijkstra_work: Mutex<Vec<DijkstraWork>>,
 }
 
 /// The lower triangle (which is all a Cholesky factorisation with `Side::Lower` reads) of
@@ -339,7 +476,7 @@ impl GeodesicSolver {
     /// `average_boundary = false` keeps only the Neumann heat flow: a third less memory and
     /// factorisation time on meshes with boundary, somewhat less accurate near the boundary.
     pub fn with_boundary_averaging(mesh: Mesh, average_boundary: bool) -> Self {
-        let graph = Graph::new(&mesh);
+        let (graph, mean_edge) = Graph::edge_graph(&mesh);
         let nv = mesh.vertices.len();
         // Connected components by breadth-first search over the edge graph.
         let mut component = vec![usize::MAX; nv];
@@ -361,7 +498,6 @@ impl GeodesicSolver {
             }
             next += 1;
         }
-        let mean_edge = graph.mean_edge;
         let adjacency = crate::mesh::Adjacency::new(&mesh);
         GeodesicSolver {
             adjacency,
@@ -373,7 +509,6 @@ impl GeodesicSolver {
             component,
             heat: OnceLock::new(),
             mean_edge,
-            dijkstra_work: Mutex::new(Vec::new()),
         }
     }
 
@@ -437,15 +572,29 @@ impl GeodesicSolver {
     pub fn distances(&self, sets: &[Vec<Source>], method: Method) -> Result<Vec<f32>> {
         let sets = self.check_sources(sets)?;
         let rows: Vec<Vec<f64>> = match method {
-            Method::Dijkstra => {
-                // Straight into the output: one row per set, the sets in parallel.
+            Method::Dijkstra | Method::Graph => {
+                // Straight into the output: one row per set, the sets in parallel (one set on
+                // the calling thread: handing it to a pool thread only adds the wake-up).
                 let nv = self.mesh.vertices.len();
                 let mut out = vec![0.0f32; sets.len() * nv];
-                out.par_chunks_mut(nv)
-                    .zip(sets.par_iter())
-                    .for_each(|(row, set)| {
-                        self.dijkstra_with(set, |v, d| row[v] = d as f32);
-                    });
+                let graph = (method == Method::Graph).then(|| self.saddle_graph());
+                let run = |row: &mut [f32], set: &[Source]| match graph {
+                    None => self.dijkstra_with(set, |v, d| row[v] = d as f32),
+                    Some(g) => g.distances_with(
+                        &self.mesh,
+                        &self.adjacency,
+                        set,
+                        crate::svg::SOURCE_NEIGHBOURS,
+                        |v, d| row[v] = d as f32,
+                    ),
+                };
+                if sets.len() == 1 {
+                    run(&mut out, &sets[0]);
+                } else {
+                    out.par_chunks_mut(nv.max(1))
+                        .zip(sets.par_iter())
+                        .for_each(|(row, set)| run(row, set));
+                }
                 return Ok(out);
             }
             Method::Heat => self.heat_method(&sets)?,
@@ -459,19 +608,6 @@ impl GeodesicSolver {
                         crate::exact::exact_distances(&self.mesh, &self.adjacency, pseudo, s, cap)
                     })
                     .collect::<Result<Vec<_>>>()?
-            }
-            Method::Graph => {
-                let g = self.saddle_graph();
-                sets.par_iter()
-                    .map(|s| {
-                        g.distances(
-                            &self.mesh,
-                            &self.adjacency,
-                            s,
-                            crate::svg::SOURCE_NEIGHBOURS,
-                        )
-                    })
-                    .collect()
             }
         };
         Ok(rows
@@ -537,72 +673,17 @@ impl GeodesicSolver {
         out
     }
 
-    /// Multi-source Dijkstra along the edges of the cache-ordered graph, with a bucket queue of
-    /// quantised keys ([`crate::radix_heap::BucketQueue`]) and buffers kept between queries; `emit(v, d)` receives the
+    /// Multi-source Dijkstra along the edges ([`Graph::dijkstra`]); `emit(v, d)` receives the
     /// distance of every mesh vertex v (+inf where no source reaches).
     ///
-    /// Seeds: the unfolded straight-line distances next to the sources ([`crate::unfold`]). The
-    /// result is, for every vertex, the smallest over those seeds u and edge paths from u of
-    /// near(u) + the path's edge lengths, summed in f64 from u outward. Rounding is monotone, so
-    /// that smallest value is the one fixed point of the relaxation whatever the order in which
-    /// vertices are settled (the quantised heap keys can only make a vertex be settled again, never
-    /// stop short of it): it does not depend on the vertex order, and for a set of sources it is the
-    /// minimum of the fields of each source alone.
-    fn dijkstra_with(&self, set: &[Source], mut emit: impl FnMut(usize, f64)) {
-        let g = &self.graph;
-        let mut w = {
-            let mut pool = self.dijkstra_work.lock().unwrap_or_else(|e| e.into_inner());
-            pool.pop()
-        }
-        .unwrap_or_else(|| {
-            let nv = self.mesh.vertices.len();
-            DijkstraWork {
-                dist: vec![f64::INFINITY; nv],
-                near: vec![f64::INFINITY; nv],
-                touched: Vec::new(),
-                queue: crate::radix_heap::BucketQueue::new(g.key_span),
-            }
-        });
-        let DijkstraWork {
-            dist,
-            near,
-            touched,
-            queue,
-        } = &mut w;
-        crate::unfold::near_source(&self.mesh, &self.adjacency, set, near, touched);
-        queue.clear();
-        for &v in touched.iter() {
-            let (p, d) = (g.rank[v] as usize, near[v]);
-            near[v] = f64::INFINITY;
-            if d < dist[p] {
-                dist[p] = d;
-                queue.push(g.key(d), p as u32);
-            }
-        }
-        touched.clear();
-        while let Some((key, p)) = queue.pop() {
-            let p = p as usize;
-            let d = dist[p];
-            if key > g.key(d) {
-                continue; // stale entry: p has a shorter distance, with its own entry
-            }
-            for &(q, l) in &g.edges[g.start[p]..g.start[p + 1]] {
-                let nd = d + l as f64;
-                let dq = &mut dist[q as usize];
-                if nd < *dq {
-                    *dq = nd;
-                    queue.push(g.key(nd), q);
-                }
-            }
-        }
-        for (p, d) in dist.iter_mut().enumerate() {
-            emit(g.order[p] as usize, *d);
-            *d = f64::INFINITY;
-        }
-        self.dijkstra_work
-            .lock()
-            .unwrap_or_else(|e| e.into_inner())
-            .push(w);
+    /// Seeds: the unfolded straight-line distances next to the sources ([`crate::unfold`]).
+    fn dijkstra_with(&self, set: &[Source], emit: impl FnMut(usize, f64)) {
+        self.graph.dijkstra(
+            |near, touched| {
+                crate::unfold::near_source(&self.mesh, &self.adjacency, set, near, touched)
+            },
+            emit,
+        );
     }
 
     fn heat_factors(&self) -> Result<&Heat> {

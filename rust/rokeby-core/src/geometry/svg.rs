@@ -15,11 +15,11 @@
 //! error a fraction of a percent instead of growing with the distance. Every edge is the length of
 //! a path on the surface, so no distance is ever shorter than the geodesic (or the chord).
 
-use crate::exact::direct_near;
-use crate::geodesic::{Mesh, Source};
+use crate::exact::{direct_near, Queue};
+use crate::geodesic::{Graph, Mesh, Source};
 use crate::mesh::Adjacency;
-use crate::radix_heap::RadixHeap;
 use rayon::prelude::*;
+use std::sync::Mutex;
 
 /// Vertices each vertex is linked to. Measured against exact geodesics on the shared meshes
 /// (docs/geodesics.md): the mean error falls like ~1/k while memory and precomputation grow like k.
@@ -27,12 +27,13 @@ pub const NEIGHBOURS: usize = 32;
 /// Vertices the query's own propagation reaches from the sources: exact distances there.
 pub const SOURCE_NEIGHBOURS: usize = 128;
 
-/// The graph in compressed rows: out-edges of each vertex to the vertices of its direct
-/// geodesic disk, with their lengths (f32, summed in f64).
+/// The graph: out-edges of each vertex to the vertices of its direct geodesic disk, with their
+/// lengths (f32, summed in f64), in the cache-ordered rows that the edge graph's Dijkstra uses
+/// ([`Graph`]: Morton order, bucket queue of quantised keys, buffers kept between queries).
 pub struct SaddleGraph {
-    start: Vec<usize>,
-    nbr: Vec<u32>,
-    len: Vec<f32>,
+    graph: Graph,
+    /// The window queues of the queries' propagations, one per query running at once.
+    queues: Mutex<Vec<Queue>>,
 }
 
 impl SaddleGraph {
@@ -40,83 +41,200 @@ impl SaddleGraph {
     pub(crate) fn new(mesh: &Mesh, adj: &Adjacency, k: usize) -> Self {
         let nv = mesh.vertices.len();
         const CHUNK: usize = 1024;
-        let chunks: Vec<(Vec<u32>, Vec<u32>, Vec<f32>)> = (0..nv.div_ceil(CHUNK))
+        let chunks: Vec<(Vec<u32>, Vec<_>)> = (0..nv.div_ceil(CHUNK))
             .into_par_iter()
             .map_init(
-                || vec![f64::INFINITY; nv],
-                |dist, c| {
+                || (vec![f64::INFINITY; nv], Vec::new(), Queue::default()),
+                |(dist, touched, queue), c| {
                     let (lo, hi) = (c * CHUNK, ((c + 1) * CHUNK).min(nv));
                     let mut count = Vec::with_capacity(hi - lo);
-                    let mut nbr = Vec::with_capacity((hi - lo) * k);
-                    let mut len = Vec::with_capacity((hi - lo) * k);
+                    let mut rows: Vec<(u32, f32)> = Vec::with_capacity((hi - lo) * k);
                     for v in lo..hi {
-                        let before = nbr.len();
-                        for (w, d) in direct_near(mesh, adj, &[Source::Vertex(v)], k, dist) {
+                        let before = rows.len();
+                        direct_near(mesh, adj, &[Source::Vertex(v)], k, dist, touched, queue);
+                        for w in touched.drain(..) {
+                            let d = std::mem::replace(&mut dist[w], f64::INFINITY);
                             if w != v && d.is_finite() {
-                                nbr.push(w as u32);
-                                len.push(d as f32);
+                                rows.push((w as u32, d as f32));
                             }
                         }
-                        count.push((nbr.len() - before) as u32);
+                        count.push((rows.len() - before) as u32);
                     }
-                    nbr.shrink_to_fit();
-                    len.shrink_to_fit();
-                    (count, nbr, len)
+                    rows.shrink_to_fit();
+                    (count, rows)
                 },
             )
             .collect();
         let total: usize = chunks.iter().map(|c| c.1.len()).sum();
         let mut start = Vec::with_capacity(nv + 1);
-        let mut nbr = Vec::with_capacity(total);
-        let mut len = Vec::with_capacity(total);
+        let mut rows = Vec::with_capacity(total);
         start.push(0);
-        for (count, n, l) in chunks {
+        for (count, r) in chunks {
             for c in count {
                 start.push(start.last().unwrap() + c as usize);
             }
-            nbr.extend_from_slice(&n);
-            len.extend_from_slice(&l);
+            rows.extend_from_slice(&r);
         }
-        SaddleGraph { start, nbr, len }
+        SaddleGraph {
+            graph: Graph::new(&mesh.vertices, &start, &rows),
+            queues: Mutex::new(Vec::new()),
+        }
     }
 
     /// Edges stored (for memory reports).
     pub fn edges(&self) -> usize {
-        self.nbr.len()
+        self.graph.edges()
     }
 
     /// Distances from one set of sources: their direct geodesics to `k_source` vertices, then
-    /// multi-source Dijkstra on the graph.
-    pub(crate) fn distances(
+    /// multi-source Dijkstra on the graph; `emit(v, d)` receives the distance of every vertex.
+    pub(crate) fn distances_with(
         &self,
         mesh: &Mesh,
         adj: &Adjacency,
         set: &[Source],
         k_source: usize,
-    ) -> Vec<f64> {
-        let nv = mesh.vertices.len();
-        let mut dist = vec![f64::INFINITY; nv];
-        let seeds = direct_near(mesh, adj, set, k_source, &mut dist);
-        let mut heap = RadixHeap::new();
-        for (v, d) in seeds {
-            dist[v] = d;
-            heap.push(d as f32, v as u32);
-        }
-        while let Some((key, v)) = heap.pop() {
-            let v = v as usize;
-            let d = dist[v];
-            if key > d as f32 {
-                continue;
+        emit: impl FnMut(usize, f64),
+    ) {
+        let mut queue = {
+            let mut pool = self.queues.lock().unwrap_or_else(|e| e.into_inner());
+            pool.pop().unwrap_or_default()
+        };
+        self.graph.dijkstra(
+            |near, touched| direct_near(mesh, adj, set, k_source, near, touched, &mut queue),
+            emit,
+        );
+        self.queues
+            .lock()
+            .unwrap_or_else(|e| e.into_inner())
+            .push(queue);
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    //! The query before issue 21's rewrite (the graph's rows in mesh order, a radix heap on f32
+    //! keys, fresh buffers per query) kept as the oracle: the rewrite must give the same bits.
+    use super::*;
+    use crate::radix_heap::RadixHeap;
+    use std::path::PathBuf;
+
+    /// The former graph: compressed rows in mesh vertex order.
+    struct ReferenceGraph {
+        start: Vec<usize>,
+        nbr: Vec<u32>,
+        len: Vec<f32>,
+    }
+
+    /// The direct geodesics of a set (vertex, distance), in the order they were reached.
+    fn near(mesh: &Mesh, adj: &Adjacency, set: &[Source], k: usize) -> Vec<(usize, f64)> {
+        let mut dist = vec![f64::INFINITY; mesh.vertices.len()];
+        let mut touched = Vec::new();
+        direct_near(
+            mesh,
+            adj,
+            set,
+            k,
+            &mut dist,
+            &mut touched,
+            &mut Queue::default(),
+        );
+        touched.into_iter().map(|v| (v, dist[v])).collect()
+    }
+
+    impl ReferenceGraph {
+        fn new(mesh: &Mesh, adj: &Adjacency, k: usize) -> Self {
+            let (mut start, mut nbr, mut len) = (vec![0], Vec::new(), Vec::new());
+            for v in 0..mesh.vertices.len() {
+                for (w, d) in near(mesh, adj, &[Source::Vertex(v)], k) {
+                    if w != v && d.is_finite() {
+                        nbr.push(w as u32);
+                        len.push(d as f32);
+                    }
+                }
+                start.push(nbr.len());
             }
-            for e in self.start[v]..self.start[v + 1] {
-                let w = self.nbr[e] as usize;
-                let nd = d + self.len[e] as f64;
-                if nd < dist[w] {
-                    dist[w] = nd;
-                    heap.push(nd as f32, w as u32);
+            ReferenceGraph { start, nbr, len }
+        }
+
+        /// The former `SaddleGraph::distances`, verbatim but for the seeds' call.
+        fn distances(&self, mesh: &Mesh, adj: &Adjacency, set: &[Source], k: usize) -> Vec<f64> {
+            let mut dist = vec![f64::INFINITY; mesh.vertices.len()];
+            let mut heap = RadixHeap::new();
+            for (v, d) in near(mesh, adj, set, k) {
+                dist[v] = d;
+                heap.push(d as f32, v as u32);
+            }
+            while let Some((key, v)) = heap.pop() {
+                let v = v as usize;
+                let d = dist[v];
+                if key > d as f32 {
+                    continue;
+                }
+                for e in self.start[v]..self.start[v + 1] {
+                    let w = self.nbr[e] as usize;
+                    let nd = d + self.len[e] as f64;
+                    if nd < dist[w] {
+                        dist[w] = nd;
+                        heap.push(nd as f32, w as u32);
+                    }
+                }
+            }
+            dist
+        }
+    }
+
+    fn shared_mesh(name: &str) -> Option<Mesh> {
+        let root = std::env::var("ROKEBY_SHARED").map_or_else(
+            |_| PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../../shared"),
+            PathBuf::from,
+        );
+        let text = std::fs::read_to_string(root.join("meshes").join(name)).ok()?;
+        let (v, f) = crate::mesh::parse_obj(&text).unwrap();
+        Some(Mesh::new(&v, &f).unwrap())
+    }
+
+    #[test]
+    fn saddle_graph_query_matches_the_former_implementation_bit_for_bit() {
+        use crate::geodesic::SurfacePoint;
+        let mut any = false;
+        for name in ["teapot.obj", "spot.obj", "homer.obj", "fandisk.obj"] {
+            let Some(mesh) = shared_mesh(name) else {
+                continue;
+            };
+            any = true;
+            let adj = Adjacency::new(&mesh);
+            let g = SaddleGraph::new(&mesh, &adj, NEIGHBOURS);
+            let old = ReferenceGraph::new(&mesh, &adj, NEIGHBOURS);
+            assert_eq!(g.edges(), old.nbr.len(), "{name}");
+            let (nv, nf) = (mesh.vertices.len(), mesh.faces.len());
+            let p = |face: usize, bary: [f64; 3]| Source::Point(SurfacePoint { face, bary });
+            let sets = [
+                vec![Source::Vertex(mesh.faces[nf / 4][0])],
+                vec![Source::Vertex(nv / 3)],
+                vec![p(nf / 2, [0.2, 0.3, 0.5])],
+                vec![p(nf / 5, [0.0, 0.4, 0.6])],
+                [0, nv / 4, nv / 2, 3 * nv / 4].map(Source::Vertex).to_vec(),
+            ];
+            // Twice, so that the second round runs on reused buffers.
+            for round in 0..2 {
+                for (s, set) in sets.iter().enumerate() {
+                    let want = old.distances(&mesh, &adj, set, SOURCE_NEIGHBOURS);
+                    assert!(want.iter().any(|d| d.is_finite() && *d > 0.0));
+                    let mut got = vec![f64::NAN; nv];
+                    g.distances_with(&mesh, &adj, set, SOURCE_NEIGHBOURS, |v, d| got[v] = d);
+                    for v in 0..nv {
+                        assert_eq!(
+                            got[v].to_bits(),
+                            want[v].to_bits(),
+                            "{name}, set {s}, vertex {v}, round {round}: {} vs {}",
+                            got[v],
+                            want[v]
+                        );
+                    }
                 }
             }
         }
-        dist
+        assert!(any, "no shared mesh found (set ROKEBY_SHARED)");
     }
 }
