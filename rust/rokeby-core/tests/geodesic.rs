@@ -242,6 +242,43 @@ fn degenerate_faces_duplicates_and_nonmanifold_edges_stay_finite() {
     }
 }
 
+/// Issue 21: the exact method's window trimming and per-halfedge tables on a mesh with a
+/// non-manifold edge, a zero-area face and a sliver: every distance is finite, at least the
+/// straight chord and at most the edge path (Dijkstra), and it agrees with the flat parts'
+/// straight lines where the surface is flat (the fin and the sliver are off the grid's plane).
+#[test]
+fn exact_on_nonmanifold_and_degenerate_faces_lies_between_chord_and_edge_path() {
+    let n = 11;
+    let (mut v, mut f) = grid(n, |x, y| DVec3::new(x, y, 0.0));
+    let nv = (v.len() / 3) as i64;
+    // A duplicate of vertex 5 with a zero-area face on it, a face with a repeated vertex, and a
+    // fin on the interior edge (60, 61): three faces there.
+    v.extend_from_slice(&[v[15], v[16], v[17]]);
+    v.extend_from_slice(&[0.55, 0.5, 0.3]);
+    f.extend_from_slice(&[5, nv, 6, 3, 3, 4, 60, 61, nv + 1]);
+    let s = solver(&v, &f);
+    let src = 12;
+    let set = [vec![Source::Vertex(src)]];
+    let exact = s.distances(&set, Method::Exact).unwrap();
+    let edge = s.distances(&set, Method::Dijkstra).unwrap();
+    let p = |i: usize| DVec3::new(v[3 * i] as f64, v[3 * i + 1] as f64, v[3 * i + 2] as f64);
+    for (i, (&d, &e)) in exact.iter().zip(&edge).enumerate() {
+        let chord = p(i).distance(p(src)) as f32;
+        assert!(d.is_finite(), "vertex {i}");
+        assert!(
+            d >= chord * (1.0 - 1e-6) && d <= e * (1.0 + 1e-6),
+            "vertex {i}: {d} not in [{chord}, {e}]"
+        );
+        if i < n * n {
+            // The grid is flat and convex: the straight line is on it.
+            assert!(
+                (d - chord).abs() <= 1e-6 * chord.max(1.0),
+                "vertex {i}: {d} vs {chord}"
+            );
+        }
+    }
+}
+
 #[test]
 fn bad_input_is_an_error() {
     assert!(Mesh::new(&[], &[]).is_err());

@@ -440,6 +440,8 @@ pub struct GeodesicSolver {
     adjacency: crate::mesh::Adjacency,
     /// Vertices where exact shortest paths may bend (saddles, boundary), made on first use.
     pseudo_sources: OnceLock<Vec<bool>>,
+    /// Every face unfolded onto each of its edges, for the exact method, made on first use.
+    face_unfolding: OnceLock<crate::exact::FaceUnfolding>,
     /// The saddle vertex graph, made on the first [`Method::Graph`] query.
     saddle_graph: OnceLock<crate::svg::SaddleGraph>,
 }
@@ -502,6 +504,7 @@ impl GeodesicSolver {
         GeodesicSolver {
             adjacency,
             pseudo_sources: OnceLock::new(),
+            face_unfolding: OnceLock::new(),
             saddle_graph: OnceLock::new(),
             mesh,
             average_boundary,
@@ -602,10 +605,20 @@ impl GeodesicSolver {
                 let pseudo = self.pseudo_sources.get_or_init(|| {
                     crate::exact::pseudo_source_vertices(&self.mesh, &self.adjacency)
                 });
+                let table = self
+                    .face_unfolding
+                    .get_or_init(|| crate::exact::FaceUnfolding::new(&self.mesh, &self.adjacency));
                 let cap = 5000 * (self.mesh.faces.len() + 1000);
                 sets.par_iter()
                     .map(|s| {
-                        crate::exact::exact_distances(&self.mesh, &self.adjacency, pseudo, s, cap)
+                        crate::exact::exact_distances(
+                            &self.mesh,
+                            &self.adjacency,
+                            table,
+                            pseudo,
+                            s,
+                            cap,
+                        )
                     })
                     .collect::<Result<Vec<_>>>()?
             }

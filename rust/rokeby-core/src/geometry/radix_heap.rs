@@ -10,26 +10,22 @@
 //! coarse quantisation) cost less than f32 bit patterns, whose low mantissa bits all differ.
 //! Ties pop in no particular order.
 //!
-//! Both Dijkstras (the edge graph's and the saddle vertex graph's, [`crate::geodesic`]) now use the
-//! bucket queue below; the radix heap remains as the queue of the former implementations that the
-//! unit tests keep as oracles.
+//! Both Dijkstras (the edge graph's and the saddle vertex graph's, [`crate::geodesic`]) use the
+//! bucket queue below; the radix heap orders the exact method's windows ([`crate::exact`]) and
+//! the former Dijkstras that the unit tests keep as oracles.
 
-/// Entries: (key bits, vertex). The queue of the Dijkstras before issue 21's rewrite, kept for
-/// the unit tests that hold the former implementations as oracles.
-#[cfg(test)]
+/// Entries: (key bits, vertex).
 pub(crate) struct RadixHeap {
     last: u32,
     len: usize,
     buckets: [Vec<(u32, u32)>; 33],
 }
 
-#[cfg(test)]
 #[inline]
 fn bucket(key: u32, last: u32) -> usize {
     (32 - (key ^ last).leading_zeros()) as usize
 }
 
-#[cfg(test)]
 impl RadixHeap {
     pub(crate) fn new() -> Self {
         RadixHeap {
@@ -39,13 +35,24 @@ impl RadixHeap {
         }
     }
 
+    /// Empties the heap, keeping its buckets' allocations (for a heap reused between queries).
+    pub(crate) fn clear(&mut self) {
+        self.last = 0;
+        self.len = 0;
+        for b in &mut self.buckets {
+            b.clear();
+        }
+    }
+
     /// Pushes `v` with distance `d` (≥ 0, and not below the last key popped).
+    #[cfg(test)]
     #[inline]
     pub(crate) fn push(&mut self, d: f32, v: u32) {
         self.push_key(d.max(0.0).to_bits(), v);
     }
 
     /// The entry of smallest key (its key as f32, and the vertex).
+    #[cfg(test)]
     #[inline]
     pub(crate) fn pop(&mut self) -> Option<(f32, u32)> {
         self.pop_key().map(|(k, v)| (f32::from_bits(k), v))
