@@ -3,7 +3,7 @@
 Per drag step the modal operator runs ``session.drag`` (MLS + handles, native) and
 ``shadow.live_step`` (the shadow mesh, written into the shadow object's shape key); the viewport
 then evaluates the depsgraph (``view_layer.update``: the shape key applied). The first step of a
-drag back-substitutes three right-hand sides; the medians are of the steps after it, which update
+drag back-substitutes the responses to the dragged point's x and y (four columns); the medians are of the steps after it, which update
 the shadow mesh incrementally (affine drags); ``full_solve_step_ms`` is a step of a rigid drag,
 which back-substitutes the whole system every step (the cost of every step before).
 Casters are bench/shadow.py's shared meshes (spot subdivided once, the bunny with its holes
@@ -98,7 +98,7 @@ def main():
             s.cancel()
             return drag, step, update, native
 
-        # The default (affine) drag: its first step back-substitutes three right-hand sides, every
+        # The default (affine) drag: its first step back-substitutes the responses to x and y, every
         # further step is incremental (ShadowEditor::shadow_mesh, O(V)).
         drag, step, update, native = steps("affine", args.steps + 1)
         row["first_step_ms"] = 1e3 * (drag[0] + step[0] + update[0])

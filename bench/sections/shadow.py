@@ -58,7 +58,7 @@ def shadow_section(emit):
     emit("Live shadow while dragging (issue 22, bench/shadow_live.py, medians of the 7 steps after a drag's first): "
          "drag = `session.drag`, step = `shadow.live_step` (the shadow mesh, incremental within an affine drag, written "
          "into the edit key), native = `ShadowEditor.shadow_mesh` alone, depsgraph = `view_layer.update()`; first = the "
-         "drag's first step (three right-hand sides back-substituted); full solve = a step that back-substitutes the "
+         "drag's first step (the responses to x and y back-substituted); full solve = a step that back-substitutes the "
          "whole system (a rigid drag; every step before the incremental update). A frame is 16.7 ms.")
     emit()
     emit("| paper model | shared mesh | tris | drag (ms) | step (ms) | native (ms) | depsgraph (ms) | per step (ms) | in a frame | first step (ms) | full-solve step (ms) |")

@@ -77,6 +77,34 @@ def main():
     white = beside[:, right, :3][beside[:, right, :3].sum(-1) >= 0.5 * beside[:, right, :3].sum(-1).max()].mean(axis=0)
     out["highlight_white"] = [float(v) for v in white]
     out["highlight_red"] = [float(v) for v in top]
+
+    # The same on a texture target, painted with the brush: the preview reads the painted image
+    # (the per-point attribute stays white), in both views.
+    appearance._write(ob, "specular_tint", np.ones((n, 4), np.float32))
+    appearance.setup(ob, target="TEXTURE", resolution=64)
+
+    ys, xs = np.mgrid[0:H, 0:W] + 0.5
+    centre_disc = (xs / W * 4 - 1) ** 2 + (ys / H * 2 - 1) ** 2 < 0.25 ** 2  # n·v > 0.87 on the left ball
+
+    def green_share(img, half):
+        """G / R of the environment-lit ball's middle (off-grazing: Fresnel's white edge left out),
+        or of the point-lit copy's highlight."""
+        if half is left:
+            px = img[centre_disc][:, :3]
+        else:
+            px = img[:, half, :3]
+            px = px[px.sum(-1) >= 0.5 * px.sum(-1).max()]
+        m = px.mean(axis=0)
+        return float(m[1] / m[0])
+
+    env0, beside0 = view("ENVIRONMENT"), view("BESIDE")
+    for _ in range(3):  # dabs over the whole ball: the tint goes most of the way to red everywhere
+        appearance.paint(ob, "specular_tint", [[0.0, -0.5, 0.0]], radius=2.0, value=(1.0, 0.0, 0.0))
+    env1, beside1 = view("ENVIRONMENT"), view("BESIDE")
+    out["texture"] = {"attribute_green_min": float(appearance.read(ob, "specular_tint")[:, 1].min()),
+                      "image_green_max": float(appearance.point_values(ob, "specular_tint")[:, 1].max()),
+                      "env_green_share": [green_share(env0, left), green_share(env1, left)],
+                      "point_green_share": [green_share(beside0, right), green_share(beside1, right)]}
     print("RESULT " + json.dumps(out))
 
 

@@ -120,7 +120,8 @@ def test_viewport_draws_the_point_lit_view_beside_the_environment_lit_one():
     """tests/appearance/appearance_light_check.py in a fresh bpy process, through Blender's gpu module and
     the viewport handler's draw_view: 'BESIDE' draws the environment-lit ball unchanged and, to
     its right on screen, a copy under the point light that matches the numpy twin; the copy's
-    highlight moves right, left and up with the light; a red specular colour turns it red."""
+    highlight moves right, left and up with the light; a red specular colour turns it red, also
+    when painted with the brush on a texture target (both views)."""
     from support.bpy_process import run_check
 
     res = run_check("appearance/appearance_light_check.py")
@@ -131,3 +132,10 @@ def test_viewport_draws_the_point_lit_view_beside_the_environment_lit_one():
     assert rx - lx > 4 and abs(ry - ly) < 1.5 and uy - ry > 3, res
     w, r = res["highlight_white"], res["highlight_red"]
     assert max(w) / min(w) < 1.3 and r[0] > 0.5 * w[0] and r[1] < 0.3 * r[0] and r[2] < 0.3 * r[0], res
+    # Specular colour painted with the brush on a texture target: the preview shows it red in the
+    # environment-lit view and in the point-lit one, from the image (the attribute stays white).
+    t = res["texture"]
+    assert t["attribute_green_min"] == 1.0 and t["image_green_max"] < 0.3, t
+    (e0, e1), (p0, p1) = t["env_green_share"], t["point_green_share"]
+    print(f"G/R before/after: environment view {e0:.3f} -> {e1:.3f}, point-lit view {p0:.3f} -> {p1:.3f}")
+    assert e0 > 0.7 and p0 > 0.7 and e1 < 0.35 and p1 < 0.35, t

@@ -95,3 +95,38 @@ def test_bad_ldr_files_are_refused_by_name(tmp_path):
         envmaps.read_image(tmp_path / "missing.jpg")
     with pytest.raises(ValueError, match="expected an OpenEXR"):
         envmaps.read_image(tmp_path / "x.tif")
+
+
+@pytest.mark.parametrize("colorspace", ["sRGB", "Non-Color"])
+def test_an_ldr_world_lights_the_appearance_preview_as_cycles_renders_it(tmp_path, colorspace):
+    """A PNG world (flat codes 200, 128, 30) as the scene's Environment Texture: the values the
+    appearance preview prefilters (``world_pixels``) are those Cycles renders when the camera looks
+    at that world — sRGB-decoded for an sRGB image (Blender's ``Image.pixels`` gives an 8-bit
+    image's stored codes, which the preview once took as linear: 0.78 for 0.58), as stored for
+    Non-Color."""
+    bpy = pytest.importorskip("bpy")
+    from support import cycles
+    from rokeby import appearance_preview
+
+    codes = np.array([200, 128, 30], np.uint8)
+    path = write_png(tmp_path / "world.png", np.broadcast_to(codes, (8, 16, 3)).copy())
+    bpy.ops.wm.read_factory_settings(use_empty=True)
+    sc = cycles(bpy.context.scene, 4, 1)
+    world = bpy.data.worlds.new("LDR")
+    sc.world = world
+    world.use_nodes = True
+    env = world.node_tree.nodes.new("ShaderNodeTexEnvironment")
+    env.image = bpy.data.images.load(str(path))
+    env.image.colorspace_settings.name = colorspace
+    world.node_tree.links.new(env.outputs["Color"], world.node_tree.nodes["Background"].inputs["Color"])
+    sc.camera = bpy.data.objects.new("Cam", bpy.data.cameras.new("Cam"))
+    sc.collection.objects.link(sc.camera)
+    sc.render.image_settings.file_format = "OPEN_EXR"
+    sc.render.filepath = str(tmp_path / "render")
+    bpy.ops.render.render(write_still=True)
+    rendered = envmaps.read_exr(tmp_path / "render.exr")[..., :3].reshape(-1, 3).mean(axis=0)
+    want = srgb_reference(codes, 255) if colorspace == "sRGB" else codes / 255.0
+    np.testing.assert_allclose(rendered, want, rtol=2e-3)  # what a render shows of the world
+    px = appearance_preview.world_pixels(sc)
+    assert px.shape == (8, 16, 4)
+    np.testing.assert_allclose(px[..., :3].reshape(-1, 3), np.broadcast_to(rendered, (128, 3)), rtol=2e-3)

@@ -182,5 +182,35 @@ def test_modal_drag_far_from_any_handle_is_refused_and_changes_nothing():
         rokeby.unregister()
 
 
+def test_modal_drag_outside_rendered_shading_says_where_the_live_shadow_shows():
+    """The shadow mesh is displayed as Wire, which Solid and Material Preview shading skip: the
+    operator says the live shadow shows in Rendered shading, and says nothing there."""
+    bpy, sc, ball, lamp, ground = ts.blender_scene()
+    import rokeby
+    from bpy_extras import view3d_utils
+    from rokeby import shadow, shadow_ui
+
+    rokeby.register()
+    try:
+        bpy.context.view_layer.objects.active = ball
+        assert bpy.ops.rokeby.shadow_start(light="Lamp", min_loop_vertices=10) == {"FINISHED"}
+        sess = shadow_ui.session(sc)
+        region, rv3d = _view(bpy, sc)
+        press = view3d_utils.location_3d_to_region_2d(region, rv3d, sess.handles(0)["points"][0])
+        for shading, said in (("MATERIAL", True), ("SOLID", True), ("RENDERED", False)):
+            ctx = SimpleNamespace(scene=sc, region=region, region_data=rv3d, area=SimpleNamespace(type="VIEW_3D"),
+                                  space_data=SimpleNamespace(shading=SimpleNamespace(type=shading)),
+                                  window_manager=SimpleNamespace(modal_handler_add=lambda op: None),
+                                  evaluated_depsgraph_get=bpy.context.evaluated_depsgraph_get)
+            op = _operator()
+            assert op.invoke(ctx, _event("LEFTMOUSE", "PRESS", press)) == {"RUNNING_MODAL"}
+            told = [m for kind, m in op.reports if "Rendered viewport shading" in m]
+            assert bool(told) == said, (shading, op.reports)
+            assert op.modal(ctx, _event("ESC", "PRESS", (0, 0))) == {"CANCELLED"}
+            assert shadow.shadow_mesh_of(ball) is None
+    finally:
+        rokeby.unregister()
+
+
 if __name__ == "__main__":
     pytest.main([__file__, "-q"])

@@ -469,6 +469,15 @@ def test_sequence_operator_recomposites_every_frame_and_resumes(registered, tmp_
         rgb = np.asarray(f.parts[0].channels["RGB"].pixels, np.float32)
     assert rgb.shape == (16, 24, 3) and np.isfinite(rgb).all()
     assert (np.abs(rgb - inp.image[..., :3]) > 1e-4).any(-1).sum() > 10
+    # The command line (python -m rokeby.composite --sequence, the farm's path) with the same edit
+    # writes the same frames, bit for bit.
+    cli = subprocess.run([sys.executable, "-m", "rokeby.composite", "--sequence", str(frames), str(tmp_path / "cli"),
+                          "--pattern", "shot_####.exr", "--emboss", "0.4"], capture_output=True, text=True,
+                         cwd=ROOT / "addon", timeout=600)
+    assert cli.returncode == 0, cli.stderr[-2000:]
+    for n in names:
+        with OpenEXR.File(str(tmp_path / "cli" / n)) as f, OpenEXR.File(str(out / n)) as g:
+            np.testing.assert_array_equal(np.asarray(f.parts[0].channels["RGB"].pixels), np.asarray(g.parts[0].channels["RGB"].pixels))
     # Resume: a frame whose output is gone is redone; frames done are kept as they are.
     kept = {n: os.stat(out / n).st_mtime_ns for n in ("shot_0001.exr", "shot_0003.exr")}
     os.remove(out / "shot_0002.exr")

@@ -327,9 +327,20 @@ _world_cache: dict = {}
 last_error: str | None = None
 
 
+def _stored_linear(img) -> bool:
+    """Whether a byte image's ``pixels`` are linear values as stored (data and linear colour
+    spaces); else they are display-encoded and decoded with the sRGB curve."""
+    cs = img.colorspace_settings
+    return bool(getattr(cs, "is_data", False)) or cs.name == "Non-Color" or cs.name.startswith(("Linear", "ACES"))
+
+
 def world_pixels(scene):
-    """The scene world's equirectangular Environment Texture as (H, W, 4) float32, row 0 at the
-    top, or None when the world has none."""
+    """The scene world's equirectangular Environment Texture as (H, W, 4) float32 linear values,
+    row 0 at the top, or None when the world has none.
+
+    Blender gives float images (EXR, HDR, 16-bit PNG) in linear values, but 8-bit images (PNG,
+    JPEG) as their stored codes: an sRGB world is decoded here (:func:`envmaps.srgb_to_linear`,
+    as Cycles reads it), so an LDR world lights the preview as it lights the render."""
     world = scene.world
     if world is None or not world.use_nodes:
         return None
@@ -341,7 +352,10 @@ def world_pixels(scene):
                 return None
             px = np.empty(w * h * 4, np.float32)
             img.pixels.foreach_get(px)
-            return envmaps.flip_rows(px.reshape(h, w, 4))
+            px = envmaps.flip_rows(px.reshape(h, w, 4))
+            if not img.is_float and not _stored_linear(img):
+                px[..., :3] = envmaps.srgb_to_linear(px[..., :3])
+            return px
     return None
 
 
@@ -353,7 +367,8 @@ def world_light(scene, model: str = "PRINCIPLED"):
         node = next((n for n in world.node_tree.nodes if n.type == "TEX_ENVIRONMENT" and n.image is not None), None)
     if node is None:
         return None
-    key = (node.image.name, tuple(node.image.size), node.image.filepath, str(model).upper())
+    img = node.image
+    key = (img.name, tuple(img.size), img.filepath, img.is_float, img.colorspace_settings.name, str(model).upper())
     if key not in _world_cache:
         px = world_pixels(scene)
         if px is None:

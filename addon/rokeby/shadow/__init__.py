@@ -1067,9 +1067,10 @@ def sync_falloffs(scene) -> int:
 
 
 # --- Live shadow while dragging (the paper's Fig. 3 B–D) -----------------------------------------
-# Each drag step writes the current (uncommitted) shadow mesh into the edit's shape key, so the
-# viewport (EEVEE, or Solid with shadows, both honour the linking) and renders show the edited
-# shadow during the drag. live_begin installs the edit (apply) if the caster has none; live_end
+# Each drag step writes the current (uncommitted) shadow mesh into the edit's shape key, so a
+# viewport in Rendered shading (EEVEE or Cycles: both honour the linking) and renders show the
+# edited shadow during the drag. Solid and Material Preview shading skip the shadow mesh (it is
+# displayed as Wire) and Solid has no linked lights. live_begin installs the edit (apply) if the caster has none; live_end
 # keeps the result (apply again: everything consistent) or puts back exactly what was there.
 
 

@@ -232,6 +232,12 @@ class ROKEBY_OT_shadow_drag(bpy.types.Operator):
         except (shadow.ShadowEditError, ValueError) as exc:
             self._live = None
             self.report({"WARNING"}, f"Rokeby: no live shadow: {exc}")
+        else:
+            # The shadow mesh is displayed as Wire: Solid and Material Preview shading skip such
+            # objects (and Solid has no linked lights), so only Rendered shading shows the shadow.
+            shading = getattr(getattr(context, "space_data", None), "shading", None)
+            if shading is not None and shading.type != "RENDERED":
+                self.report({"INFO"}, "Rokeby: the edited shadow shows while dragging in Rendered viewport shading (Z)")
         context.window_manager.modal_handler_add(self)
         return {"RUNNING_MODAL"}
 

@@ -22,8 +22,11 @@
 //! updated incrementally: with the affine or similarity style and no noise the deformed segment,
 //! and so the shadow mesh (§6.1 is linear in the offsets), is an affine function of the dragged
 //! point f's frustum (x, y) (Schaefer et al.'s affine and similarity MLS are linear in the
-//! deformed control points). The first step of a drag back-substitutes three right-hand sides at
-//! once (f and f + h·eₓ, f + h·e_y); every further step of it is a combination of those, O(V).
+//! deformed control points). The first step of a drag takes the shadow mesh of the drag's base (f
+//! at its committed position f₀: remembered from the last commit or solve, the rest pose for no
+//! edits) and back-substitutes the responses to f₀ + h·eₓ and f₀ + h·e_y in one pass (four
+//! columns: their x and y; a frustum offset has no depth part); every further step of it is a
+//! combination of those, O(V).
 //!
 //! A silhouette vertex lies on a mesh edge, inside the smooth surface the normals describe, so
 //! its grazing shadow ray would immediately re-enter the polygonal caster through the faces
@@ -107,6 +110,26 @@ struct DragCache {
     gy: Vec<DVec3>,
 }
 
+impl DragCache {
+    /// The solve-space shadow mesh for the dragged point at `f2`.
+    fn at(&self, f2: DVec2) -> Vec<DVec3> {
+        let (dx, dy) = (f2.x - self.f0.x, f2.y - self.f0.y);
+        self.x0
+            .iter()
+            .zip(self.gx.iter().zip(&self.gy))
+            .map(|(x0, (gx, gy))| *x0 + *gx * dx + *gy * dy)
+            .collect()
+    }
+}
+
+/// A solve-space shadow mesh and the constraint offsets it solves for: a drag's first step that
+/// starts from these offsets (the state the last drag was committed or cancelled to) takes it
+/// instead of back-substituting it again.
+struct Solved {
+    offsets: Vec<DVec3>,
+    x: Vec<DVec3>,
+}
+
 /// Step (in frustum units) of the two extra right-hand sides of [`DragCache`]; the map is affine,
 /// so any step gives the same result up to rounding.
 const CACHE_STEP: f64 = 0.1;
@@ -145,6 +168,7 @@ pub struct ShadowEditor {
     /// Per loop: the handles of its uncommitted drag (None: no drag since the last commit).
     current_handles: Vec<Option<Vec<Handle>>>,
     cache: Option<DragCache>,
+    solved: Option<Solved>,
 }
 
 /// A point light farther than this many caster radii from the caster's bounds centre is treated
@@ -325,6 +349,7 @@ impl ShadowEditor {
             last_drag: None,
             epoch: 0,
             cache: None,
+            solved: None,
             committed_handles: vec![None; nloops],
             current_handles: vec![None; nloops],
         };
@@ -666,6 +691,16 @@ impl ShadowEditor {
     /// Makes the current state the base of the next drag (mouse release).
     pub fn commit(&mut self) {
         self.committed = self.current.clone();
+        // The committed shadow mesh, from the drag's incremental map (the next drag starts there).
+        if let (Some((key, f2)), Some(c)) = (self.last_drag, &self.cache) {
+            if c.key == key && c.epoch == self.epoch {
+                let x = c.at(f2);
+                self.solved = Some(Solved {
+                    offsets: self.offsets(&self.current),
+                    x,
+                });
+            }
+        }
         for (c, h) in self
             .committed_handles
             .iter_mut()
@@ -769,23 +804,26 @@ impl ShadowEditor {
         self.factor()?;
         let Some((key, f2)) = self.last_drag.filter(|_| self.frame.is_some()) else {
             let off = self.offsets(&self.current);
-            return self.solver.as_ref().expect("factored").solve_offsets(&off);
+            let x = self.solution(off)?;
+            return self.solver.as_ref().expect("factored").to_world(&x);
         };
-        let solver = self.solver.as_ref().expect("factored");
         if let Some(c) = &self.cache {
             if c.key == key && c.epoch == self.epoch {
-                let (dx, dy) = (f2.x - c.f0.x, f2.y - c.f0.y);
-                let x: Vec<DVec3> =
-                    c.x0.iter()
-                        .zip(c.gx.iter().zip(&c.gy))
-                        .map(|(x0, (gx, gy))| *x0 + *gx * dx + *gy * dy)
-                        .collect();
-                return solver.to_world(&x);
+                return self.solver.as_ref().expect("factored").to_world(&c.at(f2));
             }
         }
-        // First step of this drag: the current offsets and the two displaced by h in x and y.
+        // First step of this drag. Its base: the current offsets with the dragged loop's committed
+        // (where the dragged point f is at f₀, its committed position, and the MLS is the identity).
+        let k = key.loop_index;
+        let mut base = self.current.clone();
+        base[k] = self.committed[k].clone();
+        let off_base = self.offsets(&base);
+        let x0 = self.solution(off_base.clone())?;
+        let r = self.rest[k][key.moved];
+        let f0 = DVec2::new(r.x, r.y) + self.committed[k][key.moved];
+        // The offsets' change for f moved by h in x and in y: their responses are Gₓ h and G_y h.
         let d = Drag {
-            loop_index: key.loop_index,
+            loop_index: k,
             fixed: key.fixed,
             moved: key.moved,
             target: DVec3::ZERO,
@@ -794,37 +832,49 @@ impl ShadowEditor {
             noise_amplitude: 0.0,
             noise_frequency: 0.0,
         };
-        let seg = self.segment(key.loop_index, key.fixed.0, key.fixed.1, key.moved)?;
-        let mut sets = Vec::with_capacity(3);
-        for h in [
-            DVec2::ZERO,
-            DVec2::new(CACHE_STEP, 0.0),
-            DVec2::new(0.0, CACHE_STEP),
-        ] {
-            let mut per_loop = self.current.clone();
-            if h != DVec2::ZERO {
-                per_loop[key.loop_index] =
-                    self.segment_offsets(key.loop_index, &seg, &d, f2 + h)?;
-            }
-            sets.push(self.offsets(&per_loop));
+        let seg = self.segment(k, key.fixed.0, key.fixed.1, key.moved)?;
+        let mut diffs = Vec::with_capacity(2);
+        for h in [DVec2::new(CACHE_STEP, 0.0), DVec2::new(0.0, CACHE_STEP)] {
+            let mut per_loop = base.clone();
+            per_loop[k] = self.segment_offsets(k, &seg, &d, f0 + h)?;
+            let off = self.offsets(&per_loop);
+            diffs.push(
+                off.iter()
+                    .zip(&off_base)
+                    .map(|(a, b)| *a - *b)
+                    .collect::<Vec<_>>(),
+            );
         }
-        let refs: Vec<&[DVec3]> = sets.iter().map(|s| s.as_slice()).collect();
-        let mut xs = solver.solve_space(&refs)?;
-        let xy = xs.pop().expect("three solutions");
-        let xx = xs.pop().expect("three solutions");
-        let x0 = xs.pop().expect("three solutions");
+        let solver = self.solver.as_ref().expect("factored");
+        let mut g = solver.offset_response(&[&diffs[0], &diffs[1]])?;
         let inv = 1.0 / CACHE_STEP;
-        let gx = xx.iter().zip(&x0).map(|(a, b)| (*a - *b) * inv).collect();
-        let gy = xy.iter().zip(&x0).map(|(a, b)| (*a - *b) * inv).collect();
-        let out = solver.to_world(&x0)?;
-        self.cache = Some(DragCache {
+        let gy = g.pop().expect("two responses");
+        let gx = g.pop().expect("two responses");
+        let cache = DragCache {
             key,
             epoch: self.epoch,
-            f0: f2,
+            f0,
             x0,
-            gx,
-            gy,
-        });
+            gx: gx.into_iter().map(|v| v * inv).collect(),
+            gy: gy.into_iter().map(|v| v * inv).collect(),
+        };
+        let out = solver.to_world(&cache.at(f2))?;
+        self.cache = Some(cache);
         Ok(out)
+    }
+
+    /// The solve-space shadow mesh for the constraint offsets `off`: the remembered one when it
+    /// is for the same offsets, else solved (and remembered).
+    fn solution(&mut self, off: Vec<DVec3>) -> Result<Vec<DVec3>> {
+        if let Some(s) = self.solved.as_ref().filter(|s| s.offsets == off) {
+            return Ok(s.x.clone());
+        }
+        let solver = self.solver.as_ref().expect("factored");
+        let x = solver.solve_space(&[&off])?.pop().expect("one solution");
+        self.solved = Some(Solved {
+            offsets: off,
+            x: x.clone(),
+        });
+        Ok(x)
     }
 }

@@ -11,7 +11,8 @@
 //! |L P' − δ|² + λ² Σ_k |C_k P' − t_k|² + ε² |P' − P|²,
 //!
 //! whose normal matrix LᵀL + λ² CᵀC + ε² I does not depend on the edit: it is factored once
-//! (faer's sparse Cholesky) and every edit is three back-substitutions. The small ε anchors parts
+//! (faer's sparse Cholesky). The rest pose P solves it for Δ = 0, so an edit's solution is P plus
+//! M⁻¹ λ² Cᵀ Δ: two back-substitutions (x and y; Δ has no depth part in the frustum). The small ε anchors parts
 //! of the caster without silhouette constraints. With every Δ = 0 the solution is P itself.
 //! Afterwards the positions go back through the inverse scale and projection.
 //!
@@ -57,14 +58,9 @@ pub struct ShadowMeshSolver {
     w_z: f64,
     /// Rest positions in scaled post-perspective light space.
     rest: Vec<DVec3>,
-    /// Rows of L: (column, weight) incl. the diagonal.
-    lap: Vec<Vec<(u32, f64)>>,
     constraints: Vec<EdgePoint>,
     lambda2: f64,
-    eps2: f64,
     llt: Llt<u32, f64>,
-    /// The right-hand side of the rest pose, Lᵀδ + λ² Cᵀ t₀ + ε² P (t₀ the rest targets).
-    rhs_rest: Mat<f64>,
 }
 
 impl ShadowMeshSolver {
@@ -183,19 +179,14 @@ impl ShadowMeshSolver {
         }
         let m = numerical::assemble(n, &trip, "shadow mesh")?;
         let llt = numerical::cholesky(&m, "shadow mesh")?;
-        let mut s = ShadowMeshSolver {
+        Ok(ShadowMeshSolver {
             space,
             w_z,
             rest,
-            lap,
             constraints,
             lambda2,
-            eps2,
             llt,
-            rhs_rest: Mat::zeros(n, 3),
-        };
-        s.rhs_rest = s.rhs(&vec![DVec3::ZERO; s.constraints.len()]);
-        Ok(s)
+        })
     }
 
     pub fn num_constraints(&self) -> usize {
@@ -219,38 +210,9 @@ impl ShadowMeshSolver {
         self.space.to_space(p, self.w_z)
     }
 
-    fn rhs(&self, deltas: &[DVec3]) -> Mat<f64> {
-        let n = self.rest.len();
-        let mut r = Mat::<f64>::zeros(n, 3);
-        // δ = L P, then Lᵀδ = L δ.
-        let delta: Vec<DVec3> = self
-            .lap
-            .iter()
-            .map(|row| {
-                row.iter()
-                    .fold(DVec3::ZERO, |a, &(j, w)| a + self.rest[j as usize] * w)
-            })
-            .collect();
-        for (i, row) in self.lap.iter().enumerate() {
-            let v = row
-                .iter()
-                .fold(DVec3::ZERO, |a, &(j, w)| a + delta[j as usize] * w)
-                + self.rest[i] * self.eps2;
-            r[(i, 0)] = v.x;
-            r[(i, 1)] = v.y;
-            r[(i, 2)] = v.z;
-        }
-        for (c, d) in self.constraints.iter().zip(deltas) {
-            let (b, f, a) = (c.back as usize, c.front as usize, c.alpha);
-            let t = self.rest[b] * (1.0 - a) + self.rest[f] * a + *d;
-            for (idx, w) in [(b, 1.0 - a), (f, a)] {
-                let v = t * (self.lambda2 * w);
-                r[(idx, 0)] += v.x;
-                r[(idx, 1)] += v.y;
-                r[(idx, 2)] += v.z;
-            }
-        }
-        r
+    /// Rest positions in the solve space: the solution for zero offsets (L P = δ, C P = t₀).
+    pub fn rest_space(&self) -> &[DVec3] {
+        &self.rest
     }
 
     /// The shadow mesh's world-space vertices for the silhouette offsets `deltas` (one per
@@ -266,9 +228,24 @@ impl ShadowMeshSolver {
         self.to_world(&x[0])
     }
 
-    /// The solutions in the solve space for several sets of offsets, back-substituted together
-    /// (one pass over the factor for all of them).
+    /// The solutions in the solve space for several sets of offsets: the rest positions plus
+    /// [`Self::offset_response`] (the normal equations' right-hand side is the rest pose's plus
+    /// λ² Cᵀ d, and the rest pose solves the first part exactly).
     pub fn solve_space(&self, sets: &[&[DVec3]]) -> Result<Vec<Vec<DVec3>>> {
+        let mut x = self.offset_response(sets)?;
+        for xs in &mut x {
+            for (p, r) in xs.iter_mut().zip(&self.rest) {
+                *p += *r;
+            }
+        }
+        Ok(x)
+    }
+
+    /// M⁻¹ λ² Cᵀ d for each set of offsets d (M = LᵀL + λ² CᵀC + ε² I): how far the solution
+    /// moves from the rest positions, linear in d. The coordinates in which a set's offsets are
+    /// all zero (z in the caster's frustum, where offsets are (Δx, Δy, 0)) move by exactly zero and
+    /// are not back-substituted; the others are, together in one pass over the factor.
+    pub fn offset_response(&self, sets: &[&[DVec3]]) -> Result<Vec<Vec<DVec3>>> {
         let n = self.rest.len();
         for d in sets {
             if d.len() != self.constraints.len() {
@@ -285,27 +262,34 @@ impl ShadowMeshSolver {
                 return Err(RokebyError::invalid("deltas", "offsets must be finite"));
             }
         }
-        let mut x = Mat::<f64>::zeros(n, 3 * sets.len());
-        for (s, d) in sets.iter().enumerate() {
-            let r = if d.iter().all(|d| *d == DVec3::ZERO) {
-                self.rhs_rest.clone()
-            } else {
-                self.rhs(d)
-            };
-            for c in 0..3 {
-                for i in 0..n {
-                    x[(i, 3 * s + c)] = r[(i, c)];
-                }
+        let cols: Vec<(usize, usize)> = sets
+            .iter()
+            .enumerate()
+            .flat_map(|(s, d)| {
+                (0..3)
+                    .filter(move |&c| d.iter().any(|o| o[c] != 0.0))
+                    .map(move |c| (s, c))
+            })
+            .collect();
+        let mut out = vec![vec![DVec3::ZERO; n]; sets.len()];
+        if cols.is_empty() {
+            return Ok(out);
+        }
+        let mut x = Mat::<f64>::zeros(n, cols.len());
+        for (j, &(s, c)) in cols.iter().enumerate() {
+            for (con, d) in self.constraints.iter().zip(sets[s]) {
+                let v = d[c] * self.lambda2;
+                x[(con.back as usize, j)] += v * (1.0 - con.alpha);
+                x[(con.front as usize, j)] += v * con.alpha;
             }
         }
         self.llt.solve_in_place(x.as_mut());
-        Ok((0..sets.len())
-            .map(|s| {
-                (0..n)
-                    .map(|i| DVec3::new(x[(i, 3 * s)], x[(i, 3 * s + 1)], x[(i, 3 * s + 2)]))
-                    .collect()
-            })
-            .collect())
+        for (j, &(s, c)) in cols.iter().enumerate() {
+            for (i, p) in out[s].iter_mut().enumerate() {
+                p[c] = x[(i, j)];
+            }
+        }
+        Ok(out)
     }
 
     /// Solve-space positions → the shadow mesh's world vertices. An error, not NaN vertices:
