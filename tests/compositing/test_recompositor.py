@@ -31,14 +31,18 @@ def _session(args, kw, **extra):
     return rn.Recompositor(ids, n, view, d0, r0, img, pts, **kw, **extra)
 
 
+@pytest.mark.parametrize("prepared", [True, False])
 @pytest.mark.parametrize("gamma, k_d, k_r", [(1.0, 1.0, 1.0), (2.2, 1.0, 1.0), (1.0, 1.4, 0.6)])
-def test_whole_frame_and_windows_equal_one_shot_recompositing(gamma, k_d, k_r):
+def test_whole_frame_and_windows_equal_one_shot_recompositing(gamma, k_d, k_r, prepared):
     args, kw = _frame()
     ids, n, e, view, d0, r0, img, pts = args
     ref, rst = rn.recomposite(*args, **kw, k_d=k_d, k_r=k_r, gamma=gamma)
     assert rst["edited"] > 1000 and rst["masked"] > 0
-    s = _session(args, kw, gamma=gamma)
+    s = _session(args, kw, gamma=gamma, prepared=prepared)
     assert s.shape == ids.shape
+    # The per-pixel terms that do not depend on ñ: unit n, unit v (a view per pixel here), eq. 5's
+    # subtracted term (9 floats) and a validity byte per pixel, in blocks of 64 pixels.
+    assert s.prepared_bytes == (37 * -(-ids.size // 64) * 64 if prepared else 0)
     out = np.full_like(img, -5.0)
     st = s.run(out, e, k_d=k_d, k_r=k_r)
     assert st == rst

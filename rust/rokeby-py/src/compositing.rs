@@ -674,13 +674,17 @@ fn bound(
 }
 
 /// Recompositor(ids, normals, view, diffuse, reflection, image, patches, *, alpha_d=None,
-/// alpha_r=None, alpha=None, diffuse_color=None, reflection_color=None, gamma=1.0, epsilon=ε)
+/// alpha_r=None, alpha=None, diffuse_color=None, reflection_color=None, gamma=1.0, epsilon=ε,
+/// prepared=True)
 ///
 /// One rendered frame held for many recompositings (eqs. 3–5; an artist's slider or brush): the
 /// passes (as for `recomposite`, without edited_normals) are checked and copied into the core
 /// once; each `run` takes only the edited normals (the whole frame, read in place, or a window)
 /// and k_D, k_R, and writes I~ into the caller's float32 buffer, the GIL released. Gives
-/// `recomposite`'s values bit for bit. Methods: run(...), set_patches(patches); `shape` (H, W).
+/// `recomposite`'s values bit for bit. `prepared`: keep, per pixel, what does not depend on the
+/// edited normals (unit n and v, validity, eq. 5's subtracted term; 25–37 bytes a pixel,
+/// `prepared_bytes`) instead of computing it in every run — the same values, faster edits.
+/// Methods: run(...), set_patches(patches); `shape` (H, W).
 #[pyclass(frozen, name = "Recompositor", module = "rokeby_native")]
 pub struct PyRecompositor {
     inner: std::sync::Mutex<core_recomposite::Recompositor>,
@@ -690,7 +694,7 @@ pub struct PyRecompositor {
 #[pymethods]
 impl PyRecompositor {
     #[new]
-    #[pyo3(signature = (ids, normals, view, diffuse, reflection, image, patches, *, alpha_d = None, alpha_r = None, alpha = None, diffuse_color = None, reflection_color = None, gamma = 1.0, epsilon = core_recomposite::EPSILON))]
+    #[pyo3(signature = (ids, normals, view, diffuse, reflection, image, patches, *, alpha_d = None, alpha_r = None, alpha = None, diffuse_color = None, reflection_color = None, gamma = 1.0, epsilon = core_recomposite::EPSILON, prepared = true))]
     #[allow(clippy::too_many_arguments)]
     fn new(
         py: Python<'_>,
@@ -708,6 +712,7 @@ impl PyRecompositor {
         reflection_color: Option<&Bound<'_, PyAny>>,
         gamma: f64,
         epsilon: f64,
+        prepared: bool,
     ) -> PyResult<Self> {
         let p = Passes::read(
             ids,
@@ -721,7 +726,9 @@ impl PyRecompositor {
         let pts = parse_patches(patches)?;
         let bufs = p.buffers();
         let inner = run_detached(py, || {
-            core_recomposite::Recompositor::new(w, h, &bufs, pts, gamma, epsilon)
+            let mut rc = core_recomposite::Recompositor::new(w, h, &bufs, pts, gamma, epsilon)?;
+            rc.set_prepared(prepared);
+            Ok(rc)
         })?;
         Ok(PyRecompositor {
             inner: std::sync::Mutex::new(inner),
@@ -733,6 +740,14 @@ impl PyRecompositor {
     #[getter]
     fn shape(&self) -> (usize, usize) {
         self.shape
+    }
+
+    /// Bytes held for the per-pixel terms that do not depend on the edited normals (0 when made
+    /// with prepared=False).
+    #[getter]
+    fn prepared_bytes(&self) -> usize {
+        let g = self.inner.lock().unwrap_or_else(|p| p.into_inner());
+        g.prepared_bytes()
     }
 
     /// New reconstructions: a list of {'sh': (3, 9) or None, 'env': (2, S, S, 3) or None} per

@@ -634,10 +634,12 @@ def test_recompositor(data):
     h, w = kw["ids"].shape
     for k in ("edited_normals", "k_d", "k_r"):
         kw.pop(k)
+    kw["prepared"] = data.draw(st.booleans())
     s = call(rn.Recompositor, **data.draw(mutated(kw)))
     if s is None:
         return
     assert s.shape == (h, w)
+    assert s.prepared_bytes >= 0
     for _ in range(data.draw(st.integers(1, 4))):
         if data.draw(st.integers(0, 4)) == 0:
             call(s.set_patches, **data.draw(mutated(dict(patches=data.draw(k_recomposite())["patches"]))))

@@ -34,7 +34,12 @@
 //! tests as the reference) they differ only by rounding: n, ñ and v are normalised with a
 //! Newton-refined f32 estimate of 1/‖·‖ (≈ 1e-14 relative; which normals are rejected is exactly
 //! [`unit`]'s), and x^(1/γ) for γ ≠ 1 comes from f64 polynomials (within 1 ulp of `powf`). The
-//! texels of a batch are prefetched before eq. 3 is evaluated and fetched after it.
+//! texels of a batch are prefetched before eq. 3 is evaluated and fetched after it (eight lanes
+//! per gather in the AVX2 instantiation); runs of 64 consecutive pixels are de-interleaved with
+//! AVX2 shuffles there. Each thread keeps its lane arrays: an edit allocates nothing per chunk.
+//! A [`Recompositor`] also keeps, per pixel, what does not depend on ñ ([`Prepared`]: unit n and
+//! v, validity, eq. 5's subtracted term), computed once by the same lane functions: the same
+//! bits, fewer instructions per edit (tested against [`recomposite`] for every kind of view).
 
 use crate::error::{Result, RokebyError};
 use crate::reconstruct::{unit, ParaboloidMap};
@@ -170,6 +175,23 @@ struct Frame<'a> {
     avx2: bool,
     /// Every map's texel indices (< 2·size²) fit in i32 lanes (size ≤ 32767).
     small_maps: bool,
+    /// A [`Recompositor`]'s per-pixel terms that do not depend on ñ (None: computed per batch).
+    pre: Option<&'a Prepared>,
+}
+
+/// Per pixel, what eqs. 3–5 compute that does not depend on ñ, k_D or k_R, kept by a
+/// [`Recompositor`] for the session (issue 23: an edit then only normalises ñ, reflects about it,
+/// evaluates the SH difference and the lookup, and shades). Computed by the kernel's own lane
+/// functions on the same inputs, so an edit gives the same bits as without it. Blocks of
+/// structure of arrays: a batch of consecutive pixels loads at most two slices per component.
+struct Prepared {
+    /// Blocks of [`BLOCK`] pixels, each `comps` lane arrays: unit n ([`unit_lanes`], 3), eq. 5's
+    /// subtracted term g(c_D D0 + c_R R0) (g = x^(1/γ), [`pow_lanes`]; 3) and, with a per-pixel
+    /// view, unit v (3).
+    tab: Vec<f32>,
+    /// D0, R0, c_D, c_R, α_D, α_R, α finite, n (and v) normalisable: the pixel can be
+    /// recomposited (else it is masked when edited).
+    ok: Vec<bool>,
 }
 
 /// The buffers' lengths, the parameters and the maps, checked before any pixel is touched.
@@ -241,6 +263,7 @@ fn validate_patches(patches: &[Patch]) -> Result<()> {
 fn frame<'a>(b: &'a Buffers<'a>, patches: &'a [Patch], p: &Params, simd: bool) -> Frame<'a> {
     Frame {
         b,
+        pre: None,
         sh: patches
             .iter()
             .map(|q| {
@@ -301,10 +324,7 @@ fn add(x: Stats, y: Stats) -> Stats {
 fn run_range(f: &Frame, base: usize, o: &mut [MaybeUninit<f32>]) -> Stats {
     o.par_chunks_mut(3 * CHUNK)
         .enumerate()
-        // The lane arrays of the batches: one set per rayon job, not per chunk.
-        .map_init(Work::new, |w, (chunk, o)| {
-            run_chunk(f, base + chunk * CHUNK, o, w)
-        })
+        .map(|(chunk, o)| with_work(|w| run_chunk(f, base + chunk * CHUNK, o, w)))
         .reduce(Stats::default, add)
 }
 
@@ -341,14 +361,16 @@ fn run_window(
     };
     o.par_chunks_mut(stride)
         .enumerate()
-        .map_init(Work::new, |w, (k, row)| {
+        .map(|(k, row)| {
             let base = (r0 + k) * width + c0;
             let row = &mut row[off..off + 3 * cw];
-            let mut st = Stats::default();
-            for (q, piece) in row.chunks_mut(3 * CHUNK).enumerate() {
-                st = add(st, run_chunk(f, base + q * CHUNK, piece, w));
-            }
-            st
+            with_work(|w| {
+                let mut st = Stats::default();
+                for (q, piece) in row.chunks_mut(3 * CHUNK).enumerate() {
+                    st = add(st, run_chunk(f, base + q * CHUNK, piece, w));
+                }
+                st
+            })
         })
         .reduce(Stats::default, add)
 }
@@ -398,7 +420,9 @@ pub struct Window {
 /// the frame's ñ kept here), k_D, k_R, or new patches — and eqs. 3–5 write I~ into a buffer of
 /// the caller (the whole frame or only a window of it), with nothing allocated per edit. The
 /// result equals [`recomposite`]'s on the same inputs bit for bit (the same kernel), and
-/// overflow (a finite I giving a non-finite I~, whatever γ) is refused naming the pixel.
+/// overflow (a finite I giving a non-finite I~, whatever γ) is refused naming the pixel. By
+/// default it also keeps, per pixel, the terms of eqs. 3–5 that do not depend on ñ
+/// ([`Recompositor::set_prepared`]: 25–37 bytes a pixel, the same bits).
 pub struct Recompositor {
     width: usize,
     height: usize,
@@ -418,6 +442,10 @@ pub struct Recompositor {
     patches: Vec<Patch>,
     gamma: f64,
     epsilon: f64,
+    /// The per-pixel terms that do not depend on ñ ([`Prepared`]), or None (computed per edit).
+    pre: Option<Prepared>,
+    /// Whether the AVX2 instantiation may run (false: the portable one; the same bits).
+    simd: bool,
 }
 
 impl Recompositor {
@@ -450,7 +478,7 @@ impl Recompositor {
             &patches,
             &p,
         )?;
-        Ok(Recompositor {
+        let mut rc = Recompositor {
             width,
             height,
             ids: b.ids.to_vec(),
@@ -468,7 +496,54 @@ impl Recompositor {
             patches,
             gamma,
             epsilon,
-        })
+            pre: None,
+            simd: true,
+        };
+        rc.set_prepared(true);
+        Ok(rc)
+    }
+
+    /// The passes as the kernel reads them, ñ = `edited`.
+    fn buffers<'a>(&'a self, edited: &'a [f32]) -> Buffers<'a> {
+        Buffers {
+            ids: &self.ids,
+            normals: &self.normals,
+            edited,
+            view: &self.view,
+            diffuse: &self.diffuse,
+            reflection: &self.reflection,
+            alpha_d: &self.alpha_d,
+            alpha_r: &self.alpha_r,
+            alpha: &self.alpha,
+            image: &self.image,
+            diffuse_color: &self.diffuse_color,
+            reflection_color: &self.reflection_color,
+        }
+    }
+
+    /// Keep (the default), or drop, the per-pixel terms of eqs. 3–5 that do not depend on ñ:
+    /// unit n and v, the validity of each pixel's passes and eq. 5's subtracted term g(c_D D0 +
+    /// c_R R0) — 25 (orthographic view) or 37 bytes per pixel ([`Recompositor::prepared_bytes`]),
+    /// computed once here instead of in every edit. The results are the same bits either way.
+    pub fn set_prepared(&mut self, on: bool) {
+        if !on {
+            self.pre = None;
+        } else if self.pre.is_none() {
+            let p = Params {
+                gamma: self.gamma,
+                epsilon: self.epsilon,
+                ..Params::default()
+            };
+            let b = self.buffers(&self.normals);
+            let f = frame(&b, &self.patches, &p, self.simd);
+            let pre = Prepared::new(&f, self.ids.len());
+            self.pre = Some(pre);
+        }
+    }
+
+    /// Bytes held by the per-pixel terms ([`Recompositor::set_prepared`]; 0 without them).
+    pub fn prepared_bytes(&self) -> usize {
+        self.pre.as_ref().map_or(0, Prepared::bytes)
     }
 
     pub fn width(&self) -> usize {
@@ -576,21 +651,9 @@ impl Recompositor {
             gamma: self.gamma,
             epsilon: self.epsilon,
         };
-        let b = Buffers {
-            ids: &self.ids,
-            normals: &self.normals,
-            edited,
-            view: &self.view,
-            diffuse: &self.diffuse,
-            reflection: &self.reflection,
-            alpha_d: &self.alpha_d,
-            alpha_r: &self.alpha_r,
-            alpha: &self.alpha,
-            image: &self.image,
-            diffuse_color: &self.diffuse_color,
-            reflection_color: &self.reflection_color,
-        };
-        let f = frame(&b, &self.patches, &p, true);
+        let b = self.buffers(edited);
+        let mut f = frame(&b, &self.patches, &p, self.simd);
+        f.pre = self.pre.as_ref();
         // SAFETY: f32 and MaybeUninit<f32> have the same layout; the kernel only writes.
         let o = unsafe { &mut *(out as *mut [f32] as *mut [MaybeUninit<f32>]) };
         let st = run_window(&f, self.width, win, o, out_full);
@@ -671,7 +734,9 @@ unsafe fn chunk_avx2(f: &Frame, base: usize, o: &mut [MaybeUninit<f32>], w: &mut
 fn chunk(f: &Frame, base: usize, o: &mut [MaybeUninit<f32>], w: &mut Work) -> Stats {
     let b = f.b;
     let mut st = Stats::default();
-    let mut todo = [0u32; CHUNK];
+    // The list of the chunk's pixels to recomposite: the job's, not zeroed per chunk (entries past
+    // `m` are stale, never read).
+    let mut todo = std::mem::take(&mut w.todo);
     let mut m = 0;
     let npx = o.len() / 3;
     let mut start = 0;
@@ -743,6 +808,7 @@ fn chunk(f: &Frame, base: usize, o: &mut [MaybeUninit<f32>], w: &mut Work) -> St
     if m == 0 {
         // Nothing to recomposite: I~ = I, written around the cache (it is not read again here).
         copy_streaming(src, o);
+        w.todo = todo;
         return st;
     }
     // SAFETY: `o` and `src` have the same length and do not overlap (`o` is the new output).
@@ -754,6 +820,7 @@ fn chunk(f: &Frame, base: usize, o: &mut [MaybeUninit<f32>], w: &mut Work) -> St
     for ks in todo[..m].chunks(LANES) {
         batch(f, base, ks, o, &mut st, w);
     }
+    w.todo = todo;
     st
 }
 
@@ -787,8 +854,25 @@ fn copy_streaming(src: &[f32], o: &mut [MaybeUninit<f32>]) {
     unsafe { std::ptr::copy_nonoverlapping(src.as_ptr(), o.as_mut_ptr() as *mut f32, o.len()) };
 }
 
+thread_local! {
+    /// Each thread's lane arrays, made on its first chunk and kept (about 25 kB): an edit
+    /// allocates none.
+    static WORK: std::cell::RefCell<Option<Box<Work>>> = const { std::cell::RefCell::new(None) };
+}
+
+/// `run` with this thread's [`Work`] (a fresh one if it is in use: never, as the kernels do not
+/// re-enter rayon, but a panic must not be the answer).
+fn with_work<R>(run: impl FnOnce(&mut Work) -> R) -> R {
+    WORK.with(|cell| match cell.try_borrow_mut() {
+        Ok(mut slot) => run(slot.get_or_insert_with(Work::new)),
+        Err(_) => run(&mut Work::new()),
+    })
+}
+
 /// The lane arrays (structure of arrays, one f32 lane per pixel) of one batch.
 struct Work {
+    /// A chunk's pixels to recomposite ([`CHUNK`] entries).
+    todo: Vec<u32>,
     k: [usize; LANES],
     px: [usize; LANES],
     id: [usize; LANES],
@@ -830,6 +914,7 @@ impl Work {
     fn new() -> Box<Work> {
         const Z: Lanes = [0.0; LANES];
         Box::new(Work {
+            todo: vec![0; CHUNK],
             k: [0; LANES],
             px: [0; LANES],
             id: [0; LANES],
@@ -1036,50 +1121,30 @@ fn batch(f: &Frame, base: usize, ks: &[u32], o: &mut [f32], st: &mut Stats, w: &
     for l in 0..nb {
         w.k[l] = ks[l] as usize;
         w.px[l] = base + w.k[l];
-        w.id[l] = b.ids[w.px[l]] as usize;
     }
     // Consecutive pixels (the common case: a full batch inside an edited region) are loaded as
     // one slice per buffer and de-interleaved; others are gathered lane by lane.
     let run = (nb == LANES && w.k[LANES - 1] - w.k[0] == LANES - 1).then_some(w.px[0]);
-    let px = &w.px;
-    gather3(b.diffuse, px, run, nb, &mut w.d0);
-    gather3(b.reflection, px, run, nb, &mut w.r0);
-    col3(b.diffuse_color, px, run, nb, &mut w.cd);
-    col3(b.reflection_color, px, run, nb, &mut w.cr);
-    opt1(b.alpha_d, px, run, nb, &mut w.ad);
-    opt1(b.alpha_r, px, run, nb, &mut w.ar);
-    opt1(b.alpha, px, run, nb, &mut w.a);
-    for l in 0..nb {
-        let mut fin = w.ad[l].is_finite() & w.ar[l].is_finite() & w.a[l].is_finite();
-        for c in 0..3 {
-            fin &= w.d0[c][l].is_finite()
-                & w.r0[c][l].is_finite()
-                & w.cd[c][l].is_finite()
-                & w.cr[c][l].is_finite();
+    if let Some(p) = run {
+        let ids: &[i32; LANES] = b.ids[p..p + LANES].try_into().unwrap();
+        for l in 0..LANES {
+            w.id[l] = ids[l] as usize;
         }
-        w.ok[l] = fin;
+    } else {
+        for l in 0..nb {
+            w.id[l] = b.ids[w.px[l]] as usize;
+        }
     }
-    gather3(b.normals, px, run, nb, &mut w.raw);
-    unit_lanes(&w.raw, &mut w.nn, &mut w.ok, nb);
-    gather3(b.edited, px, run, nb, &mut w.raw);
+    match f.pre {
+        Some(pre) => {
+            // The session's tables: unit n and v, the validity and eq. 5's subtracted term.
+            gather_passes(b, run, nb, w, f.avx2);
+            pre.load(run, nb, w, f.view);
+        }
+        None => static_terms(f, run, nb, w),
+    }
+    gather3(b.edited, &w.px, run, nb, &mut w.raw, f.avx2);
     unit_lanes(&w.raw, &mut w.ne, &mut w.ok, nb);
-    match f.view {
-        View::PerPixel => {
-            gather3(b.view, px, run, nb, &mut w.raw);
-            unit_lanes(&w.raw, &mut w.vv, &mut w.ok, nb);
-        }
-        View::Constant(v) => {
-            for c in 0..3 {
-                w.vv[c][..nb].fill(v[c]);
-            }
-        }
-        View::Invalid => {
-            for c in 0..3 {
-                w.vv[c][..nb].fill([0.0, 0.0, 1.0][c]);
-            }
-            w.ok[..nb].fill(false);
-        }
-    }
     let id0 = w.id[0];
     let uniform = w.id[..nb].iter().all(|&x| x == id0);
 
@@ -1215,7 +1280,16 @@ fn batch(f: &Frame, base: usize, ks: &[u32], o: &mut [f32], st: &mut Stats, w: &
     // SAFETY (the unchecked loads): face ∈ {0, 1} and i, j ∈ [0, n − 1] (clamped above), so a
     // texel index is below 2n², and every map (or NO_MAP, n = 1) holds 2n²·3 values (checked in
     // `recomposite_with`).
-    if f.small_maps && uniform {
+    #[cfg(target_arch = "x86_64")]
+    let gathered = f.avx2 && f.small_maps && uniform && {
+        // SAFETY: AVX2 was detected (`f.avx2`); the indices are inside the map (above).
+        unsafe { fetch_avx2(f.env_data[id0], &w.corner, &mut w.t, nb) };
+        true
+    };
+    #[cfg(not(target_arch = "x86_64"))]
+    let gathered = false;
+    if gathered {
+    } else if f.small_maps && uniform {
         let data = f.env_data[id0];
         for l in 0..nb {
             for q in 0..4 {
@@ -1268,15 +1342,16 @@ fn batch(f: &Frame, base: usize, ks: &[u32], o: &mut [f32], st: &mut Stats, w: &
             let look = if w.fetch[l] { v } else { r0 };
             let rt = r0 + w.wgt[l] * (look - r0);
             w.shade[c][l] = f.k_d * (w.cd[c][l] * w.dt[c][l]) + f.k_r * (w.cr[c][l] * rt);
-            w.shade0[c][l] = w.cd[c][l] * w.d0[c][l] + w.cr[c][l] * r0;
         }
     }
     if !f.gamma_one {
         let p = f.inv_gamma as f64;
         for c in 0..3 {
             pow_lanes(&mut w.shade[c], p, nb);
-            pow_lanes(&mut w.shade0[c], p, nb);
         }
+    }
+    if f.pre.is_none() {
+        shade0_lanes(f, nb, w);
     }
     if run.is_some() && w.ok[..nb].iter().all(|&x| x) {
         st.edited += LANES;
@@ -1309,17 +1384,292 @@ fn batch(f: &Frame, base: usize, ks: &[u32], o: &mut [f32], st: &mut Stats, w: &
     }
 }
 
+/// The four texels' channels of the lanes (`corner`: texel indices into `data`) into `t`, eight
+/// lanes per AVX2 gather (the lanes past `nb` are masked off: their indices are stale).
+///
+/// # Safety
+/// AVX2 must be available, and every index of `corner[..][..nb]` below `data.len() / 3`.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+#[inline]
+unsafe fn fetch_avx2(data: &[f32], corner: &[[i32; LANES]; 4], t: &mut [[Lanes; 3]; 4], nb: usize) {
+    use std::arch::x86_64::*;
+    let nb = nb.min(LANES);
+    let lane = _mm256_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7);
+    for (cq, tq) in corner.iter().zip(t.iter_mut()) {
+        let mut l = 0;
+        while l < nb {
+            let k = _mm256_loadu_si256(cq.as_ptr().add(l) as *const __m256i);
+            let k3 = _mm256_add_epi32(k, _mm256_add_epi32(k, k));
+            let live = _mm256_cmpgt_epi32(_mm256_set1_epi32((nb - l) as i32), lane);
+            let m = _mm256_castsi256_ps(live);
+            for (c, tc) in tq.iter_mut().enumerate() {
+                let v =
+                    _mm256_mask_i32gather_ps::<4>(_mm256_setzero_ps(), data.as_ptr().add(c), k3, m);
+                _mm256_storeu_ps(tc.as_mut_ptr().add(l), v);
+            }
+            l += 8;
+        }
+    }
+}
+
+/// D0, R0, c_D, c_R and the α's of the lanes' pixels `px` into `w` (1 where an optional buffer
+/// is empty).
+#[inline(always)]
+fn gather_passes(b: &Buffers, run: Option<usize>, nb: usize, w: &mut Work, simd: bool) {
+    let px = &w.px;
+    gather3(b.diffuse, px, run, nb, &mut w.d0, simd);
+    gather3(b.reflection, px, run, nb, &mut w.r0, simd);
+    col3(b.diffuse_color, px, run, nb, &mut w.cd, simd);
+    col3(b.reflection_color, px, run, nb, &mut w.cr, simd);
+    opt1(b.alpha_d, px, run, nb, &mut w.ad);
+    opt1(b.alpha_r, px, run, nb, &mut w.ar);
+    opt1(b.alpha, px, run, nb, &mut w.a);
+}
+
+/// What eqs. 3–5 need of the lanes' pixels `w.px` besides ñ: the passes ([`gather_passes`]),
+/// unit n and v (`w.nn`, `w.vv`) and whether the pixel can be recomposited (`w.ok`: finite
+/// passes, n and v normalisable).
+#[allow(clippy::needless_range_loop)]
+#[inline(always)]
+fn static_terms(f: &Frame, run: Option<usize>, nb: usize, w: &mut Work) {
+    let b = f.b;
+    let nb = nb.min(LANES);
+    gather_passes(b, run, nb, w, f.avx2);
+    for l in 0..nb {
+        let mut fin = w.ad[l].is_finite() & w.ar[l].is_finite() & w.a[l].is_finite();
+        for c in 0..3 {
+            fin &= w.d0[c][l].is_finite()
+                & w.r0[c][l].is_finite()
+                & w.cd[c][l].is_finite()
+                & w.cr[c][l].is_finite();
+        }
+        w.ok[l] = fin;
+    }
+    gather3(b.normals, &w.px, run, nb, &mut w.raw, f.avx2);
+    unit_lanes(&w.raw, &mut w.nn, &mut w.ok, nb);
+    match f.view {
+        View::PerPixel => {
+            gather3(b.view, &w.px, run, nb, &mut w.raw, f.avx2);
+            unit_lanes(&w.raw, &mut w.vv, &mut w.ok, nb);
+        }
+        View::Constant(v) => {
+            for c in 0..3 {
+                w.vv[c][..nb].fill(v[c]);
+            }
+        }
+        View::Invalid => {
+            for c in 0..3 {
+                w.vv[c][..nb].fill([0.0, 0.0, 1.0][c]);
+            }
+            w.ok[..nb].fill(false);
+        }
+    }
+}
+
+/// Eq. 5's subtracted term g(c_D D0 + c_R R0) of the lanes into `w.shade0` (g = x^(1/γ)).
+#[allow(clippy::needless_range_loop)]
+#[inline(always)]
+fn shade0_lanes(f: &Frame, nb: usize, w: &mut Work) {
+    let nb = nb.min(LANES);
+    for c in 0..3 {
+        for l in 0..nb {
+            w.shade0[c][l] = w.cd[c][l] * w.d0[c][l] + w.cr[c][l] * w.r0[c][l];
+        }
+    }
+    if !f.gamma_one {
+        for c in 0..3 {
+            pow_lanes(&mut w.shade0[c], f.inv_gamma as f64, nb);
+        }
+    }
+}
+
+/// Pixels of one block of [`Prepared::tab`]: one batch's lanes.
+const BLOCK: usize = LANES;
+/// Blocks per parallel task when preparing.
+const PREP_BLOCKS: usize = CHUNK / BLOCK;
+
+impl Prepared {
+    /// The tables of the frame `f` (`f.pre` is None; the passes already validated) of `n` pixels,
+    /// blocks of pixels in parallel, through the same lane functions as a batch.
+    fn new(f: &Frame, n: usize) -> Prepared {
+        let comps = Self::comps(f.view);
+        let blocks = n.div_ceil(BLOCK);
+        let mut tab = vec![0.0f32; blocks * comps * BLOCK];
+        let mut ok = vec![false; blocks * BLOCK];
+        tab.par_chunks_mut(PREP_BLOCKS * comps * BLOCK)
+            .zip(ok.par_chunks_mut(PREP_BLOCKS * BLOCK))
+            .enumerate()
+            .for_each(|(t, (tab, ok))| {
+                with_work(|w| {
+                    let blocks = tab.chunks_mut(comps * BLOCK).zip(ok.chunks_mut(BLOCK));
+                    for (j, (tb, okb)) in blocks.enumerate() {
+                        let base = (t * PREP_BLOCKS + j) * BLOCK;
+                        prepare_block(f, base, (n - base).min(BLOCK), w, tb, okb);
+                    }
+                })
+            });
+        Prepared { tab, ok }
+    }
+
+    /// Lane arrays per block: unit n, g(c_D D0 + c_R R0) and, with a per-pixel view, unit v.
+    fn comps(view: View) -> usize {
+        if matches!(view, View::PerPixel) {
+            9
+        } else {
+            6
+        }
+    }
+
+    /// Bytes held.
+    fn bytes(&self) -> usize {
+        4 * self.tab.len() + self.ok.len()
+    }
+
+    /// The lanes' unit n, v, validity and eq. 5's subtracted term into `w`; `run` as for
+    /// [`gather3`].
+    #[allow(clippy::needless_range_loop)]
+    #[inline(always)]
+    fn load(&self, run: Option<usize>, nb: usize, w: &mut Work, view: View) {
+        let nb = nb.min(LANES);
+        let px = &w.px;
+        let comps = Self::comps(view);
+        let stride = comps * BLOCK;
+        let one = |c: usize, g: &mut Lanes| {
+            if let Some(p) = run {
+                // A run of BLOCK pixels spans at most two blocks.
+                let (k, o) = (p / BLOCK, p % BLOCK);
+                let a = k * stride + c * BLOCK;
+                if o == 0 {
+                    // A whole block (runs of a chunk start at multiples of BLOCK): a fixed-size copy.
+                    let src: &Lanes = self.tab[a..a + BLOCK].try_into().unwrap();
+                    *g = *src;
+                } else {
+                    g[..BLOCK - o].copy_from_slice(&self.tab[a + o..a + BLOCK]);
+                    let a = a + stride;
+                    g[BLOCK - o..].copy_from_slice(&self.tab[a..a + o]);
+                }
+            } else {
+                for l in 0..nb {
+                    let q = px[l];
+                    g[l] = self.tab[(q / BLOCK) * stride + c * BLOCK + q % BLOCK];
+                }
+            }
+        };
+        for c in 0..3 {
+            one(c, &mut w.nn[c]);
+            one(3 + c, &mut w.shade0[c]);
+        }
+        match view {
+            View::PerPixel => {
+                for c in 0..3 {
+                    one(6 + c, &mut w.vv[c]);
+                }
+            }
+            View::Constant(v) => {
+                for c in 0..3 {
+                    w.vv[c][..nb].fill(v[c]);
+                }
+            }
+            View::Invalid => {
+                for c in 0..3 {
+                    w.vv[c][..nb].fill([0.0, 0.0, 1.0][c]);
+                }
+            }
+        }
+        if let Some(p) = run {
+            let src: &[bool; LANES] = self.ok[p..p + LANES].try_into().unwrap();
+            w.ok = *src;
+        } else {
+            for l in 0..nb {
+                w.ok[l] = self.ok[w.px[l]];
+            }
+        }
+    }
+}
+
+/// One block of [`Prepared`]: pixels base..base + nb into `tb` (comps × BLOCK) and `okb`.
+fn prepare_block(
+    f: &Frame,
+    base: usize,
+    nb: usize,
+    w: &mut Work,
+    tb: &mut [f32],
+    okb: &mut [bool],
+) {
+    #[cfg(target_arch = "x86_64")]
+    if f.avx2 {
+        // SAFETY: AVX2 was detected on this CPU (`avx2_available`).
+        return unsafe { prepare_block_avx2(f, base, nb, w, tb, okb) };
+    }
+    prepare_block_lanes(f, base, nb, w, tb, okb)
+}
+
+/// [`prepare_block_lanes`] compiled for AVX2 (the same bits, as [`chunk_avx2`]).
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+unsafe fn prepare_block_avx2(
+    f: &Frame,
+    base: usize,
+    nb: usize,
+    w: &mut Work,
+    tb: &mut [f32],
+    okb: &mut [bool],
+) {
+    prepare_block_lanes(f, base, nb, w, tb, okb)
+}
+
+#[inline(always)]
+fn prepare_block_lanes(
+    f: &Frame,
+    base: usize,
+    nb: usize,
+    w: &mut Work,
+    tb: &mut [f32],
+    okb: &mut [bool],
+) {
+    let nb = nb.min(BLOCK);
+    for (l, p) in w.px[..nb].iter_mut().enumerate() {
+        *p = base + l;
+    }
+    static_terms(f, (nb == BLOCK).then_some(base), nb, w);
+    shade0_lanes(f, nb, w);
+    for c in 0..3 {
+        tb[c * BLOCK..c * BLOCK + nb].copy_from_slice(&w.nn[c][..nb]);
+        tb[(3 + c) * BLOCK..(3 + c) * BLOCK + nb].copy_from_slice(&w.shade0[c][..nb]);
+        if matches!(f.view, View::PerPixel) {
+            tb[(6 + c) * BLOCK..(6 + c) * BLOCK + nb].copy_from_slice(&w.vv[c][..nb]);
+        }
+    }
+    okb[..nb].copy_from_slice(&w.ok[..nb]);
+}
+
 /// v[3·px_l + c] for the lanes' pixels px (3-vector buffers), as lanes per component, into g;
 /// `run`: the pixels are run, run + 1, …, run + LANES − 1.
 #[inline(always)]
-fn gather3(v: &[f32], px: &[usize; LANES], run: Option<usize>, nb: usize, g: &mut [Lanes; 3]) {
+fn gather3(
+    v: &[f32],
+    px: &[usize; LANES],
+    run: Option<usize>,
+    nb: usize,
+    g: &mut [Lanes; 3],
+    simd: bool,
+) {
     let nb = nb.min(LANES);
     if let Some(p) = run {
-        let q = &v[3 * p..3 * p + 3 * LANES];
-        for l in 0..nb {
-            for c in 0..3 {
-                g[c][l] = q[3 * l + c];
-            }
+        let q: &[f32; 3 * LANES] = v[3 * p..3 * p + 3 * LANES].try_into().unwrap();
+        #[cfg(target_arch = "x86_64")]
+        if simd {
+            // SAFETY: `simd` is set only where AVX2 was detected (`Frame::avx2`).
+            unsafe { deinterleave_avx2(q, g) };
+            return;
+        }
+        let _ = simd;
+        let [g0, g1, g2] = g;
+        for l in 0..LANES {
+            g0[l] = q[3 * l];
+            g1[l] = q[3 * l + 1];
+            g2[l] = q[3 * l + 2];
         }
     } else {
         for l in 0..nb {
@@ -1331,15 +1681,63 @@ fn gather3(v: &[f32], px: &[usize; LANES], run: Option<usize>, nb: usize, g: &mu
     }
 }
 
+/// `g[c][l] = q[3l + c]` (three interleaved components into lanes), eight lanes at a time: three
+/// loads, two blends and one permutation per component.
+///
+/// # Safety
+/// AVX2 must be available.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+#[inline]
+unsafe fn deinterleave_avx2(q: &[f32; 3 * LANES], g: &mut [Lanes; 3]) {
+    use std::arch::x86_64::*;
+    // Of a = x0 y0 z0 x1 y1 z1 x2 y2, b = z2 x3 y3 z3 x4 y4 z4 x5, c = y5 z5 x6 y6 z6 x7 y7 z7,
+    // x lies at a{0,3,6}, b{1,4,7}, c{2,5}; y at c{0,3,6}, a{1,4,7}, b{2,5}; z at b{0,3,6},
+    // c{1,4,7}, a{2,5}: blend those positions together, then put them in order.
+    let px = _mm256_setr_epi32(0, 3, 6, 1, 4, 7, 2, 5);
+    let py = _mm256_setr_epi32(1, 4, 7, 2, 5, 0, 3, 6);
+    let pz = _mm256_setr_epi32(2, 5, 0, 3, 6, 1, 4, 7);
+    for k in 0..LANES / 8 {
+        let s = q.as_ptr().add(24 * k);
+        let (a, b, c) = (
+            _mm256_loadu_ps(s),
+            _mm256_loadu_ps(s.add(8)),
+            _mm256_loadu_ps(s.add(16)),
+        );
+        let x = _mm256_blend_ps::<0x24>(_mm256_blend_ps::<0x92>(a, b), c);
+        let y = _mm256_blend_ps::<0x49>(_mm256_blend_ps::<0x24>(a, b), c);
+        let z = _mm256_blend_ps::<0x92>(_mm256_blend_ps::<0x49>(a, b), c);
+        _mm256_storeu_ps(
+            g[0].as_mut_ptr().add(8 * k),
+            _mm256_permutevar8x32_ps(x, px),
+        );
+        _mm256_storeu_ps(
+            g[1].as_mut_ptr().add(8 * k),
+            _mm256_permutevar8x32_ps(y, py),
+        );
+        _mm256_storeu_ps(
+            g[2].as_mut_ptr().add(8 * k),
+            _mm256_permutevar8x32_ps(z, pz),
+        );
+    }
+}
+
 /// [`gather3`] of an optional colour buffer: 1 where it is empty.
 #[inline(always)]
-fn col3(v: &[f32], px: &[usize; LANES], run: Option<usize>, nb: usize, g: &mut [Lanes; 3]) {
+fn col3(
+    v: &[f32],
+    px: &[usize; LANES],
+    run: Option<usize>,
+    nb: usize,
+    g: &mut [Lanes; 3],
+    simd: bool,
+) {
     if v.is_empty() {
         for c in g.iter_mut() {
             c[..nb.min(LANES)].fill(1.0);
         }
     } else {
-        gather3(v, px, run, nb, g);
+        gather3(v, px, run, nb, g, simd);
     }
 }
 
@@ -1926,6 +2324,25 @@ mod tests {
                     .iter()
                     .zip(&want)
                     .all(|(x, y)| x.to_bits() == y.to_bits()));
+                // Without the per-pixel tables, and through the portable instantiation (tables
+                // made by it too): the same bits.
+                for (prepared, simd) in [(false, true), (true, false), (false, false)] {
+                    let mut other =
+                        Recompositor::new(w, h, &b, patches.clone(), gamma, EPSILON).unwrap();
+                    other.simd = simd;
+                    other.set_prepared(false);
+                    other.set_prepared(prepared);
+                    assert_eq!(other.prepared_bytes() > 0, prepared);
+                    let mut o2 = vec![f32::NAN; 3 * w * h];
+                    let st2 = other
+                        .run(&other.full(), Some(edited), k_d, k_r, &mut o2, true)
+                        .unwrap();
+                    assert_eq!((st2.edited, st2.masked), (st0.edited, st0.masked));
+                    assert!(o2
+                        .iter()
+                        .zip(&want)
+                        .all(|(x, y)| x.to_bits() == y.to_bits()));
+                }
                 // A window: ñ kept here, set from the whole frame; window- and frame-shaped out.
                 let win = Window {
                     rows: 3..17,
@@ -1983,6 +2400,64 @@ mod tests {
                 .iter()
                 .zip(&want)
                 .all(|(x, y)| x.to_bits() == y.to_bits()));
+        }
+    }
+
+    /// The session's per-pixel tables with a view for the whole frame (orthographic), one that
+    /// cannot be normalised, and non-finite passes and normals: the same bits and counts as
+    /// [`recomposite`], with and without the tables, AVX2 and portable.
+    #[test]
+    fn recompositor_tables_match_recomposite_for_every_view() {
+        let (w, h) = (67, 23);
+        let (ids, v, a, patches) = session_frame(w, h);
+        let mut v = v;
+        let mut a = a;
+        v[3][3 * 100 + 1] = f32::NAN; // D0
+        v[4][3 * 200] = f32::INFINITY; // R0
+        v[7][3 * 300 + 2] = f32::NAN; // c_R
+        a[1][400] = f32::NAN; // α_R
+        v[0][3 * 500] = f32::NAN; // n
+        v[0][3 * 600..3 * 600 + 3].fill(0.0); // n = 0
+        for view in [v[2].clone(), vec![0.1, -0.2, 1.0], vec![0.0; 3]] {
+            let b = Buffers {
+                ids: &ids,
+                normals: &v[0],
+                edited: &v[1],
+                view: &view,
+                diffuse: &v[3],
+                reflection: &v[4],
+                alpha_d: &a[0],
+                alpha_r: &a[1],
+                alpha: &a[2],
+                image: &v[5],
+                diffuse_color: &v[6],
+                reflection_color: &v[7],
+            };
+            for gamma in [1.0, 2.2] {
+                let p = Params {
+                    gamma,
+                    k_d: 1.1,
+                    ..Params::default()
+                };
+                let (want, st0) = recomposite(&b, &patches, &p).unwrap();
+                assert!(st0.masked > 0);
+                for (prepared, simd) in [(true, true), (true, false), (false, true)] {
+                    let mut rc =
+                        Recompositor::new(w, h, &b, patches.clone(), gamma, EPSILON).unwrap();
+                    rc.simd = simd;
+                    rc.set_prepared(false);
+                    rc.set_prepared(prepared);
+                    let mut out = vec![f32::NAN; 3 * w * h];
+                    let st = rc
+                        .run(&rc.full(), Some(&v[1]), 1.1, 1.0, &mut out, true)
+                        .unwrap();
+                    assert_eq!((st.edited, st.masked), (st0.edited, st0.masked));
+                    assert!(out
+                        .iter()
+                        .zip(&want)
+                        .all(|(x, y)| x.to_bits() == y.to_bits()));
+                }
+            }
         }
     }
 
