@@ -675,7 +675,7 @@ fn bound(
 
 /// Recompositor(ids, normals, view, diffuse, reflection, image, patches, *, alpha_d=None,
 /// alpha_r=None, alpha=None, diffuse_color=None, reflection_color=None, gamma=1.0, epsilon=ε,
-/// prepared=True)
+/// prepared=False)
 ///
 /// One rendered frame held for many recompositings (eqs. 3–5; an artist's slider or brush): the
 /// passes (as for `recomposite`, without edited_normals) are checked and copied into the core
@@ -683,7 +683,8 @@ fn bound(
 /// and k_D, k_R, and writes I~ into the caller's float32 buffer, the GIL released. Gives
 /// `recomposite`'s values bit for bit. `prepared`: keep, per pixel, what does not depend on the
 /// edited normals (unit n and v, validity, eq. 5's subtracted term; 25–37 bytes a pixel,
-/// `prepared_bytes`) instead of computing it in every run — the same values, faster edits.
+/// `prepared_bytes`) instead of computing it in every run — the same values; 0.72× the instructions
+/// of an edit but no faster on a quiet machine (docs/compositing.md), so off by default.
 /// Methods: run(...), set_patches(patches); `shape` (H, W).
 #[pyclass(frozen, name = "Recompositor", module = "rokeby_native")]
 pub struct PyRecompositor {
@@ -694,7 +695,7 @@ pub struct PyRecompositor {
 #[pymethods]
 impl PyRecompositor {
     #[new]
-    #[pyo3(signature = (ids, normals, view, diffuse, reflection, image, patches, *, alpha_d = None, alpha_r = None, alpha = None, diffuse_color = None, reflection_color = None, gamma = 1.0, epsilon = core_recomposite::EPSILON, prepared = true))]
+    #[pyo3(signature = (ids, normals, view, diffuse, reflection, image, patches, *, alpha_d = None, alpha_r = None, alpha = None, diffuse_color = None, reflection_color = None, gamma = 1.0, epsilon = core_recomposite::EPSILON, prepared = false))]
     #[allow(clippy::too_many_arguments)]
     fn new(
         py: Python<'_>,
