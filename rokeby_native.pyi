@@ -215,6 +215,7 @@ class Recompositor:
         reflection_color: _Array | None = None,
         gamma: float = 1.0,
         epsilon: float = ...,
+        prepared: bool = False,
     ) -> Recompositor: ...
     def run(
         self,
@@ -228,6 +229,8 @@ class Recompositor:
     def set_patches(self, patches: Sequence[dict[str, Any] | None]) -> None: ...
     @property
     def shape(self) -> tuple[int, int]: ...
+    @property
+    def prepared_bytes(self) -> int: ...
 
 class ShadowEditor:
     def __new__(
@@ -258,6 +261,17 @@ class ShadowEditor:
         noise_amplitude: float = 0.0,
         noise_frequency: float = 0.0,
     ) -> dict[str, Any]: ...
+    def prepare_drag(
+        self,
+        loop: int,
+        fixed: tuple[int, int],
+        moved: int,
+        *,
+        style: str = "affine",
+        mls_alpha: float = 1.0,
+        noise_amplitude: float = 0.0,
+    ) -> bool: ...
+    def drag_is_incremental(self) -> bool: ...
     def commit(self) -> None: ...
     def cancel(self) -> None: ...
     def reset(self) -> None: ...

@@ -3,8 +3,9 @@
 Per drag step the modal operator runs ``session.drag`` (MLS + handles, native) and
 ``shadow.live_step`` (the shadow mesh, written into the shadow object's shape key); the viewport
 then evaluates the depsgraph (``view_layer.update``: the shape key applied). The first step of a
-drag back-substitutes the responses to the dragged point's x and y (four columns); the medians are of the steps after it, which update
-the shadow mesh incrementally (affine drags); ``full_solve_step_ms`` is a step of a rigid drag,
+drag back-substitutes the responses to the dragged point's x and y (four columns) unless the drag was
+prepared on the mouse press (``prepare_drag``, as the operator does: ``press_ms``); the medians are of the steps after
+the first, which update the shadow mesh incrementally (affine drags); ``full_solve_step_ms`` is a step of a rigid drag,
 which back-substitutes the whole system every step (the cost of every step before).
 Casters are bench/shadow.py's shared meshes (spot subdivided once, the bunny with its holes
 closed, nefertiti) at unit radius over the 80k-triangle terrain, a point light above; medians of
@@ -78,8 +79,12 @@ def main():
         live = shadow.live_begin(s)  # installs the edit (first shadow_mesh: the factorisation)
         row["begin_s"] = time.perf_counter() - t0
 
-        def steps(style, n):
+        def steps(style, n, press=False):
             drag, step, update, native = [], [], [], []
+            if press:  # the operator's mouse press (ShadowSession.prepare_drag)
+                t0 = time.perf_counter()
+                s.prepare_drag(k, fixed, mid, style=style)
+                row["press_ms"] = 1e3 * (time.perf_counter() - t0)
             for i in range(n):
                 target = centre + (h["points"][mid] - centre) * (1.05 + 0.03 * i)
                 t0 = time.perf_counter()
@@ -98,9 +103,12 @@ def main():
             s.cancel()
             return drag, step, update, native
 
-        # The default (affine) drag: its first step back-substitutes the responses to x and y, every
-        # further step is incremental (ShadowEditor::shadow_mesh, O(V)).
-        drag, step, update, native = steps("affine", args.steps + 1)
+        # The default (affine) drag without a press: its first step back-substitutes the responses
+        # to x and y; then as the operator runs it, prepared on the press: every step, the first
+        # included, is incremental (ShadowEditor::shadow_mesh, O(V)).
+        drag, step, update, native = steps("affine", 2)
+        row["first_step_unprepared_ms"] = 1e3 * (drag[0] + step[0] + update[0])
+        drag, step, update, native = steps("affine", args.steps + 1, press=True)
         row["first_step_ms"] = 1e3 * (drag[0] + step[0] + update[0])
         drag, step, update, native = drag[1:], step[1:], update[1:], native[1:]
         row.update(drag_ms=1e3 * statistics.median(drag), live_step_ms=1e3 * statistics.median(step),

@@ -107,6 +107,9 @@ def test_modal_drag_with_synthetic_events_live_shadow_follows_release_keeps_esc_
             press = sess.handles(0)["points"][m]  # where handle m is now
             assert op.invoke(ctx, _event("LEFTMOUSE", "PRESS", screen(press))) == {"RUNNING_MODAL"}, op.reports
             assert added[-1] is op and op.moved == m and op.loop == 0
+            # Prepared on the press: the drag's first step is already an O(V) update of the shadow
+            # mesh, not a back-substitution (the step that missed a frame).
+            assert sess.editor.drag_is_incremental()
             reaches = []
             for f in factors:
                 want = centre + d * r0 * f

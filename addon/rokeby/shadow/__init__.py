@@ -154,6 +154,14 @@ class ShadowSession:
         self.pending = step
         return r
 
+    def prepare_drag(self, loop: int, fixed, moved: int, *, style: str = "affine", noise_amplitude: float = 0.0) -> bool:
+        """The mouse press of a drag (the arguments as :meth:`drag` takes them): makes the steps
+        that follow, the first included, update the shadow mesh by an O(V) sum instead of a
+        back-substitution (docs/shadow_editing.md). Returns whether it could (not for rigid or
+        noisy drags, per-loop frusta or with an uncommitted step). Changes no edit."""
+        return bool(self.editor.prepare_drag(int(loop), tuple(int(i) for i in fixed), int(moved), style=style,
+                                             noise_amplitude=float(noise_amplitude)))
+
     def commit(self):
         self.editor.commit()
         if self.pending is not None:

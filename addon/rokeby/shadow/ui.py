@@ -238,6 +238,13 @@ class ROKEBY_OT_shadow_drag(bpy.types.Operator):
             shading = getattr(getattr(context, "space_data", None), "shading", None)
             if shading is not None and shading.type != "RENDERED":
                 self.report({"INFO"}, "Rokeby: the edited shadow shows while dragging in Rendered viewport shading (Z)")
+        # On the press, before the mouse moves: the drag's responses to the dragged point, so that
+        # every step, the first included, fits a frame (docs/shadow_editing.md).
+        try:
+            sess.prepare_drag(self.loop, tuple(self.fixed), self.moved, style=self.style,
+                              noise_amplitude=self.noise_amplitude)
+        except ValueError as exc:
+            self.report({"WARNING"}, f"Rokeby: {exc}")
         context.window_manager.modal_handler_add(self)
         return {"RUNNING_MODAL"}
 

@@ -975,3 +975,66 @@ fn incremental_drag_steps_equal_a_direct_solve() {
         }
     }
 }
+
+/// A drag prepared on the mouse press (`prepare_drag`): its first step is already incremental,
+/// and every step gives the shadow mesh an unprepared editor gives; the shadow mesh at the press
+/// is the committed one; rigid drags and drags with an uncommitted step are not prepared.
+#[test]
+fn a_drag_prepared_on_the_press_is_incremental_from_its_first_step() {
+    for style in [MlsStyle::Affine, MlsStyle::Similarity] {
+        let (mut ed, l) = scene(32, 48);
+        let (mut plain, _) = scene(32, 48);
+        // A committed edit first, so that the press starts from a moved base.
+        let (d, _) = drag_radially(&mut ed, l, 20, 1.2);
+        for e in [&mut ed, &mut plain] {
+            e.drag(&d).unwrap();
+            e.shadow_mesh().unwrap();
+            e.commit();
+        }
+        let at_press = plain.shadow_mesh().unwrap();
+        let (mut d, _) = drag_radially(&mut ed, l, 3, 1.1);
+        d.style = style;
+        assert!(ed.prepare_drag(&d).unwrap());
+        assert!(ed.drag_is_incremental());
+        let same = ed.shadow_mesh().unwrap();
+        let most = at_press
+            .iter()
+            .zip(&ed.caster().vertices)
+            .map(|(a, b)| (*a - *b).length())
+            .fold(0.0, f64::max);
+        assert!(most > 1e-3);
+        for (a, b) in same.iter().zip(&at_press) {
+            assert!((*a - *b).length() < 1e-9 * (1.0 + most));
+        }
+        for factor in [1.1, 1.3, 0.9] {
+            let (mut d, _) = drag_radially(&mut ed, l, 3, factor);
+            d.style = style;
+            ed.drag(&d).unwrap();
+            // The first step too: no back-substitution left for it.
+            assert!(ed.drag_is_incremental(), "{style:?} {factor}");
+            plain.drag(&d).unwrap();
+            let want = plain.shadow_mesh().unwrap();
+            for (a, b) in ed.shadow_mesh().unwrap().iter().zip(&want) {
+                assert!(
+                    (*a - *b).length() < 1e-9 * (1.0 + most),
+                    "{style:?}: {a:?} vs {b:?}"
+                );
+            }
+        }
+        // Mid-drag (an uncommitted step) nothing is prepared; nor for rigid drags.
+        assert!(!ed.prepare_drag(&d).unwrap());
+        ed.commit();
+        plain.commit();
+        let (mut r, _) = drag_radially(&mut ed, l, 3, 1.1);
+        r.style = MlsStyle::Rigid;
+        assert!(!ed.prepare_drag(&r).unwrap());
+        // Without a press the first step of a drag is the one that solves.
+        let (d2, _) = drag_radially(&mut plain, l, 20, 1.1);
+        plain.drag(&d2).unwrap();
+        assert!(!plain.drag_is_incremental());
+        // Bad loops are refused by name.
+        let mut bad = d2;
+        bad.loop_index = 99;
+        assert!(ed.prepare_drag(&bad).is_err());
+    }
+}

@@ -381,6 +381,48 @@ impl PyShadowEditor {
         Ok(out)
     }
 
+    /// Mouse press: prepares the drag of `moved` between `fixed` (as `drag` takes them), so
+    /// that its steps, the first included, update the shadow mesh in O(V). Returns whether it
+    /// did (False: an uncommitted drag is in progress, a rigid or noisy style, or per-loop
+    /// frusta — those steps solve in full). The shadow mesh is unchanged.
+    #[pyo3(signature = (r#loop, fixed, moved, *, style="affine", mls_alpha=1.0, noise_amplitude=0.0))]
+    // One argument per Python (keyword) argument of the pyo3 signature above.
+    #[allow(clippy::too_many_arguments)]
+    fn prepare_drag(
+        &self,
+        py: Python<'_>,
+        r#loop: i64,
+        fixed: (i64, i64),
+        moved: i64,
+        style: &str,
+        mls_alpha: f64,
+        noise_amplitude: f64,
+    ) -> PyResult<bool> {
+        let (r#loop, moved) = (index(r#loop, "loop")?, index(moved, "moved")?);
+        let fixed = (index(fixed.0, "fixed")?, index(fixed.1, "fixed")?);
+        let style = MlsStyle::parse(style).ok_or_else(|| PyValueError::new_err(format!("style: unknown deformation style {style:?} (expected 'affine', 'similarity' or 'rigid')")))?;
+        let d = Drag {
+            loop_index: r#loop,
+            fixed,
+            moved,
+            target: DVec3::ZERO,
+            style,
+            mls_alpha,
+            noise_amplitude,
+            noise_frequency: 0.0,
+        };
+        self.with(py, move |ed| ed.prepare_drag(&d))
+    }
+
+    /// Whether the current drag's next shadow_mesh() is incremental (prepared on the press or
+    /// by the drag's first step).
+    fn drag_is_incremental(&self) -> bool {
+        self.inner
+            .lock()
+            .unwrap_or_else(|p| p.into_inner())
+            .drag_is_incremental()
+    }
+
     /// Mouse release: the current state becomes the base of the next drag.
     fn commit(&self) {
         self.inner

@@ -667,7 +667,8 @@ def test_shadow_editor(data):
     _ = (ed.num_loops, ed.num_receiver_faces, ed.factored)
     loops = call(ed.loops) or []
     for _ in range(data.draw(st.integers(1, 5))):
-        op = data.draw(st.sampled_from(["handles", "drag", "commit", "cancel", "reset", "shadow_mesh"]))
+        op = data.draw(st.sampled_from(["handles", "drag", "prepare_drag", "commit", "cancel", "reset", "shadow_mesh",
+                                        "drag_is_incremental"]))
         k = len(loops[0]["points"]) if loops else 3
         if op == "handles":
             call(ed.handles, **data.draw(mutated(dict(loop=data.draw(st.one_of(st.integers(0, 2), NASTY_INTS)),
@@ -681,6 +682,14 @@ def test_shadow_editor(data):
                         noise_amplitude=data.draw(st.one_of(st.floats(-1, 1), NASTY_FLOATS)),
                         noise_frequency=data.draw(st.floats(0, 10)))
             call(ed.drag, **data.draw(mutated(args)))
+        elif op == "prepare_drag":
+            args = dict(loop=data.draw(st.one_of(st.just(0), NASTY_INTS)),
+                        fixed=(data.draw(st.integers(-1, k)), data.draw(st.integers(-1, k))),
+                        moved=data.draw(st.one_of(st.integers(0, k), NASTY_INTS)),
+                        style=data.draw(st.sampled_from(["affine", "similarity", "rigid", "warp"])),
+                        mls_alpha=data.draw(st.one_of(st.floats(0, 3), NASTY_FLOATS)),
+                        noise_amplitude=data.draw(st.one_of(st.floats(-1, 1), NASTY_FLOATS)))
+            call(ed.prepare_drag, **data.draw(mutated(args)))
         else:
             call(getattr(ed, op))
 

@@ -656,6 +656,65 @@ impl ShadowEditor {
         })
     }
 
+    /// Prepares the incremental shadow mesh of a drag before its first step, on the mouse press:
+    /// the responses to the dragged point moving in x and y (the back-substitution that otherwise
+    /// makes the first [`Self::shadow_mesh`] of a drag the slow one) do not depend on where the
+    /// point goes, so the steps that follow with the same loop, ends, dragged vertex and style
+    /// are all O(V). `Ok(false)`: nothing to prepare (an uncommitted drag is in progress, the
+    /// style is rigid or noisy, or the loops have their own frusta: those steps solve in full).
+    /// The shadow mesh is unchanged by it.
+    pub fn prepare_drag(&mut self, d: &Drag) -> Result<bool> {
+        self.check_loop(d.loop_index)?;
+        let k = d.loop_index;
+        if !self.active[k] {
+            return Err(RokebyError::invalid(
+                "loop",
+                format!(
+                    "loop {k} has {} vertices, fewer than the threshold: it is not editable",
+                    self.loops[k].len()
+                ),
+            ));
+        }
+        let seg = self.segment(k, d.fixed.0, d.fixed.1, d.moved)?;
+        if self.frame.is_none()
+            || d.noise_amplitude != 0.0
+            || d.style == MlsStyle::Rigid
+            || self.current != self.committed
+        {
+            return Ok(false);
+        }
+        let key = DragKey {
+            loop_index: k,
+            fixed: (seg[0], *seg.last().expect("segment has ends")),
+            moved: d.moved,
+            style: d.style,
+            mls_alpha: d.mls_alpha,
+        };
+        let r = self.rest[k][d.moved];
+        let f0 = DVec2::new(r.x, r.y) + self.committed[k][d.moved];
+        if self.last_drag.map(|(k0, _)| k0) != Some(key) {
+            self.epoch += 1;
+        }
+        // The drag at its start (f at f₀: the committed state); shadow_mesh builds the cache.
+        self.last_drag = Some((key, f0));
+        if let Err(e) = self.shadow_mesh() {
+            self.end_drag();
+            return Err(e);
+        }
+        Ok(true)
+    }
+
+    /// Whether the current drag's next [`Self::shadow_mesh`] is incremental (O(V), from the map
+    /// made by [`Self::prepare_drag`] or by this drag's first step).
+    pub fn drag_is_incremental(&self) -> bool {
+        match (self.last_drag, &self.cache) {
+            (Some((key, _)), Some(c)) => {
+                self.frame.is_some() && c.key == key && c.epoch == self.epoch
+            }
+            _ => false,
+        }
+    }
+
     /// Loop `k`'s offsets (frustum x, y per silhouette vertex) after deforming the segment `seg`
     /// of its committed state so that the dragged vertex goes to `f2` (§5.2, §5.3).
     fn segment_offsets(&self, k: usize, seg: &[usize], d: &Drag, f2: DVec2) -> Result<Vec<DVec2>> {
