@@ -252,6 +252,18 @@ def geodesic_section(emit, peers_python):
                 else:
                     emit(f"(peers failed on {name}: {r.stderr.strip().splitlines()[-1] if r.stderr.strip() else r.returncode})")
         exact = peers["exact_d"] if "exact_d" in peers else None
+        if exact is not None and original is None:
+            # A geodesic is never longer than a path along the edges (Dijkstra's): where the peer's
+            # MMP is, it is wrong (pygeodesic on the teapot, whose reads of uninitialised memory also
+            # raise OverflowError in some runs), and Rokeby's exact method scores the mesh instead.
+            dj = rn.GeodesicSolver(v, f).distances(sources, method="dijkstra").astype(np.float64)
+            fin = np.isfinite(exact) & np.isfinite(dj)
+            longer = int(((exact - dj) > 1e-5 * np.maximum(dj, 1e-12))[fin].sum())
+            if longer:
+                emit(f"| {name} | {len(f):,} | exact MMP (pygeodesic) | not used: longer than an edge path at {longer} of {int(fin.sum())} vertices | | | | |")
+                peers.pop("exact_d", None)
+                peers.pop("exact_pre", None)
+                exact = None
         if exact is not None:
             exact_of[name] = exact
         n_scored = len(v)
