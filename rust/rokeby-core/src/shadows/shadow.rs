@@ -560,11 +560,9 @@ impl ShadowEditor {
         }
     }
 
-    /// One drag step (§5.1–5.3), relative to the last committed state; the result becomes the
-    /// current state (see [`Self::commit`]).
-    pub fn drag(&mut self, d: &Drag) -> Result<DragResult> {
-        self.check_loop(d.loop_index)?;
-        let k = d.loop_index;
+    /// A loop that exists and is active (enough silhouette vertices to drag).
+    fn check_editable(&self, k: usize) -> Result<()> {
+        self.check_loop(k)?;
         if !self.active[k] {
             return Err(RokebyError::invalid(
                 "loop",
@@ -574,6 +572,14 @@ impl ShadowEditor {
                 ),
             ));
         }
+        Ok(())
+    }
+
+    /// One drag step (§5.1–5.3), relative to the last committed state; the result becomes the
+    /// current state (see [`Self::commit`]).
+    pub fn drag(&mut self, d: &Drag) -> Result<DragResult> {
+        self.check_editable(d.loop_index)?;
+        let k = d.loop_index;
         if !d.target.is_finite() {
             return Err(RokebyError::invalid("target", "must be finite"));
         }
@@ -664,17 +670,8 @@ impl ShadowEditor {
     /// style is rigid or noisy, or the loops have their own frusta: those steps solve in full).
     /// The shadow mesh is unchanged by it.
     pub fn prepare_drag(&mut self, d: &Drag) -> Result<bool> {
-        self.check_loop(d.loop_index)?;
+        self.check_editable(d.loop_index)?;
         let k = d.loop_index;
-        if !self.active[k] {
-            return Err(RokebyError::invalid(
-                "loop",
-                format!(
-                    "loop {k} has {} vertices, fewer than the threshold: it is not editable",
-                    self.loops[k].len()
-                ),
-            ));
-        }
         let seg = self.segment(k, d.fixed.0, d.fixed.1, d.moved)?;
         if self.frame.is_none()
             || d.noise_amplitude != 0.0
