@@ -829,8 +829,8 @@ pub fn partial(
     })
 }
 
-/// The former partial reconstruction (grid of triangles queried per texel), kept as the
-/// reference of the tests.
+/// A direct partial reconstruction (a grid of triangles queried per texel), the reference of
+/// the tests.
 #[cfg(test)]
 // The same arguments as `partial` (the test reference).
 #[allow(clippy::too_many_arguments)]
@@ -1564,7 +1564,7 @@ mod tests {
         (refl, vals, mask, depth)
     }
 
-    /// The polygon-visits-texels search gives the former per-texel grid query's map: same
+    /// The polygon-visits-texels search gives the per-texel grid query's map: same
     /// triangles, same covered texels, values within f64 rounding (the barycentric coordinates
     /// come from precomputed dual vectors) — equal after the f32 store here.
     #[test]

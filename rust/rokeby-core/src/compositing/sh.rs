@@ -958,7 +958,7 @@ impl GiState {
     }
 }
 
-/// The former fit, kept as the reference of the tests: the N×9 matrix A stored, [GI83] on all N
+/// A direct fit, the reference of the tests: the N×9 matrix A stored, [GI83] on all N
 /// constraints with a full pass per step.
 #[cfg(test)]
 pub(crate) fn fit_reference(
@@ -1106,7 +1106,7 @@ type Chol = crate::numerical::DenseCholesky<SH_COEFFS>;
 /// Goldfarb–Idnani dual active-set method for
 ///   min ½ cᵀHc − gᵀc   s.t.  aᵢᵀc ≥ bᵢ  (i = 1..N),
 /// started at the unconstrained optimum x0 = H⁻¹g. Returns the optimum and the number of steps.
-/// The former solver (a full pass over all N constraints per step), the tests' reference.
+/// A direct solver (a full pass over all N constraints per step), the tests' reference.
 #[cfg(test)]
 fn goldfarb_idnani(
     chol: &Chol,
@@ -1329,7 +1329,7 @@ mod tests {
                 tol.max_residual[c]
             );
         }
-        // An independent check of middle τs: the former solver (`fit_reference`: the N×9 matrix
+        // An independent check of middle τs: the direct solver (`fit_reference`: the N×9 matrix
         // stored, one Goldfarb–Idnani run over all N constraints, no screening) with b − τ.
         for t in [[0.01, 0.03, 0.05], [0.02; 3]] {
             let refq = fit_reference_tolerance(&ns, &vs, 3, Fit::Constrained, &t).unwrap();
@@ -1454,7 +1454,7 @@ mod tests {
             let f = fit(&ns, &vs, 1, Fit::Constrained).unwrap();
             let r = fit_reference(&ns, &vs, 1, Fit::Constrained).unwrap();
             let x = f.coeffs[0];
-            // The same optimum as the former solver (unique: H is positive definite).
+            // The same optimum as the direct solver (unique: H is positive definite).
             for (k, &xk) in x.iter().enumerate() {
                 assert!(
                     (xk - r.coeffs[0][k]).abs() < 1e-9,
