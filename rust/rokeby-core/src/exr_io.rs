@@ -134,7 +134,7 @@ fn file_error(e: exr::error::Error) -> RokebyError {
 /// Checks what the headers ask for (pixels of every channel, as f32/u32, of the full-resolution
 /// level) against the memory limit before the crate allocates anything, and refuses what the
 /// reader does not return (deep data, subsampled channels) with a message naming it.
-fn check_headers(bytes: &[u8], dwa: bool) -> Result<()> {
+fn check_headers(bytes: &[u8], dwa: bool) -> Result<exr::meta::MetaData> {
     if bytes.len() < 4 || bytes[..4] != [0x76, 0x2f, 0x31, 0x01] {
         let head: String = String::from_utf8_lossy(&bytes[..bytes.len().min(8)])
             .chars()
@@ -180,14 +180,24 @@ fn check_headers(bytes: &[u8], dwa: bool) -> Result<()> {
     }
     // The crate's f16 buffers plus the widened f32 copies: 6 bytes per sample at most at once.
     crate::alloc::check::<[u8; 6]>("EXR pixels", &[samples])?;
-    Ok(())
+    Ok(meta)
 }
 
 /// Every part of the EXR file `bytes` (see the module documentation). `dwa`: decode DWAA/DWAB
 /// files too, accepting that a few pixels differ from OpenEXR's decoding by a rounding (for
 /// environment maps: Blender's own studio worlds are DWAB), instead of refusing them.
 pub fn read(bytes: &[u8], dwa: bool) -> Result<Vec<Part>> {
-    check_headers(bytes, dwa)?;
+    let meta = check_headers(bytes, dwa)?;
+    // Multi-part files carry each part's chunk count as an attribute (the crate keeps it apart).
+    let chunk_counts: Vec<Option<usize>> = meta
+        .headers
+        .iter()
+        .map(|h| {
+            meta.requirements
+                .has_multiple_layers
+                .then_some(h.chunk_count)
+        })
+        .collect();
     let image = exr::image::read::read()
         .no_deep_data()
         .largest_resolution_level()
@@ -200,7 +210,7 @@ pub fn read(bytes: &[u8], dwa: bool) -> Result<Vec<Part>> {
     let shared = &image.attributes;
     let display_window = bounds(shared.display_window);
     let mut parts = Vec::with_capacity(image.layer_data.len());
-    for layer in image.layer_data.iter() {
+    for (index, layer) in image.layer_data.iter().enumerate() {
         let a = &layer.attributes;
         let (w, h) = (layer.size.x(), layer.size.y());
         let data_window = bounds(IntegerBounds::new(a.layer_position, layer.size));
@@ -259,6 +269,9 @@ pub fn read(bytes: &[u8], dwa: bool) -> Result<Vec<Part>> {
                 _ => continue,
             };
             attrs.push((text(k), v));
+        }
+        if let Some(Some(n)) = chunk_counts.get(index) {
+            attrs.push(("chunkCount".to_string(), AttrValue::Int(*n as i64)));
         }
         attrs.sort_by(|x, y| x.0.cmp(&y.0));
         attrs.dedup_by(|x, y| x.0 == y.0);
