@@ -12,7 +12,7 @@ export ROKEBY_SHARED := $(SHARED)
 
 RUST_SRC := Cargo.toml pyproject.toml $(wildcard rust/*/Cargo.toml) $(shell find rust -name '*.rs' 2>/dev/null)
 
-.PHONY: ci-phase2 all demo dist test test-blender test-matrix bench cargo-test pytest native venv clean help fuzz fuzz-py lint
+.PHONY: ci-phase2 all demo dist debian-blender test test-blender test-matrix bench cargo-test pytest native venv clean help fuzz fuzz-py lint
 
 all: native
 
@@ -23,6 +23,7 @@ help:
 	@echo "make test-matrix  test-blender for each of MATRIX (5.3.0 4.2.23 5.0.1), as CI runs it (CPython 3.11 legs: -m blender; MATRIX_JOBS=2 at once)"
 	@echo "make bench  benchmarks, printed next to the reference numbers"
 	@echo "make dist   the installable Blender extension zip, dist/rokeby-<version>.zip"
+	@echo "make debian-blender  Debian 13's Blender 4.3.2 in .py313 (tests/compositing/test_exr_io.py runs the zip in it)"
 	@echo "make lint   ruff (errors), cargo fmt --check, cargo clippy -D warnings, and the add-on checked against the newest Blender API stubs"
 	@echo "make fuzz-py  hypothesis fuzzing of rokeby_native and the file readers (FUZZ_PY_EXAMPLES=500)"
 
@@ -55,6 +56,15 @@ demo: native dist
 # `exr` crate), never through a second OpenEXR C library inside Blender's process.
 dist: native
 	$(PY) tools/build_extension.py --wheels target/wheels --out dist
+
+# Debian 13's own Blender (4.3.2, linked with Debian's OpenEXR) inside the Debian 13 root of
+# tools/py313, for tests/compositing/test_exr_io.py's check that the extension zip runs Render and
+# Recomposite in it (a zip with the OpenEXR wheel crashed it). Idempotent; about 700 MB once. Not
+# part of `make test`: the test skips, saying so, until this has run.
+debian-blender:
+	tools/py313 --setup
+	@test -x .py313/usr/bin/blender || tools/py313 bash -c 'apt-get update -q >/dev/null && DEBIAN_FRONTEND=noninteractive apt-get install -y -q --no-install-recommends blender python3-numpy >/dev/null'
+	@tools/py313 blender --version | head -1
 
 test: cargo-test pytest
 

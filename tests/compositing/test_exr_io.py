@@ -381,3 +381,30 @@ def test_environment_maps_take_dwa_files_within_a_rounding_of_openexr():
             with pytest.raises(ValueError, match="compression is not supported"):
                 exr.read(path)
     assert differing <= total // 1000  # measured: 0.03 % of the samples
+
+
+def test_debian_blender_renders_and_recomposites_with_the_extension_zip():
+    """The defect where it happened: Debian 13's Blender 4.3.2 (it links Debian's libOpenEXRCore),
+    in background mode inside the project's Debian 13 root (`make debian-blender` installs it),
+    installs the zip from disk and runs Render and Recomposite: Blender stays alive, the EXR is
+    read (44 channels, ZIP) and the recomposited image made, and OpenEXR is never imported. (The
+    zip that bundled the OpenEXR wheel died here with SIGBUS or SIGSEGV after saving the EXR.)"""
+    import build_extension as be
+
+    if not (ROOT / ".py313" / "usr" / "bin" / "blender").exists():
+        pytest.skip("no Debian Blender in .py313 (`make debian-blender` installs Debian 13's blender there)")
+    wheels = ROOT / "target" / "wheels"
+    if not list(wheels.glob("rokeby_native-*.whl")):
+        pytest.skip("no rokeby_native wheel in target/wheels (make native builds it)")
+    work = ROOT / "target" / "debian-blender-check"  # bound inside the root, unlike /tmp
+    shutil.rmtree(work, ignore_errors=True)
+    zip_path = be.build(ROOT / "addon" / "rokeby", wheels, work, ROOT / "shaders")
+    cmd = ('export HOME=$(mktemp -d); exec blender -b --factory-startup --python-exit-code 1 --python "$0" -- "$1" "$2"')
+    r = subprocess.run([str(ROOT / "tools" / "py313"), "bash", "-c", cmd, str(ROOT / "tests" / "compositing" / "debian_blender_exr_check.py"),
+                        str(zip_path), str(work / "out")], capture_output=True, text=True, timeout=600)
+    assert r.returncode == 0, (r.returncode, (r.stdout + r.stderr)[-3000:])
+    line = next(ln for ln in r.stdout.splitlines() if ln.startswith("ROKEBY-CHECK {"))
+    res = json.loads(line.split(" ", 1)[1])
+    assert res["blender"].startswith("4.3") and res["operator"] == ["FINISHED"] and res["exr_exists"]
+    assert res["openexr_imported"] is False and res["channels"] == 44 and res["compression"] == "zip"
+    assert res["images"]
