@@ -12,7 +12,7 @@ export ROKEBY_SHARED := $(SHARED)
 
 RUST_SRC := Cargo.toml pyproject.toml $(wildcard rust/*/Cargo.toml) $(shell find rust -name '*.rs' 2>/dev/null)
 
-.PHONY: ci-phase2 all demo dist test test-blender test-matrix bench cargo-test pytest native venv clean help fuzz fuzz-py lint
+.PHONY: ci-phase2 all demo dist debian-blender test test-blender test-matrix bench cargo-test pytest native venv clean help fuzz fuzz-py lint
 
 all: native
 
@@ -23,6 +23,7 @@ help:
 	@echo "make test-matrix  test-blender for each of MATRIX (5.3.0 4.2.23 5.0.1), as CI runs it (CPython 3.11 legs: -m blender; MATRIX_JOBS=2 at once)"
 	@echo "make bench  benchmarks, printed next to the reference numbers"
 	@echo "make dist   the installable Blender extension zip, dist/rokeby-<version>.zip"
+	@echo "make debian-blender  Debian 13's Blender 4.3.2 in .py313 (tests/compositing/test_exr_io.py runs the zip in it)"
 	@echo "make lint   ruff (errors), cargo fmt --check, cargo clippy -D warnings, and the add-on checked against the newest Blender API stubs"
 	@echo "make fuzz-py  hypothesis fuzzing of rokeby_native and the file readers (FUZZ_PY_EXAMPLES=500)"
 
@@ -51,29 +52,26 @@ demo: native dist
 
 # The Blender 4.2+ extension zip: add-on files at the root, the manifest with the wheel's real
 # filename, the wheel under wheels/ (tools/build_extension.py; rewrites the zip only if it changed).
-# Packages the add-on imports that Blender does not ship go into the zip as wheels too: OpenEXR
-# (the compositing tools read and write multilayer EXRs), the version pinned in requirements-test.txt,
-# for each CPython that Blender bundles (3.11 up to 5.0, 3.13 from 5.1): the zip lists them all and
-# Blender installs the one for its Python.
-EXTRA_WHEELS := target/extra-wheels
-EXTRA_PYTHONS := 3.11 3.13
-$(EXTRA_WHEELS)/.done: requirements-test.txt
-	@rm -rf $(EXTRA_WHEELS)
-	@set -e; for v in $(EXTRA_PYTHONS); do \
-		$(PIP) download -q --no-deps --only-binary=:all: --python-version $$v --implementation cp \
-			-d $(EXTRA_WHEELS) "$$(grep -E '^OpenEXR==' requirements-test.txt)"; \
-	done
-	@touch $@
+# rokeby_native's is the only wheel: the add-on reads and writes EXRs through it (the pure-Rust
+# `exr` crate), never through a second OpenEXR C library inside Blender's process.
+dist: native
+	$(PY) tools/build_extension.py --wheels target/wheels --out dist
 
-dist: native $(EXTRA_WHEELS)/.done
-	$(PY) tools/build_extension.py --wheels target/wheels --extra-wheels $(EXTRA_WHEELS) --out dist
+# Debian 13's own Blender (4.3.2, linked with Debian's OpenEXR) inside the Debian 13 root of
+# tools/py313, for tests/compositing/test_exr_io.py's check that the extension zip runs Render and
+# Recomposite in it (a zip with the OpenEXR wheel crashed it). Idempotent; about 700 MB once. Not
+# part of `make test`: the test skips, saying so, until this has run.
+debian-blender:
+	tools/py313 --setup
+	@test -x .py313/usr/bin/blender || tools/py313 bash -c 'apt-get update -q >/dev/null && DEBIAN_FRONTEND=noninteractive apt-get install -y -q --no-install-recommends blender python3-numpy >/dev/null'
+	@tools/py313 blender --version | head -1
 
 test: cargo-test pytest
 
 cargo-test:
 	cargo test -p rokeby-core --quiet
 
-pytest: native $(EXTRA_WHEELS)/.done
+pytest: native
 	$(PY) -m pytest -q
 
 # Static checks in their own environment (the Blender API stubs are a fake `bpy` package).
@@ -116,7 +114,7 @@ $(BPY_VENV)/.deps: requirements-test.txt
 	@$(BPY_RUN) $(BPY_PY) -c 'import bpy, sys; v = bpy.app.version_string; print("bpy", v, "on Python", sys.version.split()[0]); sys.exit(not v.startswith("$(BPY)".rsplit(".", 1)[0]))'
 	@touch $@
 
-test-blender: native $(EXTRA_WHEELS)/.done $(BPY_VENV)/.deps
+test-blender: native $(BPY_VENV)/.deps
 	$(BPY_RUN) $(BPY_PY) -m pip install -q --force-reinstall --no-deps target/wheels/rokeby_native-*.whl
 	$(BPY_RUN) $(BPY_PY) -m pytest $(PYTEST_ARGS)
 
@@ -130,7 +128,7 @@ test-blender: native $(EXTRA_WHEELS)/.done $(BPY_VENV)/.deps
 MATRIX ?= 5.3.0 4.2.23 5.0.1
 MATRIX_CP311_ARGS ?= -q -m blender
 MATRIX_JOBS ?= 2
-test-matrix: native $(EXTRA_WHEELS)/.done
+test-matrix: native
 	@s=$$(date +%s); \
 	$(MAKE) --no-print-directory -k -j$(MATRIX_JOBS) --output-sync=target $(addprefix matrix-leg-,$(MATRIX)); rc=$$?; \
 	echo "== matrix ($(MATRIX), $(MATRIX_JOBS) at once): $$(( $$(date +%s) - s )) s"; \

@@ -185,6 +185,16 @@ def env_reference(image: _Array, lobe: str, directions: _Array, param: float = 0
 def rgbe_decode(data: bytes) -> _F32: ...
 def rgbe_encode(pixels: _Array) -> bytes: ...
 
+# --- OpenEXR files (pure Rust: no OpenEXR C library in the process) ---------------------------
+
+def exr_read(data: bytes, dwa: bool = False) -> list[dict[str, Any]]: ...
+def exr_write(
+    channels: dict[str, _Array],
+    header: dict[str, str] | None = None,
+    compression: str = "zip",
+    half: Sequence[str] | None = None,
+) -> bytes: ...
+
 # --- shadow: freeform shadow boundary editing (Mattausch et al.) -----------------------------
 
 def shadow_falloff(l_initial: _Array, l_current: _Array, beta: float) -> float: ...

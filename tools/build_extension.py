@@ -77,38 +77,6 @@ def find_wheel(wheel_dir: Path, version: str) -> Path:
     return wheel
 
 
-def find_extra_wheels(extra_dir: "Path | None", native: Path) -> list[Path]:
-    """Wheels of the Python packages the add-on imports that Blender does not ship (OpenEXR, for
-    the compositing tools), downloaded by `make dist` into ``extra_dir``; only those for a Python
-    the native wheel loads in (its own; with the stable ABI, ``abi3``, every CPython from its
-    own on: Blender 4.2-5.0 bundle 3.11, 5.1+ 3.13) and its platform are taken. Blender installs,
-    of the wheels a manifest lists, those for its own Python."""
-    if extra_dir is None or not extra_dir.is_dir():
-        return []
-    platforms = set(blender_platforms(native.name))
-    out = []
-    for w in sorted(extra_dir.glob("*.whl")):
-        wpy, _wabi, wplat = wheel_tags(w.name)
-        if pythons_overlap(native.name, wpy) and (wplat == "any" or set(blender_platforms(w.name)) & platforms):
-            out.append(w)
-    return out
-
-
-def pythons_overlap(native_name: str, python_tag: str) -> bool:
-    """Whether a wheel for ``python_tag`` can load beside the native wheel. A stable-ABI (abi3) native
-    wheel tagged cp311 loads in every CPython from 3.11 on, so the extra wheels of each of those versions
-    go into the zip (Blender installs the one for its own Python); a version-specific native wheel takes
-    only its own version's."""
-    py, abi, _plat = wheel_tags(native_name)
-    tags = python_tag.split(".")
-    if any(t in ("py3", py) for t in tags):
-        return True
-    if abi != "abi3" or not py.startswith("cp3"):
-        return False
-    floor = int(py[3:])
-    return any(t.startswith("cp3") and t[3:].isdigit() and int(t[3:]) >= floor for t in tags)
-
-
 def manifest_text(source: str, wheel_name: "str | list[str]", platforms: list[str]) -> str:
     """The source manifest with ``wheels`` and ``platforms`` set (top-level keys, so they go before
     the first table); any existing or commented-out wheels/platforms lines are dropped."""
@@ -144,7 +112,7 @@ def _entry(name: str) -> zipfile.ZipInfo:
     return info
 
 
-def build(addon: Path, wheel_dir: Path, out_dir: Path, shaders: "Path | None" = None, extra_wheels: "Path | None" = None) -> Path:
+def build(addon: Path, wheel_dir: Path, out_dir: Path, shaders: "Path | None" = None) -> Path:
     """Build (or leave in place, when identical) ``out_dir/rokeby-<version>.zip``; returns its path."""
     source = (addon / "blender_manifest.toml").read_text()
     meta = tomllib.loads(source)
@@ -152,8 +120,7 @@ def build(addon: Path, wheel_dir: Path, out_dir: Path, shaders: "Path | None" = 
         if key not in meta:
             raise BuildError(f"{addon / 'blender_manifest.toml'}: missing '{key}'")
     wheel = find_wheel(wheel_dir, meta["version"])
-    extra = find_extra_wheels(extra_wheels, wheel)
-    manifest = manifest_text(source, [wheel.name, *(w.name for w in extra)], blender_platforms(wheel.name))
+    manifest = manifest_text(source, wheel.name, blender_platforms(wheel.name))
 
     buf = io.BytesIO()
     with zipfile.ZipFile(buf, "w") as zf:
@@ -164,8 +131,7 @@ def build(addon: Path, wheel_dir: Path, out_dir: Path, shaders: "Path | None" = 
             # The GLSL of the viewport preview: rokeby.glsl looks for shaders/ next to the package.
             for path, name in package_files(shaders):
                 zf.writestr(_entry(f"shaders/{name}"), path.read_bytes())
-        for w in (wheel, *extra):
-            zf.writestr(_entry(f"wheels/{w.name}"), w.read_bytes())
+        zf.writestr(_entry(f"wheels/{wheel.name}"), wheel.read_bytes())
     data = buf.getvalue()
 
     out_dir.mkdir(parents=True, exist_ok=True)
@@ -184,11 +150,9 @@ def main(argv=None) -> int:
     ap.add_argument("--wheels", type=Path, default=ROOT / "target" / "wheels")
     ap.add_argument("--out", type=Path, default=ROOT / "dist")
     ap.add_argument("--shaders", type=Path, default=ROOT / "shaders", help="GLSL folder packed as shaders/ (if it exists)")
-    ap.add_argument("--extra-wheels", type=Path, default=None,
-                    help="folder of wheels of packages Blender lacks (OpenEXR), bundled when they fit the native wheel")
     args = ap.parse_args(argv)
     try:
-        path = build(args.addon, args.wheels, args.out, args.shaders, args.extra_wheels)
+        path = build(args.addon, args.wheels, args.out, args.shaders)
     except BuildError as exc:
         print(f"build_extension: {exc}", file=sys.stderr)
         return 1

@@ -35,6 +35,7 @@ import time
 import numpy as np
 
 from . import compositing as C
+from .core import exr
 from .blender import transaction
 
 
@@ -51,13 +52,12 @@ def _read_height(path: str, shape) -> np.ndarray:
         if path.endswith(".npy"):
             h = np.load(path)
         else:
-            import OpenEXR
-
-            with OpenEXR.File(path) as f:
-                ch = f.parts[0].channels
-                key = next(iter(ch))
-                h = np.asarray(ch[key].pixels, np.float32)
-    except (OSError, RuntimeError, ValueError, StopIteration) as exc:  # unreadable, not an EXR, no channel
+            # The first channel as OpenEXR's reader groups them (an RGB[A] set is one, averaged below).
+            ch = exr.grouped(exr.read(path)[0].channels)
+            h = np.asarray(ch[next(iter(ch))], np.float32)
+    except exr.ExrError as exc:
+        raise C.CompositingError(f"--bump: cannot read the height image {path}: {exc.why}") from None
+    except (OSError, ValueError, StopIteration) as exc:  # unreadable, no channel
         raise C.CompositingError(f"--bump: cannot read the height image {path}: {exc}") from None
     h = np.asarray(h, np.float32)
     if h.ndim == 3:

@@ -319,9 +319,8 @@ def test_exr_writes_are_whole_or_nothing(tmp_path, monkeypatch, writer, fault):
     """The recomposited frame (CLI, sequence) and environment maps are written under a temporary
     name and renamed: a failure while writing or renaming keeps the old file and leaves no partial
     one."""
-    import OpenEXR
-
     from rokeby import compositing, envmaps
+    from rokeby.core import exr
 
     write = {"compositing": compositing.write_exr, "envmaps": envmaps.write_exr}[writer]
     out = tmp_path / "frame.exr"
@@ -332,11 +331,11 @@ def test_exr_writes_are_whole_or_nothing(tmp_path, monkeypatch, writer, fault):
             raise OSError("injected: disk full")
         monkeypatch.setattr(os, "replace", boom)
     else:
-        def boom(self, path):
+        def boom(path, data):
             with open(path, "wb") as f:
-                f.write(b"v/1\x01 half")  # a partial file, then the failure
-            raise RuntimeError("injected: write failed")
-        monkeypatch.setattr(OpenEXR.File, "write", boom)
+                f.write(data[:10])  # a partial file, then the failure
+            raise OSError("injected: write failed")
+        monkeypatch.setattr(exr, "save", boom)
     with pytest.raises((OSError, RuntimeError), match="injected"):
         write(out, np.full((4, 6, 3), 0.75, np.float32))
     monkeypatch.undo()

@@ -18,22 +18,16 @@ import build_extension as be  # noqa: E402
 WHEELS = ROOT / "target" / "wheels"
 
 
-# Wheels of packages Blender lacks (OpenEXR, for compositing), downloaded by `make dist`/`make test`.
-EXTRA = ROOT / "target" / "extra-wheels"
-
-
 def _wheel_or_skip():
     if not list(WHEELS.glob("rokeby_native-*.whl")):
         pytest.skip("no rokeby_native wheel in target/wheels (make native builds it)")
-    if not list(EXTRA.glob("*.whl")):
-        pytest.skip("no OpenEXR wheel in target/extra-wheels (make dist or make test downloads it)")
 
 
 @pytest.fixture(scope="module")
 def built(tmp_path_factory):
     _wheel_or_skip()
     out = tmp_path_factory.mktemp("dist")
-    path = be.build(ROOT / "addon" / "rokeby", WHEELS, out, ROOT / "shaders", EXTRA)
+    path = be.build(ROOT / "addon" / "rokeby", WHEELS, out, ROOT / "shaders")
     return path
 
 
@@ -68,64 +62,29 @@ def test_zip_layout_and_manifest(built):
     assert manifest["platforms"] == ["linux-x64"] or sys.platform != "linux"
 
 
-def test_listed_wheels_install_on_this_python(built):
+def test_the_zip_carries_only_the_native_wheel_which_installs_on_this_python(built):
     """One zip for every supported Blender: the native wheel is built for the stable ABI (abi3, CPython 3.11
-    and later: Blender 4.2-5.0 embed 3.11, Blender 5.1 and later 3.13) and loads on this Python; OpenEXR,
-    which has no stable-ABI wheel, comes once per CPython, and one of them installs here."""
+    and later: Blender 4.2-5.0 embed 3.11, Blender 5.1 and later 3.13) and loads on this Python. It is the
+    only wheel: EXRs are read and written by it (the pure-Rust `exr` crate), and no OpenEXR wheel comes
+    along, whose own OpenEXR C library would collide with the one a Blender build links (Debian's
+    Blender died with SIGBUS on the first EXR read)."""
     from packaging.tags import sys_tags
     from packaging.utils import parse_wheel_filename
 
     here = set(sys_tags())
     with zipfile.ZipFile(built) as zf:
         manifest = tomllib.loads(zf.read("blender_manifest.toml").decode())
-        by_dist: dict = {}
-        for entry in manifest["wheels"]:
-            name = entry.removeprefix("./")
-            dist, version, _build, tags = parse_wheel_filename(Path(name).name)
-            assert dist in ("rokeby-native", "openexr"), name
-            by_dist.setdefault(str(dist), []).append((name, tags))
-            if dist == "rokeby-native":
-                assert str(version) == manifest["version"]
-                assert {(t.interpreter, t.abi) for t in tags} == {("cp311", "abi3")}, name
-            with zipfile.ZipFile(zf.open(name)) as whl:  # a real wheel with the extension module
-                mod = "rokeby_native/" if dist == "rokeby-native" else "OpenEXR"
-                assert any(n.startswith(mod) and n.endswith(".so") for n in whl.namelist()) or sys.platform != "linux"
-        assert len(by_dist["rokeby-native"]) == 1, by_dist["rokeby-native"]
-        for dist, wheels in by_dist.items():
-            assert any(tags & here for _n, tags in wheels), f"no {dist} wheel installs on this Python ({sys.version_info[:2]}, {sys.platform}): {wheels}"
-        exr_pythons = {t.interpreter for _n, tags in by_dist["openexr"] for t in tags}
-        assert {"cp311", "cp313"} <= exr_pythons, exr_pythons
-        # The compositing tools (Recomposite Render, the EXR sequence operator) read EXRs with the
-        # OpenEXR package, which Blender does not ship: the zip brings the pinned one.
-        pinned = next(ln.split("==")[1].strip() for ln in (ROOT / "requirements-test.txt").read_text().splitlines() if ln.startswith("OpenEXR=="))
-        assert all(Path(n).name.startswith(f"openexr-{pinned}-") for n, _t in by_dist["openexr"]), by_dist["openexr"]
-
-
-def test_extra_wheels_follow_the_native_wheels_pythons():
-    ov = be.pythons_overlap
-    assert ov("rokeby_native-0.1.0-cp311-abi3-manylinux_2_35_x86_64.whl", "cp313")
-    assert ov("rokeby_native-0.1.0-cp311-abi3-manylinux_2_35_x86_64.whl", "cp311")
-    assert not ov("rokeby_native-0.1.0-cp311-abi3-manylinux_2_35_x86_64.whl", "cp310")
-    assert not ov("rokeby_native-0.1.0-cp311-cp311-manylinux_2_35_x86_64.whl", "cp313")
-    assert ov("rokeby_native-0.1.0-cp311-cp311-manylinux_2_35_x86_64.whl", "py3")
-
-
-def test_extra_wheels_follow_the_pythons_the_native_wheel_loads_in(tmp_path):
-    """A wheel built for one CPython takes the OpenEXR wheel of that CPython only; a stable-ABI
-    (abi3) wheel, which loads in every CPython from its own on, takes those of 3.11 and 3.13 too
-    (Blender 4.2-5.0 and 5.1+), never one for an older Python."""
-    extra = tmp_path / "extra"
-    extra.mkdir()
-    for py in ("cp310", "cp311", "cp313"):
-        (extra / f"openexr-3.5.3-{py}-{py}-manylinux_2_28_x86_64.whl").write_bytes(b"")
-    (extra / "openexr-3.5.3-cp313-cp313-win_amd64.whl").write_bytes(b"")  # another platform
-
-    def picked(native_name):
-        return sorted(w.name.split("-")[2] for w in be.find_extra_wheels(extra, Path(native_name)))
-
-    assert picked("rokeby_native-0.1.0-cp311-cp311-manylinux_2_35_x86_64.whl") == ["cp311"]
-    assert picked("rokeby_native-0.1.0-cp311-abi3-manylinux_2_35_x86_64.whl") == ["cp311", "cp313"]
-    assert picked("rokeby_native-0.1.0-cp313-cp313-manylinux_2_35_x86_64.whl") == ["cp313"]
+        names = zf.namelist()
+        (entry,) = manifest["wheels"]
+        name = entry.removeprefix("./")
+        dist, version, _build, tags = parse_wheel_filename(Path(name).name)
+        assert dist == "rokeby-native" and str(version) == manifest["version"], name
+        assert {(t.interpreter, t.abi) for t in tags} == {("cp311", "abi3")}, name
+        assert tags & here, f"the native wheel does not install on this Python ({sys.version_info[:2]}, {sys.platform}): {name}"
+        with zipfile.ZipFile(zf.open(name)) as whl:  # a real wheel with the extension module
+            assert any(n.startswith("rokeby_native/") and n.endswith(".so") for n in whl.namelist()) or sys.platform != "linux"
+        assert [n for n in names if n.startswith("wheels/")] == [name]
+        assert not [n for n in names if "openexr" in n.lower() and not n.endswith(".py")], names
 
 
 def test_blender_validates_the_zip(built):
@@ -140,7 +99,7 @@ def test_blender_validates_the_zip(built):
 
 def test_build_is_idempotent_and_refuses_bad_input(built, tmp_path):
     before = built.read_bytes()
-    assert be.build(ROOT / "addon" / "rokeby", WHEELS, built.parent, ROOT / "shaders", EXTRA) == built
+    assert be.build(ROOT / "addon" / "rokeby", WHEELS, built.parent, ROOT / "shaders") == built
     assert built.read_bytes() == before
     # A second, stale wheel is an error, not a silent pick.
     stale = tmp_path / "wheels"

@@ -10,7 +10,8 @@ re-rendering. Pipeline (numerics in the Rust core, reached through ``native``):
    self-reflections count), ``rokeby_incoming_cam`` (the view vector in camera space) and
    ``rokeby_camera_x``/``_y`` (the world axes in camera space: the camera's rotation in every
    frame, so an EXR alone is enough — no camera data to carry along).
-2. ``read_exr``: the passes from a multilayer OpenEXR (OpenEXR package); missing passes are named.
+2. ``read_exr``: the passes from a multilayer OpenEXR (read by the Rust core, ``core.exr``); missing
+   passes are named.
 3. ``reconstruct``: per object/material patch (IndexOB × IndexMA), the SH diffuse environment
    (eq. 1; the QP of §3.1 or least squares) of D0 = DiffDir + DiffInd, and the dual-paraboloid
    reflection environment (eq. 2, hole filling, regularisation) of R0 = GlossDir + GlossInd, in
@@ -28,12 +29,10 @@ there, and the report (and a RuntimeWarning) says so.
 
 from __future__ import annotations
 
-import contextlib
 import glob
 import math
 import os
 import re
-import sys
 import time
 import warnings
 import weakref
@@ -41,7 +40,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..core import native
+from ..core import exr, native
 from ..blender import transaction
 from ..core import schema
 
@@ -338,120 +337,70 @@ def _layer_channels(part_channels: dict, layer: str | None):
 
 def read_exr(path: str, layer: str | None = None) -> Passes:
     """Reads a Blender multilayer EXR (one view layer, default the first) into ``Passes``. A file
-    that is not a readable EXR (truncated, corrupted) is a ``CompositingError`` naming it; a
-    missing or unreadable one stays an ``OSError``."""
-    said: list[str] = []
+    that is not a readable EXR (truncated, corrupted, a compression or layout the reader does not
+    take) is a ``CompositingError`` naming it and what is wrong; a missing or unreadable one stays
+    an ``OSError``."""
     try:
-        with _library_output(said):
-            return _read_exr(path, layer)
-    except (CompositingError, OSError, MemoryError) as exc:
-        if said and isinstance(exc, CompositingError) and not isinstance(exc, MissingPasses):
-            raise CompositingError(f"{exc} ({said[0]})") from None
-        raise
-    except Exception as exc:  # noqa: BLE001 - OpenEXR's reader fails in many ways on a bad file
-        why = said[0] if said else f"{type(exc).__name__}: {exc}"
-        raise CompositingError(f"{path}: not a readable multilayer EXR (truncated or corrupted?): {why}") from None
-    finally:
-        if said and sys.exc_info()[0] is None:
-            print("\n".join(said), file=sys.stderr)  # a file that did read: its warnings are not hidden
-
-
-@contextlib.contextmanager
-def _library_output(lines: list):
-    """OpenEXR's C++ library prints its complaints about a bad file itself, on stdout and stderr:
-    they are collected into ``lines`` (the complaint, without the path it repeats), so that a
-    bad file ends in one clear error instead of a screenful of library messages."""
-    import tempfile
-
-    try:
-        sys.stdout.flush()
-        sys.stderr.flush()
-        saved = [(fd, os.dup(fd)) for fd in (1, 2)]
-    except (OSError, ValueError, AttributeError):  # no real file descriptors: nothing to collect
-        yield lines
-        return
-    with tempfile.TemporaryFile() as tmp:
-        for fd, _old in saved:
-            os.dup2(tmp.fileno(), fd)
-        try:
-            yield lines
-        finally:
-            for fd, old in saved:
-                os.dup2(old, fd)
-                os.close(old)
-            tmp.seek(0)
-            for ln in tmp.read().decode("utf-8", "replace").splitlines():
-                ln = ln.strip()
-                if ln and ln not in lines:
-                    lines.append(ln.split(": ", 1)[1] if ln.startswith("/") and ": " in ln else ln)
+        parts = exr.read(path)
+    except exr.ExrError as exc:
+        raise CompositingError(f"{path}: not a readable multilayer EXR (truncated or corrupted?): {exc.why}") from None
+    if not parts:
+        raise CompositingError(f"{path}: not a readable multilayer EXR (truncated or corrupted?): it has no image parts")
+    return _passes(path, parts, layer)
 
 
 def _pass_pixels(chans: dict, bases: list) -> "np.ndarray | None":
-    """The pixels of the first of ``bases`` (``Layer.Pass``) the channels hold: grouped (RGB[A]) by
-    the OpenEXR reader, or separate channels X[YZ], R[GB], V, Z; None when none is there."""
+    """The pixels of the first of ``bases`` (``Layer.Pass``) the channels hold: R, G, B[, A] (the
+    group OpenEXR's reader makes of them), or X[YZ], R[GB], V, Z; None when none is there."""
     for base in bases:
-        if base in chans:
-            return np.asarray(chans[base].pixels, np.float32)
+        rgb = exr.colour(chans, base + ".")
+        if rgb is not None:
+            return rgb
         for suffixes in ("XYZ", "RGB", "X", "V", "Z", "R"):
             keys = [f"{base}.{c}" for c in suffixes]
             if all(k in chans for k in keys):
-                return np.stack([np.asarray(chans[k].pixels, np.float32) for k in keys], -1)
+                return np.stack([np.asarray(chans[k], np.float32) for k in keys], -1)
     return None
 
 
-def _read_exr(path: str, layer: str | None) -> Passes:
-    import OpenEXR
-
-    with OpenEXR.File(str(path), separate_channels=False) as f:
-        if not f.parts:
-            raise CompositingError(f"{path}: not a readable multilayer EXR (truncated or corrupted?): it has no image parts")
-        part = f.parts[0]
-        # Blender 5.0+ writes a multilayer EXR as one part per pass by default (up to 4.5, and with
-        # "interleave", one part): the channel names carry the layer and pass either way.
-        chans = {}
-        for p in f.parts:
-            chans.update(p.channels)
-        layer = _layer_channels(chans, layer)
-        arrays, missing = {}, []
-        for name, (attr, ch) in PASSES.items():
-            a = _pass_pixels(chans, [f"{layer}.{n}" for n in exr_pass_names(name)])
-            if a is None:
-                missing.append(name)
-                continue
-            if a.ndim == 2:
-                a = a[..., None]
-            if ch == 1:
-                a = a[..., 0]
-            elif a.shape[-1] >= 3:
-                a = a[..., :3]
-            else:
-                raise CompositingError(f"pass {name}: expected 3 channels, got {a.shape[-1]}")
-            arrays[attr] = np.ascontiguousarray(a)
-        if missing:
-            raise MissingPasses(missing, str(path))
-        comb = np.asarray(chans[f"{layer}.Combined"].pixels, np.float32)
-        alpha = comb[..., 3].copy() if comb.ndim == 3 and comb.shape[2] == 4 else None
-        header = {k: v for k, v in part.header.items() if isinstance(v, (str, int, float))}
+def _passes(path, parts: list, layer: str | None) -> Passes:
+    # Blender 5.0+ writes a multilayer EXR as one part per pass by default (up to 4.5, and with
+    # "interleave", one part): the channel names carry the layer and pass either way.
+    chans = {}
+    for p in parts:
+        chans.update(p.channels)
+    layer = _layer_channels(chans, layer)
+    arrays, missing = {}, []
+    for name, (attr, ch) in PASSES.items():
+        a = _pass_pixels(chans, [f"{layer}.{n}" for n in exr_pass_names(name)])
+        if a is None:
+            missing.append(name)
+            continue
+        if a.ndim == 2:
+            a = a[..., None]
+        if ch == 1:
+            a = a[..., 0]
+        elif a.shape[-1] >= 3:
+            a = a[..., :3]
+        else:
+            raise CompositingError(f"pass {name}: expected 3 channels, got {a.shape[-1]}")
+        arrays[attr] = np.ascontiguousarray(a)
+    if missing:
+        raise MissingPasses(missing, str(path))
+    comb = exr.colour(chans, f"{layer}.Combined.")
+    alpha = comb[..., 3].copy() if comb is not None and comb.shape[2] == 4 else None
+    header = {k: v for k, v in parts[0].header.items() if isinstance(v, (str, int, float))}
     p = Passes(alpha=alpha, header=header, **arrays)
     p.validate()
     return p
 
 
 def write_exr(path: str, image: np.ndarray, header: dict | None = None) -> None:
-    """Writes an (H, W, 3) float32 image as an RGB EXR (ZIP compressed), whole or not at all."""
-    import OpenEXR
-
-    hdr = {"compression": OpenEXR.ZIP_COMPRESSION, "type": OpenEXR.scanlineimage}
-    for k, v in (header or {}).items():
-        if isinstance(v, str) and k not in ("File", "Date"):
-            hdr[k] = v
-    with OpenEXR.File(hdr, {"RGB": np.ascontiguousarray(image[..., :3], np.float32)}) as f:
-        def write(tmp):
-            try:
-                f.write(tmp)
-            except RuntimeError as exc:  # OpenEXR's "Cannot open image file": a path problem, not a bug
-                raise OSError(f"{path}: cannot write the EXR: {exc}") from None
-        transaction.write_whole(path, write)  # no half-written file, the old one kept on failure
+    """Writes an (H, W, 3) float32 image as an RGB EXR (float channels R, G, B, ZIP compressed,
+    the string attributes of ``header`` but File and Date), whole or not at all."""
+    hdr = {k: v for k, v in (header or {}).items() if isinstance(v, str) and k not in ("File", "Date")}
+    data = exr.encode(exr.split("", np.asarray(image, np.float32)[..., :3]), hdr, "zip")
+    transaction.write_whole(path, lambda tmp: exr.save(tmp, data))  # no half-written file, the old one kept on failure
 
 
 # --- screen space -------------------------------------------------------------------------------

@@ -18,7 +18,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..core import native
+from ..core import exr, native
 
 LAYOUTS = ("latlong", "cube", "sphere", "paraboloid")
 LOBES = ("phong", "ggx", "torrance_sparrow")
@@ -57,31 +57,25 @@ def use_studio_world(scene, name: str = "forest"):
 
 def read_exr(path) -> np.ndarray:
     """An OpenEXR file's RGB (or RGBA, or single-channel Y) pixels as (H, W, C) float32, row 0 at
-    the top."""
-    import OpenEXR
-
+    the top (read by the Rust core: ``core.exr``, DWAA/DWAB included). A file that is not a
+    readable EXR, or has none of those channels, raises ValueError naming it."""
     path = Path(path)
     if not path.exists():
         raise FileNotFoundError(f"read_exr: {path} does not exist")
-    with OpenEXR.File(str(path)) as f:
-        ch = f.parts[0].channels
-        if "RGBA" in ch:
-            px = ch["RGBA"].pixels
-        elif "RGB" in ch:
-            px = ch["RGB"].pixels
-        elif all(k in ch for k in "RGB"):
-            px = np.stack([ch[k].pixels for k in "RGB"], axis=-1)
-        elif "Y" in ch:
-            px = ch["Y"].pixels[..., None]
-        else:
+    # DWAA/DWAB (Blender's studio worlds are DWAB) decoded too: a few texels may differ from
+    # OpenEXR's decoding by a rounding, far below what lighting from the map shows.
+    ch = exr.read(path, dwa=True)[0].channels
+    px = exr.colour(ch)
+    if px is None:
+        if "Y" not in ch:
             raise ValueError(f"read_exr: {path} has no RGB/RGBA/Y channels (has {', '.join(ch)})")
+        px = np.asarray(ch["Y"], np.float32)[..., None]
     return np.ascontiguousarray(px, dtype=np.float32)
 
 
 def write_exr(path, pixels) -> Path:
-    """Writes (H, W, 3|4) or (H, W) float pixels (row 0 at the top) as a half-free float32 EXR."""
-    import OpenEXR
-
+    """Writes (H, W, 3|4) or (H, W) float pixels (row 0 at the top) as a float32 EXR (channels
+    R, G, B[, A] or Y; ZIP compressed)."""
     px = np.asarray(pixels, dtype=np.float32)
     if px.ndim == 2:
         px = px[..., None]
@@ -89,14 +83,10 @@ def write_exr(path, pixels) -> Path:
         raise ValueError(f"write_exr: pixels must have shape (H, W), (H, W, 3) or (H, W, 4), got {px.shape}")
     if not np.isfinite(px).all():
         raise ValueError("write_exr: pixels contain NaN or inf")
-    name = {1: "Y", 3: "RGB", 4: "RGBA"}[px.shape[2]]
-    data = px[..., 0] if name == "Y" else px
-    header = {"compression": OpenEXR.ZIP_COMPRESSION, "type": OpenEXR.scanlineimage}
+    data = exr.encode(exr.split("", px), None, "zip")
     path = Path(path)
     from ..blender import transaction  # noqa: PLC0415
-
-    with OpenEXR.File(header, {name: np.ascontiguousarray(data)}) as f:
-        transaction.write_whole(path, f.write)  # no half-written file, the old one kept on failure
+    transaction.write_whole(path, lambda tmp: exr.save(tmp, data))  # no half-written file, the old one kept on failure
     return path
 
 

@@ -12,6 +12,8 @@
 //!   direction formulas, seam-correct bilinear lookups, conversions) and their prefiltering under
 //!   environment light (Fraser): order-2 SH irradiance, Phong/GGX/Torrance–Sparrow lobes;
 //!   [`rgbe`] reads and writes Radiance `.hdr` files.
+//! * [`exr_io`] — OpenEXR files (Blender's multilayer renders, recomposited frames, environment
+//!   maps) in pure Rust, so no second OpenEXR library enters Blender's process.
 //! * [`silhouette`], [`bvh`], [`light_space`], [`mls2d`], [`shadow_mesh`], [`shadow`] — freeform
 //!   shadow boundary editing (Mattausch, Igarashi, Wimmer): smooth silhouettes from the light,
 //!   shadow handles by ray casting, 2D MLS boundary deformation, the Laplacian shadow mesh.
@@ -22,6 +24,7 @@ pub mod cancel;
 pub mod compositing;
 pub mod envmaps;
 pub mod error;
+pub mod exr_io;
 pub mod geometry;
 pub mod numerical;
 pub mod reflection;

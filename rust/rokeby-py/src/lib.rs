@@ -7,7 +7,7 @@
 //! cancelled → `KeyboardInterrupt`, internal bug or panic → `RuntimeError`.
 
 //! One binding file per area of the core: [`field`] (reflection), [`geodesic`] (geometry),
-//! [`environment`] (envmap), [`compositing`], [`shadow`]; [`convert`] and [`errors`] are shared.
+//! [`environment`] (envmap), [`compositing`], [`shadow`], [`openexr`] (EXR files); [`convert`] and [`errors`] are shared.
 
 use pyo3::prelude::*;
 
@@ -17,6 +17,7 @@ mod environment;
 mod errors;
 mod field;
 mod geodesic;
+mod openexr;
 mod shadow;
 
 pub(crate) use convert::{f32_array, i64_array, parse_vec3, shape_str, F32Array};
@@ -42,5 +43,6 @@ fn rokeby_native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     compositing::register(m)?;
     environment::register(m)?;
     shadow::register(m)?;
+    openexr::register(m)?;
     Ok(())
 }

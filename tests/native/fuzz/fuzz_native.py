@@ -772,6 +772,84 @@ def test_read_exr(data):
         assert passes is not None
 
 
+EXR_COMPRESSIONS = ["none", "rle", "zips", "zip", "piz", "pxr24", "b44", "b44a"]
+
+
+@st.composite
+def written_exr_bytes(draw):
+    """A file rn.exr_write wrote (any writable compression, half and float channels), then cut,
+    changed byte by byte, or its header kept and the rest noise."""
+    h, w = draw(st.integers(1, 24)), draw(st.integers(1, 24))
+    rng = np.random.default_rng(draw(seeds))
+    chans = {c: rng.standard_normal((h, w)).astype(np.float32) for c in draw(st.sampled_from(["RGB", "Y", "RGBA"]))}
+    data = bytearray(rn.exr_write(chans, {"Note": "fuzz"}, draw(st.sampled_from(EXR_COMPRESSIONS)),
+                                  half=draw(st.sampled_from([[], sorted(chans)[:1]]))))
+    kind = draw(st.integers(0, 3))
+    if kind == 0:
+        return bytes(data[: draw(st.integers(0, len(data)))])
+    if kind == 1:
+        for _ in range(draw(st.integers(1, 8))):
+            i = draw(st.integers(0, len(data) - 1))
+            data[i] = draw(st.integers(0, 255)) if draw(st.booleans()) else data[i] ^ (1 << draw(st.integers(0, 7)))
+        return bytes(data)
+    if kind == 2:
+        return bytes(data[: draw(st.integers(8, len(data)))]) + draw(st.binary(max_size=200))
+    return bytes(data)
+
+
+@settings(max_examples=max(10, EXAMPLES))
+@given(data=st.one_of(written_exr_bytes(), exr_bytes(), st.binary(max_size=64)), dwa=st.booleans())
+def test_exr_read(data, dwa):
+    """Any bytes: parts whose channels cover their data windows, or ValueError/MemoryError."""
+    try:
+        parts = rn.exr_read(data, dwa)
+    except (ValueError, MemoryError):
+        return
+    except BaseException as e:
+        raise AssertionError(f"exr_read raised {type(e).__name__}: {e}") from e
+    for p in parts:
+        x0, y0, x1, y1 = p["data_window"]
+        assert set(p["channels"]) == set(p["types"])
+        for name, a in p["channels"].items():
+            assert a.shape == (y1 - y0 + 1, x1 - x0 + 1), (name, a.shape, p["data_window"])
+            assert a.dtype == (np.uint32 if p["types"][name] == "uint" else np.float32)
+
+
+@st.composite
+def k_exr_write(draw):
+    h, w = draw(st.integers(1, 6)), draw(st.integers(1, 6))
+    names = draw(st.lists(st.sampled_from(["R", "G", "B", "A", "Y", "ViewLayer.Normal.X", "é", "", "a\0b"]),
+                          max_size=4, unique=True))
+    chans = {n: draw(farr((h, w), -70000.0, 70000.0)) for n in names}
+    if chans and draw(st.booleans()):
+        chans[draw(st.sampled_from(sorted(chans)))] = draw(hostile(np.zeros((h, w), np.float32)))
+    header = draw(st.sampled_from([None, {}, {"Note": "x"}, {"dataWindow": "x"}, {"": "x"}, {"Note": 3}, {"ä": "ö\0"}]))
+    compression = draw(st.sampled_from([*EXR_COMPRESSIONS, "dwaa", "ZIP", ""]))
+    half = draw(st.sampled_from([None, [], sorted(chans)[:1], ["nope"]]))
+    return dict(channels=chans, header=header, compression=compression, half=half)
+
+
+@given(data=st.data())
+def test_exr_write(data):
+    """Channels, header, compression and half flags, hostile or not: bytes that exr_read reads
+    back with the same float (or half-rounded) values, or ValueError/TypeError/MemoryError."""
+    kw = data.draw(k_exr_write())
+    try:
+        out = rn.exr_write(**kw)
+    except ALLOWED:
+        return
+    except BaseException as e:
+        raise AssertionError(f"exr_write raised {type(e).__name__}: {e}") from e
+    (part,) = rn.exr_read(out)
+    for name, a in kw["channels"].items():
+        with np.errstate(over="ignore"):  # beyond half's range is inf, as the writer stores it
+            want = np.asarray(a, np.float32)
+            if name in (kw["half"] or []):
+                want = want.astype(np.float16).astype(np.float32)
+        if kw["compression"].lower() in ("none", "rle", "zips", "zip", "piz"):
+            np.testing.assert_array_equal(part["channels"][name], want)
+
+
 def test_every_native_entry_point_is_fuzzed():
     """A new rokeby_native function or method must get a fuzz test here."""
     fuzzed = {n[len("test_"):] for n in globals() if n.startswith("test_")}
