@@ -39,4 +39,5 @@ struct RokebyField {
   ivec4 vlayout;                    /* per-vertex texture: x distances, y region weights, z rotation vector (float offsets), w width */
   ivec4 options;                    /* x: RK_OUT_*, y: RK_ENV_*, z: 1 = encode sRGB */
   vec4 env_origin;                  /* RK_ENV_SCENE: xyz the capture point; w: 1 = correct for q (distance), 0 = centre only */
+  vec4 world_scale;                 /* RK_ENV_SCENE: rgb scale of rk_world (the world's own lat-long image) to the capture; w: 1 = use it */
 };

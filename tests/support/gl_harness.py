@@ -94,7 +94,8 @@ class Renderer:
         self.ubo.bind_to_uniform_block(0)
         (self.vertex_tex or self._dummy).use(0)
         (self.env_tex or self._dummy).use(1)
-        for name, unit in (("rk_vertex_data", 0), ("rk_env", 1)):
+        self._dummy.use(2)
+        for name, unit in (("rk_vertex_data", 0), ("rk_env", 1), ("rk_world", 2)):
             if name in self.program:
                 self.program[name].value = unit
         self.program["rk_view_projection"].write(np.asarray(view_projection, "f4").T.tobytes())

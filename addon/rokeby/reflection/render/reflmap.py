@@ -324,13 +324,16 @@ def _read_exr(path: str, width: int, height: int, what: str) -> np.ndarray:
     return px.reshape(height, width, 4)
 
 
-def _render_panorama(scene, mirror, origin, width: int, samples: int, *, distance: bool = False, denoise: bool | None = None):
+def _render_panorama(scene, mirror, origin, width: int, samples: int, *, distance: bool = False, denoise: bool | None = None,
+                     camera_only: bool = False):
     """Render the equirectangular panorama (H, W, 3) float32, row 0 at the bottom.
 
     With ``distance``, returns (colour, distance): a second render of one sample with every
     surface replaced by an emission of its distance from ``origin`` (the view layers' material
     override; the world transparent) gives the distance per texel, +inf where the world is seen.
-    ``denoise``: the colour render's denoising (None: the scene's setting)."""
+    ``denoise``: the colour render's denoising (None: the scene's setting). ``camera_only``: the
+    mirror is hidden from camera rays only, so that it still shadows and lights the other objects
+    as in a final render (else it is hidden from the render altogether)."""
     import bpy  # noqa: PLC0415
 
     from ...blender import compat  # noqa: PLC0415
@@ -355,7 +358,7 @@ def _render_panorama(scene, mirror, origin, width: int, samples: int, *, distanc
             scene.collection.objects.link(cam)
             r = scene.render
             undo.set(scene, "camera", cam)
-            undo.set(mirror, "hide_render", True)
+            undo.set(mirror, "visible_camera" if camera_only else "hide_render", not camera_only)
             undo.set(r, "engine", "CYCLES")
             undo.set_many(r, (
                 ("resolution_x", width), ("resolution_y", height), ("resolution_percentage", 100),

@@ -3,8 +3,8 @@
 The paper (§6.3) renders one cube map of the scene from the centre of every reflecting object
 and reads the edited direction from it. Rokeby captures an equirectangular panorama from the
 mirror's centre (``reflmap.capture_origin``) with Cycles (``reflmap._render_panorama``: the same
-renderer, materials, lights and world as F12; the mirror itself hidden; the add-on's handles are
-empties and never render), plus the distance of every texel from the centre. The preview shader
+renderer, materials, lights and world as F12; the mirror hidden from camera rays only, so it still
+shadows and lights the rest as in F12; the add-on's handles are empties and never render), plus the distance of every texel from the centre. The preview shader
 stores 1/distance beside the colour (0 where the world is seen) and corrects the lookup for the
 point q on the surface (``rk_scene_lookup`` in shaders/rokeby_field_lib.glsl): near objects land
 where a ray from q, not from the centre, meets them.
@@ -51,6 +51,8 @@ class SceneCapture:
     width: int
     samples: int
     serial: int
+    world_image: str = ""  # the world's lat-long image standing in for the world's texels ("" for none)
+    world_scale: tuple | None = None  # its scale to the capture (the Background strength and colour nodes)
 
     @property
     def nbytes(self) -> int:
@@ -168,6 +170,52 @@ def fingerprint(mirror, scene, depsgraph=None, *, width: int = DEFAULT_WIDTH, sa
     return h.hexdigest()
 
 
+def world_image(scene):
+    """The world's Environment Texture image (equirectangular, not muted), or None."""
+    world = scene.world
+    if world is not None and world.use_nodes and world.node_tree is not None:
+        for node in world.node_tree.nodes:
+            if node.type == "TEX_ENVIRONMENT" and node.image is not None and node.projection == "EQUIRECTANGULAR" and not node.mute:
+                return node.image
+    return None
+
+
+def fit_world(texels: np.ndarray, image) -> tuple | None:
+    """The per-channel scale taking ``image`` (the world's lat-long image) to the world's texels
+    of a capture (1/distance = 0), or None where the image does not explain them (a world with a
+    texture mapping or colour nodes other than a scale, or too few world texels to tell)."""
+    w, h = image.size
+    if w < 2 or h < 2:
+        return None
+    px = np.empty(w * h * image.channels, np.float32)
+    image.pixels.foreach_get(px)
+    px = px.reshape(h, w, image.channels)[..., :3]
+    ch, cw = texels.shape[:2]
+    # the image averaged over each capture texel (box), as the capture's pixel filter does
+    if h % ch == 0 and w % cw == 0:
+        img = px.reshape(ch, h // ch, cw, w // cw, 3).mean((1, 3))
+    else:
+        from ...core import latlong  # noqa: PLC0415
+
+        u, v = np.meshgrid((np.arange(cw) + 0.5) / cw, (np.arange(ch) + 0.5) / ch)
+        img = reflmap.sample(px, latlong.uv_to_direction(u, v))
+    world = texels[..., 3] == 0
+    # away from objects: texels whose neighbours are world too
+    inner = world & np.roll(world, 1, 0) & np.roll(world, -1, 0) & np.roll(world, 1, 1) & np.roll(world, -1, 1)
+    if inner.sum() < 64:
+        return None
+    a, b = img[inner].astype(np.float64), texels[inner][:, :3].astype(np.float64)
+    # ratio of sums without the brightest texels (a sun's few texels would decide a fit alone)
+    keep = a.sum(1) <= np.percentile(a.sum(1), 99)
+    a, b = a[keep], b[keep]
+    scale = b.sum(0) / np.maximum(a.sum(0), 1e-30)
+    if not np.all(np.isfinite(scale)) or np.any(scale < 0):
+        return None
+    resid = np.abs(a * scale - b).sum() / max(np.abs(b).sum(), 1e-30)
+    # Texel averages of a detailed HDR differ from point samples by ~10%; a wrong mapping by far more.
+    return tuple(float(x) for x in scale) if resid < 0.25 else None
+
+
 # --- capturing -----------------------------------------------------------------------------------
 
 
@@ -182,7 +230,7 @@ def capture(mirror, scene=None, *, width: int = DEFAULT_WIDTH, samples: int = DE
     print_ = fingerprint(mirror, scene, dg, width=width, samples=samples)
     origin = reflmap.capture_origin(mirror, dg)
     t0 = time.perf_counter()
-    colour, dist = reflmap._render_panorama(scene, mirror, origin, width, int(samples), distance=True, denoise=denoise)
+    colour, dist = reflmap._render_panorama(scene, mirror, origin, width, int(samples), distance=True, denoise=denoise, camera_only=True)
     seconds = time.perf_counter() - t0
     texels = np.empty(colour.shape[:2] + (4,), np.float32)
     texels[..., :3] = np.nan_to_num(colour, nan=0.0, posinf=0.0, neginf=0.0)
@@ -190,7 +238,10 @@ def capture(mirror, scene=None, *, width: int = DEFAULT_WIDTH, samples: int = DE
         texels[..., 3] = np.where(np.isfinite(dist) & (dist > 0), 1.0 / dist, 0.0)
     _serial += 1
     stats["captures"] += 1
-    cap = SceneCapture(texels, origin, print_, seconds, width, int(samples), _serial)
+    image = world_image(scene)
+    scale = fit_world(texels, image) if image is not None else None
+    cap = SceneCapture(texels, origin, print_, seconds, width, int(samples), _serial,
+                       world_image=image.name if scale is not None else "", world_scale=scale)
     _captures[_key(mirror)] = cap
     return cap
 
