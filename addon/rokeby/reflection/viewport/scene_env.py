@@ -340,12 +340,20 @@ def _timer():
     _pending = False
     try:
         if refresh():
-            from .draw import _redraw  # noqa: PLC0415
-
-            _redraw(None, __import__("bpy").context)
+            _redraw()
     except Exception as exc:  # noqa: BLE001 - a timer must never raise into Blender
         print(f"Rokeby: scene capture failed: {type(exc).__name__}: {exc}")
     return None
+
+
+def _redraw():
+    import bpy  # noqa: PLC0415
+
+    wm = getattr(bpy.context, "window_manager", None)
+    for window in getattr(wm, "windows", []):
+        for area in window.screen.areas:
+            if area.type == "VIEW_3D":
+                area.tag_redraw()
 
 
 def on_depsgraph_update(scene, depsgraph):
