@@ -29,9 +29,9 @@ def scene():
 
 def test_distances_are_those_a_ray_from_the_centre_meets(scene):
     sc, mirror, objects = scene
-    before = (sc.camera, sc.render.engine, mirror.visible_camera, mirror.hide_render, len(bpy.data.objects), len(bpy.data.materials))
+    before = (sc.camera, sc.world, sc.render.engine, mirror.visible_camera, mirror.hide_render, len(bpy.data.objects), len(bpy.data.materials))
     cap = scene_env.capture(mirror, sc, width=WIDTH, samples=SAMPLES)
-    assert (sc.camera, sc.render.engine, mirror.visible_camera, mirror.hide_render, len(bpy.data.objects), len(bpy.data.materials)) == before
+    assert (sc.camera, sc.world, sc.render.engine, mirror.visible_camera, mirror.hide_render, len(bpy.data.objects), len(bpy.data.materials)) == before
     h, w = cap.texels.shape[:2]
     assert (w, h) == (WIDTH, WIDTH // 2) and cap.nbytes == w * h * 16
     assert np.all(np.isfinite(cap.texels)) and np.all(cap.texels[..., 3] >= 0)

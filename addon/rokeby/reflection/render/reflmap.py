@@ -395,6 +395,7 @@ def _render_panorama(scene, mirror, origin, width: int, samples: int, *, distanc
                         again.set(scene.cycles, attr, value)
                     for vl in scene.view_layers:
                         again.set(vl, "material_override", dist_mat)
+                    again.set(scene, "world", None)  # transparent anyway: no world lighting to prepare
                     render()
                     dpx = _read_exr(dist_path, width, height, f"distance capture of '{mirror.name}'")
                 finally:

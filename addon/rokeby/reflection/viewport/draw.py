@@ -347,7 +347,8 @@ def steps_aside(scene, shading: str | None) -> bool:
     return shading == "RENDERED" and not getattr(scene, schema.SCENE_PREVIEW_RENDERED_PROP, False)
 
 
-def draw_scene(scene, view_projection, eye, *, eye_is_direction=False, viewport_size=(1, 1), view_right=(1, 0, 0), view_up=(0, 0, 1), overlays=True, shading=None) -> int:
+def draw_scene(scene, view_projection, eye, *, eye_is_direction=False, viewport_size=(1, 1), view_right=(1, 0, 0), view_up=(0, 0, 1), overlays=True, shading=None,
+               parallax=True) -> int:
     """Draw the preview of every mirror of ``scene`` that shows it; returns how many were drawn.
     ``shading``: the view's shading type (see ``steps_aside``)."""
     drawn = 0
@@ -357,7 +358,7 @@ def draw_scene(scene, view_projection, eye, *, eye_is_direction=False, viewport_
         if not (s.enabled and s.show_preview) or obj.type != "MESH" or not obj.visible_get():
             _status.pop(obj.name, None)
             continue
-        if not aside and draw_mirror(obj, scene, view_projection, eye, eye_is_direction=eye_is_direction):
+        if not aside and draw_mirror(obj, scene, view_projection, eye, eye_is_direction=eye_is_direction, parallax=parallax):
             drawn += 1
         if overlays:
             draw_overlays(obj, scene, viewport_size, view_right, view_up)
@@ -392,6 +393,7 @@ def _draw_callback():
             view_right=tuple(view_inv.col[0].xyz),
             view_up=tuple(view_inv.col[1].xyz),
             shading=getattr(getattr(context.space_data, "shading", None), "type", None),
+            parallax=prefs.get(context).preview_parallax,
         )
         _last_error = None
     except Exception as exc:  # noqa: BLE001 - a draw callback must never raise into Blender
