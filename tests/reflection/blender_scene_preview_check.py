@@ -13,7 +13,7 @@ import time
 import sys
 
 import numpy as np
-import bpy
+import bpy  # noqa: F401 - loads Blender (and Cycles, for _cycles below)
 
 from support import scene_preview as S
 
