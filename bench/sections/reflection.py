@@ -449,3 +449,13 @@ def scene_preview_section(emit):
         c, n = a["corrected"], a["centre"]
         emit(f"| {a['world']} | {'green handle on the near cube' if a['edited'] else 'none'} | {c['mean']:.3f} | {c['p95']:.3f} | {n['mean']:.3f} | {n['p95']:.3f} |")
     emit()
+    sh = rows["shader"]
+    emit(f"The preview shader with the scene lookup, {sh[0]['width']}x{sh[0]['height']}, K = {sh[0]['k']}, a ball filling the view, on")
+    emit(f"{sh[0]['renderer']} (moderngl, headless EGL; draw + glFinish, median of 3): what the parallax correction")
+    emit("(a 32-step search and 6 secant steps per pixel) costs beside the centre-only lookup. No GPU was lent to this task.")
+    emit()
+    emit("| lookup | ms / frame |")
+    emit("|---|---:|")
+    for r in sh:
+        emit(f"| {'distance-corrected' if r['parallax'] else 'centre-only'} | {r['ms']:.0f} |")
+    emit()

@@ -97,3 +97,44 @@ def test_mirrors_without_the_preview_are_not_captured(scene):
     sc.rokeby_viewport_preview = True
     mirror.rokeby.show_preview = False
     assert scene_env.refresh(sc) == 0 and scene_env.current(mirror) is None
+
+
+@pytest.fixture
+def window(monkeypatch):
+    """Depsgraph updates as in a Blender window; the timers the add-on asks for are kept here."""
+    from rokeby.reflection import evaluate, handlers
+
+    timers = []
+    monkeypatch.setattr(handlers, "WINDOW_UPDATES", True)
+    monkeypatch.setattr(scene_env, "_pending", False)
+    monkeypatch.setattr(evaluate, "_schedule", lambda fn, seconds: timers.append(fn))
+    return timers
+
+
+def _settle(timers, monkeypatch):
+    """Run the capture timer as the event loop would once the updates have paused."""
+    ours = [fn for fn in timers if fn is scene_env._timer]
+    assert ours, "no capture timer was asked for"
+    timers[:] = [fn for fn in timers if fn is not scene_env._timer]
+    fn = ours[0]
+    assert fn() > 0  # right after an update it waits (debounced)
+    monkeypatch.setattr(scene_env, "_last_change", scene_env._last_change - 2 * scene_env.DEBOUNCE_SECONDS)
+    assert fn() is None
+
+
+def test_in_a_window_updates_recapture_after_a_pause_and_drags_do_not(scene, window, monkeypatch):
+    sc, mirror, objects = scene
+    scene_env.capture(mirror, sc, width=WIDTH, samples=SAMPLES)
+    n = scene_env.stats["captures"]
+    c = mirror.rokeby.constraints[0]
+    for _ in range(3):  # a drag: a stream of updates
+        c.target_handle.location.x += 0.1
+        bpy.context.view_layer.update()
+    _settle(window, monkeypatch)
+    assert scene_env.stats["captures"] == n
+    for _ in range(3):  # a transform of a cube in progress: one capture once it pauses
+        objects["Red"].location.z += 0.1
+        bpy.context.view_layer.update()
+    assert [fn for fn in window if fn is scene_env._timer] == [scene_env._timer]  # one timer for the whole stream
+    _settle(window, monkeypatch)
+    assert scene_env.stats["captures"] == n + 1

@@ -359,18 +359,12 @@ def _redraw():
 def on_depsgraph_update(scene, depsgraph):
     """A window's depsgraph update: when any preview shows a capture, look again after a pause
     (``refresh`` recaptures only what changed; a handle drag changes nothing it shows)."""
-    from .. import guard  # noqa: PLC0415
+    from .. import guard, handlers  # noqa: PLC0415
 
-    if guard.active() or not _captures or bpy_background():
+    if guard.active() or not _captures or not handlers.in_a_window():
         return
     if previewed(scene):
         request()
-
-
-def bpy_background() -> bool:
-    import bpy  # noqa: PLC0415
-
-    return bool(bpy.app.background)
 
 
 def register():
