@@ -17,7 +17,7 @@ Kept current, never in the way:
   field the mirror stores changes no vertex position, so handle drags never recapture;
 - in a window, depsgraph updates only mark the previews dirty; a timer captures once the updates
   have paused for ``DEBOUNCE_SECONDS`` (a transform in progress keeps postponing it), with
-  progress shown on the cursor while several mirrors are captured;
+  progress shown on the cursor while it renders;
 - captures are cached per mirror (runtime only, never saved: a reload recaptures on first draw);
   ``stats`` counts them, and each records its time and memory for the sidebar and ``make bench``.
 
@@ -286,7 +286,7 @@ def refresh(scene=None) -> int:
     done = 0
     wm = bpy.context.window_manager
     todo = [(sc, ob) for sc in scenes if sc is not None for ob in previewed(sc)]
-    progress = wm is not None and len(todo) > 1 and not bpy.app.background
+    progress = wm is not None and bool(todo) and not bpy.app.background
     if progress:
         wm.progress_begin(0, len(todo))
     try:
