@@ -138,3 +138,15 @@ def test_in_a_window_updates_recapture_after_a_pause_and_drags_do_not(scene, win
     assert [fn for fn in window if fn is scene_env._timer] == [scene_env._timer]  # one timer for the whole stream
     _settle(window, monkeypatch)
     assert scene_env.stats["captures"] == n + 1
+
+
+def test_another_file_drops_the_captures(scene, tmp_path):
+    sc, mirror, _objects = scene
+    scene_env.capture(mirror, sc, width=WIDTH, samples=SAMPLES)
+    assert scene_env.current(mirror) is not None
+    path = str(tmp_path / "other.blend")
+    bpy.ops.wm.save_as_mainfile(filepath=path)
+    bpy.ops.wm.open_mainfile(filepath=path)
+    assert not scene_env._captures  # captures are never saved: the reopened mirror captures anew
+    mirror = bpy.data.objects["Mirror"]
+    assert scene_env.current(mirror) is None

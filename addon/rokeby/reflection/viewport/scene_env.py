@@ -371,6 +371,15 @@ def register():
     from ...blender import hooks  # noqa: PLC0415
 
     hooks.add("reflection-preview", "depsgraph_update_post", on_depsgraph_update)
+    hooks.add("reflection-preview", "load_post", on_load)
+
+
+def on_load(*_args):
+    """Another file: its mirrors are captured when their preview is first drawn."""
+    global _pending
+    _captures.clear()
+    _errors.clear()
+    _pending = False  # loading a file drops the timers
 
 
 def unregister():
