@@ -32,6 +32,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ...blender import compat
 from ..render import reflmap
 
 DEFAULT_WIDTH = 256  # panorama width (height = width / 2)
@@ -133,7 +134,7 @@ def fingerprint(mirror, scene, depsgraph=None, *, width: int = DEFAULT_WIDTH, sa
     world = scene.world
     h.update(repr(world.name if world else None).encode())
     seen: set = set()
-    if world is not None and getattr(world, "use_nodes", True) and world.node_tree is not None:
+    if world is not None and compat.node_tree_of(world) is not None:
         _socket_values(h, world.node_tree, seen)
     elif world is not None:
         h.update(repr(tuple(world.color)).encode())
@@ -151,7 +152,7 @@ def fingerprint(mirror, scene, depsgraph=None, *, width: int = DEFAULT_WIDTH, sa
             for attr in ("type", "energy", "color", "shadow_soft_size", "spot_size", "spot_blend", "angle", "size", "size_y", "shape"):
                 value = getattr(light, attr, None)
                 h.update(repr(tuple(value) if hasattr(value, "__len__") and not isinstance(value, str) else value).encode())
-            if getattr(light, "use_nodes", True) and getattr(light, "node_tree", None) is not None:
+            if compat.node_tree_of(light) is not None:
                 _socket_values(h, light.node_tree, seen)
             continue
         data = ev.data
@@ -165,7 +166,7 @@ def fingerprint(mirror, scene, depsgraph=None, *, width: int = DEFAULT_WIDTH, sa
             h.update(repr(mat.name if mat else None).encode())
             if mat is not None:
                 h.update(repr(tuple(mat.diffuse_color)).encode())
-                if getattr(mat, "use_nodes", True) and mat.node_tree is not None:
+                if compat.node_tree_of(mat) is not None:
                     _socket_values(h, mat.node_tree, seen)
     return h.hexdigest()
 
@@ -173,7 +174,7 @@ def fingerprint(mirror, scene, depsgraph=None, *, width: int = DEFAULT_WIDTH, sa
 def world_image(scene):
     """The world's Environment Texture image (equirectangular, not muted), or None."""
     world = scene.world
-    if world is not None and getattr(world, "use_nodes", True) and world.node_tree is not None:
+    if world is not None and compat.node_tree_of(world) is not None:
         for node in world.node_tree.nodes:
             if node.type == "TEX_ENVIRONMENT" and node.image is not None and node.projection == "EQUIRECTANGULAR" and not node.mute:
                 return node.image
