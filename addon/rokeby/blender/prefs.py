@@ -47,7 +47,7 @@ class RokebyPreferences(bpy.types.AddonPreferences):
         name="Parallax-Corrected Reflections",
         description="The reflection preview corrects its lookup in the captured scene for where each point of the "
                     "mirror is (near objects in the right place); off: the lookup from the mirror's centre, about "
-                    "a third of the cost per pixel on a software renderer",
+                    "a fifth of the cost per pixel on a software renderer",
         default=True,
     )
     cache_folder: StringProperty(
