@@ -150,3 +150,13 @@ def test_another_file_drops_the_captures(scene, tmp_path):
     assert not scene_env._captures  # captures are never saved: the reopened mirror captures anew
     mirror = bpy.data.objects["Mirror"]
     assert scene_env.current(mirror) is None
+
+
+def test_the_capture_scene_operator_captures_every_previewed_mirror_again(scene):
+    sc, mirror, _objects = scene
+    scene_env.capture(mirror, sc, width=WIDTH, samples=SAMPLES)
+    n = scene_env.stats["captures"]
+    assert bpy.ops.rokeby.preview_capture() == {"FINISHED"}
+    assert scene_env.stats["captures"] == n + 1 and scene_env.current(mirror).width == WIDTH  # its settings kept
+    sc.rokeby_viewport_preview = False
+    assert not bpy.ops.rokeby.preview_capture.poll()
