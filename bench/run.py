@@ -25,8 +25,9 @@ from sections.addon import HEAVY_MARKER, addon_section, heavy_section  # noqa: E
 from sections.appearance import APPEARANCE_MARKER, appearance_section  # noqa: E402
 from sections.compositing import COMPOSITING_MARKER, compositing_section  # noqa: E402
 from sections.envmaps import ENVMAP_MARKER, envmap_section  # noqa: E402
-from sections.reflection import (GEODESIC_MARKER, RENDER_MARKER, ROOFLINE_MARKER, VIEWPORT_MARKER, field_section,  # noqa: E402
-                                 geodesic_section, render_section, roofline_section, viewport_section)
+from sections.reflection import (GEODESIC_MARKER, RENDER_MARKER, ROOFLINE_MARKER, SCENE_PREVIEW_MARKER, VIEWPORT_MARKER,  # noqa: E402
+                                 field_section, geodesic_section, render_section, roofline_section, scene_preview_section,
+                                 viewport_section)
 from sections.shadow import SHADOW_MARKER, shadow_section  # noqa: E402
 
 import tradeoff_sections  # noqa: E402
@@ -58,7 +59,7 @@ def _refresh_section(emit, out, marker, section):
 def main():
     ap = argparse.ArgumentParser(description="Rokeby benchmarks")
     ap.add_argument("--peers", default=None, help="python of .venv-peers (exact geodesics, potpourri3d, libigl, matplotlib)")
-    ap.add_argument("--only", choices=["field", "roofline", "geodesic", "addon", "heavy", "render", "viewport", "envmap", "appearance", "compositing", "shadow", *TRADEOFFS], default=None)
+    ap.add_argument("--only", choices=["field", "roofline", "geodesic", "addon", "heavy", "render", "viewport", "scene_preview", "envmap", "appearance", "compositing", "shadow", *TRADEOFFS], default=None)
     args = ap.parse_args()
     out = []
 
@@ -81,6 +82,9 @@ def main():
     (ROOT / "docs").mkdir(exist_ok=True)
     if args.only == "viewport":
         _refresh_section(emit, out, VIEWPORT_MARKER, viewport_section)
+        return
+    if args.only == "scene_preview":
+        _refresh_section(emit, out, SCENE_PREVIEW_MARKER, scene_preview_section)
         return
     if args.only == "roofline":
         _refresh_section(emit, out, ROOFLINE_MARKER, roofline_section)
@@ -136,6 +140,7 @@ def main():
     addon_section(emit)
     heavy_section(emit)
     viewport_section(emit)
+    scene_preview_section(emit)
     render_section(emit)
     envmap_section(emit)
     appearance_section(emit)

@@ -446,10 +446,143 @@ vec3 rk_builtin_sky(vec3 d)
   return mix(c, vec3(0.95), 0.5 * line);
 }
 
+/* ---- the scene captured from the mirror (RK_ENV_SCENE) ----
+ * rk_env holds a lat-long panorama taken from rk_field.env_origin: linear RGB, and 1/distance of
+ * what each texel sees (0: the world, at infinity). Fetched texel by texel and filtered here
+ * (bilinear, wrapping around the seam, clamped at the poles) so that every GPU and sampler
+ * state gives the same result. */
+
+/* Bilinear texel of direction d. Where the world is seen (1/distance = 0) and the world's own
+ * lat-long image is bound (rk_world, scaled to the capture by world_scale), that image stands in
+ * for the world's texels: it is sharper than the capture and free of its noise. */
+vec4 rk_scene_texel(vec3 d)
+{
+  ivec2 size = textureSize(rk_env, 0);
+  vec2 uv = rokeby_equirect_uv(d);
+  vec2 st = uv * vec2(size) - 0.5;
+  vec2 f = fract(st);
+  ivec2 i0 = ivec2(floor(st));
+  int x0 = (i0.x % size.x + size.x) % size.x;
+  int x1 = (x0 + 1) % size.x;
+  int y0 = clamp(i0.y, 0, size.y - 1);
+  int y1 = clamp(i0.y + 1, 0, size.y - 1);
+  vec4 t00 = texelFetch(rk_env, ivec2(x0, y0), 0);
+  vec4 t10 = texelFetch(rk_env, ivec2(x1, y0), 0);
+  vec4 t01 = texelFetch(rk_env, ivec2(x0, y1), 0);
+  vec4 t11 = texelFetch(rk_env, ivec2(x1, y1), 0);
+  vec4 w = vec4((1.0 - f.x) * (1.0 - f.y), f.x * (1.0 - f.y), (1.0 - f.x) * f.y, f.x * f.y);
+  vec4 c = t00 * w.x + t10 * w.y + t01 * w.z + t11 * w.w;
+  if (rk_field.world_scale.w != 0.0) {
+    vec4 is_world = vec4(equal(vec4(t00.a, t10.a, t01.a, t11.a), vec4(0.0)));
+    float ww = dot(w, is_world);
+    if (ww > 0.0) {
+      vec3 objects = t00.rgb * (w.x * (1.0 - is_world.x)) + t10.rgb * (w.y * (1.0 - is_world.y)) +
+                     t01.rgb * (w.z * (1.0 - is_world.z)) + t11.rgb * (w.w * (1.0 - is_world.w));
+      vec3 world = rk_field.world_scale.rgb * textureLod(rk_world, uv, 0.0).rgb;
+      c.rgb = objects + ww * world;
+    }
+  }
+  return c;
+}
+
+/* 1/distance of the texel holding direction d (not filtered: a blend of a near object's and
+ * the background's values would stand for a surface that is not there, one texel around every
+ * outline). */
+float rk_scene_inverse_distance(vec3 d)
+{
+  ivec2 size = textureSize(rk_env, 0);
+  ivec2 i = ivec2(floor(rokeby_equirect_uv(d) * vec2(size)));
+  return texelFetch(rk_env, ivec2((i.x % size.x + size.x) % size.x, clamp(i.y, 0, size.y - 1)), 0).a;
+}
+
+/* The direction, seen from the capture point c, of what the ray q + t e meets (a distance
+ * impostor, after Szirmay-Kalos et al. 2005). With a = q - c and t = s |a| / (1 - s), the ray's
+ * point is c + p(s) / (1 - s), p(s) = (1 - s) a + s |a| e: s = 0 is q, s -> 1 the point at
+ * infinity in direction e, and dir p(s) turns evenly from a towards e. The ray is behind the
+ * captured surface where |x - c| >= D(dir), i.e. h(s) = |p| / D(dir p) - (1 - s) >= 0.
+ *
+ * A linear search finds where h turns from negative to positive; secant steps refine it. A
+ * crossing where the ray is still well behind the nearest surface around it is not a hit but
+ * the ray passing behind an object's outline (what lies there was hidden from c): the search goes
+ * on. No hit: the ray leaves for the world, seen in direction e (as the centre-only lookup);
+ * where that direction is hidden from c behind an object the ray passed, the nearest direction
+ * in front of it along the search stands in (what c saw just beside that outline). */
+#define RK_MARCH_STEPS 32
+#define RK_SECANT_STEPS 6
+#define RK_HIT_TOLERANCE 0.15 /* relative depth mismatch still taken as a hit */
+
+vec3 rk_scene_direction(vec3 q, vec3 e)
+{
+  vec3 a = q - rk_field.env_origin.xyz;
+  float la = length(a);
+  if (rk_field.env_origin.w == 0.0 || !(la > 1e-7)) {
+    return e;
+  }
+  vec3 b = la * e;
+  float s0 = 0.0;
+  float h0 = la * rk_scene_inverse_distance(a) - 1.0;
+  if (h0 >= 0.0) {
+    return a; /* q lies behind the captured surface (an object inside the mirror): what c sees there */
+  }
+  vec3 front = a; /* the last point of the search in front of the captured surface */
+  for (int i = 1; i <= RK_MARCH_STEPS; i++) {
+    float s1 = float(i) / float(RK_MARCH_STEPS + 1);
+    vec3 p1 = mix(a, b, s1);
+    float h1 = length(p1) * rk_scene_inverse_distance(p1) - (1.0 - s1);
+    if (h1 < 0.0) {
+      front = p1;
+    }
+    if (h0 < 0.0 && h1 >= 0.0) {
+      /* between s0 (in front) and s1 (behind): secant steps, keeping the bracket */
+      float lo = s0, hlo = h0, hi = s1, hhi = h1;
+      for (int k = 0; k < RK_SECANT_STEPS; k++) {
+        float s = lo + (hi - lo) * (-hlo) / (hhi - hlo);
+        vec3 p = mix(a, b, s);
+        float h = length(p) * rk_scene_inverse_distance(p) - (1.0 - s);
+        if (h >= 0.0) {
+          hi = s;
+          hhi = h;
+        }
+        else {
+          lo = s;
+          hlo = h;
+        }
+      }
+      vec3 p = mix(a, b, hi);
+      /* the nearest surface among the texels around (a steep surface spans depths in one texel) */
+      float inv_near = max(rk_scene_inverse_distance(p), rk_scene_texel(p).a);
+      if (length(p) * inv_near <= (1.0 - hi) * (1.0 + RK_HIT_TOLERANCE)) {
+        return p;
+      }
+      front = mix(a, b, lo);
+    }
+    s0 = s1;
+    h0 = h1;
+  }
+  /* the point at infinity: hidden from c (1/D > 0 there and the ray went behind) or not */
+  return (h0 >= 0.0 && rk_scene_inverse_distance(e) > 0.0) ? front : e;
+}
+
+/* The colour seen along e from the surface point q. */
+vec3 rokeby_environment_at(vec3 q, vec3 d)
+{
+  if (rk_field.options.y == RK_ENV_SCENE) {
+    return rk_scene_texel(rk_scene_direction(q, normalize(d))).rgb;
+  }
+  if (rk_field.options.y == RK_ENV_IMAGE) {
+    /* level 0: no mip jump at the seam u = 0 / 1 */
+    return textureLod(rk_env, rokeby_equirect_uv(d), 0.0).rgb;
+  }
+  return rk_builtin_sky(d);
+}
+
+/* The colour seen in direction d from far away (no surface point: no parallax). */
 vec3 rokeby_environment(vec3 d)
 {
-  if (rk_field.options.y == 1) {
-    /* level 0: no mip jump at the seam u = 0 / 1 */
+  if (rk_field.options.y == RK_ENV_SCENE) {
+    return rk_scene_texel(normalize(d)).rgb;
+  }
+  if (rk_field.options.y == RK_ENV_IMAGE) {
     return textureLod(rk_env, rokeby_equirect_uv(d), 0.0).rgb;
   }
   return rk_builtin_sky(d);
@@ -482,6 +615,6 @@ vec4 rokeby_fragment(vec3 q, vec3 n, vec3 bary, vec3 vertex_ids)
   if (mode == RK_OUT_DIRECTION) {
     return vec4(e, 1.0);
   }
-  vec3 c = rokeby_environment(e);
+  vec3 c = rokeby_environment_at(q, e);
   return vec4(rk_field.options.z == 1 ? rk_linear_to_srgb(c) : c, 1.0);
 }

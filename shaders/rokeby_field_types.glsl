@@ -14,6 +14,11 @@
 #define RK_DIST_PER_VERTEX 1 /* per-pixel field, d from per-vertex distances, interpolated */
 #define RK_PER_VERTEX_FIELD 2 /* fallback: the stored per-vertex rotation vectors, interpolated */
 
+/* options.y: what e(q) is looked up in */
+#define RK_ENV_SKY 0    /* the built-in sky with a 15-degree grid */
+#define RK_ENV_IMAGE 1  /* a lat-long image (the world's, or the mirror's reflection map) */
+#define RK_ENV_SCENE 2  /* the scene captured from the mirror: lat-long RGB + 1/distance in alpha */
+
 /* options.x: what the fragment writes (0 is the preview; the others are for tests) */
 #define RK_OUT_COLOR 0
 #define RK_OUT_DIRECTION 1
@@ -32,5 +37,7 @@ struct RokebyField {
   vec4 eye;                         /* xyz: eye point (w = 1), or direction towards the eye (w = 0) */
   ivec4 counts;                     /* x: K, y: regions (0 = all constraints everywhere), z: RK_DIST_*, w: texels per vertex */
   ivec4 vlayout;                    /* per-vertex texture: x distances, y region weights, z rotation vector (float offsets), w width */
-  ivec4 options;                    /* x: RK_OUT_*, y: 1 = environment image, 0 = built-in sky, z: 1 = encode sRGB */
+  ivec4 options;                    /* x: RK_OUT_*, y: RK_ENV_*, z: 1 = encode sRGB */
+  vec4 env_origin;                  /* RK_ENV_SCENE: xyz the capture point; w: 1 = correct for q (distance), 0 = centre only */
+  vec4 world_scale;                 /* RK_ENV_SCENE: rgb scale of rk_world (the world's own lat-long image) to the capture; w: 1 = use it */
 };

@@ -53,6 +53,8 @@ class Renderer:
         self.vao = None
         self.vertex_tex = None
         self.env_tex = None
+        self.env_mode = glsl.ENV_SKY
+        self.env_origin = None
         self._dummy = ctx.texture((1, 1), 4, np.zeros(4, np.float32).tobytes(), dtype="f4")
 
     def set_mesh(self, vertices, normals, triangles):
@@ -77,14 +79,23 @@ class Renderer:
         self.env_tex = self.ctx.texture((img.shape[1], img.shape[0]), 4, np.ascontiguousarray(img).tobytes(), dtype="f4")
         self.env_tex.filter = (moderngl.LINEAR, moderngl.LINEAR)
         self.env_tex.repeat_x, self.env_tex.repeat_y = True, False
+        self.env_mode, self.env_origin = glsl.ENV_IMAGE, None
 
-    def render(self, view_projection, eye, output=glsl.OUT_DIRECTION, *, srgb=False, finish=True) -> np.ndarray | None:
+    def set_scene_capture(self, texels, origin):
+        """texels: (H, W, 4) float32 lat-long, linear RGB and 1/distance from ``origin`` (0 for the
+        world), row 0 at the bottom: the scene captured from the mirror (ENV_SCENE)."""
+        img = np.ascontiguousarray(texels, np.float32)
+        self.env_tex = self.ctx.texture((img.shape[1], img.shape[0]), 4, img.tobytes(), dtype="f4")
+        self.env_mode, self.env_origin = glsl.ENV_SCENE, tuple(map(float, origin))
+
+    def render(self, view_projection, eye, output=glsl.OUT_DIRECTION, *, srgb=False, finish=True, parallax=True) -> np.ndarray | None:
         """One frame; returns (H, W, 4) float32 with row 0 at the top, alpha 0 where no mirror."""
-        self.ubo.write(glsl.pack_field(self.plan, eye, output=output, env_image=self.env_tex is not None, srgb=srgb))
+        self.ubo.write(glsl.pack_field(self.plan, eye, output=output, env=self.env_mode, env_origin=self.env_origin, parallax=parallax, srgb=srgb))
         self.ubo.bind_to_uniform_block(0)
         (self.vertex_tex or self._dummy).use(0)
         (self.env_tex or self._dummy).use(1)
-        for name, unit in (("rk_vertex_data", 0), ("rk_env", 1)):
+        self._dummy.use(2)
+        for name, unit in (("rk_vertex_data", 0), ("rk_env", 1), ("rk_world", 2)):
             if name in self.program:
                 self.program[name].value = unit
         self.program["rk_view_projection"].write(np.asarray(view_projection, "f4").T.tobytes())

@@ -299,6 +299,7 @@ NOT_COVERED = {
     "return_to_view": "moves a 3D view, which background mode does not have (no scene data changes)",
     "update": "recomputes the field from the scene as it is: undoing it changes nothing",
     "reflection_map": "a Cycles capture; tests/reflection/test_reflmap.py covers its data",
+    "preview_capture": "captures the scene for the viewport preview, kept outside the file (no scene data changes; tests/reflection/test_scene_capture.py)",
     "appearance_preview": "switches a viewport draw handler on or off: no scene data changes",
     "appearance_render_difference": "a measurement: stores the figure in the brush settings, edits nothing (tests/appearance/test_appearance_render_model.py)",
     "shadow_start": "a shadow-editing session lives outside the file (no scene data changes until Apply)",

@@ -59,6 +59,34 @@ def is_eevee(engine: str) -> bool:
     return engine in ("BLENDER_EEVEE_NEXT", "BLENDER_EEVEE")
 
 
+# --- node trees of materials, worlds and lights ----------------------------------------------------
+
+_USE_NODES_DEPRECATED: dict = {}
+
+
+def node_tree_of(idblock):
+    """The node tree that shapes ``idblock`` (a material, world or light), or None: its
+    ``node_tree`` where ``use_nodes`` is on; from Blender 5.0, where reading ``use_nodes`` warns
+    that it is deprecated (node trees always apply), the node tree alone (decided once per type,
+    by that warning)."""
+    import warnings  # noqa: PLC0415
+
+    tree = getattr(idblock, "node_tree", None)
+    if tree is None:
+        return None
+    kind = type(idblock).__name__
+    if kind not in _USE_NODES_DEPRECATED:
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            on = getattr(idblock, "use_nodes", True)
+        _USE_NODES_DEPRECATED[kind] = any(issubclass(w.category, DeprecationWarning) for w in caught)
+        if not _USE_NODES_DEPRECATED[kind]:
+            return tree if on else None
+    if _USE_NODES_DEPRECATED[kind]:
+        return tree
+    return tree if getattr(idblock, "use_nodes", True) else None
+
+
 # --- image output ------------------------------------------------------------------------------
 
 @functools.cache

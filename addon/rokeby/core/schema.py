@@ -20,12 +20,13 @@ Enum item numbers (what Blender stores for an enum) are declared with the enums 
 from __future__ import annotations
 
 # Bumped whenever a name below is added, or a name's meaning changes (with a migration).
-SCHEMA_VERSION = 1
+SCHEMA_VERSION = 2
 
 # --- Properties registered on Blender's types ----------------------------------------------------
 OBJECT_PROP = "rokeby"  # Object.rokeby: RokebyMirror (reflection editing, appearance roles)
 OBJECT_SHADOW_PROP = "rokeby_shadow"  # Object.rokeby_shadow: RokebyShadowLinks
 SCENE_VIEWPORT_PREVIEW_PROP = "rokeby_viewport_preview"  # Scene.rokeby_viewport_preview
+SCENE_PREVIEW_RENDERED_PROP = "rokeby_preview_rendered"  # Scene.rokeby_preview_rendered: the preview over Rendered shading
 SCENE_APPEARANCE_BRUSH_PROP = "rokeby_appearance_brush"  # Scene.rokeby_appearance_brush
 
 # --- Data versions (stored in the properties above / on node groups) -----------------------------

@@ -45,6 +45,7 @@ __all__ = [
     "remove_render_nodes",
     "capture_reflection_map",
     "reflection_map",
+    "capture_preview_scene",
     "set_edited_materials",
     "constraint_view",
     "edited_reflections",
@@ -788,6 +789,20 @@ def capture_reflection_map(mirror, *, resolution=None, samples=None, storage: st
     from .render import reflmap  # noqa: PLC0415
 
     return reflmap.capture(mirror, resolution=resolution, samples=samples, storage=storage, scene=scene)
+
+
+def capture_preview_scene(mirror, *, width: int = 256, samples: int = 16, denoise: bool = False, scene=None):
+    """Capture now the scene the viewport preview of ``mirror`` looks its edited reflection up in
+    (the preview otherwise captures by itself when what it shows changes, never for handle moves):
+    a Cycles equirectangular panorama from the mirror's centre with the mirror hidden from camera
+    rays, and the distance per texel. ``width``: a power of two (height = width / 2). Returns the
+    capture (``texels`` (H, W, 4): linear RGB and 1/distance, ``origin``, ``seconds``,
+    ``nbytes``); it lives for the session, never in the .blend. See
+    rokeby.reflection.viewport.scene_env."""
+    from .viewport import scene_env  # noqa: PLC0415
+
+    _require_mirror(mirror)
+    return scene_env.capture(mirror, _scene(scene), width=width, samples=samples, denoise=denoise)
 
 
 def reflection_map(mirror):

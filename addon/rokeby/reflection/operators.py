@@ -525,7 +525,43 @@ class ROKEBY_OT_update(bpy.types.Operator):
         return {"FINISHED"}
 
 
+class ROKEBY_OT_preview_capture(bpy.types.Operator):
+    """Capture again the scene that the viewport preview reflects, for every previewed mirror (it is captured by itself when objects, materials, lights or the world change)"""
+
+    bl_idname = "rokeby.preview_capture"
+    bl_label = "Capture Scene"
+    bl_options = {"REGISTER"}
+
+    @classmethod
+    def poll(cls, context):
+        from .viewport import scene_env  # noqa: PLC0415
+
+        if context.scene is None or not scene_env.previewed(context.scene):
+            return _fail(cls, "Switch on Viewport Preview for a mirror first")
+        return True
+
+    def execute(self, context):
+        from .viewport import scene_env  # noqa: PLC0415
+
+        done = 0
+        for ob in scene_env.previewed(context.scene):
+            cap = scene_env.current(ob)
+            try:
+                api.capture_preview_scene(ob, width=cap.width if cap else scene_env.DEFAULT_WIDTH,
+                                          samples=cap.samples if cap else scene_env.DEFAULT_SAMPLES, scene=context.scene)
+            except RokebyError as exc:
+                self.report({"ERROR"}, str(exc))
+                return {"CANCELLED"}
+            done += 1
+        for area in context.screen.areas if context.screen else ():
+            if area.type == "VIEW_3D":
+                area.tag_redraw()
+        self.report({"INFO"}, f"Rokeby: captured the scene around {done} mirror(s)")
+        return {"FINISHED"}
+
+
 classes = (
+    ROKEBY_OT_preview_capture,
     ROKEBY_OT_mirror_add,
     ROKEBY_OT_mirror_remove,
     ROKEBY_OT_constraint_add,

@@ -13,6 +13,7 @@ from . import edit as api  # reflection editing's entry points (rokeby.api re-ex
 from . import evaluate
 from ..core import native, words
 from .viewport import draw as viewport
+from .viewport import scene_env
 from .props import METRICS
 from ..core import schema
 
@@ -70,6 +71,10 @@ class ROKEBY_PT_main(bpy.types.Panel):
         box = layout.box()
         box.label(text=f"Mirrors ({len(mirrors)})", icon="MOD_MIRROR")
         box.prop(context.scene, schema.SCENE_VIEWPORT_PREVIEW_PROP, icon="SHADING_RENDERED")
+        if getattr(context.scene, schema.SCENE_VIEWPORT_PREVIEW_PROP, False):
+            row = box.row(align=True)
+            row.prop(context.scene, schema.SCENE_PREVIEW_RENDERED_PROP)
+            row.operator("rokeby.preview_capture", text="", icon="FILE_REFRESH")
         if viewport.last_error():
             box.label(text=f"Preview: {viewport.last_error()}"[:120], icon="ERROR")
         for m in mirrors:
@@ -106,6 +111,11 @@ class ROKEBY_PT_main(bpy.types.Panel):
             if rep.interpolation_error is not None:
                 p99, worst = rep.interpolation_error[:2]
                 col.label(text=f"render vs preview: {p99:.2f}° (99th percentile), {worst:.2f}° max", icon="CHECKMARK" if p99 <= evaluate.AGREEMENT_DEGREES else "ERROR")
+            cap = scene_env.current(mirror)
+            if cap is not None:  # short: details in docs/addon.md, "Viewport preview"
+                col.label(text=f"Scene {cap.seconds:.1f} s, {cap.nbytes / 2**20:.1f} MB", icon="WORLD")
+            elif scene_env.error_of(mirror):
+                col.label(text="Scene capture failed", icon="ERROR")
             if rep.recomputed or rep.python_ms:
                 col.label(text=f"last update {rep.python_ms + rep.native_ms:.1f} ms (Python {rep.python_ms:.1f}, Rust {rep.native_ms:.1f})")
         layout.operator("rokeby.update", icon="FILE_REFRESH")
@@ -311,6 +321,7 @@ MENU = (
     ("rokeby.reflection_map", None, {}, "WORLD"),
     ("rokeby.reflection_map", "Clear Reflection Map", {"action": "CLEAR"}, "X"),
     ("rokeby.update", None, {}, "FILE_REFRESH"),
+    ("rokeby.preview_capture", "Capture Scene for Preview", {}, "WORLD"),
     None,
     ("rokeby.appearance_setup", None, {}, "MATERIAL"),
     ("rokeby.appearance_paint", None, {}, "BRUSH_DATA"),

@@ -289,8 +289,51 @@ class _Restorer:
         return errors
 
 
-def _render_panorama(scene, mirror, origin, width: int, samples: int) -> np.ndarray:
-    """Render the equirectangular panorama (H, W, 3) float32, row 0 at the bottom."""
+def _distance_material():
+    """An emission material whose colour is the distance from the camera to the shaded point
+    (Camera Data's View Distance: for a panoramic camera, the Euclidean distance from its centre)."""
+    import bpy  # noqa: PLC0415
+
+    mat = bpy.data.materials.new("Rokeby capture distance")
+    mat.use_nodes = True
+    nt = mat.node_tree
+    nt.nodes.clear()
+    cam = nt.nodes.new("ShaderNodeCameraData")
+    emit = nt.nodes.new("ShaderNodeEmission")
+    emit.inputs["Strength"].default_value = 1.0
+    out = nt.nodes.new("ShaderNodeOutputMaterial")
+    nt.links.new(cam.outputs["View Distance"], emit.inputs["Color"])
+    nt.links.new(emit.outputs["Emission"], out.inputs["Surface"])
+    return mat
+
+
+def _read_exr(path: str, width: int, height: int, what: str) -> np.ndarray:
+    """The RGBA pixels (H, W, 4) of the single-layer EXR ``path`` (Blender's own reader)."""
+    import bpy  # noqa: PLC0415
+
+    if not os.path.exists(path):
+        raise RokebyError(f"{what}: Cycles wrote no image (was the render cancelled?)")
+    img = bpy.data.images.load(path)
+    try:
+        if tuple(img.size) != (width, height):
+            raise RokebyError(f"{what}: expected a {width}×{height} panorama, got {tuple(img.size)}")
+        px = np.empty(width * height * 4, dtype=np.float32)
+        img.pixels.foreach_get(px)
+    finally:
+        bpy.data.images.remove(img)
+    return px.reshape(height, width, 4)
+
+
+def _render_panorama(scene, mirror, origin, width: int, samples: int, *, distance: bool = False, denoise: bool | None = None,
+                     camera_only: bool = False):
+    """Render the equirectangular panorama (H, W, 3) float32, row 0 at the bottom.
+
+    With ``distance``, returns (colour, distance): a second render of one sample with every
+    surface replaced by an emission of its distance from ``origin`` (the view layers' material
+    override; the world transparent) gives the distance per texel, +inf where the world is seen.
+    ``denoise``: the colour render's denoising (None: the scene's setting). ``camera_only``: the
+    mirror is hidden from camera rays only, so that it still shadows and lights the other objects
+    as in a final render (else it is hidden from the render altogether)."""
     import bpy  # noqa: PLC0415
 
     from ...blender import compat  # noqa: PLC0415
@@ -315,7 +358,7 @@ def _render_panorama(scene, mirror, origin, width: int, samples: int) -> np.ndar
             scene.collection.objects.link(cam)
             r = scene.render
             undo.set(scene, "camera", cam)
-            undo.set(mirror, "hide_render", True)
+            undo.set(mirror, "visible_camera" if camera_only else "hide_render", not camera_only)
             undo.set(r, "engine", "CYCLES")
             undo.set_many(r, (
                 ("resolution_x", width), ("resolution_y", height), ("resolution_percentage", 100),
@@ -327,20 +370,42 @@ def _render_panorama(scene, mirror, origin, width: int, samples: int) -> np.ndar
             im = r.image_settings
             undo.set_many(im, compat.single_layer_exr_items() + (("color_mode", "RGB"), ("color_depth", "32"), ("exr_codec", "ZIP"), ("color_management", "FOLLOW_SCENE")))
             undo.set(scene.cycles, "samples", int(samples))
-            if scene == bpy.context.scene:
-                bpy.ops.render.render(write_still=True)
-            else:
-                bpy.ops.render.render(write_still=True, scene=scene.name)
-            if not os.path.exists(path):
-                raise RokebyError(f"capture of '{mirror.name}': Cycles wrote no image (was the render cancelled?)")
-            img = bpy.data.images.load(path)
-            try:
-                if tuple(img.size) != (width, height):
-                    raise RokebyError(f"capture of '{mirror.name}': expected a {width}×{height} panorama, got {tuple(img.size)}")
-                px = np.empty(width * height * 4, dtype=np.float32)
-                img.pixels.foreach_get(px)
-            finally:
-                bpy.data.images.remove(img)
+            if denoise is not None:
+                undo.set(scene.cycles, "use_denoising", bool(denoise))
+
+            def render():
+                if scene == bpy.context.scene:
+                    bpy.ops.render.render(write_still=True)
+                else:
+                    bpy.ops.render.render(write_still=True, scene=scene.name)
+
+            render()
+            px = _read_exr(path, width, height, f"capture of '{mirror.name}'")
+            if distance:
+                # Its own restorer, undone first: it sets again what the colour render set.
+                again = _Restorer()
+                dist_mat = _distance_material()
+                try:
+                    dist_path = os.path.join(tmp, "distance.exr")
+                    again.set(r, "filepath", dist_path)
+                    again.set(r, "film_transparent", True)
+                    again.set(im, "color_mode", "RGBA")
+                    for attr, value in (("samples", 1), ("use_denoising", False), ("filter_width", 0.01), ("max_bounces", 0),
+                                        ("transparent_max_bounces", 0), ("use_adaptive_sampling", False)):
+                        again.set(scene.cycles, attr, value)
+                    for vl in scene.view_layers:
+                        again.set(vl, "material_override", dist_mat)
+                    again.set(scene, "world", None)  # transparent anyway: no world lighting to prepare
+                    render()
+                    dpx = _read_exr(dist_path, width, height, f"distance capture of '{mirror.name}'")
+                finally:
+                    undone = again.restore()
+                    bpy.data.materials.remove(dist_mat)
+                if undone:
+                    raise RokebyError(f"capture of '{mirror.name}': could not restore " + "; ".join(undone))
+                covered = dpx[..., 3]
+                with np.errstate(divide="ignore", invalid="ignore"):
+                    dist = np.where(covered > 0.5, dpx[..., 0] / np.maximum(covered, 1e-6), np.inf).astype(np.float32)
     finally:
         errors = undo.restore()
         if cam is not None:
@@ -350,7 +415,8 @@ def _render_panorama(scene, mirror, origin, width: int, samples: int) -> np.ndar
         shutil.rmtree(tmp, ignore_errors=True)
     if errors:
         raise RokebyError(f"capture of '{mirror.name}': could not restore " + "; ".join(errors))
-    return px.reshape(height, width, 4)[..., :3]
+    colour = px[..., :3]
+    return (colour, dist) if distance else colour
 
 
 def _store(name: str, px: np.ndarray, storage: str, filepath: str, old):

@@ -25,7 +25,7 @@ import bpy
 
 from ...blender import compat
 from .. import evaluate
-from . import glsl
+from . import glsl, scene_env
 from ...core import schema
 
 DEPTH_BIAS = 2e-5
@@ -83,6 +83,9 @@ class _MirrorGPU:
         self.ubo = None
         self.iso_key = None
         self.iso = None
+        self.scene_serial = None
+        self.scene_tex = None
+        self.world_tex = None
 
 
 def _float_texture(array: np.ndarray):
@@ -109,12 +112,7 @@ def environment_image(obj, scene):
     s = obj.rokeby
     if getattr(s, "render_mode", "") == "REFLECTION_MAP" and getattr(s, "map_image", None) is not None:
         return s.map_image
-    world = scene.world
-    if world is not None and world.use_nodes and world.node_tree is not None:
-        for node in world.node_tree.nodes:
-            if node.type == "TEX_ENVIRONMENT" and node.image is not None and node.projection == "EQUIRECTANGULAR" and not node.mute:
-                return node.image
-    return None
+    return scene_env.world_image(scene)
 
 
 def _mirror_gpu(obj, st) -> _MirrorGPU:
@@ -138,9 +136,26 @@ def _mirror_gpu(obj, st) -> _MirrorGPU:
     return entry
 
 
-def draw_mirror(obj, scene, view_projection, eye, *, eye_is_direction=False, output=glsl.OUT_COLOR, srgb=False) -> bool:
+def scene_texture(obj, entry):
+    """The GPU texture of ``obj``'s scene capture (remade when a new capture arrives), or None."""
+    cap = scene_env.current(obj)
+    if cap is None:
+        entry.scene_tex, entry.scene_serial = None, None
+        return None, None
+    if entry.scene_serial != cap.serial:
+        entry.scene_tex = _float_texture(cap.texels)
+        entry.scene_serial = cap.serial
+    return entry.scene_tex, cap
+
+
+def draw_mirror(obj, scene, view_projection, eye, *, eye_is_direction=False, output=glsl.OUT_COLOR, srgb=False, parallax=True, use_scene=True) -> bool:
     """Draw one mirror with the preview shader into the bound framebuffer. ``view_projection``:
-    world -> clip (4x4, row-major maths convention). Returns whether it drew."""
+    world -> clip (4x4, row-major maths convention). Returns whether it drew.
+
+    What e(q) is looked up in: the mirror's reflection map in reflection-map mode (what its
+    renders show), else the scene captured from the mirror (``scene_env``; corrected for the
+    surface point q with ``parallax``, else the centre-only lookup), else, until the first capture
+    arrives, the world's lat-long image or the built-in sky."""
     import gpu  # noqa: PLC0415
     from mathutils import Matrix  # noqa: PLC0415
 
@@ -163,14 +178,30 @@ def draw_mirror(obj, scene, view_projection, eye, *, eye_is_direction=False, out
         _status.pop(obj.name, None)
     if obj.rokeby.freeze:
         eye, eye_is_direction = tuple(obj.rokeby.freeze_eye), False
-    image = environment_image(obj, scene)
-    env = None
-    if image is not None:
-        try:
-            env = gpu.texture.from_image(image)
-        except Exception as exc:  # noqa: BLE001 - an image that cannot be loaded
-            _status[obj.name] = f"preview: image '{image.name}' cannot be used ({exc}); showing the built-in sky"
-    data = glsl.pack_field(entry.plan, eye, eye_is_direction=eye_is_direction, output=output, env_image=env is not None, srgb=srgb)
+    map_mode = getattr(obj.rokeby, "render_mode", "") == "REFLECTION_MAP" and getattr(obj.rokeby, "map_image", None) is not None
+    env, env_mode, origin, world, world_scale = None, glsl.ENV_SKY, None, None, None
+    if use_scene and not map_mode:
+        env, cap = scene_texture(obj, entry)
+        if env is not None:
+            env_mode, origin = glsl.ENV_SCENE, cap.origin
+            image = bpy.data.images.get(cap.world_image) if cap.world_image else None
+            if image is not None and cap.world_scale is not None:
+                try:
+                    world, world_scale = gpu.texture.from_image(image), cap.world_scale
+                except Exception:  # noqa: BLE001 - the capture's own world texels serve
+                    world = None
+        else:
+            scene_env.request()  # captured from the event loop, never from inside a draw
+    if env is None:
+        image = environment_image(obj, scene)
+        if image is not None:
+            try:
+                env = gpu.texture.from_image(image)
+                env_mode = glsl.ENV_IMAGE
+            except Exception as exc:  # noqa: BLE001 - an image that cannot be loaded
+                _status[obj.name] = f"preview: image '{image.name}' cannot be used ({exc}); showing the built-in sky"
+    data = glsl.pack_field(entry.plan, eye, eye_is_direction=eye_is_direction, output=output, env=env_mode, env_origin=origin, parallax=parallax, srgb=srgb,
+                           world_scale=world_scale)
     if entry.ubo is None:
         entry.ubo = gpu.types.GPUUniformBuf(data)
     else:
@@ -182,6 +213,7 @@ def draw_mirror(obj, scene, view_projection, eye, *, eye_is_direction=False, out
     sh.uniform_float("rk_depth_bias", DEPTH_BIAS)
     sh.uniform_sampler("rk_vertex_data", entry.vertex_tex)
     sh.uniform_sampler("rk_env", env if env is not None else _dummy_texture())
+    sh.uniform_sampler("rk_world", world if world is not None else _dummy_texture())
     sh.uniform_block("rk_field", entry.ubo)
     entry.batch.draw(sh)
     gpu.state.depth_mask_set(False)
@@ -308,15 +340,25 @@ def draw_overlays(obj, scene, viewport_size, view_right, view_up):
     gpu.state.blend_set("NONE")
 
 
-def draw_scene(scene, view_projection, eye, *, eye_is_direction=False, viewport_size=(1, 1), view_right=(1, 0, 0), view_up=(0, 0, 1), overlays=True) -> int:
-    """Draw the preview of every mirror of ``scene`` that shows it; returns how many were drawn."""
+def steps_aside(scene, shading: str | None) -> bool:
+    """Whether the mirrors' preview stays out of a view with ``shading`` (its shading type): in
+    Rendered shading the renderer's own edited result is shown, unless the scene asks for the
+    overlay there too (``Scene.rokeby_preview_rendered``). Handles and region borders stay."""
+    return shading == "RENDERED" and not getattr(scene, schema.SCENE_PREVIEW_RENDERED_PROP, False)
+
+
+def draw_scene(scene, view_projection, eye, *, eye_is_direction=False, viewport_size=(1, 1), view_right=(1, 0, 0), view_up=(0, 0, 1), overlays=True, shading=None,
+               parallax=True) -> int:
+    """Draw the preview of every mirror of ``scene`` that shows it; returns how many were drawn.
+    ``shading``: the view's shading type (see ``steps_aside``)."""
     drawn = 0
+    aside = steps_aside(scene, shading)
     for obj in evaluate.mirrors_of(scene):
         s = obj.rokeby
         if not (s.enabled and s.show_preview) or obj.type != "MESH" or not obj.visible_get():
             _status.pop(obj.name, None)
             continue
-        if draw_mirror(obj, scene, view_projection, eye, eye_is_direction=eye_is_direction):
+        if not aside and draw_mirror(obj, scene, view_projection, eye, eye_is_direction=eye_is_direction, parallax=parallax):
             drawn += 1
         if overlays:
             draw_overlays(obj, scene, viewport_size, view_right, view_up)
@@ -350,6 +392,8 @@ def _draw_callback():
             viewport_size=(region.width, region.height),
             view_right=tuple(view_inv.col[0].xyz),
             view_up=tuple(view_inv.col[1].xyz),
+            shading=getattr(getattr(context.space_data, "shading", None), "type", None),
+            parallax=prefs.get(context).preview_parallax,
         )
         _last_error = None
     except Exception as exc:  # noqa: BLE001 - a draw callback must never raise into Blender
@@ -375,6 +419,14 @@ def register():
         default=False,
         update=_redraw,
     )
+    setattr(bpy.types.Scene, schema.SCENE_PREVIEW_RENDERED_PROP, bpy.props.BoolProperty(
+        name="Preview in Rendered",
+        description="Draw the reflection preview over Rendered shading too. Off: Rendered shading shows the renderer's "
+                    "own edited reflections (Cycles, EEVEE) and only the handles are drawn over them",
+        default=False,
+        update=_redraw,
+    ))
+    scene_env.register()
     if _handle is None:
         _handle = bpy.types.SpaceView3D.draw_handler_add(_draw_callback, (), "WINDOW", "POST_VIEW")
 
@@ -395,5 +447,8 @@ def unregister():
         _handle = None
     if hasattr(bpy.types.Scene, schema.SCENE_VIEWPORT_PREVIEW_PROP):
         del bpy.types.Scene.rokeby_viewport_preview
+    if hasattr(bpy.types.Scene, schema.SCENE_PREVIEW_RENDERED_PROP):
+        delattr(bpy.types.Scene, schema.SCENE_PREVIEW_RENDERED_PROP)
+    scene_env.unregister()
     free()
     _last_error = None

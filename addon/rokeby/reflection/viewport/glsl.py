@@ -53,6 +53,8 @@ if MAX_CONSTRAINTS > 128:
 
 # counts.z
 DIST_EUCLIDEAN, DIST_PER_VERTEX, PER_VERTEX_FIELD = 0, 1, 2
+# options.y: what e(q) is looked up in
+ENV_SKY, ENV_IMAGE, ENV_SCENE = 0, 1, 2
 # options.x
 OUT_COLOR, OUT_DIRECTION, OUT_POSITION, OUT_NORMAL, OUT_BARY, OUT_VERTEX_IDS = range(6)
 
@@ -61,7 +63,7 @@ INTERFACE = {
     "vertex_in": [(0, "VEC3", "rk_position"), (1, "VEC3", "rk_normal"), (2, "VEC3", "rk_vertex_ids")],
     "vertex_out": [("smooth", "VEC3", "rk_v_position"), ("smooth", "VEC3", "rk_v_normal"), ("smooth", "VEC3", "rk_v_bary"), ("flat", "VEC3", "rk_v_vertex_ids")],
     "push_constant": [("MAT4", "rk_view_projection"), ("FLOAT", "rk_depth_bias")],
-    "sampler": [(0, "FLOAT_2D", "rk_vertex_data"), (1, "FLOAT_2D", "rk_env")],
+    "sampler": [(0, "FLOAT_2D", "rk_vertex_data"), (1, "FLOAT_2D", "rk_env"), (2, "FLOAT_2D", "rk_world")],
     "uniform_buf": [(0, "RokebyField", "rk_field")],
     "fragment_out": [(0, "VEC4", "rk_out")],
 }
@@ -77,7 +79,7 @@ def standalone_sources(version: str = "330 core") -> tuple[str, str]:
 _K, _R = MAX_CONSTRAINTS, MAX_REGIONS
 OFFSETS = {}
 _o = 0
-for _name, _n in (("cp", _K), ("cr", _K), ("ce", _K), ("region_a", _R), ("region_b", _R), ("region_members", _R), ("eye", 1), ("counts", 1), ("vlayout", 1), ("options", 1)):
+for _name, _n in (("cp", _K), ("cr", _K), ("ce", _K), ("region_a", _R), ("region_b", _R), ("region_members", _R), ("eye", 1), ("counts", 1), ("vlayout", 1), ("options", 1), ("env_origin", 1), ("world_scale", 1)):
     OFFSETS[_name] = _o
     _o += 16 * _n  # every member is a vec4/uvec4/ivec4 or an array of them: 16-byte stride
 BLOCK_SIZE = _o
@@ -251,9 +253,27 @@ def plan_field(rows, regions=None, *, n_vertices: int, distances=None, rotations
     )
 
 
-def pack_field(plan: FieldPlan, eye, *, eye_is_direction: bool = False, output: int = OUT_COLOR, env_image: bool = False, srgb: bool = False) -> bytes:
+def pack_field(plan: FieldPlan, eye, *, eye_is_direction: bool = False, output: int = OUT_COLOR, env_image: bool = False, srgb: bool = False,
+               env: int | None = None, env_origin=None, parallax: bool = True, world_scale=None) -> bytes:
     """The std140 bytes of ``RokebyField`` for ``plan`` seen from ``eye`` (a point; or, with
-    ``eye_is_direction``, the direction towards an orthographic viewer)."""
+    ``eye_is_direction``, the direction towards an orthographic viewer).
+
+    ``env``: what e(q) is looked up in (ENV_SKY, ENV_IMAGE, ENV_SCENE; default ENV_IMAGE with
+    ``env_image``, else ENV_SKY). ENV_SCENE needs ``env_origin``, the point the scene was captured
+    from; ``parallax`` corrects the lookup for the surface point q (else the centre-only lookup);
+    ``world_scale`` (3 numbers): the world's own lat-long image (bound as rk_world) times this
+    stands in for the capture's world texels (None: the capture's texels)."""
+    if env is None:
+        env = ENV_IMAGE if env_image else ENV_SKY
+    if env not in (ENV_SKY, ENV_IMAGE, ENV_SCENE):
+        raise ValueError(f"env: expected ENV_SKY, ENV_IMAGE or ENV_SCENE, got {env!r}")
+    origin = np.zeros(3)
+    if env == ENV_SCENE:
+        if env_origin is None:
+            raise ValueError("env_origin: ENV_SCENE needs the point the scene was captured from")
+        origin = np.asarray(env_origin, dtype=np.float64)
+        if origin.shape != (3,) or not np.all(np.isfinite(origin)):
+            raise ValueError(f"env_origin: expected 3 finite numbers, got {env_origin!r}")
     eye = np.asarray(eye, dtype=np.float64)
     if eye.shape != (3,) or not np.all(np.isfinite(eye)):
         raise ValueError(f"eye: expected 3 finite numbers, got {eye!r}")
@@ -284,7 +304,13 @@ def pack_field(plan: FieldPlan, eye, *, eye_is_direction: bool = False, output: 
     n_groups = len(plan.groups) if plan.has_regions else 0
     put("counts", 0, [k, n_groups, plan.mode, plan.texels_per_vertex], ints)
     put("vlayout", 0, [*plan.offsets, plan.vertex_data.shape[1]], ints)
-    put("options", 0, [int(output), 1 if env_image else 0, 1 if srgb else 0, 0], ints)
+    put("options", 0, [int(output), int(env), 1 if srgb else 0, 0], ints)
+    put("env_origin", 0, [*origin, 1.0 if parallax else 0.0])
+    if world_scale is not None and env == ENV_SCENE:
+        ws = np.asarray(world_scale, dtype=np.float64)
+        if ws.shape != (3,) or not np.all(np.isfinite(ws)):
+            raise ValueError(f"world_scale: expected 3 finite numbers, got {world_scale!r}")
+        put("world_scale", 0, [*ws, 1.0])
     return buf.tobytes()
 
 
