@@ -85,7 +85,7 @@ def test_a_drag_shows_a_preview_and_the_release_stores_the_accurate_field(window
     # Which preview ran: updates ("drag"; the last step is beyond DRAG_UPDATE_REACH of the start,
     # so Dijkstra solves there), or Dijkstra only.
     kinds = {key[0] for key in evaluate.state_of(ball).distance_cache}
-    assert kinds == ({"dense_graph", "drag", "dijkstra"} if preview == "update" else {"dense_graph", "dijkstra"}), kinds
+    assert kinds == ({"graph", "drag", "dijkstra"} if preview == "update" else {"graph", "dijkstra"}), kinds
     settle = [fn for fn in window if fn is handlers._settle_timer]
     assert len(settle) == 1, "the end of the drag was not scheduled (once)"
     preview = _stored(ball)

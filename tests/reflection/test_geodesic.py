@@ -44,10 +44,10 @@ def test_solver_keeps_its_factorisation(spot_solver):
     v, f, _ = spot_solver
     s = rn.GeodesicSolver(v, f)
     assert not s.factored
-    a = s.distances([3])
+    a = s.distances([3], method="heat")
     assert s.factored
-    np.testing.assert_array_equal(a, s.distances([3]))
-    np.testing.assert_allclose(a, rn.geodesic_distances(v, f, [3]), atol=1e-6)
+    np.testing.assert_array_equal(a, s.distances([3], method="heat"))
+    np.testing.assert_allclose(a, rn.geodesic_distances(v, f, [3], method="heat"), atol=1e-6)
 
 
 def centred_plane():
@@ -165,7 +165,7 @@ def test_boundary_choice_trades_accuracy_near_the_boundary():
     """Averaging Neumann and Dirichlet heat flows is more accurate on a mesh with boundary; the
     Neumann-only solver is the cheaper option, still far better than edge paths."""
     v, f, src, error = centred_plane()
-    err = {b: error(rn.GeodesicSolver(v, f, boundary=b).distances([src])[0]) for b in ("average", "neumann")}
+    err = {b: error(rn.GeodesicSolver(v, f, boundary=b).distances([src], method="heat")[0]) for b in ("average", "neumann")}
     assert err["average"] < err["neumann"] < 0.02
     with pytest.raises(ValueError, match="boundary: unknown condition"):
         rn.GeodesicSolver(v, f, boundary="dirichlet")
@@ -201,7 +201,7 @@ def test_api_reuses_the_solver_until_the_mesh_changes():
 
     v, f = flat_grid(11)
     a = api.geodesic_solver(v, f)
-    api.geodesic_distances(v, f, [0])
+    api.geodesic_distances(v, f, [0], method="heat")
     assert api.geodesic_solver(v.copy(), f.copy()) is a and a.factored
     moved = v.copy()
     moved[5, 2] += 0.1

@@ -137,7 +137,9 @@ fn prune_rows(
     eps: f64,
 ) -> (Vec<usize>, Vec<(u32, f32)>) {
     const CHUNK: usize = 1024;
-    let chunks: Vec<(Vec<u32>, Vec<(u32, f32)>)> = (0..nv.div_ceil(CHUNK))
+    // Per chunk of vertices: the count of edges kept per vertex, and the kept edges.
+    type Kept = (Vec<u32>, Vec<(u32, f32)>);
+    let chunks: Vec<Kept> = (0..nv.div_ceil(CHUNK))
         .into_par_iter()
         .map_init(
             || (vec![f32::INFINITY; nv], Vec::new()),
