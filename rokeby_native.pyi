@@ -21,7 +21,7 @@ _F64 = npt.NDArray[np.float64]
 _I64 = npt.NDArray[np.int64]
 _Array = npt.ArrayLike
 _Polar = Literal["exact", "svd", "fast", "iterative"]
-_GeodesicMethod = Literal["heat", "dijkstra", "exact", "graph"]
+_GeodesicMethod = Literal["dense_graph", "graph", "heat", "dijkstra", "exact"]
 # A surface point: (face index, (b0, b1, b2)) barycentric coordinates.
 _SurfacePoint = tuple[int, Sequence[float]]
 _Source = int | _SurfacePoint
@@ -69,7 +69,7 @@ def ortho(matrices: _Array, method: _Polar = "exact") -> _F32: ...
 # --- geometry: geodesic distances and regions ------------------------------------------------
 
 def geodesic_distances(
-    vertices: _Array, faces: _Array, sources: _Sources, *, method: _GeodesicMethod = "heat"
+    vertices: _Array, faces: _Array, sources: _Sources, *, method: _GeodesicMethod = "dense_graph"
 ) -> _F32: ...
 def interpolate(values: _Array, faces: _Array, face_index: _Array, bary: _Array) -> _F32: ...
 
@@ -81,16 +81,16 @@ class GeodesicSolver:
         *,
         boundary: Literal["average", "neumann"] = "average",
     ) -> GeodesicSolver: ...
-    def distances(self, sources: _Sources, method: _GeodesicMethod = "heat") -> _F32: ...
+    def distances(self, sources: _Sources, method: _GeodesicMethod = "dense_graph") -> _F32: ...
     def geodesic_region(
         self,
         centre: _Source,
         radius: float,
         border: float = 0.0,
-        method: _GeodesicMethod = "heat",
+        method: _GeodesicMethod = "dense_graph",
     ) -> _F32: ...
     def freeform_region(
-        self, weights: _Array, border: float = 0.0, method: _GeodesicMethod = "heat"
+        self, weights: _Array, border: float = 0.0, method: _GeodesicMethod = "dense_graph"
     ) -> _F32: ...
     @property
     def factored(self) -> bool: ...

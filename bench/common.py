@@ -73,3 +73,12 @@ def rel_errors(d, exact, faces, source):
     rel = np.abs(d[ok] - exact[ok]) / exact[ok]
     missing = int(np.count_nonzero(mask & ~np.isfinite(d)))
     return float(rel.mean()), float(rel.max()), missing
+
+
+def against_goal(value: float, goal: float, unit: str, *, at_most: bool = True) -> str:
+    """'met' or by how much ``value`` misses ``goal`` (an upper bound when ``at_most``, else a
+    lower bound), in ``unit`` and in percent of the goal: what the bench prints beside each goal."""
+    if (value <= goal) if at_most else (value >= goal):
+        return f"met ({value:.1f} {unit}, goal {'<=' if at_most else '>='} {goal:g})"
+    gap = value - goal if at_most else goal - value
+    return f"missed by {gap:.1f} {unit} ({100 * gap / goal:.0f} % of the goal {goal:g})"

@@ -88,7 +88,7 @@ def plot(json_path, png_path):
 
     rows = json.load(open(json_path))
     fig, ax = plt.subplots(figsize=(7.5, 4.8), dpi=120)
-    markers = {"rokeby heat": "o", "rokeby heat (neumann)": "s", "rokeby dijkstra": "^", "potpourri3d heat": "D", "libigl heat": "v"}
+    markers = {"rokeby dense graph (default)": "*", "rokeby graph (SVG)": "P", "rokeby heat": "o", "rokeby heat (neumann)": "s", "rokeby dijkstra": "^", "potpourri3d heat": "D", "libigl heat": "v"}
     meshes = sorted({r["mesh"] for r in rows})
     colours = dict(zip(meshes, plt.rcParams["axes.prop_cycle"].by_key()["color"]))
     for r in rows:

@@ -44,10 +44,10 @@ def test_solver_keeps_its_factorisation(spot_solver):
     v, f, _ = spot_solver
     s = rn.GeodesicSolver(v, f)
     assert not s.factored
-    a = s.distances([3])
+    a = s.distances([3], method="heat")
     assert s.factored
-    np.testing.assert_array_equal(a, s.distances([3]))
-    np.testing.assert_allclose(a, rn.geodesic_distances(v, f, [3]), atol=1e-6)
+    np.testing.assert_array_equal(a, s.distances([3], method="heat"))
+    np.testing.assert_allclose(a, rn.geodesic_distances(v, f, [3], method="heat"), atol=1e-6)
 
 
 def centred_plane():
@@ -165,7 +165,7 @@ def test_boundary_choice_trades_accuracy_near_the_boundary():
     """Averaging Neumann and Dirichlet heat flows is more accurate on a mesh with boundary; the
     Neumann-only solver is the cheaper option, still far better than edge paths."""
     v, f, src, error = centred_plane()
-    err = {b: error(rn.GeodesicSolver(v, f, boundary=b).distances([src])[0]) for b in ("average", "neumann")}
+    err = {b: error(rn.GeodesicSolver(v, f, boundary=b).distances([src], method="heat")[0]) for b in ("average", "neumann")}
     assert err["average"] < err["neumann"] < 0.02
     with pytest.raises(ValueError, match="boundary: unknown condition"):
         rn.GeodesicSolver(v, f, boundary="dirichlet")
@@ -201,7 +201,7 @@ def test_api_reuses_the_solver_until_the_mesh_changes():
 
     v, f = flat_grid(11)
     a = api.geodesic_solver(v, f)
-    api.geodesic_distances(v, f, [0])
+    api.geodesic_distances(v, f, [0], method="heat")
     assert api.geodesic_solver(v.copy(), f.copy()) is a and a.factored
     moved = v.copy()
     moved[5, 2] += 0.1
@@ -237,7 +237,7 @@ def test_no_distance_is_shorter_than_the_straight_chord(name):
     pair = [[sources[6], sources[0]]]
     chord_pair = np.minimum(chord[6], chord[0])[None]
     scale = np.abs(v).max()
-    methods = ("dijkstra", "heat", "graph", "exact") if name in ("spot.obj", "teapot.obj") else ("dijkstra", "heat", "graph")
+    methods = ("dijkstra", "heat", "graph", "dense_graph", "exact") if name in ("spot.obj", "teapot.obj") else ("dijkstra", "heat", "graph", "dense_graph")
     for method in methods:
         for srcs, ch in ((sources, chord), (pair, chord_pair)):
             d = s.distances(srcs, method=method).astype(np.float64)
@@ -274,10 +274,10 @@ def test_mirror_geodesic_methods_keep_their_stored_numbers():
     with the same method after Exact (2) was added, and every item maps to a native method."""
     from rokeby import props
 
-    assert sorted((i[0], i[4]) for i in props.GEODESIC_METHODS) == [("DIJKSTRA", 1), ("EXACT", 2), ("GRAPH", 3), ("HEAT", 0)]
+    assert sorted((i[0], i[4]) for i in props.GEODESIC_METHODS) == [("DENSE_GRAPH", 4), ("DIJKSTRA", 1), ("EXACT", 2), ("GRAPH", 3), ("HEAT", 0)]
     v, f = flat_grid(9)
     s = rn.GeodesicSolver(v, f)
-    for name in ("heat", "dijkstra", "exact", "graph"):
+    for name in ("heat", "dijkstra", "exact", "graph", "dense_graph"):
         assert np.isfinite(s.distances([40], method=name)).all()
 
 
@@ -307,7 +307,7 @@ def test_graph_method_is_within_half_a_percent_of_exact_mmp():
 
 
 def test_new_mirrors_use_the_graph_but_saved_files_keep_heat():
-    """A mirror made now measures on the geodesic graph; a file saved before the graph existed
+    """A mirror made now measures on the dense geodesic graph; a file saved before the graph existed
     (no stored setting) still reads the property's default, heat, so its renders do not change."""
     bpy = pytest.importorskip("bpy")
     import rokeby
@@ -324,7 +324,7 @@ def test_new_mirrors_use_the_graph_but_saved_files_keep_heat():
 
     new = plane("graph mirror")
     api.add_mirror(new, metric="GEODESIC")
-    assert new.rokeby.geodesic_method == "GRAPH"
+    assert new.rokeby.geodesic_method == "DENSE_GRAPH"
     old = plane("older mirror")
     assert old.rokeby.geodesic_method == "HEAT"  # what a file without the stored setting reads
     with pytest.raises(Exception, match="geodesic_method"):

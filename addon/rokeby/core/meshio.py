@@ -63,3 +63,32 @@ def subdivide_midpoint(verts: np.ndarray, tris: np.ndarray) -> tuple[np.ndarray,
     m01, m12, m20 = m[:, 0], m[:, 1], m[:, 2]
     new_f = np.concatenate([np.stack([a, m01, m20], 1), np.stack([m01, b, m12], 1), np.stack([m20, m12, c], 1), np.stack([m01, m12, m20], 1)])
     return np.vstack([v, mid.astype(v.dtype)]), new_f.astype(np.int32)
+
+
+def open_seams(verts: np.ndarray, tris: np.ndarray, tolerance: float = 1e-7) -> int:
+    """Boundary edges that lie on another boundary edge: the two sides of an unwelded seam
+    (duplicate vertices at the same positions, as along the Utah teapot's patches). The surface
+    is cut there, so geodesic distances must go around, which the heat method does not do
+    (docs/geodesics.md); the sidebar warns about heat on such meshes. Positions within
+    ``tolerance`` of the mesh's size count as the same."""
+    tris = np.asarray(tris, dtype=np.int64).reshape(-1, 3)
+    verts = np.asarray(verts, dtype=np.float64).reshape(-1, 3)
+    if len(tris) == 0 or len(verts) == 0:
+        return 0
+    e = np.sort(np.concatenate([tris[:, [0, 1]], tris[:, [1, 2]], tris[:, [2, 0]]]), axis=1)
+    edges, count = np.unique(e, axis=0, return_counts=True)
+    boundary = edges[count == 1]
+    if len(boundary) < 2:
+        return 0
+    finite = np.isfinite(verts).all(axis=1)
+    size = float(np.ptp(verts[finite], axis=0).max()) if finite.any() else 0.0
+    cell = tolerance * size if size > 0 else 1.0
+    q = np.round(np.where(finite[:, None], verts, 0.0) / cell).astype(np.int64)
+    _, place = np.unique(q, axis=0, return_inverse=True)
+    place = place.reshape(-1)
+    pe = np.sort(place[boundary], axis=1)
+    pe = pe[pe[:, 0] != pe[:, 1]]
+    if len(pe) < 2:
+        return 0
+    _, inverse, n = np.unique(pe, axis=0, return_inverse=True, return_counts=True)
+    return int((n[inverse.reshape(-1)] >= 2).sum())

@@ -179,7 +179,13 @@ def geodesic_solver(vertices, faces, *, boundary: str = "average"):
     return solver
 
 
-def geodesic_distances(vertices, faces, sources, *, method: str = "heat", boundary: str = "average") -> np.ndarray:
+# The geodesic method of every entry point that does not name one: rokeby_native's functions
+# (their own default, checked equal by tests/reflection/test_geodesic_accuracy.py), this API and
+# new mirrors (add_mirror's GEODESIC_METHODS item of the same name).
+DEFAULT_GEODESIC_METHOD = "dense_graph"
+
+
+def geodesic_distances(vertices, faces, sources, *, method: str = DEFAULT_GEODESIC_METHOD, boundary: str = "average") -> np.ndarray:
     """Geodesic distances (S, V) through the cached solver of this mesh; see
     ``rokeby_native.GeodesicSolver.distances`` for the forms ``sources`` may take."""
     return geodesic_solver(vertices, faces, boundary=boundary).distances(sources, method=method)
@@ -245,10 +251,10 @@ def mirror_of(obj, scene=None):
 
 
 @transaction.atomic(materials=_of_mirrors)
-def add_mirror(obj, *, metric: str = "EUCLIDEAN", geodesic_method: str = "GRAPH", polar: str = "FAST"):
+def add_mirror(obj, *, metric: str = "EUCLIDEAN", geodesic_method: str = DEFAULT_GEODESIC_METHOD.upper(), polar: str = "FAST"):
     """Make the mesh object ``obj`` a Rokeby mirror (its reflections become editable). New mirrors
-    measure geodesics on the geodesic graph (GRAPH); the property's own default, which files saved
-    without the setting read back, stays HEAT."""
+    measure geodesics on the dense geodesic graph (DENSE_GRAPH, rokeby_native's default method
+    too); the property's own default, which files saved without the setting read back, stays HEAT."""
     _check_mirror(obj)
     s = obj.rokeby
     for prop, value in (("metric", metric), ("geodesic_method", geodesic_method), ("polar", polar)):

@@ -45,7 +45,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..blender import meshes
-from ..core import native, vecmath, words
+from ..core import meshio, native, vecmath, words
 from ..core import schema
 from .duplicates import shrinkwrap_target  # noqa: F401 - the handles' Shrinkwrap (duplicates: the copies' rule)
 
@@ -165,6 +165,14 @@ class _Geometry:
         self._poly_start = None
         self.edges = None  # mesh_edges(triangles), made on first use
         self.shared = False  # the mesh had other users when read (see shares_mesh)
+        self._open_seams = None  # meshio.open_seams, made on first use
+
+    @property
+    def open_seams(self) -> int:
+        """Boundary edges on unwelded seams (meshio.open_seams), counted once per shape."""
+        if self._open_seams is None:
+            self._open_seams = meshio.open_seams(self.vertices, self.triangles)
+        return self._open_seams
 
     def triangles_of_polygon(self, poly: int) -> range:
         if self._poly_start is None:
@@ -277,6 +285,21 @@ def state_of(obj) -> "_State | None":
         return _STATE.get(obj.session_uid)
     except (AttributeError, ReferenceError):
         return None
+
+
+HEAT_SEAMS_STATUS = "Heat crosses open seams"
+
+
+def heat_seams(obj) -> int:
+    """How many boundary edges of the mirror's last read mesh lie on unwelded seams, when it
+    measures geodesics with the heat method (0 otherwise, or before its first evaluation). Heat's
+    distances cross such seams (22 % off on the Utah teapot, docs/geodesics.md), so the sidebar
+    marks heat unsuitable there; the method's tooltip says why and what to use instead."""
+    s = obj.rokeby
+    st = state_of(obj)
+    if s.metric != "GEODESIC" or s.geodesic_method != "HEAT" or st is None or st.geometry is None:
+        return 0
+    return st.geometry.open_seams
 
 
 def rotations_of(obj) -> np.ndarray | None:
@@ -1734,7 +1757,7 @@ def evaluate_mirror(obj, scene, depsgraph, *, force=False, reread_geometry=False
             kept.eye = report.eye
             return kept
         report.constraints_used = len(rows) + len(t_rows)
-        method = {"HEAT": "heat", "DIJKSTRA": "dijkstra", "EXACT": "exact", "GRAPH": "graph"}[settings.geodesic_method]
+        method = {"HEAT": "heat", "DIJKSTRA": "dijkstra", "EXACT": "exact", "GRAPH": "graph", "DENSE_GRAPH": "dense_graph"}[settings.geodesic_method]
         polar = "exact" if settings.polar == "EXACT" else "fast"
         distances = None
         previewed = False

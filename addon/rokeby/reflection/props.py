@@ -32,11 +32,13 @@ METRICS = [
 GEODESIC_METHODS = [
     # Blender stores the item number: HEAT and DIJKSTRA keep the numbers they had as positions.
     # The property's default stays HEAT (a file saved without the setting means heat); new mirrors
-    # get GRAPH from api.add_mirror.
-    ("HEAT", "Smooth (heat)", "Heat method on an intrinsic Delaunay triangulation, exact next to each handle: about 1-2% error; factorised once per mesh", "", 0),
+    # get DENSE_GRAPH from api.add_mirror. GRAPH stays for the files saved with it: its distances
+    # are those it always gave.
+    ("HEAT", "Smooth (heat)", "Heat method on an intrinsic Delaunay triangulation, exact next to each handle: about 1-2% error; factorised once per mesh. Not for meshes with open seams (unwelded duplicate vertices, as in the Utah teapot): its distances cross them, the Settings panel says so", "", 0),
     ("DIJKSTRA", "Fast (Dijkstra)", "Shortest paths along edges, as in the paper, exact next to each handle: fastest, over-estimates by 5-10%", "", 1),
     ("EXACT", "Exact", "Exact polyhedral geodesics (window propagation): no approximation error; seconds per handle on meshes of tens of thousands of faces", "", 2),
-    ("GRAPH", "Accurate (default)", "Dijkstra on a graph of exact local geodesics (saddle vertex graph), exact next to each handle: under 0.5% error; built once per mesh (seconds), then queries about as fast as the heat method (faster on large meshes)", "", 3),
+    ("GRAPH", "Graph (coarse)", "The coarser geodesic graph of earlier versions (each vertex linked to its 32 nearest): under 0.6% error; kept so that files saved with it render as they did", "", 3),
+    ("DENSE_GRAPH", "Accurate (default)", "Dijkstra on a dense graph of exact local geodesics (saddle vertex graph, each vertex linked to its 96 nearest, redundant links pruned), exact next to each handle: under 0.25% error; built once per mesh (seconds), then queries about as fast as the heat method (faster on large meshes)", "", 4),
 ]
 POLAR_METHODS = [
     ("EXACT", "Exact", "Rotational factor by an SVD in double precision", 0),

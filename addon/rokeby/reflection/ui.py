@@ -224,6 +224,11 @@ class ROKEBY_PT_settings(_MirrorSubPanel, bpy.types.Panel):
             op.mirror, op.metric = mirror.name, ident
         if s.metric == "GEODESIC":
             col.prop(s, "geodesic_method")
+            if evaluate.heat_seams(mirror):
+                # A short row; the method's tooltip (the enum item's description) has the details.
+                row = col.row()
+                row.alert = True
+                row.label(text=evaluate.HEAT_SEAMS_STATUS, icon="ERROR")
         col.prop(s, "polar")
         col.prop(s, "eye_source")
         col.prop(s, "render_edits")

@@ -471,7 +471,15 @@ fn main() {
             share,
             100.0 * fb,
             bw * 1e3 / 36.0,
-            if rate >= goal { "yes" } else { "no" }
+            if rate >= goal {
+                "yes".to_string()
+            } else {
+                format!(
+                    "no: missed by {:.1} MP/s ({:.0} % of the goal)",
+                    goal - rate,
+                    100.0 * (goal - rate) / goal
+                )
+            }
         );
     }
     if let Some(&(_, fast, _, _)) = best_pixels.iter().find(|b| b.0 == 32) {
@@ -484,9 +492,13 @@ fn main() {
             "",
             "",
             if 2.0 * exact_rate >= fast {
-                "yes"
+                "yes".to_string()
             } else {
-                "no"
+                format!(
+                    "no: missed by {:.1}× (needs {:.1} MP/s more)",
+                    fast / exact_rate / 2.0,
+                    fast / 2.0 - exact_rate
+                )
             },
             fast / exact_rate
         );

@@ -1,10 +1,10 @@
-//! Issue 21: the geodesic graph's query (`Method::Graph`) against the heat method's
-//! (`Method::Heat`) on every shared mesh, in one process: the bench's query (one source, the
-//! vertex of the face a quarter through the face list) after each method's precomputation, the two
-//! methods alternating, and the median of each with their ratio.
+//! The geodesic graphs' queries (`Method::DenseGraph`, the default, and `Method::Graph`) against
+//! the heat method's (`Method::Heat`) on every shared mesh, in one process: the bench's query (one
+//! source, the vertex of the face a quarter through the face list) after each method's
+//! precomputation, the three methods alternating, and the median of each with their ratios.
 //!
 //! `cargo run --release -p rokeby-core --example graph_vs_heat [-- --runs N] [-- --mesh NAME]`;
-//! `-- --once graph|heat --mesh NAME [--queries N]`: the precomputation and N queries (default 1)
+//! `-- --once dense_graph|graph|heat --mesh NAME [--queries N]`: the precomputation and N queries (default 1)
 //! only, for `valgrind --tool=callgrind`: the instructions of a query are the difference between
 //! two such runs divided by the difference of their N (every thread counted, the precomputation
 //! cancelled out).
@@ -38,7 +38,8 @@ fn main() {
             .cloned()
     };
     let runs: usize = arg("--runs").map_or(201, |x| x.parse().unwrap());
-    let once = arg("--once").map(|m| Method::parse(&m).expect("--once graph|heat|dijkstra"));
+    let once =
+        arg("--once").map(|m| Method::parse(&m).expect("--once dense_graph|graph|heat|dijkstra"));
     let only = arg("--mesh");
     let queries: usize = arg("--queries").map_or(1, |x| x.parse().unwrap());
     let root = std::env::var("ROKEBY_SHARED").map_or_else(
@@ -53,8 +54,8 @@ fn main() {
         .collect();
     meshes.sort_by_key(|p| std::fs::metadata(p).map_or(0, |m| m.len()));
     if once.is_none() {
-        println!("| mesh | vertices | graph query (ms) | heat query (ms) | graph / heat |");
-        println!("|---|---:|---:|---:|---:|");
+        println!("| mesh | vertices | dense_graph query (ms) | graph query (ms) | heat query (ms) | dense_graph / heat | graph / heat |");
+        println!("|---|---:|---:|---:|---:|---:|---:|");
     }
     for path in meshes {
         let (v, f) = load_obj(&path);
@@ -76,11 +77,15 @@ fn main() {
             );
             continue;
         }
-        let methods = [Method::Graph, Method::Heat];
+        let methods = [Method::DenseGraph, Method::Graph, Method::Heat];
         for &method in &methods {
             solver.distances(&set, method).unwrap();
         }
-        let mut times = [Vec::with_capacity(runs), Vec::with_capacity(runs)];
+        let mut times = [
+            Vec::with_capacity(runs),
+            Vec::with_capacity(runs),
+            Vec::with_capacity(runs),
+        ];
         for _ in 0..runs {
             for (k, &method) in methods.iter().enumerate() {
                 let t = Instant::now();
@@ -88,12 +93,14 @@ fn main() {
                 times[k].push(t.elapsed().as_secs_f64());
             }
         }
-        let [g, h] = times.map(median);
+        let [d, g, h] = times.map(median);
         println!(
-            "| {name} | {} | {:.2} | {:.2} | {:.2} |",
+            "| {name} | {} | {:.2} | {:.2} | {:.2} | {:.2} | {:.2} |",
             m.vertices.len(),
+            d * 1e3,
             g * 1e3,
             h * 1e3,
+            d / h,
             g / h
         );
     }

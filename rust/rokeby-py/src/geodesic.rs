@@ -117,7 +117,7 @@ fn parse_sources(obj: &Bound<'_, PyAny>) -> PyResult<Vec<Vec<Source>>> {
 fn parse_method(name: &str) -> PyResult<Method> {
     Method::parse(name).ok_or_else(|| {
         PyValueError::new_err(format!(
-            "method: unknown method {name:?} (expected 'heat', 'dijkstra', 'exact' or 'graph')"
+            "method: unknown method {name:?} (expected 'dense_graph', 'graph', 'heat', 'dijkstra' or 'exact')"
         ))
     })
 }
@@ -134,13 +134,14 @@ fn distances_array<'py>(
     to_numpy(py, &[ns, nv], out)
 }
 
-/// geodesic_distances(vertices, faces, sources, *, method="heat") -> (S, V) float32.
+/// geodesic_distances(vertices, faces, sources, *, method="dense_graph") -> (S, V) float32.
 ///
 /// Distances over the surface from each source (or source set) to every vertex. +inf where no
 /// source can reach (other connected components). For repeated queries on one mesh use
-/// GeodesicSolver, which keeps the heat method's factorisation.
+/// GeodesicSolver, which keeps what each method precomputes (the geodesic graph, the heat
+/// method's factorisation). The default method is the add-on's default for new mirrors.
 #[pyfunction]
-#[pyo3(signature = (vertices, faces, sources, *, method="heat"))]
+#[pyo3(signature = (vertices, faces, sources, *, method="dense_graph"))]
 fn geodesic_distances<'py>(
     py: Python<'py>,
     vertices: &Bound<'py, PyAny>,
@@ -194,8 +195,8 @@ impl PyGeodesicSolver {
         })
     }
 
-    /// distances(sources, method="heat") -> (S, V) float32
-    #[pyo3(signature = (sources, method="heat"))]
+    /// distances(sources, method="dense_graph") -> (S, V) float32
+    #[pyo3(signature = (sources, method="dense_graph"))]
     fn distances<'py>(
         &self,
         py: Python<'py>,
@@ -207,12 +208,12 @@ impl PyGeodesicSolver {
         distances_array(py, &self.inner, sets, method)
     }
 
-    /// geodesic_region(centre, radius, border=0.0, method="heat") -> (V,) float32 a(q)
+    /// geodesic_region(centre, radius, border=0.0, method="dense_graph") -> (V,) float32 a(q)
     ///
     /// A geodesic region of interest: 1 within `radius - border` of the surface `centre` (a vertex
     /// index or (face, (b0, b1, b2))) measured over the surface, a smooth step to 0 at `radius`,
     /// and 0 on other connected components. Pass it to rotation_field as a "weights" region.
-    #[pyo3(signature = (centre, radius, border=0.0, method="heat"))]
+    #[pyo3(signature = (centre, radius, border=0.0, method="dense_graph"))]
     fn geodesic_region<'py>(
         &self,
         py: Python<'py>,
@@ -230,12 +231,12 @@ impl PyGeodesicSolver {
         Ok(numpy::PyArray1::from_vec(py, a).to_dyn().clone())
     }
 
-    /// freeform_region(weights, border=0.0, method="heat") -> (V,) float32 a(q)
+    /// freeform_region(weights, border=0.0, method="dense_graph") -> (V,) float32 a(q)
     ///
     /// A free-form region from painted per-vertex weights in [0, 1] (a vertex group): unpainted
     /// vertices get 0; inside, the weight fades in over `border` (geodesic distance from the nearest
     /// unpainted vertex).
-    #[pyo3(signature = (weights, border=0.0, method="heat"))]
+    #[pyo3(signature = (weights, border=0.0, method="dense_graph"))]
     fn freeform_region<'py>(
         &self,
         py: Python<'py>,

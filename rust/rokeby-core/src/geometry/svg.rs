@@ -27,6 +27,17 @@ pub const NEIGHBOURS: usize = 32;
 /// Vertices the query's own propagation reaches from the sources: exact distances there.
 pub const SOURCE_NEIGHBOURS: usize = 128;
 
+/// The dense graph of [`crate::geodesic::Method::DenseGraph`]: vertices each vertex is linked to
+/// before pruning. Measured against exact geodesics on the shared meshes and on generated meshes
+/// with seams, holes, pieces, needles and slivers (docs/geodesics.md): the mean error falls like
+/// ~1/k; pruning keeps the edges a vertex stores (and the query's time) near those of k = 32.
+pub const DENSE_NEIGHBOURS: usize = 96;
+/// The dense graph's pruning: an edge v→w is dropped where a two-edge path of the graph is at
+/// most this much longer, relatively ([`prune_rows`]).
+pub const DENSE_PRUNE: f64 = 0.004;
+/// The dense graph's query: vertices its own propagation reaches from the sources.
+pub const DENSE_SOURCE_NEIGHBOURS: usize = 48;
+
 /// The graph: out-edges of each vertex to the vertices of its direct geodesic disk, with their
 /// lengths (f32, summed in f64), in the cache-ordered rows that the edge graph's Dijkstra uses
 /// ([`Graph`]: Morton order, bucket queue of quantised keys, buffers kept between queries).
@@ -37,8 +48,9 @@ pub struct SaddleGraph {
 }
 
 impl SaddleGraph {
-    /// Direct geodesics from every vertex to its `k` nearest vertices (in parallel).
-    pub(crate) fn new(mesh: &Mesh, adj: &Adjacency, k: usize) -> Self {
+    /// Direct geodesics from every vertex to its `k` nearest vertices (in parallel); with
+    /// `prune = Some(eps)`, the edges that a two-edge path replaces within `eps` dropped.
+    pub(crate) fn new(mesh: &Mesh, adj: &Adjacency, k: usize, prune: Option<f64>) -> Self {
         let nv = mesh.vertices.len();
         const CHUNK: usize = 1024;
         let chunks: Vec<(Vec<u32>, Vec<_>)> = (0..nv.div_ceil(CHUNK))
@@ -75,6 +87,9 @@ impl SaddleGraph {
             }
             rows.extend_from_slice(&r);
         }
+        if let Some(eps) = prune {
+            (start, rows) = prune_rows(nv, &start, &rows, eps);
+        }
         SaddleGraph {
             graph: Graph::new(&mesh.vertices, &start, &rows),
             queues: Mutex::new(Vec::new()),
@@ -109,6 +124,67 @@ impl SaddleGraph {
             .unwrap_or_else(|e| e.into_inner())
             .push(queue);
     }
+}
+
+/// Drops the out-edge v→w wherever a two-edge path v→u→w of the graph is at most `(1 + eps)`
+/// times as long: Dijkstra then reaches w through u at nearly the same distance. Each replacement
+/// uses strictly shorter edges, so chains of replacements end, and a dropped edge costs at most
+/// a factor (1 + eps) per level of replacement.
+fn prune_rows(
+    nv: usize,
+    start: &[usize],
+    rows: &[(u32, f32)],
+    eps: f64,
+) -> (Vec<usize>, Vec<(u32, f32)>) {
+    const CHUNK: usize = 1024;
+    // Per chunk of vertices: the count of edges kept per vertex, and the kept edges.
+    type Kept = (Vec<u32>, Vec<(u32, f32)>);
+    let chunks: Vec<Kept> = (0..nv.div_ceil(CHUNK))
+        .into_par_iter()
+        .map_init(
+            || (vec![f32::INFINITY; nv], Vec::new()),
+            |(near, drop), c| {
+                let (lo, hi) = (c * CHUNK, ((c + 1) * CHUNK).min(nv));
+                let mut count = Vec::with_capacity(hi - lo);
+                let mut out = Vec::new();
+                for v in lo..hi {
+                    let row = &rows[start[v]..start[v + 1]];
+                    drop.clear();
+                    drop.resize(row.len(), false);
+                    for &(u, du) in row {
+                        let ru = &rows[start[u as usize]..start[u as usize + 1]];
+                        for &(x, dx) in ru {
+                            near[x as usize] = dx;
+                        }
+                        for (i, &(w, dw)) in row.iter().enumerate() {
+                            if dw > du
+                                && (du as f64 + near[w as usize] as f64) <= (1.0 + eps) * dw as f64
+                            {
+                                drop[i] = true;
+                            }
+                        }
+                        for &(x, _) in ru {
+                            near[x as usize] = f32::INFINITY;
+                        }
+                    }
+                    let before = out.len();
+                    out.extend(row.iter().zip(drop.iter()).filter(|e| !*e.1).map(|e| *e.0));
+                    count.push((out.len() - before) as u32);
+                }
+                (count, out)
+            },
+        )
+        .collect();
+    let mut start = Vec::with_capacity(nv + 1);
+    let mut out = Vec::new();
+    start.push(0);
+    for (count, r) in chunks {
+        for c in count {
+            start.push(start.last().unwrap() + c as usize);
+        }
+        out.extend_from_slice(&r);
+    }
+    (start, out)
 }
 
 #[cfg(test)]
@@ -204,7 +280,7 @@ mod tests {
             };
             any = true;
             let adj = Adjacency::new(&mesh);
-            let g = SaddleGraph::new(&mesh, &adj, NEIGHBOURS);
+            let g = SaddleGraph::new(&mesh, &adj, NEIGHBOURS, None);
             let old = ReferenceGraph::new(&mesh, &adj, NEIGHBOURS);
             assert_eq!(g.edges(), old.nbr.len(), "{name}");
             let (nv, nf) = (mesh.vertices.len(), mesh.faces.len());
