@@ -145,8 +145,9 @@ matrix-leg-%:
 	exit $$rc
 
 # What .ci/run's second phase runs, CI_JOBS at once (the longest first): the first matrix leg, the
-# whole suite on 4.5 (`make pytest`), the other legs, then lint; each prints its cost.
-ci-phase2: $(addprefix matrix-leg-,$(firstword $(MATRIX))) timed-pytest $(addprefix matrix-leg-,$(wordlist 2,99,$(MATRIX))) timed-lint
+# whole suite on 4.5 (`make pytest`), the other legs, the window leg (its root made in phase 1), then
+# lint; each prints its cost.
+ci-phase2: $(addprefix matrix-leg-,$(firstword $(MATRIX))) timed-pytest $(addprefix matrix-leg-,$(wordlist 2,99,$(MATRIX))) timed-test-gui timed-lint
 
 timed-%:
 	@s=$$(date +%s); \
