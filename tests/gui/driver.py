@@ -170,11 +170,12 @@ class UI:
         yield from self.until(lambda: ADDON in bpy.context.preferences.addons, 60, "the add-on enabled")
         return sys.modules[ADDON]
 
-    def addon(self):
-        """The installed add-on's package (``bl_ext.user_default.rokeby``); ``ui.addon().api`` is rokeby.api."""
+    def addon(self, sub: str = ""):
+        """The installed add-on's package (``bl_ext.user_default.rokeby``), or one of its modules:
+        ``ui.addon("api")`` is rokeby.api, ``ui.addon("appearance.preview")``."""
         import importlib
 
-        return importlib.import_module(ADDON)
+        return importlib.import_module(ADDON + (f".{sub}" if sub else ""))
 
     def show_sidebar_tab(self, category: str = "Rokeby", area=None):
         """``yield from ui.show_sidebar_tab()``: the 3D view's sidebar shown and its ``category`` tab
