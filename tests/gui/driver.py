@@ -192,7 +192,7 @@ class UI:
                 break
             before = ui_region.active_panel_category
             yield from self.click(*self.screen_xy(ui_region, x, ry))
-            yield from self._settle(lambda: ui_region.active_panel_category != before, 1.5)
+            yield from self._settle(lambda before=before: ui_region.active_panel_category != before, 1.5)
         if ui_region.active_panel_category != category:
             raise RuntimeError(f"no sidebar tab {category!r} (active: {ui_region.active_panel_category!r})")
         yield from self.redraws(2)

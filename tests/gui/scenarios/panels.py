@@ -8,7 +8,7 @@ import sys
 import bpy
 
 sys.path.insert(0, os.path.dirname(__file__))
-import textfit  # noqa: E402
+import textfit
 
 
 def open_all_panels(prefix):

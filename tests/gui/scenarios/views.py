@@ -20,7 +20,7 @@ def scenario(ui):
         bpy.ops.mesh.primitive_uv_sphere_add(segments=48, ring_count=24, radius=1.0, location=(0, 0, 0))
     sphere = bpy.context.view_layer.objects.active
     sphere.name = "Mirror"
-    mirror = api.add_mirror(sphere)
+    api.add_mirror(sphere)
     region = ui.region("WINDOW")
     rv3d = region.data
     made_from = (rv3d.view_rotation.copy(), rv3d.view_distance)
