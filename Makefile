@@ -12,7 +12,7 @@ export ROKEBY_SHARED := $(SHARED)
 
 RUST_SRC := Cargo.toml pyproject.toml $(wildcard rust/*/Cargo.toml) $(shell find rust -name '*.rs' 2>/dev/null)
 
-.PHONY: ci-phase2 all demo dist debian-blender test test-blender test-matrix bench cargo-test pytest native venv clean help fuzz fuzz-py lint
+.PHONY: ci-phase2 test-gui gui-root all demo dist test test-blender test-matrix bench cargo-test pytest native venv clean help fuzz fuzz-py lint
 
 all: native
 
@@ -23,8 +23,8 @@ help:
 	@echo "make test-matrix  test-blender for each of MATRIX (5.3.0 4.2.23 5.0.1), as CI runs it (CPython 3.11 legs: -m blender; MATRIX_JOBS=2 at once)"
 	@echo "make bench  benchmarks, printed next to the reference numbers"
 	@echo "make dist   the installable Blender extension zip, dist/rokeby-<version>.zip"
-	@echo "make debian-blender  Debian 13's Blender 4.3.2 in .py313 (tests/compositing/test_exr_io.py runs the zip in it)"
 	@echo "make lint   ruff (errors), cargo fmt --check, cargo clippy -D warnings, and the add-on checked against the newest Blender API stubs"
+	@echo "make test-gui  the window leg: real Blender 4.3 windows on Xvfb driven by X input (tests/gui/; needs root)"
 	@echo "make fuzz-py  hypothesis fuzzing of rokeby_native and the file readers (FUZZ_PY_EXAMPLES=500)"
 
 # --- bootstrap -------------------------------------------------------------------------------
@@ -56,15 +56,6 @@ demo: native dist
 # `exr` crate), never through a second OpenEXR C library inside Blender's process.
 dist: native
 	$(PY) tools/build_extension.py --wheels target/wheels --out dist
-
-# Debian 13's own Blender (4.3.2, linked with Debian's OpenEXR) inside the Debian 13 root of
-# tools/py313, for tests/compositing/test_exr_io.py's check that the extension zip runs Render and
-# Recomposite in it (a zip with the OpenEXR wheel crashed it). Idempotent; about 700 MB once. Not
-# part of `make test`: the test skips, saying so, until this has run.
-debian-blender:
-	tools/py313 --setup
-	@test -x .py313/usr/bin/blender || tools/py313 bash -c 'apt-get update -q >/dev/null && DEBIAN_FRONTEND=noninteractive apt-get install -y -q --no-install-recommends blender python3-numpy >/dev/null'
-	@tools/py313 blender --version | head -1
 
 test: cargo-test pytest
 
@@ -142,14 +133,27 @@ matrix-leg-%:
 	exit $$rc
 
 # What .ci/run's second phase runs, CI_JOBS at once (the longest first): the first matrix leg, the
-# whole suite on 4.5 (`make pytest`), the other legs, then lint; each prints its cost.
-ci-phase2: $(addprefix matrix-leg-,$(firstword $(MATRIX))) timed-pytest $(addprefix matrix-leg-,$(wordlist 2,99,$(MATRIX))) timed-lint
+# whole suite on 4.5 (`make pytest`), the other legs, the window leg (its root made in phase 1), then
+# lint; each prints its cost.
+ci-phase2: $(addprefix matrix-leg-,$(firstword $(MATRIX))) timed-pytest $(addprefix matrix-leg-,$(wordlist 2,99,$(MATRIX))) timed-test-gui timed-lint
 
 timed-%:
 	@s=$$(date +%s); \
 	$(MAKE) --no-print-directory $*; rc=$$?; \
 	echo "== make $*: $$(( $$(date +%s) - s )) s$$( [ $$rc = 0 ] || echo ', FAILED')"; \
 	exit $$rc
+
+# --- the window leg (tests/gui/) ----------------------------------------------------------------
+# Real Blender windows (Debian 13's blender 4.3 on Xvfb, Mesa's llvmpipe) driven by X input events,
+# inside tools/guiroot's own Debian root (.gui-root/, made once: debootstrap + apt-get, needs root).
+# Each test installs dist/'s zip from disk into a fresh user configuration; results and screenshots
+# go to target/gui/<scenario>/. `make test` never collects tests/gui (tests/conftest.py).
+GUI_PYTEST_ARGS ?= -q
+gui-root:
+	tools/guiroot --setup
+
+test-gui: dist
+	$(PY) -m pytest tests/gui $(GUI_PYTEST_ARGS)
 
 # Peers of the benchmark (exact MMP geodesics, potpourri3d, libigl, matplotlib) live in their
 # own environment: they need numpy >= 2, bpy 4.5 needs numpy < 2.

@@ -58,17 +58,22 @@ def _panel(context):
     return out
 
 
+def _words(shown) -> str:
+    """The panel's labels as one text (a long label is drawn as several wrapped lines)."""
+    return " ".join(text for kind, text in shown if kind == "label")
+
+
 def test_panel_states_the_render_model_and_the_measured_difference(painted):
     s = bpy.context.scene.rokeby_appearance_brush
-    assert _panel(bpy.context) == [("label", "Renders use this model (Principled BSDF)")]
+    assert _panel(bpy.context) == [("label", "Renders use this model")]
     s.preview_model = "PHONG"
     shown = _panel(bpy.context)
-    assert ("label", "Renders use Principled (GGX), not this model") in shown
+    assert "Renders use Principled (GGX), not this model" in _words(shown)  # wrapped to the sidebar's width
     assert ("operator", "rokeby.appearance_render_difference") in shown  # not measured yet: no figure claimed
     assert bpy.ops.rokeby.appearance_render_difference() == {"FINISHED"}
     assert 0.1 < s.render_difference < 1.0, s.render_difference  # rough metal: the preview is far brighter than GGX
     shown = _panel(bpy.context)
-    assert ("label", f"Render differs from this preview by {100 * s.render_difference:.1f} % (measured)") in shown
+    assert f"Render differs from this preview by {100 * s.render_difference:.1f} % (measured)" in _words(shown)
     appearance.paint(painted, "roughness", [0.0, 0.0, 1.0], radius=5.0, value=0.1)  # the figure no longer applies
     assert ("operator", "rokeby.appearance_render_difference") in _panel(bpy.context)
 

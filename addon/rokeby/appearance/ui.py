@@ -13,7 +13,7 @@ import bpy
 from bpy.props import CollectionProperty, EnumProperty, FloatProperty, FloatVectorProperty, IntProperty, PointerProperty, StringProperty
 
 from .. import appearance
-from ..blender import compat
+from ..blender import compat, ui_text
 from ..core import words
 from ..core import schema
 
@@ -137,7 +137,8 @@ class ROKEBY_OT_appearance_setup(bpy.types.Operator):
     material's Principled BSDF"""
 
     bl_idname = "rokeby.appearance_setup"
-    bl_label = "Set Up Appearance Painting"
+    # Short: the redo panel's title has about 135 px at UI scale 1 (the sidebar button says more).
+    bl_label = "Set Up Appearance"
     bl_options = {"REGISTER", "UNDO"}
 
     replace_links: bpy.props.BoolProperty(
@@ -168,7 +169,7 @@ class ROKEBY_OT_appearance_remove(bpy.types.Operator):
     attributes stay on the mesh for a later Set Up)"""
 
     bl_idname = "rokeby.appearance_remove"
-    bl_label = "Remove Appearance Painting"
+    bl_label = "Remove Appearance"  # short for the redo panel's title (the menu says more)
     bl_options = {"REGISTER", "UNDO"}
 
     @classmethod
@@ -195,7 +196,7 @@ class ROKEBY_OT_appearance_texture_remove(bpy.types.Operator):
     active material (restoring it exactly as the per-point setup left it)"""
 
     bl_idname = "rokeby.appearance_texture_remove"
-    bl_label = "Back to Per-Point Attributes"
+    bl_label = "Back to Attributes"  # short for the redo panel's title (the button says more)
     bl_options = {"REGISTER", "UNDO"}
 
     @classmethod
@@ -452,12 +453,12 @@ def draw_render_model(layout, context) -> None:
     model, by how much the render differs (measured), or the button that measures it."""
     s = _settings(context)
     if s.preview_model == "PRINCIPLED":
-        layout.label(text="Renders use this model (Principled BSDF)", icon="CHECKMARK")
+        layout.label(text="Renders use this model", icon="CHECKMARK")  # the model menu above names it
         return
     col = layout.column(align=True)
-    col.label(text="Renders use Principled (GGX), not this model", icon="INFO")
+    ui_text.label(col, context, "Renders use Principled (GGX), not this model", icon="INFO")
     if s.render_difference >= 0 and s.render_difference_key == _difference_key(context):
-        col.label(text=f"Render differs from this preview by {100 * s.render_difference:.1f} % (measured)", icon="ERROR")
+        ui_text.label(col, context, f"Render differs from this preview by {100 * s.render_difference:.1f} % (measured)", icon="ERROR")
     else:
         col.operator(ROKEBY_OT_appearance_render_difference.bl_idname, icon="VIEWZOOM")
 
@@ -489,15 +490,15 @@ class ROKEBY_PT_appearance(bpy.types.Panel):
                     col.label(text="This mesh has no UV map", icon="ERROR")
             if appearance.PARAMS["roughness"][0] not in ob.data.attributes or s.target == "TEXTURE":
                 row = layout.row(align=True)
-                row.operator(ROKEBY_OT_appearance_setup.bl_idname)
+                row.operator(ROKEBY_OT_appearance_setup.bl_idname, text="Set Up Appearance Painting")
                 row.operator(ROKEBY_OT_appearance_setup.bl_idname, text="", icon="LINKED").replace_links = True
         else:
             img = appearance._texture_image(ob, "roughness")
-            layout.label(text=f"Target: images {img.size[0]}² on UV map '{ob.active_material.node_tree.nodes[appearance.NODE_PREFIX + 'uv'].uv_map}'" if img else "Target: images", icon="IMAGE_DATA")
-            layout.operator(ROKEBY_OT_appearance_texture_remove.bl_idname)
+            ui_text.label(layout, context, f"Target: images {img.size[0]}² on UV map '{ob.active_material.node_tree.nodes[appearance.NODE_PREFIX + 'uv'].uv_map}'" if img else "Target: images", icon="IMAGE_DATA")
+            layout.operator(ROKEBY_OT_appearance_texture_remove.bl_idname, text="Back to Per-Point Attributes")
             missing = appearance.missing_images(ob)
             if missing:
-                layout.label(text=f"Painted image gone: {', '.join(missing)}", icon="ERROR")
+                ui_text.label(layout, context, f"Painted image gone: {', '.join(missing)}", icon="ERROR")
                 col = layout.column(align=True)
                 col.prop(s, "target")
                 col.prop(s, "resolution")
@@ -537,15 +538,16 @@ class ROKEBY_PT_appearance_brush(_PaintedSubPanel, bpy.types.Panel):
         on = appearance_preview.enabled()
         layout.operator(ROKEBY_OT_appearance_preview.bl_idname, text="Hide Preview" if on else "Preview Under the World", icon="SHADING_RENDERED", depress=on)
         if on:
-            layout.prop(s, "preview_model")
+            # Short names: a field's name gets a quarter of the sidebar's width (the tooltip has the full one).
+            layout.prop(s, "preview_model", text="Model")
             draw_render_model(layout, context)
-            layout.prop(s, "preview_light")
+            layout.prop(s, "preview_light", text="Light")
             if s.preview_light != "ENVIRONMENT":
                 col = layout.column(align=True)
                 col.prop(s, "light_location")
                 col.prop(s, "light_intensity")
         if on and appearance_preview.last_error:
-            layout.label(text=appearance_preview.last_error, icon="ERROR")
+            ui_text.label(layout, context, appearance_preview.last_error, icon="ERROR")
 
 
 class ROKEBY_PT_appearance_sliders(_PaintedSubPanel, bpy.types.Panel):

@@ -16,6 +16,7 @@ from .viewport import draw as viewport
 from .viewport import scene_env
 from .props import METRICS
 from ..core import schema
+from ..blender import ui_text
 
 _STATUS_ICON = {"OK": "CHECKMARK", "WARNING": "ERROR", "ERROR": "CANCEL", "DISABLED": "HIDE_ON"}
 
@@ -76,7 +77,7 @@ class ROKEBY_PT_main(bpy.types.Panel):
             row.prop(context.scene, schema.SCENE_PREVIEW_RENDERED_PROP)
             row.operator("rokeby.preview_capture", text="", icon="FILE_REFRESH")
         if viewport.last_error():
-            box.label(text=f"Preview: {viewport.last_error()}"[:120], icon="ERROR")
+            ui_text.label(box, context, f"Preview: {viewport.last_error()}"[:240], icon="ERROR", boxed=True)
         for m in mirrors:
             rep = evaluate.report_of(m)
             row = box.row(align=True)
@@ -101,23 +102,23 @@ class ROKEBY_PT_main(bpy.types.Panel):
         if rep is not None:
             col = layout.column(align=True)
             col.alert = rep.status == "ERROR"
-            col.label(text=f"{words.status(rep.status)}: {rep.constraints_used} constraint(s), {rep.vertices:,} vertices", icon=_STATUS_ICON[rep.status])
+            ui_text.label(col, context, f"{words.status(rep.status)}: {rep.constraints_used} constraint(s), {rep.vertices:,} vertices", icon=_STATUS_ICON[rep.status])
             for msg in rep.messages[:6]:
-                col.label(text=msg)
+                ui_text.label(col, context, msg)
             if rep.render_note:
                 row = col.row()
                 row.alert = rep.renders is False
-                row.label(text=rep.render_note[:120], icon={True: "RENDER_STILL", False: "ERROR", None: "INFO"}[rep.renders])
+                ui_text.label(row, context, rep.render_note[:240], icon={True: "RENDER_STILL", False: "ERROR", None: "INFO"}[rep.renders])
             if rep.interpolation_error is not None:
                 p99, worst = rep.interpolation_error[:2]
-                col.label(text=f"render vs preview: {p99:.2f}° (99th percentile), {worst:.2f}° max", icon="CHECKMARK" if p99 <= evaluate.AGREEMENT_DEGREES else "ERROR")
+                ui_text.label(col, context, f"render vs preview: {p99:.2f}° (99th percentile), {worst:.2f}° max", icon="CHECKMARK" if p99 <= evaluate.AGREEMENT_DEGREES else "ERROR")
             cap = scene_env.current(mirror)
             if cap is not None:  # short: details in docs/addon.md, "Viewport preview"
                 col.label(text=f"Scene {cap.seconds:.1f} s, {cap.nbytes / 2**20:.1f} MB", icon="WORLD")
             elif scene_env.error_of(mirror):
                 col.label(text="Scene capture failed", icon="ERROR")
             if rep.recomputed or rep.python_ms:
-                col.label(text=f"last update {rep.python_ms + rep.native_ms:.1f} ms (Python {rep.python_ms:.1f}, Rust {rep.native_ms:.1f})")
+                ui_text.label(col, context, f"last update {rep.python_ms + rep.native_ms:.1f} ms (Python {rep.python_ms:.1f}, Rust {rep.native_ms:.1f})")
         layout.operator("rokeby.update", icon="FILE_REFRESH")
 
 
@@ -229,8 +230,9 @@ class ROKEBY_PT_settings(_MirrorSubPanel, bpy.types.Panel):
                 row = col.row()
                 row.alert = True
                 row.label(text=evaluate.HEAT_SEAMS_STATUS, icon="ERROR")
-        col.prop(s, "polar")
-        col.prop(s, "eye_source")
+        # Short names: a field's name gets a quarter of the sidebar's width (the tooltip has the full one).
+        col.prop(s, "polar", text="Polar")
+        col.prop(s, "eye_source", text="Eye")
         col.prop(s, "render_edits")
         col.prop(s, "show_preview")
         if viewport.status_of(mirror):
@@ -261,7 +263,7 @@ class ROKEBY_PT_render(_MirrorSubPanel, bpy.types.Panel):
                 on = slot.material in edited
                 op = layout.operator("rokeby.material_toggle", text=slot.material.name, icon="CHECKBOX_HLT" if on else "CHECKBOX_DEHLT", depress=on)
                 op.mirror, op.material = mirror.name, slot.material.name
-        layout.prop(s, "render_mode")
+        layout.prop(s, "render_mode", text="Mode")
         if s.render_mode == "REFLECTION_MAP":
             _draw_reflection_map(layout, mirror, context.scene)
         row = layout.row(align=True)
@@ -328,10 +330,10 @@ MENU = (
     ("rokeby.update", None, {}, "FILE_REFRESH"),
     ("rokeby.preview_capture", "Capture Scene for Preview", {}, "WORLD"),
     None,
-    ("rokeby.appearance_setup", None, {}, "MATERIAL"),
+    ("rokeby.appearance_setup", "Set Up Appearance Painting", {}, "MATERIAL"),
     ("rokeby.appearance_paint", None, {}, "BRUSH_DATA"),
-    ("rokeby.appearance_texture_remove", None, {}, "X"),
-    ("rokeby.appearance_remove", None, {}, "TRASH"),
+    ("rokeby.appearance_texture_remove", "Back to Per-Point Attributes", {}, "X"),
+    ("rokeby.appearance_remove", "Remove Appearance Painting", {}, "TRASH"),
     ("rokeby.appearance_preview", None, {}, "SHADING_RENDERED"),
     ("rokeby.appearance_render_difference", None, {}, "VIEWZOOM"),
     None,

@@ -1,0 +1,40 @@
+"""Every Rokeby panel and redo panel reads whole at the default sidebar width (nothing cut): one
+window (tests/gui/scenarios/panels.py) with a mirror's status rows and the appearance preview's
+rows drawn, every panel open, and Set Up Appearance run from F3 search for its redo panel."""
+
+import pytest
+
+from harness import run_scenario
+
+
+@pytest.fixture(scope="module")
+def panels(dist_zip):
+    run = run_scenario("panels", dist_zip)
+    assert run.error is None, run.describe()
+    assert not run.tracebacks, run.describe()
+    return run.result
+
+
+def test_every_panel_reads_whole(panels):
+    r = panels
+    assert any(d.startswith("mirror:ROKEBY_PT_main") for d in r["drawn"]), r["drawn"]
+    assert any(d.startswith("appearance:ROKEBY_PT_appearance_brush") for d in r["drawn"]), r["drawn"]
+    assert r.get("cut", {}) == {}, "texts cut at the default sidebar width (text, needed px, room px):\n" + "\n".join(
+        f"  {panel}: {c}" for panel, cuts in r["cut"].items() for c in cuts)
+
+
+def test_redo_panel_title_reads_whole(panels):
+    hud = panels["hud"]
+    assert hud["need"] <= hud["room"], f"redo panel title {hud['title']!r} needs {hud['need']} px, has {hud['room']}"
+    appearance = {t: n for t, n in panels["redo_titles_cut"].items() if "Appearance" in t or "Attributes" in t}
+    assert appearance == {}, f"appearance redo titles cut at {hud['room']} px: {appearance}"
+
+
+# The other features' operators whose redo titles are still cut (measured against the same room):
+# renaming them touches the compositing and reflection features' names in docs and messages.
+STILL_CUT = {"Render and Recomposite", "Recomposite EXR Sequence", "Set Up Compositing Passes", "Add Reflection Constraint"}
+
+
+@pytest.mark.xfail(strict=True, reason="redo titles still cut: " + ", ".join(sorted(STILL_CUT)))
+def test_every_redo_title_reads_whole(panels):
+    assert panels["redo_titles_cut"] == {}, panels["redo_titles_cut"]
