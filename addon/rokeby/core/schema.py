@@ -124,6 +124,8 @@ SHADOW_LINKING_TAG = "rokeby_shadow_linking"  # on a light-linking collection: i
 SHADOW_LIGHT_INITIAL_KEY = "rokeby_light_initial"  # on a shadow mesh: the light position edited for
 SHADOW_LIGHT_CONFIGURATIONS_KEY = "rokeby_light_configurations"  # ... further light positions (flat xyz)
 SHADOW_FALLOFF_BETA_KEY = "rokeby_falloff_beta"  # ... the falloff exponent between them
+SHADOW_SESSION_STEP_KEY = "rokeby_shadow_session_step"  # on a scene: which state of the shadow-editing
+# session (kept in memory, not in the file) the scene's undo step holds; 0 or absent: none
 # Keys of shadow edits saved before the pointer links (data version 0); read by the migration only.
 SHADOW_LEGACY_SHADOW_OF_KEY = "rokeby_shadow_of"
 SHADOW_LEGACY_LIGHT_KEY = "rokeby_light"
