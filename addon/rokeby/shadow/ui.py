@@ -18,6 +18,7 @@ import bpy
 import numpy as np
 
 from ..blender import compat, hooks
+from ..blender.modal import undo_key, view3d_at as _view_at
 from .. import shadow
 from ..core import schema, words
 
@@ -220,35 +221,6 @@ class ROKEBY_OT_shadow_start(bpy.types.Operator):
         return {"FINISHED"}
 
 
-def _is_undo_key(event) -> bool:
-    """Ctrl+Z (Cmd+Z) and its Shift/Alt forms (redo, undo history): undo keys a modal drag takes."""
-    return event.type == "Z" and getattr(event, "value", "PRESS") == "PRESS" and bool(getattr(event, "ctrl", False) or getattr(event, "oskey", False))
-
-
-def _view_at(context, event):
-    """(region, region_3d, (x, y)) of the 3D view's main region under the mouse, or None: the
-    operator's own region where it is one (the shortcut; F3 over the view), else the main region
-    of a 3D view of the window whose rectangle holds the mouse (a button in the sidebar)."""
-    region, area = context.region, context.area
-    if region is not None and getattr(region, "type", "WINDOW") == "WINDOW" and getattr(area, "type", None) == "VIEW_3D" \
-            and context.region_data is not None:
-        x, y = event.mouse_region_x, event.mouse_region_y
-        if 0 <= x < region.width and 0 <= y < region.height:
-            return region, context.region_data, (x, y)
-        return None
-    areas = [area] if getattr(area, "type", None) == "VIEW_3D" else []
-    screen = getattr(getattr(context, "window", None), "screen", None) or getattr(context, "screen", None)
-    areas += [a for a in getattr(screen, "areas", ()) if a.type == "VIEW_3D" and a != area]
-    mx, my = getattr(event, "mouse_x", None), getattr(event, "mouse_y", None)
-    if mx is None:
-        return None
-    for a in areas:
-        for r in a.regions:
-            if r.type == "WINDOW" and r.x <= mx < r.x + r.width and r.y <= my < r.y + r.height and r.data is not None:
-                return r, r.data, (mx - r.x, my - r.y)
-    return None
-
-
 class ROKEBY_OT_shadow_drag(bpy.types.Operator):
     """Drag a shadow boundary: press on a handle in the 3D view and drag, the segment between the
     fixed ends deforms (release to keep; right-click, Esc or Ctrl+Z cancel). From the sidebar
@@ -386,7 +358,7 @@ class ROKEBY_OT_shadow_drag(bpy.types.Operator):
         if sess is None:
             self._status(context, None)
             return {"CANCELLED"}
-        if event.type in {"RIGHTMOUSE", "ESC"} or _is_undo_key(event):
+        if event.type in {"RIGHTMOUSE", "ESC"} or undo_key(event, context):
             return self._cancel(context, sess)  # Ctrl+Z takes back this drag, never a step before it
         if not getattr(self, "_dragging", True):  # waiting for the press on a handle
             if event.type == "LEFTMOUSE" and event.value == "PRESS":
