@@ -113,3 +113,28 @@ def test_f3_finds_paint_normals_in_the_image_editor(registered):
     for name in submenus:
         getattr(bpy.types, name).draw(types.SimpleNamespace(layout=Layout(log)), bpy.context)
     assert ("operator", "rokeby.composite_brush") in log
+
+
+def test_paint_normals_starts_from_the_edited_result_shown(registered, frame):
+    """Render and Recomposite (here Recomposite Render of the same frame) shows an edited frame;
+    starting Paint Normals on it keeps that image bit for bit, and a stroke changes only the pixels
+    under it, on top of the edit (not on the unedited recomposite)."""
+    name = "Rokeby Recomposited"
+    assert bpy.ops.rokeby.composite_edit(filepath=str(frame), edit="EMBOSS", amount=0.3, k_d=1.2, image_name=name) == {"FINISHED"}
+    knob = _pixels(bpy.data.images[name])
+    s = B.open_brush(str(frame), name)  # what the operator's invoke does
+    assert _pixels(bpy.data.images[name]).tobytes() == knob.tobytes()
+    B.paint_stroke(s, [A, Bp], RADIUS, 0.8, "emboss")
+    after = _pixels(bpy.data.images[name])
+    from test_compositing_brush import _segment_distance
+
+    far = _segment_distance(knob.shape[:2], A, Bp) > RADIUS + 2
+    assert (after != knob).any()
+    assert after[far].tobytes() == knob[far].tobytes()
+    # Through the operator (exec: a stroke given as pixels) on a freshly edited image: the same.
+    assert bpy.ops.rokeby.composite_edit(filepath=str(frame), edit="SMOOTH", amount=2.0, image_name=name) == {"FINISHED"}
+    smooth = _pixels(bpy.data.images[name])
+    assert bpy.ops.rokeby.composite_brush(image_name=name, radius=RADIUS, stroke=[{"name": "", "pixel": A}]) == {"FINISHED"}
+    got = _pixels(bpy.data.images[name])
+    far = _segment_distance(knob.shape[:2], A, A) > RADIUS + 2
+    assert (got != smooth).any() and got[far].tobytes() == smooth[far].tobytes()

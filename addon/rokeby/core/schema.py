@@ -154,3 +154,5 @@ RECOMPOSITED_IMAGE = "Rokeby Recomposited"  # default name of a recomposited ima
 COMPOSITE_LAST_EXR_KEY = "rokeby_composite_exr"  # on the scene: the last EXR the operators read/wrote
 BRUSH_STROKES_KEY = "rokeby_brush_strokes"  # on a brushed image: list of {"id", "mode", "radius", "strength", "points"}
 BRUSH_SOURCE_KEY = "rokeby_brush_exr"  # on a brushed image: the multilayer EXR its strokes edit
+BRUSH_BASE_KEY = "rokeby_brush_base"  # on a recomposited image: the one-knob edit it shows, which strokes add to
+# ({"edit", "amount", "k_d", "k_r", "fit", "noise_tolerance"})
