@@ -50,7 +50,7 @@ def _operator():
 
     cls = shadow_ui.ROKEBY_OT_shadow_drag
     op = SimpleNamespace(loop=0, fixed=(0, 0), moved=0, target=(0.0, 0.0, 0.0), style="affine", segment=0.2,
-                         noise_amplitude=0.0, noise_frequency=0.0, pass_through=False, reports=[])
+                         noise_amplitude=0.0, noise_frequency=0.0, pass_through=False, apply_edit=False, reports=[])
     op.report = lambda kind, msg: op.reports.append((kind, msg))
     for name in ("_drag", "invoke", "modal", "_nearest", "_begin", "_cancel", "_status"):
         if hasattr(cls, name):

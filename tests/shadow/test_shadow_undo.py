@@ -137,3 +137,48 @@ def test_undo_of_stop_brings_the_session_back():
         assert shadow_ui.session(bpy.context.scene) is None
     finally:
         rokeby.unregister()
+
+
+def test_the_redo_panel_repeats_a_drag_with_its_shadow_mesh():
+    """Adjust Last Operation after a drag in the view: Blender undoes the drag and runs execute()
+    with the changed numbers; the session and the shadow mesh both show the repeated drag."""
+    bpy, sc, ball, lamp, ground = ts.blender_scene()
+    import rokeby
+    from bpy_extras import view3d_utils
+    from rokeby import shadow, shadow_ui
+
+    rokeby.register()
+    try:
+        bpy.context.view_layer.objects.active = ball
+        bpy.ops.ed.undo_push(message="scene set up")
+        assert bpy.ops.rokeby.shadow_start(light="Lamp", min_loop_vertices=10) == {"FINISHED"}
+        bpy.ops.ed.undo_push(message="Edit Shadow Boundaries")
+        sess = shadow_ui.session(sc)
+        h0 = sess.handles(0)["points"].copy()
+        region, rv3d = _view(bpy, sc)
+        ctx = SimpleNamespace(scene=sc, region=region, region_data=rv3d, area=SimpleNamespace(type="VIEW_3D"),
+                              window_manager=SimpleNamespace(modal_handler_add=lambda op: None),
+                              evaluated_depsgraph_get=bpy.context.evaluated_depsgraph_get)
+        screen = lambda p: np.array(view3d_utils.location_3d_to_region_2d(region, rv3d, p))  # noqa: E731
+        m = int(np.argmax(h0[:, 0]))
+        c = h0.mean(axis=0)
+        op = _operator()
+        assert op.invoke(ctx, _event("LEFTMOUSE", "PRESS", screen(h0[m]))) == {"RUNNING_MODAL"}
+        assert op.modal(ctx, _event("MOUSEMOVE", "NOTHING", screen(c + (h0[m] - c) * 1.3))) == {"RUNNING_MODAL"}
+        assert op.modal(ctx, _event("LEFTMOUSE", "RELEASE", (0, 0))) == {"FINISHED"}
+        assert op.apply_edit
+        bpy.ops.ed.undo_push(message="Drag Shadow Boundary")
+        # The redo panel: undo, then execute with the operator's properties, the target changed.
+        bpy.ops.ed.undo()
+        assert shadow.shadow_mesh_of(bpy.data.objects["Ball"]) is None
+        target = tuple(c + (h0[m] - c) * 1.5)
+        assert bpy.ops.rokeby.shadow_drag(loop=op.loop, fixed=tuple(op.fixed), moved=op.moved, target=target,
+                                          apply_edit=op.apply_edit) == {"FINISHED"}
+        sess = shadow_ui.session(bpy.context.scene)
+        np.testing.assert_allclose(sess.handles(0)["points"][m], target, atol=1e-3)
+        mesh = shadow.shadow_mesh_of(bpy.data.objects["Ball"])
+        assert mesh is not None
+        kb = mesh.data.shape_keys.key_blocks[shadow.configuration_key(0)]
+        assert not np.allclose(np.array([p.co[:] for p in kb.data]), np.array([p.co[:] for p in mesh.data.shape_keys.key_blocks[0].data]))
+    finally:
+        rokeby.unregister()

@@ -238,6 +238,9 @@ class ROKEBY_OT_shadow_drag(bpy.types.Operator):
     segment: bpy.props.FloatProperty(name="Segment", default=0.2, min=0.02, max=0.49, description="Fixed ends this fraction of the loop away on either side (interactive drags)")
     noise_amplitude: bpy.props.FloatProperty(name="Noise amplitude", default=0.0)
     noise_frequency: bpy.props.FloatProperty(name="Noise frequency", default=0.0)
+    apply_edit: bpy.props.BoolProperty(
+        name="Apply", default=False, options={"HIDDEN", "SKIP_SAVE"},
+        description="Also make the shadow mesh show the edit (what a drag in the view does; the redo panel repeats it)")
     pass_through: bpy.props.BoolProperty(
         name="Pass Other Presses On", default=False, options={"HIDDEN", "SKIP_SAVE"},
         description="A press far from every handle goes on to the view (the shortcut: a click elsewhere still selects)")
@@ -262,6 +265,12 @@ class ROKEBY_OT_shadow_drag(bpy.types.Operator):
             self.report({"ERROR"}, f"Rokeby: {exc}")
             return {"CANCELLED"}
         sess.commit()
+        if self.apply_edit:
+            try:
+                shadow.apply(sess, scene=context.scene)
+            except shadow.ShadowEditError as exc:
+                self.report({"ERROR"}, f"Rokeby: {exc}")
+                return {"CANCELLED"}
         record(context.scene, sess)
         _refresh(context.scene)
         return {"FINISHED"}
@@ -399,6 +408,7 @@ class ROKEBY_OT_shadow_drag(bpy.types.Operator):
             sess.commit()
             if self._live is not None:
                 shadow.live_end(self._live, keep=True, scene=context.scene)
+                self.apply_edit = True  # the redo panel's repeat applies it as this drag did
             record(context.scene, sess)
             _refresh(context.scene)
             return {"FINISHED"}
