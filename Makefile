@@ -12,7 +12,7 @@ export ROKEBY_SHARED := $(SHARED)
 
 RUST_SRC := Cargo.toml pyproject.toml $(wildcard rust/*/Cargo.toml) $(shell find rust -name '*.rs' 2>/dev/null)
 
-.PHONY: ci-phase2 all demo dist test test-blender test-matrix bench cargo-test pytest native venv clean help fuzz fuzz-py lint
+.PHONY: ci-phase2 test-gui gui-root all demo dist test test-blender test-matrix bench cargo-test pytest native venv clean help fuzz fuzz-py lint
 
 all: native
 
@@ -24,6 +24,7 @@ help:
 	@echo "make bench  benchmarks, printed next to the reference numbers"
 	@echo "make dist   the installable Blender extension zip, dist/rokeby-<version>.zip"
 	@echo "make lint   ruff (errors), cargo fmt --check, cargo clippy -D warnings, and the add-on checked against the newest Blender API stubs"
+	@echo "make test-gui  the window leg: real Blender 4.3 windows on Xvfb driven by X input (tests/gui/; needs root)"
 	@echo "make fuzz-py  hypothesis fuzzing of rokeby_native and the file readers (FUZZ_PY_EXAMPLES=500)"
 
 # --- bootstrap -------------------------------------------------------------------------------
@@ -144,14 +145,27 @@ matrix-leg-%:
 	exit $$rc
 
 # What .ci/run's second phase runs, CI_JOBS at once (the longest first): the first matrix leg, the
-# whole suite on 4.5 (`make pytest`), the other legs, then lint; each prints its cost.
-ci-phase2: $(addprefix matrix-leg-,$(firstword $(MATRIX))) timed-pytest $(addprefix matrix-leg-,$(wordlist 2,99,$(MATRIX))) timed-lint
+# whole suite on 4.5 (`make pytest`), the other legs, the window leg (its root made in phase 1), then
+# lint; each prints its cost.
+ci-phase2: $(addprefix matrix-leg-,$(firstword $(MATRIX))) timed-pytest $(addprefix matrix-leg-,$(wordlist 2,99,$(MATRIX))) timed-test-gui timed-lint
 
 timed-%:
 	@s=$$(date +%s); \
 	$(MAKE) --no-print-directory $*; rc=$$?; \
 	echo "== make $*: $$(( $$(date +%s) - s )) s$$( [ $$rc = 0 ] || echo ', FAILED')"; \
 	exit $$rc
+
+# --- the window leg (tests/gui/) ----------------------------------------------------------------
+# Real Blender windows (Debian 13's blender 4.3 on Xvfb, Mesa's llvmpipe) driven by X input events,
+# inside tools/guiroot's own Debian root (.gui-root/, made once: debootstrap + apt-get, needs root).
+# Each test installs dist/'s zip from disk into a fresh user configuration; results and screenshots
+# go to target/gui/<scenario>/. `make test` never collects tests/gui (tests/conftest.py).
+GUI_PYTEST_ARGS ?= -q
+gui-root:
+	tools/guiroot --setup
+
+test-gui: dist
+	$(PY) -m pytest tests/gui $(GUI_PYTEST_ARGS)
 
 # Peers of the benchmark (exact MMP geodesics, potpourri3d, libigl, matplotlib) live in their
 # own environment: they need numpy >= 2, bpy 4.5 needs numpy < 2.

@@ -209,3 +209,20 @@ def pytest_collection_modifyitems(config, items):
             continue
         for name in sorted(marks):
             item.add_marker(name)
+
+
+# --- the window leg ----------------------------------------------------------------------------------
+# tests/gui/ runs real Blender windows (make test-gui, inside tools/guiroot): `pytest` without
+# arguments (make test, the Blender matrix) never collects it; naming it (`pytest tests/gui`) does.
+_GUI = TESTS / "gui"
+
+
+def pytest_ignore_collect(collection_path, config):
+    path = Path(collection_path).resolve()
+    if path != _GUI and _GUI not in path.parents:
+        return None
+    for arg in config.args:
+        named = Path(str(arg).split("::")[0]).resolve()
+        if named == _GUI or _GUI in named.parents:
+            return None
+    return True
