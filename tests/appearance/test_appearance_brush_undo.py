@@ -164,3 +164,21 @@ def test_a_click_outside_the_view_is_not_taken_by_the_brush(painted):
     assert modal(op, ctx, ev("MOUSEMOVE", "NOTHING", 110, 100)) == {"RUNNING_MODAL"}
     assert modal(op, ctx, ev("LEFTMOUSE", "RELEASE", 110, 100)) == {"RUNNING_MODAL"}
     assert np.abs(_roughness() - before).max() > 0.3
+
+
+def test_a_click_on_a_sidebar_drawn_over_the_view_is_not_taken(painted):
+    """Region Overlap (Blender's default): the sidebar is drawn over the main region, which spans
+    the whole area; the brush runs in the main region. A press on the sidebar goes to the sidebar."""
+    from rokeby import appearance_ui
+
+    modal = appearance_ui.ROKEBY_OT_appearance_paint.modal
+    main = types.SimpleNamespace(type="WINDOW", x=0, y=0, width=SIZE, height=SIZE, data=_view())
+    side = types.SimpleNamespace(type="UI", x=SIZE - 60, y=0, width=60, height=SIZE, data=None)
+    area = types.SimpleNamespace(type="VIEW_3D", regions=[main, side], tag_redraw=lambda: None)
+    ctx = _Ctx(main, main.data, area)
+    op = brush_operator([])
+    before = _roughness()
+    assert modal(op, ctx, _event("LEFTMOUSE", "PRESS", SIZE - 30, 100)) == {"PASS_THROUGH"}
+    assert modal(op, ctx, _event("LEFTMOUSE", "RELEASE", SIZE - 30, 100)) == {"PASS_THROUGH"}
+    np.testing.assert_array_equal(_roughness(), before)
+    assert modal(op, ctx, _event("LEFTMOUSE", "PRESS", 100, 100)) == {"RUNNING_MODAL"}

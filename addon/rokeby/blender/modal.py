@@ -41,15 +41,28 @@ def undo_key(event, context=None) -> "str | None":
     return None
 
 
+# Regions drawn over a 3D view's main region (Region Overlap, on by default): a click there is theirs.
+_OVERLAPPING = ("UI", "TOOLS", "HEADER", "TOOL_HEADER", "ASSET_SHELF", "ASSET_SHELF_HEADER")
+
+
+def _covered(area, mx: float, my: float) -> bool:
+    """Whether window point (mx, my) lies on a sidebar, toolbar or header of ``area``."""
+    for r in getattr(area, "regions", ()):
+        if r.type in _OVERLAPPING and r.width > 1 and r.height > 1 and r.x <= mx < r.x + r.width and r.y <= my < r.y + r.height:
+            return True
+    return False
+
+
 def view3d_at(context, event):
     """(region, region_3d, (x, y)) of the 3D view main region under the mouse, or None: the
     operator's own region where it is one, else the main region of a 3D view of the window whose
-    rectangle holds the mouse (window coordinates ``event.mouse_x``/``mouse_y``)."""
+    rectangle holds the mouse (window coordinates ``event.mouse_x``/``mouse_y``). A point on a
+    sidebar, toolbar or header drawn over the main region (Region Overlap) is not in the view."""
     region, area = context.region, context.area
     if region is not None and getattr(region, "type", "WINDOW") == "WINDOW" and getattr(area, "type", None) == "VIEW_3D" \
             and context.region_data is not None:
         x, y = event.mouse_region_x, event.mouse_region_y
-        if 0 <= x < region.width and 0 <= y < region.height:
+        if 0 <= x < region.width and 0 <= y < region.height and not _covered(area, getattr(region, "x", 0) + x, getattr(region, "y", 0) + y):
             return region, context.region_data, (x, y)
         return None
     areas = [area] if getattr(area, "type", None) == "VIEW_3D" else []
@@ -59,6 +72,8 @@ def view3d_at(context, event):
     if mx is None:
         return None
     for a in areas:
+        if _covered(a, mx, my):
+            return None
         for r in a.regions:
             if r.type == "WINDOW" and r.x <= mx < r.x + r.width and r.y <= my < r.y + r.height and r.data is not None:
                 return r, r.data, (mx - r.x, my - r.y)
