@@ -4,12 +4,18 @@ and the session stay, the session's handles and shadow mesh as before the drag),
 it back; Ctrl+Z while the button is held cancels that drag and nothing else."""
 
 import numpy as np
+import pytest
 
 from harness import run_scenario
 
 
-def test_ctrl_z_after_and_during_a_shadow_drag(dist_zip):
-    run = run_scenario("shadow_undo", dist_zip)
+@pytest.fixture(scope="module")
+def run(dist_zip):
+    """One window for both tests (a start and the install cost about 10 s)."""
+    return run_scenario("shadow_undo", dist_zip)
+
+
+def test_ctrl_z_after_and_during_a_shadow_drag(run):
     assert run.error is None, run.describe()
     assert not run.tracebacks, run.describe()
     r = run.result
@@ -29,3 +35,12 @@ def test_ctrl_z_after_and_during_a_shadow_drag(dist_zip):
     # Ctrl+Z mid-drag: that drag cancelled, the first drag kept.
     assert mid["drags"] == 1 and mid["shadow_mesh"], mid
     np.testing.assert_allclose(mid["handles"], dragged["handles"], atol=1e-6)
+
+
+def test_the_sidebar_drag_button_waits_for_a_press_on_a_handle(run):
+    """Run from the sidebar (the mouse on the sidebar, as a click on Drag Shadow Boundary runs it), the
+    operator waits; the next press on a handle in the view drags it."""
+    assert run.error is None, run.describe()
+    r = run.result
+    assert r["button"] == ["RUNNING_MODAL"], r
+    assert r["button_dragged"]["drags"] == r["mid_drag_undo"]["drags"] + 1, r["button_dragged"]

@@ -119,3 +119,26 @@ def scenario(ui):
     yield from ui.redraws(2)
     ui.result["mid_drag_undo"] = state()
     ui.screenshot("mid-drag-undo")
+    # 5. The sidebar's Drag Shadow Boundary button: run from the sidebar with the mouse on it (as its
+    # click runs it), then a press on the handle in the view, a drag and a release.
+    area.spaces.active.show_region_ui = True
+    yield from ui.redraws(2)
+    side = ui.region("UI", area)
+    bx, by = ui.screen_xy(side, side.width / 2, side.height / 2)
+    yield from ui.move(bx, by)
+    yield from ui.redraws(1)
+    with ui.override(area, "UI"):
+        ui.result["button"] = sorted(bpy.ops.rokeby.shadow_drag("INVOKE_DEFAULT"))
+    yield from ui.redraws(1)
+    h = np.array(_shadow_ui().session(bpy.context.scene).handles(0)["points"], np.float64)
+    k = int(np.argmin(h[:, 1]))  # the handle nearest the viewer's bottom edge, clear of the sidebar
+    yield from ui.move(*ui.point_xy(h[k]))
+    yield from ui.redraws(1)
+    yield from ui.press()
+    for f in (1.1, 1.2):
+        yield from ui.move(*ui.point_xy(c + (h[k] - c) * f))
+        yield from ui.redraws(1)
+    yield from ui.release()
+    yield from ui.redraws(2)
+    ui.result["button_dragged"] = state()
+    ui.screenshot("button-dragged")
