@@ -37,4 +37,10 @@ void main()
   else {
     frag = vec4(rk_shade_tinted(n, v, base.rgb, par.x, par.y, par.z, tint), 1.0);
   }
+  /* The 3D view has drawn this same surface already (Solid shading's grey), its depth sampled
+   * with a sub-pixel jitter for its anti-aliasing: pulled toward the eye by the depth change
+   * across one pixel (a slope-scaled polygon offset) and RK_DEPTH_EPSILON, the preview wins that
+   * tie everywhere instead of in speckles; a surface in front by more still hides it. */
+  float z = gl_FragCoord.z;
+  gl_FragDepth = max(z - fwidth(z) - RK_DEPTH_EPSILON, 0.0);
 }

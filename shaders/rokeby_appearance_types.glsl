@@ -8,6 +8,9 @@
 
 /* options.z: which parameters are painted into image textures (read at the fragment's UV, texel
  * resolution) instead of per-point attributes (read per vertex from rk_points). */
+/* The preview's depth pulled toward the eye beyond the slope offset (window depth, 0..1): ~17
+ * steps of a 24-bit depth buffer (see the fragment stage). */
+#define RK_DEPTH_EPSILON 1.0e-6
 #define RK_TEX_BASE 1
 #define RK_TEX_SPECULAR 2
 #define RK_TEX_ROUGHNESS 4

@@ -201,6 +201,22 @@ def test_operators_paint_through_the_registered_add_on(ball):
         rokeby.unregister()
 
 
+def brush_operator(reports):
+    """The brush operator's own methods on a plain object (background Blender cannot make an
+    Operator outside bpy.ops), in the state its invoke() leaves."""
+    import types
+
+    from rokeby import appearance_ui
+
+    cls = appearance_ui.ROKEBY_OT_appearance_paint
+    op = types.SimpleNamespace(_last=None, _painting=False, _dabbed=False, _strokes=0, _undone=0, UNDO_MESSAGE=getattr(cls, "UNDO_MESSAGE", ""),
+                               report=lambda kind, msg: reports.append((kind, msg)))
+    for name in ("_hit", "_end", "_end_stroke", "_status", "_redraw"):
+        if hasattr(cls, name):
+            setattr(op, name, types.MethodType(getattr(cls, name), op))
+    return op
+
+
 def test_modal_brush_paints_where_the_mouse_ray_hits(ball):
     """The paint operator's modal path, driven by a simulated drag in a perspective 3D view (a
     stand-in region, RegionView3D and events: Blender's event loop is the only part not run): a
@@ -232,9 +248,7 @@ def test_modal_brush_paints_where_the_mouse_ray_hits(ball):
                                     workspace=types.SimpleNamespace(status_text_set=lambda _t: None),
                                     area=types.SimpleNamespace(type="VIEW_3D", tag_redraw=lambda: redraws.append(1)))
         reports = []
-        op = types.SimpleNamespace(_last=None, _painting=False, report=lambda kind, msg: reports.append((kind, msg)))
-        op._hit = types.MethodType(appearance_ui.ROKEBY_OT_appearance_paint._hit, op)
-        op._end = types.MethodType(appearance_ui.ROKEBY_OT_appearance_paint._end, op)
+        op = brush_operator(reports)
         modal = appearance_ui.ROKEBY_OT_appearance_paint.modal
 
         def event(kind, value, x, y):
@@ -259,12 +273,12 @@ def test_modal_brush_paints_where_the_mouse_ray_hits(ball):
         after_drag = appearance.read(ball, "roughness").copy()
         assert modal(op, ctx, event("LEFTMOUSE", "RELEASE", 130, 110)) == {"RUNNING_MODAL"}
         assert modal(op, ctx, event("MOUSEMOVE", "NOTHING", 80, 80)) == {"PASS_THROUGH"}  # not painting: hovering
-        hover = op._hit(ctx, event("MOUSEMOVE", "NOTHING", 80, 80))
+        hover = op._hit((ctx.region, rv3d, (80, 80)), ball, bpy.context.evaluated_depsgraph_get())
         circle = appearance_ui._cursor["circle"]  # the brush circle follows the mouse on the surface
         assert appearance_ui._cursor["handle"] is not None and circle.shape == (64, 3)
         np.testing.assert_allclose(np.linalg.norm(circle - np.array(hover[0]), axis=1), 0.2, rtol=1e-5)
         np.testing.assert_allclose((circle - np.array(hover[0])) @ np.array(hover[1]), 0.0, atol=1e-5)
-        assert modal(op, ctx, event("ESC", "PRESS", 80, 80)) == {"FINISHED"}
+        assert modal(op, ctx, event("ESC", "PRESS", 80, 80)) == {"CANCELLED"}  # its stroke was its own undo step
         assert appearance_ui._cursor["handle"] is None and appearance_ui._cursor["circle"] is None
         now = appearance.read(ball, "roughness")
         np.testing.assert_array_equal(now, after_drag)

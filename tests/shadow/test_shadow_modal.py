@@ -35,8 +35,12 @@ def _view(bpy, sc):
     return SimpleNamespace(width=W, height=H), rv3d
 
 
-def _event(kind, value, xy):
-    return SimpleNamespace(type=kind, value=value, mouse_region_x=int(round(xy[0])), mouse_region_y=int(round(xy[1])))
+def _event(kind, value, xy, **mods):
+    e = SimpleNamespace(type=kind, value=value, mouse_region_x=int(round(xy[0])), mouse_region_y=int(round(xy[1])),
+                        ctrl=False, shift=False, alt=False, oskey=False)
+    for k, v in mods.items():
+        setattr(e, k, v)
+    return e
 
 
 def _operator():
@@ -46,10 +50,11 @@ def _operator():
 
     cls = shadow_ui.ROKEBY_OT_shadow_drag
     op = SimpleNamespace(loop=0, fixed=(0, 0), moved=0, target=(0.0, 0.0, 0.0), style="affine", segment=0.2,
-                         noise_amplitude=0.0, noise_frequency=0.0, reports=[])
+                         noise_amplitude=0.0, noise_frequency=0.0, pass_through=False, apply_edit=False, reports=[])
     op.report = lambda kind, msg: op.reports.append((kind, msg))
-    for name in ("_drag", "invoke", "modal"):
-        setattr(op, name, MethodType(getattr(cls, name), op))
+    for name in ("_drag", "invoke", "modal", "_nearest", "_begin", "_cancel", "_status"):
+        if hasattr(cls, name):
+            setattr(op, name, MethodType(getattr(cls, name), op))
     return op
 
 
@@ -159,7 +164,10 @@ def test_modal_drag_with_synthetic_events_live_shadow_follows_release_keeps_esc_
         rokeby.unregister()
 
 
-def test_modal_drag_far_from_any_handle_is_refused_and_changes_nothing():
+def test_modal_drag_far_from_any_handle_waits_for_a_handle_and_changes_nothing():
+    """A press far from every handle: the shortcut passes it on (a click elsewhere still selects);
+    the button or menu waits for a press on a handle (one elsewhere in the view is refused with a
+    warning), and Esc ends the wait with nothing changed."""
     bpy, sc, ball, lamp, ground = ts.blender_scene()
     import rokeby
     from rokeby import shadow, shadow_ui
@@ -174,13 +182,125 @@ def test_modal_drag_far_from_any_handle_is_refused_and_changes_nothing():
                               window_manager=SimpleNamespace(modal_handler_add=added.append),
                               evaluated_depsgraph_get=bpy.context.evaluated_depsgraph_get)
         op = _operator()
-        assert op.invoke(ctx, _event("LEFTMOUSE", "PRESS", (2, 2))) == {"CANCELLED"}
-        assert not added and op.reports and "no shadow handle near the cursor" in op.reports[0][1]
+        op.pass_through = True
+        assert op.invoke(ctx, _event("LEFTMOUSE", "PRESS", (2, 2))) == {"PASS_THROUGH"}
+        assert not added and not op.reports
+        op = _operator()
+        assert op.invoke(ctx, _event("LEFTMOUSE", "PRESS", (2, 2))) == {"RUNNING_MODAL"}
+        assert added == [op]
+        assert op.modal(ctx, _event("LEFTMOUSE", "PRESS", (3, 3))) == {"RUNNING_MODAL"}
+        assert op.reports and "no shadow handle near the cursor" in op.reports[-1][1]
+        assert op.modal(ctx, _event("ESC", "PRESS", (0, 0))) == {"CANCELLED"}
         assert shadow.shadow_mesh_of(ball) is None and shadow_ui.session(sc) is not None
         # Outside a 3D view the operator refuses as well.
         ctx.area = SimpleNamespace(type="IMAGE_EDITOR")
         op = _operator()
         assert op.invoke(ctx, _event("LEFTMOUSE", "PRESS", (W / 2, H / 2))) == {"CANCELLED"}
+    finally:
+        rokeby.unregister()
+
+
+def _ctx(bpy, sc, region, rv3d, added, **kw):
+    return SimpleNamespace(scene=sc, region=region, region_data=rv3d, area=SimpleNamespace(type="VIEW_3D"),
+                           window_manager=SimpleNamespace(modal_handler_add=added.append),
+                           evaluated_depsgraph_get=bpy.context.evaluated_depsgraph_get, **kw)
+
+
+def test_sidebar_button_waits_for_a_press_on_a_handle_in_the_view():
+    """The sidebar's Drag Shadow Boundary button: the click is in the sidebar (another region of
+    the 3D view's area), so the operator waits; the next press on a handle in the view's main
+    region starts the drag, a click in the sidebar passes on, release keeps the drag."""
+    bpy, sc, ball, lamp, ground = ts.blender_scene()
+    import rokeby
+    from bpy_extras import view3d_utils
+    from rokeby import shadow, shadow_ui
+
+    rokeby.register()
+    try:
+        bpy.context.view_layer.objects.active = ball
+        assert bpy.ops.rokeby.shadow_start(light="Lamp", min_loop_vertices=10) == {"FINISHED"}
+        sess = shadow_ui.session(sc)
+        region, rv3d = _view(bpy, sc)
+        # The area: the main region at x = 0..W and the sidebar to its right (window coordinates).
+        main = SimpleNamespace(type="WINDOW", x=0, y=0, width=W, height=H, data=rv3d)
+        side = SimpleNamespace(type="UI", x=W, y=0, width=120, height=H, data=None)
+        area = SimpleNamespace(type="VIEW_3D", regions=[side, main])
+        added = []
+        ctx = _ctx(bpy, sc, side, None, added)
+        ctx.area = area
+
+        def ev(kind, value, window_xy):
+            e = _event(kind, value, (window_xy[0] - ctx.region.x, window_xy[1] - ctx.region.y))
+            e.mouse_x, e.mouse_y = int(round(window_xy[0])), int(round(window_xy[1]))
+            return e
+
+        op = _operator()
+        assert op.invoke(ctx, ev("LEFTMOUSE", "RELEASE", (W + 60, H / 2))) == {"RUNNING_MODAL"}, op.reports
+        assert added == [op] and not op.reports
+        # A click on another sidebar button goes to that button.
+        assert op.modal(ctx, ev("LEFTMOUSE", "PRESS", (W + 60, 40))) == {"PASS_THROUGH"}
+        h = sess.handles(0)["points"].astype(np.float64)
+        m = int(np.argmax(h[:, 0]))
+        press = view3d_utils.location_3d_to_region_2d(main, rv3d, h[m])
+        assert op.modal(ctx, ev("LEFTMOUSE", "PRESS", press)) == {"RUNNING_MODAL"}, op.reports
+        assert op.moved == m and op.loop == 0 and len(added) == 1
+        c = h.mean(axis=0)
+        want = c + (h[m] - c) * 1.3
+        assert op.modal(ctx, ev("MOUSEMOVE", "NOTHING", view3d_utils.location_3d_to_region_2d(main, rv3d, want))) == {"RUNNING_MODAL"}
+        assert np.linalg.norm(np.asarray(op.target) - want) < 0.05
+        assert op.modal(ctx, ev("LEFTMOUSE", "RELEASE", (0, 0))) == {"FINISHED"}
+        assert len(sess.drags) == 1 and shadow.shadow_mesh_of(ball) is not None
+        np.testing.assert_allclose(sess.handles(0)["points"][m], op.target, atol=1e-3)
+    finally:
+        rokeby.unregister()
+
+
+def test_ctrl_z_during_a_drag_cancels_that_drag_only():
+    """Ctrl+Z while the mouse button is held: the drag is cancelled (the shape of the kept edit
+    comes back bit for bit) and the event goes no further (it would undo a step before the drag)."""
+    bpy, sc, ball, lamp, ground = ts.blender_scene()
+    import rokeby
+    from bpy_extras import view3d_utils
+    from rokeby import shadow, shadow_ui
+
+    rokeby.register()
+    try:
+        bpy.context.view_layer.objects.active = ball
+        assert bpy.ops.rokeby.shadow_start(light="Lamp", min_loop_vertices=10) == {"FINISHED"}
+        sess = shadow_ui.session(sc)
+        region, rv3d = _view(bpy, sc)
+        added = []
+        ctx = _ctx(bpy, sc, region, rv3d, added)
+        screen = lambda p: np.array(view3d_utils.location_3d_to_region_2d(region, rv3d, p))  # noqa: E731
+        h = sess.handles(0)["points"].astype(np.float64)
+        m = int(np.argmax(h[:, 0]))
+        c = h.mean(axis=0)
+        op = _operator()
+        assert op.invoke(ctx, _event("LEFTMOUSE", "PRESS", screen(h[m]))) == {"RUNNING_MODAL"}
+        assert op.modal(ctx, _event("MOUSEMOVE", "NOTHING", screen(c + (h[m] - c) * 1.3))) == {"RUNNING_MODAL"}
+        assert shadow.shadow_mesh_of(ball) is not None
+        assert op.modal(ctx, _event("Z", "PRESS", (0, 0), ctrl=True)) == {"CANCELLED"}
+        assert shadow.shadow_mesh_of(ball) is None and not sess.drags
+        np.testing.assert_allclose(sess.handles(0)["points"], h, atol=1e-6)
+    finally:
+        rokeby.unregister()
+
+
+def test_press_on_a_handle_is_a_3d_view_shortcut():
+    """The add-on's keymap: a left press in the 3D View starts Drag Shadow Boundary, passing
+    presses that are not on a handle on (so clicking still selects)."""
+    bpy, *_ = ts.blender_scene()
+    import rokeby
+    from rokeby import shadow_ui
+
+    rokeby.register()
+    try:
+        items = [(km.name, kmi) for km, kmi in shadow_ui._keymaps]
+        if bpy.context.window_manager.keyconfigs.addon is None:
+            pytest.skip("no add-on key configuration in this Blender (background mode without one)")
+        (name, kmi), = [(n, k) for n, k in items if k.idname == "rokeby.shadow_drag"]
+        assert name == "3D View" and (kmi.type, kmi.value) == ("LEFTMOUSE", "PRESS")
+        assert not (kmi.ctrl or kmi.shift or kmi.alt) and kmi.properties.pass_through
     finally:
         rokeby.unregister()
 

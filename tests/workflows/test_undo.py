@@ -302,9 +302,9 @@ NOT_COVERED = {
     "preview_capture": "captures the scene for the viewport preview, kept outside the file (no scene data changes; tests/reflection/test_scene_capture.py)",
     "appearance_preview": "switches a viewport draw handler on or off: no scene data changes",
     "appearance_render_difference": "a measurement: stores the figure in the brush settings, edits nothing (tests/appearance/test_appearance_render_model.py)",
-    "shadow_start": "a shadow-editing session lives outside the file (no scene data changes until Apply)",
-    "shadow_drag": "moves a handle of the session, outside the file; Apply is the undoable step",
-    "shadow_stop": "ends the session; the scene's data does not change",
+    "shadow_start": "one undo step each; the session (kept outside the file) follows undo/redo: tests/shadow/test_shadow_undo.py",
+    "shadow_drag": "one undo step per confirmed drag, the session and the live shadow mesh follow: tests/shadow/test_shadow_undo.py",
+    "shadow_stop": "one undo step; undo brings the session back: tests/shadow/test_shadow_undo.py",
     "composite_sequence": "writes recomposited frames to files outside the .blend (tests/workflows/test_interface.py)",
     "composite_brush": "pushes one undo step per stroke itself (no UNDO flag); undo/redo tested in tests/compositing/test_compositing_brush.py",
 }

@@ -63,6 +63,7 @@ INTERFACE = {
                 (6, "FLOAT_2D", "rk_tex_metallic"), (7, "FLOAT_2D", "rk_tex_specular_tint")],
     "uniform_buf": [(0, "RokebyAppearance", "rk_appearance")],
     "fragment_out": [(0, "VEC4", "frag")],
+    "depth_write": "LESS",  # the fragment stage writes gl_FragDepth, only ever nearer
 }
 INTERFACE_NAME = "rk_appearance_iface"
 BLOCK_BYTES = (16 + 4 + 4 + 9 * 4 + 4 + 4 + 16 + 4 + 4) * 4  # mat4, vec4 eye, ivec4 options, vec4 sh[9], vec4 tint, vec4 scale, mat4, vec4 spec_tint, vec4 light

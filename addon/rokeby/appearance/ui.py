@@ -217,8 +217,8 @@ class ROKEBY_OT_appearance_texture_remove(bpy.types.Operator):
 
 
 class ROKEBY_OT_appearance_paint(bpy.types.Operator):
-    """Paint the active object's appearance with the current brush (drag with the left mouse
-    button; right mouse or Esc ends)"""
+    """Paint the active object's appearance with the current brush: drag with the left mouse
+    button in the 3D view, one undo step per stroke; right mouse or Esc ends the brush"""
 
     bl_idname = "rokeby.appearance_paint"
     bl_label = "Paint Appearance"
@@ -243,62 +243,128 @@ class ROKEBY_OT_appearance_paint(bpy.types.Operator):
         return {"FINISHED"}
 
     # --- interactive ------------------------------------------------------------------------
-    def _hit(self, context, event):
-        """(world point, world normal) where the mouse ray meets the active object, or None."""
+    # One undo step per stroke (press ... release), pushed at the release; the brush's end pushes
+    # none (it returns CANCELLED: its strokes are already steps). Ctrl+Z between strokes undoes
+    # this brush's strokes only (never a step from before the brush: it is refused there, and so
+    # is redo past what it undid); during a stroke it is refused.
+    UNDO_MESSAGE = "Paint Appearance Stroke"
+
+    def _hit(self, view, ob, depsgraph):
+        """(world point, world normal) where the mouse ray meets ``ob``, or None."""
         from bpy_extras import view3d_utils
 
-        region, rv3d = context.region, context.region_data
-        co = (event.mouse_region_x, event.mouse_region_y)
+        region, rv3d, co = view
         origin = view3d_utils.region_2d_to_origin_3d(region, rv3d, co)
         direction = view3d_utils.region_2d_to_vector_3d(region, rv3d, co)
-        ob = context.active_object
         inv = ob.matrix_world.inverted()
-        ok, loc, nrm, _i = ob.ray_cast(inv @ origin, (inv.to_3x3() @ direction).normalized(), depsgraph=context.evaluated_depsgraph_get())
+        ok, loc, nrm, _i = ob.ray_cast(inv @ origin, (inv.to_3x3() @ direction).normalized(), depsgraph=depsgraph)
         if not ok:
             return None
         return ob.matrix_world @ loc, (inv.transposed().to_3x3() @ nrm).normalized()
 
+    def _status(self, context, text):
+        ws = getattr(context, "workspace", None)
+        if ws is not None:
+            ws.status_text_set(text)
+
+    def _redraw(self, context):
+        area = getattr(context, "area", None)
+        if area is not None:
+            area.tag_redraw()
+        _redraw_views(context)
+
     def _end(self, context):
-        context.workspace.status_text_set(None)
+        self._status(context, None)
         show_cursor(None)
-        appearance.pack_painted(context.active_object)  # the undo step keeps texture strokes (and the dabs made before an error)
-        context.area.tag_redraw()
+        self._redraw(context)
+
+    def _end_stroke(self, context):
+        """The release: the stroke becomes one undo step (texture strokes packed first, so the
+        step holds them)."""
+        self._painting = False
+        self._last = None
+        if not self._dabbed:
+            return
+        self._dabbed = False
+        ob = context.active_object
+        if ob is not None:
+            appearance.pack_painted(ob)
+        try:
+            bpy.ops.ed.undo_push(message=self.UNDO_MESSAGE)
+        except RuntimeError:  # no undo stack (Blender started without one): the stroke stays
+            return
+        self._strokes += 1
+        self._undone = 0
 
     def invoke(self, context, event):
-        if context.area is None or context.area.type != "VIEW_3D":
+        from ..blender.modal import view3d_at  # noqa: PLC0415
+
+        if context.area is None or (context.area.type != "VIEW_3D" and view3d_at(context, event) is None):
             return self.execute(context)
         self._last = None
         self._painting = False
+        self._dabbed = False
+        self._strokes = 0  # strokes of this brush pushed as undo steps and not undone
+        self._undone = 0  # strokes of this brush undone (redo may bring them back)
         context.window_manager.modal_handler_add(self)
-        context.workspace.status_text_set("Rokeby: drag to paint, right mouse / Esc to finish")
+        self._status(context, "Rokeby: drag to paint (one undo step per stroke); right mouse / Esc: finish")
         return {"RUNNING_MODAL"}
 
     def modal(self, context, event):
-        if event.type in {"RIGHTMOUSE", "ESC"}:
+        from ..blender.modal import undo_key, view3d_at  # noqa: PLC0415
+
+        key = undo_key(event, context)
+        if key is not None:
+            if self._painting:
+                return {"RUNNING_MODAL"}  # mid-stroke: refused (it would cut the stroke in two)
+            if key == "UNDO" and self._strokes > 0:
+                self._strokes -= 1
+                self._undone += 1
+                return {"PASS_THROUGH"}  # Blender's Ctrl+Z takes back this brush's last stroke
+            if key == "REDO" and self._undone > 0:
+                self._strokes += 1
+                self._undone -= 1
+                return {"PASS_THROUGH"}
+            self.report({"INFO"}, "Rokeby: no stroke of this brush to undo (finish the brush with right mouse / Esc first)"
+                        if key != "REDO" else "Rokeby: no stroke of this brush to redo")
+            return {"RUNNING_MODAL"}  # refused: it would reach past the brush
+        if event.type in {"RIGHTMOUSE", "ESC"} and event.value == "PRESS":
+            if self._painting:
+                self._end_stroke(context)
             self._end(context)
-            return {"FINISHED"}
+            return {"CANCELLED"}  # every stroke is its own undo step already
+        view = view3d_at(context, event) if event.type in {"LEFTMOUSE", "MOUSEMOVE"} else None
         if event.type == "LEFTMOUSE":
-            self._painting = event.value == "PRESS"
-            self._last = None
-            if not self._painting:
+            if event.value == "RELEASE":
+                if not self._painting:
+                    return {"PASS_THROUGH"}  # the release of a click outside the view (a button)
+                self._end_stroke(context)
                 return {"RUNNING_MODAL"}  # the release ends this drag; passed on it could click-select
-        if event.type not in {"LEFTMOUSE", "MOUSEMOVE"}:
-            return {"PASS_THROUGH"}
-        hit = self._hit(context, event)
+            if event.value != "PRESS":
+                return {"RUNNING_MODAL"} if self._painting else {"PASS_THROUGH"}
+            if view is None:
+                return {"PASS_THROUGH"}  # a click in the sidebar, a header, another editor: theirs
+            self._painting, self._last, self._dabbed = True, None, False
+        elif event.type != "MOUSEMOVE":
+            return {"RUNNING_MODAL"} if self._painting else {"PASS_THROUGH"}
+        ob = context.active_object
+        hit = self._hit(view, ob, context.evaluated_depsgraph_get()) if view is not None and ob is not None else None
         settings = _settings(context)
         # the brush cursor: a circle of the brush radius on the surface under the mouse
         show_cursor(None if hit is None else (tuple(hit[0]), tuple(hit[1]), settings.radius))
-        context.area.tag_redraw()
+        self._redraw(context)
         if not self._painting:
             return {"PASS_THROUGH"}  # hovering: the view keeps its own mouse handling
         if hit is not None:
             try:
-                _dab(settings, context.active_object, [tuple(hit[0])], previous=self._last, pack=False)
+                _dab(settings, ob, [tuple(hit[0])], previous=self._last, pack=False)
             except ValueError as e:
                 self.report({"ERROR"}, str(e))
+                self._end_stroke(context)
                 self._end(context)
                 return {"CANCELLED"}
             self._last = tuple(hit[0])
+            self._dabbed = True
         return {"RUNNING_MODAL"}
 
 

@@ -154,6 +154,13 @@ def builtin_shader(name: str):
     return gpu.shader.from_builtin(have)
 
 
+def shader_depth_write(info, value: str) -> None:
+    """Declares how a shader writes gl_FragDepth (``GPUShaderCreateInfo.depth_write``, where the
+    release has it; OpenGL needs no declaration, so a release without it compiles the same)."""
+    if hasattr(info, "depth_write"):
+        info.depth_write(value)
+
+
 def builtin_shader_name(name: str) -> "str | None":
     """The built-in shader :func:`builtin_shader` uses for ``name`` (None until it was first
     asked in a process that can draw)."""

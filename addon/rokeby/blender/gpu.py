@@ -5,6 +5,8 @@ import or register time, so the add-on loads in background mode.
 
 from __future__ import annotations
 
+from . import compat
+
 
 def create_shader(interface: dict, interface_name: str, src: dict):
     """Compiles ``src`` (types, lib, vertex, fragment) through Blender's GPUShaderCreateInfo as
@@ -29,6 +31,8 @@ def create_shader(interface: dict, interface_name: str, src: dict):
         info.uniform_buf(slot, type_name, name)
     for slot, type_name, name in interface["fragment_out"]:
         info.fragment_out(slot, type_name, name)
+    if interface.get("depth_write"):
+        compat.shader_depth_write(info, interface["depth_write"])
     info.vertex_source(src["vertex"])
     info.fragment_source(src["lib"] + "\n" + src["fragment"])
     return gpu.shader.create_from_info(info)

@@ -49,6 +49,8 @@ MAX_RADIUS = 1000.0  # pixels
 # ID properties on the brushed Blender image (saved in the .blend).
 STROKES_KEY = schema.BRUSH_STROKES_KEY  # list of {"id", "mode", "radius", "strength", "points"}
 SOURCE_KEY = schema.BRUSH_SOURCE_KEY  # the multilayer EXR the strokes edit
+BASE_KEY = schema.BRUSH_BASE_KEY  # the one-knob edit the image showed before its strokes (Render and Recomposite)
+NO_BASE = {"edit": "none", "amount": 0.0, "k_d": 1.0, "k_r": 1.0, "fit": "qp", "noise_tolerance": 0.0}
 
 _IDS = itertools.count(int(time.time() * 1000) % (1 << 30))
 
@@ -204,17 +206,22 @@ class BrushSession:
     applied, oldest first. One stroke at a time is in progress (``begin`` … ``extend`` … ``end``
     or ``cancel``); ``paint`` does all of it for a stroke given whole."""
 
-    def __init__(self, opened: "comp.RenderEdit", image_name: str | None = None):
+    def __init__(self, opened: "comp.RenderEdit", image_name: str | None = None, base: dict | None = None):
         self.opened = opened
         self.path = opened.path
         self.image_name = image_name
         rec, p = opened.reconstruction, opened.passes
         self.shape = p.shape
-        self.base = rec.normals
-        self.layer = rec.normals.copy()
+        # The strokes add to ``base``: the one-knob edit the image showed when the brush opened
+        # it (Render and Recomposite's; none: the render itself, bit for bit).
+        self.base_edit = {**NO_BASE, **(base or {})}
+        b = self.base_edit
+        self.k_d, self.k_r = float(b["k_d"]), float(b["k_r"])
+        self.base = comp.edit_normals(p, rec, b["edit"], float(b["amount"])) if b["edit"] != "none" else rec.normals
+        self.layer = np.array(self.base, np.float32, copy=True)
         self.on = rec.ids >= 0
         self.depth = p.depth
-        self.image, _stats = opened.session(self.layer)  # the identity: the render, bit for bit
+        self.image, _stats = opened.session(self.layer, k_d=self.k_d, k_r=self.k_r)
         self.image = np.ascontiguousarray(self.image, np.float32)
         h, w = self.shape
         self.rgba = np.ones((h, w, 4), np.float32)  # the image as Blender stores it: bottom row first, α = 1
@@ -280,7 +287,7 @@ class BrushSession:
         self.layer[rows, cols] = edited[inner]
         t1 = time.perf_counter()
         # The core reads the window of the layer and writes it straight into the image.
-        self.opened.session.window(self.layer, rows, cols, out=self.image)
+        self.opened.session.window(self.layer, rows, cols, out=self.image, k_d=self.k_d, k_r=self.k_r)
         h = self.shape[0]
         self.rgba[h - rows.stop:h - rows.start, cols, :3] = self.image[rows, cols][::-1]
         box = a["box"]
@@ -419,17 +426,33 @@ def open_brush(path: str, image_name: str = schema.RECOMPOSITED_IMAGE, *, fit: s
 
     if not image_name:
         raise BrushError("image_name: give the name of the image to paint on")
+    img = bpy.data.images.get(image_name)
+    shown = img is not None and img.get(SOURCE_KEY) == path and img.get(BASE_KEY) is not None
+    base = img[BASE_KEY].to_dict() if shown else None
+    if base is not None:  # the image shows a one-knob edit: the strokes go on top of it, with its fit
+        fit, noise_tolerance = str(base.get("fit", fit)), float(base.get("noise_tolerance", noise_tolerance))
     opened = comp.open_render(path, backend="cpu", warn=False, method=fit, noise_tolerance=noise_tolerance)
     s = _SESSIONS.get(image_name)
-    if s is None or s.opened is not opened or s.opened.reconstructed:
-        s = BrushSession(opened, image_name)
+    if s is None or s.opened is not opened or s.opened.reconstructed or s.base_edit != {**NO_BASE, **(base or {})}:
+        s = BrushSession(opened, image_name, base)
         _SESSIONS[image_name] = s
-    img = bpy.data.images.get(image_name)
     if img is not None and img.get(SOURCE_KEY) == path:
         s.sync(list(img.get(STROKES_KEY, [])))
     img = _show(s)
     _record(s, img)
     return s
+
+
+def record_edit(img, path: str, *, edit: str, amount: float, k_d: float = 1.0, k_r: float = 1.0, fit: str = "qp",
+                noise_tolerance: float = 0.0) -> None:
+    """Records on the Blender image ``img`` that it now shows the one-knob edit of the EXR ``path``
+    (Render and Recomposite, Recomposite Render) and no strokes: Paint Normals opened on it
+    starts from what it shows. A brush open on the image is closed (its pixels are replaced)."""
+    img[SOURCE_KEY] = path
+    img[BASE_KEY] = {"edit": str(edit), "amount": float(amount), "k_d": float(k_d), "k_r": float(k_r), "fit": str(fit),
+                     "noise_tolerance": float(noise_tolerance)}
+    img[STROKES_KEY] = []
+    _SESSIONS.pop(img.name, None)
 
 
 def show_step(session: BrushSession):

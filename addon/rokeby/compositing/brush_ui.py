@@ -3,8 +3,11 @@ emboss, bump or smooth strokes on the recomposited frame shown in an Image Edito
 result (the image, and the compositor's Image node reading it) updates at every mouse step.
 
 Modal: left drag paints one stroke (one undo step, pushed when the button is released); Esc or
-right mouse during a stroke cancels that stroke, and when no stroke is in progress ends the
-brush; between strokes other events (zoom, pan, Ctrl+Z) pass through, during one they are held. A circle of the brush radius follows the mouse (a
+right mouse pressed during a stroke cancels that stroke (its release does nothing more), and
+pressed when no stroke is in progress ends the brush; between strokes other events (zoom, pan,
+clicks outside the image's region) pass through and Ctrl+Z / Ctrl+Shift+Z undo and redo this
+brush's strokes only (refused where they would reach a step from before the brush); during a
+stroke everything else is held. A circle of the brush radius follows the mouse (a
 POST_PIXEL handler of the Image Editor, added and removed by the operator: ``gpu`` is touched
 only there). Exec (scripts): one stroke given as (row, col) pixels. The settings are the
 operator's (remembered between uses; shown in the Image Editor's sidebar, Rokeby tab)."""
@@ -16,6 +19,7 @@ from bpy.props import CollectionProperty, EnumProperty, FloatProperty, FloatVect
 
 from .. import compositing as comp
 from ..blender import compat, hooks
+from ..blender.modal import undo_key
 from ..core import schema
 from . import brush
 from .ui import LAST_EXR  # the EXR the scene's last Render and Recomposite wrote
@@ -65,12 +69,15 @@ class StrokeDriver:
     change of the image. Each step writes the image (``brush.show_step``); a stroke
     that reached the image ends with its record on the image and one undo step."""
 
-    def __init__(self, session, radius: float, strength: float, mode: str, to_pixel, redraw=lambda: None):
+    def __init__(self, session, radius: float, strength: float, mode: str, to_pixel, redraw=lambda: None,
+                 inside=lambda x, y: True, context=None):
         brush.check_brush(radius, strength, mode)
         self.session, self.radius, self.strength, self.mode = session, radius, strength, mode
-        self.to_pixel, self.redraw = to_pixel, redraw
+        self.to_pixel, self.redraw, self.inside, self.context = to_pixel, redraw, inside, context
         self.error = None
-        self.strokes = 0  # strokes ended (undo steps pushed)
+        self.refused = None  # what the last refused undo key was refused for (the operator reports it)
+        self.strokes = 0  # strokes ended (undo steps pushed) and not undone
+        self.undone = 0  # strokes of this brush undone (redo may bring them back)
 
     def _pixel(self, event):
         return self.to_pixel(event.mouse_x, event.mouse_y)
@@ -82,19 +89,36 @@ class StrokeDriver:
     def handle(self, event) -> set:
         s = self.session
         t, v = event.type, event.value
-        if t == "ESC" or (t == "RIGHTMOUSE" and v == "PRESS"):
+        key = undo_key(event, self.context)
+        self.refused = None
+        if key is not None and not s.painting:
+            if key == "UNDO" and self.strokes > 0:
+                self.strokes, self.undone = self.strokes - 1, self.undone + 1
+                return {"PASS_THROUGH"}  # Blender's undo takes back this brush's last stroke
+            if key == "REDO" and self.undone > 0:
+                self.strokes, self.undone = self.strokes + 1, self.undone - 1
+                return {"PASS_THROUGH"}
+            self.refused = ("no stroke of this brush to redo" if key == "REDO" else
+                            "no stroke of this brush to undo (finish the brush with Esc / right mouse first)")
+            return {"RUNNING_MODAL"}  # refused: it would reach a step from before the brush
+        if t in ("ESC", "RIGHTMOUSE"):
+            if v != "PRESS":
+                return {"RUNNING_MODAL"}  # the release of the key that cancelled a stroke ends nothing
             if s.painting:  # this stroke only: the brush stays on
                 s.cancel()
                 self._show()
                 return {"RUNNING_MODAL"}
             return {"FINISHED"}
         if t == "LEFTMOUSE" and v == "PRESS" and not s.painting:
+            if not self.inside(event.mouse_x, event.mouse_y):
+                return {"PASS_THROUGH"}  # a click in the sidebar, a header, another editor: theirs
             s.begin(self.radius, self.strength, self.mode)
             return self._step(event)
         if t == "LEFTMOUSE" and v == "RELEASE" and s.painting:
             if brush.finish_stroke(s) is not None:  # None: the stroke never reached the image
                 _push_undo()
                 self.strokes += 1
+                self.undone = 0
             self.redraw()
             return {"RUNNING_MODAL"}
         if t in ("MOUSEMOVE", "INBETWEEN_MOUSEMOVE") and s.painting:
@@ -208,17 +232,21 @@ class ROKEBY_OT_composite_brush(bpy.types.Operator):
         self._region = region
         self._driver = StrokeDriver(session, self.radius, self.strength, self.mode.lower(),
                                     lambda x, y: brush.region_to_pixel(region, size, x - region.x, y - region.y),
-                                    context.area.tag_redraw)
+                                    context.area.tag_redraw,
+                                    inside=lambda x, y: region.x <= x < region.x + region.width and region.y <= y < region.y + region.height,
+                                    context=context)
         context.window_manager.modal_handler_add(self)
         _cursor_show(context, region, event, self.radius, size)
-        context.workspace.status_text_set("Rokeby Paint Normals: drag to paint (one undo step per stroke); "
-                                          "Esc / right mouse: cancel the stroke, or finish")
+        context.workspace.status_text_set("Rokeby Paint Normals: drag to paint (one undo step per stroke; Ctrl+Z undoes "
+                                          "this brush's strokes); Esc / right mouse: cancel the stroke, or finish")
         return {"RUNNING_MODAL"}
 
     def modal(self, context, event):
         if event.type in ("MOUSEMOVE", "INBETWEEN_MOUSEMOVE"):
             _cursor_show(context, self._region, event, self.radius, tuple(self._driver.session.shape[::-1]))
         result = self._driver.handle(event)
+        if self._driver.refused:
+            self.report({"INFO"}, f"Rokeby: {self._driver.refused}")
         if "FINISHED" in result or "CANCELLED" in result:
             _cursor_hide()
             context.workspace.status_text_set(None)
@@ -295,6 +323,30 @@ class ROKEBY_PT_compositing_brush(bpy.types.Panel):
         col.operator("rokeby.composite_to_compositor", icon="NODE_COMPOSITING").image_name = img.name if img is not None else schema.RECOMPOSITED_IMAGE
 
 
+class IMAGE_MT_rokeby(bpy.types.Menu):
+    """Rokeby's operators of the Image Editor (Image ▸ Rokeby): F3 menu search finds them here"""
+
+    bl_idname = "IMAGE_MT_rokeby"
+    bl_label = "Rokeby"
+
+    def draw(self, context):
+        layout = self.layout
+        layout.operator_context = "INVOKE_REGION_WIN"  # the brush runs its modal part in the image's region
+        layout.operator(ROKEBY_OT_composite_brush.bl_idname, icon="BRUSH_DATA")
+        img = _editor_image(context)
+        layout.operator("rokeby.composite_to_compositor", icon="NODE_COMPOSITING").image_name = \
+            img.name if img is not None else schema.RECOMPOSITED_IMAGE
+
+
+def draw_image_menu_entry(self, context):
+    """Appended to the Image Editor's Image menu: the Rokeby submenu."""
+    self.layout.separator()
+    self.layout.menu(IMAGE_MT_rokeby.bl_idname, icon="MOD_MIRROR")
+
+
+IMAGE_MENUS_EXTENDED = ("IMAGE_MT_image",)
+
+
 def _on_undo_redo(*_args):
     try:
         brush.sync_after_undo()
@@ -308,7 +360,7 @@ def _on_load(*_args):
 
 OWNER = "compositing.brush"
 _HANDLERS = (("undo_post", _on_undo_redo), ("redo_post", _on_undo_redo), ("load_post", _on_load))
-CLASSES = (RokebyBrushPoint, ROKEBY_OT_composite_brush, ROKEBY_PT_compositing_brush)
+CLASSES = (RokebyBrushPoint, ROKEBY_OT_composite_brush, ROKEBY_PT_compositing_brush, IMAGE_MT_rokeby)
 
 
 def register():
@@ -316,10 +368,16 @@ def register():
         bpy.utils.register_class(c)
     for name, fn in _HANDLERS:
         hooks.add(OWNER, name, fn)
+    for name in IMAGE_MENUS_EXTENDED:
+        getattr(bpy.types, name).append(draw_image_menu_entry)
 
 
 def unregister():
     _cursor_hide()
+    for name in IMAGE_MENUS_EXTENDED:
+        menu = getattr(bpy.types, name, None)
+        if menu is not None:
+            menu.remove(draw_image_menu_entry)
     hooks.remove(OWNER)
     for c in reversed(CLASSES):
         if getattr(c, "is_registered", False):

@@ -229,6 +229,7 @@ class ROKEBY_OT_composite_edit(_EditProps, bpy.types.Operator):
                 self._result["error"] = exc
 
         self._image_name = image_name
+        self._args = args
         self._thread = threading.Thread(target=work, name="rokeby recomposite", daemon=True)
         self._thread.start()
         wm = context.window_manager
@@ -239,6 +240,8 @@ class ROKEBY_OT_composite_edit(_EditProps, bpy.types.Operator):
 
     def modal(self, context, event):
         from ..core import native  # noqa: PLC0415
+
+        from . import workflow  # noqa: PLC0415
 
         if event.type == "ESC":
             native.cancel()  # the worker's native call stops at its next row
@@ -251,6 +254,8 @@ class ROKEBY_OT_composite_edit(_EditProps, bpy.types.Operator):
             return self._failed(exc)
         out, stats = self._result["ok"]
         img = comp.show_image(self._image_name, out)
+        a = self._args
+        workflow.record_edit(img, self._path(context), a["edit"], a["amount"], a["k_d"], a["k_r"], a["fit"], a["noise_tolerance"])
         return self._done(img, stats)
 
     def _failed(self, exc):

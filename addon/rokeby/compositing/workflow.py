@@ -80,8 +80,16 @@ def recomposite_exr(path: str, *, edit: str = "emboss", amount: float = 0.5, ima
                                         fit=fit, noise_tolerance=noise_tolerance)
     t0 = time.perf_counter()
     img = comp.show_image(image_name, out)
+    record_edit(img, path, edit, amount, k_d, k_r, fit, noise_tolerance)
     stats["show_s"] = time.perf_counter() - t0
     return img, stats
+
+
+def record_edit(img, path, edit, amount, k_d, k_r, fit, noise_tolerance):
+    """The image shows this one-knob edit now: Paint Normals opened on it paints on top of it."""
+    from . import brush  # noqa: PLC0415
+
+    brush.record_edit(img, path, edit=edit, amount=amount, k_d=k_d, k_r=k_r, fit=fit, noise_tolerance=noise_tolerance)
 
 
 @_cancellable
@@ -153,6 +161,7 @@ def _recomposite_opened(opened, edit, amount, k_d, k_r, image_name):
     out, stats = opened.session(n, k_d=k_d, k_r=k_r)
     t2 = time.perf_counter()
     img = comp.show_image(image_name, out)
+    record_edit(img, opened.path, edit, amount, k_d, k_r, *opened.fit)
     stats = {**stats, "reused": opened.reused, "edit_s": t1 - t0, "recomposite_s": t2 - t1,
              "show_s": time.perf_counter() - t2}
     return img, stats

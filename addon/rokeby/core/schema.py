@@ -125,6 +125,8 @@ SHADOW_LINKING_TAG = "rokeby_shadow_linking"  # on a light-linking collection: i
 SHADOW_LIGHT_INITIAL_KEY = "rokeby_light_initial"  # on a shadow mesh: the light position edited for
 SHADOW_LIGHT_CONFIGURATIONS_KEY = "rokeby_light_configurations"  # ... further light positions (flat xyz)
 SHADOW_FALLOFF_BETA_KEY = "rokeby_falloff_beta"  # ... the falloff exponent between them
+SHADOW_SESSION_STEP_KEY = "rokeby_shadow_session_step"  # on a scene: which state of the shadow-editing
+# session (kept in memory, not in the file) the scene's undo step holds; 0 or absent: none
 # Keys of shadow edits saved before the pointer links (data version 0); read by the migration only.
 SHADOW_LEGACY_SHADOW_OF_KEY = "rokeby_shadow_of"
 SHADOW_LEGACY_LIGHT_KEY = "rokeby_light"
@@ -153,3 +155,5 @@ RECOMPOSITED_IMAGE = "Rokeby Recomposited"  # default name of a recomposited ima
 COMPOSITE_LAST_EXR_KEY = "rokeby_composite_exr"  # on the scene: the last EXR the operators read/wrote
 BRUSH_STROKES_KEY = "rokeby_brush_strokes"  # on a brushed image: list of {"id", "mode", "radius", "strength", "points"}
 BRUSH_SOURCE_KEY = "rokeby_brush_exr"  # on a brushed image: the multilayer EXR its strokes edit
+BRUSH_BASE_KEY = "rokeby_brush_base"  # on a recomposited image: the one-knob edit it shows, which strokes add to
+# ({"edit", "amount", "k_d", "k_r", "fit", "noise_tolerance"})

@@ -11,16 +11,30 @@ callback, never at import or registration.
 
 from __future__ import annotations
 
+import itertools
+import time
+
 import bpy
 import numpy as np
 
-from ..blender import compat
+from ..blender import compat, hooks
+from ..blender.modal import undo_key, view3d_at as _view_at
 from .. import shadow
-from ..core import words
+from ..core import schema, words
 
 _SESSIONS: dict = {}
 _OVERLAY: dict = {}
 _DRAW_HANDLE = [None]
+
+# Undo: a session lives in memory, not in the file, so each operator that changes it (start,
+# a confirmed drag, apply, stop) records the session's state under a new number and writes the
+# number on the scene (``STEP_KEY``) before its undo step is pushed; after undo or redo the
+# session is put back to the state the restored scene names (``sync_after_undo``).
+STEP_KEY = schema.SHADOW_SESSION_STEP_KEY
+_HISTORY: dict = {}  # number -> (session, committed drags, applied, configuration), or None: no session
+_HISTORY_KEPT = 512  # numbers kept (Blender keeps 32 undo steps by default)
+_STEP_IDS = itertools.count(int(time.time() * 1000) % (1 << 30) + 1)
+PICK_RADIUS = 30  # pixels: how near a handle a press must be to drag it
 
 ACTIVE = (1.0, 0.55, 0.0, 1.0)
 INACTIVE = (0.5, 0.5, 0.5, 1.0)
@@ -75,6 +89,53 @@ def _refresh(scene, eye=None):
             area.tag_redraw()
 
 
+def record(scene, sess=None) -> int:
+    """Marks ``scene``'s next undo step with the session's state now (``sess`` None: no session);
+    returns the number written on the scene."""
+    step = next(_STEP_IDS)
+    _HISTORY[step] = None if sess is None else (sess, list(sess.drags), sess.applied, sess.configuration)
+    while len(_HISTORY) > _HISTORY_KEPT:
+        _HISTORY.pop(next(iter(_HISTORY)))
+    scene[STEP_KEY] = step
+    return step
+
+
+def sync_after_undo(*_args) -> int:
+    """undo_post / redo_post: each scene's shadow-editing session becomes the one its restored
+    undo step names (its drags replayed), or ends where the step is from before the session.
+    Returns how many scenes changed."""
+    changed = 0
+    for sc in bpy.data.scenes:
+        entry = _HISTORY.get(int(sc.get(STEP_KEY, 0) or 0))
+        key, now = _key(sc), _SESSIONS.get(_key(sc))
+        if entry is not None and (entry[0].caster_object() is None or entry[0].light_object() is None):
+            entry = None  # its caster or light is gone in the restored scene
+        if entry is None:
+            if now is not None:
+                _SESSIONS.pop(key, None)
+                changed += 1
+                _refresh(sc)
+            continue
+        sess, drags, applied, configuration = entry
+        if sess.pending is not None:
+            sess.cancel()
+        if now is not sess or [id(d) for d in sess.drags] != [id(d) for d in drags]:
+            sess.drags[:] = drags
+            sess._replay(drags)
+            changed += 1
+        sess.applied, sess.configuration = applied, configuration
+        _SESSIONS[key] = sess
+        _refresh(sc)
+    return changed
+
+
+def _forget(*_args):
+    """load_post: another file's undo steps name none of these sessions."""
+    _HISTORY.clear()
+    _SESSIONS.clear()
+    _OVERLAY.clear()
+
+
 def _draw():
     geo = _OVERLAY.get(_key(bpy.context.scene))
     if not geo or len(geo["lines"]) == 0:
@@ -127,7 +188,7 @@ class ROKEBY_OT_shadow_start(bpy.types.Operator):
 
     bl_idname = "rokeby.shadow_start"
     bl_label = "Edit Shadow Boundaries"
-    bl_options = {"REGISTER"}
+    bl_options = {"REGISTER", "UNDO"}  # one undo step: Ctrl+Z ends the session it started
 
     light: bpy.props.StringProperty(name="Light", default="", description="Light object (default: the selected or only light)")
     min_loop_vertices: bpy.props.IntProperty(name="Shortest loop", default=20, min=3, description="Loops with fewer silhouette vertices are grey and not editable")
@@ -152,6 +213,7 @@ class ROKEBY_OT_shadow_start(bpy.types.Operator):
             self.report({"ERROR"}, f"Rokeby: {exc}")
             return {"CANCELLED"}
         _SESSIONS[_key(context.scene)] = sess
+        record(context.scene, sess)
         _ensure_overlay()
         _refresh(context.scene)
         n = len(sess.loops())
@@ -160,12 +222,13 @@ class ROKEBY_OT_shadow_start(bpy.types.Operator):
 
 
 class ROKEBY_OT_shadow_drag(bpy.types.Operator):
-    """Drag a shadow boundary: the nearest handle follows the cursor on the receivers, the segment
-    between the fixed ends deforms (release to keep, right-click or Esc to cancel)"""
+    """Drag a shadow boundary: press on a handle in the 3D view and drag, the segment between the
+    fixed ends deforms (release to keep; right-click, Esc or Ctrl+Z cancel). From the sidebar
+    button or a menu, the next press on a handle starts the drag"""
 
     bl_idname = "rokeby.shadow_drag"
     bl_label = "Drag Shadow Boundary"
-    bl_options = {"REGISTER"}
+    bl_options = {"REGISTER", "UNDO"}  # one undo step per confirmed drag (a cancelled drag pushes none)
 
     loop: bpy.props.IntProperty(name="Loop", default=0, min=0)
     fixed: bpy.props.IntVectorProperty(name="Fixed ends", size=2, default=(0, 0))
@@ -175,6 +238,12 @@ class ROKEBY_OT_shadow_drag(bpy.types.Operator):
     segment: bpy.props.FloatProperty(name="Segment", default=0.2, min=0.02, max=0.49, description="Fixed ends this fraction of the loop away on either side (interactive drags)")
     noise_amplitude: bpy.props.FloatProperty(name="Noise amplitude", default=0.0)
     noise_frequency: bpy.props.FloatProperty(name="Noise frequency", default=0.0)
+    apply_edit: bpy.props.BoolProperty(
+        name="Apply", default=False, options={"HIDDEN", "SKIP_SAVE"},
+        description="Also make the shadow mesh show the edit (what a drag in the view does; the redo panel repeats it)")
+    pass_through: bpy.props.BoolProperty(
+        name="Pass Other Presses On", default=False, options={"HIDDEN", "SKIP_SAVE"},
+        description="A press far from every handle goes on to the view (the shortcut: a click elsewhere still selects)")
 
     @classmethod
     def poll(cls, context):
@@ -196,18 +265,22 @@ class ROKEBY_OT_shadow_drag(bpy.types.Operator):
             self.report({"ERROR"}, f"Rokeby: {exc}")
             return {"CANCELLED"}
         sess.commit()
+        if self.apply_edit:
+            try:
+                shadow.apply(sess, scene=context.scene)
+            except shadow.ShadowEditError as exc:
+                self.report({"ERROR"}, f"Rokeby: {exc}")
+                return {"CANCELLED"}
+        record(context.scene, sess)
         _refresh(context.scene)
         return {"FINISHED"}
 
-    def invoke(self, context, event):
+    def _nearest(self, sess, view):
+        """(pixels, loop, handle) of the editable handle nearest the mouse in ``view``, or None."""
         from bpy_extras import view3d_utils  # noqa: PLC0415
 
-        sess = session(context.scene)
-        if sess is None or context.area is None or context.area.type != "VIEW_3D":
-            self.report({"ERROR"}, "Rokeby: start a shadow edit, then drag in a 3D view")
-            return {"CANCELLED"}
-        region, rv3d = context.region, context.region_data
-        mouse = np.array([event.mouse_region_x, event.mouse_region_y], float)
+        region, rv3d, co = view
+        mouse = np.array(co, float)
         best = None
         for k, lp in enumerate(sess.loops()):
             if not lp["active"]:
@@ -218,10 +291,36 @@ class ROKEBY_OT_shadow_drag(bpy.types.Operator):
                     d = np.hypot(*(np.array(s) - mouse))
                     if best is None or d < best[0]:
                         best = (d, k, i)
-        if best is None or best[0] > 30:
-            self.report({"WARNING"}, "Rokeby: no shadow handle near the cursor")
+        return best if best is not None and best[0] <= PICK_RADIUS else None
+
+    def _status(self, context, text):
+        ws = getattr(context, "workspace", None)
+        if ws is not None:
+            ws.status_text_set(text)
+
+    def invoke(self, context, event):
+        sess = session(context.scene)
+        if sess is None:
+            self.report({"ERROR"}, "Rokeby: start a shadow edit, then drag in a 3D view")
             return {"CANCELLED"}
-        _, self.loop, self.moved = best
+        view = _view_at(context, event)
+        picked = self._nearest(sess, view) if view is not None else None
+        if picked is None:
+            if self.pass_through:
+                return {"PASS_THROUGH"}  # the shortcut's press was not on a handle
+            if getattr(context.area, "type", None) != "VIEW_3D" and view is None:
+                self.report({"ERROR"}, "Rokeby: drag shadow handles in a 3D view")
+                return {"CANCELLED"}
+            # The button in the sidebar (or a menu): wait for a press on a handle in the view.
+            self._dragging = False
+            context.window_manager.modal_handler_add(self)
+            self._status(context, "Rokeby: press on a shadow handle in the 3D view and drag; Esc / right mouse: cancel")
+            return {"RUNNING_MODAL"}
+        return self._begin(context, sess, view, picked)
+
+    def _begin(self, context, sess, view, picked):
+        self._view = view[:2]
+        _, self.loop, self.moved = picked
         n = len(sess.loops()[self.loop]["points"])
         w = max(1, int(self.segment * n))
         self.fixed = ((self.moved - w) % n, (self.moved + w) % n)
@@ -245,16 +344,52 @@ class ROKEBY_OT_shadow_drag(bpy.types.Operator):
                               noise_amplitude=self.noise_amplitude)
         except ValueError as exc:
             self.report({"WARNING"}, f"Rokeby: {exc}")
-        context.window_manager.modal_handler_add(self)
+        if not getattr(self, "_waiting", False):
+            context.window_manager.modal_handler_add(self)
+        self._dragging = True
+        self._status(context, "Rokeby: drag the shadow boundary; release: keep; Esc / right mouse / Ctrl+Z: cancel")
         return {"RUNNING_MODAL"}
+
+    def _cancel(self, context, sess):
+        self._status(context, None)
+        if not getattr(self, "_dragging", False):
+            return {"CANCELLED"}
+        sess.cancel()
+        if self._live is not None:
+            shadow.live_end(self._live, keep=False, scene=context.scene)
+        _refresh(context.scene)
+        return {"CANCELLED"}
 
     def modal(self, context, event):
         from bpy_extras import view3d_utils  # noqa: PLC0415
 
         sess = session(context.scene)
+        if sess is None:
+            self._status(context, None)
+            return {"CANCELLED"}
+        if event.type in {"RIGHTMOUSE", "ESC"} or undo_key(event, context):
+            return self._cancel(context, sess)  # Ctrl+Z takes back this drag, never a step before it
+        if not getattr(self, "_dragging", True):  # waiting for the press on a handle
+            if event.type == "LEFTMOUSE" and event.value == "PRESS":
+                view = _view_at(context, event)
+                picked = self._nearest(sess, view) if view is not None else None
+                if picked is None:
+                    if view is None:
+                        return {"PASS_THROUGH"}  # a click elsewhere (the sidebar, a header) works as usual
+                    self.report({"WARNING"}, "Rokeby: no shadow handle near the cursor: press on an orange handle")
+                    return {"RUNNING_MODAL"}
+                self._waiting = True
+                return self._begin(context, sess, view, picked)
+            return {"PASS_THROUGH"}  # hovering, zooming, orbiting: the view works while waiting
         if event.type == "MOUSEMOVE":
-            region, rv3d = context.region, context.region_data
-            co = (event.mouse_region_x, event.mouse_region_y)
+            region, rv3d = self._view
+            view = _view_at(context, event)
+            if view is not None and view[0] == region:
+                co = view[2]
+            elif hasattr(event, "mouse_x") and hasattr(region, "x"):
+                co = (event.mouse_x - region.x, event.mouse_y - region.y)
+            else:
+                co = (event.mouse_region_x, event.mouse_region_y)
             o = view3d_utils.region_2d_to_origin_3d(region, rv3d, co)
             d = view3d_utils.region_2d_to_vector_3d(region, rv3d, co)
             hit, loc, *_ = context.scene.ray_cast(context.evaluated_depsgraph_get(), o, d)
@@ -269,17 +404,14 @@ class ROKEBY_OT_shadow_drag(bpy.types.Operator):
                 _refresh(context.scene, _view_eye(rv3d))
             return {"RUNNING_MODAL"}
         if event.type == "LEFTMOUSE" and event.value == "RELEASE":
+            self._status(context, None)
             sess.commit()
             if self._live is not None:
                 shadow.live_end(self._live, keep=True, scene=context.scene)
+                self.apply_edit = True  # the redo panel's repeat applies it as this drag did
+            record(context.scene, sess)
             _refresh(context.scene)
             return {"FINISHED"}
-        if event.type in {"RIGHTMOUSE", "ESC"}:
-            sess.cancel()
-            if self._live is not None:
-                shadow.live_end(self._live, keep=False, scene=context.scene)
-            _refresh(context.scene)
-            return {"CANCELLED"}
         return {"RUNNING_MODAL"}
 
 
@@ -310,6 +442,7 @@ class ROKEBY_OT_shadow_apply(bpy.types.Operator):
         except shadow.ShadowEditError as exc:
             self.report({"ERROR"}, f"Rokeby: {exc}")
             return {"CANCELLED"}
+        record(context.scene, sess)
         self.report({"INFO"}, f"Rokeby: shadow mesh '{ob.name}', edited shadows lit by '{twin.name}'")
         return {"FINISHED"}
 
@@ -319,6 +452,7 @@ class ROKEBY_OT_shadow_stop(bpy.types.Operator):
 
     bl_idname = "rokeby.shadow_stop"
     bl_label = "Stop Shadow Editing"
+    bl_options = {"REGISTER", "UNDO"}  # Ctrl+Z brings the session back
 
     @classmethod
     def poll(cls, context):
@@ -326,6 +460,7 @@ class ROKEBY_OT_shadow_stop(bpy.types.Operator):
 
     def execute(self, context):
         _SESSIONS.pop(_key(context.scene), None)
+        record(context.scene, None)
         _refresh(context.scene)
         return {"FINISHED"}
 
@@ -385,12 +520,37 @@ CLASSES = (ROKEBY_OT_shadow_start, ROKEBY_OT_shadow_drag, ROKEBY_OT_shadow_apply
            ROKEBY_PT_shadow)
 
 
+OWNER = "shadow.ui"
+# The shortcut: a press on a shadow handle in the 3D view drags it (a press elsewhere passes on).
+KEYMAP = (("rokeby.shadow_drag", "LEFTMOUSE", "PRESS", {}, {"pass_through": True}),)
+_keymaps = []
+
+
 def register():
     for c in CLASSES:
         bpy.utils.register_class(c)
+    hooks.add(OWNER, "undo_post", sync_after_undo)
+    hooks.add(OWNER, "redo_post", sync_after_undo)
+    hooks.add(OWNER, "load_post", _forget)
+    kc = bpy.context.window_manager.keyconfigs.addon if bpy.context.window_manager else None
+    if kc is not None:
+        km = kc.keymaps.new(name="3D View", space_type="VIEW_3D")
+        for idname, key, value, mods, props in KEYMAP:
+            kmi = km.keymap_items.new(idname, key, value, **mods)
+            for name, v in props.items():
+                setattr(kmi.properties, name, v)
+            _keymaps.append((km, kmi))
 
 
 def unregister():
+    for km, kmi in _keymaps:
+        try:
+            km.keymap_items.remove(kmi)
+        except (ReferenceError, RuntimeError):
+            pass
+    _keymaps.clear()
+    hooks.remove(OWNER)
+    _HISTORY.clear()
     if _DRAW_HANDLE[0] is not None:
         bpy.types.SpaceView3D.draw_handler_remove(_DRAW_HANDLE[0], "WINDOW")
         _DRAW_HANDLE[0] = None
