@@ -6,7 +6,7 @@
 mod common;
 use common::Input;
 use libfuzzer_sys::fuzz_target;
-use rokeby_core::bvh::Bvh;
+use rokeby_core::geometry::bvh::Bvh;
 
 fuzz_target!(|data: &[u8]| {
     let mut inp = Input::new(data);
@@ -54,7 +54,7 @@ fuzz_target!(|data: &[u8]| {
         let tame = tris.iter().flatten().all(|p| p.abs().max_element() <= 4.0 * scale) && origin.abs().max_element() <= 4.0 * scale && dir.abs().max_element() <= 2.0;
         // A hit on a triangle's boundary (u, v or 1 − u − v within 1e-9) is decided by rounding
         // in either test, and the box test may round the other way: not asserted either.
-        let on_edge = |h: &rokeby_core::bvh::Hit| h.u.min(h.v).min(1.0 - h.u - h.v) < 1e-9;
+        let on_edge = |h: &rokeby_core::geometry::bvh::Hit| h.u.min(h.v).min(1.0 - h.u - h.v) < 1e-9;
         match (a, b) {
             _ if !tame => {}
             (None, Some(h)) | (Some(h), None) if on_edge(&h) => {}

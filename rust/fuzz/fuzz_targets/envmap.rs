@@ -7,7 +7,7 @@
 mod common;
 use common::Input;
 use libfuzzer_sys::fuzz_target;
-use rokeby_core::envmap::{cube_dir, cube_face_st, finite_dirs, latlong_dir, latlong_texel_solid_angle, latlong_uv, paraboloid_dir, paraboloid_uv, sphere_dir, sphere_st, EnvMap, Layout};
+use rokeby_core::envmaps::envmap::{cube_dir, cube_face_st, finite_dirs, latlong_dir, latlong_texel_solid_angle, latlong_uv, paraboloid_dir, paraboloid_uv, sphere_dir, sphere_st, EnvMap, Layout};
 
 const LAYOUTS: [Layout; 4] = [Layout::LatLong, Layout::Cube, Layout::Sphere, Layout::Paraboloid];
 

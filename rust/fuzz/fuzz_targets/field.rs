@@ -3,9 +3,9 @@
 //! non-finite output from finite accepted input, are bugs.
 #![no_main]
 use libfuzzer_sys::fuzz_target;
-use rokeby_core::field::{Distances, Field, FieldOutput};
-use rokeby_core::polar::PolarMethod;
-use rokeby_core::region::Region;
+use rokeby_core::reflection::field::{Distances, Field, FieldOutput};
+use rokeby_core::reflection::polar::PolarMethod;
+use rokeby_core::reflection::region::Region;
 
 fn floats(data: &[u8]) -> Vec<f32> {
     data.chunks_exact(4).map(|c| f32::from_le_bytes([c[0], c[1], c[2], c[3]])).collect()

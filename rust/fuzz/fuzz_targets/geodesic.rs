@@ -2,7 +2,7 @@
 //! (degenerate, non-manifold, NaN vertices, out-of-range faces): errors, never panics.
 #![no_main]
 use libfuzzer_sys::fuzz_target;
-use rokeby_core::geodesic::{interpolate, GeodesicSolver, Mesh, Method, Source, SurfacePoint};
+use rokeby_core::geometry::geodesic::{interpolate, GeodesicSolver, Mesh, Method, Source, SurfacePoint};
 
 fuzz_target!(|data: &[u8]| {
     if data.len() < 8 {

@@ -7,7 +7,7 @@ mod common;
 use common::Input;
 use glam::DVec2;
 use libfuzzer_sys::fuzz_target;
-use rokeby_core::mls2d::{sinusoidal_noise, Mls2d, MlsStyle};
+use rokeby_core::shadows::mls2d::{sinusoidal_noise, Mls2d, MlsStyle};
 
 fuzz_target!(|data: &[u8]| {
     let mut inp = Input::new(data);

@@ -3,7 +3,7 @@
 #![no_main]
 use glam::{DMat3, DQuat};
 use libfuzzer_sys::fuzz_target;
-use rokeby_core::polar::{ortho, rotation_vector, PolarMethod};
+use rokeby_core::reflection::polar::{ortho, rotation_vector, PolarMethod};
 
 fuzz_target!(|data: &[u8]| {
     if data.len() < 72 {

@@ -7,8 +7,8 @@
 mod common;
 use common::Input;
 use libfuzzer_sys::fuzz_target;
-use rokeby_core::envmap::{EnvMap, Layout};
-use rokeby_core::prefilter::{brute_force, brute_force_irradiance, irradiance_map, prefilter, sh_irradiance, sh_project, Lobe, PrefilterParams};
+use rokeby_core::envmaps::envmap::{EnvMap, Layout};
+use rokeby_core::envmaps::prefilter::{brute_force, brute_force_irradiance, irradiance_map, prefilter, sh_irradiance, sh_project, Lobe, PrefilterParams};
 
 fuzz_target!(|data: &[u8]| {
     let mut inp = Input::new(data);

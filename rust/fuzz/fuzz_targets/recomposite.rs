@@ -5,9 +5,9 @@
 mod common;
 use common::Input;
 use libfuzzer_sys::fuzz_target;
-use rokeby_core::recomposite::{eval_diffuse, recomposite, Buffers, Params, Patch};
-use rokeby_core::reconstruct::ParaboloidMap;
-use rokeby_core::sh::SH_COEFFS;
+use rokeby_core::compositing::recomposite::{eval_diffuse, recomposite, Buffers, Params, Patch};
+use rokeby_core::compositing::reconstruct::ParaboloidMap;
+use rokeby_core::compositing::sh::SH_COEFFS;
 
 fuzz_target!(|data: &[u8]| {
     let mut inp = Input::new(data);

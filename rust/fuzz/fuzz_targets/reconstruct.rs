@@ -7,7 +7,7 @@ mod common;
 use common::Input;
 use glam::DVec3;
 use libfuzzer_sys::fuzz_target;
-use rokeby_core::reconstruct::{dir_to_uv, fill_beyond_equator, fill_holes, partial, reconstruct, reflect_dirs, regularize, uv_to_dir, ParaboloidMap, ReflectionParams};
+use rokeby_core::compositing::reconstruct::{dir_to_uv, fill_beyond_equator, fill_holes, partial, reconstruct, reflect_dirs, regularize, uv_to_dir, ParaboloidMap, ReflectionParams};
 
 fuzz_target!(|data: &[u8]| {
     let mut inp = Input::new(data);

@@ -3,7 +3,7 @@
 #![no_main]
 use glam::DVec3;
 use libfuzzer_sys::fuzz_target;
-use rokeby_core::region::{falloff, freeform_weights, geodesic_weights, Region};
+use rokeby_core::reflection::region::{falloff, freeform_weights, geodesic_weights, Region};
 
 fuzz_target!(|data: &[u8]| {
     let f: Vec<f32> = data.chunks_exact(4).map(|c| f32::from_le_bytes([c[0], c[1], c[2], c[3]])).collect();

@@ -4,7 +4,7 @@
 //! and each channel within ½ mantissa unit of its pixel's largest.
 #![no_main]
 use libfuzzer_sys::fuzz_target;
-use rokeby_core::rgbe::{decode, encode};
+use rokeby_core::envmaps::rgbe::{decode, encode};
 
 fuzz_target!(|data: &[u8]| {
     let w = 1 + data.first().copied().unwrap_or(0) as usize % 40;

@@ -6,7 +6,7 @@
 mod common;
 use common::Input;
 use libfuzzer_sys::fuzz_target;
-use rokeby_core::sh::{basis, eval, fit, Fit, SH_COEFFS};
+use rokeby_core::compositing::sh::{basis, eval, fit, Fit, SH_COEFFS};
 
 fuzz_target!(|data: &[u8]| {
     let mut inp = Input::new(data);

@@ -8,9 +8,9 @@ mod common;
 use common::{uv_sphere, Input};
 use glam::DVec3;
 use libfuzzer_sys::fuzz_target;
-use rokeby_core::mls2d::MlsStyle;
-use rokeby_core::shadow::{Drag, ShadowEditor};
-use rokeby_core::silhouette::{ClosedMesh, Light};
+use rokeby_core::shadows::mls2d::MlsStyle;
+use rokeby_core::shadows::shadow::{Drag, ShadowEditor};
+use rokeby_core::shadows::silhouette::{ClosedMesh, Light};
 
 fuzz_target!(|data: &[u8]| {
     let mut inp = Input::new(data);

@@ -7,9 +7,9 @@ mod common;
 use common::{octahedron, uv_sphere, Input};
 use glam::DVec2;
 use libfuzzer_sys::fuzz_target;
-use rokeby_core::light_space::LightFrame;
-use rokeby_core::shadow_mesh::{cotangent_weights, falloff, EdgePoint, ShadowMeshSolver};
-use rokeby_core::silhouette::{ClosedMesh, Light};
+use rokeby_core::shadows::light_space::LightFrame;
+use rokeby_core::shadows::shadow_mesh::{cotangent_weights, falloff, EdgePoint, ShadowMeshSolver};
+use rokeby_core::shadows::silhouette::{ClosedMesh, Light};
 
 fuzz_target!(|data: &[u8]| {
     let mut inp = Input::new(data);

@@ -8,7 +8,7 @@ mod common;
 use common::{octahedron, uv_sphere, Input};
 use glam::DVec3;
 use libfuzzer_sys::fuzz_target;
-use rokeby_core::silhouette::{silhouette_alpha, silhouettes, ClosedMesh, Light};
+use rokeby_core::shadows::silhouette::{silhouette_alpha, silhouettes, ClosedMesh, Light};
 
 fuzz_target!(|data: &[u8]| {
     let mut inp = Input::new(data);

@@ -6,13 +6,13 @@
 //! `cargo run --release -p rokeby-core --example dijkstra_lucy [-- --runs N] [-- --once]`
 //! (`--once`: one query after the precompute, for `valgrind --tool=callgrind` or `perf stat`).
 
-use rokeby_core::geodesic::{GeodesicSolver, Mesh, Method, Source};
+use rokeby_core::geometry::geodesic::{GeodesicSolver, Mesh, Method, Source};
 use std::path::PathBuf;
 use std::time::Instant;
 
 fn load_obj(path: &PathBuf) -> (Vec<f32>, Vec<i64>) {
     let text = std::fs::read_to_string(path).unwrap_or_else(|e| panic!("{path:?}: {e}"));
-    rokeby_core::mesh::parse_obj(&text).unwrap_or_else(|e| panic!("{path:?}: {e}"))
+    rokeby_core::geometry::mesh::parse_obj(&text).unwrap_or_else(|e| panic!("{path:?}: {e}"))
 }
 
 /// One level of midpoint subdivision with the vertex and face order of `rokeby.meshio`'s

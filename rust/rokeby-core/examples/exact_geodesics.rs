@@ -7,7 +7,7 @@
 //! `cargo run --release -p rokeby-core --example exact_geodesics [-- --runs N] [-- --once]
 //! [-- --dump DIR] [-- MESH.obj ...]` (`--once`: one pass, for `valgrind --tool=callgrind`).
 
-use rokeby_core::geodesic::{GeodesicSolver, Mesh, Method, Source};
+use rokeby_core::geometry::geodesic::{GeodesicSolver, Mesh, Method, Source};
 use std::path::PathBuf;
 use std::time::Instant;
 
@@ -44,8 +44,8 @@ fn main() {
     for name in names {
         let path = root.join("meshes").join(&name);
         let text = std::fs::read_to_string(&path).unwrap_or_else(|e| panic!("{path:?}: {e}"));
-        let (v, f) =
-            rokeby_core::mesh::parse_obj(&text).unwrap_or_else(|e| panic!("{path:?}: {e}"));
+        let (v, f) = rokeby_core::geometry::mesh::parse_obj(&text)
+            .unwrap_or_else(|e| panic!("{path:?}: {e}"));
         let nf = f.len() / 3;
         let sources: Vec<usize> = [1, 2, 3].map(|k| f[3 * (nf * k / 4)] as usize).to_vec();
         let solver = GeodesicSolver::new(Mesh::new(&v, &f).unwrap());

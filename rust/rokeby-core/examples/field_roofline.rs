@@ -8,10 +8,10 @@
 //! image (for instruction counts); `--exact`: the exact polar method.
 
 use glam::{DQuat, DVec3};
-use rokeby_core::field::{
+use rokeby_core::reflection::field::{
     fallback_lanes, scalar_fallback_lanes, Distances, Field, FieldOutput, Kernel,
 };
-use rokeby_core::polar::PolarMethod;
+use rokeby_core::reflection::polar::PolarMethod;
 use std::time::Instant;
 
 /// A curved mirror z = 0.3 (x² + y²) over [−1, 1]², sampled w × h, seen from `EYE`.

@@ -9,13 +9,13 @@
 //! two such runs divided by the difference of their N (every thread counted, the precomputation
 //! cancelled out).
 
-use rokeby_core::geodesic::{GeodesicSolver, Mesh, Method, Source};
+use rokeby_core::geometry::geodesic::{GeodesicSolver, Mesh, Method, Source};
 use std::path::PathBuf;
 use std::time::Instant;
 
 fn load_obj(path: &PathBuf) -> (Vec<f32>, Vec<i64>) {
     let text = std::fs::read_to_string(path).unwrap_or_else(|e| panic!("{path:?}: {e}"));
-    rokeby_core::mesh::parse_obj(&text).unwrap_or_else(|e| panic!("{path:?}: {e}"))
+    rokeby_core::geometry::mesh::parse_obj(&text).unwrap_or_else(|e| panic!("{path:?}: {e}"))
 }
 
 /// One query (a function of its own, so that callgrind can collect it alone).

@@ -7,8 +7,8 @@
 //! the process's CPU time per edit (all threads; /proc, 10 ms ticks).
 //! `EDITS = 0`: the set-up only (subtract its count from a run with edits under callgrind).
 
-use rokeby_core::recomposite::{Buffers, Patch, Recompositor};
-use rokeby_core::reconstruct::ParaboloidMap;
+use rokeby_core::compositing::recomposite::{Buffers, Patch, Recompositor};
+use rokeby_core::compositing::reconstruct::ParaboloidMap;
 use std::time::Instant;
 
 const TRUE_SH: [[f64; 9]; 3] = [
@@ -105,7 +105,15 @@ fn main() {
         reflection_color: &r0,
     };
     let t = Instant::now();
-    let rc = Recompositor::new(w, h, &b, pts, gamma, rokeby_core::recomposite::EPSILON).unwrap();
+    let rc = Recompositor::new(
+        w,
+        h,
+        &b,
+        pts,
+        gamma,
+        rokeby_core::compositing::recomposite::EPSILON,
+    )
+    .unwrap();
     let setup = t.elapsed().as_secs_f64() * 1e3;
     let mut out = vec![0.0f32; 3 * n];
     let win = rc.full();

@@ -1,24 +1,24 @@
 //! rokeby-core: the numerics of Rokeby, free of Python.
 //!
-//! * [`polar`]  — the rotational factor of the polar decomposition (`ortho` of Ritschel et al. 2009,
+//! * [`reflection::polar`]  — the rotational factor of the polar decomposition (`ortho` of Ritschel et al. 2009,
 //!   eq. 5), exact (Jacobi SVD, f64) and fast (warm-started iteration with an exactness check).
-//! * [`region`] — regions of interest a(q) with smooth-step borders (paper §4 "Regions", eq. 7).
-//! * [`field`]  — the Moving Least Squares rotation field R(q) = ortho(Σ wₙ eₙ rₙᵀ), wₙ = 1/d²
+//! * [`reflection::region`] — regions of interest a(q) with smooth-step borders (paper §4 "Regions", eq. 7).
+//! * [`reflection::field`]  — the Moving Least Squares rotation field R(q) = ortho(Σ wₙ eₙ rₙᵀ), wₙ = 1/d²
 //!   (eqs. 2–7), evaluated per point (mesh vertices) or per pixel (a G-buffer), in parallel.
-//! * [`sh`], [`reconstruct`], [`recomposite`] — local shape editing at the compositing stage
+//! * [`compositing::sh`], [`compositing::reconstruct`], [`compositing::recomposite`] — local shape editing at the compositing stage
 //!   (Zubiaga et al. 2016): SH diffuse environments (eq. 1, LS and the QP), dual-paraboloid
 //!   reflection environments (eq. 2, hole filling, regularisation) and recompositing (eqs. 3–5).
-//! * [`envmap`], [`prefilter`] — environment maps (lat-long, cube, sphere, dual-paraboloid; exact
+//! * [`envmaps::envmap`], [`envmaps::prefilter`] — environment maps (lat-long, cube, sphere, dual-paraboloid; exact
 //!   direction formulas, seam-correct bilinear lookups, conversions) and their prefiltering under
 //!   environment light (Fraser): order-2 SH irradiance, Phong/GGX/Torrance–Sparrow lobes;
-//!   [`rgbe`] reads and writes Radiance `.hdr` files.
+//!   [`envmaps::rgbe`] reads and writes Radiance `.hdr` files.
 //! * [`exr_io`] — OpenEXR files (Blender's multilayer renders, recomposited frames, environment
 //!   maps) in pure Rust, so no second OpenEXR library enters Blender's process.
-//! * [`silhouette`], [`bvh`], [`light_space`], [`mls2d`], [`shadow_mesh`], [`shadow`] — freeform
+//! * [`shadows::silhouette`], [`geometry::bvh`], [`shadows::light_space`], [`shadows::mls2d`], [`shadows::shadow_mesh`], [`shadows::shadow`] — freeform
 //!   shadow boundary editing (Mattausch, Igarashi, Wimmer): smooth silhouettes from the light,
 //!   shadow handles by ray casting, 2D MLS boundary deformation, the Laplacian shadow mesh.
 
-// Grouped by feature (one folder each); the flat paths (`rokeby_core::geodesic`, ...) stay.
+// One folder per area; every module is named through its area (`rokeby_core::geometry::geodesic`).
 pub mod alloc;
 pub mod cancel;
 pub mod compositing;
@@ -29,12 +29,5 @@ pub mod geometry;
 pub mod numerical;
 pub mod reflection;
 pub mod shadows;
-
-pub use compositing::{normals, recomposite, reconstruct, sh};
-pub use envmaps::{envmap, prefilter, rgbe};
-pub(crate) use geometry::radix_heap;
-pub use geometry::{bvh, exact, geodesic, intrinsic, laplacian, mesh, svg, unfold};
-pub use reflection::{field, polar, region};
-pub use shadows::{light_space, mls2d, shadow, shadow_mesh, silhouette};
 
 pub use error::{Result, RokebyError};

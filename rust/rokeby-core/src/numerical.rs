@@ -1,7 +1,7 @@
 //! Linear algebra, one home: sparse assembly, the sparse Cholesky (LLᵀ) and LU factorisations of
-//! faer used by the geodesic heat method ([`crate::geodesic`], Crane et al. 2013), the shadow mesh
-//! ([`crate::shadow_mesh`], Sorkine 2006) and the hole filling ([`crate::reconstruct`]), and the
-//! small fixed-size dense Cholesky of the SH fits ([`crate::sh`]), together with the classification
+//! faer used by the geodesic heat method ([`crate::geometry::geodesic`], Crane et al. 2013), the shadow mesh
+//! ([`crate::shadows::shadow_mesh`], Sorkine 2006) and the hole filling ([`crate::compositing::reconstruct`]), and the
+//! small fixed-size dense Cholesky of the SH fits ([`crate::compositing::sh`]), together with the classification
 //! of their failures:
 //!
 //! | failure                                        | error                                   |

@@ -4,9 +4,11 @@
 
 use glam::DVec3;
 use proptest::prelude::*;
-use rokeby_core::recomposite::{self, Buffers, Params, Patch};
-use rokeby_core::reconstruct::{self, dir_to_uv, uv_to_dir, ParaboloidMap, ReflectionParams};
-use rokeby_core::sh::{self, Fit, SH_COEFFS};
+use rokeby_core::compositing::recomposite::{self, Buffers, Params, Patch};
+use rokeby_core::compositing::reconstruct::{
+    self, dir_to_uv, uv_to_dir, ParaboloidMap, ReflectionParams,
+};
+use rokeby_core::compositing::sh::{self, Fit, SH_COEFFS};
 
 fn fib_sphere(n: usize) -> Vec<[f64; 3]> {
     let g = std::f64::consts::PI * (3.0 - 5f64.sqrt());

@@ -3,7 +3,7 @@
 
 use glam::DVec3;
 use proptest::prelude::*;
-use rokeby_core::envmap::{self, EnvMap, Layout};
+use rokeby_core::envmaps::envmap::{self, EnvMap, Layout};
 
 const LAYOUTS: [Layout; 4] = [
     Layout::LatLong,

@@ -3,9 +3,9 @@
 //! and fallbacks (points on constraints, unreachable points, region borders) included.
 
 use glam::{DQuat, DVec3};
-use rokeby_core::field::{Distances, Field, FieldOutput, Kernel};
-use rokeby_core::polar::PolarMethod;
-use rokeby_core::region::Region;
+use rokeby_core::reflection::field::{Distances, Field, FieldOutput, Kernel};
+use rokeby_core::reflection::polar::PolarMethod;
+use rokeby_core::reflection::region::Region;
 
 const TOL: f64 = 1e-5;
 const EYE: [f64; 3] = [0.25, -2.5, 3.0]; // exact in f32 (a point can sit on it)
@@ -225,7 +225,7 @@ fn per_point_lanes_match_the_f64_reference_in_every_output_form() {
                         output,
                     )
                     .unwrap();
-                let w = rokeby_core::field::output_width(output);
+                let w = rokeby_core::reflection::field::output_width(output);
                 for (i, (a, b)) in got.chunks_exact(w).zip(want.chunks_exact(w)).enumerate() {
                     let (err, what) = match output {
                         FieldOutput::RotationVector => (
@@ -395,7 +395,7 @@ fn exact_polar_lanes_match_the_scalar_svd() {
                         .unwrap()
                 };
                 let (got, want) = (field(kern), field(Kernel::Scalar));
-                let wd = rokeby_core::field::output_width(output);
+                let wd = rokeby_core::reflection::field::output_width(output);
                 for (i, (a, b)) in got.chunks_exact(wd).zip(want.chunks_exact(wd)).enumerate() {
                     let (err, tol) = match output {
                         FieldOutput::RotationVector => {

@@ -5,9 +5,9 @@
 use glam::{DMat3, DQuat, DVec3};
 use proptest::prelude::*;
 use proptest::test_runner::RngSeed;
-use rokeby_core::field::{Distances, Field};
-use rokeby_core::polar::PolarMethod;
-use rokeby_core::region::Region;
+use rokeby_core::reflection::field::{Distances, Field};
+use rokeby_core::reflection::polar::PolarMethod;
+use rokeby_core::reflection::region::Region;
 
 fn quats(out: &[f32]) -> Vec<DQuat> {
     out.chunks_exact(4)
@@ -354,7 +354,8 @@ fn per_pixel_matches_per_point() {
                 pos[3 * i + 2] as f64,
             );
             let n = DVec3::new(0.0, 0.1, 1.0);
-            let r = rokeby_core::field::reflect_dir(q, n, DVec3::from_array(eye)).unwrap();
+            let r =
+                rokeby_core::reflection::field::reflect_dir(q, n, DVec3::from_array(eye)).unwrap();
             let e = DVec3::new(
                 dirs[3 * i] as f64,
                 dirs[3 * i + 1] as f64,
@@ -422,8 +423,8 @@ proptest! {
         let s = rot.inverse() * r;
         prop_assume!(a + (1.0 - a) * r.dot(s) > 0.05);
         let m = DMat3::from_quat(rot) * a + DMat3::from_cols(r * r.x, r * r.y, r * r.z) * (1.0 - a);
-        let want = rokeby_core::polar::ortho_svd(&m) * r;
-        let got = rokeby_core::field::view_blend(rot, a, r);
+        let want = rokeby_core::reflection::polar::ortho_svd(&m) * r;
+        let got = rokeby_core::reflection::field::view_blend(rot, a, r);
         prop_assert!((got.length() - 1.0).abs() < 1e-9);
         prop_assert!(dir_angle(got, want) < 1e-6, "{} rad", dir_angle(got, want));
     }
@@ -439,13 +440,13 @@ proptest! {
         let pts: Vec<f32> = qs.iter().flat_map(|(p, _)| [p.x as f32, p.y as f32, p.z as f32]).collect();
         let nrm: Vec<f32> = qs.iter().flat_map(|(_, n)| [n.x as f32, n.y as f32, n.z as f32]).collect();
         let want = f.edited_directions(&pts, &nrm, eye.to_array(), Distances::Euclidean, PolarMethod::Svd, 8).unwrap();
-        let parts = f.rotation_field_as(&pts, Distances::Euclidean, None, PolarMethod::Svd, rokeby_core::field::FieldOutput::ViewBlend).unwrap();
+        let parts = f.rotation_field_as(&pts, Distances::Euclidean, None, PolarMethod::Svd, rokeby_core::reflection::field::FieldOutput::ViewBlend).unwrap();
         let r: Vec<f32> = qs.iter().flat_map(|(p, n)| {
-            let d = rokeby_core::field::reflect_dir(*p, *n, eye).unwrap();
+            let d = rokeby_core::reflection::field::reflect_dir(*p, *n, eye).unwrap();
             [d.x as f32, d.y as f32, d.z as f32]
         }).collect();
-        let got = rokeby_core::field::view_blend_directions(&parts, &r, false).unwrap();
-        let by_ramp = rokeby_core::field::view_blend_directions(&parts, &r, true).unwrap();
+        let got = rokeby_core::reflection::field::view_blend_directions(&parts, &r, false).unwrap();
+        let by_ramp = rokeby_core::reflection::field::view_blend_directions(&parts, &r, true).unwrap();
         prop_assert!(got.iter().zip(&by_ramp).all(|(a, b)| (a - b).abs() < 1e-5), "smooth_step(u) is a for one Euclidean region");
         for i in 0..qs.len() {
             let p = &parts[6 * i..6 * i + 6];
@@ -464,11 +465,23 @@ proptest! {
 fn view_blend_ends_and_bad_input() {
     let rot = DQuat::from_axis_angle(DVec3::X, 1.0);
     let r = DVec3::new(0.0, 0.6, 0.8);
-    assert!(dir_angle(rokeby_core::field::view_blend(rot, 1.0, r), rot * r) < 1e-12);
-    assert!(dir_angle(rokeby_core::field::view_blend(rot, 0.0, r), r) < 1e-12);
-    assert!(dir_angle(rokeby_core::field::view_blend(DQuat::IDENTITY, 0.5, r), r) < 1e-12);
-    assert!(rokeby_core::field::view_blend_directions(&[0.0; 6], &[0.0; 6], false).is_err());
-    assert!(rokeby_core::field::view_blend_directions(
+    assert!(
+        dir_angle(
+            rokeby_core::reflection::field::view_blend(rot, 1.0, r),
+            rot * r
+        ) < 1e-12
+    );
+    assert!(dir_angle(rokeby_core::reflection::field::view_blend(rot, 0.0, r), r) < 1e-12);
+    assert!(
+        dir_angle(
+            rokeby_core::reflection::field::view_blend(DQuat::IDENTITY, 0.5, r),
+            r
+        ) < 1e-12
+    );
+    assert!(
+        rokeby_core::reflection::field::view_blend_directions(&[0.0; 6], &[0.0; 6], false).is_err()
+    );
+    assert!(rokeby_core::reflection::field::view_blend_directions(
         &[0.0, 0.0, 0.0, 1.0, f32::NAN, 0.0],
         &[0.0, 0.0, 1.0],
         false
@@ -486,9 +499,9 @@ proptest! {
         let region = Region::euclidean([0.1, -0.2, 0.0], 0.9, 0.6, "regions[0]").unwrap();
         let f = Field::new(&rows(&cs), vec![region]).unwrap();
         let pts: Vec<f32> = qs.iter().flat_map(|p| [p.x as f32, p.y as f32, p.z as f32]).collect();
-        let parts = f.rotation_field_as(&pts, Distances::Euclidean, None, PolarMethod::Svd, rokeby_core::field::FieldOutput::ViewBlend).unwrap();
-        let want = f.rotation_field_as(&pts, Distances::Euclidean, None, PolarMethod::Svd, rokeby_core::field::FieldOutput::RotationVector).unwrap();
-        let got = rokeby_core::field::view_blend_rotation_vectors(&parts).unwrap();
+        let parts = f.rotation_field_as(&pts, Distances::Euclidean, None, PolarMethod::Svd, rokeby_core::reflection::field::FieldOutput::ViewBlend).unwrap();
+        let want = f.rotation_field_as(&pts, Distances::Euclidean, None, PolarMethod::Svd, rokeby_core::reflection::field::FieldOutput::RotationVector).unwrap();
+        let got = rokeby_core::reflection::field::view_blend_rotation_vectors(&parts).unwrap();
         for (g, w) in got.chunks_exact(3).zip(want.chunks_exact(3)) {
             let (g, w) = (DVec3::new(g[0] as f64, g[1] as f64, g[2] as f64), DVec3::new(w[0] as f64, w[1] as f64, w[2] as f64));
             let (qg, qw) = (DQuat::from_scaled_axis(g), DQuat::from_scaled_axis(w));
@@ -499,7 +512,7 @@ proptest! {
 
 #[test]
 fn view_blend_render_rows_keep_each_polygon_in_one_hemisphere() {
-    use rokeby_core::field::view_blend_render_rows as rows_of;
+    use rokeby_core::reflection::field::view_blend_render_rows as rows_of;
     let q = DQuat::from_axis_angle(DVec3::Z, 3.0);
     let parts: Vec<f32> = [q, -DQuat::from_axis_angle(DVec3::Z, 3.1)]
         .iter()
@@ -542,5 +555,5 @@ fn view_blend_render_rows_keep_each_polygon_in_one_hemisphere() {
     assert!(rows_of(&parts, &[0, 2], &[0, 0], false).is_err());
     assert!(rows_of(&parts, &[0, -1], &[0, 0], false).is_err());
     assert!(rows_of(&parts, &[0], &[0, 0], false).is_err());
-    assert!(rokeby_core::field::view_blend_rotation_vectors(&parts[..5]).is_err());
+    assert!(rokeby_core::reflection::field::view_blend_rotation_vectors(&parts[..5]).is_err());
 }

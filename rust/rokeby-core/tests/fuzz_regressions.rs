@@ -1,13 +1,13 @@
 //! Inputs the cargo-fuzz targets of rust/fuzz found (issue 9): each test reproduces one and checks
 //! the fix.
 use glam::{DVec2, DVec3};
-use rokeby_core::bvh::Bvh;
-use rokeby_core::light_space::LightFrame;
-use rokeby_core::mls2d::sinusoidal_noise;
-use rokeby_core::prefilter::Lobe;
-use rokeby_core::recomposite::{recomposite, Buffers, Params, Patch};
-use rokeby_core::reconstruct::ParaboloidMap;
-use rokeby_core::silhouette::Light;
+use rokeby_core::compositing::recomposite::{recomposite, Buffers, Params, Patch};
+use rokeby_core::compositing::reconstruct::ParaboloidMap;
+use rokeby_core::envmaps::prefilter::Lobe;
+use rokeby_core::geometry::bvh::Bvh;
+use rokeby_core::shadows::light_space::LightFrame;
+use rokeby_core::shadows::mls2d::sinusoidal_noise;
+use rokeby_core::shadows::silhouette::Light;
 
 /// Fuzzer (bvh): NaN t_min/t_max returned a hit at t < 0 (`tt <= NaN` is false).
 #[test]
@@ -181,7 +181,7 @@ fn sharp_ggx_kernel_is_finite() {
 /// Fuzzer (shadow_mesh): falloff of two nearly equal unit directions was 1 + 9e-16.
 #[test]
 fn falloff_stays_within_unit_interval() {
-    use rokeby_core::shadow_mesh::falloff;
+    use rokeby_core::shadows::shadow_mesh::falloff;
     let a = DVec3::new(0.1, 0.7, 0.3);
     for k in 0..200 {
         let b = a * (1.0 + k as f64 * 1e-3);
@@ -194,7 +194,7 @@ fn falloff_stays_within_unit_interval() {
 /// blur_sigma = NaN gave a NaN map; each is now an error naming it.
 #[test]
 fn reflection_params_are_checked() {
-    use rokeby_core::reconstruct::{reconstruct, ReflectionParams};
+    use rokeby_core::compositing::reconstruct::{reconstruct, ReflectionParams};
     let (w, h) = (4, 4);
     let mut refl = Vec::new();
     for y in 0..h {
@@ -256,7 +256,7 @@ fn reflection_params_are_checked() {
 /// Fuzzer (mls2d): a control point at −1e300 made the affine moment matrices inf · 0 = NaN.
 #[test]
 fn mls_rejects_overflowing_controls() {
-    use rokeby_core::mls2d::{Mls2d, MlsStyle};
+    use rokeby_core::shadows::mls2d::{Mls2d, MlsStyle};
     let p = vec![
         DVec2::new(0.0, 1.28),
         DVec2::new(-1e300, 0.0),
@@ -278,7 +278,7 @@ fn mls_rejects_overflowing_controls() {
 /// the weights are now relative to the nearest control point's.
 #[test]
 fn mls_with_huge_falloff_is_finite_and_interpolates() {
-    use rokeby_core::mls2d::{Mls2d, MlsStyle};
+    use rokeby_core::shadows::mls2d::{Mls2d, MlsStyle};
     let p = vec![
         DVec2::new(1.92, 3.0),
         DVec2::new(4.0, 1.0),
@@ -319,7 +319,7 @@ fn light_frame_rejects_overflowing_caster() {
 /// 6e-5 (A⁻¹A rounding); it is now the identity to rounding of the inputs.
 #[test]
 fn affine_mls_at_rest_is_the_identity() {
-    use rokeby_core::mls2d::{Mls2d, MlsStyle};
+    use rokeby_core::shadows::mls2d::{Mls2d, MlsStyle};
     let p = vec![
         DVec2::new(0.0, 0.0),
         DVec2::new(1.0, 1e-5),
@@ -346,8 +346,8 @@ fn affine_mls_at_rest_is_the_identity() {
 /// NaN shadow mesh; the solve now reports it.
 #[test]
 fn overflowing_shadow_solve_is_an_error() {
-    use rokeby_core::shadow_mesh::{EdgePoint, ShadowMeshSolver};
-    use rokeby_core::silhouette::ClosedMesh;
+    use rokeby_core::shadows::shadow_mesh::{EdgePoint, ShadowMeshSolver};
+    use rokeby_core::shadows::silhouette::ClosedMesh;
     let v: Vec<f32> = vec![
         1., 0., 0., -1., 0., 0., 0., 1., 0., 0., -1., 0., 0., 0., 1., 0., 0., -1.,
     ];
@@ -394,8 +394,8 @@ fn overflowing_shadow_solve_is_an_error() {
 /// returned 0/0 = NaN; it now returns the bilinear lookup, like a mirror lobe.
 #[test]
 fn brute_force_of_a_vanishing_lobe_is_the_lookup() {
-    use rokeby_core::envmap::{EnvMap, Layout};
-    use rokeby_core::prefilter::brute_force;
+    use rokeby_core::envmaps::envmap::{EnvMap, Layout};
+    use rokeby_core::envmaps::prefilter::brute_force;
     let env = EnvMap::new(Layout::LatLong, 2, 4, 1, vec![-2.744_381; 8], "image").unwrap();
     for lobe in [
         Lobe::torrance_sparrow(1e-300).unwrap(),

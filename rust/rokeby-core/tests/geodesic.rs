@@ -5,7 +5,7 @@ mod common;
 
 use common::grid;
 use glam::DVec3;
-use rokeby_core::geodesic::{GeodesicSolver, Mesh, Method, Source, SurfacePoint};
+use rokeby_core::geometry::geodesic::{GeodesicSolver, Mesh, Method, Source, SurfacePoint};
 
 fn solver(v: &[f32], f: &[i64]) -> GeodesicSolver {
     GeodesicSolver::new(Mesh::new(v, f).unwrap())
@@ -164,7 +164,7 @@ fn surface_point_source_mid_triangle() {
             d[far]
         );
         // Interpolated at the source itself: close to 0.
-        let at = rokeby_core::geodesic::interpolate(
+        let at = rokeby_core::geometry::geodesic::interpolate(
             &d,
             m.vertices.len(),
             &m.faces,

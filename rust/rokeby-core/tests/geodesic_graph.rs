@@ -6,7 +6,7 @@ mod common;
 
 use common::{grid, load_obj, shared_meshes};
 use glam::DVec3;
-use rokeby_core::geodesic::{GeodesicSolver, Mesh, Method, Source};
+use rokeby_core::geometry::geodesic::{GeodesicSolver, Mesh, Method, Source};
 use std::path::PathBuf;
 
 /// Mean and max relative error outside the source's 1-ring, over the vertices exact reaches.

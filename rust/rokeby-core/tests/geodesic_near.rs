@@ -6,7 +6,7 @@ mod common;
 
 use common::{grid, load_obj, shared_meshes};
 use glam::DVec3;
-use rokeby_core::geodesic::{GeodesicSolver, Mesh, Method, Source, SurfacePoint};
+use rokeby_core::geometry::geodesic::{GeodesicSolver, Mesh, Method, Source, SurfacePoint};
 
 /// A small deterministic generator (no dependency): xorshift64*.
 struct Rng(u64);

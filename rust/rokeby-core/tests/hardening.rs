@@ -2,12 +2,12 @@
 //! anything is allocated (OutOfMemory, never an abort), long loops are clipped to the data and
 //! cancellable, and finite input never gives NaN or inf.
 
-use rokeby_core::envmap::{EnvMap, Layout};
-use rokeby_core::geodesic::{interpolate, SurfacePoint};
-use rokeby_core::normals::{self, Frame};
-use rokeby_core::prefilter::{self, Lobe, PrefilterParams};
-use rokeby_core::reconstruct::{self, ParaboloidMap};
-use rokeby_core::{cancel, sh, RokebyError};
+use rokeby_core::compositing::normals::{self, Frame};
+use rokeby_core::compositing::reconstruct::{self, ParaboloidMap};
+use rokeby_core::envmaps::envmap::{EnvMap, Layout};
+use rokeby_core::envmaps::prefilter::{self, Lobe, PrefilterParams};
+use rokeby_core::geometry::geodesic::{interpolate, SurfacePoint};
+use rokeby_core::{cancel, compositing::sh, RokebyError};
 use std::sync::Mutex;
 use std::time::Instant;
 

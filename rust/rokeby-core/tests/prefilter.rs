@@ -2,8 +2,8 @@
 //! the fast ring convolution against the seed's brute-force sum (Fraser eq. 2), bad parameters.
 
 use glam::DVec3;
-use rokeby_core::envmap::{EnvMap, Layout};
-use rokeby_core::prefilter::{self, Lobe, PrefilterParams};
+use rokeby_core::envmaps::envmap::{EnvMap, Layout};
+use rokeby_core::envmaps::prefilter::{self, Lobe, PrefilterParams};
 
 fn latlong(h: usize, f: impl Fn(DVec3) -> [f32; 3]) -> EnvMap {
     let mut m = EnvMap::zeros(Layout::LatLong, h, 2 * h, 3).unwrap();
@@ -279,7 +279,7 @@ fn prefilter_gaussian_levels_keep_constants_and_energy_and_spread_by_sigma() {
         for i in 0..hh {
             for j in 0..ww {
                 let d = lv.map.texel_direction(0, i, j);
-                let om = rokeby_core::envmap::latlong_texel_solid_angle(hh, ww, i);
+                let om = rokeby_core::envmaps::envmap::latlong_texel_solid_angle(hh, ww, i);
                 let v = lv.map.data[i * ww + j] as f64 * om;
                 num += v * d.x.clamp(-1.0, 1.0).acos().powi(2);
                 den += v;

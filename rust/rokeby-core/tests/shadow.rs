@@ -4,12 +4,12 @@
 
 use glam::{DVec2, DVec3};
 use proptest::prelude::*;
-use rokeby_core::bvh::Bvh;
-use rokeby_core::light_space::LightFrame;
-use rokeby_core::mls2d::{sinusoidal_noise, Mls2d, MlsStyle};
-use rokeby_core::shadow::{Drag, ShadowEditor};
-use rokeby_core::shadow_mesh::falloff;
-use rokeby_core::silhouette::{silhouettes, ClosedMesh, Light};
+use rokeby_core::geometry::bvh::Bvh;
+use rokeby_core::shadows::light_space::LightFrame;
+use rokeby_core::shadows::mls2d::{sinusoidal_noise, Mls2d, MlsStyle};
+use rokeby_core::shadows::shadow::{Drag, ShadowEditor};
+use rokeby_core::shadows::shadow_mesh::falloff;
+use rokeby_core::shadows::silhouette::{silhouettes, ClosedMesh, Light};
 
 /// A UV sphere (poles + `lat`−1 rings of `lon` vertices), faces counter-clockwise from outside.
 fn sphere(c: DVec3, r: f64, lat: usize, lon: usize) -> (Vec<f32>, Vec<i64>) {

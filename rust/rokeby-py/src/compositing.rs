@@ -9,10 +9,10 @@ use numpy::{PyArrayDyn, PyArrayMethods, PyUntypedArrayMethods};
 use pyo3::exceptions::{PyRuntimeError, PyTypeError, PyValueError};
 use pyo3::prelude::*;
 use pyo3::types::{PyDict, PyList};
-use rokeby_core::normals;
-use rokeby_core::recomposite::{self as core_recomposite, Buffers, Params, Patch};
-use rokeby_core::reconstruct::{self, ParaboloidMap, ReflectionParams};
-use rokeby_core::sh::{self, Fit, SH_COEFFS};
+use rokeby_core::compositing::normals;
+use rokeby_core::compositing::recomposite::{self as core_recomposite, Buffers, Params, Patch};
+use rokeby_core::compositing::reconstruct::{self, ParaboloidMap, ReflectionParams};
+use rokeby_core::compositing::sh::{self, Fit, SH_COEFFS};
 
 /// A float array, or a boolean one read as 0/1 (masks).
 fn mask_array<'py>(obj: &Bound<'py, PyAny>, name: &str) -> PyResult<F32Array<'py>> {

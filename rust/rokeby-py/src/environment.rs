@@ -1,5 +1,5 @@
-//! Bindings of the environment-map toolkit and its prefiltering (issue 8; rokeby_core::envmap,
-//! rokeby_core::prefilter). Same house style as the parent module: float arrays in
+//! Bindings of the environment-map toolkit and its prefiltering (issue 8; rokeby_core::envmaps::envmap,
+//! rokeby_core::envmaps::prefilter). Same house style as the parent module: float arrays in
 //! (float32/float64), shapes and values checked with messages naming the argument, the GIL
 //! released around the work, core errors mapped by kind (`core_err`).
 //!
@@ -13,9 +13,9 @@ use numpy::PyArrayDyn;
 use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
 use pyo3::types::{PyBytes, PyDict, PyList};
-use rokeby_core::envmap::{EnvMap, Layout};
-use rokeby_core::prefilter::{self, Lobe, PrefilterParams, A_HAT};
-use rokeby_core::sh::SH_COEFFS;
+use rokeby_core::compositing::sh::SH_COEFFS;
+use rokeby_core::envmaps::envmap::{EnvMap, Layout};
+use rokeby_core::envmaps::prefilter::{self, Lobe, PrefilterParams, A_HAT};
 use rokeby_core::RokebyError;
 
 fn parse_layout(name: &str, arg: &str) -> PyResult<Layout> {
@@ -238,7 +238,7 @@ pub fn env_reference<'py>(
     // Checked here so that a zero or non-finite direction is reported as `directions` (the core's
     // irradiance reference calls them "normals"); found by tests/test_properties_new.py.
     run_detached(py, || {
-        rokeby_core::envmap::finite_dirs(&d, "directions").map(|_| ())
+        rokeby_core::envmaps::envmap::finite_dirs(&d, "directions").map(|_| ())
     })?;
     let out = if lobe.eq_ignore_ascii_case("lambert") {
         run_detached(py, || prefilter::brute_force_irradiance(&env, &d))?
@@ -255,7 +255,7 @@ pub fn env_reference<'py>(
 /// Malformed or unsupported files raise ValueError saying what was found.
 #[pyfunction]
 pub fn rgbe_decode<'py>(py: Python<'py>, data: &[u8]) -> PyResult<Bound<'py, PyArrayDyn<f32>>> {
-    let (h, w, px) = run_detached(py, || rokeby_core::rgbe::decode(data))?;
+    let (h, w, px) = run_detached(py, || rokeby_core::envmaps::rgbe::decode(data))?;
     array_f32(py, &[h, w, 3], px)
 }
 
@@ -282,7 +282,9 @@ pub fn rgbe_encode<'py>(
             i / 3
         )));
     }
-    let bytes = run_detached(py, || rokeby_core::rgbe::encode(shape[0], shape[1], sl))?;
+    let bytes = run_detached(py, || {
+        rokeby_core::envmaps::rgbe::encode(shape[0], shape[1], sl)
+    })?;
     Ok(PyBytes::new(py, &bytes))
 }
 

@@ -1,6 +1,6 @@
 //! Bindings of reflection editing (Ritschel et al. 2009): the MLS rotation field
-//! (rokeby_core::field), its view-dependent blend (eq. 7), regions (rokeby_core::region) and the
-//! polar decomposition (rokeby_core::polar).
+//! (rokeby_core::reflection::field), its view-dependent blend (eq. 7), regions (rokeby_core::reflection::region) and the
+//! polar decomposition (rokeby_core::reflection::polar).
 
 use crate::convert::{f32_array, i64_array, parse_vec3, shape_str, to_numpy, F32Array};
 use crate::errors::{core_err, run_detached};
@@ -8,15 +8,15 @@ use numpy::{PyArrayDyn, PyArrayMethods, PyUntypedArrayMethods};
 use pyo3::exceptions::{PyRuntimeError, PyTypeError, PyValueError};
 use pyo3::prelude::*;
 use pyo3::types::{PyDict, PyList, PyTuple};
-use rokeby_core::field::{output_width, Distances, Field, FieldOutput};
-use rokeby_core::polar::{self, PolarMethod};
-use rokeby_core::region::Region;
+use rokeby_core::reflection::field::{output_width, Distances, Field, FieldOutput};
+use rokeby_core::reflection::polar::{self, PolarMethod};
+use rokeby_core::reflection::region::Region;
 
 /// field_kernel() -> str: the kernel the field functions use now: "scalar" (the f64 reference),
 /// "portable", "avx2" or "avx512" — ROKEBY_SIMD (read at each call) resolved against this CPU.
 #[pyfunction]
 fn field_kernel() -> &'static str {
-    rokeby_core::field::Kernel::from_env().name()
+    rokeby_core::reflection::field::Kernel::from_env().name()
 }
 
 fn parse_polar(name: &str) -> PyResult<PolarMethod> {
@@ -254,7 +254,9 @@ fn view_blend<'py>(
         )));
     }
     let (p, d) = (pa.slice(), da.slice());
-    let out = run_detached(py, || rokeby_core::field::view_blend_directions(p, d, ramp))?;
+    let out = run_detached(py, || {
+        rokeby_core::reflection::field::view_blend_directions(p, d, ramp)
+    })?;
     to_numpy(py, &[ps[0], 3], out)
 }
 
@@ -340,7 +342,7 @@ fn view_blend_render_rows<'py>(
     };
     let p = pa.slice();
     let r = run_detached(py, || {
-        rokeby_core::field::view_blend_render_rows(p, cv, fv, ramp)
+        rokeby_core::reflection::field::view_blend_render_rows(p, cv, fv, ramp)
     })?;
     let rows = r.xyz.len() / 3;
     Ok((
@@ -360,7 +362,9 @@ fn view_blend_rotation_vectors<'py>(
     let pa = parts_array(parts)?;
     let n = pa.shape()[0];
     let p = pa.slice();
-    let out = run_detached(py, || rokeby_core::field::view_blend_rotation_vectors(p))?;
+    let out = run_detached(py, || {
+        rokeby_core::reflection::field::view_blend_rotation_vectors(p)
+    })?;
     to_numpy(py, &[n, 3], out)
 }
 

@@ -1,15 +1,15 @@
-//! Bindings of the geometry: geodesic distances (rokeby_core::geodesic: heat method, Dijkstra,
-//! exact), geodesic and free-form regions (rokeby_core::region) and barycentric interpolation.
+//! Bindings of the geometry: geodesic distances (rokeby_core::geometry::geodesic: heat method, Dijkstra,
+//! exact), geodesic and free-form regions (rokeby_core::reflection::region) and barycentric interpolation.
 
 use crate::convert::{f32_array, i64_array, shape_str, to_numpy};
 use crate::errors::{core_err, run_detached};
 use numpy::{PyArrayDyn, PyArrayMethods, PyUntypedArray};
 use pyo3::exceptions::{PyTypeError, PyValueError};
 use pyo3::prelude::*;
-use rokeby_core::geodesic::{
+use rokeby_core::geometry::geodesic::{
     self, GeodesicSolver as CoreSolver, Mesh, Method, Source, SurfacePoint,
 };
-use rokeby_core::region;
+use rokeby_core::reflection::region;
 use std::sync::Arc;
 
 fn parse_mesh(vertices: &Bound<'_, PyAny>, faces: &Bound<'_, PyAny>) -> PyResult<Mesh> {

@@ -1,4 +1,4 @@
-//! Bindings of freeform shadow boundary editing (issue 7; rokeby_core::shadow and friends). Same
+//! Bindings of freeform shadow boundary editing (issue 7; rokeby_core::shadows::shadow and friends). Same
 //! house style as the parent module: float arrays in (float32/float64), shapes checked with
 //! messages naming the argument, the GIL released around the work, core errors as ValueError.
 
@@ -9,10 +9,10 @@ use numpy::{IntoPyArray, PyArrayDyn};
 use pyo3::exceptions::{PyRuntimeError, PyValueError};
 use pyo3::prelude::*;
 use pyo3::types::{PyDict, PyList};
-use rokeby_core::mls2d::MlsStyle;
-use rokeby_core::shadow::{Drag, Handle, ShadowEditor as CoreEditor};
-use rokeby_core::shadow_mesh::falloff;
-use rokeby_core::silhouette::{silhouettes, ClosedMesh, Light, SilhouetteLoop};
+use rokeby_core::shadows::mls2d::MlsStyle;
+use rokeby_core::shadows::shadow::{Drag, Handle, ShadowEditor as CoreEditor};
+use rokeby_core::shadows::shadow_mesh::falloff;
+use rokeby_core::shadows::silhouette::{silhouettes, ClosedMesh, Light, SilhouetteLoop};
 use std::sync::Mutex;
 
 fn arr<'py, T: numpy::Element>(

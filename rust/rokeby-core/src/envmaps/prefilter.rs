@@ -43,9 +43,9 @@
 //! ring radius, bilinear upsampling, energy cut) is measured against [`brute_force`] in
 //! docs/envmaps.md.
 
-use crate::envmap::{finite_dirs, latlong_texel_solid_angle, EnvMap, Layout};
+use crate::compositing::sh::{basis, SH_COEFFS};
+use crate::envmaps::envmap::{finite_dirs, latlong_texel_solid_angle, EnvMap, Layout};
 use crate::error::{Result, RokebyError};
-use crate::sh::{basis, SH_COEFFS};
 use glam::DVec3;
 use rayon::prelude::*;
 use std::f64::consts::{PI, TAU};

@@ -26,10 +26,10 @@
 //! takes 552M instructions to 337M (callgrind), the whole rework 1,266M to 327M.
 
 use crate::error::{Result, RokebyError};
-use crate::geodesic::{Mesh, Source};
-use crate::mesh::Adjacency;
-use crate::radix_heap::RadixHeap;
-use crate::unfold::layout;
+use crate::geometry::geodesic::{Mesh, Source};
+use crate::geometry::mesh::Adjacency;
+use crate::geometry::radix_heap::RadixHeap;
+use crate::geometry::unfold::layout;
 use glam::DVec2;
 
 /// A window, stored in the frame of its edge (see the module documentation).
@@ -109,7 +109,7 @@ pub(crate) fn pseudo_source_vertices(mesh: &Mesh, adj: &Adjacency) -> Vec<bool> 
     let mut boundary = vec![false; nv];
     let mut out = vec![false; nv];
     for (fi, f) in mesh.faces.iter().enumerate() {
-        if !crate::mesh::is_proper(f) {
+        if !crate::geometry::mesh::is_proper(f) {
             continue;
         }
         let p = f.map(|v| mesh.vertices[v]);
@@ -175,7 +175,8 @@ impl FaceUnfolding {
             let p = f.map(|v| mesh.vertices[v]);
             let l = [0, 1, 2].map(|k| p[k].distance(p[(k + 1) % 3]));
             for k in 0..3 {
-                let c = crate::intrinsic::layout([l[k], l[(k + 1) % 3], l[(k + 2) % 3]])[2];
+                let c =
+                    crate::geometry::intrinsic::layout([l[k], l[(k + 1) % 3], l[(k + 2) % 3]])[2];
                 len.push(l[k]);
                 apex.push(if c.is_finite() { c } else { DVec2::NAN });
             }
@@ -197,7 +198,7 @@ impl FaceUnfolding {
                     p[1].distance(p[2]),
                     p[2].distance(p[0]),
                 ];
-                (l[0], crate::intrinsic::layout(l)[2])
+                (l[0], crate::geometry::intrinsic::layout(l)[2])
             }
         }
     }
@@ -207,10 +208,10 @@ struct Propagation<'a> {
     mesh: &'a Mesh,
     adj: &'a Adjacency,
     /// The per-halfedge unfolding; `None`: computed from the mesh where needed (the local
-    /// queries of [`crate::svg`], which touch a few faces each).
+    /// queries of [`crate::geometry::saddle_vertex_graph`], which touch a few faces each).
     table: Option<&'a FaceUnfolding>,
     /// Vertices that become pseudo-sources; `None`: none do (paths stay straight, for the local
-    /// direct geodesics of [`crate::svg`]).
+    /// direct geodesics of [`crate::geometry::saddle_vertex_graph`]).
     pseudo: Option<&'a [bool]>,
     dist: &'a mut [f64],
     /// The distance each pseudo-source was last expanded with (+inf: never; empty without

@@ -4,16 +4,16 @@
 //!   Fast; always over-estimates (edge paths zig-zag), however fine the mesh.
 //! * [`Method::Heat`]: the heat method (Crane, Weischedel, Wardetzky 2013/2017): one short heat
 //!   flow (A + tL) u = δ, the normalised gradient X = −∇u/|∇u|, then the Poisson problem L φ = ∇·X.
-//!   It runs on the intrinsic Delaunay triangulation of the mesh ([`crate::intrinsic`]), which
+//!   It runs on the intrinsic Delaunay triangulation of the mesh ([`crate::geometry::intrinsic`]), which
 //!   keeps it accurate on scanned meshes with obtuse slivers. Paths cross faces, so it converges to the true geodesic distance as the mesh is refined. Both
 //!   sparse matrices are factored once per mesh (faer's sparse Cholesky) and reused by every query:
 //!   moving a handle costs two triangular solves, not a factorisation.
 //!
-//! * [`Method::Graph`]: Dijkstra on a saddle vertex graph of direct geodesics ([`crate::svg`],
+//! * [`Method::Graph`]: Dijkstra on a saddle vertex graph of direct geodesics ([`crate::geometry::saddle_vertex_graph`],
 //!   Ying, Wang & He 2013): under 0.5 % mean error on the shared meshes, after a graph built once.
 //! * [`Method::DenseGraph`] (the default, [`Method::DEFAULT`]): the same on a denser graph whose
 //!   redundant edges are pruned: under 0.25 % mean error at about the same query time.
-//! * [`Method::Exact`]: exact polyhedral geodesics by window propagation ([`crate::exact`]).
+//! * [`Method::Exact`]: exact polyhedral geodesics by window propagation ([`crate::geometry::exact`]).
 //!
 //! Sources are vertices or surface points (a face and barycentric coordinates), several per
 //! distance field (the distance to the nearest). Inside the source's own triangle the distance is
@@ -22,8 +22,8 @@
 //! unreferenced vertices) get +inf.
 
 use crate::error::{Result, RokebyError};
+use crate::geometry::laplacian::{face_cotangents, FaceCotangents};
 pub use crate::geometry::mesh::{Mesh, SurfacePoint};
-use crate::laplacian::{face_cotangents, FaceCotangents};
 use crate::numerical::{self, SparseMatrix, SymbolicCholesky, Triplet};
 use faer::linalg::solvers::Solve;
 use faer::sparse::linalg::solvers::Llt;
@@ -44,14 +44,14 @@ pub enum Source {
 pub enum Method {
     Dijkstra,
     Heat,
-    /// Exact polyhedral geodesics by window propagation ([`crate::exact`]).
+    /// Exact polyhedral geodesics by window propagation ([`crate::geometry::exact`]).
     Exact,
-    /// Dijkstra on a saddle vertex graph of direct geodesics ([`crate::svg`]): near-exact, with a
+    /// Dijkstra on a saddle vertex graph of direct geodesics ([`crate::geometry::saddle_vertex_graph`]): near-exact, with a
     /// query as fast as Dijkstra's after a precomputation.
     Graph,
     /// [`Method::Graph`] on a denser saddle vertex graph (each vertex linked to its
-    /// [`crate::svg::DENSE_NEIGHBOURS`] nearest vertices), its redundant edges pruned
-    /// ([`crate::svg::DENSE_PRUNE`]): about half the error at about the same query time.
+    /// [`crate::geometry::saddle_vertex_graph::DENSE_NEIGHBOURS`] nearest vertices), its redundant edges pruned
+    /// ([`crate::geometry::saddle_vertex_graph::DENSE_PRUNE`]): about half the error at about the same query time.
     DenseGraph,
 }
 
@@ -80,7 +80,7 @@ impl Method {
 
 /// A graph on the mesh vertices in compressed rows (CSR), built once per mesh, and its Dijkstra:
 /// the edge graph of [`Method::Dijkstra`] and the saddle vertex graph of [`Method::Graph`]
-/// ([`crate::svg`]). The rows are stored in *cache order*, the vertices sorted along a Morton
+/// ([`crate::geometry::saddle_vertex_graph`]). The rows are stored in *cache order*, the vertices sorted along a Morton
 /// (Z-order) curve of their positions, so that a Dijkstra front, which moves across the surface,
 /// reads and writes nearby memory; meshes come in any order (midpoint subdivision, for one, puts
 /// neighbours hundreds of thousands of indices apart). `rank` and `order` map between mesh vertex
@@ -287,7 +287,7 @@ impl Graph {
     }
 
     /// Multi-source Dijkstra with a bucket queue of quantised keys
-    /// ([`crate::radix_heap::BucketQueue`]) and buffers kept between queries. `seed(near, touched)`
+    /// ([`crate::geometry::radix_heap::BucketQueue`]) and buffers kept between queries. `seed(near, touched)`
     /// writes the seeds' distances into `near` (mesh order, all +inf on entry) and the vertices it
     /// set into `touched` (empty on entry); `emit(v, d)` receives the distance of every mesh
     /// vertex v (+inf where no seed reaches).
@@ -314,7 +314,7 @@ impl Graph {
                 near: vec![f64::INFINITY; nv],
                 settled: vec![false; nv],
                 touched: Vec::new(),
-                queue: crate::radix_heap::BucketQueue::new(self.key_span),
+                queue: crate::geometry::radix_heap::BucketQueue::new(self.key_span),
             }
         });
         let DijkstraWork {
@@ -377,7 +377,7 @@ struct DijkstraWork {
     /// Whether a vertex's outgoing edges were relaxed from its current distance (cache order).
     settled: Vec<bool>,
     touched: Vec<usize>,
-    queue: crate::radix_heap::BucketQueue,
+    queue: crate::geometry::radix_heap::BucketQueue,
 }
 
 /// A heap entry: an f32 key (8-byte entries keep the heap in cache) and the vertex. The exact f64
@@ -454,15 +454,15 @@ pub struct GeodesicSolver {
     heat: OnceLock<std::result::Result<Heat, RokebyError>>,
     mean_edge: f64,
     /// Faces across each edge and around each vertex, for the unfolding next to sources.
-    adjacency: crate::mesh::Adjacency,
+    adjacency: crate::geometry::mesh::Adjacency,
     /// Vertices where exact shortest paths may bend (saddles, boundary), made on first use.
     pseudo_sources: OnceLock<Vec<bool>>,
     /// Every face unfolded onto each of its edges, for the exact method, made on first use.
-    face_unfolding: OnceLock<crate::exact::FaceUnfolding>,
+    face_unfolding: OnceLock<crate::geometry::exact::FaceUnfolding>,
     /// The saddle vertex graph, made on the first [`Method::Graph`] query.
-    saddle_graph: OnceLock<crate::svg::SaddleGraph>,
+    saddle_graph: OnceLock<crate::geometry::saddle_vertex_graph::SaddleGraph>,
     /// The dense, pruned saddle vertex graph, made on the first [`Method::DenseGraph`] query.
-    dense_graph: OnceLock<crate::svg::SaddleGraph>,
+    dense_graph: OnceLock<crate::geometry::saddle_vertex_graph::SaddleGraph>,
 }
 
 /// The lower triangle (which is all a Cholesky factorisation with `Side::Lower` reads) of
@@ -519,7 +519,7 @@ impl GeodesicSolver {
             }
             next += 1;
         }
-        let adjacency = crate::mesh::Adjacency::new(&mesh);
+        let adjacency = crate::geometry::mesh::Adjacency::new(&mesh);
         GeodesicSolver {
             adjacency,
             pseudo_sources: OnceLock::new(),
@@ -539,21 +539,26 @@ impl GeodesicSolver {
         &self.mesh
     }
 
-    /// The saddle vertex graph ([`crate::svg`]), made on first use.
-    pub fn saddle_graph(&self) -> &crate::svg::SaddleGraph {
+    /// The saddle vertex graph ([`crate::geometry::saddle_vertex_graph`]), made on first use.
+    pub fn saddle_graph(&self) -> &crate::geometry::saddle_vertex_graph::SaddleGraph {
         self.saddle_graph.get_or_init(|| {
-            crate::svg::SaddleGraph::new(&self.mesh, &self.adjacency, crate::svg::NEIGHBOURS, None)
+            crate::geometry::saddle_vertex_graph::SaddleGraph::new(
+                &self.mesh,
+                &self.adjacency,
+                crate::geometry::saddle_vertex_graph::NEIGHBOURS,
+                None,
+            )
         })
     }
 
     /// The dense, pruned saddle vertex graph of [`Method::DenseGraph`], made on first use.
-    pub fn dense_graph(&self) -> &crate::svg::SaddleGraph {
+    pub fn dense_graph(&self) -> &crate::geometry::saddle_vertex_graph::SaddleGraph {
         self.dense_graph.get_or_init(|| {
-            crate::svg::SaddleGraph::new(
+            crate::geometry::saddle_vertex_graph::SaddleGraph::new(
                 &self.mesh,
                 &self.adjacency,
-                crate::svg::DENSE_NEIGHBOURS,
-                Some(crate::svg::DENSE_PRUNE),
+                crate::geometry::saddle_vertex_graph::DENSE_NEIGHBOURS,
+                Some(crate::geometry::saddle_vertex_graph::DENSE_PRUNE),
             )
         })
     }
@@ -613,10 +618,14 @@ impl GeodesicSolver {
                 let nv = self.mesh.vertices.len();
                 let mut out = vec![0.0f32; sets.len() * nv];
                 let graph = match method {
-                    Method::Graph => Some((self.saddle_graph(), crate::svg::SOURCE_NEIGHBOURS)),
-                    Method::DenseGraph => {
-                        Some((self.dense_graph(), crate::svg::DENSE_SOURCE_NEIGHBOURS))
-                    }
+                    Method::Graph => Some((
+                        self.saddle_graph(),
+                        crate::geometry::saddle_vertex_graph::SOURCE_NEIGHBOURS,
+                    )),
+                    Method::DenseGraph => Some((
+                        self.dense_graph(),
+                        crate::geometry::saddle_vertex_graph::DENSE_SOURCE_NEIGHBOURS,
+                    )),
                     _ => None,
                 };
                 let run = |row: &mut [f32], set: &[Source]| match graph {
@@ -639,15 +648,15 @@ impl GeodesicSolver {
             Method::Heat => self.heat_method(&sets)?,
             Method::Exact => {
                 let pseudo = self.pseudo_sources.get_or_init(|| {
-                    crate::exact::pseudo_source_vertices(&self.mesh, &self.adjacency)
+                    crate::geometry::exact::pseudo_source_vertices(&self.mesh, &self.adjacency)
                 });
-                let table = self
-                    .face_unfolding
-                    .get_or_init(|| crate::exact::FaceUnfolding::new(&self.mesh, &self.adjacency));
+                let table = self.face_unfolding.get_or_init(|| {
+                    crate::geometry::exact::FaceUnfolding::new(&self.mesh, &self.adjacency)
+                });
                 let cap = 5000 * (self.mesh.faces.len() + 1000);
                 sets.par_iter()
                     .map(|s| {
-                        crate::exact::exact_distances(
+                        crate::geometry::exact::exact_distances(
                             &self.mesh,
                             &self.adjacency,
                             table,
@@ -665,7 +674,7 @@ impl GeodesicSolver {
             .collect())
     }
 
-    /// Distances next to the sources: the unfolded straight-line distances ([`crate::unfold`]),
+    /// Distances next to the sources: the unfolded straight-line distances ([`crate::geometry::unfold`]),
     /// exact on the source's own faces and, wherever the geodesic is straight across a few
     /// edges, one to three rings out; then edge paths from those vertices one step further, which
     /// carry straight lines through flat vertices. Returns (vertex, distance, straight): every
@@ -674,7 +683,13 @@ impl GeodesicSolver {
         let nv = self.mesh.vertices.len();
         let mut dist = vec![f64::INFINITY; nv];
         let mut touched = Vec::new();
-        crate::unfold::near_source(&self.mesh, &self.adjacency, set, &mut dist, &mut touched);
+        crate::geometry::unfold::near_source(
+            &self.mesh,
+            &self.adjacency,
+            set,
+            &mut dist,
+            &mut touched,
+        );
         let mut straight = vec![false; nv];
         let mut heap = BinaryHeap::with_capacity(touched.len());
         for &v in &touched {
@@ -725,11 +740,17 @@ impl GeodesicSolver {
     /// Multi-source Dijkstra along the edges ([`Graph::dijkstra`]); `emit(v, d)` receives the
     /// distance of every mesh vertex v (+inf where no source reaches).
     ///
-    /// Seeds: the unfolded straight-line distances next to the sources ([`crate::unfold`]).
+    /// Seeds: the unfolded straight-line distances next to the sources ([`crate::geometry::unfold`]).
     fn dijkstra_with(&self, set: &[Source], emit: impl FnMut(usize, f64)) {
         self.graph.dijkstra(
             |near, touched| {
-                crate::unfold::near_source(&self.mesh, &self.adjacency, set, near, touched)
+                crate::geometry::unfold::near_source(
+                    &self.mesh,
+                    &self.adjacency,
+                    set,
+                    near,
+                    touched,
+                )
             },
             emit,
         );
@@ -757,7 +778,7 @@ impl GeodesicSolver {
                     .map(|k| self.mesh.vertices[f[k]].distance(self.mesh.vertices[f[(k + 1) % 3]]))
             })
             .collect();
-        let tri = crate::intrinsic::Intrinsic::delaunay(&self.mesh.faces, lengths);
+        let tri = crate::geometry::intrinsic::Intrinsic::delaunay(&self.mesh.faces, lengths);
         let flips = tri.flips;
         let mut faces = Vec::with_capacity(tri.faces.len());
         let mut mass = vec![0.0f64; nv];
@@ -783,7 +804,7 @@ impl GeodesicSolver {
                 ldiag[j] += w;
                 ldiag[m] += w;
             }
-            let p = crate::intrinsic::layout(*l);
+            let p = crate::geometry::intrinsic::layout(*l);
             faces.push(HeatFace {
                 v: f.map(|x| x as u32),
                 l01: p[1].x,
@@ -1005,7 +1026,7 @@ impl GeodesicSolver {
                     ];
                     let rmin = cd[0].min(cd[1]).min(cd[2]);
                     let w_near = if rmin < r2 && r2 > 0.0 {
-                        1.0 - crate::region::smooth_step((rmin - r1) / (r2 - r1))
+                        1.0 - crate::reflection::region::smooth_step((rmin - r1) / (r2 - r1))
                     } else {
                         0.0
                     };
@@ -1272,7 +1293,7 @@ mod tests {
         let nv = s.mesh.vertices.len();
         let mut dist = vec![f64::INFINITY; nv];
         let mut touched = Vec::new();
-        crate::unfold::near_source(&s.mesh, &s.adjacency, set, &mut dist, &mut touched);
+        crate::geometry::unfold::near_source(&s.mesh, &s.adjacency, set, &mut dist, &mut touched);
         let mut straight = vec![false; nv];
         let mut heap = BinaryHeap::with_capacity(touched.len());
         for &v in &touched {
@@ -1298,7 +1319,7 @@ mod tests {
         }
         let seeds: Vec<(usize, f64)> = reached.into_iter().map(|v| (v, dist[v])).collect();
         let mut dist = vec![f64::INFINITY; nv];
-        let mut heap = crate::radix_heap::RadixHeap::new();
+        let mut heap = crate::geometry::radix_heap::RadixHeap::new();
         for (v, d) in seeds {
             if d < dist[v] {
                 dist[v] = d;
@@ -1328,7 +1349,7 @@ mod tests {
             PathBuf::from,
         );
         let text = std::fs::read_to_string(root.join("meshes").join(name)).ok()?;
-        let (v, f) = crate::mesh::parse_obj(&text).unwrap();
+        let (v, f) = crate::geometry::mesh::parse_obj(&text).unwrap();
         Some(Mesh::new(&v, &f).unwrap())
     }
 

@@ -1,11 +1,11 @@
 //! The cotangent Laplacian, one home (Pinkall & Polthier 1993; Crane et al. 2013 eq. 5; Sorkine
 //! 2006 §2): the weight of edge (i, j) is w_ij = ½ (cot α_ij + cot β_ij), α and β the angles
-//! opposite the edge in its faces, computed from edge lengths alone ([`crate::intrinsic`]'s
+//! opposite the edge in its faces, computed from edge lengths alone ([`crate::geometry::intrinsic`]'s
 //! stable Heron area and law of cosines) so that it serves both intrinsic triangulations (the
 //! geodesic heat method) and meshes with positions (the shadow mesh). Faces without area
 //! (collinear or repeated corners) have no stiffness and are left out.
 
-use crate::intrinsic::{area_from_lengths, cot_opposite};
+use crate::geometry::intrinsic::{area_from_lengths, cot_opposite};
 use glam::DVec3;
 
 /// Area and corner cotangents of one face.
@@ -40,7 +40,7 @@ pub fn edge_lengths(v: &[DVec3], f: [usize; 3]) -> [f64; 3] {
 pub fn cotangent_weights(faces: &[[usize; 3]], lengths: &[[f64; 3]]) -> Vec<(u32, u32, f64)> {
     let mut e: Vec<(u32, u32, f64)> = Vec::with_capacity(faces.len() * 3);
     for (f, l) in faces.iter().zip(lengths) {
-        if !crate::mesh::is_proper(f) {
+        if !crate::geometry::mesh::is_proper(f) {
             continue;
         }
         let Some(fc) = face_cotangents(*l) else {

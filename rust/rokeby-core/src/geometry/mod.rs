@@ -10,5 +10,5 @@ pub mod intrinsic;
 pub mod laplacian;
 pub mod mesh;
 pub(crate) mod radix_heap;
-pub mod svg;
+pub mod saddle_vertex_graph;
 pub mod unfold;

@@ -10,8 +10,8 @@
 //! coarse quantisation) cost less than f32 bit patterns, whose low mantissa bits all differ.
 //! Ties pop in no particular order.
 //!
-//! Both Dijkstras (the edge graph's and the saddle vertex graph's, [`crate::geodesic`]) use the
-//! bucket queue below; the radix heap orders the exact method's windows ([`crate::exact`]) and
+//! Both Dijkstras (the edge graph's and the saddle vertex graph's, [`crate::geometry::geodesic`]) use the
+//! bucket queue below; the radix heap orders the exact method's windows ([`crate::geometry::exact`]) and
 //! the former Dijkstras that the unit tests keep as oracles.
 
 /// Entries: (key bits, vertex).
@@ -93,7 +93,7 @@ impl RadixHeap {
 
 /// A bucket queue (Dial 1969) over a window of integer keys: an array of buckets indexed by key
 /// modulo the window, for Dijkstra with quantised keys where every edge spans fewer keys than the
-/// window ([`crate::geodesic`]). Entries never move: a push is one append, a pop takes from the
+/// window ([`crate::geometry::geodesic`]). Entries never move: a push is one append, a pop takes from the
 /// current bucket or steps to the next key. Keys at or beyond the window's end (seeds far from
 /// the first one popped, edges longer than the window) wait in an overflow list, moved into the
 /// buckets as the window reaches them. Entries of the same key pop in no particular order.

@@ -16,8 +16,8 @@
 //!   vertex (it can only pass through a vertex where the angles around it sum to more than 2π, a
 //!   saddle; there the unfolded value is an upper bound).
 
-use crate::geodesic::{Mesh, Source};
-use crate::mesh::Adjacency;
+use crate::geometry::geodesic::{Mesh, Source};
+use crate::geometry::mesh::Adjacency;
 use glam::DVec2;
 
 /// Edge crossings from the source's faces that the unfolding follows. 3 reaches the 2-ring of a
@@ -33,7 +33,7 @@ pub(crate) fn cross(a: DVec2, b: DVec2) -> f64 {
 pub(crate) fn layout(mesh: &Mesh, f: usize) -> [DVec2; 3] {
     let p = mesh.faces[f].map(|v| mesh.vertices[v]);
     let l = [0, 1, 2].map(|k| p[k].distance(p[(k + 1) % 3]));
-    crate::intrinsic::layout(l)
+    crate::geometry::intrinsic::layout(l)
 }
 
 /// The third corner of a triangle on edge A–B with 3D lengths `la` = |AC| and `lb` = |BC|, on the

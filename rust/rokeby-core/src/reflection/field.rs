@@ -27,16 +27,16 @@
 //!   computed once.
 
 use crate::error::{Result, RokebyError};
-use crate::polar::{self, min_rotation, PolarMethod};
-use crate::region::Region;
+use crate::reflection::polar::{self, min_rotation, PolarMethod};
+use crate::reflection::region::Region;
 use glam::{DMat3, DQuat, DVec3};
 use rayon::prelude::*;
 use std::sync::atomic::{AtomicU64, Ordering};
 
-mod lanes;
-mod simd;
-mod wide;
-pub use lanes::Kernel;
+mod f32_lanes;
+mod f64_lanes;
+mod lane_vectors;
+pub use f32_lanes::Kernel;
 
 /// Row length of a constraint: [p (3), r (3), e (3)].
 pub const CONSTRAINT_STRIDE: usize = 9;
@@ -211,7 +211,7 @@ pub fn view_blend_directions(parts: &[f32], r: &[f32], ramp: bool) -> Result<Vec
                 };
                 let d = vec3_at(r, i).normalize_or_zero();
                 let a = if ramp {
-                    crate::region::smooth_step(p[5] as f64)
+                    crate::reflection::region::smooth_step(p[5] as f64)
                 } else {
                     p[4] as f64
                 };
@@ -749,12 +749,12 @@ impl Field {
             self.check_distance_values(dist, n)?;
             // The exact method: the f64 lanes, the scalar path where they cannot vouch.
             let rows = self.wide_rows(self.exact_plan(polar).as_ref());
-            let ctx = rows.as_deref().map(|rows| wide::Ctx {
+            let ctx = rows.as_deref().map(|rows| f64_lanes::Ctx {
                 rows,
                 points,
                 dist: given,
                 n,
-                exact: wide::Exactness::Exact,
+                exact: f64_lanes::Exactness::Exact,
             });
             const CHUNK: usize = 2048;
             par_chunks_if_large(&mut out, CHUNK * width, n, |ci, chunk| {
@@ -771,29 +771,29 @@ impl Field {
             return Ok(out);
         };
         let rows = self.wide_rows(Some(&plan));
-        let ctx = rows.as_deref().map(|rows| wide::Ctx {
+        let ctx = rows.as_deref().map(|rows| f64_lanes::Ctx {
             rows,
             points,
             dist: given,
             n,
-            exact: wide::Exactness::Fast,
+            exact: f64_lanes::Exactness::Fast,
         });
-        let inputs = lanes::Inputs {
+        let inputs = f32_lanes::Inputs {
             field: self,
             plan: &plan,
             points,
             dist: given,
             n,
-            job: lanes::Job::Points {
+            job: f32_lanes::Job::Points {
                 output,
                 view: eye.is_some(),
-                ramp: lanes::ramp_of(&self.regions),
+                ramp: f32_lanes::ramp_of(&self.regions),
             },
         };
         const CHUNK: usize = 4096;
         let (suspect, nonfinite) = par_chunks_if_large(&mut out, CHUNK * width, n, |ci, chunk| {
             let start = ci * CHUNK;
-            let left = lanes::run(self.kernel, &inputs, start, chunk);
+            let left = f32_lanes::run(self.kernel, &inputs, start, chunk);
             let mut s = self.scratch();
             let mut nonfinite = false;
             FALLBACK_LANES.fetch_add(left.points.len() as u64, Ordering::Relaxed);
@@ -819,7 +819,7 @@ impl Field {
 
     /// The f32 lanes' plan when this call can use them: a vector kernel, Newton's polar method (the
     /// exact one runs the f64 lanes alone, `exact_plan`), and one group.
-    fn lanes_plan(&self, polar: PolarMethod, dist: Distances) -> Option<lanes::Plan> {
+    fn lanes_plan(&self, polar: PolarMethod, dist: Distances) -> Option<f32_lanes::Plan> {
         if self.kernel == Kernel::Scalar || polar != PolarMethod::Iterative {
             return None;
         }
@@ -832,7 +832,7 @@ impl Field {
     }
 
     /// The plan of the exact polar method's f64 lanes: a vector kernel and one group.
-    fn exact_plan(&self, polar: PolarMethod) -> Option<lanes::Plan> {
+    fn exact_plan(&self, polar: PolarMethod) -> Option<f32_lanes::Plan> {
         if self.kernel == Kernel::Scalar || polar != PolarMethod::Svd {
             return None;
         }
@@ -840,9 +840,10 @@ impl Field {
     }
 
     /// The f64 lanes' rows for `plan`, unless its group is one constraint (a constant rotation).
-    fn wide_rows(&self, plan: Option<&lanes::Plan>) -> Option<Vec<wide::Row64>> {
+    fn wide_rows(&self, plan: Option<&f32_lanes::Plan>) -> Option<Vec<f64_lanes::Row64>> {
         let plan = plan?;
-        (self.kernel != Kernel::Scalar && plan.constant.is_none()).then(|| wide::rows64(self, plan))
+        (self.kernel != Kernel::Scalar && plan.constant.is_none())
+            .then(|| f64_lanes::rows64(self, plan))
     }
 
     /// `each(i, s)` (the scalar path of point i) for the points `at(0..count)` in order. With
@@ -851,7 +852,7 @@ impl Field {
     /// the f32 lane's rotation `at(j).1`, else the lane's previous result (the point 4 before).
     fn with_wide(
         &self,
-        ctx: Option<&wide::Ctx>,
+        ctx: Option<&f64_lanes::Ctx>,
         count: usize,
         at: impl Fn(usize) -> (usize, Option<[f32; 4]>),
         s: &mut Scratch,
@@ -875,7 +876,7 @@ impl Field {
             let lanes: [(usize, Option<[f32; 4]>); 4] =
                 std::array::from_fn(|l| at(b + l.min(len - 1)));
             let warm = std::array::from_fn(|l| lanes[l].1.map_or(chain[l], warm_quat));
-            let got = wide::solve4(self.kernel, ctx, lanes.map(|x| x.0), warm);
+            let got = f64_lanes::solve4(self.kernel, ctx, lanes.map(|x| x.0), warm);
             for l in 0..len {
                 let (i, q) = lanes[l];
                 match got[l] {
@@ -915,7 +916,7 @@ impl Field {
         if output == FieldOutput::ViewBlend {
             let (rot, a) = self.view_blend_parts_at(i, n, q, dist, polar, s);
             let rot = polar::canonical(rot);
-            let u = match lanes::ramp_of(&self.regions) {
+            let u = match f32_lanes::ramp_of(&self.regions) {
                 Some((center, radius, border)) => {
                     (radius - q.distance(center)) / border.min(radius)
                 }
@@ -1014,12 +1015,12 @@ impl Field {
             checks()?;
             // The exact method: the f64 lanes, the scalar path where they cannot vouch.
             let rows = self.wide_rows(self.exact_plan(polar).as_ref());
-            let ctx = rows.as_deref().map(|rows| wide::Ctx {
+            let ctx = rows.as_deref().map(|rows| f64_lanes::Ctx {
                 rows,
                 points: positions,
                 dist: given,
                 n,
-                exact: wide::Exactness::Exact,
+                exact: f64_lanes::Exactness::Exact,
             });
             par_chunks_if_large(&mut out, row_len * 3, n, |ci, chunk| {
                 let mut s = self.scratch();
@@ -1034,27 +1035,27 @@ impl Field {
             return Ok(out);
         };
         let rows = self.wide_rows(Some(&plan));
-        let ctx = rows.as_deref().map(|rows| wide::Ctx {
+        let ctx = rows.as_deref().map(|rows| f64_lanes::Ctx {
             rows,
             points: positions,
             dist: given,
             n,
-            exact: wide::Exactness::Fast,
+            exact: f64_lanes::Exactness::Fast,
         });
-        let inputs = lanes::Inputs {
+        let inputs = f32_lanes::Inputs {
             field: self,
             plan: &plan,
             points: positions,
             dist: given,
             n,
-            job: lanes::Job::Pixels {
+            job: f32_lanes::Job::Pixels {
                 normals,
                 eye: eye.as_vec3().to_array(),
             },
         };
         let (suspect, nonfinite) = par_chunks_if_large(&mut out, row_len * 3, n, |ci, chunk| {
             let start = ci * row_len;
-            let left = lanes::run(self.kernel, &inputs, start, chunk);
+            let left = f32_lanes::run(self.kernel, &inputs, start, chunk);
             let mut s = self.scratch();
             let mut nonfinite = false;
             FALLBACK_LANES.fetch_add(left.points.len() as u64, Ordering::Relaxed);

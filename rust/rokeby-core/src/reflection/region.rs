@@ -7,7 +7,7 @@
 //! each constraint, which decides which constraints are *inside* the region (a(pₙ) > 0).
 
 use crate::error::{Result, RokebyError};
-use crate::geodesic::{GeodesicSolver, Method, Source};
+use crate::geometry::geodesic::{GeodesicSolver, Method, Source};
 use glam::DVec3;
 
 /// Hermite smooth step: 0 for t ≤ 0, 1 for t ≥ 1, 3t² − 2t³ between (C¹ at both ends).
@@ -293,7 +293,7 @@ mod tests {
             0.0f32, 0.0, 0.0, 1.0, 0.0, 0.0, 1.0, 1.0, 0.0, 0.0, 1.0, 0.0,
         ];
         let f = [0i64, 1, 2, 0, 2, 3];
-        GeodesicSolver::new(crate::geodesic::Mesh::new(&v, &f).unwrap())
+        GeodesicSolver::new(crate::geometry::geodesic::Mesh::new(&v, &f).unwrap())
     }
 
     #[test]

@@ -24,7 +24,7 @@
 //! every direction around the light (one unit of Q across the rays is one radian).
 
 use crate::error::{Result, RokebyError};
-use crate::silhouette::Light;
+use crate::shadows::silhouette::Light;
 use glam::{DMat3, DVec3};
 
 /// The widest angle between a silhouette loop's vertices and its frustum's axis (§5.2, per-loop

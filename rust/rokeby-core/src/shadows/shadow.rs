@@ -1,15 +1,15 @@
 //! Freeform shadow boundary editing (Mattausch, Igarashi, Wimmer): the editing session.
 //!
 //! A [`ShadowEditor`] holds a closed caster, the receivers and a light. It computes the smooth
-//! silhouette loops of the caster ([`crate::silhouette`], §4.1), the shadow handles — each
+//! silhouette loops of the caster ([`crate::shadows::silhouette`], §4.1), the shadow handles — each
 //! silhouette vertex a projected onto the receivers by a shadow ray in direction a − l through a
 //! [`Bvh`] over receivers and caster, with a further ray from the hit point whenever the hit face is
 //! back-facing (§4.2, Fig. 4 left) — and, per drag (§5.1, Fig. 2): the receiver point e under the
 //! cursor → the modified silhouette point f at the depth of a (or e for contact shadows) → a 2D MLS
-//! deformation ([`crate::mls2d`], §5.2) of the selected boundary segment (two fixed ends and the
-//! dragged point as control points) in the light's frustum ([`crate::light_space`]), optional
+//! deformation ([`crate::shadows::mls2d`], §5.2) of the selected boundary segment (two fixed ends and the
+//! dragged point as control points) in the light's frustum ([`crate::shadows::light_space`]), optional
 //! sinusoidal noise (§5.3), and new handles g by shadow rays from the deformed silhouette. The
-//! shadow mesh ([`crate::shadow_mesh`], §6.1) is solved from all edited loops; loops with fewer
+//! shadow mesh ([`crate::shadows::shadow_mesh`], §6.1) is solved from all edited loops; loops with fewer
 //! than `min_loop_vertices` vertices are inactive (shown grey, not selectable, no constraints).
 //!
 //! A point light inside the caster's bounding box (a light under a hat's brim, inside a ring) has
@@ -32,12 +32,12 @@
 //! its grazing shadow ray would immediately re-enter the polygonal caster through the faces
 //! around that edge; the faces incident to the edge's two vertices are skipped by its rays.
 
-use crate::bvh::{Bvh, Hit};
 use crate::error::{Result, RokebyError};
-use crate::light_space::{LightFrame, LightSpace};
-use crate::mls2d::{sinusoidal_noise, Mls2d, MlsStyle};
-use crate::shadow_mesh::{EdgePoint, ShadowMeshSolver};
-use crate::silhouette::{silhouettes, ClosedMesh, Light, SilhouetteLoop};
+use crate::geometry::bvh::{Bvh, Hit};
+use crate::shadows::light_space::{LightFrame, LightSpace};
+use crate::shadows::mls2d::{sinusoidal_noise, Mls2d, MlsStyle};
+use crate::shadows::shadow_mesh::{EdgePoint, ShadowMeshSolver};
+use crate::shadows::silhouette::{silhouettes, ClosedMesh, Light, SilhouetteLoop};
 use glam::{DVec2, DVec3};
 use rayon::prelude::*;
 

@@ -23,9 +23,9 @@
 //! while dragging.
 
 use crate::error::{Result, RokebyError};
-use crate::laplacian::{self, edge_lengths};
-use crate::light_space::{LightFrame, LightSpace};
+use crate::geometry::laplacian::{self, edge_lengths};
 use crate::numerical::{self, Triplet};
+use crate::shadows::light_space::{LightFrame, LightSpace};
 use faer::linalg::solvers::Solve;
 use faer::sparse::linalg::solvers::Llt;
 use faer::Mat;
@@ -46,7 +46,7 @@ pub struct EdgePoint {
 }
 
 /// Cotangent weights per undirected edge (i < j), summed over the edge's faces
-/// ([`crate::laplacian::cotangent_weights`] on the faces' edge lengths).
+/// ([`crate::geometry::laplacian::cotangent_weights`] on the faces' edge lengths).
 pub fn cotangent_weights(v: &[DVec3], faces: &[[usize; 3]]) -> Vec<(u32, u32, f64)> {
     let lengths: Vec<[f64; 3]> = faces.iter().map(|&f| edge_lengths(v, f)).collect();
     laplacian::cotangent_weights(faces, &lengths)

@@ -17,7 +17,7 @@
 //! from outside the surface.
 
 use crate::error::{Result, RokebyError};
-use crate::mesh::{Adjacency, Mesh};
+use crate::geometry::mesh::{Adjacency, Mesh};
 use glam::DVec3;
 
 /// A light as the shadow editing sees it.

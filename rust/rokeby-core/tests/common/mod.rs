@@ -46,8 +46,8 @@ pub fn shared_meshes() -> Vec<PathBuf> {
     out
 }
 
-/// The vertices and triangles of an OBJ file ([`rokeby_core::mesh::parse_obj`]).
+/// The vertices and triangles of an OBJ file ([`rokeby_core::geometry::mesh::parse_obj`]).
 pub fn load_obj(path: &PathBuf) -> (Vec<f32>, Vec<i64>) {
     let text = std::fs::read_to_string(path).unwrap_or_else(|e| panic!("{path:?}: {e}"));
-    rokeby_core::mesh::parse_obj(&text).unwrap_or_else(|e| panic!("{path:?}: {e}"))
+    rokeby_core::geometry::mesh::parse_obj(&text).unwrap_or_else(|e| panic!("{path:?}: {e}"))
 }

@@ -41,9 +41,9 @@
 //! v, validity, eq. 5's subtracted term), computed once by the same lane functions: the same
 //! bits, fewer instructions per edit (tested against [`recomposite`] for every kind of view).
 
+use crate::compositing::reconstruct::{unit, ParaboloidMap};
+use crate::compositing::sh::{self, SH_COEFFS};
 use crate::error::{Result, RokebyError};
-use crate::reconstruct::{unit, ParaboloidMap};
-use crate::sh::{self, SH_COEFFS};
 use rayon::prelude::*;
 use std::mem::MaybeUninit;
 

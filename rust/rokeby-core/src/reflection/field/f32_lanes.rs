@@ -15,10 +15,10 @@
 //! tests; `ROKEBY_SIMD=scalar` uses it everywhere).
 
 #[cfg(target_arch = "x86_64")]
-use super::simd::{Avx2, Avx512};
-use super::simd::{Mk, Portable, Simd, L};
+use super::lane_vectors::{Avx2, Avx512};
+use super::lane_vectors::{Mk, Portable, Simd, L};
 use super::{Field, FieldOutput};
-use crate::region::Region;
+use crate::reflection::region::Region;
 use glam::{DQuat, DVec3};
 
 /// Which implementation evaluates the field.
@@ -681,7 +681,7 @@ fn run_lanes<S: Simd>(inp: &Inputs, start: usize, out: &mut [f32]) -> Leftover {
                         }
                         FieldOutput::RotationVector => {
                             lane_ok &= a[l] >= 1.0 || !inside;
-                            let v = crate::polar::rotation_vector(DQuat::from_xyzw(
+                            let v = crate::reflection::polar::rotation_vector(DQuat::from_xyzw(
                                 quat[0] as f64,
                                 quat[1] as f64,
                                 quat[2] as f64,

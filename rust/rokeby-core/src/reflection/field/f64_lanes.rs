@@ -16,7 +16,7 @@
 //! Every other lane (a point on a constraint, unreachable, rank 1, ill-conditioned, not converged)
 //! returns None and is computed by the scalar path (the SVD with its rank-1 tie-break).
 
-use super::lanes::Plan;
+use super::f32_lanes::Plan;
 use glam::DQuat;
 
 /// Conditioning the exact lanes need: λ_min(H) ≥ EXACT_COND ‖M‖_F, so the rounding of S = RᵀM
@@ -367,7 +367,10 @@ fn solve<const F: bool>(ctx: &Ctx, idx: [usize; 4], warm: [DQuat; 4]) -> [Option
         }
         qv = next;
     }
-    out.map(|q| q.filter(|q| q.is_finite()).map(crate::polar::canonical))
+    out.map(|q| {
+        q.filter(|q| q.is_finite())
+            .map(crate::reflection::polar::canonical)
+    })
 }
 
 #[cfg(test)]
@@ -447,7 +450,7 @@ mod tests {
                         let d2 = (q - DVec3::from_array(row.p)).length_squared();
                         m += DMat3::from_cols_array(&row.er).transpose() * d2.recip();
                     }
-                    let want = crate::polar::ortho_svd(&m);
+                    let want = crate::reflection::polar::ortho_svd(&m);
                     total += l % 2;
                     if let Some(g) = g {
                         accepted += l % 2;

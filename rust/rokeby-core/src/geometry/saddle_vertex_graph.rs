@@ -5,7 +5,7 @@
 //! unfolding of the faces they cross) that bend only at saddle vertices (total angle over 2π) and
 //! reflex boundary vertices (Mitchell, Mount & Papadimitriou 1987, Lemma 3.3). The SVG stores, for
 //! every vertex, the direct geodesics to the `k` vertices nearest to it (window propagation without
-//! pseudo-sources, [`crate::exact::direct_near`]); a query is one window propagation from the
+//! pseudo-sources, [`crate::geometry::exact::direct_near`]); a query is one window propagation from the
 //! sources to their own `k_source` nearest vertices, then Dijkstra on the graph. Distances are
 //! exact where every straight piece of the geodesic lies within a vertex's `k`-neighbourhood
 //! (Ying et al. §4); elsewhere the graph path bends at an ordinary vertex and is slightly long.
@@ -15,9 +15,9 @@
 //! error a fraction of a percent instead of growing with the distance. Every edge is the length of
 //! a path on the surface, so no distance is ever shorter than the geodesic (or the chord).
 
-use crate::exact::{direct_near, Queue};
-use crate::geodesic::{Graph, Mesh, Source};
-use crate::mesh::Adjacency;
+use crate::geometry::exact::{direct_near, Queue};
+use crate::geometry::geodesic::{Graph, Mesh, Source};
+use crate::geometry::mesh::Adjacency;
 use rayon::prelude::*;
 use std::sync::Mutex;
 
@@ -27,7 +27,7 @@ pub const NEIGHBOURS: usize = 32;
 /// Vertices the query's own propagation reaches from the sources: exact distances there.
 pub const SOURCE_NEIGHBOURS: usize = 128;
 
-/// The dense graph of [`crate::geodesic::Method::DenseGraph`]: vertices each vertex is linked to
+/// The dense graph of [`crate::geometry::geodesic::Method::DenseGraph`]: vertices each vertex is linked to
 /// before pruning. Measured against exact geodesics on the shared meshes and on generated meshes
 /// with seams, holes, pieces, needles and slivers (docs/geodesics.md): the mean error falls like
 /// ~1/k; pruning keeps the edges a vertex stores (and the query's time) near those of k = 32.
@@ -192,7 +192,7 @@ mod tests {
     //! The query before issue 21's rewrite (the graph's rows in mesh order, a radix heap on f32
     //! keys, fresh buffers per query) kept as the oracle: the rewrite must give the same bits.
     use super::*;
-    use crate::radix_heap::RadixHeap;
+    use crate::geometry::radix_heap::RadixHeap;
     use std::path::PathBuf;
 
     /// The former graph: compressed rows in mesh vertex order.
@@ -266,13 +266,13 @@ mod tests {
             PathBuf::from,
         );
         let text = std::fs::read_to_string(root.join("meshes").join(name)).ok()?;
-        let (v, f) = crate::mesh::parse_obj(&text).unwrap();
+        let (v, f) = crate::geometry::mesh::parse_obj(&text).unwrap();
         Some(Mesh::new(&v, &f).unwrap())
     }
 
     #[test]
     fn saddle_graph_query_matches_the_former_implementation_bit_for_bit() {
-        use crate::geodesic::SurfacePoint;
+        use crate::geometry::geodesic::SurfacePoint;
         let mut any = false;
         for name in ["teapot.obj", "spot.obj", "homer.obj", "fandisk.obj"] {
             let Some(mesh) = shared_mesh(name) else {
