@@ -78,7 +78,7 @@ lint: $(LINT)/.deps
 	cargo clippy --workspace --all-targets -- -D warnings
 	$(LINT)/bin/python tools/api_check.py
 
-# --- the Blender matrix (issue 19) -------------------------------------------------------------
+# --- the Blender matrix -------------------------------------------------------------
 # `make test-blender BPY=4.2.23` runs the whole pytest suite against bpy <version> in its own venv,
 # .venv-bpy-<version>, made idempotently like .venv: BPY_PYTHON, bpy==<version>, the numpy that bpy
 # needs (BPY_NUMPY: 1.26.4 up to 5.0; for 5.1+ the one bpy's own requirements pick, unless set) and
@@ -167,7 +167,7 @@ $(PEERS)/.deps: requirements-peers.txt
 bench: native $(PEERS)/.deps
 	$(PY) bench/run.py --peers $(PEERS)/bin/python
 
-# Fuzzing (issue #9): every rokeby-core entry point for FUZZ_SECONDS each with cargo-fuzz
+# Fuzzing: every rokeby-core entry point for FUZZ_SECONDS each with cargo-fuzz
 # (libFuzzer), installed into .tools on first use. The stable toolchain runs it with
 # RUSTC_BOOTSTRAP=1 and no sanitizer; a crash leaves its input under rust/fuzz/artifacts.
 FUZZ_SECONDS ?= 30
@@ -182,7 +182,7 @@ fuzz: $(CARGO_FUZZ)
 		RUSTC_BOOTSTRAP=1 $(CARGO_FUZZ) fuzz run --fuzz-dir rust/fuzz --sanitizer none --release $$t -- -max_total_time=$(FUZZ_SECONDS) -rss_limit_mb=2048; \
 	done
 
-# Hypothesis fuzzing (issue 24) of every rokeby_native function and method and the bpy-free file
+# Hypothesis fuzzing of every rokeby_native function and method and the bpy-free file
 # readers, FUZZ_PY_EXAMPLES examples each, random seeds, in a subprocess under a 4 GiB address-space
 # limit with ROKEBY_MAX_ALLOC_BYTES at 1 GiB (tests/native/fuzz/run_fuzz.py). `make test` runs it briefly
 # with fixed seeds (tests/native/test_fuzz_native.py).

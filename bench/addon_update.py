@@ -1,4 +1,4 @@
-"""Benchmark: time from a handle move to the updated field attribute (issue #4).
+"""Benchmark: time from a handle move to the updated field attribute.
 
 A mirror of about 100k vertices (a UV sphere, 99,602 vertices) and the real nefertiti.obj scan
 (49,971 vertices), 8 constraints, the green handle of one constraint moved per step through the
@@ -6,7 +6,7 @@ depsgraph handler, as when dragging in the viewport. Prints the evaluator's own 
 reading handles and the mesh, projecting the red handles, converting and writing the attribute;
 Rust: rokeby_native) and the whole view_layer.update() including Blender's depsgraph work.
 
-Red-handle drags with geodesic distances (issue 23): the red handle of one constraint moves per
+Red-handle drags with geodesic distances: the red handle of one constraint moves per
 step (each step a new surface point, so a new solve); during the drag the moved constraint's
 distances come from evaluate.DRAG_METHOD (a preview), and on release (``handlers.settle_previews``,
 what the end-of-drag timer runs) the mirror's own method recomputes them. Printed: the drag step,
@@ -106,7 +106,7 @@ def measure(kind: str, shared: Path, metric: str, method: str, polar: str, steps
         "python_ms": float(np.median(py)),
         "rust_ms": float(np.median(rs)),
         "update_ms": float(np.median(total)),
-        # Issue 23: the following depsgraph update re-evaluates the mesh the write tagged.
+        # the following depsgraph update re-evaluates the mesh the write tagged.
         "after_ms": float(np.median(after)),
     }
 
@@ -227,7 +227,7 @@ def main(argv=None) -> int:
     ap.add_argument("--json", type=Path)
     ap.add_argument("--shared", type=Path, default=Path(os.environ.get("ROKEBY_SHARED", ROOT.parent / "shared")))
     ap.add_argument("--quick", action="store_true", help="the 100k sphere only, Euclidean and geodesic (heat), fast polar")
-    ap.add_argument("--red-only", action="store_true", help="only the red-handle drags (issue 23)")
+    ap.add_argument("--red-only", action="store_true", help="only the red-handle drags")
     args = ap.parse_args(argv)
     rows = []
     red = []

@@ -1,4 +1,4 @@
-"""Issue #8, end to end in a fresh bpy process (gpu context from a tiny EEVEE render; llvmpipe
+"""The appearance preview, end to end in a fresh bpy process (gpu context from a tiny EEVEE render; llvmpipe
 here, no GPU lent): (1) "a brush stroke updates the preview within a frame": one dab through
 rokeby.appearance.paint, then the preview drawn offscreen (the kept batch, the painted values
 uploaded, shader, read-back of the pixels, which waits for the GPU), per-point and 1024² texture

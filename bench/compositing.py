@@ -1,4 +1,4 @@
-"""Benchmark: local shape editing at the compositing stage (issue #6), per stage.
+"""Benchmark: local shape editing at the compositing stage, per stage.
 
 Inputs are synthetic so that they are exact and the same on every run: an orthographic sphere whose
 normals carry a procedural bump (so the Gauss map folds, patches overlap and the reflection map has
@@ -182,11 +182,11 @@ def recomposite_bench(rng, w=1920, h=1080, patches=10, env_size=128, repeat=5):
             **edit, **glsl_bench(run, args, kw, repeat)}
 
 
-EDIT_GOAL_MS = 8.0  # issue 23: one recompositing edit of a 1080p frame with ten patches, on 2 threads
+EDIT_GOAL_MS = 8.0  # goal: one recompositing edit of a 1080p frame with ten patches, on 2 threads
 
 
 def session_bench(args, kw, repeat=9):
-    """Per-edit time of an artist's loop (issue 23): ``rokeby_native.Recompositor`` holding the
+    """Per-edit time of an artist's loop: ``rokeby_native.Recompositor`` holding the
     passes (the default session), each edit passing only the edited normals and writing into the
     same buffer, against the same session keeping the per-pixel terms that do not depend on ñ
     (``prepared=True``) and the former per-edit path in the same run (``rokeby_native.recompose``

@@ -1,4 +1,4 @@
-"""Timing: one step of the normal brush (*Paint Normals*, rokeby.compositing_brush, issue 22) on a
+"""Timing: one step of the normal brush (*Paint Normals*, rokeby.compositing_brush) on a
 1920x1080 frame: the brush's edit of the dab's window plus eqs. 3-5 on that window
 (``BrushSession.extend``), and writing the frame into the Blender image (``show_step``:
 foreach_set of the whole image, which keeps the compositor's Image node current), against eqs.

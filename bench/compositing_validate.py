@@ -1,4 +1,4 @@
-"""Validation of compositing-stage shape editing (issue #6) with Cycles renders.
+"""Validation of compositing-stage shape editing with Cycles renders.
 
 Protocol (after the paper's Figs. 6 and 9), tiny renders so that it runs on a shared machine. For
 every HDR world bpy ships (``envmaps.studio_world``) and every mesh asked for:

@@ -1,4 +1,4 @@
-"""Benchmark: what the edit costs a Cycles render of the demo scene (issue #5, "Performance").
+"""Benchmark: what the edit costs a Cycles render of the demo scene ("Performance").
 
 The Rokeby Venus of `make demo` (rokeby.demo_scene) is rendered with the mirror's render node
 group installed (the edit: the edited normal n' = normalize(R r + V) read from the field

@@ -1,4 +1,4 @@
-"""Benchmark: environment-map prefiltering (issue 8) on the HDR worlds bpy ships.
+"""Benchmark: environment-map prefiltering on the HDR worlds bpy ships.
 
 * speed: 8 prefiltered levels of a 1024x512 world (GGX roughness 0, 1/7, ..., 1; Phong and
   Torrance–Sparrow ladders too), wall and CPU time, for K = 4, 6 (default), 8 texels per ring radius;

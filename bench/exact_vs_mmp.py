@@ -1,4 +1,4 @@
-"""Rokeby's exact geodesics (method="exact") against pygeodesic's exact MMP, issue 21's goal: the same
+"""Rokeby's exact geodesics (method="exact") against pygeodesic's exact MMP, the goal: the same
 distances to 1e-5 relative at a quarter of MMP's query time on the shared meshes.
 
     make native .venv-peers/.deps && .venv/bin/python bench/exact_vs_mmp.py [--rounds N]

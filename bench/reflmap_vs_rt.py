@@ -1,4 +1,4 @@
-"""Reflection map versus ray traced render (issue 9): time against error, Cycles CPU, tiny.
+"""Reflection map versus ray traced render: time against error, Cycles CPU, tiny.
 
 A chrome ball (64x32 UV sphere, smooth) under the forest HDR world, nothing else near it: the map's
 only errors are its resolution and, for rough metal, its blurred-level lobe. Reference: the same

@@ -41,7 +41,7 @@ def _refresh_section(emit, out, marker, section):
     start = len(out)
     section(emit)
     if not any(line.startswith("Run: ") for line in out[start:start + 4]):
-        # Issue 9: each section says which run it came from.
+        # each section says which run it came from.
         out[start + 1:start + 1] = ["", f"Run: {time.strftime('%Y-%m-%d %H:%M')}, `bench/run.py --only` ({os.cpu_count()} cores, load average {os.getloadavg()[0]:.1f} at the end)."]
     doc = ROOT / "docs" / "benchmarks.md"
     old = doc.read_text() if doc.exists() else ""
@@ -99,7 +99,7 @@ def main():
         _refresh_section(emit, out, APPEARANCE_MARKER, appearance_section)
         return
     if args.only in TRADEOFFS:
-        # Issue 9: one speed-for-accuracy choice (bench/tradeoff_sections.py), with its plot.
+        # one speed-for-accuracy choice (bench/tradeoff_sections.py), with its plot.
         marker, section = TRADEOFFS[args.only]
         _refresh_section(emit, out, marker, lambda e: section(e, args.peers))
         tradeoff_sections.refresh_peers_line(args.peers)

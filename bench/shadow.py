@@ -1,4 +1,4 @@
-"""Benchmark: freeform shadow boundary editing (issue 7) against the paper's Table 1.
+"""Benchmark: freeform shadow boundary editing against the paper's Table 1.
 
 Mattausch et al. (single core of an i7-3770K + GTX 580): Paolo 30.5k triangles, Bunny 70k,
 Dragon 100k; shadow-mesh creation 0.2 s, 1.01 s, 1.28 s; editing and rendering hard shadows

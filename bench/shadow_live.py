@@ -1,4 +1,4 @@
-"""Benchmark: the live shadow while dragging (issue 22; the paper's Fig. 3 B–D) in Blender.
+"""Benchmark: the live shadow while dragging (the paper's Fig. 3 B–D) in Blender.
 
 Per drag step the modal operator runs ``session.drag`` (MLS + handles, native) and
 ``shadow.live_step`` (the shadow mesh, written into the shadow object's shape key); the viewport

@@ -1,4 +1,4 @@
-"""Sections of docs/benchmarks.md for the speed-for-accuracy choices of issue 9 (bench/run.py
+"""Sections of docs/benchmarks.md for the speed-for-accuracy choices (bench/run.py
 --only sh_order | qp | holefill | precision | reflmap). Each runs its measurement in a fresh process
 (bench/tradeoffs.py, bench/reflmap_vs_rt.py), emits a table with the run's date, writes a
 time-against-error PNG under docs/bench/ with matplotlib from .venv-peers (--peers; without it the
@@ -385,7 +385,7 @@ def representation_section(emit, peers=None):
     emit("foreach_set). Memory: what is stored per mirror. Eye-dependent: must be recomputed when the camera moves.")
     emit("The add-on's own Cycles renders agree with these figures (tests/reflection/test_wysiwyg.py).")
     emit()
-    emit("Goal (issue 17): render against preview, 99th percentile under 1° on a ~2k-vertex sphere with and without a")
+    emit("Goal: render against preview, 99th percentile under 1° on a ~2k-vertex sphere with and without a")
     emit("region and on the ±170° plane.")
     emit()
     emit("| mesh | vertices | region | representation | p99 (°) | goal p99 (°) | max (°) | > 5° | update (ms) | memory (bytes) | eye-dependent |")

@@ -1,4 +1,4 @@
-"""Speed-for-accuracy trades of issue 9 not measured elsewhere (run by bench/run.py --only <name>).
+"""Speed-for-accuracy trades not measured elsewhere (run by bench/run.py --only <name>).
 
 * sh: SH order of the irradiance (0, 1, 2 from the core's order-2 projection truncated to its first
   1/4/9 coefficients; 4 from a numpy projection, labelled so) against the exact irradiance.
@@ -356,7 +356,7 @@ def field_section(k=8, n_pixels=1280 * 960, levels=(0, 1, 2, 3)):
     return {"rows": rows, "pixels": n_pixels, "k": k, "load_average": [load0, os.getloadavg()[0]], "cpus": os.cpu_count()}
 
 
-# --- what the render reads: the representation of the field (issue 17) -----------------------
+# --- what the render reads: the representation of the field -----------------------
 
 def _uv_sphere(segments, rings):
     """Vertices, smooth normals and triangles of Blender's UV sphere (radius 1)."""

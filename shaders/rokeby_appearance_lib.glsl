@@ -1,4 +1,4 @@
-/* Rokeby appearance preview (issue 8): shading under the world HDR with the prefiltered chain of
+/* Rokeby appearance preview: shading under the world HDR with the prefiltered chain of
  * the chosen lobe in one lat-long atlas (levels at roughness l / (levels - 1), stacked top to
  * bottom) and order-2 SH irradiance. Needs: the block rk_appearance (RokebyAppearance), the
  * samplers rk_env_atlas and rk_brdf_lut (GGX directional albedo: r = scale, g = bias of F0, at

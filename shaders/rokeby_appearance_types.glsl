@@ -1,4 +1,4 @@
-/* Rokeby appearance preview (issue 8): the uniform block, std140, shared by Blender's
+/* Rokeby appearance preview: the uniform block, std140, shared by Blender's
  * GPUShaderCreateInfo (typedef source) and the moderngl tests (rokeby.appearance_glsl packs it).
  * Only the model matrix is a push constant (64 bytes, within Vulkan's guaranteed 128). */
 

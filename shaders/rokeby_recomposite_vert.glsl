@@ -1,4 +1,4 @@
-/* Rokeby recompositing (issue #6), vertex stage: one triangle covering the viewport, no inputs.
+/* Rokeby recompositing, vertex stage: one triangle covering the viewport, no inputs.
  * Declarations come from rokeby.compositing.RECOMPOSITE_INTERFACE (a #version header for
  * moderngl, GPUShaderCreateInfo in Blender). */
 

@@ -95,7 +95,7 @@ def _indices(text: str) -> list[int]:
 
 def main(argv=None) -> int:
     """The tool: 0 on success; 2 with one line on stderr naming the problem for a bad file, flag
-    or value, an unwritable output or a resource limit (issue 24: never a traceback for those)."""
+    or value, an unwritable output or a resource limit (never a traceback for those)."""
     import signal  # noqa: PLC0415
 
     from .core import native  # noqa: PLC0415

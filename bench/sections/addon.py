@@ -17,7 +17,7 @@ HEAVY_MARKER = "## Heavy scenes: "
 
 
 def heavy_section(emit):
-    """Issue 18, problem 5: a depsgraph update in a scene of 3,000 and 10,000 objects with the
+    """A depsgraph update in a scene of 3,000 and 10,000 objects with the
     add-on disabled, enabled with no Rokeby data, and enabled with one mirror (bench/heavy_scene.py
     in a fresh process). Not a timed test: printed side by side."""
     with tempfile.TemporaryDirectory() as tmp:
@@ -31,7 +31,7 @@ def heavy_section(emit):
     emit(f'{rows[0]["rounds"]} rounds of {rows[0]["steps"]} updates; medians. "Handler": the CPU time of the add-on\'s own depsgraph handler, steadier on a shared')
     emit("machine. One mirror: a 482-vertex sphere with 2 constraints and a region, unrelated to the object that moves")
     emit('(it is still re-checked every update, which costs the same at any N); "handle move": an update that moves its')
-    emit("green handle (the field is recomputed). Goal (issue 18): no Rokeby data within 5% of disabled; with one mirror,")
+    emit("green handle (the field is recomputed). Goal: no Rokeby data within 5% of disabled; with one mirror,")
     emit("no growth with the number of unrelated objects. The handlers keep a registry of what the add-on owns")
     emit("(rokeby.registry) instead of scanning `scene.objects`; what still grows with N is one `len(bpy.data.objects)`")
     emit("per update (a walk of a linked list in C: about 0.4 ms at 10,000 objects).")
@@ -52,7 +52,7 @@ def heavy_section(emit):
 
 
 def addon_section(emit):
-    """Issue #4: handle move → updated attribute through the add-on's depsgraph handler (bpy in a
+    """handle move → updated attribute through the add-on's depsgraph handler (bpy in a
     fresh process, bench/addon_update.py)."""
     import json
     import subprocess
@@ -75,7 +75,7 @@ def addon_section(emit):
     emit("copy of the mesh's attributes). Medians of 30 moves. Goal: under 16 ms (one viewport frame at 60 Hz).")
     emit()
     emit("Next update: the depsgraph update that re-evaluates the mesh the attribute write tagged (`me.update_tag()`,")
-    emit("issue 23; it no longer recomputes normals inside the handler).")
+    emit("since the drag-loop rework; it no longer recomputes normals inside the handler).")
     emit()
     emit("| mirror | vertices | distance | polar | Python (ms) | Rust (ms) | handler total (ms) | whole update (ms) | next update (ms) | goal (ms) |")
     emit("|---|---:|---|---|---:|---:|---:|---:|---:|---:|")
@@ -88,7 +88,7 @@ def addon_section(emit):
     emit("Geodesic distances are cached per constraint, so a green-handle move costs no solve; moving a red")
     emit("handle costs one solve for that constraint only.")
     emit()
-    emit("### Red-handle drags with geodesic distances (issue 23)")
+    emit("### Red-handle drags with geodesic distances")
     emit()
     emit("The red handle of one of 8 constraints moves to a new surface point each step on the 100k sphere. During")
     emit("the drag (interactive updates) the moved constraint's distances come from the drag method, a preview the")
@@ -113,6 +113,6 @@ def addon_section(emit):
              f"| {r['release_ms']:.1f} / {r['release_cpu_ms']:.1f} | {r['solve_ms']:.1f} / {r['solve_cpu_ms']:.1f} | 50 | {r['drag_solve_ms']:.1f} / {r['drag_solve_cpu_ms']:.1f} "
              f"| {r['accurate_step_update_ms']:.1f} / {r['accurate_step_cpu_ms']:.1f} | {100 * r['preview_error_mean']:.2f}% / {100 * r['preview_error_p99']:.2f}% | {r['load_average']:.1f} |")
     emit()
-    for r in red:  # issue 34: the red handle's accurate update at 100k vertices, under 50 ms
+    for r in red:  # goal: the red handle's accurate update at 100k vertices, under 50 ms
         emit(f"- red handle, accurate update ({r['vertices']:,} vertices, geodesic {r['method'].lower()}, one accurate solve; goal at 100k): {against_goal(r['solve_ms'], 50.0, 'ms')}")
     emit()

@@ -19,7 +19,7 @@ W_PREVIEW = 96
 
 
 def appearance_section(emit):
-    """Issue #8 end to end: a brush stroke until the preview's pixels are back, and the
+    """Appearance painting end to end: a brush stroke until the preview's pixels are back, and the
     Blender-drawn preview of each model against Cycles (bench/appearance_preview.py, fresh bpy)."""
     with tempfile.TemporaryDirectory() as tmp:
         out = Path(tmp) / "appearance.json"

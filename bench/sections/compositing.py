@@ -17,7 +17,7 @@ COMPOSITING_MARKER = "## Compositing-stage shape editing: "
 
 
 def compositing_section(emit):
-    """Issue #6: reconstruction stages and recompositing (bench/compositing.py in fresh processes,
+    """reconstruction stages and recompositing (bench/compositing.py in fresh processes,
     on 1 thread like the paper's single core, and on all threads)."""
     runs = {}
     with tempfile.TemporaryDirectory() as tmp:
@@ -26,7 +26,7 @@ def compositing_section(emit):
             env = dict(os.environ, RAYON_NUM_THREADS=str(threads))
             subprocess.run([sys.executable, str(ROOT / "bench" / "compositing.py"), "--json", str(out)], check=True, stdout=subprocess.DEVNULL, env=env)
             runs[threads] = json.loads(out.read_text())
-        # Issue 23's goal is stated on 2 threads: the per-edit times once more on exactly 2.
+        # The goal is stated on 2 threads: the per-edit times once more on exactly 2.
         edit_json = Path(tmp) / "edit2.json"
         subprocess.run([sys.executable, str(ROOT / "bench" / "compositing.py"), "--edit-only", "--json", str(edit_json)], check=True,
                        stdout=subprocess.DEVNULL, env=dict(os.environ, RAYON_NUM_THREADS="2"))
@@ -64,7 +64,7 @@ def compositing_section(emit):
     emit(f"{r1['edited_fraction']:.0%} of the pixels edited: {r1['recomposite_ms']:.0f} ms on 1 thread, {rn_['recomposite_ms']:.0f} ms on {os.cpu_count()};")
     emit(f"unmodified normals (every pixel takes the exact-identity path): {rn_['recomposite_identity_ms']:.0f} ms. Goal: under 33 ms.")
     emit()
-    emit("Per edit of that frame with the passes held in Rust (issue 23; rokeby_native.Recompositor: only ñ passed, read in")
+    emit("Per edit of that frame with the passes held in Rust (rokeby_native.Recompositor: only ñ passed, read in")
     emit("place, the result written into the same buffer, overflow checked in the kernel's store), against the same session")
     emit("keeping per pixel unit n and v, the validity and eq. 5's subtracted term (prepared=True; off by default: no faster")
     emit("on a quiet machine) and the former per-edit path in the same run (rokeby_native.recomposite converting the passes and")
@@ -79,7 +79,7 @@ def compositing_section(emit):
         if "edit_ms" in r:
             emit(f"| {label} | **{r['edit_ms']:.1f}** ({r['edit_runs']} runs) | {r['edit_goal_ms']:.0f} (on 2) | {r['edit_prepared_ms']:.1f} | {r['edit_old_ms']:.1f} | "
                  f"{r['edit_ms'] / r['edit_old_ms']:.2f} | {r['edit_memory_bound_ms']:.1f} ({r['edit_bytes_mb']:.0f} MB at {r['bandwidth_gbs']:.1f} GB/s) | {r['edit_same_bits']} |")
-    if "edit_ms" in edit2:  # issue 34: recompositing a 1080p edit in at most 8 ms on 2 threads
+    if "edit_ms" in edit2:  # goal: recompositing a 1080p edit in at most 8 ms on 2 threads
         emit()
         emit(f"Per edit on 2 threads: {against_goal(edit2['edit_ms'], edit2['edit_goal_ms'], 'ms')}.")
     if "prepared_mb" in edit2:

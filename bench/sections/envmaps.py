@@ -18,7 +18,7 @@ ENVMAP_MARKER = "## Environment maps: "
 
 
 def envmap_section(emit):
-    """Issue #8: prefiltering the HDR worlds bpy ships, speed and error against the seed's
+    """prefiltering the HDR worlds bpy ships, speed and error against the seed's
     brute-force sum (in a fresh process, bench/envmap.py)."""
     with tempfile.TemporaryDirectory() as tmp:
         out = Path(tmp) / "envmap.json"

@@ -113,7 +113,7 @@ ROOFLINE_MARKER = "## Field kernels against this machine's roofline"
 
 
 def roofline_section(emit):
-    """Issue 23: the field kernels (f32 lanes: portable, AVX2, AVX-512; the scalar f64 reference)
+    """the field kernels (f32 lanes: portable, AVX2, AVX-512; the scalar f64 reference)
     beside this machine's own f32 FMA peak and stream-triad bandwidth, measured in the same run by
     rust/rokeby-core/examples/field_roofline.rs, with the goals and the paper's GPU figure."""
     import subprocess
@@ -184,7 +184,7 @@ def graph_heat_query_ratios(emit, runs=201):
     """The geodesic graphs' queries against heat's on every shared mesh, in one process: the
     section's query (one source, `distances(sources[:1])` after the precomputation), the three
     methods alternating, medians of `runs` each and their ratios (on a shared machine the ratio is
-    steadier than either time). Goal (issues 21 and 34): the default's query no slower than heat's."""
+    steadier than either time). Goal: the default's query no slower than heat's."""
     emit("Geodesic graphs against heat, query only (goal: the default method's query no slower than heat's): the query")
     emit(f"above, the three methods alternating in one process, median of {runs} each.")
     emit()
@@ -392,7 +392,7 @@ RENDER_MARKER = "## Render: "
 
 
 def render_section(emit):
-    """Issue #5: what the edit costs a Cycles render of the `make demo` scene (bpy in a fresh
+    """what the edit costs a Cycles render of the `make demo` scene (bpy in a fresh
     process, bench/demo_render.py)."""
     with tempfile.TemporaryDirectory() as tmp:
         out = Path(tmp) / "render.json"
@@ -421,7 +421,7 @@ SCENE_PREVIEW_MARKER = "## Viewport preview, the scene captured from the mirror:
 
 
 def viewport_section(emit):
-    """Issue #5: the viewport preview's shader per frame (moderngl on headless EGL, in a fresh
+    """the viewport preview's shader per frame (moderngl on headless EGL, in a fresh
     process, bench/viewport.py)."""
     with tempfile.TemporaryDirectory() as tmp:
         out = Path(tmp) / "viewport.json"

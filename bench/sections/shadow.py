@@ -17,7 +17,7 @@ SHADOW_MARKER = "## Shadow boundary editing: "
 
 
 def shadow_section(emit):
-    """Issue #7: silhouettes, handles, a drag step and the shadow mesh on the shared meshes of the
+    """silhouettes, handles, a drag step and the shadow mesh on the shared meshes of the
     sizes of the paper's Table 1 (bench/shadow.py in fresh processes, 1 thread and all threads)."""
     runs = {}
     with tempfile.TemporaryDirectory() as tmp:
@@ -49,13 +49,13 @@ def shadow_section(emit):
     emit()
     emit(f"Load average {many['load_average']:.1f} at the end, on {many['cpus']} CPUs (other jobs shared the machine).")
     emit()
-    # Issue 22: the live shadow while dragging, per drag step in Blender (bench/shadow_live.py).
+    # the live shadow while dragging, per drag step in Blender (bench/shadow_live.py).
     with tempfile.TemporaryDirectory() as tmp:
         out = Path(tmp) / "live.json"
         env = dict(os.environ, PYTHONPATH=os.pathsep.join([str(ROOT / "addon"), os.environ.get("PYTHONPATH", "")]))
         subprocess.run([sys.executable, str(ROOT / "bench" / "shadow_live.py"), "--json", str(out)], check=True, stdout=subprocess.DEVNULL, env=env)
         live = json.loads(out.read_text())["rows"]
-    emit("Live shadow while dragging (issue 22, bench/shadow_live.py, medians of the 7 steps after a drag's first): "
+    emit("Live shadow while dragging (bench/shadow_live.py, medians of the 7 steps after a drag's first): "
          "drag = `session.drag`, step = `shadow.live_step` (the shadow mesh, incremental within an affine drag, written "
          "into the edit key), native = `ShadowEditor.shadow_mesh` alone, depsgraph = `view_layer.update()`; first = the "
          "drag's first step after the mouse press (the operator prepares the drag there: press), and without a press (the "
@@ -73,7 +73,7 @@ def shadow_section(emit):
              f"{'yes' if r['total_ms'] < 1000 / 60 else 'no'} | {r['press_ms']:.1f} | {r['first_step_ms']:.1f} | "
              f"{r['first_step_unprepared_ms']:.1f} | {r['full_solve_step_ms']:.1f} |")
     emit()
-    for r in live:  # issue 34: the shadow drag's press under 30 ms at 100k vertices
+    for r in live:  # goal: the shadow drag's press under 30 ms at 100k vertices
         if "press_ms" in r:
             emit(f"- shadow press, {r['mesh']} ({r.get('vertices', 0):,} vertices, {r['triangles']:,} tris; goal at 100k vertices): "
                  f"{against_goal(r['press_ms'], 30.0, 'ms')}")

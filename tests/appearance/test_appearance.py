@@ -1,4 +1,4 @@
-"""Appearance painting (issue 8): attributes wired into the Principled BSDF, Gaussian brushes,
+"""Appearance painting: attributes wired into the Principled BSDF, Gaussian brushes,
 global sliders, a Cycles render under a shipped HDR world, bad input. bpy in background mode."""
 
 import numpy as np

@@ -1,4 +1,4 @@
-"""Fraser's point-light view (issue 22): rk_shade_point in shaders/rokeby_appearance_lib.glsl, the
+"""Fraser's point-light view: rk_shade_point in shaders/rokeby_appearance_lib.glsl, the
 painted parameters under one movable point light, run with moderngl on headless EGL against its
 numpy twin (appearance_glsl.shade_point_reference) for the three preview models; the highlight
 follows the light. And the specular tint in the environment-lit shading (rk_shade_tinted)."""

@@ -1,4 +1,4 @@
-"""The final-render model (issue 22): renders use the Principled BSDF whatever the preview model;
+"""The final-render model: renders use the Principled BSDF whatever the preview model;
 the panel says so and shows by how much the render differs from a Phong or Torrance–Sparrow
 preview, measured by an operator, never a claim of a match. bpy in background mode."""
 

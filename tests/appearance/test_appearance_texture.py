@@ -1,4 +1,4 @@
-"""Appearance painting into image textures (issue 8, texture targets): wiring through the UV map,
+"""Appearance painting into image textures (texture targets): wiring through the UV map,
 removal, the no-UV error, agreement with the per-point target, a Cycles render, save/reload.
 bpy in background mode."""
 

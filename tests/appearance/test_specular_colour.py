@@ -1,4 +1,4 @@
-"""Specular colour brush (issue 22; Fraser's proposed Step 6, "change the colour of specular
+"""Specular colour brush (Fraser's proposed Step 6, "change the colour of specular
 highlights using a brush"): Principled Specular Tint painted per point and in textures, rendered
 by Cycles, undone by Ctrl-Z, kept by save/reload, added at load to files painted before it
 existed. bpy in background mode."""
@@ -128,7 +128,7 @@ def test_bad_specular_colours_are_refused_by_name(lit_ball):
 
 
 def _strip_specular_tint(ball):
-    """The material and mesh as Rokeby before issue 22 left them: no specular colour."""
+    """The material and mesh as Rokeby left them before the specular colour existed: no specular colour."""
     nodes = ball.active_material.node_tree.nodes
     for name in ("rokeby_specular_tint", "rokeby_global_specular_tint", "rokeby_tex_specular_tint"):
         if nodes.get(name) is not None:

@@ -1,4 +1,4 @@
-"""Local shape editing at the compositing stage (Zubiaga et al. 2016, issue 6): the native stages'
+"""Local shape editing at the compositing stage (Zubiaga et al. 2016): the native stages'
 properties and bad input, then the Blender pipeline on a tiny Cycles render (passes → EXR →
 reconstruction → recompositing), the fall-backs, and the command-line tool."""
 

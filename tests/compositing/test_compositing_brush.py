@@ -1,4 +1,4 @@
-"""The normal brush (issue 22: "a viewport/image-editor brush that paints normal edits (emboss,
+"""The normal brush ("a viewport/image-editor brush that paints normal edits (emboss,
 bump, smooth) directly on the rendered image with the result updating per stroke"): strokes on a
 Cycles render through the API, the operator and its modal event handling; pixels change under
 the stroke and nowhere else, emboss and smooth move the shading's contrast in opposite

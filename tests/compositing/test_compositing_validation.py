@@ -1,4 +1,4 @@
-"""The conventions bench/compositing_validate.py relies on, without Cycles (issue 6, "validation,
+"""The conventions bench/compositing_validate.py relies on, without Cycles ("validation,
 measured"): an environment whose order-2 irradiance is known in closed form, on Blender's lat-long
 layout; ``envmaps.irradiance`` gives E(n)/π of it; a synthetic G-buffer of an orthographic sphere
 under that environment, seen by a rotated camera exactly as the Cycles passes carry it (world-space

@@ -1,4 +1,4 @@
-"""Compositing where compositors work, and sequences (issue 22; Zubiaga et al. edit normals in a
+"""Compositing where compositors work, and sequences (Zubiaga et al. edit normals in a
 node-based compositor): Use in Compositor feeds the recomposited image into the scene's compositor
 as an Image node that later recomposites keep current (a render through the artist's chain shows
 each edit); ``python -m rokeby.composite --sequence`` recomposites a folder of frames with progress,

@@ -1,5 +1,5 @@
 """The GLSL recompositing path drawn through Blender's own gpu module (rokeby.recomposite_gpu,
-issue #6): the same shader files and interface as the moderngl path, compiled by
+Zubiaga et al. 2016): the same shader files and interface as the moderngl path, compiled by
 GPUShaderCreateInfo and drawn offscreen (RGBA32F) in a fresh bpy process
 (tests/compositing/recomposite_blender_gpu_check.py), against the Rust core on the frames of
 tests/compositing/test_recomposite_glsl.py."""

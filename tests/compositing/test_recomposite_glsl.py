@@ -1,4 +1,4 @@
-"""The GLSL recompositing path (shaders/rokeby_recomposite_frag.glsl, issue #6) against the Rust
+"""The GLSL recompositing path (shaders/rokeby_recomposite_frag.glsl) against the Rust
 core's ``recomposite``: the same shader file Blender would load, compiled by moderngl on a headless
 EGL context (Mesa llvmpipe here)."""
 

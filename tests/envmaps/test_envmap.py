@@ -1,4 +1,4 @@
-"""Environment-map toolkit (issue 8) through rokeby.envmaps: the shipped HDR worlds read with
+"""Environment-map toolkit through rokeby.envmaps: the shipped HDR worlds read with
 OpenEXR, conversions and lookups in Blender's convention, SH irradiance and specular prefiltering
 against the seed's brute-force sum, writing results, bad input."""
 

@@ -1,4 +1,4 @@
-"""8-bit (LDR) environment images (issue 22): rokeby.envmaps.read_image reads PNG and JPEG as
+"""8-bit (LDR) environment images: rokeby.envmaps.read_image reads PNG and JPEG as
 Fraser's implementation does, sRGB-decoded to linear, row 0 at the top. The PNGs are written here
 byte by byte (zlib + CRC, no image library), so the expected values do not come from the loader
 under test."""

@@ -1,4 +1,4 @@
-"""Runs the native fuzz suite (tests/native/fuzz/fuzz_native.py, issue 24) briefly, in a subprocess under
+"""Runs the native fuzz suite (tests/native/fuzz/fuzz_native.py) briefly, in a subprocess under
 an address-space limit (tests/native/fuzz/run_fuzz.py): every rokeby_native function and method and the
 bpy-free file readers on random, empty, huge, non-finite and non-contiguous input must return
 finite output or raise ValueError/TypeError/MemoryError/NumericalError — no crash, abort, hang

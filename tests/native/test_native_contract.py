@@ -1,7 +1,7 @@
-"""The native core's error contract (issue 24, native items): sizes a caller or a file controls are
+"""The native core's error contract (native items): sizes a caller or a file controls are
 bounded before anything is allocated (MemoryError / ValueError instead of an abort), long calls
 stay bounded and can be cancelled, and finite input never gives NaN/inf. See docs/errors.md,
-"The native core". Each test here failed on the core before issue 24 (an abort, a 50 s or endless
+"The native core". Each test here failed on the core before its hardening (an abort, a 50 s or endless
 call, a RuntimeError, or NaN/inf returned)."""
 
 import os
@@ -153,7 +153,7 @@ def test_bilateral_at_the_largest_sigma_on_1080p_finishes():
     out = rn.normals_bilateral(n, depth, sigma_s=50.0)
     took = time.process_time() - t0
     print(f"normals_bilateral(sigma_s=50) on 1920×1080: {took:.1f} CPU s")
-    assert took < 240, took  # ~19 minutes (per thread) before issue 24
+    assert took < 240, took  # ~19 minutes (per thread) before the hardening
     assert out.shape == n.shape and np.isfinite(out).all()
     with pytest.raises(ValueError, match="sigma_s"):
         rn.normals_bilateral(n[:4, :4], depth[:4, :4], sigma_s=50.5)
@@ -270,7 +270,7 @@ def test_recomposite_with_a_tiny_gamma_is_refused_or_finite():
 
 @pytest.mark.parametrize("limit_env", [{}, {"ROKEBY_MAX_ALLOC_BYTES": str(10**9)}], ids=["machine-limit", "env-limit"])
 def test_every_allocation_crash_of_the_issue_survives_in_a_subprocess(limit_env):
-    """Issue 24's aborts, each in a process under a 2 GiB address-space limit (an abort or an
+    """The aborts the hardening fixed, each in a process under a 2 GiB address-space limit (an abort or an
     uncaught allocation failure kills it before RESULT): the 53-byte .hdr declaring 65536², the
     30000² one, interpolate turning 2.4 MB into 40 GB, sh_eval's C×N output, noise_decal of
     100000², env_prefilter with 20,000 parameters. Without ROKEBY_MAX_ALLOC_BYTES the sizes are

@@ -1,4 +1,4 @@
-"""rokeby_native from many Python threads (issue 24): the GIL is released around the native work,
+"""rokeby_native from many Python threads: the GIL is released around the native work,
 so calls really run at once. On shared read-only arrays each call must give bit-identical results
 to the same call made alone; an array written by another thread while a call reads it (which the
 contract forbids: docs/errors.md, "The native core") must still never produce NaN."""

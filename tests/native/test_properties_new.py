@@ -1,4 +1,4 @@
-"""Property-based tests (issue 9) of the rokeby_native entry points added by issues 6, 7 and 8:
+"""Property-based tests of the rokeby_native entry points of compositing, environment maps and shadows:
 compositing (sh_fit, sh_eval, reflect_dirs, reflection_env, fill_holes, envmap_lookup,
 recomposite), environment maps (env_convert, env_sample, env_prefilter, env_irradiance,
 env_reference) and shadow editing (shadow_silhouettes, shadow_falloff, ShadowEditor).
@@ -63,7 +63,7 @@ def smooth_env(layout, size, c, rng):
 
 
 # ---------------------------------------------------------------------------------------------
-# sh_fit / sh_eval (issue 6, eq. 1)
+# sh_fit / sh_eval (eq. 1)
 
 
 @SOME
@@ -118,7 +118,7 @@ def test_sh_adversarial(n, k, dtype):
 
 
 # ---------------------------------------------------------------------------------------------
-# reflect_dirs, envmap_lookup, fill_holes, reflection_env (issue 6, §3.2)
+# reflect_dirs, envmap_lookup, fill_holes, reflection_env (§3.2)
 
 
 @SOME
@@ -246,7 +246,7 @@ def test_reflection_env_adversarial():
 
 
 # ---------------------------------------------------------------------------------------------
-# recomposite (issue 6, eqs. 3–5)
+# recomposite (eqs. 3–5)
 
 
 def recomposite_inputs(rng, h, w, npatch):
@@ -312,7 +312,7 @@ def test_recomposite_adversarial(seed, data, bad):
 
 
 # ---------------------------------------------------------------------------------------------
-# environment maps (issue 7)
+# environment maps
 
 
 @FEW
@@ -433,7 +433,7 @@ def test_env_irradiance_of_a_constant_is_the_constant(seed, h, size, c):
 
 
 # ---------------------------------------------------------------------------------------------
-# shadow editing (issue 8)
+# shadow editing
 
 
 PLANE_V = np.array([[-30, -30, 0], [30, -30, 0], [30, 30, 0], [-30, 30, 0]], np.float32)

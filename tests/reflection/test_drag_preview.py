@@ -1,4 +1,4 @@
-"""Red-handle drags with geodesic distances (issue 23): while the handle moves in a window, the
+"""Red-handle drags with geodesic distances: while the handle moves in a window, the
 moved constraint's distances come from the fast drag method (a preview the report names); when
 the drag ends, and before any render or save, the mirror's own method recomputes them, so what
 renders and what is saved is always the accurate field."""

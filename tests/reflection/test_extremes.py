@@ -1,4 +1,4 @@
-"""Numerical extremes (issue #9): scene scales from 1e-6 to 1e6, 10,000 constraints, constraints
+"""Numerical extremes: scene scales from 1e-6 to 1e6, 10,000 constraints, constraints
 closer than float precision, every pixel on a silhouette, near-degenerate triangles. Nothing may
 come back NaN, non-unit or silently different from the same scene at scale 1."""
 

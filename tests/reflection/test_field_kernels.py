@@ -1,4 +1,4 @@
-"""Issue 23: each field kernel (f32 lanes: portable, AVX2, AVX-512, forced with ROKEBY_SIMD) against
+"""each field kernel (f32 lanes: portable, AVX2, AVX-512, forced with ROKEBY_SIMD) against
 the scalar f64 reference (ROKEBY_SIMD=scalar, exact polar), the oracle, through rokeby_native: the
 per-pixel directions and the per-vertex field the add-on writes agree within 1e-5 rad."""
 

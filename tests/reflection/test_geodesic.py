@@ -214,7 +214,7 @@ def test_api_reuses_the_solver_until_the_mesh_changes():
 
 @pytest.mark.parametrize("name", ["fandisk.obj", "homer.obj", "nefertiti.obj", "spot.obj", "stanford-bunny.obj", "teapot.obj"])
 def test_no_distance_is_shorter_than_the_straight_chord(name):
-    """Issue 21: next to a handle the heat method gave distances shorter than the straight line
+    """next to a handle the heat method gave distances shorter than the straight line
     to it (up to -70 %), which no path on the surface can be, and the 1/d² weights there came out
     up to ~10x too large. Random surface points (inside faces, on an edge, on a corner) and
     vertices, one source and a set of two, every method."""
@@ -250,7 +250,7 @@ def test_no_distance_is_shorter_than_the_straight_chord(name):
 
 
 def test_exact_method_matches_pygeodesic_mmp():
-    """Issue 21: the exact method (window propagation) gives MMP's distances (pygeodesic, the
+    """the exact method (window propagation) gives MMP's distances (pygeodesic, the
     fixture of bench/make_exact_fixture.py) to float32 precision, at every vertex; a surface point
     on a vertex is that vertex."""
     from pathlib import Path
@@ -282,7 +282,7 @@ def test_mirror_geodesic_methods_keep_their_stored_numbers():
 
 
 def test_graph_method_is_within_half_a_percent_of_exact_mmp():
-    """Issue 21: the geodesic graph (new mirrors' default) against pygeodesic's exact MMP on spot:
+    """the geodesic graph (new mirrors' default) against pygeodesic's exact MMP on spot:
     under 0.5 % mean error outside the source's 1-ring, never below the exact distance (every
     graph edge is a path on the surface), and exact next to the source."""
     from pathlib import Path

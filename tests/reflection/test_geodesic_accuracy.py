@@ -1,5 +1,5 @@
 """The default geodesic method against exact polyhedral geodesics on meshes a user might bring:
-unwelded seams, holes, several pieces, needles and slivers, open and closed (issue 34); one default
+unwelded seams, holes, several pieces, needles and slivers, open and closed; one default
 at every entry point; the heat method's check for open seams."""
 
 import inspect
@@ -156,7 +156,7 @@ def _mean_error(v, f, method, upper=True):
 
 @pytest.mark.parametrize("name", sorted(MESHES))
 def test_default_method_is_within_a_quarter_percent_of_exact_on_generated_meshes(name):
-    """Issue 34: the default method (the dense geodesic graph) is under 0.25 % mean error on
+    """the default method (the dense geodesic graph) is under 0.25 % mean error on
     meshes with seams, holes, pieces, needles and slivers; the coarse graph it replaces was not
     (0.31-0.58 % on these, measured), which this also checks, so the meshes are hard enough."""
     v, f = MESHES[name]()

@@ -205,7 +205,7 @@ def test_prefilter_blurs_by_the_lobe_width_and_keeps_energy():
         assert np.unravel_index(np.argmax(lv[..., 0]), lv.shape[:2]) in {(hh // 2, ww // 2), (hh // 2 - 1, ww // 2), (hh // 2, ww // 2 - 1), (hh // 2 - 1, ww // 2 - 1)}
 
 
-# --- the numpy prefilter of the releases up to issue 20, kept here only to compare with ----------
+# --- the numpy prefilter of earlier releases, kept here only to compare with ----------
 # (reflmap's levels are now blurred by the Rust core's Lobe::Gaussian; maps captured before were
 # blurred by this code, and a new capture of the same scene must give the same levels.)
 
@@ -265,7 +265,7 @@ def _hdr_panorama(h, w, seed):
 
 @pytest.mark.parametrize("h, w", [(16, 32), (32, 64), (128, 256), (512, 1024)])
 def test_prefilter_gives_the_levels_maps_were_captured_with(h, w):
-    """A new capture of an unchanged scene blurs its levels as every capture before did (issue 20:
+    """A new capture of an unchanged scene blurs its levels as every capture before did (
     the numpy blur moved into the Rust core): same sizes, same pixels within 1e-5 of the level's
     brightest texel (measured: 2e-6 at most; EXR half floats, which the maps are stored as, hold 3
     significant digits)."""
@@ -448,7 +448,7 @@ def test_save_and_reload_keep_the_map_and_the_mode(chrome_ball, tmp_path):
     ball.rokeby.render_mode = "REFLECTION_MAP"
     cached = _pixels(api.capture_reflection_map(ball, resolution=64, samples=2))
     img = reflmap.image_for(ball)
-    stem = f"Ball-{ball.rokeby.map_id}"  # the name, and an id unique where names are not (issue 24)
+    stem = f"Ball-{ball.rokeby.map_id}"  # the name, and an id unique where names are not
     assert len(ball.rokeby.map_id) == reflmap.ID_CHARS
     assert img.packed_file is None and img.filepath == f"//rokeby_maps/{stem}.exr"
     assert sorted(os.listdir(tmp_path / "rokeby_maps")) == [f"{stem}.exr", f"{stem}_r0.25.exr", f"{stem}_r0.5.exr", f"{stem}_r1.exr"]

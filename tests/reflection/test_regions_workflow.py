@@ -1,4 +1,4 @@
-"""Issue 18, problems 3 and 4: the everyday workflows around regions never lose an edit silently.
+"""The everyday workflows around regions never lose an edit silently.
 
 Problem 3, free-form regions: the region follows its vertex group when the group is renamed
 (also after save and reload), when its reader modifier is applied (or the mirror converted to a

@@ -1,4 +1,4 @@
-"""What the artist sees is what F12 renders (issue 17): Cycles pixels against the per-pixel field.
+"""What the artist sees is what F12 renders: Cycles pixels against the per-pixel field.
 
 The world is direction-coded (its colour is 0.5 d + 0.5 for the direction d a ray leaves in) and
 the mirrors are perfect Glossy BSDFs, so each pixel of a 1-sample render (filter width 0.01:
@@ -456,7 +456,7 @@ def test_files_from_before_data_version_1_keep_their_meaning(tmp_path):
     assert not any(n.get("rokeby_edited_normal") for n in ball.data.materials[0].node_tree.nodes)
 
 
-# --- issue 23: the drag loop tags attribute-only writes (update_tag), it does not rebuild the mesh
+# --- the drag loop tags attribute-only writes (update_tag), it does not rebuild the mesh
 
 
 def test_each_drag_reaches_the_evaluated_mesh_and_the_render(tmp_path):

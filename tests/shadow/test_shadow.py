@@ -1,4 +1,4 @@
-"""Freeform shadow boundary editing (issue 7): the native ShadowEditor on a sphere over a plane
+"""Freeform shadow boundary editing: the native ShadowEditor on a sphere over a plane
 (handles, drags, shadow mesh), bad inputs with clear errors, and in Blender a Cycles render whose
 shadow edge follows a dragged handle while the far side stays."""
 

@@ -1,4 +1,4 @@
-"""A point light inside the caster's bounding box (issue 22; the paper's §5.2 per-loop frusta):
+"""A point light inside the caster's bounding box (the paper's §5.2 per-loop frusta):
 a lamp at the centre of a ring lights the ground through the ring's hole, and the edge of that lit
 disc is the shadow boundary of the ring's lower silhouette loop. Edited with the light inside the
 bounds, it renders in Cycles where it was dragged, and only there; a light inside the ring's

@@ -1,4 +1,4 @@
-"""Keyed configurations (§6.2, issue 22) and the live shadow while dragging (Fig. 3 B–D).
+"""Keyed configurations (§6.2) and the live shadow while dragging (Fig. 3 B–D).
 
 Keyed configurations: an edit made under two light positions is blended by the light's angle to
 each; at the midpoint the rendered boundary lies between the two edits' boundaries. Live shadow:

@@ -1,5 +1,5 @@
 """Shadow edits refer to their caster, light, twin light and linking collections by pointer
-(issue 18, problem 2): renaming the caster and the light keeps the edit (the render is the edited
+(problem 2): renaming the caster and the light keeps the edit (the render is the edited
 one, pixel for pixel), objects made later under the old names take nothing over and lose nothing,
 and a file saved when the links were names (as main wrote them before) loads with its shadow and
 then survives renames too. Tiny Cycles renders of tests/shadow/test_shadow.py's top view (96 px, 4

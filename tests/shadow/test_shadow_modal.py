@@ -1,4 +1,4 @@
-"""The interactive Drag Shadow Boundary operator (issue 22): its real invoke() and modal() driven
+"""The interactive Drag Shadow Boundary operator: its real invoke() and modal() driven
 with synthetic mouse events.
 
 Background Blender has no window, screen or 3D-view region, so no context override can give the

@@ -1,4 +1,4 @@
-"""Self-shadow edits (issue 22; the paper's Fig. 1D / Fig. 6, the cap's shadow on the face) that
+"""Self-shadow edits (the paper's Fig. 1D / Fig. 6, the cap's shadow on the face) that
 render in Cycles: one caster object holds a slab (the "face") and a sphere floating above it (the
 "cap"); the sphere's shadow on the slab is a self-shadow. A loop whose handles lie on the caster,
 dragged, changes the caster's pixels there and only there, and the installed set-up with the

@@ -1,4 +1,4 @@
-"""Fault injection for "all or nothing" (issue 24): a snapshot of everything an operation of the
+"""Fault injection for "all or nothing": a snapshot of everything an operation of the
 add-on may change (materials' and node groups' node trees, objects' custom properties, attributes,
 shape keys, modifiers and linking, collections, images, the scene's passes and render settings,
 and the files of a folder), and ``each_fault``, which runs an operation once for every internal

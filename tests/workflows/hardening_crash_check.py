@@ -1,4 +1,4 @@
-"""Issue 24, crash 1 (run in its own process by tests/workflows/test_hardening.py: a segfault must not take
+"""Hardening, crash 1 (run in its own process by tests/workflows/test_hardening.py: a segfault must not take
 pytest down): another depsgraph handler deletes a constraint's red handle (or a geodesic region's
 centre) in the same update that Rokeby's handler evaluates. On the old main Blender died in
 ``closest_point_on_mesh`` on the evaluated mesh the ID removal had freed.

@@ -1,4 +1,4 @@
-"""Every operation that edits materials or writes files is all or nothing (issue 24): with an
+"""Every operation that edits materials or writes files is all or nothing: with an
 exception injected at each of its internal steps in turn (tests/support/atomic_harness.py: every call of
 an add-on function the operation makes), it either completes as it would have without the fault
 or leaves the scene (node trees, objects' properties, attributes, shape keys, modifiers, linking,

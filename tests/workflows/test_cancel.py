@@ -1,4 +1,4 @@
-"""Cancel reaches the user (issue 24): Ctrl-C (SIGINT) stops ``python -m rokeby.composite`` in
+"""Cancel reaches the user: Ctrl-C (SIGINT) stops ``python -m rokeby.composite`` in
 the middle of long native work with exit status 130, one line and no partial output file; an
 operation cancelled from another thread (what an operator's Esc does: ``rokeby_native.cancel()``)
 raises KeyboardInterrupt and leaves the scene as it was."""

@@ -1,4 +1,4 @@
-"""The compatibility module (issue 19) on the Blender this leg runs (`make test` on 4.5, `make
+"""The compatibility module on the Blender this leg runs (`make test` on 4.5, `make
 test-blender BPY=<version>` on the others): every answer of ``rokeby.compat`` is checked by using
 it — the engine id it picks renders, the multilayer EXR setting writes several layers, the
 built-in point shader draws, the compositor tree it returns composites the render, modifier inputs

@@ -1,4 +1,4 @@
-"""Deleting any object the add-on uses, at any time (issue #9): the mirror, every kind of handle,
+"""Deleting any object the add-on uses, at any time: the mirror, every kind of handle,
 region centres, the light of a highlight, the camera, the vertex group of a free-form region.
 Afterwards evaluation, the sidebar, a render and undo all still work, nothing non-finite is
 written, and the report says what is missing."""

@@ -1,4 +1,4 @@
-"""Deleting anything the shadow, appearance and compositing editors use (issue #9, for #6–#8),
+"""Deleting anything the shadow, appearance and compositing editors use (for #6–#8),
 at any time: what is derived is made again or taken down, what the artist made is kept, the
 render shows what the remaining objects mean, every refusal names what is gone, and undo brings
 everything back.

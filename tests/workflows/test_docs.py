@@ -1,4 +1,4 @@
-"""Documentation examples run as written (issue 18, problem 8).
+"""Documentation examples run as written (problem 8).
 
 Every fenced ```python block of README.md and docs/*.md is extracted and executed: the blocks of
 one file run in order, in one namespace, in a fresh bpy process (tests/support/doc_runner.py: Blender's

@@ -1,8 +1,8 @@
-"""Issue 24 (hardening), the Python side: no crash when another handler deletes a handle in the
+"""Hardening, the Python side: no crash when another handler deletes a handle in the
 same update, no recursion from a frame-change handler, reflection-map files unique per mirror,
 no stale field after a script edits a mesh, no inf into Blender data or files from finite input,
 clean errors for bad EXRs and CLI flags, and texture links kept by appearance painting.
-Each test fails on the main before issue 24 (see the notes in each)."""
+Each test failed before the hardening (see the notes in each)."""
 
 import json
 import os

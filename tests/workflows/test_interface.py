@@ -1,4 +1,4 @@
-"""The add-on's interface by Blender's conventions (issue 18, problem 7): sub-panels, menus that
+"""The add-on's interface by Blender's conventions (problem 7): sub-panels, menus that
 name every operator (F3 search reads menus), a poll on every operator that says why it is
 unavailable, messages in the words of the buttons, progress in the status bar, Set Up Compositing
 Passes that reports and undoes its changes, settings saved with the .blend, add-on preferences

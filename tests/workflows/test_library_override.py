@@ -1,4 +1,4 @@
-"""A mirror in a linked asset and its library override in one scene (issue 24): the override is
+"""A mirror in a linked asset and its library override in one scene: the override is
 a mirror of its own and evaluates (it is found by identity rather than by name, which it shares
 with the linked original); the linked original cannot store a field and says so; nothing
 raises."""

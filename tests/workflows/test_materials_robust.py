@@ -1,4 +1,4 @@
-"""Materials come back as they were (issue 24, "half-done operations and materials left
+"""Materials come back as they were ("half-done operations and materials left
 changed"): Remove Render Edits after Remove Mirror, after the original Principled BSDF was
 deleted as "unused", after the Material Output or the split BSDF was renamed; a material swapped
 out of a mirror's slot; installs interrupted by an exception half way."""

@@ -1,4 +1,4 @@
-"""Heavy scenes (issue 18, problem 5): the add-on's handlers never scan the scene's objects.
+"""Heavy scenes (problem 5): the add-on's handlers never scan the scene's objects.
 
 What the add-on owns is kept in ``rokeby.registry``; these tests check that it finds exactly the
 mirrors a full scan finds after every everyday operation (add, remove, Shift+D and Alt+D copies,

@@ -1,4 +1,4 @@
-"""Clean removal (issue 18, problem 6): Remove Mirror and deleting a mirror with X leave the
+"""Clean removal (problem 6): Remove Mirror and deleting a mirror with X leave the
 file as it was before the mirror was added (materials' node trees exactly, collections, node
 groups, handles; the render too), and a handle deleted with X is released (its row flagged, the
 object freed) instead of living on through the constraint's pointer."""

@@ -211,7 +211,7 @@ def _recomposite(sc, tmp_path):
         warnings.simplefilter("ignore", RuntimeWarning)
         api.recomposite_render(str(tmp_path / "recomposite.exr"), edit="emboss", amount=0.5, scene=sc)
     api.use_in_compositor(scene=sc)
-    # a stroke of the normal brush (issue 22): its record and source on the image
+    # a stroke of the normal brush: its record and source on the image
     brush = api.open_normal_brush(str(tmp_path / "recomposite.exr"), "Rokeby Recomposited")
     api.paint_normals(brush, [(8.0, 4.0), (8.0, 12.0)], radius=3.0, strength=0.5, mode="emboss")
     sc.render.resolution_x = sc.render.resolution_y = feature_fixtures.SIZE

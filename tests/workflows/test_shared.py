@@ -1,4 +1,4 @@
-"""Shared meshes and duplicates (issue 18, problem 1): no edit overwrites another object's.
+"""Shared meshes and duplicates (problem 1): no edit overwrites another object's.
 
 Two mirrors sharing one mesh (Ctrl+L ▸ Link Object Data, Alt+D) used to write their fields into
 the one mesh: the last evaluated won, and Remove Mirror on one deleted the other's field. Copies

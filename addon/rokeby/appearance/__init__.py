@@ -1,4 +1,4 @@
-"""Appearance painting under environment light (issue 8; Fraser, "Interactive Real-Time BRDF
+"""Appearance painting under environment light (Fraser, "Interactive Real-Time BRDF
 Editing under Environment Lighting", §"Painting"): per-point BRDF parameters stored as mesh
 attributes and wired into the material's Principled BSDF, brushes with a radius and Gaussian
 falloff that write them, and global sliders that scale them for the whole object.
@@ -932,7 +932,7 @@ def _stretch_direction_texture(obj, path, first, radius, strength):
 
 
 def migrate() -> list[str]:
-    """Files painted before a parameter existed (the specular colour, issue 22) get it at load:
+    """Files painted before a parameter existed (the specular colour) get it at load:
     each painted mesh's material (with ``rokeby_global_roughness``) lacking a parameter's nodes is
     set up again (idempotent: what exists is kept; the new attribute and, on a texture target, its
     image start from the material's value, so the render does not change). Returns what was done,

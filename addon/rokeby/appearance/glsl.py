@@ -1,4 +1,4 @@
-"""GLSL interface and numpy twin of the appearance preview under environment light (issue 8).
+"""GLSL interface and numpy twin of the appearance preview under environment light.
 
 The shader lives in ``shaders/rokeby_appearance_*.glsl`` (bodies only); this module declares its
 interface once (:data:`INTERFACE`, in GPUShaderCreateInfo's terms), turns it into a ``#version
@@ -303,7 +303,7 @@ def shade_point_reference(n, v, p, light_position, light_intensity: float, base,
     return np.where(nl > 0, out * light_intensity / d2, 0.0)
 
 
-# --- the final-render model (issue 22) ------------------------------------------------------------
+# --- the final-render model ------------------------------------------------------------
 # Renders use Blender's Principled BSDF (GGX) whatever the preview model. A fit was measured and
 # rejected (docs/addon.md, "Final-render model"): the GGX roughness whose prefiltering lobe is
 # closest to Phong's or Torrance–Sparrow's (relative L2 of the normalised lobes) leaves 20 % lobe

@@ -1,4 +1,4 @@
-"""Blender UI of appearance painting (issue 8): an operator that sets an object up, a brush
+"""Blender UI of appearance painting: an operator that sets an object up, a brush
 operator that paints strokes on it in the viewport (modal: the mouse is ray-cast onto the object
 and each step is one dab of :func:`rokeby.appearance.paint`; exec: a stroke given as points, for
 scripts and tests), the brush settings, and a sidebar panel with Fraser's global sliders (the
@@ -18,7 +18,7 @@ from ..core import words
 from ..core import schema
 
 # Explicit item numbers: Blender stores the number, so new brushes are appended with new numbers
-# (files saved before issue 22 stored 0-6 without explicit numbers, which are these).
+# (files saved before the enum had explicit numbers stored 0-6, which are these).
 _BRUSH_ITEMS = [
     ("diffuse", "Diffuse", "Paint the diffuse colour", 0),
     ("specular", "Specular", "Paint the specular intensity k_s toward the value", 1),
@@ -89,7 +89,7 @@ class RokebyAppearanceBrush(bpy.types.PropertyGroup):
     )
     light_location: FloatVectorProperty(name="Light Location", description="The preview's point light, world space", size=3,
                                         subtype="TRANSLATION", default=(3.0, -3.0, 4.0), update=_redraw_update)
-    # The final-render model (issue 22): renders use Principled (GGX); Measure Difference to Render
+    # The final-render model: renders use Principled (GGX); Measure Difference to Render
     # stores how far they are from the Phong / Torrance–Sparrow preview (−1: not measured).
     render_difference: FloatProperty(name="Render Difference", default=-1.0)
     render_difference_key: StringProperty(name="Measured For", default="")

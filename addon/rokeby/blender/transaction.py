@@ -1,4 +1,4 @@
-"""All or nothing for the operations that edit Blender data (issue 24): ``all_or_nothing()``
+"""All or nothing for the operations that edit Blender data: ``all_or_nothing()``
 records what an operation of the add-on may change and, when the operation raises, puts it back,
 so an exception half way (a bug, a bad value found late, a full disk, Esc) leaves the file exactly
 as it was. Feature-agnostic (the Blender layer); the features wrap their operations in it.

@@ -230,7 +230,7 @@ def sequence_frames(directory: str, pattern: str = "*.exr") -> list[str]:
     return [os.path.join(directory, n) for n in sorted(names, key=key) if os.path.isfile(os.path.join(directory, n))]
 
 
-# --- the compositor's input (issue 22) ------------------------------------------------------------
+# --- the compositor's input ------------------------------------------------------------
 # Zubiaga et al. edit normals inside a node-based compositor. Rokeby's recompositing runs outside
 # Blender's compositor (Rust or GLSL), so its result enters the compositor as an Image node named
 # COMPOSITOR_NODE that every recomposite of the same image keeps pointing at the current pixels

@@ -1,4 +1,4 @@
-"""A brush that paints normal edits on a rendered frame (issue 22; Zubiaga et al. 2016 edit the
+"""A brush that paints normal edits on a rendered frame (Zubiaga et al. 2016 edit the
 normal buffer interactively where compositors work).
 
 The brush edits the frame's screen-space normal buffer under a stroke with the compositing

@@ -1,4 +1,4 @@
-"""Blender UI of the normal brush (``rokeby.compositing.brush``, issue 22): *Paint Normals* paints
+"""Blender UI of the normal brush (``rokeby.compositing.brush``): *Paint Normals* paints
 emboss, bump or smooth strokes on the recomposited frame shown in an Image Editor, and the
 result (the image, and the compositor's Image node reading it) updates at every mouse step.
 

@@ -1,4 +1,4 @@
-"""Environment maps for painting under environment light (issue 8): reading and writing HDR
+"""Environment maps for painting under environment light: reading and writing HDR
 images (OpenEXR, and Radiance RGBE ``.hdr`` through the Rust core), reading 8-bit PNG/JPEG ones
 (sRGB-decoded; Blender's image loader), conversions between lat-long, cube, sphere (mirror-ball) and dual-paraboloid
 maps, order-2 SH irradiance, and specular prefiltering across roughness levels — all computed by

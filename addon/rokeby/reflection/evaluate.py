@@ -628,7 +628,7 @@ def _bvh(geo: _Geometry):
     """A BVH over the triangles of ``geo`` in object space (kept while the local positions and
     triangles are unchanged, also across transforms), built from the copied arrays: surface
     queries never touch Blender's evaluated mesh, which another handler's ID removal in the same
-    update can free under us (issue 24)."""
+    update can free under us."""
     if geo.bvh is None:
         from mathutils.bvhtree import BVHTree  # noqa: PLC0415
 
@@ -1192,7 +1192,7 @@ def write_attribute(obj, values: np.ndarray, name: str = ATTRIBUTE, *, update: b
     _vector_attribute(me, name, "POINT").data.foreach_set("vector", np.ascontiguousarray(values, dtype=np.float32).ravel())
     if update:
         # Attribute-only: tag the mesh for re-evaluation; me.update() would also recompute its
-        # normals and caches (8-12 ms at 100k vertices in the drag loop, issue 23).
+        # normals and caches (8-12 ms at 100k vertices in the drag loop).
         me.update_tag()
 
 

@@ -1,4 +1,4 @@
-"""Freeform shadow boundary editing (Mattausch, Igarashi, Wimmer; issue 7) in Blender.
+"""Freeform shadow boundary editing (Mattausch, Igarashi, Wimmer) in Blender.
 
 The numerics run in Rust (``rokeby_native.ShadowEditor`` through :mod:`rokeby.native`): smooth
 silhouette loops of the caster from the light, shadow handles by ray casting, MLS boundary

@@ -1,4 +1,4 @@
-//! bvh (issue 8): BVHs over arbitrary triangle soups (degenerate, duplicated, huge, NaN corners)
+//! bvh: BVHs over arbitrary triangle soups (degenerate, duplicated, huge, NaN corners)
 //! and rays in arbitrary directions. Never a panic; the BVH's closest hit agrees with the
 //! brute-force one (same t); hits lie in [t_min, t_max] with barycentrics in the triangle; with
 //! a filter, no rejected triangle is returned.

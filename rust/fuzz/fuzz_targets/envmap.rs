@@ -1,4 +1,4 @@
-//! envmap (issue 7): EnvMap::new/zeros of arbitrary shapes and values, directions ↔ map
+//! envmap: EnvMap::new/zeros of arbitrary shapes and values, directions ↔ map
 //! coordinates of every layout, sample/sample_many in arbitrary directions, convert between
 //! layouts. Never a panic; coords lie within the image; direction(coords(d)) = d; lookups and
 //! conversions of a finite map are finite and within the map's value range (bilinear weights

@@ -1,4 +1,4 @@
-//! mls2d (issue 8, §5.2–5.3): MLS deformations of arbitrary control points and styles, and
+//! mls2d (§5.2–5.3): MLS deformations of arbitrary control points and styles, and
 //! sinusoidal noise along arbitrary polylines. Never a panic; accepted control points give finite
 //! deformations of finite points; the deformation interpolates (f(p_i) = q_i) and is the
 //! identity when q = p; noise keeps the point count and moves points by at most |amplitude|.

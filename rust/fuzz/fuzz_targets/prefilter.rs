@@ -1,4 +1,4 @@
-//! prefilter (issue 7): lobes of arbitrary parameters, their kernels and radii, and prefiltering,
+//! prefilter: lobes of arbitrary parameters, their kernels and radii, and prefiltering,
 //! brute force, SH projection and irradiance of small random lat-long maps. Never a panic;
 //! kernels are finite and ≥ 0, 0 ≤ core radius ≤ cut radius ≤ π/2; prefiltered levels and the
 //! brute-force reference are weighted means (within the map's value range); a constant map's

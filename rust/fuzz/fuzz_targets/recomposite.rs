@@ -1,4 +1,4 @@
-//! recomposite (issue 6, eqs. 3–5) and eval_diffuse on small random buffers and patches. Never a
+//! recomposite (eqs. 3–5) and eval_diffuse on small random buffers and patches. Never a
 //! panic; accepted input gives H·W×3 output; pixels whose normal is unedited (k_D = k_R = 1) and
 //! pixels outside every patch are returned exactly; finite bounded input gives finite output.
 #![no_main]

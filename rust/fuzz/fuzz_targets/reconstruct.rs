@@ -1,4 +1,4 @@
-//! reconstruct (issue 6, §3.2): paraboloid (u, v) ↔ direction, map lookups in any direction,
+//! reconstruct (§3.2): paraboloid (u, v) ↔ direction, map lookups in any direction,
 //! reflect_dirs, and the partial map / hole filling / regularisation / full reconstruction of
 //! small random patches. Never a panic; finite maps give finite lookups; accepted patches give
 //! finite maps with coverage in [0, 1].

@@ -1,4 +1,4 @@
-//! rgbe (issue 8): Radiance .hdr decoding of arbitrary bytes, raw and behind a valid header (so
+//! rgbe: Radiance .hdr decoding of arbitrary bytes, raw and behind a valid header (so
 //! the scanline decoder sees the adversarial part), and encode → decode of what decoded. Never a
 //! panic; decoded pixels are finite and non-negative; a re-encoded image decodes to the same size
 //! and each channel within ½ mantissa unit of its pixel's largest.

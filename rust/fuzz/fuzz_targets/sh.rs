@@ -1,4 +1,4 @@
-//! sh (issue 6, eq. 1): basis/eval of arbitrary normals, and fit of arbitrary normals and values
+//! sh (eq. 1): basis/eval of arbitrary normals, and fit of arbitrary normals and values
 //! with both methods. Never a panic; finite accepted input gives finite coefficients and
 //! residuals; a least-squares fit of values that are exactly an SH function recovers it, and the
 //! constrained fit keeps D(n) ≥ D0 (max residual ≤ ~0).

@@ -1,4 +1,4 @@
-//! shadow (issue 8): ShadowEditor sessions on a UV sphere over a ground quad with arbitrary
+//! shadow: ShadowEditor sessions on a UV sphere over a ground quad with arbitrary
 //! lights, loops, handles, drags (arbitrary indices, targets, styles, MLS α, noise), commit,
 //! cancel, reset and the shadow mesh. Never a panic; accepted drags give finite silhouettes and
 //! handles of the loop's length; the shadow mesh is finite, one vertex per caster vertex, and

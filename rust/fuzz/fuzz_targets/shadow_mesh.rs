@@ -1,4 +1,4 @@
-//! light_space and shadow_mesh (issue 8, §5.1, §6): light frames of arbitrary lights around
+//! light_space and shadow_mesh (§5.1, §6): light frames of arbitrary lights around
 //! closed meshes, frustum round trips and drag targets, cotangent weights, the shadow-mesh solver
 //! and the §6.2 falloff. Never a panic; from_frustum(to_frustum(p)) = p; zero offsets give the
 //! rest mesh back; non-zero offsets give finite vertices; falloff ∈ [0, 1].

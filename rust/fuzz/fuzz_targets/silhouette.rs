@@ -1,4 +1,4 @@
-//! silhouette (issue 8, §4.1): ClosedMesh::new of arbitrary vertex/face/normal arrays (soups,
+//! silhouette (§4.1): ClosedMesh::new of arbitrary vertex/face/normal arrays (soups,
 //! open, non-manifold, out-of-range, NaN) and silhouettes of closed meshes (jittered octahedra,
 //! UV spheres) under arbitrary lights. Never a panic; every silhouette vertex has α ∈ [0, 1], lies
 //! at (1 − α) v_back + α v_front on an edge whose ends face the light oppositely, and each loop's

@@ -1,4 +1,4 @@
-//! Multi-source Dijkstra at the scale of the paper's Lucy (issue 21): homer subdivided three times
+//! Multi-source Dijkstra at the scale of the paper's Lucy: homer subdivided three times
 //! by midpoints (768k triangles, the same mesh `make bench` builds with `rokeby.meshio`), one set of
 //! four vertex sources, the median wall time of the query beside the 70 ms goal and the paper's
 //! 139 ms for one source on the 525k-triangle Lucy (Ritschel et al. 2009, §6.2).

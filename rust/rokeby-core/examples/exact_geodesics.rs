@@ -1,4 +1,4 @@
-//! Exact polyhedral geodesics (issue 21) on the shared meshes: the sources of `make bench`'s
+//! Exact polyhedral geodesics on the shared meshes: the sources of `make bench`'s
 //! geodesic section (the first vertex of the faces a quarter, half and three quarters through the
 //! face list), one source per query, run one after another on one thread; the median wall time
 //! per query. `--dump DIR` writes each mesh's distances (3 × V little-endian f32) to

@@ -1,4 +1,4 @@
-//! The field kernels against this machine's roofline (issue 23): the f32 FMA peak and the memory
+//! The field kernels against this machine's roofline: the f32 FMA peak and the memory
 //! bandwidth measured in the same run, then the per-pixel field (`edited_directions`, 1280×960, K =
 //! 1 / 8 / 32) and the per-vertex field (`rotation_field`, 100k points, K = 8, the add-on's
 //! view-blend output) per kernel, with the largest angle from the scalar f64 reference.
@@ -441,10 +441,10 @@ fn main() {
         );
     }
 
-    // The goals of issue 23 with what this run measured (absolute goals are for an idle AVX-512
+    // The speed goals with what this run measured (absolute goals are for an idle AVX-512
     // machine; the memory floor is 36 bytes per pixel, 24 read and 12 written, at the triad rate).
     println!(
-        "\ngoals (issue 23), best kernel {}{}:",
+        "\ngoals, best kernel {}{}:",
         Kernel::best().name(),
         if quick {
             ", --quick: smaller scenes, per-vertex scaled to 100k"

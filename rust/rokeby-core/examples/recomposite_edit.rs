@@ -1,5 +1,5 @@
 //! One recompositing edit (eqs. 3–5) of bench/compositing.py's 1920×1080 frame with ten patches
-//! (issue 23), through `Recompositor`: for instruction counts (callgrind) and quick timings of the
+//!, through `Recompositor`: for instruction counts (callgrind) and quick timings of the
 //! kernel alone, without Python.
 //!
 //! `cargo run --release -p rokeby-core --example recomposite_edit -- [EDITS] [--gamma G] [--ortho]`

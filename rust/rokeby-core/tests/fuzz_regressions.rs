@@ -1,4 +1,4 @@
-//! Inputs the cargo-fuzz targets of rust/fuzz found (issue 9): each test reproduces one and checks
+//! Inputs the cargo-fuzz targets of rust/fuzz found: each test reproduces one and checks
 //! the fix.
 use glam::{DVec2, DVec3};
 use rokeby_core::compositing::recomposite::{recomposite, Buffers, Params, Patch};

@@ -242,7 +242,7 @@ fn degenerate_faces_duplicates_and_nonmanifold_edges_stay_finite() {
     }
 }
 
-/// Issue 21: the exact method's window trimming and per-halfedge tables on a mesh with a
+/// the exact method's window trimming and per-halfedge tables on a mesh with a
 /// non-manifold edge, a zero-area face and a sliver: every distance is finite, at least the
 /// straight chord and at most the edge path (Dijkstra), and it agrees with the flat parts'
 /// straight lines where the surface is flat (the fin and the sliver are off the grid's plane).

@@ -1,5 +1,5 @@
-//! The saddle vertex graph methods: the coarse graph (issue 21) under 0.5 % mean error against
-//! exact geodesics, the dense graph (the default, issue 34) under 0.25 %, on the shared meshes and
+//! The saddle vertex graph methods: the coarse graph under 0.5 % mean error against
+//! exact geodesics, the dense graph (the default) under 0.25 %, on the shared meshes and
 //! on generated ones with unwelded seams, holes, several pieces, needles and slivers.
 
 mod common;

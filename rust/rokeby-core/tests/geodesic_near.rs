@@ -1,4 +1,4 @@
-//! Next to the source (issue 21): no method may return a distance shorter than the straight chord
+//! Next to the source: no method may return a distance shorter than the straight chord
 //! to the nearest source, which no path on the surface can beat; on developable meshes the values
 //! around a vertex or surface-point source are the exact unfolded distances.
 

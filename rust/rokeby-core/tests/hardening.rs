@@ -1,4 +1,4 @@
-//! Issue 24's error contract in the core: sizes a caller or a file controls are bounded before
+//! The error contract in the core: sizes a caller or a file controls are bounded before
 //! anything is allocated (OutOfMemory, never an abort), long loops are clipped to the data and
 //! cancellable, and finite input never gives NaN or inf.
 

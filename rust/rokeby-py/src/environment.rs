@@ -1,4 +1,4 @@
-//! Bindings of the environment-map toolkit and its prefiltering (issue 8; rokeby_core::envmaps::envmap,
+//! Bindings of the environment-map toolkit and its prefiltering (rokeby_core::envmaps::envmap,
 //! rokeby_core::envmaps::prefilter). Same house style as the parent module: float arrays in
 //! (float32/float64), shapes and values checked with messages naming the argument, the GIL
 //! released around the work, core errors mapped by kind (`core_err`).

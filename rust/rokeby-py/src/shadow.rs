@@ -1,4 +1,4 @@
-//! Bindings of freeform shadow boundary editing (issue 7; rokeby_core::shadows::shadow and friends). Same
+//! Bindings of freeform shadow boundary editing (rokeby_core::shadows::shadow and friends). Same
 //! house style as the parent module: float arrays in (float32/float64), shapes checked with
 //! messages naming the argument, the GIL released around the work, core errors as ValueError.
 

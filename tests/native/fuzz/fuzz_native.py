@@ -1,5 +1,5 @@
 """Hypothesis fuzzing of every rokeby_native function and class method, and of the bpy-free file
-readers (issue 24). Not collected by the normal pytest run (the file name does not start with
+readers. Not collected by the normal pytest run (the file name does not start with
 test_): tests/native/fuzz/run_fuzz.py runs it in a subprocess under an address-space limit (RLIMIT_AS)
 and ROKEBY_MAX_ALLOC_BYTES, so that an abort or a huge allocation cannot take pytest down.
 tests/native/test_fuzz_native.py launches it briefly; `make fuzz-py` runs it for longer.

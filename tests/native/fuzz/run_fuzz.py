@@ -1,4 +1,4 @@
-"""Runs tests/native/fuzz/fuzz_native.py in this process under an address-space limit (issue 24):
+"""Runs tests/native/fuzz/fuzz_native.py in this process under an address-space limit:
 
     python tests/native/fuzz/run_fuzz.py [--examples N] [--as-gib 4] [--max-alloc-gib 1] [pytest args...]
 

@@ -1,4 +1,4 @@
-"""Live viewport preview of edited reflections (issue #5, paper §6.1).
+"""Live viewport preview of edited reflections (paper §6.1).
 
 A POST_VIEW draw handler on the 3D View draws every mirror that shows its preview with the
 per-pixel field shader of ``shaders/`` (the same files the moderngl tests check against

@@ -60,7 +60,7 @@ fn texel_uv(size: usize, i: usize, j: usize) -> (f64, f64) {
 }
 
 /// The dual-paraboloid projection both ways (face, u, v) ↔ unit direction: the map layout is the
-/// one of `envmap` (issue #8), so its formulas serve here under the names this module uses.
+/// one of `envmap`, so its formulas serve here under the names this module uses.
 pub use crate::envmaps::envmap::{paraboloid_dir as uv_to_dir, paraboloid_uv as dir_to_uv};
 
 /// Solid angle of texel (i, j) of either face (the projection's area factor 4/(1 + ρ²)²).

@@ -38,7 +38,7 @@
 //!   (u, v) = (r_x, r_y) / (1 + |r_z|),   x = (u + 1)/2·S,  y = (v + 1)/2·S
 //!   r(u, v) = (2u, 2v, ±(1 − u² − v²)) / (1 + u² + v²)
 //!   ```
-//!   This is the layout of `reconstruct::ParaboloidMap` (issue 6): texels beyond the unit circle
+//!   This is the layout of `reconstruct::ParaboloidMap`: texels beyond the unit circle
 //!   hold the other face's value there (the inverse formula continues across the equator).
 //!
 //! Conversions evaluate each target texel (optionally n×n sub-texel samples, averaged) by a

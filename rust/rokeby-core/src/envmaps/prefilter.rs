@@ -15,7 +15,7 @@
 //!   representation for irradiance environment maps"): L_lm = ∫ L Y_lm dω, irradiance
 //!   E(n) = Σ_lm Â_l L_lm Y_lm(n) with Â_0 = π, Â_1 = 2π/3, Â_2 = π/4. Maps store E(n)/π, the
 //!   radiance of a white Lambertian surface, so a constant environment stays constant. The basis
-//!   is `sh::basis` (issue 6's module), shared.
+//!   is `sh::basis` (the compositing module), shared.
 //! * **Specular** — a radially symmetric lobe k(r·ω_i) about the reflected direction r,
 //!   normalised: P(r) = ∫ L(ω) k(r·ω) dω / ∫ k(r·ω) dω. The lobes:
 //!   - [`Lobe::Phong`]: k = max(0, c)^σ. With Fraser's normalisation (1 + σ)/(2π) this is the

@@ -394,7 +394,7 @@ mod tests {
                 "old-style",
             ),
             (good[..good.len() - 5].to_vec(), "truncated"),
-            // 53 bytes declaring 65536×65536 (issue 24: allocated 51.5 GB and aborted)
+            // 53 bytes declaring 65536×65536 (allocated 51.5 GB and aborted)
             (
                 b"#?RADIANCE\nFORMAT=32-bit_rle_rgbe\n\n-Y 65536 +X 65536\n\x02\x02\x01\x00"
                     .to_vec(),

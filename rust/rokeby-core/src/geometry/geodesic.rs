@@ -908,7 +908,7 @@ impl GeodesicSolver {
         // mesh 30 % short, 1e-30 gave 1.9 % there; 1e-150 has not been re-measured at that size.)
         // Heat values more than 150 orders of magnitude below the peak lose their direction; one
         // solve resolves every shared mesh (up to 100k faces) in one pass. Measured against exact
-        // geodesics (issue 21): with the earlier 1e-30, nefertiti needed several fronts (1.21 %
+        // geodesics: with the earlier 1e-30, nefertiti needed several fronts (1.21 %
         // mean error, ~1.1 s for 3 sources); with 1e-150 one (1.20 %, ~0.6 s). Each further
         // front costs one more triangular solve.
         const RESOLVED: f64 = 1e-150;
@@ -1241,7 +1241,7 @@ pub fn interpolate(
 
 #[cfg(test)]
 mod tests {
-    //! The Dijkstra before issue 21's rewrite (a graph in mesh order, fresh buffers and a seeding
+    //! A plain Dijkstra (a graph in mesh order, fresh buffers and a seeding
     //! pass per query) kept as the oracle: the rewrite must give the same bits.
     use super::*;
     use std::path::PathBuf;
@@ -1288,7 +1288,7 @@ mod tests {
         }
     }
 
-    /// The former `seeds` and `dijkstra`, verbatim but for the graph they read.
+    /// A plain `seeds` and `dijkstra` (the oracle), reading the graph in mesh order.
     fn reference_dijkstra(s: &GeodesicSolver, g: &ReferenceGraph, set: &[Source]) -> Vec<f64> {
         let nv = s.mesh.vertices.len();
         let mut dist = vec![f64::INFINITY; nv];
@@ -1432,7 +1432,7 @@ mod tests {
     }
 
     #[test]
-    fn geodesic_dijkstra_matches_the_former_implementation_bit_for_bit() {
+    fn geodesic_dijkstra_matches_the_plain_implementation_bit_for_bit() {
         check_against_reference(bumpy_grid(60), "bumpy grid");
         let mut any = false;
         for name in ["spot.obj", "fandisk.obj", "homer.obj", "teapot.obj"] {

@@ -12,7 +12,7 @@
 //!
 //! Both Dijkstras (the edge graph's and the saddle vertex graph's, [`crate::geometry::geodesic`]) use the
 //! bucket queue below; the radix heap orders the exact method's windows ([`crate::geometry::exact`]) and
-//! the former Dijkstras that the unit tests keep as oracles.
+//! the plain Dijkstras that the unit tests keep as oracles.
 
 /// Entries: (key bits, vertex).
 pub(crate) struct RadixHeap {

@@ -189,13 +189,13 @@ fn prune_rows(
 
 #[cfg(test)]
 mod tests {
-    //! The query before issue 21's rewrite (the graph's rows in mesh order, a radix heap on f32
+    //! A plain query (the graph's rows in mesh order, a radix heap on f32
     //! keys, fresh buffers per query) kept as the oracle: the rewrite must give the same bits.
     use super::*;
     use crate::geometry::radix_heap::RadixHeap;
     use std::path::PathBuf;
 
-    /// The former graph: compressed rows in mesh vertex order.
+    /// The oracle graph: compressed rows in mesh vertex order.
     struct ReferenceGraph {
         start: Vec<usize>,
         nbr: Vec<u32>,
@@ -233,7 +233,7 @@ mod tests {
             ReferenceGraph { start, nbr, len }
         }
 
-        /// The former `SaddleGraph::distances`, verbatim but for the seeds' call.
+        /// A plain `SaddleGraph::distances` (the oracle).
         fn distances(&self, mesh: &Mesh, adj: &Adjacency, set: &[Source], k: usize) -> Vec<f64> {
             let mut dist = vec![f64::INFINITY; mesh.vertices.len()];
             let mut heap = RadixHeap::new();
@@ -271,7 +271,7 @@ mod tests {
     }
 
     #[test]
-    fn saddle_graph_query_matches_the_former_implementation_bit_for_bit() {
+    fn saddle_graph_query_matches_the_plain_implementation_bit_for_bit() {
         use crate::geometry::geodesic::SurfacePoint;
         let mut any = false;
         for name in ["teapot.obj", "spot.obj", "homer.obj", "fandisk.obj"] {

@@ -190,7 +190,7 @@ struct Frame<'a> {
 }
 
 /// Per pixel, what eqs. 3–5 compute that does not depend on ñ, k_D or k_R, kept by a
-/// [`Recompositor`] for the session (issue 23: an edit then only normalises ñ, reflects about it,
+/// [`Recompositor`] for the session (an edit then only normalises ñ, reflects about it,
 /// evaluates the SH difference and the lookup, and shades). Computed by the kernel's own lane
 /// functions on the same inputs, so an edit gives the same bits as without it. Blocks of
 /// structure of arrays: a batch of consecutive pixels loads at most two slices per component.
