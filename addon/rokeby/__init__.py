@@ -13,6 +13,8 @@ from __future__ import annotations
 
 __all__ = ["register", "unregister", "is_registered"]
 
+__version__ = "0.1.0"  # as blender_manifest.toml says (tests/workflows/test_farm_jobs.py checks)
+
 from . import _legacy
 
 _legacy.install(__name__)  # old module paths (rokeby.evaluate, rokeby.shading, ...) name the moved modules

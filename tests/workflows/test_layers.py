@@ -32,7 +32,7 @@ ROOT = Path(__file__).resolve().parents[2]
 PKG = ROOT / "addon" / "rokeby"
 PACKAGE = "rokeby"
 
-FEATURES = ("reflection", "envmaps", "appearance", "shadow", "compositing")
+FEATURES = ("reflection", "envmaps", "appearance", "shadow", "compositing", "farm")
 FACADE = ("api", "_legacy", "composite", "demo", "demo_scene")  # and the package's __init__
 RANK = {"core": 0, "blender": 1, "feature": 2, "facade": 3}
 NATIVE_HOME = f"{PACKAGE}.core.native"

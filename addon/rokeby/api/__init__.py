@@ -64,5 +64,10 @@ def remove_shadow_edit(obj) -> None:
     shadow.remove(obj)
 
 
-__all__ = [*_edit.__all__, "setup_compositing_passes", "recomposite_render", "recomposite_exr", "recomposite_exr_pixels",
+# --- Render farms (Open Job Description; rokeby.farm) -------------------------------------------
+
+from ..farm.api import write_render_job  # noqa: E402 - the farm feature's entry point
+
+
+__all__ = [*_edit.__all__, "write_render_job", "setup_compositing_passes", "recomposite_render", "recomposite_exr", "recomposite_exr_pixels",
            "use_in_compositor", "open_normal_brush", "paint_normals", "start_shadow_edit", "apply_shadow_edit", "remove_shadow_edit"]
