@@ -39,13 +39,14 @@ def _features():
     from .appearance import addon as appearance
     from .blender import prefs
     from .compositing import addon as compositing
+    from .farm import addon as farm
     from .reflection import addon as reflection
     from .reflection import ui as reflection_ui
     from .shadow import addon as shadow
 
     # Each feature registers itself (props, operators, UI, hooks). The reflection sidebar's menus
     # name every feature's operators: it goes last.
-    return (prefs, reflection, appearance, compositing, shadow, reflection_ui)
+    return (prefs, reflection, appearance, compositing, shadow, farm, reflection_ui)
 
 
 def _modules():
@@ -55,11 +56,12 @@ def _modules():
     from .blender import prefs
     from .compositing import brush_ui as compositing_brush_ui
     from .compositing import ui as compositing_ui
+    from .farm import ui as farm_ui
     from .reflection import handlers, operators, props, ui
     from .reflection.viewport import draw as viewport
     from .shadow import ui as shadow_ui
 
-    return (prefs, props, operators, handlers, viewport, appearance_ui, compositing_ui, compositing_brush_ui, shadow_ui, ui)
+    return (prefs, props, operators, handlers, viewport, appearance_ui, compositing_ui, compositing_brush_ui, shadow_ui, farm_ui, ui)
 
 
 def register():

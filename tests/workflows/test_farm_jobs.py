@@ -237,3 +237,22 @@ def test_a_killed_task_leaves_no_partial_frame_and_its_rerun_finishes(shot, tmp_
     for frame in (1, 2, 3):
         np.testing.assert_array_equal(envmaps.read_exr(out / f"frame_{frame:04d}.exr"), session[frame], err_msg=f"frame {frame}")
     shutil.rmtree(out)
+
+
+def test_export_farm_job_operator_writes_the_bundle_of_the_saved_file(shot, tmp_path):
+    path, _session, z = shot
+    bpy.ops.wm.open_mainfile(filepath=str(path))
+    rokeby.register()
+    sc = bpy.context.scene
+    assert bpy.ops.rokeby.farm_export.poll()
+    r = bpy.ops.rokeby.farm_export(directory=str(tmp_path / "bundle"), frame_start=sc.frame_start, frame_end=sc.frame_end,
+                                   chunk=5, zip_path=str(z))
+    assert r == {"FINISHED"}
+    values = {p["name"]: p["value"] for p in json.loads((tmp_path / "bundle" / "parameter_values.yaml").read_text())["parameterValues"]}
+    assert (values["BlendFile"], values["FrameStart"], values["FrameEnd"], values["ChunkSize"]) == (str(path), 1, 20, 5)
+    with pytest.raises(RuntimeError, match="frames: the last frame 1 is before the first 5"):
+        bpy.ops.rokeby.farm_export(directory=str(tmp_path / "bad"), frame_start=5, frame_end=1, zip_path=str(z))
+    assert not (tmp_path / "bad").exists()
+    bpy.ops.wm.read_factory_settings(use_empty=True)
+    rokeby.register()
+    assert not bpy.ops.rokeby.farm_export.poll()  # never saved

@@ -46,7 +46,7 @@ def _frames(frames) -> tuple[int, int]:
     return a, b
 
 
-def _find_zip(zip_path) -> Path:
+def _find_zip(zip_path) -> "Path | None":
     if zip_path is not None:
         z = Path(zip_path)
         if not z.is_file():
@@ -56,7 +56,22 @@ def _find_zip(zip_path) -> Path:
     for folder in (_HERE.parents[2] / "dist", Path.cwd() / "dist"):
         if (folder / want).is_file():
             return folder / want
+    if (_HERE.parent / "wheels").is_dir():  # an installed extension: pack it as it was installed
+        return None
     raise RokebyError(f"zip_path: no {want} found in dist/ (run `make dist`, or pass the extension zip's path)")
+
+
+def _pack_installed(dest: Path) -> None:
+    """The installed extension's folder (manifest, add-on files, wheels/) as a zip at ``dest``."""
+    import zipfile
+
+    root = _HERE.parent
+    tmp = dest.with_name(f".{dest.name}.tmp")
+    with zipfile.ZipFile(tmp, "w", zipfile.ZIP_DEFLATED) as z:
+        for f in sorted(root.rglob("*")):
+            if f.is_file() and "__pycache__" not in f.parts:
+                z.write(f, f.relative_to(root).as_posix())
+    os.replace(tmp, dest)
 
 
 def render_template(first: int, last: int, chunk: int) -> dict:
@@ -107,7 +122,8 @@ def render_template(first: int, last: int, chunk: int) -> dict:
 
 def write_render_job(blend, bundle_dir, *, frames=None, chunk: int = 1, zip_path=None, output_dir=None) -> Path:
     """Writes a job bundle that renders the saved ``blend`` on a farm: ``bundle_dir/template.yaml``,
-    ``parameter_values.yaml`` and the extension zip (``zip_path``, or ``dist/rokeby-<version>.zip``).
+    ``parameter_values.yaml`` and the extension zip (``zip_path``, else ``dist/rokeby-<version>.zip``,
+    else the installed extension packed as it was installed).
     ``frames``: "A-B" or (A, B) (required: the file's own range is not known without Blender);
     ``chunk`` frames per task; ``output_dir`` default
     ``<blend's folder>/render``. Returns the bundle folder. Bad arguments are ``RokebyError``
@@ -124,11 +140,15 @@ def write_render_job(blend, bundle_dir, *, frames=None, chunk: int = 1, zip_path
     out = Path(output_dir).resolve() if output_dir else blend.parent / "render"
     bundle = Path(bundle_dir).resolve()
     bundle.mkdir(parents=True, exist_ok=True)
-    shutil.copyfile(z, bundle / z.name)
+    name = z.name if z is not None else f"rokeby-{addon_version()}.zip"
+    if z is not None:
+        shutil.copyfile(z, bundle / name)
+    else:
+        _pack_installed(bundle / name)
     values = {"parameterValues": [
         {"name": "BlendFile", "value": str(blend)},
         {"name": "OutputDir", "value": str(out)},
-        {"name": "ExtensionZip", "value": str(bundle / z.name)},
+        {"name": "ExtensionZip", "value": str(bundle / name)},
         {"name": "RokebyVersion", "value": addon_version()},
         {"name": "FrameStart", "value": first},
         {"name": "FrameEnd", "value": last},

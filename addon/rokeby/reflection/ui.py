@@ -271,6 +271,7 @@ class ROKEBY_PT_render(_MirrorSubPanel, bpy.types.Panel):
         op.mirror, op.action = mirror.name, "INSTALL"
         op = row.operator("rokeby.render_nodes", text="", icon="X")
         op.mirror, op.action = mirror.name, "REMOVE"
+        layout.operator("rokeby.farm_export", text="Export Farm Job…", icon="NETWORK_DRIVE")
 
 
 def _draw_reflection_map(layout, mirror, scene):
@@ -329,6 +330,7 @@ MENU = (
     ("rokeby.reflection_map", "Clear Reflection Map", {"action": "CLEAR"}, "X"),
     ("rokeby.update", None, {}, "FILE_REFRESH"),
     ("rokeby.preview_capture", "Capture Scene for Preview", {}, "WORLD"),
+    ("rokeby.farm_export", "Export Farm Job…", {}, "NETWORK_DRIVE"),
     None,
     ("rokeby.appearance_setup", "Set Up Appearance Painting", {}, "MATERIAL"),
     ("rokeby.appearance_paint", None, {}, "BRUSH_DATA"),
