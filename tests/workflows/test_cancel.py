@@ -65,6 +65,21 @@ def test_cli_ctrl_c_exits_130_with_one_line_and_no_output(big_frame, tmp_path):
     assert sorted(x.name for x in tmp_path.iterdir()) == []  # no output, no report, no partial file
 
 
+def test_cli_ctrl_c_while_reading_the_frame_exits_130(big_frame, tmp_path):
+    """Ctrl-C early, while the EXR is read: the first arrays rokeby_native makes then must not turn
+    the KeyboardInterrupt into a panic (numpy's C API is looked up when rokeby_native is imported)."""
+    out = tmp_path / "out.exr"
+    p = subprocess.Popen([sys.executable, "-m", "rokeby.composite", str(big_frame), str(out), "--smooth", "50"],
+                         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                         cwd=Path(rokeby.__file__).resolve().parents[1])
+    time.sleep(1.5)  # reading the 1.2 GB frame takes seconds
+    p.send_signal(signal.SIGINT)
+    _out, err = p.communicate(timeout=60)
+    assert p.returncode == 130, (p.returncode, err[-2000:])
+    assert "panicked" not in err and err.strip().splitlines()[-1] == "rokeby.composite: cancelled", err[-2000:]
+    assert sorted(x.name for x in tmp_path.iterdir()) == []
+
+
 def test_cancel_from_a_timer_thread_leaves_the_scene_unchanged(big_frame):
     """The operator path: the API entry the Recomposite operator runs (api.recomposite_exr),
     cancelled from another thread while its native smoothing runs, as Esc does

@@ -36,6 +36,10 @@ fn cancel() {
 #[pymodule]
 fn rokeby_native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
+    // NumPy's C API is looked up (importing numpy's modules) on the first array made from Rust, and
+    // rust-numpy panics if that import fails. Made here, at import, so that a KeyboardInterrupt
+    // raised later by a Ctrl-C handler can never land inside that lookup: it would be a panic.
+    let _ = numpy::PyArray1::<f32>::zeros(m.py(), 0, false);
     m.add("NumericalError", m.py().get_type::<NumericalError>())?;
     m.add_function(wrap_pyfunction!(cancel, m)?)?;
     field::register(m)?;
