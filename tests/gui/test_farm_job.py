@@ -21,26 +21,11 @@ from harness import GUIROOT, REPO
 SHOT = r"""
 import sys
 sys.path[:0] = [sys.argv[-2] + "/tests", sys.argv[-2] + "/blend_fixtures"]
-import bpy, make_fixtures, rokeby
-from support import SHARED, cycles
-from rokeby import api, envmaps
-mirror, _ = make_fixtures.keyframed_spot(SHARED)
-rokeby.register()
-sc = bpy.context.scene
-cycles(sc, 40, 4, seed=3)
-sc.cycles.use_denoising = False  # Debian's Blender has no OpenImageDenoise
-sc.render.image_settings.file_format = "PNG"
-envmaps.use_studio_world(sc, "forest")
-mat = bpy.data.materials.new("Chrome")
-mat.use_nodes = True
-mat.node_tree.nodes["Principled BSDF"].inputs["Metallic"].default_value = 1.0
-mat.node_tree.nodes["Principled BSDF"].inputs["Roughness"].default_value = 0.0
-mirror.data.materials.append(mat)
-api.evaluate()
-api.install_render_nodes(mirror)
+import bpy
+from support.farm import keyframed_chrome_spot
+keyframed_chrome_spot(file_format="PNG", denoise=False)
 bpy.ops.wm.save_as_mainfile(filepath=sys.argv[-1])
 """
-
 
 def test_openjd_runs_the_render_job_with_debian_blender(dist_zip):
     pytest.importorskip("openjd.cli", reason="openjd-cli is not installed here (requirements-test.txt pins it)")

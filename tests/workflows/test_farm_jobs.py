@@ -16,20 +16,17 @@ import signal
 import subprocess
 import sys
 import time
-import zipfile
 from pathlib import Path
 
 import numpy as np
 import pytest
-from support import SHARED, cycles
+from support.farm import keyframed_chrome_spot
 
 bpy = pytest.importorskip("bpy")
 pytest.importorskip("openjd.cli", reason="openjd-cli is not installed here (requirements-test.txt pins it)")
 
-import make_fixtures  # noqa: E402  (blend_fixtures/, on pytest's pythonpath)
-
 import rokeby  # noqa: E402
-from rokeby import api, envmaps  # noqa: E402
+from rokeby import envmaps  # noqa: E402
 from rokeby.farm import api as farm  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -117,19 +114,8 @@ def _openjd(bundle, exe, home, *extra, timeout=600):
 def shot(tmp_path_factory):
     """A keyframed reflection edit saved to a .blend, and the interactive session's frames 1-4."""
     tmp = tmp_path_factory.mktemp("shot")
-    mirror, _ = make_fixtures.keyframed_spot(SHARED)
-    rokeby.register()
+    keyframed_chrome_spot()
     sc = bpy.context.scene
-    cycles(sc, SIZE, 4, seed=3)
-    sc.render.image_settings.file_format = "OPEN_EXR"
-    envmaps.use_studio_world(sc, "forest")
-    mat = bpy.data.materials.new("Chrome")
-    mat.use_nodes = True
-    mat.node_tree.nodes["Principled BSDF"].inputs["Metallic"].default_value = 1.0
-    mat.node_tree.nodes["Principled BSDF"].inputs["Roughness"].default_value = 0.0
-    mirror.data.materials.append(mat)
-    api.evaluate()
-    api.install_render_nodes(mirror)
     sc.frame_start, sc.frame_end = 1, 20
     session = {}
     for frame in (1, 2, 3, 20):
