@@ -8,13 +8,11 @@ import sys
 
 import numpy as np
 import pytest
-from support import SHARED, cycles
+from support.farm import keyframed_chrome_spot
 
 bpy = pytest.importorskip("bpy")
 
-import make_fixtures  # noqa: E402  (blend_fixtures/, on pytest's pythonpath)
-
-from rokeby import api, envmaps  # noqa: E402
+from rokeby import envmaps  # noqa: E402
 
 SIZE = 40
 
@@ -36,12 +34,6 @@ for frame in (1, 20):
 """
 
 
-def _setup_render(sc):
-    cycles(sc, SIZE, 4, seed=3)
-    sc.render.image_settings.file_format = "OPEN_EXR"
-    envmaps.use_studio_world(sc, "forest")
-
-
 def _read(path):
     return envmaps.read_exr(path)[..., :3]
 
@@ -54,16 +46,8 @@ def _worker(enable, path, out):
 
 
 def test_fresh_process_renders_the_same_frames(tmp_path):
-    mirror, _ = make_fixtures.keyframed_spot(SHARED)
+    keyframed_chrome_spot(size=SIZE)
     sc = bpy.context.scene
-    _setup_render(sc)
-    mat = bpy.data.materials.new("Chrome")
-    mat.use_nodes = True
-    mat.node_tree.nodes["Principled BSDF"].inputs["Metallic"].default_value = 1.0
-    mat.node_tree.nodes["Principled BSDF"].inputs["Roughness"].default_value = 0.0
-    mirror.data.materials.append(mat)
-    api.evaluate()
-    api.install_render_nodes(mirror)
     session = {}
     for frame in (1, 20):
         sc.frame_set(frame)
