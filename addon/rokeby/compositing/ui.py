@@ -89,7 +89,7 @@ class ROKEBY_OT_composite_setup_passes(bpy.types.Operator):
     """Enable the render passes and AOVs that compositing-stage shape editing needs"""
 
     bl_idname = "rokeby.composite_setup_passes"
-    bl_label = "Set Up Compositing Passes"
+    bl_label = "Set Up Passes"
     bl_options = {"REGISTER", "UNDO"}
 
     @classmethod
@@ -146,7 +146,7 @@ class ROKEBY_OT_composite_render(_EditProps, bpy.types.Operator):
     recomposited frame as a new image"""
 
     bl_idname = "rokeby.composite_render"
-    bl_label = "Render and Recomposite"
+    bl_label = "Render & Edit"
     bl_options = {"REGISTER", "UNDO"}
 
     filepath: bpy.props.StringProperty(name="EXR", default="", subtype="FILE_PATH",
@@ -310,7 +310,7 @@ class ROKEBY_OT_composite_sequence(_EditProps, bpy.types.Operator):
     run that stopped (a bad frame, a crash) resumes where it left off"""
 
     bl_idname = "rokeby.composite_sequence"
-    bl_label = "Recomposite EXR Sequence"
+    bl_label = "Recomposite EXRs"
     bl_options = {"REGISTER"}
 
     directory: bpy.props.StringProperty(name="Folder", subtype="DIR_PATH",
@@ -432,12 +432,12 @@ class ROKEBY_PT_compositing(bpy.types.Panel):
 
     def draw(self, context):
         col = self.layout.column()
-        col.operator(ROKEBY_OT_composite_setup_passes.bl_idname, icon="RENDERLAYERS")
-        col.operator(ROKEBY_OT_composite_render.bl_idname, icon="RENDER_STILL")
+        col.operator(ROKEBY_OT_composite_setup_passes.bl_idname, text="Set Up Compositing Passes", icon="RENDERLAYERS")
+        col.operator(ROKEBY_OT_composite_render.bl_idname, text="Render and Recomposite", icon="RENDER_STILL")
         col.operator(ROKEBY_OT_composite_edit.bl_idname, icon="IMAGE")
         col.operator(ROKEBY_OT_composite_to_compositor.bl_idname, icon="NODE_COMPOSITING")
         col.separator()
-        col.operator(ROKEBY_OT_composite_sequence.bl_idname, icon="SEQUENCE")
+        col.operator(ROKEBY_OT_composite_sequence.bl_idname, text="Recomposite EXR Sequence", icon="SEQUENCE")
 
 
 CLASSES = (ROKEBY_OT_composite_setup_passes, ROKEBY_OT_composite_render, ROKEBY_OT_composite_edit,

@@ -153,7 +153,7 @@ class ROKEBY_OT_constraint_add(_Op, bpy.types.Operator):
     """Click on a mirror: the red handle goes where you click, the green handle where the reflected ray lands, so nothing changes until you move one"""
 
     bl_idname = "rokeby.constraint_add"
-    bl_label = "Add Reflection Constraint"
+    bl_label = "Add Constraint"
     bl_options = UNDO
 
     mirror: StringProperty(name="Mirror", description="Object name (default: the mirror under the click, or the active one)")
