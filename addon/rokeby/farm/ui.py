@@ -90,7 +90,7 @@ class ROKEBY_OT_farm_export_recomposite(bpy.types.Operator):
     recomposited image's edit"""
 
     bl_idname = "rokeby.farm_export_recomposite"
-    bl_label = "Export Recompositing Job"
+    bl_label = "Export EXR Farm Job"
     bl_options = {"REGISTER"}
 
     directory: bpy.props.StringProperty(name="Bundle Folder", subtype="DIR_PATH")
