@@ -39,13 +39,6 @@ from .core import exr
 from .blender import transaction
 
 
-def _pair(text: str) -> tuple[float, float]:
-    try:
-        x, y = (float(v) for v in text.split(","))
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected X,Y in pixels, got {text!r}") from None
-    return x, y
-
 
 def _read_height(path: str, shape) -> np.ndarray:
     try:
@@ -86,12 +79,6 @@ class _Parser(argparse.ArgumentParser):
         self.exit(2, f"rokeby.composite: {message} (see --help)\n")
 
 
-def _indices(text: str) -> list[int]:
-    try:
-        return [int(v) for v in text.split(",")]
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected comma-separated object pass indices, got {text!r}") from None
-
 
 def main(argv=None) -> int:
     """The tool: 0 on success; 2 with one line on stderr naming the problem for a bad file, flag
@@ -104,11 +91,12 @@ def main(argv=None) -> int:
         native.cancel()  # a native call in flight stops at its next row
         raise KeyboardInterrupt
 
-    old = signal.signal(signal.SIGINT, interrupted) if _main_thread() else None
+    # Ctrl-C, and a scheduler's cancel (SIGTERM: a farm task, a batch job), stop at the next row.
+    old = {sig: signal.signal(sig, interrupted) for sig in (signal.SIGINT, signal.SIGTERM)} if _main_thread() else {}
     try:
         with native.cancellable():
             return _main(argv)
-    except KeyboardInterrupt:  # Ctrl-C / SIGINT: one line, status 130, no (partial) output file
+    except KeyboardInterrupt:  # Ctrl-C / SIGINT / SIGTERM: one line, status 130, no (partial) output file
         print("rokeby.composite: cancelled", file=sys.stderr)
         return 130
     except (C.CompositingError, ValueError, OSError, MemoryError) as exc:
@@ -116,8 +104,8 @@ def main(argv=None) -> int:
         print(f"rokeby.composite: {what or type(exc).__name__}", file=sys.stderr)
         return 2
     finally:
-        if old is not None:
-            signal.signal(signal.SIGINT, old)
+        for sig, handler in old.items():
+            signal.signal(sig, handler)
 
 
 def _main_thread() -> bool:
@@ -127,41 +115,7 @@ def _main_thread() -> bool:
 
 
 def _main(argv) -> int:
-    ap = _Parser(prog="python -m rokeby.composite", description=__doc__.split("\n\n")[0])
-    ap.add_argument("input", help="Blender multilayer EXR with the passes of setup_passes (with --sequence: the folder of frames)")
-    ap.add_argument("output", help="recomposited RGB EXR (with --sequence: the output folder)")
-    ap.add_argument("--sequence", action="store_true", help="input and output are folders: recomposite every frame")
-    ap.add_argument("--pattern", default="*.exr", help="with --sequence: which files are frames, a glob or '#' per digit (default *.exr)")
-    ap.add_argument("--frame", type=int, metavar="K", help="with --sequence: only the K-th frame (1-based, frame order): one process per frame")
-    ap.add_argument("--skip-existing", action="store_true", help="an output that exists is kept and its frame skipped (resume a stopped run)")
-    ap.add_argument("--layer", help="view layer (default: the first in the file)")
-    ap.add_argument("--emboss", type=float, metavar="BETA", help="n_z → β n_z, β in (0, 1]")
-    ap.add_argument("--ripple", type=float, metavar="STRENGTH", help="fading 2D ripple decal of this strength")
-    ap.add_argument("--ripple-center", type=_pair, metavar="X,Y", help="ripple centre in pixels (default: image centre)")
-    ap.add_argument("--ripple-wavelength", type=float, default=24.0, metavar="PX")
-    ap.add_argument("--ripple-radius", type=float, metavar="PX")
-    ap.add_argument("--noise", type=float, metavar="STRENGTH", help="fading procedural noise bump decal of this strength")
-    ap.add_argument("--noise-size", type=float, default=16.0, metavar="PX", help="its feature size (default 16)")
-    ap.add_argument("--noise-octaves", type=int, default=3, metavar="N")
-    ap.add_argument("--noise-seed", type=int, default=0)
-    ap.add_argument("--noise-center", type=_pair, metavar="X,Y", help="its centre in pixels (default: image centre)")
-    ap.add_argument("--noise-radius", type=float, metavar="PX")
-    ap.add_argument("--bump", metavar="HEIGHT", help="height image (EXR or .npy, frame-sized)")
-    ap.add_argument("--bump-strength", type=float, default=1.0)
-    ap.add_argument("--smooth", type=float, metavar="SIGMA_PX", help="cross-bilateral smoothing of normals with depth")
-    ap.add_argument("--smooth-depth", type=float, default=0.02, metavar="REL", help="depth range kernel σ (relative)")
-    ap.add_argument("--objects", type=_indices, help="comma-separated object pass indices to edit (default: all)")
-    ap.add_argument("--fit", choices=("qp", "ls"), default="qp", help="diffuse SH fit (default: the QP)")
-    ap.add_argument("--noise-tolerance", type=float, default=0.0, metavar="KAPPA",
-                    help="the QP's constraint D(n) >= D0 - KAPPA*sigma, sigma the pixel noise of the diffuse pass "
-                         "(default 0: the paper's QP; about 2-3 for a noisy render)")
-    ap.add_argument("--env-size", type=int, default=128, help="texels per paraboloid face")
-    ap.add_argument("--kd", type=float, default=1.0, help="diffuse intensity k_D")
-    ap.add_argument("--kr", type=float, default=1.0, help="reflection intensity k_R")
-    ap.add_argument("--backend", choices=C.RECOMPOSITE_BACKENDS, default="cpu",
-                    help="eqs. 3-5 on the CPU (Rust core, default), or the GLSL shader on a headless EGL context (moderngl) "
-                         "or through Blender's gpu module (blender_gpu: bpy in this process; its context costs one tiny EEVEE render)")
-    ap.add_argument("--report", metavar="JSON", help="write per-patch reconstruction report and timings")
+    ap = C.command_parser(description=__doc__.split("\n\n")[0], parser_class=_Parser)
     a = ap.parse_args(argv)
     if a.sequence:
         return _sequence(a)

@@ -307,6 +307,7 @@ NOT_COVERED = {
     "shadow_stop": "one undo step; undo brings the session back: tests/shadow/test_shadow_undo.py",
     "composite_sequence": "writes recomposited frames to files outside the .blend (tests/workflows/test_interface.py)",
     "farm_export": "writes a job bundle outside the .blend (tests/workflows/test_farm_jobs.py)",
+    "farm_export_recomposite": "writes a job bundle outside the .blend (tests/workflows/test_farm_jobs.py)",
     "composite_brush": "pushes one undo step per stroke itself (no UNDO flag); undo/redo tested in tests/compositing/test_compositing_brush.py",
 }
 

@@ -66,8 +66,8 @@ def remove_shadow_edit(obj) -> None:
 
 # --- Render farms (Open Job Description; rokeby.farm) -------------------------------------------
 
-from ..farm.api import write_render_job  # noqa: E402 - the farm feature's entry point
+from ..farm.api import write_recomposite_job, write_render_job  # noqa: E402 - the farm feature's entry points
 
 
-__all__ = [*_edit.__all__, "write_render_job", "setup_compositing_passes", "recomposite_render", "recomposite_exr", "recomposite_exr_pixels",
+__all__ = [*_edit.__all__, "write_render_job", "write_recomposite_job", "setup_compositing_passes", "recomposite_render", "recomposite_exr", "recomposite_exr_pixels",
            "use_in_compositor", "open_normal_brush", "paint_normals", "start_shadow_edit", "apply_shadow_edit", "remove_shadow_edit"]

@@ -438,6 +438,7 @@ class ROKEBY_PT_compositing(bpy.types.Panel):
         col.operator(ROKEBY_OT_composite_to_compositor.bl_idname, icon="NODE_COMPOSITING")
         col.separator()
         col.operator(ROKEBY_OT_composite_sequence.bl_idname, text="Recomposite EXR Sequence", icon="SEQUENCE")
+        col.operator("rokeby.farm_export_recomposite", text="Export Recompositing Farm Job…", icon="NETWORK_DRIVE")
 
 
 CLASSES = (ROKEBY_OT_composite_setup_passes, ROKEBY_OT_composite_render, ROKEBY_OT_composite_edit,

@@ -20,7 +20,7 @@ Enum item numbers (what Blender stores for an enum) are declared with the enums 
 from __future__ import annotations
 
 # Bumped whenever a name below is added, or a name's meaning changes (with a migration).
-SCHEMA_VERSION = 2
+SCHEMA_VERSION = 3
 
 # --- Properties registered on Blender's types ----------------------------------------------------
 OBJECT_PROP = "rokeby"  # Object.rokeby: RokebyMirror (reflection editing, appearance roles)
@@ -157,3 +157,10 @@ BRUSH_STROKES_KEY = "rokeby_brush_strokes"  # on a brushed image: list of {"id",
 BRUSH_SOURCE_KEY = "rokeby_brush_exr"  # on a brushed image: the multilayer EXR its strokes edit
 BRUSH_BASE_KEY = "rokeby_brush_base"  # on a recomposited image: the one-knob edit it shows, which strokes add to
 # ({"edit", "amount", "k_d", "k_r", "fit", "noise_tolerance"})
+
+
+# --- Render farms (farm/) ------------------------------------------------------------------------
+# On each scene of a file that holds edits the add-on recomputes at render time (a reflection
+# field, a shadow edit): the add-on version that saved it, e.g. "0.1.0". A farm job's tasks refuse
+# to render the file in a Blender whose Rokeby is missing or another version.
+SCENE_SAVED_WITH_KEY = "rokeby_saved_with"

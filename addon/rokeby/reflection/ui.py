@@ -351,6 +351,7 @@ MENU = (
     ("rokeby.composite_to_compositor", None, {}, "NODE_COMPOSITING"),
     ("rokeby.composite_brush", None, {}, "BRUSH_DATA"),
     ("rokeby.composite_sequence", None, {}, "SEQUENCE"),
+    ("rokeby.farm_export_recomposite", "Export Recompositing Farm Job…", {}, "NETWORK_DRIVE"),
 )
 
 
