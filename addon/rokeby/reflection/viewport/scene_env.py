@@ -16,7 +16,8 @@ Kept current, never in the way:
   positions, materials and their node values, lights' settings). Handles are empties and the
   field the mirror stores changes no vertex position, so handle drags never recapture;
 - in a window, depsgraph updates only mark the previews dirty; a timer captures once the updates
-  have paused for ``DEBOUNCE_SECONDS`` (a transform in progress keeps postponing it), with
+  have paused for ``DEBOUNCE_SECONDS`` and no transform runs (a transform in progress postpones it
+  until it is confirmed or cancelled), with
   progress shown on the cursor while it renders;
 - captures are cached per mirror (runtime only, never saved: a reload recaptures on first draw);
   ``stats`` counts them, and each records its time and memory for the sidebar and ``make bench``.
@@ -331,13 +332,25 @@ def request():
         evaluate._schedule(_timer, DEBOUNCE_SECONDS)
 
 
+def transform_running() -> bool:
+    """Whether a window runs a transform (G, R, S, a gizmo drag): the mouse holding still inside
+    one is no pause; the capture waits for its confirm or cancel."""
+    import bpy  # noqa: PLC0415
+
+    for window in getattr(getattr(bpy.context, "window_manager", None), "windows", []):
+        for op in getattr(window, "modal_operators", ()):
+            if op.bl_idname.startswith(("TRANSFORM_OT_", "transform.")):
+                return True
+    return False
+
+
 def _timer():
     global _pending
     from .. import guard  # noqa: PLC0415
 
     wait = DEBOUNCE_SECONDS - (time.perf_counter() - _last_change)
-    if wait > 0 or guard.active():
-        return max(wait, 0.05)
+    if wait > 0 or guard.active() or transform_running():
+        return max(wait, 0.1)
     _pending = False
     try:
         if refresh():
