@@ -26,11 +26,6 @@ def test_the_window_captures_the_scene_by_itself(preview):
     assert preview["capture"]["bytes"] > 0 and preview["capture"]["width"] == 256, preview
 
 
-@pytest.mark.xfail(strict=True, reason=(
-    "known bug, found by this test: in Debian's Blender 4.3 window the preview draws the unedited "
-    "reflection (the magenta cube where a plain mirror shows it, left of the red handle) while the "
-    "Cycles render of the same view and the background-mode preview (bpy 4.2-5.3) show it at the red "
-    "handle; the field's constraint rows reach draw_mirror intact (result.json 'debug')"))
 def test_the_red_handle_shows_the_object_under_the_green_handle(preview):
     # Without the preview the chrome ball is drawn flat grey; with it, the magenta cube sits under
     # the red handle, as in the Cycles render of the same view.
@@ -41,7 +36,16 @@ def test_the_red_handle_shows_the_object_under_the_green_handle(preview):
     assert max(abs(a - b) for a, b in zip(on, ren)) < 0.2, (on, ren)
 
 
+def test_the_parallax_correction_puts_it_there(preview):
+    # Drawn offscreen in the window with the same view: e(q) at the red handle is the constraint's
+    # e_n; the corrected lookup finds the magenta cube along it, the centre-only lookup misses it.
+    off = preview["offscreen"]
+    assert max(abs(a - b) for a, b in zip(off["direction"], off["constraint_e"])) < 0.02, off
+    assert magenta(off["corrected"]) and not magenta(off["centre"]), off
+
+
 def test_a_handle_drag_captures_nothing(preview):
+    assert preview["green_moved"] != preview["green_before"], preview  # the drag did move the handle
     assert preview["captures_handle_drag"] == 0, preview
 
 

@@ -9,6 +9,7 @@ import bpy
 import numpy as np
 
 MAGENTA = (0.8, 0.05, 0.5)
+EYE = (1.2, -6.8, 1.4)
 
 
 def material(name, colour):
@@ -64,11 +65,12 @@ def build(ui):
     return sc, mirror, cubes
 
 
-def ring_at(ui, shot, p, radius=8):
+def ring_at(ui, shot, p, box, radius=8):
     """The screenshot's sRGB colour just around the screen point of ``p``: the median over a ring of
     ``radius`` pixels above and beside it (the handle's square covers the point itself, the line
     to the green handle runs below it)."""
     x, y = ui.point_xy(p)
+    x, y = x - box[0], y - box[1]  # the screenshot is of the region (box: its place on the screen)
     px = ui.pixels(shot)
     angles = np.radians(np.arange(-30, 211, 15))  # above and to both sides, screen y down
     xs = np.round(x + radius * np.cos(angles)).astype(int)
@@ -83,25 +85,32 @@ def scenario(ui):
     schema = ui.addon("core.schema")
     sc, mirror, cubes = build(ui)
     api.add_mirror(mirror)
-    eye = (1.2, -6.8, 1.4)
+    # The scene camera: the field's reflected directions are the ones it sees (the render eye).
+    from mathutils import Vector
+
+    bpy.data.objects.remove(bpy.data.objects["Camera"])
+    cam = bpy.data.objects.new("Camera", bpy.data.cameras.new("Camera"))
+    sc.collection.objects.link(cam)
+    sc.camera = cam
+    cam.location = EYE
+    cam.rotation_euler = (-Vector(EYE)).to_track_quat("-Z", "Y").to_euler()
+    sc.render.resolution_x, sc.render.resolution_y, sc.render.resolution_percentage = 480, 320, 100
     # The red handle on the ball's front, the green one on the magenta cube.
-    api.add_constraint(mirror, (0.35, -0.9, -0.25), tuple(cubes["Magenta"].location), eye=eye)
+    api.add_constraint(mirror, (0.35, -0.9, -0.25), tuple(cubes["Magenta"].location))
     api.evaluate(sc, force=True)
     c = mirror.rokeby.constraints[0]
     red, green = c.surface_handle, c.target_handle
-    # The view: from the eye toward the ball, Solid shading, the preview on.
+    # The view: through the camera, Solid shading, the preview on.
     area = ui.area()
     space = area.spaces.active
     space.shading.type = "SOLID"
     space.overlay.show_floor = False
     space.overlay.show_axis_x = space.overlay.show_axis_y = False
     rv3d = ui.region("WINDOW", area).data
-    from mathutils import Vector
-
-    rv3d.view_perspective = "PERSP"
-    rv3d.view_location = (0.0, 0.0, 0.0)
-    rv3d.view_rotation = Vector(eye).to_track_quat("Z", "Y")
-    rv3d.view_distance = Vector(eye).length
+    rv3d.view_perspective = "CAMERA"
+    with ui.override():
+        bpy.ops.view3d.view_center_camera()
+    rv3d.view_camera_zoom -= 12  # the whole frame and the magenta cube (the green handle) in the view
     with ui.override():
         bpy.ops.ed.undo_push(message="scene set up")
     yield from ui.redraws(2)
@@ -125,22 +134,14 @@ def scenario(ui):
     box = ui.region_box(region)
 
     def at(path, p):
-        col, (x, y) = ring_at(ui, path, p)
-        return col, [x - box[0], y - box[1]]
+        return ring_at(ui, path, p, box)
 
     import os
 
     r["red_handle_on"], r["red_handle_px"] = at(shot, red.matrix_world.translation)
     r["red_handle_off"], _ = at(os.path.join(ui.out, off_shot), red.matrix_world.translation)
-    r["debug"] = debug(ui, sc, mirror, red)
-    # A Cycles render of the same view: the preview's pixel against the renderer's.
-    cam = bpy.data.objects.new("Cam", bpy.data.cameras.new("Cam"))
-    sc.collection.objects.link(cam)
-    sc.camera = cam
-    with ui.override():
-        bpy.ops.view3d.camera_to_view()
-    sc.render.resolution_x, sc.render.resolution_y = region.width, region.height
-    sc.render.resolution_percentage = 50
+    r["offscreen"] = offscreen_at(ui, sc, mirror, red)
+    # A Cycles render of the camera: the preview's pixel against the renderer's.
     sc.cycles.samples = 16
     sc.cycles.use_denoising = False
     with ui.override():
@@ -155,13 +156,12 @@ def scenario(ui):
     x, y = int(uvw.x * w), int((1.0 - uvw.y) * h)
     r["red_handle_render"] = [round(float(v), 4) for v in np.median(px[y - 1:y + 2, x - 1:x + 2, :3].reshape(-1, 3), axis=0)]
     ui.shots.append("render.png")
-    sc.camera = None
-    bpy.data.objects.remove(cam)
     yield from ui.redraws(2)
     yield from ui.until(lambda: not scene_env._pending, 60, "no capture pending")
 
     # A green-handle drag with G and the mouse: the field changes, the scene does not: no capture.
     n0 = scene_env.stats["captures"]
+    r["green_before"] = [round(float(v), 4) for v in green.location]
     yield from grab(ui, green, 25, -10)
     yield 1.5  # past the debounce: a capture would have run by now
     yield from ui.redraws(2)
@@ -192,39 +192,31 @@ def scenario(ui):
     r["addon_version"] = getattr(rokeby, "__version__", None)
 
 
-def debug(ui, sc, mirror, red):
+def offscreen_at(ui, sc, mirror, red):
+    """The preview drawn offscreen through the window's GPU context with the same view (draw_mirror),
+    read at the red handle's pixel: the parallax-corrected and the centre-only lookups, and the
+    edited direction e(q) there beside the constraint's own e_n."""
     import gpu
+    from bpy_extras.view3d_utils import location_3d_to_region_2d
 
     draw = ui.addon("reflection.viewport.draw")
-    prefs = ui.addon("blender.prefs")
-    api = ui.addon("api")
+    glsl = ui.addon("reflection.viewport.glsl")
+    evaluate = ui.addon("reflection.evaluate")
     region = ui.region("WINDOW")
     rv3d = region.data
     eye = tuple(rv3d.view_matrix.inverted().translation)
-    out = {"status": draw.status_of(mirror), "last_error": draw.last_error(), "parallax": prefs.get(bpy.context).preview_parallax,
-           "freeze": mirror.rokeby.freeze, "report": api.evaluate(sc)[mirror.name].summary(), "eye": list(eye)}
-    evaluate = ui.addon("reflection.evaluate")
-    st = evaluate.state_of(mirror)
-    rows, distances, regions = st.field_inputs
-    out["rows"] = np.round(np.asarray(rows), 4).tolist()
-    out["regions"] = str(regions)[:300]
-    out["rotations"] = None if st.rotations is None else [list(np.shape(st.rotations)), float(np.abs(np.asarray(st.rotations)).max())]
-    out["plan_mode"] = draw._cache[mirror.session_uid].plan.mode
-    out["mirror_matrix"] = [list(r) for r in mirror.matrix_world]
-    c = mirror.rokeby.constraints[0]
-    out["handles"] = [list(c.surface_handle.matrix_world.translation), list(c.target_handle.matrix_world.translation)]
-    from bpy_extras.view3d_utils import location_3d_to_region_2d
-
+    rows = np.asarray(evaluate.state_of(mirror).field_inputs[0])
+    out = {"constraint_e": np.round(rows[0, 6:9], 4).tolist()}
     q = location_3d_to_region_2d(region, rv3d, red.matrix_world.translation)
-    x, y = int(q.x), int(q.y + 9)
+    x, y = int(round(q.x)), int(round(q.y))
     off = gpu.types.GPUOffScreen(region.width, region.height, format="RGBA32F")
     try:
         with off.bind():
             fb = gpu.state.active_framebuffer_get()
-            for key, kw in (("corrected", {}), ("centre", {"parallax": False}), ("noscene", {"use_scene": False})):
+            for key, kw in (("corrected", {}), ("centre", {"parallax": False}), ("direction", {"output": glsl.OUT_DIRECTION})):
                 fb.clear(color=(0.0, 0.0, 0.0, 0.0), depth=1.0)
-                out["drew_" + key] = draw.draw_mirror(mirror, sc, np.array(rv3d.perspective_matrix), eye, **kw)
-                out["offscreen_" + key] = [round(v, 4) for v in fb.read_color(x, y, 1, 1, 4, 0, "FLOAT").to_list()[0][0]]
+                draw.draw_mirror(mirror, sc, np.array(rv3d.perspective_matrix), eye, **kw)
+                out[key] = [round(v, 4) for v in fb.read_color(x, y, 1, 1, 4, 0, "FLOAT").to_list()[0][0][:3]]
     finally:
         off.free()
     return out
