@@ -1,0 +1,271 @@
+"""One figure per claim: the guides quote docs/benchmarks.md, and name what the code does.
+
+Speed and accuracy figures live in docs/benchmarks.md (written by ``make bench``, each section with
+its machine and date). README.md and the other guides quote them as links to the table they come
+from, with the row (or the sentence) named in the link's title:
+
+    a green-handle move takes [12.7–16.8 ms](benchmarks.md#green-handle-move-at-100k-vertices "whole update")
+
+This test checks, for every such citation, that the heading exists, that the quoted row exists in
+that section, and that every number in the link's text is a number of that row (rounded as quoted:
+``13`` quotes 12.7, ``0.2 %`` quotes 0.16 %). A range quotes several rows: every row that holds the
+title counts, and a title may name several rows separated by " ; ". A timing or an error figure outside such a link (``12 ms``, ``56 MP/s``, ``3 % mean
+error``) fails, unless it is a goal, a setting or a limit the code enforces (``ALLOWED`` below,
+each with its reason).
+
+It also checks what the guides name against the code: the geodesic methods (labels, identifiers,
+saved item numbers, the default of new mirrors and of ``rokeby_native``), the region kinds, the
+distance metrics, polar methods, generating eyes and render modes in docs/addon.md and
+docs/geodesics.md; and docs/architecture.md's "To change …, start in …" table, whose every path
+must exist, and the README's guide list, which must start with the architecture guide.
+"""
+
+from __future__ import annotations
+
+import inspect
+import re
+import unicodedata
+from dataclasses import dataclass
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[2]
+BENCH = ROOT / "docs" / "benchmarks.md"
+GUIDES = [ROOT / "README.md", *sorted(p for p in (ROOT / "docs").glob("*.md") if p.name != "benchmarks.md")]
+
+# --- docs/benchmarks.md: sections, rows, numbers ----------------------------------------------
+
+HEADING = re.compile(r"^(#{1,6})\s+(.*?)\s*#*\s*$")
+NUMBER = re.compile(r"(?<![\w.])[-−]?\d[\d,]*(?:\.\d+)?(?:[eE][-−+]?\d+)?")
+
+
+def slug(heading: str) -> str:
+    """GitHub's anchor for a heading: lower case, punctuation dropped, spaces to hyphens."""
+    text = re.sub(r"`|\*\*|\*|_(?=\w)|(?<=\w)_", "", heading).strip().lower()
+    out = []
+    for ch in text:
+        cat = unicodedata.category(ch)
+        if ch in " -":
+            out.append("-" if ch == " " else ch)
+        elif ch == "_" or cat[0] in "LN" or cat == "Mn":
+            out.append(ch)
+    return "".join(out)
+
+
+def _blocks(lines: list[str]) -> list[str]:
+    """A section's units: each table row, each line of a code block, each paragraph (joined)."""
+    units, para, fenced = [], [], False
+    for ln in lines:
+        if ln.lstrip().startswith("```"):
+            fenced = not fenced
+            if para:
+                units.append(" ".join(para))
+                para = []
+            continue
+        if fenced or ln.lstrip().startswith("|"):
+            if para:
+                units.append(" ".join(para))
+                para = []
+            if ln.strip():
+                units.append(ln.strip())
+        elif ln.strip():
+            para.append(ln.strip())
+        elif para:
+            units.append(" ".join(para))
+            para = []
+    if para:
+        units.append(" ".join(para))
+    return units
+
+
+LEVELS: dict[str, int] = {}
+
+
+def bench_sections() -> dict[str, list[str]]:
+    """anchor -> the units (rows, paragraphs) between that heading and the next heading."""
+    sections: dict[str, list[str]] = {}
+    seen: dict[str, int] = {}
+    current, lines, fenced = None, [], False
+
+    def close():
+        if current is not None:
+            sections[current] = _blocks(lines)
+
+    for ln in BENCH.read_text().splitlines():
+        if ln.lstrip().startswith("```"):
+            fenced = not fenced
+        m = None if fenced else HEADING.match(ln)
+        if m:
+            close()
+            base = slug(m.group(2))
+            n = seen.get(base, 0)
+            seen[base] = n + 1
+            current, lines = (base if n == 0 else f"{base}-{n}"), []
+            LEVELS[current] = len(m.group(1))
+        else:
+            lines.append(ln)
+    close()
+    return sections
+
+
+def numbers(text: str) -> list[str]:
+    """The numbers of a text as written ("1,599,008", "0.16", "4e-7"; "13–17" gives 13 and 17)."""
+    text = text.replace("−", "-")
+    return [m.group(0).lstrip("-").replace(",", "") for m in NUMBER.finditer(text.replace("–", " – "))]
+
+
+def quotes(quoted: str, value: str) -> bool:
+    """Does ``quoted`` (as written in a guide) quote ``value`` (as written in the table)?"""
+    q, v = float(quoted), float(value)
+    if "e" in quoted.lower():
+        mant, _, exp = quoted.lower().partition("e")
+        step = 10.0 ** (int(exp) - (len(mant.split(".")[1]) if "." in mant else 0))
+    else:
+        step = 10.0 ** -(len(quoted.split(".")[1]) if "." in quoted else 0)
+    return abs(q - v) <= step / 2 + 1e-12 * max(1.0, abs(v))
+
+
+# --- the guides: citations and bare figures ----------------------------------------------------
+
+CITATION = re.compile(r"\[(?P<text>[^\]\n]+)\]\((?P<path>(?:docs/)?benchmarks\.md)#(?P<anchor>[^\s)]+)(?:\s+\"(?P<row>[^\"]*)\")?\)")
+
+# A timing or an error figure: a number or range with a unit of time or throughput, or a percentage,
+# angle or ratio said to be an error, an accuracy or a speed-up.
+_NUM = r"(?<![\w.×/-])\d[\d,]*(?:\.\d+)?(?:\s?[–-]\s?\d[\d,]*(?:\.\d+)?)?"
+FIGURE = re.compile(
+    rf"{_NUM}\s?(?:ms|µs|ns|s|seconds?|minutes?|MP/s|megapixels/s|fps|GFLOP/s|GB/s|M instructions)(?![\w/])"
+    rf"|{_NUM}\s?%"
+    rf"|{_NUM}\s?×(?!\s?\d)(?=\s?(?:faster|slower|fewer|more|the|heat|closer|less))"
+)
+
+ERROR_WORDS = re.compile(r"error|accura|over-?estimat|too long|\bmean\b|p99|percentile|off by", re.IGNORECASE)
+
+# Figures in guides that are not measurements: goals, settings, limits the code enforces, the
+# papers' own numbers. (guide, text of the figure, the words around it that identify it) -> why.
+ALLOWED: dict[tuple[str, str, str], str] = {
+    ("docs/envmaps.md", "6 minutes", "pre-rendered for 6 minutes per image"): "the paper's (Fraser's) figure",
+    ("docs/addon.md", "0.25 s", "updates pause for 0.25 s"): "a setting: evaluate.SETTLE_INTERVAL",
+    ("docs/addon.md", "0.4 s", "it runs at most every 0.4 s"): "a setting: evaluate.ESTIMATE_INTERVAL",
+    ("docs/addon.md", "0.4 s", '("Scene 0.4 s, 0.5 MB")'): "an example of the status text",
+    ("docs/addon.md", "0.4 s", "until the changes pause (0.4 s"): "a setting: scene_env.DEBOUNCE_SECONDS",
+    ("docs/farm.md", "120 s", "SIGKILL 120 s"): "a setting: farm.api.CANCEL_NOTICE_S",
+    ("docs/development.md", "20 s", "takes more than about 20 s"): "the rule for the `slow` test marker",
+    ("docs/development.md", "20 s", "above about 20 s on the shared"): "the rule for the `slow` test marker",
+    ("docs/development.md", "4 minutes", "about 4 minutes"): "how long a one-off set-up step takes, not a figure of Rokeby's",
+    ("docs/development.md", "2 minutes", "The leg takes about 2 minutes"): "how long a test leg takes, not a figure of Rokeby's",
+    ("docs/development.md", "15–35 s", "15–35 s each"): "how long a test leg takes, not a figure of Rokeby's",
+    ("docs/development.md", "1.5 minutes", "about 1.5 minutes"): "how long a one-off set-up step takes, not a figure of Rokeby's",
+}
+
+
+@dataclass(frozen=True)
+class Figure:
+    guide: str
+    line: int
+    text: str
+    context: str
+
+
+def _strip_markup(line: str) -> str:
+    """The line without inline code, citations, link targets and HTML comments."""
+    line = re.sub(r"<!--.*?-->", " ", line)
+    line = re.sub(r"`[^`]*`", " ", line)
+    line = CITATION.sub(" ", line)
+    return re.sub(r"\]\([^)]*\)", "]", line)
+
+
+def bare_figures(path: Path) -> list[Figure]:
+    found, fenced = [], False
+    for i, raw in enumerate(path.read_text().splitlines(), 1):
+        if raw.lstrip().startswith(("```", "~~~")):
+            fenced = not fenced
+            continue
+        if fenced:
+            continue
+        line = _strip_markup(raw)
+        for m in FIGURE.finditer(line):
+            if m.group(0).endswith("%") and not ERROR_WORDS.search(line[max(0, m.start() - 40): m.end() + 40]):
+                continue  # a share of something (pixels, a radius), not an error figure
+            before, after = line[max(0, m.start() - 30): m.start()], line[m.end(): m.end() + 12]
+            if re.search(r"\bgoals?\b|\bpaper\b|paper's|Table 1|GTX", before, re.IGNORECASE) or re.match(r"\s*goal", after):
+                continue  # a target, or the paper's own figure, not a measurement of ours
+            found.append(Figure(path.relative_to(ROOT).as_posix(), i, m.group(0), line.strip()))
+    return found
+
+
+def citations():
+    for path in GUIDES:
+        for i, line in enumerate(path.read_text().splitlines(), 1):
+            for m in CITATION.finditer(line):
+                yield pytest.param(path, i, m, id=f"{path.relative_to(ROOT)}:{i}")
+
+
+@pytest.fixture(scope="module")
+def sections():
+    return bench_sections()
+
+
+def test_benchmarks_name_machine_and_date():
+    text = BENCH.read_text()
+    assert re.search(r"^Machine: .+", text, re.MULTILINE), "docs/benchmarks.md: no 'Machine:' line"
+    dated = False  # a ### subsection may take its date from its ## section
+    for anchor, units in bench_sections().items():
+        level = LEVELS[anchor]
+        body = " ".join(units)
+        has_date = bool(re.search(r"\b20\d\d-\d\d-\d\d\b", body))
+        if level <= 2:
+            dated = has_date
+        if level == 1 or not re.search(r"\d\s?(?:ms|s|%|MP/s|MB)\b", body):
+            continue
+        assert has_date or (level > 2 and dated), f"docs/benchmarks.md, section #{anchor}: its figures say no date (a 'Run: YYYY-MM-DD' line)"
+
+
+@pytest.mark.parametrize("path, line, m", list(citations()))
+def test_citation_quotes_its_table(path, line, m, sections):
+    where = f"{path.relative_to(ROOT)}:{line}: [{m['text']}]({m['path']}#{m['anchor']})"
+    expected = "docs/benchmarks.md" if path.parent == ROOT else "benchmarks.md"
+    assert m["path"] == expected, f"{where}: link to {expected} from this file"
+    assert m["anchor"] in sections, f"{where}: docs/benchmarks.md has no heading with the anchor #{m['anchor']}"
+    if not m["row"] and not numbers(m["text"]):
+        return  # a link to the section, quoting nothing
+    assert m["row"], f'{where}: name the row or sentence quoted in the link\'s title: (benchmarks.md#{m["anchor"]} "row")'
+    wanted = " ".join(m["row"].split())
+    selectors = [w.strip() for w in wanted.split(" ; ")]
+    units = [u for u in sections[m["anchor"]] if any(w in " ".join(u.split()) for w in selectors)]
+    assert units, f"{where}: section #{m['anchor']} has no row or sentence containing {wanted!r}"
+    quoted = numbers(m["text"])
+    assert quoted, f"{where}: the link's text holds no figure"
+    available = [n for u in units for n in numbers(u)]
+    missing = [q for q in quoted if not any(quotes(q, v) for v in available)]
+    assert not missing, (f"{where}: {', '.join(missing)} not in the cited row(s) of #{m['anchor']} "
+                         f"(containing {wanted!r}): {units[0][:300]}")
+
+
+@pytest.mark.parametrize("path", GUIDES, ids=lambda p: str(p.relative_to(ROOT)))
+def test_no_uncited_figure(path):
+    rel = path.relative_to(ROOT).as_posix()
+    bad = []
+    for f in bare_figures(path):
+        if any(g == rel and t == f.text and c in f.context for (g, t, c) in ALLOWED):
+            continue
+        bad.append(f"{f.guide}:{f.line}: {f.text!r} in: {f.context[:160]}")
+    assert not bad, ("timing/accuracy figures without a citation of docs/benchmarks.md (quote the row as "
+                     "[figure](benchmarks.md#section \"row\"), or remove the figure):\n" + "\n".join(bad))
+
+
+def test_allowed_entries_still_match():
+    """Every ALLOWED entry still names a figure in its guide (a stale entry would hide a new one)."""
+    stale = []
+    for (guide, text, context), _why in ALLOWED.items():
+        figs = bare_figures(ROOT / guide)
+        if not any(f.text == text and context in f.context for f in figs):
+            stale.append((guide, text, context))
+    assert not stale, f"ALLOWED entries that no longer match a figure: {stale}"
+
+
+def test_no_machine_paths_in_guides():
+    for path in GUIDES:
+        for i, line in enumerate(path.read_text().splitlines(), 1):
+            assert not re.search(r"(?<![\w.])/(?:work|home|Users|root)/", line), \
+                f"{path.relative_to(ROOT)}:{i}: a machine's absolute path: {line.strip()}"
