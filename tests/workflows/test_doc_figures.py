@@ -136,7 +136,7 @@ _NUM = r"(?<![\w.×/-])\d[\d,]*(?:\.\d+)?(?:\s?[–-]\s?\d[\d,]*(?:\.\d+)?)?"
 FIGURE = re.compile(
     rf"{_NUM}\s?(?:ms|µs|ns|s|seconds?|minutes?|MP/s|megapixels/s|fps|GFLOP/s|GB/s|M instructions)(?![\w/])"
     rf"|{_NUM}\s?%"
-    rf"|{_NUM}\s?×(?!\s?\d)(?=\s?(?:faster|slower|fewer|more|the|heat|closer|less))"
+    rf"|{_NUM}×(?!\s?\d)"
 )
 
 ERROR_WORDS = re.compile(r"error|accura|over-?estimat|too long|\bmean\b|p99|percentile|off by", re.IGNORECASE)
@@ -149,6 +149,7 @@ ALLOWED: dict[tuple[str, str, str], str] = {
     ("docs/addon.md", "0.4 s", "it runs at most every 0.4 s"): "a setting: evaluate.ESTIMATE_INTERVAL",
     ("docs/addon.md", "0.4 s", '("Scene 0.4 s, 0.5 MB")'): "an example of the status text",
     ("docs/addon.md", "0.4 s", "until the changes pause (0.4 s"): "a setting: scene_env.DEBOUNCE_SECONDS",
+    ("docs/envmaps.md", "5×", "world turned half a turn to be 5× worse"): "a test's bound (tests/envmaps/test_envmap.py)",
     ("docs/farm.md", "120 s", "SIGKILL 120 s"): "a setting: farm.api.CANCEL_NOTICE_S",
     ("docs/development.md", "20 s", "takes more than about 20 s"): "the rule for the `slow` test marker",
     ("docs/development.md", "20 s", "above about 20 s on the shared"): "the rule for the `slow` test marker",
@@ -176,7 +177,7 @@ def _strip_markup(line: str) -> str:
 
 
 def bare_figures(path: Path) -> list[Figure]:
-    found, fenced = [], False
+    found, fenced, header = [], False, None
     for i, raw in enumerate(path.read_text().splitlines(), 1):
         if raw.lstrip().startswith(("```", "~~~")):
             fenced = not fenced
@@ -184,11 +185,19 @@ def bare_figures(path: Path) -> list[Figure]:
         if fenced:
             continue
         line = _strip_markup(raw)
+        if not line.lstrip().startswith("|"):
+            header = None
+        elif header is None:
+            header = [c.strip() for c in line.strip().strip("|").split("|")]
         for m in FIGURE.finditer(line):
+            if header is not None and line.lstrip().startswith("|"):
+                column = line[:m.start()].count("|") - 1
+                if 0 <= column < len(header) and re.search(r"\bgoal|\bpaper", header[column], re.IGNORECASE):
+                    continue  # the goal or the paper's column of a table
             if m.group(0).endswith("%") and not ERROR_WORDS.search(line[max(0, m.start() - 40): m.end() + 40]):
                 continue  # a share of something (pixels, a radius), not an error figure
-            before, after = line[max(0, m.start() - 30): m.start()], line[m.end(): m.end() + 12]
-            if re.search(r"\bgoals?\b|\bpaper\b|paper's|Table 1|GTX", before, re.IGNORECASE) or re.match(r"\s*goal", after):
+            before, after = line[max(0, m.start() - 30): m.start()], line[m.end(): m.end() + 20]
+            if re.search(r"\bgoals?\b|\bpaper\b|paper's|Table 1|GTX", before, re.IGNORECASE) or re.match(r"[^.;,()]{0,15}\bgoals?\b", after):
                 continue  # a target, or the paper's own figure, not a measurement of ours
             found.append(Figure(path.relative_to(ROOT).as_posix(), i, m.group(0), line.strip()))
     return found
