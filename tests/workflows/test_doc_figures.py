@@ -278,3 +278,133 @@ def test_no_machine_paths_in_guides():
         for i, line in enumerate(path.read_text().splitlines(), 1):
             assert not re.search(r"(?<![\w.])/(?:work|home|Users|root)/", line), \
                 f"{path.relative_to(ROOT)}:{i}: a machine's absolute path: {line.strip()}"
+
+
+# --- docs/architecture.md and the README's guide list ----------------------------------------
+
+def _section(text: str, heading: str) -> str:
+    start = text.index(heading)
+    nxt = re.search(r"^#{1,2} ", text[start + len(heading):], re.MULTILINE)
+    return text[start: start + len(heading) + (nxt.start() if nxt else len(text))]
+
+
+def test_architecture_opens_with_data_flow_and_start_here_table():
+    text = (ROOT / "docs" / "architecture.md").read_text()
+    headings = re.findall(r"^## (.+)$", text, re.MULTILINE)
+    assert headings[:2] == ["The data flow", "To change …, start in …"], headings[:3]
+    flow = _section(text, "## The data flow")
+    assert "```" in flow and "rokeby_native" in flow and "▼" in flow, "the data-flow picture is missing"
+
+
+def test_architecture_table_paths_exist():
+    table = _section((ROOT / "docs" / "architecture.md").read_text(), "## To change …, start in …")
+    rows = [ln for ln in table.splitlines() if ln.startswith("|") and not ln.startswith("|---")][1:]
+    assert len(rows) >= 20, f"the table holds {len(rows)} rows"
+    missing = []
+    for row in rows:
+        cells = [c.strip() for c in row.strip().strip("|").split("|")]
+        paths = [p for p in re.findall(r"`([^`]+)`", cells[-1]) if "/" in p or "." in p]
+        assert paths, f"docs/architecture.md: the row {cells[0]!r} names no file"
+        missing += [f"{cells[0]!r}: {p}" for p in paths if not (ROOT / p).exists()]
+    assert not missing, "docs/architecture.md, 'To change …, start in …': paths that do not exist:\n" + "\n".join(missing)
+
+
+def test_readme_links_architecture_first_among_guides():
+    guides = _section((ROOT / "README.md").read_text(), "## Guides")
+    first = re.search(r"^- \[[^\]]+\]\(([^)]+)\)", guides, re.MULTILINE)
+    assert first and first.group(1) == "docs/architecture.md", f"README's first guide: {first and first.group(1)}"
+
+
+# --- method lists and defaults the guides name, against the code -------------------------------
+
+@pytest.fixture(scope="module")
+def reflection_props():
+    pytest.importorskip("bpy")
+    from rokeby.reflection import props
+
+    return props
+
+
+def _default(props_module, cls_name: str, prop: str) -> str:
+    ann = getattr(props_module, cls_name).__annotations__[prop]
+    if isinstance(ann, str):  # postponed annotations: the EnumProperty(...) call as written
+        return re.search(r"default=['\"](\w+)['\"]", ann).group(1)
+    return ann.keywords["default"]
+
+
+def _add_mirror_default(name: str) -> str:
+    from rokeby import api
+
+    return inspect.signature(api.add_mirror).parameters[name].default
+
+
+def test_addon_md_geodesic_methods_match_the_enum(reflection_props):
+    text = (ROOT / "docs" / "addon.md").read_text()
+    bullet = text[text.index("with the *Geodesic method*"):]
+    bullet = bullet[: bullet.index("\n  - ")]
+    documented = re.findall(r"\*([^*]+)\*\s*\(`([A-Z_]+)`, (?:item )?(\d+)", bullet)
+    code = [(label, ident, number) for ident, label, _desc, _icon, number in reflection_props.GEODESIC_METHODS]
+    assert sorted((lab, i, int(n)) for lab, i, n in documented) == sorted(code), (
+        f"docs/addon.md lists {documented}; reflection/props.py GEODESIC_METHODS: {code}")
+    # the default of new mirrors, and the property's own default (what old files read)
+    new_default = _add_mirror_default("geodesic_method")
+    label = dict((i, lab) for lab, i, _n in code)[new_default]
+    assert re.search(rf"\*{re.escape(label)}\*[^*]*the default of new\s+mirrors", bullet), (
+        f"docs/addon.md must name {label!r} ({new_default}) as the default of new mirrors")
+    prop_default = _default(reflection_props, "RokebyMirror", "geodesic_method")
+    label = dict((i, lab) for lab, i, _n in code)[prop_default]
+    assert re.search(rf"\*{re.escape(label)}\*[^*]*the property's default", bullet), (
+        f"docs/addon.md must name {label!r} ({prop_default}) as the property's default")
+
+
+def test_geodesics_md_methods_and_defaults_match_the_code(reflection_props):
+    text = (ROOT / "docs" / "geodesics.md").read_text()
+    table = _section(text, "## The methods")
+    rows = [ln for ln in table.splitlines() if ln.startswith('| `"')]
+    methods = {re.match(r'\| `"(\w+)"`', r).group(1): r for r in rows}
+    code = {ident.lower() for ident, *_ in reflection_props.GEODESIC_METHODS}
+    assert set(methods) == code, f"docs/geodesics.md's table: {sorted(methods)}; the enum: {sorted(code)}"
+    new_default = _add_mirror_default("geodesic_method").lower()
+    marked = [m for m, r in methods.items() if "(the default" in r]
+    assert marked == [new_default], f"docs/geodesics.md marks {marked} as the default; new mirrors get {new_default}"
+    stub = (ROOT / "rokeby_native.pyi").read_text()
+    native_defaults = set(re.findall(r'method: _GeodesicMethod = "(\w+)"', stub))
+    assert native_defaults == {new_default}, f"rokeby_native's defaults {native_defaults} differ from new mirrors' {new_default}"
+    # "Accurate (default)" (dense_graph, item 4), ...: labels and item numbers in the prose
+    named = re.findall(r'"([^"]+)"\s*\((\w+)?,?\s*item (\d+)\)', _section(text, "## The methods"))
+    named += [(lab, "", n) for lab, n in re.findall(r'"([^"]+)"\s*\(item (\d+)\)', table)]
+    by_label = {label: (ident, number) for ident, label, _d, _i, number in reflection_props.GEODESIC_METHODS}
+    assert named, "docs/geodesics.md names no method label with its item number"
+    for label, ident, number in named:
+        assert label in by_label, f"docs/geodesics.md names {label!r}, not a label of the enum"
+        assert int(number) == by_label[label][1], f"docs/geodesics.md: {label!r} is item {by_label[label][1]}, not {number}"
+        if ident:
+            assert ident.upper() == by_label[label][0], f"docs/geodesics.md: {label!r} is {by_label[label][0]}, not {ident}"
+
+
+def test_readme_names_the_default_geodesic_method():
+    text = (ROOT / "README.md").read_text()
+    assert "the dense geodesic graph by default" in text
+    assert _add_mirror_default("geodesic_method") == "DENSE_GRAPH"
+
+
+@pytest.mark.parametrize("enum_name, doc_phrase", [
+    ("REGION_KINDS", "- **Regions**"),
+    ("METRICS", "  - Distance:"),
+    ("POLAR_METHODS", "  - Polar"),
+    ("EYE_SOURCES", "  - Eye"),
+])
+def test_addon_md_names_every_item(reflection_props, enum_name, doc_phrase):
+    """Each enum's items appear by their labels in docs/addon.md's paragraph about them, and the
+    paragraph names no label the enum lacks."""
+    text = (ROOT / "docs" / "addon.md").read_text()
+    start = text.index(doc_phrase)
+    end = text.find("\n- ", start + len(doc_phrase)) if doc_phrase.startswith("- ") else text.find("\n  - ", start + len(doc_phrase))
+    para = text[start:end]
+    labels = [item[1] for item in getattr(reflection_props, enum_name)]
+    for label in labels:
+        assert f"*{label}*" in para, f"docs/addon.md ({doc_phrase.strip()}): {label!r} of {enum_name} is not named"
+    if enum_name == "EYE_SOURCES":
+        default = _default(reflection_props, "RokebyMirror", "eye_source")
+        label = dict((i[0], i[1]) for i in reflection_props.EYE_SOURCES)[default]
+        assert f"*{label}* (the default)" in para, f"docs/addon.md must name {label!r} as the eye's default"
