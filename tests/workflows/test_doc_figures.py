@@ -443,3 +443,19 @@ def test_links_between_guides_reach_their_headings():
                 if target.suffix == ".md" and target.exists() and m.group(2) not in _anchors(target):
                     bad.append(f"{path.relative_to(ROOT)}:{i}: {m.group(1)}#{m.group(2)}")
     assert not bad, "links to headings that do not exist:\n" + "\n".join(bad)
+
+
+def test_whole_bench_run_keeps_the_sections_it_does_not_write():
+    """``make bench`` rewrites docs/benchmarks.md; the sections it does not produce (measurements
+    moved here from the guides, each dated) must survive, since the guides quote them."""
+    import importlib.util
+
+    spec = importlib.util.spec_from_file_location("bench_run", ROOT / "bench" / "run.py")
+    run = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(run)
+    old = "# R\n\nMachine: m\n\n## A\n\nRun: 2026-01-01.\n\n| x | 1 ms |\n\n## Hand\n\nRun: 2026-01-02.\n\n2 ms\n\n## B\n\nb\n"
+    new = "# R\n\nMachine: n\n\n## A\n\nRun: 2026-02-01.\n\n| x | 3 ms |\n\n## B\n\nb2\n"
+    merged = run.keep_other_sections(new, old)
+    assert merged.startswith(new.rstrip("\n")), merged
+    assert "## Hand\n\nRun: 2026-01-02.\n\n2 ms" in merged and "1 ms" not in merged and merged.count("## B") == 1
+    assert run.keep_other_sections(BENCH.read_text(), BENCH.read_text()) == BENCH.read_text()
