@@ -454,10 +454,15 @@ def test_whole_bench_run_keeps_the_sections_it_does_not_write(monkeypatch):
 
     # bench/run.py imports its siblings as a script does and puts tests/ on sys.path: undo both after.
     monkeypatch.setattr(sys, "path", [str(ROOT / "bench"), *sys.path])
-    monkeypatch.setattr(sys, "modules", dict(sys.modules))
-    spec = importlib.util.spec_from_file_location("bench_run", ROOT / "bench" / "run.py")
-    run = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(run)
+    before = set(sys.modules)
+    try:
+        spec = importlib.util.spec_from_file_location("bench_run", ROOT / "bench" / "run.py")
+        run = importlib.util.module_from_spec(spec)
+        spec.loader.exec_module(run)
+    finally:
+        for name in set(sys.modules) - before:
+            if not name.startswith(("rokeby", "numpy", "bpy")):
+                del sys.modules[name]
     old = "# R\n\nMachine: m\n\n## A\n\nRun: 2026-01-01.\n\n| x | 1 ms |\n\n## Hand\n\nRun: 2026-01-02.\n\n2 ms\n\n## B\n\nb\n"
     new = "# R\n\nMachine: n\n\n## A\n\nRun: 2026-02-01.\n\n| x | 3 ms |\n\n## B\n\nb2\n"
     merged = run.keep_other_sections(new, old)
