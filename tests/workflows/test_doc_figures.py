@@ -470,3 +470,16 @@ def test_whole_bench_run_keeps_the_sections_it_does_not_write(monkeypatch):
     assert merged.startswith(new.rstrip("\n")), merged
     assert "## Hand\n\nRun: 2026-01-02.\n\n2 ms" in merged and "1 ms" not in merged and merged.count("## B") == 1
     assert run.keep_other_sections(BENCH.read_text(), BENCH.read_text()) == BENCH.read_text()
+
+
+def test_python_api_md_geodesic_methods_match_the_stub_and_the_enum(reflection_props):
+    stub = (ROOT / "rokeby_native.pyi").read_text()
+    literal = re.search(r"_GeodesicMethod = Literal\[([^\]]*)\]", stub).group(1)
+    native = re.findall(r'"(\w+)"', literal)
+    assert set(native) == {ident.lower() for ident, *_ in reflection_props.GEODESIC_METHODS}, (native, "the enum")
+    text = (ROOT / "docs" / "python-api.md").read_text()
+    start = text.index("`method` is one of")
+    sentence = text[start: text.index(")).", start)]
+    named = re.findall(r'`"(\w+)"`', sentence)
+    assert sorted(named) == sorted(native), f"docs/python-api.md names {named}; the stub {native}"
+    assert named[0] == _add_mirror_default("geodesic_method").lower() and "(the default" in sentence
