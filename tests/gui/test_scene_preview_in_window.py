@@ -52,3 +52,14 @@ def test_a_handle_drag_captures_nothing(preview):
 def test_a_transform_captures_once_after_it_is_confirmed(preview):
     assert preview["captures_during_cube_drag"] and not any(preview["captures_during_cube_drag"]), preview
     assert preview["captures_after_cube_drag"] == 1, preview
+
+
+def test_the_gpu_capture_draws_the_scene_as_the_view_does(preview):
+    g = preview["gpu"]
+    assert preview["gpu_capture_op"] == ["FINISHED"], preview
+    assert g["route"] == "VIEWPORT" and g["captures"] == 1, g
+    assert g["mirror_visible"] and g["overlays"], g  # the mirror shown again, the overlays back on
+    assert magenta(g["red_handle"]), g  # the object under the green handle, drawn by the GPU capture
+    assert g["refresh_again"] == 0, g
+    assert g["captures_material"] == 1 and magenta(g["red_handle_material"]), g  # drawn in Material Preview too
+    assert g["captures_after_flat"] == 2, g

@@ -191,6 +191,41 @@ def scenario(ui):
     ui.screenshot("cube-moved", crop=ui.region_box(ui.region("WINDOW")))
     r["addon_version"] = getattr(rokeby, "__version__", None)
 
+    # The GPU capture (add-on preferences ▸ Scene Capture ▸ Viewport): the six views drawn by the
+    # window as its 3D view draws them, Capture Scene for Preview from the sidebar's operator.
+    prefs = ui.addon("blender.prefs")
+    prefs.get().scene_capture = "VIEWPORT"
+    n0 = scene_env.stats["captures"]
+    with ui.override():
+        r["gpu_capture_op"] = sorted(bpy.ops.rokeby.preview_capture())
+    cap = scene_env.current(mirror)
+    r["gpu"] = {"route": cap.route, "seconds": round(cap.seconds, 4), "stages": {k: round(v, 4) for k, v in (cap.stages or {}).items()},
+                "captures": scene_env.stats["captures"] - n0, "mirror_visible": mirror.visible_get(),
+                "overlays": ui.area().spaces.active.overlay.show_overlays}
+    yield from ui.redraws(3)
+    shot = ui.screenshot("preview-gpu", crop=ui.region_box(ui.region("WINDOW")))
+    box = ui.region_box(ui.region("WINDOW"))
+    r["gpu"]["red_handle"], _ = ring_at(ui, shot, red.matrix_world.translation, box)
+    # Nothing changed since: a refresh keeps it. Material Preview keeps it too (the capture is drawn
+    # in Solid shading) and shows it; another Solid lighting (Flat) recaptures.
+    r["gpu"]["refresh_again"] = scene_env.refresh(sc)
+    space = ui.area().spaces.active
+    space.shading.type = "MATERIAL"
+    yield from ui.redraws(3)
+    yield 2.0
+    yield from ui.redraws(2)
+    r["gpu"]["captures_material"] = scene_env.stats["captures"] - n0
+    shot = ui.screenshot("preview-gpu-material", crop=ui.region_box(ui.region("WINDOW")))
+    r["gpu"]["red_handle_material"], _ = ring_at(ui, shot, red.matrix_world.translation, box)
+    space.shading.type = "SOLID"
+    space.shading.light = "FLAT"
+    yield from ui.redraws(2)
+    yield from ui.until(lambda: scene_env.stats["captures"] > n0 + 1, 30, "the capture after the Solid lighting changed")
+    r["gpu"]["captures_after_flat"] = scene_env.stats["captures"] - n0
+    last = scene_env.current(mirror)
+    r["gpu"]["again"] = {"route": last.route, "seconds": round(last.seconds, 4), "stages": {k: round(v, 4) for k, v in (last.stages or {}).items()}}
+    prefs.get().scene_capture = "CYCLES"
+
 
 def offscreen_at(ui, sc, mirror, red):
     """The preview drawn offscreen through the window's GPU context with the same view (draw_mirror),
