@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 import rokeby_native as rn
 
-from rokeby.meshio import load_obj, open_seams
+from rokeby.core.meshio import load_obj, open_seams
 from support import mesh_path
 
 DEFAULT = "dense_graph"

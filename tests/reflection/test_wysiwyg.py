@@ -18,7 +18,9 @@ from support import ROOT
 
 bpy = pytest.importorskip("bpy")
 
-from rokeby import api, evaluate, handlers, native  # noqa: E402
+from rokeby import api  # noqa: E402
+from rokeby.reflection import evaluate, handlers  # noqa: E402
+from rokeby.core import native  # noqa: E402
 from support.wysiwyg import (EYE, SIZE, add_aovs, agreement, angles_deg, directions, drag, mirror_material,  # noqa: E402,F401
                               new_scene, physical, read_layers, render, sphere)
 

@@ -156,7 +156,7 @@ INSTALL = textwrap.dedent(
     if mod is not None:
         import importlib
         api = importlib.import_module("bl_ext.throwaway.rokeby.api")
-        native = importlib.import_module("bl_ext.throwaway.rokeby.native")
+        native = importlib.import_module("bl_ext.throwaway.rokeby.core.native")
         out["native_file"] = native.module().__file__ if native.available() else None
         bpy.ops.mesh.primitive_plane_add(size=2.0)
         plane = bpy.context.object

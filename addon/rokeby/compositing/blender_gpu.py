@@ -48,7 +48,7 @@ def _gpu():
     except SystemError as exc:
         raise NoGPUContext(
             f"Blender's gpu module has no context here ({exc}): in background mode render one frame with "
-            "EEVEE first (rokeby.recomposite_gpu.ensure_context()), or use the CPU path (backend='cpu')") from None
+            "EEVEE first (rokeby.compositing.blender_gpu.ensure_context()), or use the CPU path (backend='cpu')") from None
     return gpu
 
 

@@ -19,7 +19,7 @@ from ..blender.progress import Progress
 from ..core import schema
 from ..core.errors import RokebyError
 
-# What an operator reports when Esc / Ctrl-C / rokeby.native.cancel() stopped it (nothing changed).
+# What an operator reports when Esc / Ctrl-C / rokeby.core.native.cancel() stopped it (nothing changed).
 CANCELLED = "Rokeby: Cancelled (nothing was changed)"
 
 EDITS = [
@@ -209,7 +209,7 @@ class ROKEBY_OT_composite_edit(_EditProps, bpy.types.Operator):
 
     def _start(self, context):
         """With a window and the CPU backend: read, reconstruct and recomposite on a worker thread
-        while the operator waits modally, so that Esc stops it (rokeby.native.cancel()); the image
+        while the operator waits modally, so that Esc stops it (rokeby.core.native.cancel()); the image
         is made on the main thread once the pixels are there. Otherwise: ``execute``."""
         import threading  # noqa: PLC0415
 

@@ -14,7 +14,7 @@ from ..core.errors import RokebyError
 
 
 def _cancellable(fn):
-    """``fn`` is an operation ``rokeby.native.cancel()`` can stop (see ``native.cancellable``)."""
+    """``fn`` is an operation ``rokeby.core.native.cancel()`` can stop (see ``native.cancellable``)."""
     import functools  # noqa: PLC0415
 
     @functools.wraps(fn)
@@ -97,7 +97,7 @@ def recomposite_exr_pixels(path: str, *, edit: str = "emboss", amount: float = 0
                            backend: str = "cpu", warn: bool = True, fit: str = "qp", noise_tolerance: float = 0.0):
     """``recomposite_exr`` without showing the result: returns (pixels (H, W, 3) float32, stats)
     and touches no Blender data, so with the 'cpu' backend it may run on a worker thread (the
-    Recomposite Render operator does, stopping on Esc through ``rokeby.native.cancel()``)."""
+    Recomposite Render operator does, stopping on Esc through ``rokeby.core.native.cancel()``)."""
     if edit not in comp.EDITS:  # before reading the file
         raise RokebyError(f"edit: unknown {edit!r} (expected one of {', '.join(map(repr, comp.EDITS))})")
     _check_fit(fit, noise_tolerance)

@@ -65,7 +65,7 @@ __all__ = [
 
 
 def _cancellable(fn):
-    """``fn`` is an operation ``rokeby.native.cancel()`` can stop (KeyboardInterrupt; an
+    """``fn`` is an operation ``rokeby.core.native.cancel()`` can stop (KeyboardInterrupt; an
     operator's Esc, Ctrl-C): see ``native.cancellable``."""
     import functools  # noqa: PLC0415
 
@@ -192,12 +192,12 @@ def geodesic_distances(vertices, faces, sources, *, method: str = DEFAULT_GEODES
 
 
 # --- the scene model: mirrors, constraints and regions as Blender data ---------------------------
-# Everything below needs Blender. The operators in rokeby.operators are thin wrappers of these
+# Everything below needs Blender. The operators in rokeby.reflection.operators are thin wrappers of these
 # functions, and background scripts (render farms, pipelines) call them directly.
 
 from . import evaluate as _ev  # noqa: E402 - aliased: api.evaluate is a function
 from .evaluate import ATTRIBUTE, MirrorReport, RokebyError, rotate  # noqa: E402
-from .registry import of_mirrors as _of_mirrors  # noqa: E402
+from .pointers import of_mirrors as _of_mirrors  # noqa: E402
 
 HANDLE_COLLECTION = schema.HANDLE_COLLECTION
 
@@ -289,7 +289,7 @@ def _new_empty(scene, name, location, display, size, color):
     ob.show_name = False
     from .registry import MADE_KEY  # noqa: PLC0415
 
-    ob[MADE_KEY] = True  # goes with the last mirror that uses it (rokeby.registry)
+    ob[MADE_KEY] = True  # goes with the last mirror that uses it (rokeby.reflection.registry)
     _handle_collection(scene).objects.link(ob)
     return ob
 
@@ -454,7 +454,7 @@ def remove_constraint(mirror, index: int, *, delete_handles: bool = True, scene=
     _remove_objects(doomed)
 
 
-# The reader modifier of free-form regions lives with the region code (rokeby.evaluate), which
+# The reader modifier of free-form regions lives with the region code (rokeby.reflection.evaluate), which
 # keeps it live: remade when applied or removed, repointed when the vertex group is renamed.
 _vertex_group_reader = _ev.vertex_group_reader
 
@@ -601,11 +601,11 @@ def evaluate(scene=None, frame=None, *, force: bool = False) -> "dict[str, Mirro
     """Bring every mirror of ``scene`` up to date (at ``frame`` when given, which may be
     fractional) and return a report per mirror. Only mirrors whose inputs changed are recomputed,
     unless ``force``. Never raises for a bad mirror: its report says what is wrong."""
-    from . import handlers  # noqa: PLC0415
+    from . import guard  # noqa: PLC0415
 
     global _SETTING_FRAME
     scene = _scene(scene)
-    with handlers.suspended():
+    with guard.suspended():
         if frame is not None:
             try:
                 f = float(frame)
@@ -635,7 +635,7 @@ def evaluate(scene=None, frame=None, *, force: bool = False) -> "dict[str, Mirro
         reports = _ev.evaluate_scene(scene, dg, force=force, geometry_changed=edited, all_geometry=frame is not None)
         from .render import rendering  # noqa: PLC0415
 
-        # Final renders follow: render nodes in every edited material (see rokeby.rendering).
+        # Final renders follow: render nodes in every edited material (see rokeby.reflection.render.rendering).
         rendering.sync_scene(scene, reports, force=force)
         return reports
 
@@ -744,14 +744,14 @@ def set_edited_materials(mirror, materials=None):
 def install_render_nodes(mirror) -> int:
     """Make final renders (Cycles; EEVEE uses the same nodes) show the edit now. Evaluation does
     this by itself for every mirror with a constraint while its ``render_edits`` is on (the
-    default; this call turns it on): see rokeby.rendering. In the mirror's
+    default; this call turns it on): see rokeby.reflection.render.rendering. In the mirror's
     ``render_mode``: RAY_TRACED — the node group "Rokeby Edited Normal" feeds the edited normal
-    to the specular BSDFs of every edited material (see rokeby.shading); REFLECTION_MAP — their
-    specular lobe becomes a lookup of the captured map in the edited direction (rokeby.reflmap;
+    to the specular BSDFs of every edited material (see rokeby.reflection.render.shading); REFLECTION_MAP — their
+    specular lobe becomes a lookup of the captured map in the edited direction (rokeby.reflection.render.reflmap;
     capture it first with ``capture_reflection_map``). The other mode's nodes are taken out.
     Returns how many BSDF inputs (ray traced) or BSDFs (reflection map) were rewired. In both
     modes "Rokeby Edited Refraction Normal" feeds Refraction BSDFs and split Glass BSDFs first
-    (rokeby.refraction; counted too), so a split Glass's reflection part is edited as well."""
+    (rokeby.reflection.render.refraction; counted too), so a split Glass's reflection part is edited as well."""
     from .render import rendering  # noqa: PLC0415
 
     _require_mirror(mirror)
@@ -776,7 +776,7 @@ def remove_render_nodes(mirror) -> int:
 
         kept = {mat for ob in registry.mirrors() if ob.type == "MESH" and rendering.kept(ob) for mat in rendering.edited_materials(ob)}
         return sum(rendering.uninstall_material(mat) for mat in mats if mat not in kept)
-    # Each material is checked before anything changes (rokeby.shading refuses a split BSDF it
+    # Each material is checked before anything changes (rokeby.reflection.render.shading refuses a split BSDF it
     # cannot rebuild); render_edits goes off once the nodes are out.
     count = sum(rendering.uninstall_material(mat) for mat in mats)
     mirror.rokeby.render_edits = False
@@ -791,7 +791,7 @@ def capture_reflection_map(mirror, *, resolution=None, samples=None, storage: st
     default: the mirror's ``map_resolution``); ``samples``: Cycles samples (default
     ``map_samples``); ``storage``: 'AUTO' (an OpenEXR cache in //rokeby_maps/ when the .blend is
     saved, else packed), 'FILE' or 'PACK'. Materials already in reflection-map mode show the new
-    map at once. Returns the image. See rokeby.reflmap."""
+    map at once. Returns the image. See rokeby.reflection.render.reflmap."""
     from .render import reflmap  # noqa: PLC0415
 
     return reflmap.capture(mirror, resolution=resolution, samples=samples, storage=storage, scene=scene)
@@ -813,7 +813,7 @@ def capture_preview_scene(mirror, *, width: int = 256, samples: int = 16, denois
 
 def reflection_map(mirror):
     """The captured lat-long image of ``mirror`` (Blender's equirectangular convention:
-    ``rokeby.reflmap.direction_to_uv``), or None."""
+    ``rokeby.reflection.render.reflmap.direction_to_uv``), or None."""
     from .render import reflmap  # noqa: PLC0415
 
     _require_mirror(mirror)

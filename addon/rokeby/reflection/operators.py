@@ -17,7 +17,7 @@ from bpy.props import BoolProperty, EnumProperty, FloatProperty, FloatVectorProp
 from . import edit as api  # reflection editing's entry points (rokeby.api re-exports them)
 from . import evaluate
 from ..core import words
-from .evaluate import RokebyError
+from ..core.errors import RokebyError
 from ..blender.progress import Progress
 from .props import CONSTRAINT_KINDS, METRICS, REGION_KINDS
 

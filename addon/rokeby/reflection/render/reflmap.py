@@ -47,7 +47,7 @@ from . import shading
 from ... import envmaps
 from ...blender import transaction
 from .. import evaluate
-from ..evaluate import RokebyError
+from ...core.errors import RokebyError
 from ...core import latlong, schema
 
 # Widths of the panorama (height = width / 2); the UI offers these, the API any power of two.
