@@ -1,10 +1,20 @@
 """The compositing feature's entry points for scripts and operators (Zubiaga et al. 2016): render
-with the passes, reconstruct, edit the normals, recomposite and show the frame; re-exported by
-``rokeby.api``. Bad arguments are ``RokebyError`` (a ValueError) naming them, checked before any
-rendering or reading.
+with the passes, reconstruct, edit the normals, recomposite and show the frame; ``rokeby.api``
+re-exports the names of ``__all__``. Bad arguments are ``RokebyError`` (a ValueError) naming them,
+checked before any rendering or reading.
 """
 
 from __future__ import annotations
+
+__all__ = [
+    "setup_compositing_passes",
+    "recomposite_render",
+    "recomposite_exr",
+    "recomposite_exr_pixels",
+    "use_in_compositor",
+    "open_normal_brush",
+    "paint_normals",
+]
 
 import time
 
