@@ -80,3 +80,5 @@ from ..shadow import api as _shadow
 from ..shadow.api import apply_shadow_edit, remove_shadow_edit, start_shadow_edit
 
 __all__ = [*_reflection.__all__, *_compositing.__all__, *_shadow.__all__, *_farm.__all__]
+
+del _reflection, _compositing, _shadow, _farm  # the names above are the API, not the modules
