@@ -39,7 +39,6 @@ def main():
     a = ap.parse_args()
     import bpy
     import rokeby_native as rn
-    from rokeby import compositing as C
     from rokeby.compositing import blender_gpu as G
     from rokeby.compositing import gl as GL
 

@@ -8,7 +8,6 @@ import pytest
 
 bpy = pytest.importorskip("bpy")
 
-import rokeby  # noqa: E402
 from support import cycles  # noqa: E402
 from support.scenes import add_front_camera, add_point_lamp, empty_scene, plastic_material  # noqa: E402
 from rokeby import api  # noqa: E402

@@ -2,8 +2,8 @@
 the entry points of every feature in one place.
 
 This is the facade of the layered add-on (docs/architecture.md): it implements nothing and
-re-exports exactly the ``__all__`` of each feature's ``api`` module, so ``rokeby.api.<name>`` is
-the very function the feature's operators call:
+re-exports exactly the ``__all__`` of each feature's ``api`` module, in this order, so
+``rokeby.api.<name>`` is the very function the feature's operators call:
 
 - ``rokeby.reflection.api``: reflection editing (maths helpers, mirrors, constraints, regions,
   render nodes, reflection maps, highlights, refraction);
@@ -18,7 +18,6 @@ vertices. Functions that need Blender import ``bpy`` lazily, so the maths helper
 Python with numpy and rokeby_native.
 """
 
-from ..compositing import api as _compositing
 from ..compositing.api import (
     open_normal_brush,
     paint_normals,
@@ -28,9 +27,7 @@ from ..compositing.api import (
     setup_compositing_passes,
     use_in_compositor,
 )
-from ..farm import api as _farm
 from ..farm.api import write_recomposite_job, write_render_job
-from ..reflection import api as _reflection
 from ..reflection.api import (
     MeshArrays,
     MirrorReport,
@@ -76,9 +73,24 @@ from ..reflection.api import (
     stored_field,
     stored_refraction,
 )
-from ..shadow import api as _shadow
 from ..shadow.api import apply_shadow_edit, remove_shadow_edit, start_shadow_edit
 
-__all__ = [*_reflection.__all__, *_compositing.__all__, *_shadow.__all__, *_farm.__all__]
-
-del _reflection, _compositing, _shadow, _farm  # the names above are the API, not the modules
+__all__ = [
+    # rokeby.reflection.api
+    "reflect", "constraint_row", "physical_reflected_point", "MeshArrays", "mesh_arrays",
+    "rotation_field", "edited_directions", "rotate", "quat_angle", "geodesic_solver",
+    "geodesic_distances", "add_mirror", "remove_mirror", "mirror_of", "add_constraint",
+    "remove_constraint", "add_region", "remove_region", "evaluate", "freeze", "edited_materials",
+    "install_render_nodes", "remove_render_nodes", "capture_reflection_map", "reflection_map",
+    "capture_preview_scene", "set_edited_materials", "constraint_view", "edited_reflections",
+    "report", "field", "stored_field", "refract", "refraction_field", "stored_refraction",
+    "set_ior", "ior_from_material", "physical_highlight", "add_highlight_constraint", "stats",
+    "reset_stats", "RokebyError", "MirrorReport",
+    # rokeby.compositing.api
+    "setup_compositing_passes", "recomposite_render", "recomposite_exr", "recomposite_exr_pixels",
+    "use_in_compositor", "open_normal_brush", "paint_normals",
+    # rokeby.shadow.api
+    "start_shadow_edit", "apply_shadow_edit", "remove_shadow_edit",
+    # rokeby.farm.api
+    "write_render_job", "write_recomposite_job",
+]
