@@ -73,7 +73,7 @@ def measure(kind: str, shared: Path, metric: str, method: str, polar: str, steps
 
     from rokeby import api
 
-    from rokeby import evaluate, handlers
+    from rokeby.reflection import evaluate, handlers
 
     mirror, size = _scene(kind, shared)
     # A drag in a Blender window: the render-vs-preview estimate waits for the pause (its timer
@@ -116,7 +116,8 @@ def measure_red(shared: Path, method: str, update: bool = True, steps: int = 20,
     updates the accurate distances (``update``, evaluate.DRAG_UPDATE) or solves by DRAG_METHOD."""
     import bpy
 
-    from rokeby import api, evaluate, handlers
+    from rokeby import api
+    from rokeby.reflection import evaluate, handlers
 
     evaluate.DRAG_UPDATE = update
     mirror, size = _scene("sphere", shared)

@@ -23,7 +23,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "addon"))
 
 import bpy  # noqa: E402
 
-from rokeby import appearance, appearance_glsl, appearance_preview, envmaps  # noqa: E402
+from rokeby import appearance, envmaps  # noqa: E402
+from rokeby.appearance import glsl as appearance_glsl, preview as appearance_preview  # noqa: E402
 
 W = H = 96
 SCALE = 1.1

@@ -87,7 +87,7 @@ def main():
         res["render_s"] = time.perf_counter() - t
         res["cpu"] = loop(api, C, path, "cpu", a.repeat)
         try:
-            from rokeby import recomposite_gpu as G
+            from rokeby.compositing import blender_gpu as G
 
             G.ensure_context()
             res["blender_gpu"] = loop(api, C, path, "blender_gpu", a.repeat)

@@ -242,16 +242,16 @@ def glsl_bench(run_cpu, args, kw, repeat):
     per frame with uploads and read-back, and its largest relative difference from the Rust core."""
     try:
         sys.path.insert(0, str(ROOT / "addon"))
-        from rokeby import compositing as C
+        from rokeby.compositing import gl as GL
 
-        gl = C.GLRecompositor()
+        gl = GL.GLRecompositor()
     except Exception as exc:  # no moderngl or no EGL
         return {"glsl_error": str(exc)}
     out, _ = gl(*args, **kw)
     t, _ = median_time(lambda: gl(*args, **kw), repeat)
     # An interactive session's frame (RecompositeSession): only the edited normals are written;
     # and the draw alone (nothing written: shading and read-back), what a GPU would have left.
-    f = C.recomposite_frame(*args, **kw)
+    f = GL.recomposite_frame(*args, **kw)
     gl.draw(f)
     e = args[2]
 

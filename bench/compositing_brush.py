@@ -1,4 +1,4 @@
-"""Timing: one step of the normal brush (*Paint Normals*, rokeby.compositing_brush) on a
+"""Timing: one step of the normal brush (*Paint Normals*, rokeby.compositing.brush) on a
 1920x1080 frame: the brush's edit of the dab's window plus eqs. 3-5 on that window
 (``BrushSession.extend``), and writing the frame into the Blender image (``show_step``:
 foreach_set of the whole image, which keeps the compositor's Image node current), against eqs.
@@ -38,7 +38,7 @@ def main():
 
     from compositing import hd_frame
     from rokeby import compositing as C
-    from rokeby import compositing_brush as B
+    from rokeby.compositing import brush as B
 
     args, kw = hd_frame(np.random.default_rng(1), w=w, h=h)
     ids, n, _e, view, d0, r0, img, patches = args

@@ -353,7 +353,7 @@ def sphere_measures(pb, env, fib) -> dict:
     import rokeby_native as rn
     from rokeby import compositing as C
     from rokeby import envmaps
-    from rokeby.appearance_glsl import _lut_lookup, brdf_lut
+    from rokeby.appearance.glsl import _lut_lookup, brdf_lut
 
     rot = C.camera_rotation(pb.camera_x, pb.camera_y)
     nb, vb = C.screen_space(pb)

@@ -28,7 +28,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "addon"))
 import rokeby_native as rn  # noqa: E402
 
-from rokeby.meshio import load_obj  # noqa: E402
+from rokeby.core.meshio import load_obj  # noqa: E402
 
 SHARED = Path(os.environ.get("ROKEBY_SHARED", ROOT.parent / "shared"))
 MESHES = ("teapot.obj", "spot.obj", "homer.obj", "fandisk.obj")

@@ -82,7 +82,7 @@ class _HandlerClock:
     def install(self):
         import bpy
 
-        from rokeby import handlers
+        from rokeby.reflection import handlers
 
         lst = bpy.app.handlers.depsgraph_update_post
         if handlers.on_depsgraph_update in lst:

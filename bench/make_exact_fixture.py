@@ -14,7 +14,7 @@ import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "addon"))
-from rokeby.meshio import load_obj  # noqa: E402
+from rokeby.core.meshio import load_obj  # noqa: E402
 
 import pygeodesic.geodesic as geo  # noqa: E402
 

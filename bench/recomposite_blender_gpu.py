@@ -1,6 +1,6 @@
 """Timing: recompositing (eqs. 3-5) of a 1920x1080 frame with ten patches (each an SH and a 128²
 map, 43% of the pixels edited; the frame of bench/compositing.py's recompositing row) through
-Blender's own gpu module (rokeby.recomposite_gpu: the GLSL shader drawn offscreen), beside the
+Blender's own gpu module (rokeby.compositing.blender_gpu: the GLSL shader drawn offscreen), beside the
 moderngl path and the Rust core in the same process. Runs with bpy (background mode; the GPU
 context comes from one tiny EEVEE render).
 
@@ -39,8 +39,8 @@ def main():
     a = ap.parse_args()
     import bpy
     import rokeby_native as rn
-    from rokeby import compositing as C
-    from rokeby import recomposite_gpu as G
+    from rokeby.compositing import blender_gpu as G
+    from rokeby.compositing import gl as GL
 
     bpy.ops.wm.read_factory_settings(use_empty=True)
     t = time.perf_counter()
@@ -71,7 +71,7 @@ def main():
     res["identity_ms"], _ = median_ms(lambda: rc(args[0], args[1], args[1], *args[3:], **kw), a.repeat)
     # An interactive session's next frame (compositing.RecompositeSession): one texture made (the
     # edited normals) instead of twelve; and the draw with nothing made (shading and read-back).
-    f = C.recomposite_frame(*args, **kw)
+    f = GL.recomposite_frame(*args, **kw)
     rc.draw(f)
     session = []
 
@@ -87,7 +87,7 @@ def main():
     res["session_textures_made"] = session[-1]["made"]
     res["draw_only_ms"], _ = median_ms(lambda: rc.draw(f, ()), a.repeat)
     try:
-        gl = C.GLRecompositor()
+        gl = GL.GLRecompositor()
         gl(*args, **kw)
         res["moderngl_ms"], _ = median_ms(lambda: gl(*args, **kw), a.repeat)
     except Exception as exc:  # noqa: BLE001 - no EGL here

@@ -62,7 +62,7 @@ def shader_cost(width: int = 1280, height: int = 720, k: int = 8, frames: int = 
 
     from support.gl_harness import Renderer, create_context, look_at, perspective
     from support.reference import random_constraints
-    from rokeby import glsl
+    from rokeby.reflection.viewport import glsl
     from rokeby.core import latlong
 
     ctx = create_context()

@@ -34,7 +34,7 @@ from pathlib import Path
 import numpy as np
 
 import rokeby_native as rn
-from rokeby.meshio import load_obj, subdivide_midpoint, vertex_normals
+from rokeby.core.meshio import load_obj, subdivide_midpoint, vertex_normals
 
 ROOT = Path(__file__).resolve().parents[1]
 SHARED = Path(os.environ.get("ROKEBY_SHARED", ROOT.parent / "shared"))

@@ -267,7 +267,7 @@ def precision_section(k=8):
 
     sys.path.insert(0, str(ROOT / "tests"))
     from support.reference import field_matrices, ortho as ortho_ref, quat_to_matrix, random_constraints, rot_angle
-    from rokeby.meshio import load_obj
+    from rokeby.core.meshio import load_obj
 
     shared = Path(os.environ.get("ROKEBY_SHARED", ROOT.parent / "shared"))
     big = sorted((shared / "meshes").glob("*.obj"), key=lambda p: p.stat().st_size)[-1]
@@ -314,7 +314,7 @@ def field_section(k=8, n_pixels=1280 * 960, levels=(0, 1, 2, 3)):
 
     sys.path.insert(0, str(ROOT / "tests"))
     from support.reference import random_constraints
-    from rokeby.meshio import load_obj, subdivide_midpoint
+    from rokeby.core.meshio import load_obj, subdivide_midpoint
 
     shared = Path(os.environ.get("ROKEBY_SHARED", ROOT.parent / "shared"))
     v0, f0 = load_obj(shared / "meshes" / "spot.obj")

@@ -24,8 +24,8 @@ sys.path.insert(0, str(ROOT / "tests"))
 import rokeby_native as rn  # noqa: E402
 from support.gl_harness import Renderer, create_context, look_at, perspective  # noqa: E402
 from support.reference import random_constraints  # noqa: E402
-from rokeby import glsl  # noqa: E402
-from rokeby.meshio import load_obj, vertex_normals  # noqa: E402
+from rokeby.reflection.viewport import glsl  # noqa: E402
+from rokeby.core.meshio import load_obj, vertex_normals  # noqa: E402
 
 SHARED = Path(os.environ.get("ROKEBY_SHARED", ROOT.parent / "shared"))
 RESOLUTIONS = ((1280, 720), (1920, 1080))

@@ -19,7 +19,7 @@ settings.load_profile("rokeby")
 
 @pytest.fixture(scope="session")
 def spot():
-    from rokeby.meshio import load_obj, vertex_normals
+    from rokeby.core.meshio import load_obj, vertex_normals
 
     v, f = load_obj(mesh_path("spot.obj"))
     return v, f, vertex_normals(v, f)

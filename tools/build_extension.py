@@ -128,7 +128,7 @@ def build(addon: Path, wheel_dir: Path, out_dir: Path, shaders: "Path | None" = 
             data = manifest.encode() if name == "blender_manifest.toml" else path.read_bytes()
             zf.writestr(_entry(name), data)
         if shaders is not None and shaders.is_dir():
-            # The GLSL of the viewport preview: rokeby.glsl looks for shaders/ next to the package.
+            # The GLSL of the viewport preview: rokeby.reflection.viewport.glsl looks for shaders/ next to the package.
             for path, name in package_files(shaders):
                 zf.writestr(_entry(f"shaders/{name}"), path.read_bytes())
         zf.writestr(_entry(f"wheels/{wheel.name}"), wheel.read_bytes())

@@ -15,19 +15,6 @@ __all__ = ["register", "unregister", "is_registered"]
 
 __version__ = "0.1.0"  # as blender_manifest.toml says (tests/workflows/test_farm_jobs.py checks)
 
-from . import _legacy
-
-_legacy.install(__name__)  # old module paths (rokeby.evaluate, rokeby.shading, ...) name the moved modules
-
-
-def __getattr__(name: str):
-    """``rokeby.shading`` and the other old module names as attributes (they moved: rokeby._legacy)."""
-    if name in _legacy.MOVED:
-        import importlib
-
-        return importlib.import_module(f"{__name__}.{name}")
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
-
 _registered = False
 
 
@@ -47,21 +34,6 @@ def _features():
     # Each feature registers itself (props, operators, UI, hooks). The reflection sidebar's menus
     # name every feature's operators: it goes last.
     return (prefs, reflection, appearance, compositing, shadow, farm, reflection_ui)
-
-
-def _modules():
-    """The modules that declare the add-on's Blender classes (preferences, properties, operators,
-    panels), in the order the features register them."""
-    from .appearance import ui as appearance_ui
-    from .blender import prefs
-    from .compositing import brush_ui as compositing_brush_ui
-    from .compositing import ui as compositing_ui
-    from .farm import ui as farm_ui
-    from .reflection import handlers, operators, props, ui
-    from .reflection.viewport import draw as viewport
-    from .shadow import ui as shadow_ui
-
-    return (prefs, props, operators, handlers, viewport, appearance_ui, compositing_ui, compositing_brush_ui, shadow_ui, farm_ui, ui)
 
 
 def register():

@@ -33,7 +33,7 @@ def heavy_section(emit):
     emit('(it is still re-checked every update, which costs the same at any N); "handle move": an update that moves its')
     emit("green handle (the field is recomputed). Goal: no Rokeby data within 5% of disabled; with one mirror,")
     emit("no growth with the number of unrelated objects. The handlers keep a registry of what the add-on owns")
-    emit("(rokeby.registry) instead of scanning `scene.objects`; what still grows with N is one `len(bpy.data.objects)`")
+    emit("(rokeby.reflection.registry) instead of scanning `scene.objects`; what still grows with N is one `len(bpy.data.objects)`")
     emit("per update (a walk of a linked list in C: about 0.4 ms at 10,000 objects).")
     emit()
     emit("| objects | disabled (ms) | enabled, no Rokeby data (ms) | over disabled | handler (ms, % of disabled) | disabled, file with a mirror (ms) | enabled, one mirror (ms) | over disabled | handler (ms, % of disabled) | handle move (ms) | handler (ms) |")

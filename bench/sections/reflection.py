@@ -18,7 +18,7 @@ import numpy as np
 import rokeby_native as rn  # noqa: E402
 
 from support.reference import field_matrices, ortho as ortho_ref, quat_to_matrix, rot_angle  # noqa: E402
-from rokeby.meshio import load_obj, subdivide_midpoint  # noqa: E402
+from rokeby.core.meshio import load_obj, subdivide_midpoint  # noqa: E402
 
 from common import PAPER, ROOT, SHARED, constraints, full_frame_gbuffer, rel_errors, timeit  # noqa: E402
 

@@ -15,7 +15,9 @@ import bpy
 import numpy as np
 
 import rokeby
-from rokeby import api, envmaps, evaluate, reflmap
+from rokeby import api, envmaps
+from rokeby.reflection import evaluate
+from rokeby.reflection.render import reflmap
 
 OUT = Path(__file__).resolve().parent
 SIZE = 128

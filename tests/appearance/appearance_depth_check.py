@@ -13,7 +13,8 @@ import bpy
 from mathutils import Matrix, Vector
 
 from support.bpy_process import gpu_context, offscreen_pixels
-from rokeby import appearance, appearance_preview, envmaps
+from rokeby import appearance, envmaps
+from rokeby.appearance import preview as appearance_preview
 
 W = H = 160
 GREY = (0.25, 0.25, 0.25, 1.0)

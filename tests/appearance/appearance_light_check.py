@@ -11,7 +11,8 @@ import bpy
 from mathutils import Matrix
 
 from support.bpy_process import gpu_context, offscreen_pixels
-from rokeby import appearance, appearance_glsl, appearance_preview, envmaps
+from rokeby import appearance, envmaps
+from rokeby.appearance import glsl as appearance_glsl, preview as appearance_preview
 
 W, H = 128, 64
 # Orthographic from y = −10 along +Y, z up; screen x ∈ [−1, 3], z ∈ [−1, 1].

@@ -9,7 +9,8 @@ import numpy as np
 import bpy
 
 from support.bpy_process import gpu_context, offscreen_pixels
-from rokeby import appearance, appearance_preview, envmaps
+from rokeby import appearance, envmaps
+from rokeby.appearance import preview as appearance_preview
 
 W = H = 96
 S = 1 / 1.1
@@ -178,7 +179,7 @@ def main():
                         "evaluated_vertices": len(coarse.evaluated_get(dg).data.vertices), "cage_vertices": len(coarse.data.vertices)}
 
     # 6. The brush cursor: the circle drawn with Blender's polyline shader through the view's matrices.
-    from rokeby import appearance_ui
+    from rokeby.appearance import ui as appearance_ui
 
     def cursor():
         with gpu.matrix.push_pop(), gpu.matrix.push_pop_projection():

@@ -8,7 +8,8 @@ import numpy as np
 import bpy
 
 from support.bpy_process import gpu_context, offscreen_pixels
-from rokeby import appearance, appearance_glsl, appearance_preview, envmaps
+from rokeby import appearance, envmaps
+from rokeby.appearance import glsl as appearance_glsl, preview as appearance_preview
 
 W = H = 64
 

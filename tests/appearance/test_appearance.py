@@ -8,7 +8,8 @@ bpy = pytest.importorskip("bpy")
 
 from support.bpy_process import run_check  # noqa: E402
 from support.appearance import sphere_shader  # noqa: E402
-from rokeby import appearance, compat, envmaps  # noqa: E402
+from rokeby import appearance, envmaps  # noqa: E402
+from rokeby.blender import compat  # noqa: E402
 
 
 @pytest.fixture
@@ -206,7 +207,7 @@ def brush_operator(reports):
     Operator outside bpy.ops), in the state its invoke() leaves."""
     import types
 
-    from rokeby import appearance_ui
+    from rokeby.appearance import ui as appearance_ui
 
     cls = appearance_ui.ROKEBY_OT_appearance_paint
     op = types.SimpleNamespace(_last=None, _painting=False, _dabbed=False, _strokes=0, _undone=0, UNDO_MESSAGE=getattr(cls, "UNDO_MESSAGE", ""),
@@ -228,7 +229,7 @@ def test_modal_brush_paints_where_the_mouse_ray_hits(ball):
 
     import rokeby
     from mathutils import Matrix
-    from rokeby import appearance_ui
+    from rokeby.appearance import ui as appearance_ui
 
     rokeby.register()
     try:
@@ -304,7 +305,7 @@ def test_preview_glsl_matches_numpy():
     table, Phong, Torrance–Sparrow): specular metal, rough plastic, painted mid values. The
     three models differ from each other (rough cases) by more than twice the tolerance."""
     moderngl = pytest.importorskip("moderngl")
-    from rokeby import appearance_glsl
+    from rokeby.appearance import glsl as appearance_glsl
 
     gl = sphere_shader("  frag = vec4(rk_shade(n, vec3(0.0, -1.0, 0.0), u_base, u_spec, u_rough, u_metal), 1.0);")
     ctx, prog, vao, fbo, size = gl.ctx, gl.prog, gl.vao, gl.fbo, gl.size
@@ -347,7 +348,7 @@ def test_brdf_albedo_table():
     comes in (A + B ≤ 1), a mirror reflects everything (A + B = 1 at roughness 0), rough grazing
     views lose energy (multiple scattering is not in single-scatter GGX), and Schlick's bias grows
     towards grazing."""
-    from rokeby import appearance_glsl
+    from rokeby.appearance import glsl as appearance_glsl
 
     lut = appearance_glsl.brdf_lut().astype(np.float64)
     total = lut[..., 0] + lut[..., 1]
@@ -411,7 +412,7 @@ def test_preview_handler_reads_the_world_and_toggles(ball):
     flipped to file order equals the EXR, prefiltered once per image; the sidebar operator adds and
     removes the POST_VIEW handler, and unregistering removes it."""
     import rokeby
-    from rokeby import appearance_preview
+    from rokeby.appearance import preview as appearance_preview
 
     world = bpy.data.worlds.new("HDR")
     world.use_nodes = True

@@ -90,7 +90,7 @@ def _roughness():
 
 
 def test_ctrl_z_in_the_brush_undoes_its_strokes_only(painted):
-    from rokeby import appearance_ui
+    from rokeby.appearance import ui as appearance_ui
 
     modal = appearance_ui.ROKEBY_OT_appearance_paint.modal
     region = types.SimpleNamespace(width=SIZE, height=SIZE)
@@ -142,7 +142,7 @@ def test_ctrl_z_in_the_brush_undoes_its_strokes_only(painted):
 def test_a_click_outside_the_view_is_not_taken_by_the_brush(painted):
     """The brush started from the sidebar: its region is the sidebar's; a click on a sidebar button
     goes to the button (nothing painted), a drag over the view's main region paints."""
-    from rokeby import appearance_ui
+    from rokeby.appearance import ui as appearance_ui
 
     modal = appearance_ui.ROKEBY_OT_appearance_paint.modal
     main = types.SimpleNamespace(type="WINDOW", x=0, y=0, width=SIZE, height=SIZE, data=_view())
@@ -169,7 +169,7 @@ def test_a_click_outside_the_view_is_not_taken_by_the_brush(painted):
 def test_a_click_on_a_sidebar_drawn_over_the_view_is_not_taken(painted):
     """Region Overlap (Blender's default): the sidebar is drawn over the main region, which spans
     the whole area; the brush runs in the main region. A press on the sidebar goes to the sidebar."""
-    from rokeby import appearance_ui
+    from rokeby.appearance import ui as appearance_ui
 
     modal = appearance_ui.ROKEBY_OT_appearance_paint.modal
     main = types.SimpleNamespace(type="WINDOW", x=0, y=0, width=SIZE, height=SIZE, data=_view())

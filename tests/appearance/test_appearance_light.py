@@ -6,7 +6,8 @@ follows the light. And the specular tint in the environment-lit shading (rk_shad
 import numpy as np
 import pytest
 
-from rokeby import appearance_glsl, envmaps
+from rokeby import envmaps
+from rokeby.appearance import glsl as appearance_glsl
 from support.appearance import sphere_shader
 
 moderngl = pytest.importorskip("moderngl")

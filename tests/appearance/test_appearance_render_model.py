@@ -51,7 +51,7 @@ def painted():
 
 
 def _panel(context):
-    from rokeby import appearance_ui
+    from rokeby.appearance import ui as appearance_ui
 
     out = []
     appearance_ui.draw_render_model(Layout(out), context)

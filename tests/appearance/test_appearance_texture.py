@@ -7,7 +7,8 @@ import pytest
 
 bpy = pytest.importorskip("bpy")
 
-from rokeby import appearance, compat, envmaps  # noqa: E402
+from rokeby import appearance, envmaps  # noqa: E402
+from rokeby.blender import compat  # noqa: E402
 
 
 @pytest.fixture

@@ -7,8 +7,8 @@ tiny Cycles renders) in ``fixtures.json``.
 
 tests/workflows/test_saved_fixtures.py runs ``write`` with the previous release's add-on (a git worktree of
 an earlier commit, its addon/ on PYTHONPATH) and ``load`` with the current one, and compares.
-This script must use only entry points that existed at that commit (rokeby.api, rokeby.appearance,
-rokeby.compositing, rokeby.reflmap): it is copied into the old tree when the old tree lacks it.
+This script must use only entry points that exist at that commit and in the current code alike
+(rokeby.api and rokeby.appearance): it is copied into the old tree when the old tree lacks it.
 ``scenes()`` is also how tests/workflows/test_saved_names.py builds its scenes.
 """
 

@@ -537,6 +537,7 @@ def test_recomposite_exr_edits_a_rendered_frame_without_rendering_or_reconstruct
     import bpy
     from rokeby import api
     from rokeby import compositing as C
+    from rokeby.compositing import gl as GL
 
     sc = pass_scene()
     path = str(tmp_path / "frame.exr")
@@ -578,7 +579,7 @@ def test_recomposite_exr_edits_a_rendered_frame_without_rendering_or_reconstruct
         np.testing.assert_array_equal(np.array(bpy.data.images[name].pixels[:]), px)
     # Another backend on the same open frame: a new session, no new reconstruction.
     try:
-        C.gl_recompositor()
+        GL.gl_recompositor()
         gl_ok = True
     except Exception:  # noqa: BLE001 - no headless OpenGL on this machine
         gl_ok = False

@@ -19,11 +19,11 @@ bpy = pytest.importorskip("bpy")
 
 import rokeby  # noqa: E402
 from support import cycles  # noqa: E402
-from rokeby import compat  # noqa: E402
+from rokeby.blender import compat  # noqa: E402
 from rokeby import compositing as C  # noqa: E402
 from rokeby.compositing import brush as B  # noqa: E402
 from rokeby import envmaps  # noqa: E402
-from rokeby.compositing_ui import LAST_EXR  # noqa: E402
+from rokeby.compositing.ui import LAST_EXR  # noqa: E402
 
 SIZE = 48
 

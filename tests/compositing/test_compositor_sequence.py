@@ -17,7 +17,7 @@ bpy = pytest.importorskip("bpy")
 
 import rokeby  # noqa: E402
 from support import cycles  # noqa: E402
-from rokeby import compat  # noqa: E402
+from rokeby.blender import compat  # noqa: E402
 from rokeby import compositing as C  # noqa: E402
 from rokeby import envmaps  # noqa: E402
 

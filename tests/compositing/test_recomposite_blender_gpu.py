@@ -1,4 +1,4 @@
-"""The GLSL recompositing path drawn through Blender's own gpu module (rokeby.recomposite_gpu,
+"""The GLSL recompositing path drawn through Blender's own gpu module (rokeby.compositing.blender_gpu,
 Zubiaga et al. 2016): the same shader files and interface as the moderngl path, compiled by
 GPUShaderCreateInfo and drawn offscreen (RGBA32F) in a fresh bpy process
 (tests/compositing/recomposite_blender_gpu_check.py), against the Rust core on the frames of
@@ -110,8 +110,8 @@ def test_session_makes_only_the_edited_normals_texture_per_frame(res):
 
 
 def test_module_needs_no_gpu_at_import():
-    """Importing rokeby.recomposite_gpu touches no gpu call (this pytest process may have no context)."""
-    from rokeby import recomposite_gpu as G
+    """Importing rokeby.compositing.blender_gpu touches no gpu call (this pytest process may have no context)."""
+    from rokeby.compositing import blender_gpu as G
 
     assert isinstance(G.has_context(), bool)
     assert G._BLENDER is None

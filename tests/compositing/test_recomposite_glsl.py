@@ -14,12 +14,13 @@ rn = pytest.importorskip("rokeby_native")
 from support import bench_module  # noqa: E402
 from support.recomposite_frames import bad_inputs, frame, passes_and_reconstruction  # noqa: E402
 from rokeby import compositing as C  # noqa: E402
+from rokeby.compositing import gl as GL  # noqa: E402
 
 
 @pytest.fixture(scope="module")
 def gl():
     try:
-        return C.GLRecompositor()
+        return GL.GLRecompositor()
     except Exception as exc:  # no EGL/OpenGL 3.3 on this machine
         pytest.skip(f"no headless OpenGL context: {exc}")
 
@@ -55,7 +56,7 @@ def test_constant_view_and_no_optional_buffers(gl):
     (ids, n, e, view, d0, r0, img, patches), _ = frame(seed=5)
     v = np.array([0.0, 0.0, 1.0])
     ref, rst = rn.recomposite(ids, n, e, v, d0, r0, img, patches)
-    out, st = C.recomposite_gpu(ids, n, e, v, d0, r0, img, patches)
+    out, st = GL.recomposite_gpu(ids, n, e, v, d0, r0, img, patches)
     assert st == dict(rst)
     assert (np.abs(out.astype(np.float64) - ref) / (1 + np.abs(ref))).max() < 1e-4
 
@@ -105,9 +106,9 @@ def test_session_uploads_only_the_edited_normals_and_matches_one_shot_calls(gl):
     for k, (edit, k_d, k_r) in enumerate(_session_edits(n, e)):
         if k == 2:
             other(C.emboss(rec2.normals, 0.5))
-        before = C.gl_recompositor().uploads
+        before = GL.gl_recompositor().uploads
         out, st = session(edit, k_d=k_d, k_r=k_r)
-        writes.append(C.gl_recompositor().uploads - before)
+        writes.append(GL.gl_recompositor().uploads - before)
         ref, rst = C.recomposite(p, rec, edit, k_d=k_d, k_r=k_r, backend="cpu")
         assert st == dict(rst)
         assert (np.abs(out.astype(np.float64) - ref) / (1 + np.abs(ref))).max() < 1e-4
@@ -123,9 +124,9 @@ def test_session_uploads_only_the_edited_normals_and_matches_one_shot_calls(gl):
 
 
 def test_shader_files_live_in_shaders():
-    from rokeby import glsl
+    from rokeby.core.shaders import shader_dir
 
-    vs, fs = C.recomposite_sources()
-    d = glsl.shader_dir()
+    vs, fs = GL.recomposite_sources()
+    d = shader_dir()
     assert (d / "rokeby_recomposite_frag.glsl").read_text() in fs
     assert (d / "rokeby_recomposite_vert.glsl").read_text() in vs

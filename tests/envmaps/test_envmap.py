@@ -5,7 +5,8 @@ against the seed's brute-force sum, writing results, bad input."""
 import numpy as np
 import pytest
 
-from rokeby import envmaps, reflmap
+from rokeby import envmaps
+from rokeby.reflection.render import reflmap
 
 WORLDS = ("city", "courtyard", "forest", "interior", "night", "studio", "sunrise", "sunset")
 

@@ -106,7 +106,7 @@ def test_an_ldr_world_lights_the_appearance_preview_as_cycles_renders_it(tmp_pat
     Non-Color."""
     bpy = pytest.importorskip("bpy")
     from support import cycles
-    from rokeby import appearance_preview
+    from rokeby.appearance import preview as appearance_preview
 
     codes = np.array([200, 128, 30], np.uint8)
     path = write_png(tmp_path / "world.png", np.broadcast_to(codes, (8, 16, 3)).copy())

@@ -10,7 +10,9 @@ import numpy as np
 import bpy
 
 import rokeby
-from rokeby import api, evaluate, glsl, viewport
+from rokeby import api
+from rokeby.reflection import evaluate
+from rokeby.reflection.viewport import glsl, draw as viewport
 
 W, H = 96, 72
 
@@ -41,7 +43,7 @@ def main():
     scene.collection.objects.link(lamp)
     lamp.location = (1.6, 0.1, 3.0)
     bpy.context.view_layer.update()
-    from rokeby import shadow_ui
+    from rokeby.shadow import ui as shadow_ui
 
     shadow_ui._SESSIONS[shadow_ui._key(scene)] = api.start_shadow_edit(caster, lamp, [ground], min_loop_vertices=8)
     shadow_ui._refresh(scene, eye=tuple(eye))

@@ -8,7 +8,8 @@ import pytest
 
 bpy = pytest.importorskip("bpy")
 
-from rokeby import api, evaluate, handlers  # noqa: E402
+from rokeby import api  # noqa: E402
+from rokeby.reflection import evaluate, handlers  # noqa: E402
 from support.wysiwyg import new_scene, read_layers, sphere  # noqa: E402
 
 FIELDS = (evaluate.ATTRIBUTE, evaluate.RENDER_ATTRIBUTE, evaluate.RENDER_ATTRIBUTE_WA)
@@ -45,7 +46,7 @@ def _drag_red(ball, to):
 
 
 def _read(me, name):
-    attr = me.attributes[name]  # per vertex, or per face corner (rokeby.evaluate)
+    attr = me.attributes[name]  # per vertex, or per face corner (rokeby.reflection.evaluate)
     a = np.empty(3 * len(attr.data), np.float32)
     attr.data.foreach_get("vector", a)
     return a.reshape(-1, 3)

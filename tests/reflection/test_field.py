@@ -301,7 +301,7 @@ def test_gil_is_released_during_the_work(rng):
 
 
 def test_rotation_vector_output_matches_the_quaternions(rng):
-    from rokeby import evaluate
+    from rokeby.reflection import evaluate
 
     pts = rng.normal(size=(500, 3)).astype(np.float32)
     c = random_constraints(rng, 6)

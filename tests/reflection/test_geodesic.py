@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 import rokeby_native as rn
 
-from rokeby.meshio import load_obj
+from rokeby.core.meshio import load_obj
 from support import DATA, mesh_path
 
 
@@ -272,7 +272,7 @@ def test_exact_method_matches_pygeodesic_mmp():
 def test_mirror_geodesic_methods_keep_their_stored_numbers():
     """Blender stores an enum by its number: files saved with Heat (0) or Dijkstra (1) must load
     with the same method after Exact (2) was added, and every item maps to a native method."""
-    from rokeby import props
+    from rokeby.reflection import props
 
     assert sorted((i[0], i[4]) for i in props.GEODESIC_METHODS) == [("DENSE_GRAPH", 4), ("DIJKSTRA", 1), ("EXACT", 2), ("GRAPH", 3), ("HEAT", 0)]
     v, f = flat_grid(9)

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 import rokeby_native as rn
 
-from rokeby.meshio import load_obj, open_seams
+from rokeby.core.meshio import load_obj, open_seams
 from support import mesh_path
 
 DEFAULT = "dense_graph"
@@ -180,13 +180,13 @@ def _default_of(fn, name="method"):
 def test_one_default_method_at_every_entry_point():
     """A script and the sidebar agree: rokeby_native's functions, the solver's methods and new
     mirrors all default to the dense graph."""
-    from rokeby.reflection import edit, evaluate  # noqa: F401 - evaluate: the enum → native map
+    from rokeby.reflection import api, evaluate  # noqa: F401 - evaluate: the enum → native map
 
     assert _default_of(rn.geodesic_distances) == DEFAULT
     for meth in (rn.GeodesicSolver.distances, rn.GeodesicSolver.geodesic_region, rn.GeodesicSolver.freeform_region):
         assert _default_of(meth) == DEFAULT, meth
-    assert _default_of(edit.add_mirror, "geodesic_method").lower() == DEFAULT
-    assert _default_of(edit.geodesic_distances) == DEFAULT
+    assert _default_of(api.add_mirror, "geodesic_method").lower() == DEFAULT
+    assert _default_of(api.geodesic_distances) == DEFAULT
     v, f = seam_torus()
     v, f = v.astype(np.float32), f.astype(np.int32)
     s = rn.GeodesicSolver(v, f)

@@ -1,7 +1,7 @@
 """The viewport preview's GLSL (shaders/) against rokeby_native.edited_directions.
 
 The shader is compiled with moderngl on a headless EGL context (Mesa llvmpipe here) from the same
-files the Blender draw handler compiles (rokeby.glsl). A real mesh (spot) is rasterised; the
+files the Blender draw handler compiles (rokeby.reflection.viewport.glsl). A real mesh (spot) is rasterised; the
 shader's own per-pixel position, normal, barycentric coordinates and vertex ids are read back and
 given to the Rust reference, so both evaluate e(q) at exactly the same inputs.
 
@@ -20,8 +20,8 @@ rn = pytest.importorskip("rokeby_native")
 from support import mesh_path  # noqa: E402
 from support.gl_harness import Renderer, create_context, look_at, perspective  # noqa: E402
 from support.reference import random_constraints  # noqa: E402
-from rokeby import glsl  # noqa: E402
-from rokeby.meshio import load_obj, vertex_normals  # noqa: E402
+from rokeby.reflection.viewport import glsl  # noqa: E402
+from rokeby.core.meshio import load_obj, vertex_normals  # noqa: E402
 
 MEAN_TOL, MAX_TOL = 1e-5, 3e-3
 W, H = 128, 96
@@ -220,7 +220,7 @@ def test_environment_lookup_follows_blenders_equirectangular_convention(scene):
     """A colour-coded lat-long image (16 x 8 cells): each mirror pixel shows the cell that
     Blender's Environment Texture node reads for the reflected direction d:
     u = 0.5 - atan2(d.y, d.x) / 2pi, v = 0.5 + atan2(d.z, hypot(d.x, d.y)) / pi, row 0 at the
-    bottom (EEVEE's node_tex_environment_equirectangular; rokeby.reflmap.direction_to_uv)."""
+    bottom (EEVEE's node_tex_environment_equirectangular; rokeby.reflection.render.reflmap.direction_to_uv)."""
     s = scene
     r = s["renderer"]
     cells_u, cells_v, px = 16, 8, 8
@@ -293,7 +293,7 @@ def test_triangle_soup_rejects_bad_indices():
 
 @pytest.mark.slow  # a fresh bpy process, its GPU context and shader compile: 215 s measured on the shared 2-core machine
 def test_blender_compiles_and_draws_the_same_shader_offscreen():
-    """The add-on's own draw path (rokeby.viewport: GPUShaderCreateInfo from shaders/, batches,
+    """The add-on's own draw path (rokeby.reflection.viewport.draw: GPUShaderCreateInfo from shaders/, batches,
     uniform block, textures, overlays) in bpy, offscreen, against the Rust reference on the
     evaluator's inputs (3 constraints in a Euclidean region on a UV sphere)."""
     pytest.importorskip("bpy")
@@ -311,7 +311,7 @@ def test_blender_compiles_and_draws_the_same_shader_offscreen():
 
 def test_region_border_lines_lie_on_the_level_set():
     pytest.importorskip("bpy")
-    from rokeby import viewport
+    from rokeby.reflection.viewport import draw as viewport
 
     xs, ys = np.meshgrid(np.linspace(0, 1, 21), np.linspace(0, 1, 21))
     v = np.stack([xs.ravel(), ys.ravel(), np.zeros(xs.size)], 1).astype(np.float32)

@@ -10,8 +10,9 @@ from support import cycles
 bpy = pytest.importorskip("bpy")
 
 import rokeby  # noqa: E402
-from rokeby import api, evaluate  # noqa: E402
-from rokeby.evaluate import RokebyError  # noqa: E402
+from rokeby import api  # noqa: E402
+from rokeby.reflection import evaluate  # noqa: E402
+from rokeby.core.errors import RokebyError  # noqa: E402
 
 SIZE = 64
 

@@ -10,7 +10,9 @@ import pytest
 bpy = pytest.importorskip("bpy")
 OpenEXR = pytest.importorskip("OpenEXR")
 
-from rokeby import api, compat, shading  # noqa: E402
+from rokeby import api  # noqa: E402
+from rokeby.blender import compat  # noqa: E402
+from rokeby.reflection.render import shading  # noqa: E402
 from rokeby.compositing import exr_pass_names  # noqa: E402
 from support.reflection import CHROME_BALL_SIZE as SIZE  # noqa: E402  (chrome_ball: tests/reflection/conftest.py)
 

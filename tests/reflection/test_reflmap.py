@@ -10,8 +10,11 @@ from support import cycles
 bpy = pytest.importorskip("bpy")
 
 import rokeby  # noqa: E402
-from rokeby import api, compat, evaluate, reflmap  # noqa: E402
-from rokeby.evaluate import RokebyError  # noqa: E402
+from rokeby import api  # noqa: E402
+from rokeby.blender import compat  # noqa: E402
+from rokeby.reflection import evaluate  # noqa: E402
+from rokeby.reflection.render import reflmap  # noqa: E402
+from rokeby.core.errors import RokebyError  # noqa: E402
 
 SIZE = 48
 ENC_W, ENC_H = 64, 32

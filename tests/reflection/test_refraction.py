@@ -9,7 +9,9 @@ import pytest
 bpy = pytest.importorskip("bpy")
 
 import rokeby  # noqa: E402
-from rokeby import api, evaluate, refraction  # noqa: E402
+from rokeby import api  # noqa: E402
+from rokeby.reflection import evaluate  # noqa: E402
+from rokeby.reflection.render import refraction  # noqa: E402
 
 from support import cycles  # noqa: E402
 from support.reference import rotation_vectors  # noqa: E402
@@ -426,13 +428,13 @@ def test_glass_is_split_identity_holds_extreme_edits_stay_finite_and_removal_res
     plain = _render(tmp_path, "plain")
     api.add_constraint(ball, (0.0, -1.0, 0.0), eye=EYE, kind="REFRACTION")
     api.evaluate()
-    # The Glass (refraction) and the Glossy part it was split into (rokeby.shading); idempotent.
+    # The Glass (refraction) and the Glossy part it was split into (rokeby.reflection.render.shading); idempotent.
     assert api.install_render_nodes(ball) == 2 and api.install_render_nodes(ball) == 2
     roles = sorted(n[refraction.TAG] for n in tree.nodes if n.get(refraction.TAG))
     assert roles == ["fresnel", "mix", "normal", "reflection", "refraction"]
     group = next(n for n in tree.nodes if n.get(refraction.TAG) == "normal")
     assert group.inputs["Normal"].links[0].from_node == bump  # the bump passes through
-    # The split Glossy got the reflection group of rokeby.shading (reflection edits show too).
+    # The split Glossy got the reflection group of rokeby.reflection.render.shading (reflection edits show too).
     glossy = next(n for n in tree.nodes if n.get(refraction.TAG) == "reflection")
     assert glossy.inputs["Normal"].links[0].from_node.node_tree.name == "Rokeby Edited Normal"
     fresh = _render(tmp_path, "fresh")

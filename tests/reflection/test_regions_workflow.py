@@ -15,8 +15,9 @@ import pytest
 bpy = pytest.importorskip("bpy")
 
 import rokeby  # noqa: E402
-from rokeby import api, evaluate  # noqa: E402
-from rokeby.meshio import load_obj  # noqa: E402
+from rokeby import api  # noqa: E402
+from rokeby.reflection import evaluate  # noqa: E402
+from rokeby.core.meshio import load_obj  # noqa: E402
 
 from support import cycles, mesh_path  # noqa: E402
 

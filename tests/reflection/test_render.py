@@ -6,7 +6,8 @@ import pytest
 
 bpy = pytest.importorskip("bpy")
 
-from rokeby import api, compat  # noqa: E402
+from rokeby import api  # noqa: E402
+from rokeby.blender import compat  # noqa: E402
 
 from support.reflection import CHROME_BALL_SIZE as SIZE  # noqa: E402  (the chrome_ball fixture: tests/reflection/conftest.py)
 

@@ -8,7 +8,8 @@ import pytest
 bpy = pytest.importorskip("bpy")
 
 import rokeby  # noqa: E402
-from rokeby import api, evaluate  # noqa: E402
+from rokeby import api  # noqa: E402
+from rokeby.reflection import evaluate  # noqa: E402
 
 from support import SHARED  # noqa: E402
 from support.reference import rotation_vectors  # noqa: E402

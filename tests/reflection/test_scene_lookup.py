@@ -14,7 +14,7 @@ import pytest
 moderngl = pytest.importorskip("moderngl")
 
 from support.gl_harness import Renderer, create_context, look_at, perspective  # noqa: E402
-from rokeby import glsl  # noqa: E402
+from rokeby.reflection.viewport import glsl  # noqa: E402
 from rokeby.core import latlong  # noqa: E402
 
 W, H = 160, 120

@@ -18,7 +18,9 @@ from support import ROOT
 
 bpy = pytest.importorskip("bpy")
 
-from rokeby import api, evaluate, handlers, native  # noqa: E402
+from rokeby import api  # noqa: E402
+from rokeby.reflection import evaluate, guard  # noqa: E402
+from rokeby.core import native  # noqa: E402
 from support.wysiwyg import (EYE, SIZE, add_aovs, agreement, angles_deg, directions, drag, mirror_material,  # noqa: E402,F401
                               new_scene, physical, read_layers, render, sphere)
 
@@ -384,7 +386,7 @@ def test_a_drag_defers_the_estimate_and_it_follows_when_the_updates_pause(monkey
     dg = bpy.context.evaluated_depsgraph_get()
     first = evaluate.evaluate_mirror(ball, sc, dg, force=True, interactive=True)  # estimates
     assert any("too coarse" in m for m in first.messages)
-    with handlers.suspended():  # only the drag step below evaluates
+    with guard.suspended():  # only the drag step below evaluates
         drag(ball, 0, (0.0, -3.0, 0.2))  # a much smaller edit: fine on this mesh
         bpy.context.view_layer.update()
         dg = bpy.context.evaluated_depsgraph_get()
@@ -442,7 +444,7 @@ def test_files_from_before_data_version_1_keep_their_meaning(tmp_path):
     # As an older Rokeby saved it: no data version, and the settings it did not have read back
     # as their defaults (the handlers stay out of it while the file is made).
     path = tmp_path / "old.blend"
-    with handlers.suspended():
+    with guard.suspended():
         ball.rokeby.data_version = 0
         ball.rokeby.render_edits = True
         ball.rokeby.eye_source = "CAMERA"

@@ -9,7 +9,7 @@ import pytest
 
 from support.reference import uv_sphere
 from support.shadow import LIGHT, SIZE, blender_scene, edge_along, edited_scene, render
-from rokeby import native
+from rokeby.core import native
 
 rn = native.module()
 
@@ -130,7 +130,8 @@ def test_render_shadow_edge_follows_the_dragged_handle(tmp_path, engine, light_t
     """Cycles with hard (point) and soft (area light, the edge at half intensity) shadows, and EEVEE
     (which in 4.5 honours light and shadow linking and ray visibility)."""
     bpy, sc, ball, lamp, ground = blender_scene(light_type)
-    from rokeby import api, compat
+    from rokeby import api
+    from rokeby.blender import compat
 
     sc.render.engine = compat.eevee_engine() if engine == "EEVEE" else engine
 
@@ -291,7 +292,7 @@ def test_light_moved_20_degrees_puts_no_new_shadow_on_the_caster(tmp_path):
 def test_operators_start_drag_apply_and_the_overlay():
     bpy, sc, ball, lamp, ground = blender_scene()
     import rokeby
-    from rokeby import shadow_ui
+    from rokeby.shadow import ui as shadow_ui
 
     rokeby.register()
     try:

@@ -190,7 +190,8 @@ def test_live_cancel_on_an_applied_edit_puts_its_keys_back():
 def test_apply_operator_adds_a_key_configuration_and_the_panel_offers_it():
     bpy, sc, ball, lamp, ground = ts.blender_scene()
     import rokeby
-    from rokeby import shadow, shadow_ui
+    from rokeby import shadow
+    from rokeby.shadow import ui as shadow_ui
     from support.ui import Layout
 
     rokeby.register()

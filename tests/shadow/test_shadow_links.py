@@ -272,7 +272,7 @@ def test_an_edit_from_a_copied_light_leaves_the_original_whole(tmp_path):
 
 def test_edit_shadow_boundaries_picks_the_light_not_its_twin(tmp_path):
     sc, ball, lamp, ob, twin, edited = _edited(tmp_path)
-    from rokeby import shadow_ui
+    from rokeby.shadow import ui as shadow_ui
 
     for o in sc.objects:
         o.select_set(False)

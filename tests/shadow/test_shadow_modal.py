@@ -46,7 +46,7 @@ def _event(kind, value, xy, **mods):
 def _operator():
     """The operator's own methods on a plain object holding its properties (background Blender
     cannot instantiate an Operator outside bpy.ops)."""
-    from rokeby import shadow_ui
+    from rokeby.shadow import ui as shadow_ui
 
     cls = shadow_ui.ROKEBY_OT_shadow_drag
     op = SimpleNamespace(loop=0, fixed=(0, 0), moved=0, target=(0.0, 0.0, 0.0), style="affine", segment=0.2,
@@ -87,7 +87,9 @@ def test_modal_drag_with_synthetic_events_live_shadow_follows_release_keeps_esc_
     bpy, sc, ball, lamp, ground = ts.blender_scene()
     import rokeby
     from bpy_extras import view3d_utils
-    from rokeby import native, shadow, shadow_ui
+    from rokeby import shadow
+    from rokeby.core import native
+    from rokeby.shadow import ui as shadow_ui
 
     rn = native.module()
     rokeby.register()
@@ -170,7 +172,8 @@ def test_modal_drag_far_from_any_handle_waits_for_a_handle_and_changes_nothing()
     warning), and Esc ends the wait with nothing changed."""
     bpy, sc, ball, lamp, ground = ts.blender_scene()
     import rokeby
-    from rokeby import shadow, shadow_ui
+    from rokeby import shadow
+    from rokeby.shadow import ui as shadow_ui
 
     rokeby.register()
     try:
@@ -213,7 +216,8 @@ def test_sidebar_button_waits_for_a_press_on_a_handle_in_the_view():
     bpy, sc, ball, lamp, ground = ts.blender_scene()
     import rokeby
     from bpy_extras import view3d_utils
-    from rokeby import shadow, shadow_ui
+    from rokeby import shadow
+    from rokeby.shadow import ui as shadow_ui
 
     rokeby.register()
     try:
@@ -261,7 +265,8 @@ def test_ctrl_z_during_a_drag_cancels_that_drag_only():
     bpy, sc, ball, lamp, ground = ts.blender_scene()
     import rokeby
     from bpy_extras import view3d_utils
-    from rokeby import shadow, shadow_ui
+    from rokeby import shadow
+    from rokeby.shadow import ui as shadow_ui
 
     rokeby.register()
     try:
@@ -291,7 +296,7 @@ def test_press_on_a_handle_is_a_3d_view_shortcut():
     presses that are not on a handle on (so clicking still selects)."""
     bpy, *_ = ts.blender_scene()
     import rokeby
-    from rokeby import shadow_ui
+    from rokeby.shadow import ui as shadow_ui
 
     rokeby.register()
     try:
@@ -311,7 +316,8 @@ def test_modal_drag_outside_rendered_shading_says_where_the_live_shadow_shows():
     bpy, sc, ball, lamp, ground = ts.blender_scene()
     import rokeby
     from bpy_extras import view3d_utils
-    from rokeby import shadow, shadow_ui
+    from rokeby import shadow
+    from rokeby.shadow import ui as shadow_ui
 
     rokeby.register()
     try:

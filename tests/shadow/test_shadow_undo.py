@@ -34,7 +34,8 @@ def test_undo_after_a_drag_takes_back_that_drag_only_and_the_session_follows():
     bpy, sc, ball, lamp, ground = ts.blender_scene()
     import rokeby
     from bpy_extras import view3d_utils
-    from rokeby import shadow, shadow_ui
+    from rokeby import shadow
+    from rokeby.shadow import ui as shadow_ui
 
     rokeby.register()
     try:
@@ -111,7 +112,7 @@ def test_undo_after_a_drag_takes_back_that_drag_only_and_the_session_follows():
 def test_undo_of_stop_brings_the_session_back():
     bpy, sc, ball, lamp, ground = ts.blender_scene()
     import rokeby
-    from rokeby import shadow_ui
+    from rokeby.shadow import ui as shadow_ui
 
     rokeby.register()
     try:
@@ -145,7 +146,8 @@ def test_the_redo_panel_repeats_a_drag_with_its_shadow_mesh():
     bpy, sc, ball, lamp, ground = ts.blender_scene()
     import rokeby
     from bpy_extras import view3d_utils
-    from rokeby import shadow, shadow_ui
+    from rokeby import shadow
+    from rokeby.shadow import ui as shadow_ui
 
     rokeby.register()
     try:

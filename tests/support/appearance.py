@@ -33,7 +33,7 @@ def sphere_shader(body: str, uniforms: str = "", size: int = 48) -> SimpleNamesp
     pixel grid: ``p`` (x, y in [-1, 1], row 0 = bottom, as glReadPixels), ``n`` (the sphere normal at
     each pixel) and ``inside`` (pixels well inside the disk)."""
     moderngl = pytest.importorskip("moderngl")
-    from rokeby import appearance_glsl
+    from rokeby.appearance import glsl as appearance_glsl
 
     try:
         ctx = moderngl.create_context(standalone=True, backend="egl")

@@ -74,7 +74,7 @@ def _plain(v, depth=0):
 
 def _idprops(owner) -> dict:
     """Custom properties and, where Blender keeps them apart (5.0+), the registered ones."""
-    from rokeby import compat
+    from rokeby.blender import compat
 
     out = {}
     for prefix, container in (("", owner), ("system:", compat.system_properties(owner))):

@@ -41,7 +41,7 @@ def gpu_context(scene) -> None:
     ``scene`` (the check's own) is neither rendered nor changed."""
     import bpy
 
-    from rokeby import compat
+    from rokeby.blender import compat
 
     tmp = bpy.data.scenes.new("gpu context")
     try:

@@ -1,14 +1,14 @@
 """Runs the viewport preview's GLSL (shaders/) outside Blender: moderngl on a headless EGL context
 (Mesa llvmpipe on machines without a GPU). Shared by tests/reflection/test_glsl.py and bench/viewport.py.
 
-The shader is compiled from rokeby.glsl.standalone_sources(), i.e. the same files the Blender
-draw handler compiles; the field's inputs are packed by rokeby.glsl as in the add-on."""
+The shader is compiled from rokeby.reflection.viewport.glsl.standalone_sources(), i.e. the same files the Blender
+draw handler compiles; the field's inputs are packed by rokeby.reflection.viewport.glsl as in the add-on."""
 
 from __future__ import annotations
 
 import numpy as np
 
-from rokeby import glsl
+from rokeby.reflection.viewport import glsl
 
 
 def look_at(eye, target, up=(0.0, 0.0, 1.0)) -> np.ndarray:

@@ -14,7 +14,8 @@ def chrome_ball():
     import bpy
 
     import rokeby
-    from rokeby import envmaps, evaluate
+    from rokeby import envmaps
+    from rokeby.reflection import evaluate
 
     bpy.ops.wm.read_factory_settings(use_empty=True)
     rokeby.register()

@@ -133,7 +133,7 @@ def render(sc, path: str) -> np.ndarray:
     """A Cycles render of ``sc``'s camera, linear RGB (H, W, 3), row 0 at the bottom."""
     import bpy
 
-    from rokeby import compat
+    from rokeby.blender import compat
 
     sc.render.filepath = path
     sc.render.use_file_extension = False

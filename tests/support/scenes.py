@@ -15,7 +15,7 @@ def empty_scene(reset_state: bool = True):
     evaluator's per-session state dropped). Returns the scene."""
     bpy = pytest.importorskip("bpy")
     import rokeby
-    from rokeby import evaluate
+    from rokeby.reflection import evaluate
 
     bpy.ops.wm.read_factory_settings(use_empty=True)
     rokeby.register()

@@ -58,7 +58,7 @@ class Layout:
 def draw_sidebar(panel_log):
     """Draws the sidebar's mirror panel and each sub-panel whose poll passes (as Blender does)
     into ``panel_log``."""
-    from rokeby.ui import MIRROR_PANELS
+    from rokeby.reflection.ui import MIRROR_PANELS
 
     for cls in MIRROR_PANELS:
         if getattr(cls, "bl_parent_id", None) and not cls.poll(bpy.context):

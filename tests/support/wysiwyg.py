@@ -12,7 +12,9 @@ from support import cycles
 bpy = pytest.importorskip("bpy")
 
 import rokeby  # noqa: E402
-from rokeby import compat, evaluate, native  # noqa: E402
+from rokeby.blender import compat  # noqa: E402
+from rokeby.reflection import evaluate  # noqa: E402
+from rokeby.core import native  # noqa: E402
 
 SIZE = 64
 EYE = (0.0, -4.0, 0.0)

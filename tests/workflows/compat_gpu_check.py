@@ -1,4 +1,4 @@
-"""Run by tests/workflows/test_compat.py in a fresh bpy process: the built-in shader that ``rokeby.compat``
+"""Run by tests/workflows/test_compat.py in a fresh bpy process: the built-in shader that ``rokeby.blender.compat``
 picks for round points draws here. Makes Blender's GPU context with one tiny render by the engine
 id compat picks (bpy_process.gpu_context), draws one fat point into an offscreen buffer and prints
 one JSON line: RESULT {...}."""
@@ -9,7 +9,7 @@ import numpy as np
 import bpy
 
 from support.bpy_process import gpu_context, offscreen_pixels
-from rokeby import compat
+from rokeby.blender import compat
 
 
 def main():

@@ -15,7 +15,8 @@ import bpy
 import numpy as np
 
 import rokeby
-from rokeby import api, evaluate
+from rokeby import api
+from rokeby.reflection import evaluate
 
 case = sys.argv[1]
 bpy.ops.wm.read_factory_settings(use_empty=True)

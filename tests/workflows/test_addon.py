@@ -13,7 +13,7 @@ bpy = pytest.importorskip("bpy")
 
 import rokeby  # noqa: E402
 from rokeby import api  # noqa: E402
-from rokeby.meshio import load_obj  # noqa: E402
+from rokeby.core.meshio import load_obj  # noqa: E402
 
 from support import ROOT, mesh_path  # noqa: E402
 

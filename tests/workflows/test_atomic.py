@@ -105,7 +105,7 @@ def test_add_constraint():
 @pytest.mark.parametrize("metallic", [0.0, 1.0])
 def test_install_render_nodes(metallic):
     def check(ctx):
-        assert rokeby.rendering.installed(ctx["mat"])
+        assert rokeby.reflection.render.rendering.installed(ctx["mat"])
 
     _check(lambda: _mirror(False, metallic), lambda ctx: api.install_render_nodes(ctx["ball"]), check=check)
 

@@ -83,11 +83,12 @@ def test_cli_ctrl_c_while_reading_the_frame_exits_130(big_frame, tmp_path):
 def test_cancel_from_a_timer_thread_leaves_the_scene_unchanged(big_frame):
     """The operator path: the API entry the Recomposite operator runs (api.recomposite_exr),
     cancelled from another thread while its native smoothing runs, as Esc does
-    (rokeby.native.cancel()): KeyboardInterrupt soon after, and the scene exactly as before (no
+    (rokeby.core.native.cancel()): KeyboardInterrupt soon after, and the scene exactly as before (no
     image made or changed)."""
     from support.atomic_harness import diff, snapshot
 
-    from rokeby import api, compositing, native
+    from rokeby import api, compositing
+    from rokeby.core import native
 
     bpy.ops.wm.read_factory_settings(use_empty=True)
     rokeby.register()
@@ -118,7 +119,9 @@ def test_recomposite_operator_reports_cancelled(big_frame, capfd):
     thread: {'CANCELLED'}, the report says so, and no image was made."""
     from support.atomic_harness import diff, snapshot
 
-    from rokeby import compositing, compositing_ui, native
+    from rokeby import compositing
+    from rokeby.compositing import ui as compositing_ui
+    from rokeby.core import native
 
     bpy.ops.wm.read_factory_settings(use_empty=True)
     rokeby.register()

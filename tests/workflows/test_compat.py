@@ -1,5 +1,5 @@
 """The compatibility module on the Blender this leg runs (`make test` on 4.5, `make
-test-blender BPY=<version>` on the others): every answer of ``rokeby.compat`` is checked by using
+test-blender BPY=<version>` on the others): every answer of ``rokeby.blender.compat`` is checked by using
 it — the engine id it picks renders, the multilayer EXR setting writes several layers, the
 built-in point shader draws, the compositor tree it returns composites the render, modifier inputs
 and node custom properties survive a save and reload, registered properties are found where this
@@ -14,7 +14,9 @@ bpy = pytest.importorskip("bpy")
 OpenEXR = pytest.importorskip("OpenEXR")
 
 import rokeby  # noqa: E402
-from rokeby import api, compat, evaluate  # noqa: E402
+from rokeby import api  # noqa: E402
+from rokeby.blender import compat  # noqa: E402
+from rokeby.reflection import evaluate  # noqa: E402
 
 from support import cycles  # noqa: E402
 

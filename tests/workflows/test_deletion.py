@@ -62,7 +62,7 @@ ROLES = [
 
 
 def _draw_panel():
-    from rokeby.ui import ROKEBY_PT_main  # noqa: PLC0415
+    from rokeby.reflection.ui import ROKEBY_PT_main  # noqa: PLC0415
 
     log = []
     ROKEBY_PT_main.draw(type("P", (), {"layout": Layout(log)})(), bpy.context)

@@ -50,7 +50,7 @@ def _twins():
 
 
 def _draw_shadow_panel():
-    from rokeby.shadow_ui import ROKEBY_PT_shadow  # noqa: PLC0415
+    from rokeby.shadow.ui import ROKEBY_PT_shadow  # noqa: PLC0415
 
     log = []
     ROKEBY_PT_shadow.draw(type("P", (), {"layout": Layout(log)})(), bpy.context)
@@ -159,7 +159,7 @@ def _painted(target):
 
 
 def _panel_log():
-    from rokeby.appearance_ui import ROKEBY_PT_appearance  # noqa: PLC0415
+    from rokeby.appearance.ui import ROKEBY_PT_appearance  # noqa: PLC0415
 
     log = []
     ROKEBY_PT_appearance.draw(type("P", (), {"layout": Layout(log)})(), bpy.context)

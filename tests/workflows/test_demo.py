@@ -7,7 +7,9 @@ import pytest
 bpy = pytest.importorskip("bpy")
 
 import rokeby  # noqa: E402
-from rokeby import api, compat, demo_scene as ds, evaluate  # noqa: E402
+from rokeby import api, demo_scene as ds  # noqa: E402
+from rokeby.blender import compat  # noqa: E402
+from rokeby.reflection import evaluate  # noqa: E402
 
 from support import SHARED, mesh_path  # noqa: E402
 

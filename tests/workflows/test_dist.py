@@ -44,7 +44,7 @@ def test_zip_layout_and_manifest(built):
     assert all(not n.startswith(("rokeby/", "addon/")) for n in names)
     assert not [n for n in names if "__pycache__" in n or n.endswith((".pyc", ".pyo")) or n.split("/")[0] in ("tests", ".pytest_cache")]
     # Every subpackage of the layered add-on (docs/architecture.md) travels, with its modules.
-    for name in ("api/__init__.py", "reflection/edit.py", "core/__init__.py", "core/schema.py", "core/native.py", "blender/compat.py", "blender/hooks.py",
+    for name in ("api/__init__.py", "reflection/api.py", "compositing/api.py", "shadow/api.py", "farm/api.py", "core/__init__.py", "core/schema.py", "core/native.py", "blender/compat.py", "blender/hooks.py",
                  "reflection/evaluate.py", "reflection/render/shading.py", "reflection/viewport/glsl.py", "reflection/operators.py",
                  "reflection/props.py", "reflection/ui.py", "reflection/handlers.py", "envmaps/__init__.py", "appearance/ui.py",
                  "shadow/__init__.py", "compositing/blender_gpu.py"):
@@ -156,7 +156,7 @@ INSTALL = textwrap.dedent(
     if mod is not None:
         import importlib
         api = importlib.import_module("bl_ext.throwaway.rokeby.api")
-        native = importlib.import_module("bl_ext.throwaway.rokeby.native")
+        native = importlib.import_module("bl_ext.throwaway.rokeby.core.native")
         out["native_file"] = native.module().__file__ if native.available() else None
         bpy.ops.mesh.primitive_plane_add(size=2.0)
         plane = bpy.context.object

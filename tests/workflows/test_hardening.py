@@ -17,7 +17,9 @@ from support import cycles
 bpy = pytest.importorskip("bpy")
 
 import rokeby  # noqa: E402
-from rokeby import api, evaluate, reflmap  # noqa: E402
+from rokeby import api  # noqa: E402
+from rokeby.reflection import evaluate  # noqa: E402
+from rokeby.reflection.render import reflmap  # noqa: E402
 
 import make_fixtures  # noqa: E402
 
@@ -305,6 +307,7 @@ def _one_clean_line(r):
 def test_composite_with_a_huge_intensity_writes_no_inf(frame_exr, tmp_path, flag):
     """Old main: exit 0 and an EXR with inf pixels."""
     from rokeby import compositing as C
+    from rokeby.compositing import gl as GL
 
     path, p = frame_exr
     out = tmp_path / "out.exr"
@@ -315,7 +318,7 @@ def test_composite_with_a_huge_intensity_writes_no_inf(frame_exr, tmp_path, flag
     rec = C.reconstruct(p, warn=False)
     with pytest.raises(ValueError, match="k_d: must be finite and at most"):
         C.recomposite(p, rec, rec.normals, k_d=1e300)
-    img, _ = C.recomposite(p, rec, rec.normals, k_d=C.MAX_K)
+    img, _ = C.recomposite(p, rec, rec.normals, k_d=GL.MAX_K)
     assert np.isfinite(img[np.isfinite(p.image)]).all()
 
 

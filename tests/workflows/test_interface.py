@@ -19,7 +19,10 @@ import pytest
 bpy = pytest.importorskip("bpy")
 
 import rokeby  # noqa: E402
-from rokeby import api, compat, evaluate, progress, words  # noqa: E402
+from rokeby import api  # noqa: E402
+from rokeby.blender import compat, progress  # noqa: E402
+from rokeby.reflection import evaluate  # noqa: E402
+from rokeby.core import words  # noqa: E402
 
 from support import ROOT  # noqa: E402
 
@@ -97,7 +100,8 @@ def _sphere(name="Ball"):
 # --- panels and menus -----------------------------------------------------------------------------
 
 def test_sidebar_has_sub_panels_in_order(registered):
-    from rokeby import appearance_ui, ui
+    from rokeby.appearance import ui as appearance_ui
+    from rokeby.reflection import ui
 
     subs = ui.MIRROR_PANELS[1:]
     assert [p.bl_label for p in subs] == ["Constraints", "Regions", "Settings", "Render"]
@@ -107,7 +111,7 @@ def test_sidebar_has_sub_panels_in_order(registered):
         assert hasattr(bpy.types, p.bl_idname), p.bl_idname
     assert appearance_ui.PANELS[1].bl_parent_id == "ROKEBY_PT_appearance"
     # The top-level panels of the Rokeby tab are ordered: reflections, shadows, appearance.
-    from rokeby.shadow_ui import ROKEBY_PT_shadow
+    from rokeby.shadow.ui import ROKEBY_PT_shadow
 
     assert ui.ROKEBY_PT_main.bl_order < ROKEBY_PT_shadow.bl_order < appearance_ui.ROKEBY_PT_appearance.bl_order
     # The sub-panels show only with an active mirror.
@@ -120,7 +124,7 @@ def test_sidebar_has_sub_panels_in_order(registered):
 def test_menus_name_every_operator(registered):
     from support.ui import Layout
 
-    from rokeby import ui
+    from rokeby.reflection import ui
 
     log = []
     ui.VIEW3D_MT_rokeby.draw(type("M", (), {"layout": Layout(log)})(), bpy.context)
@@ -252,7 +256,7 @@ def test_status_line_reads_ok(registered):
 
 
 def test_native_missing_message_fits_how_the_add_on_is_installed(monkeypatch):
-    from rokeby import native
+    from rokeby.core import native
 
     assert "make" in native.missing_hint() and not native.is_extension()
     monkeypatch.setattr(native, "__package__", "bl_ext.user_default.rokeby")
@@ -343,7 +347,9 @@ def test_scene_settings_survive_save_and_reload(registered, tmp_path):
 def test_preferences_are_the_add_on_s_and_are_read(tmp_path):
     import addon_utils
 
-    from rokeby import appearance_preview, prefs, reflmap
+    from rokeby.appearance import preview as appearance_preview
+    from rokeby.blender import prefs
+    from rokeby.reflection.render import reflmap
 
     bpy.ops.wm.read_factory_settings(use_empty=True)
     rokeby.unregister()
@@ -370,7 +376,7 @@ def test_preferences_are_the_add_on_s_and_are_read(tmp_path):
         p.gpu_viewport_preview = True
         assert bpy.ops.rokeby.appearance_preview.poll()
         # The compositing backend: operators not given one use the preferences' default.
-        from rokeby import compositing_ui
+        from rokeby.compositing import ui as compositing_ui
 
         class Op:
             edit, amount, k_d, k_r, image_name, backend, fit, noise_tolerance = "EMBOSS", 0.5, 1.0, 1.0, "x", "CPU", "QP", 0.0
@@ -407,8 +413,8 @@ def test_preferences_work_as_an_extension(tmp_path):
         addon = bpy.context.preferences.addons.new()
         addon.module = "bl_ext.user_default.rokeby"
         mod.register()
-        prefs = importlib.import_module("bl_ext.user_default.rokeby.prefs")
-        native = importlib.import_module("bl_ext.user_default.rokeby.native")
+        prefs = importlib.import_module("bl_ext.user_default.rokeby.blender.prefs")
+        native = importlib.import_module("bl_ext.user_default.rokeby.core.native")
         print("IDNAME", prefs.RokebyPreferences.bl_idname, prefs.RokebyPreferences.is_registered)
         addon.preferences.compositing_backend = "GPU"
         print("READ", prefs.get().compositing_backend)
@@ -501,7 +507,7 @@ def test_sequence_operator_recomposites_every_frame_and_resumes(registered, tmp_
 
 
 def test_sequence_frames_sort_by_number(tmp_path):
-    from rokeby.compositing_ui import sequence_frames
+    from rokeby.compositing.ui import sequence_frames
 
     for n in ("f_10.exr", "f_2.exr", "f_1.exr", "g.exr", "f_3.png"):
         (tmp_path / n).write_bytes(b"")

@@ -11,8 +11,8 @@ resolved to the module it names. The check fails on
 - a feature importing another feature's internals (only the other feature's package, its
   public entry points, may be imported) — and a cycle between features;
 - ``rokeby_native`` imported anywhere but ``rokeby/core/native.py``;
-- a module of the package that belongs to no layer, or an import of an old module path
-  (``rokeby.evaluate`` …, kept for scripts by ``rokeby._legacy``) from inside the package;
+- a module of the package that belongs to no layer, or an import of a path that is no module of
+  the package (such as ``rokeby.evaluate``: each module has one path, ``rokeby.reflection.evaluate``);
 - a name that is saved in .blend files or EXRs (``rokeby.core.schema``) spelled as a literal
   anywhere but the schema module.
 
@@ -33,7 +33,7 @@ PKG = ROOT / "addon" / "rokeby"
 PACKAGE = "rokeby"
 
 FEATURES = ("reflection", "envmaps", "appearance", "shadow", "compositing", "farm")
-FACADE = ("api", "_legacy", "composite", "demo", "demo_scene")  # and the package's __init__
+FACADE = ("api", "composite", "demo", "demo_scene")  # and the package's __init__
 RANK = {"core": 0, "blender": 1, "feature": 2, "facade": 3}
 NATIVE_HOME = f"{PACKAGE}.core.native"
 
@@ -150,7 +150,7 @@ def violations(graph: dict[str, dict[str, int]], package: str = PACKAGE) -> dict
                     found[key] = f"line {line}: rokeby_native is imported only in core/native.py"
                 continue
             if dst not in graph:
-                found[key] = f"line {line}: not a module of the package (an old path? new code imports the new one)"
+                found[key] = f"line {line}: not a module of the package (an old path? each module has one path)"
                 continue
             ld = layer(dst, package)
             if ld is None:
@@ -304,7 +304,7 @@ def test_the_check_passes_a_clean_layout(tmp_path):
     # rokeby_native outside core/native.py
     ({"compositing/__init__.py": "import rokeby_native\n"},
      "rokeby.compositing -> rokeby_native"),
-    # an old module path from inside the package
+    # a path that is no module of the package (an old one)
     ({"shadow/__init__.py": "from rokeby.evaluate import f\n"},
      "rokeby.shadow -> rokeby.evaluate"),
     # a module in no layer

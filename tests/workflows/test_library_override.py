@@ -8,7 +8,8 @@ import numpy as np
 import pytest
 
 import rokeby
-from rokeby import api, evaluate
+from rokeby import api
+from rokeby.reflection import evaluate
 
 
 @pytest.fixture

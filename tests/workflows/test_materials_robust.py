@@ -8,10 +8,10 @@ import pytest
 
 bpy = pytest.importorskip("bpy")
 
-import rokeby  # noqa: E402
 from support import cycles  # noqa: E402
 from support.scenes import add_front_camera, add_point_lamp, empty_scene, plastic_material  # noqa: E402
-from rokeby import api, refraction, rendering, shading  # noqa: E402
+from rokeby import api  # noqa: E402
+from rokeby.reflection.render import refraction, rendering, shading  # noqa: E402
 
 
 def _tree_state(tree):
@@ -217,7 +217,7 @@ def test_removal_refuses_when_the_bsdf_and_its_parts_are_gone():
     nt.nodes.remove(next(n for n in nt.nodes if shading.SPLIT in n))
     nt.nodes.remove(next(n for n in nt.nodes if n.get(shading.ROLE) == "diffuse"))
     state = _tree_state(nt)
-    with pytest.raises(rokeby.evaluate.RokebyError, match="Principled BSDF that Rokeby split was deleted"):
+    with pytest.raises(api.RokebyError, match="Principled BSDF that Rokeby split was deleted"):
         api.remove_render_nodes(ball)
     assert _tree_state(nt) == state
     assert ball.rokeby.render_edits  # the mirror is as it was too

@@ -1,6 +1,6 @@
 """Heavy scenes (problem 5): the add-on's handlers never scan the scene's objects.
 
-What the add-on owns is kept in ``rokeby.registry``; these tests check that it finds exactly the
+What the add-on owns is kept in ``rokeby.reflection.registry``; these tests check that it finds exactly the
 mirrors a full scan finds after every everyday operation (add, remove, Shift+D and Alt+D copies,
 rename, delete with X, undo, save and reload), and that a depsgraph update costs the add-on's
 Python the same number of executed lines with 100 or 2,000 unrelated objects, with no Rokeby data
@@ -15,10 +15,11 @@ import pytest
 bpy = pytest.importorskip("bpy")
 
 import rokeby  # noqa: E402
-from rokeby import api, evaluate  # noqa: E402
+from rokeby import api  # noqa: E402
+from rokeby.reflection import evaluate  # noqa: E402
 
 try:
-    from rokeby import registry  # noqa: E402
+    from rokeby.reflection import registry  # noqa: E402
 except ImportError:  # the add-on before the registry: the line counts below still compare
     registry = None
 

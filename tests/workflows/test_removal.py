@@ -81,7 +81,7 @@ def _edit(ball):
     reps = api.evaluate()
     assert reps["Ball"].renders, reps["Ball"].summary()
     for mat in ball.data.materials:
-        assert rokeby.rendering.installed(mat), mat.name
+        assert rokeby.reflection.render.rendering.installed(mat), mat.name
 
 
 def _render(tmp_path, name):

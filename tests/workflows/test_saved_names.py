@@ -24,7 +24,7 @@ import numpy as np
 import pytest
 
 bpy = pytest.importorskip("bpy")
-from rokeby import compat  # noqa: E402
+from rokeby.blender import compat  # noqa: E402
 
 import feature_fixtures  # noqa: E402  (tests/blend_fixtures, on pytest's pythonpath)
 from support import DATA  # noqa: E402

@@ -13,7 +13,10 @@ from support.wysiwyg import EYE, angles_deg, directions, hit_mask, new_scene, ph
 
 bpy = pytest.importorskip("bpy")
 
-from rokeby import api, compat, evaluate, handlers, native  # noqa: E402
+from rokeby import api  # noqa: E402
+from rokeby.blender import compat  # noqa: E402
+from rokeby.reflection import evaluate, guard, handlers  # noqa: E402
+from rokeby.core import native  # noqa: E402
 
 LEFT, RIGHT = (-0.65, 0.0, 0.0), (0.65, 0.0, 0.0)
 SCALE = 0.5
@@ -243,7 +246,7 @@ def test_a_carrier_saved_without_an_owner_is_claimed_by_its_mirror_at_load():
     for mod in ball.modifiers:
         if mod.type == "SUBSURF":
             copy.modifiers.new(mod.name, "SUBSURF").levels = 1
-    with handlers.suspended():
+    with guard.suspended():
         copy.rokeby.is_mirror = True
         copy.rokeby.field_carrier = carrier
         carrier.parent = None  # as saved by the previous version

@@ -1,6 +1,6 @@
 """Viewport preview of painted appearance under the world HDR: the painted mesh drawn
 through Blender's gpu module with the shaders/rokeby_appearance_*.glsl files (interface in
-:mod:`rokeby.appearance_glsl`): the prefiltered chain of the chosen model's lobe in one atlas
+:mod:`rokeby.appearance.glsl`): the prefiltered chain of the chosen model's lobe in one atlas
 texture, order-2 SH irradiance, the GGX albedo table, the painted base colour/specular/roughness/
 metallic and the material's global sliders. Models: Blender's BSDF (GGX split sum), the seed's
 Phong, Fraser's Torrance–Sparrow.

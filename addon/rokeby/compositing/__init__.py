@@ -600,7 +600,7 @@ def recomposite(p: Passes, rec: Reconstruction, edited_normals: np.ndarray, *, k
     """Eqs. 3–5: the image (H, W, 3) with the edited screen-space normals. Returns (image, stats).
 
     ``backend``: 'cpu' (the Rust core, f32), 'blender_gpu' (the GLSL shader drawn by Blender's
-    ``gpu`` module, ``rokeby.recomposite_gpu``; in background mode the first call makes the GPU
+    ``gpu`` module, ``rokeby.compositing.blender_gpu``; in background mode the first call makes the GPU
     context with one 8×8 EEVEE render) or 'moderngl' (the same shader on a headless EGL context).
     All three agree within 1e-4 relative and give unmodified normals back bit for bit. For many
     edits of one frame (a slider), ``RecompositeSession`` packs and uploads the passes once."""
@@ -737,7 +737,7 @@ class RecompositeSession:
 
     def _backend(self):
         if self.backend == "blender_gpu":
-            from . import blender_gpu as in_blender  # noqa: PLC0415 - not the module-level recomposite_gpu below
+            from . import blender_gpu as in_blender  # noqa: PLC0415
 
             in_blender.ensure_context()
             return in_blender.blender_recompositor()
@@ -837,26 +837,7 @@ def close_render() -> None:
 
 # --- the GLSL path (eqs. 3–5 in shaders/rokeby_recomposite_*.glsl) and its moderngl backend: gl.py ------
 
-from .gl import (  # noqa: E402, F401 - compositing.<name>, as before the split
-    RECOMPOSITE_FILES,
-    RECOMPOSITE_INTERFACE,
-    RECOMPOSITE_INTERFACE_NAME,
-    recomposite_files,
-    recomposite_sources,
-    _gpu_image,
-    _gpu_patches,
-    RecompositeFrame,
-    MAX_K,
-    _check_k,
-    _check_output,
-    recomposite_frame,
-    frame_result,
-    _gl_lib,
-    _CurrentGL,
-    GLRecompositor,
-    gl_recompositor,
-    recomposite_gpu,
-)
+from .gl import _check_k, _check_output, gl_recompositor, recomposite_frame  # noqa: E402
 
 
 # --- normal-editing tools (screen-space normals (H, W, 3); `mask` (H, W) limits the edit) ---------

@@ -2,7 +2,7 @@
 
 The same shader files as the moderngl path (``shaders/rokeby_recomposite_{vert,frag}.glsl``),
 compiled by ``glsl.create_shader`` from the one declared interface
-``compositing.RECOMPOSITE_INTERFACE``; a fullscreen triangle into a ``GPUOffScreen`` with an
+``compositing.gl.RECOMPOSITE_INTERFACE``; a fullscreen triangle into a ``GPUOffScreen`` with an
 RGBA32F colour buffer, read back as float32. Arguments and result are those of
 ``rokeby_native.recomposite``: (image (H, W, 3) float32, {"edited", "masked"}).
 
@@ -48,7 +48,7 @@ def _gpu():
     except SystemError as exc:
         raise NoGPUContext(
             f"Blender's gpu module has no context here ({exc}): in background mode render one frame with "
-            "EEVEE first (rokeby.recomposite_gpu.ensure_context()), or use the CPU path (backend='cpu')") from None
+            "EEVEE first (rokeby.compositing.blender_gpu.ensure_context()), or use the CPU path (backend='cpu')") from None
     return gpu
 
 
@@ -151,7 +151,7 @@ class BlenderRecompositor:
         return self.draw(recomposite_frame(*args, **kw), t0=t0)
 
     def draw(self, f, changed=None, *, t0=None):
-        """Draws the packed frame ``f`` (``compositing.recomposite_frame``). ``changed``: the names of
+        """Draws the packed frame ``f`` (``compositing.gl.recomposite_frame``). ``changed``: the names of
         the textures that differ from the last frame drawn, when that was ``f`` itself (an
         interactive session's, ``compositing.RecompositeSession``): only those are made again, the
         other textures stay on the GPU. None, or a different frame, makes all of them."""

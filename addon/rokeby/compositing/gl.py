@@ -19,7 +19,7 @@ from .errors import CompositingError
 # --- the GLSL path: shaders/rokeby_recomposite_{vert,frag}.glsl ---------------------------------
 
 # The recompositing shader's interface in GPUShaderCreateInfo's terms, declared once: Blender compiles
-# the files in shaders/ (bodies only) with it through ``glsl.create_shader`` (rokeby.recomposite_gpu),
+# the files in shaders/ (bodies only) with it through ``glsl.create_shader`` (rokeby.compositing.blender_gpu),
 # and ``glsl.standalone_from`` makes their #version header for plain OpenGL (moderngl) from it.
 # Every texture is float (ids too: exact below 2^24); RGB data may sit in RGB or RGBA textures.
 RECOMPOSITE_FILES = {"vertex": "rokeby_recomposite_vert.glsl", "fragment": "rokeby_recomposite_frag.glsl"}
@@ -240,7 +240,7 @@ class _CurrentGL:
 
     moderngl makes its own context current; Blender's ``gpu`` module assumes that Blender's is, so
     a moderngl call in a Blender process would send Blender's next draws (the UI, or
-    ``rokeby.recomposite_gpu``) to the wrong context. ``GLRecompositor`` saves whatever is
+    ``rokeby.compositing.blender_gpu``) to the wrong context. ``GLRecompositor`` saves whatever is
     current before it touches moderngl and restores it after."""
 
     _libs = None
@@ -384,5 +384,5 @@ def recomposite_gpu(ids, normals, edited_normals, view, diffuse, reflection, ima
     """Eqs. 3–5 by the GLSL shader (shaders/rokeby_recomposite_frag.glsl): the arguments and the
     result (image (H, W, 3) float32, {"edited", "masked"}) of ``rokeby_native.recomposite``, in
     float32 on the GPU. Runs on a headless moderngl/EGL context made on first use; inside Blender,
-    ``rokeby.recomposite_gpu.recomposite_blender`` draws the same shader through the ``gpu`` module."""
+    ``rokeby.compositing.blender_gpu.recomposite_blender`` draws the same shader through the ``gpu`` module."""
     return gl_recompositor()(ids, normals, edited_normals, view, diffuse, reflection, image, patches, **kw)

@@ -19,7 +19,7 @@ from ..blender.progress import Progress
 from ..core import schema
 from ..core.errors import RokebyError
 
-# What an operator reports when Esc / Ctrl-C / rokeby.native.cancel() stopped it (nothing changed).
+# What an operator reports when Esc / Ctrl-C / rokeby.core.native.cancel() stopped it (nothing changed).
 CANCELLED = "Rokeby: Cancelled (nothing was changed)"
 
 EDITS = [
@@ -159,12 +159,12 @@ class ROKEBY_OT_composite_render(_EditProps, bpy.types.Operator):
         return True
 
     def execute(self, context):
-        from . import workflow  # noqa: PLC0415
+        from . import api  # noqa: PLC0415
 
         path = bpy.path.abspath(self.filepath) if self.filepath else os.path.join(tempfile.gettempdir(), "rokeby_composite.exr")
         try:
             with Progress(context, 1) as progress:  # render, reconstruct, recomposite: seconds
-                img, reports = workflow.recomposite_render(path, scene=context.scene, warn=False, **_edit_args(self, context))
+                img, reports = api.recomposite_render(path, scene=context.scene, warn=False, **_edit_args(self, context))
                 progress.step()
         except KeyboardInterrupt:
             self.report({"WARNING"}, CANCELLED)
@@ -209,11 +209,11 @@ class ROKEBY_OT_composite_edit(_EditProps, bpy.types.Operator):
 
     def _start(self, context):
         """With a window and the CPU backend: read, reconstruct and recomposite on a worker thread
-        while the operator waits modally, so that Esc stops it (rokeby.native.cancel()); the image
+        while the operator waits modally, so that Esc stops it (rokeby.core.native.cancel()); the image
         is made on the main thread once the pixels are there. Otherwise: ``execute``."""
         import threading  # noqa: PLC0415
 
-        from . import workflow  # noqa: PLC0415
+        from . import api  # noqa: PLC0415
 
         args = _edit_args(self, context)
         path = self._path(context)
@@ -224,7 +224,7 @@ class ROKEBY_OT_composite_edit(_EditProps, bpy.types.Operator):
 
         def work():
             try:
-                self._result["ok"] = workflow.recomposite_exr_pixels(path, warn=False, **args)
+                self._result["ok"] = api.recomposite_exr_pixels(path, warn=False, **args)
             except BaseException as exc:  # noqa: BLE001 - handed to the main thread
                 self._result["error"] = exc
 
@@ -241,7 +241,7 @@ class ROKEBY_OT_composite_edit(_EditProps, bpy.types.Operator):
     def modal(self, context, event):
         from ..core import native  # noqa: PLC0415
 
-        from . import workflow  # noqa: PLC0415
+        from . import api  # noqa: PLC0415
 
         if event.type == "ESC":
             native.cancel()  # the worker's native call stops at its next row
@@ -255,7 +255,7 @@ class ROKEBY_OT_composite_edit(_EditProps, bpy.types.Operator):
         out, stats = self._result["ok"]
         img = comp.show_image(self._image_name, out)
         a = self._args
-        workflow.record_edit(img, self._path(context), a["edit"], a["amount"], a["k_d"], a["k_r"], a["fit"], a["noise_tolerance"])
+        api.record_edit(img, self._path(context), a["edit"], a["amount"], a["k_d"], a["k_r"], a["fit"], a["noise_tolerance"])
         return self._done(img, stats)
 
     def _failed(self, exc):
@@ -268,7 +268,7 @@ class ROKEBY_OT_composite_edit(_EditProps, bpy.types.Operator):
         raise exc
 
     def execute(self, context):
-        from . import workflow  # noqa: PLC0415
+        from . import api  # noqa: PLC0415
 
         path = self._path(context)
         if not path:
@@ -276,7 +276,7 @@ class ROKEBY_OT_composite_edit(_EditProps, bpy.types.Operator):
             return {"CANCELLED"}
         try:
             with Progress(context, 1) as progress:  # the first edit of a frame reads and reconstructs it
-                img, stats = workflow.recomposite_exr(path, warn=False, **_edit_args(self, context))
+                img, stats = api.recomposite_exr(path, warn=False, **_edit_args(self, context))
                 progress.step()
         except (KeyboardInterrupt, comp.CompositingError, RokebyError, ValueError, RuntimeError, MemoryError) as exc:
             return self._failed(exc)
@@ -337,7 +337,7 @@ class ROKEBY_OT_composite_sequence(_EditProps, bpy.types.Operator):
         return self.execute(context)
 
     def execute(self, context):
-        from . import workflow  # noqa: PLC0415
+        from . import api  # noqa: PLC0415
 
         try:
             frames = sequence_frames(self.directory, self.pattern)
@@ -363,7 +363,7 @@ class ROKEBY_OT_composite_sequence(_EditProps, bpy.types.Operator):
                     progress.step()
                     continue
                 try:
-                    img, _stats = workflow.recomposite_exr(path, warn=False, **args)
+                    img, _stats = api.recomposite_exr(path, warn=False, **args)
                 except KeyboardInterrupt:  # Ctrl-C / a cancel: the frames done stay, the rest is left
                     comp.close_render()
                     self.report({"WARNING"}, f"Rokeby: Cancelled after {len(done)} frame(s) recomposited into {out_dir} "
@@ -413,10 +413,10 @@ class ROKEBY_OT_composite_to_compositor(bpy.types.Operator):
         return True
 
     def execute(self, context):
-        from . import workflow  # noqa: PLC0415
+        from . import api  # noqa: PLC0415
 
         try:
-            node = workflow.use_in_compositor(self.image_name, scene=context.scene)
+            node = api.use_in_compositor(self.image_name, scene=context.scene)
         except (comp.CompositingError, ValueError) as exc:
             self.report({"ERROR"}, f"Rokeby: {exc}")
             return {"CANCELLED"}

@@ -2,13 +2,13 @@
 images (OpenEXR, and Radiance RGBE ``.hdr`` through the Rust core), reading 8-bit PNG/JPEG ones
 (sRGB-decoded; Blender's image loader), conversions between lat-long, cube, sphere (mirror-ball) and dual-paraboloid
 maps, order-2 SH irradiance, and specular prefiltering across roughness levels — all computed by
-the Rust core (``rokeby_core::envmap``/``prefilter``) through :mod:`rokeby.native`.
+the Rust core (``rokeby_core::envmap``/``prefilter``) through :mod:`rokeby.core.native`.
 
 Arrays are float32 with row 0 the top row of the image file (as OpenEXR reads it); Blender's
 ``Image.pixels`` are bottom-up, :func:`flip_rows` converts. Shapes per layout: latlong (H, W, C),
 cube (6, S, S, C) in the order +X, −X, +Y, −Y, +Z, −Z, sphere (S, S, C), paraboloid (2, S, S, C).
 Lat-long maps use Blender's equirectangular convention (+X at the image centre, as
-:func:`rokeby.reflmap.direction_to_uv`). Formulas, algorithm and measured errors:
+:func:`rokeby.reflection.render.reflmap.direction_to_uv`). Formulas, algorithm and measured errors:
 docs/envmaps.md.
 """
 

@@ -17,6 +17,8 @@ Blender that Rokeby is enabled and is the zip's version (else the job fails ther
 
 from __future__ import annotations
 
+__all__ = ["write_render_job", "write_recomposite_job"]
+
 import json
 import os
 import re

@@ -20,7 +20,7 @@ recomputed; ``stats()`` counts both cases. Geodesic distances are cached per con
 point, and the geodesic solver (with its factorisation) per mesh, so a handle move costs one solve
 for the handle that moved. While a red handle is dragged in a window (``interactive``), that solve
 is replaced by a fast preview (DRAG_UPDATE, else DRAG_METHOD; said in the report); the mirror's own method follows
-when the drag ends, and before any render or save (rokeby.handlers), so only the accurate field is
+when the drag ends, and before any render or save (rokeby.reflection.handlers), so only the accurate field is
 ever rendered or saved.
 
 Shared meshes (Alt+D copies, Ctrl+L ▸ Link Object Data): a mesh used by more than one object
@@ -28,7 +28,7 @@ holds no field. Each mirror using it writes its field to a carrier of its own ("
 <mirror>", owned by that mirror) that its "Rokeby field" modifier copies onto its evaluated mesh,
 so one mirror's edit never overwrites another's and removing one never deletes another's
 (``shares_mesh``, ``ensure_carrier``). Copies of a mirror get handles of their own
-(rokeby.duplicates).
+(rokeby.reflection.duplicates).
 
 Nothing here raises into Blender's handlers: a mirror that cannot be evaluated gets an ERROR
 report (shown in the sidebar) and keeps its previous attribute values; every other mirror still
@@ -47,10 +47,10 @@ import numpy as np
 from ..blender import meshes
 from ..core import meshio, native, vecmath, words
 from ..core import schema
-from .duplicates import shrinkwrap_target  # noqa: F401 - the handles' Shrinkwrap (duplicates: the copies' rule)
+from .duplicates import shrinkwrap_target
 
 ATTRIBUTE = schema.ROTATION_ATTRIBUTE
-# What final renders read (rokeby.shading): the field's view-independent parts per vertex (per
+# What final renders read (rokeby.reflection.render.shading): the field's view-independent parts per vertex (per
 # face corner where a polygon's quaternions straddle the antipodal seam),
 # the region rotation R as a unit quaternion (x, y, z in RENDER_ATTRIBUTE; w and the region weight
 # a in RENDER_ATTRIBUTE_WA as (w, a, 0)). The render nodes form eq. 7's R_a r per shading point for
@@ -81,7 +81,7 @@ DRAG_METHOD = "dijkstra"
 DRAG_UPDATE = True
 DRAG_UPDATE_REACH = 0.15
 DRAG_UPDATE_BEND = 1.2
-# Updates this far apart (seconds) end a drag: the accurate distances follow (rokeby.handlers).
+# Updates this far apart (seconds) end a drag: the accurate distances follow (rokeby.reflection.handlers).
 SETTLE_INTERVAL = 0.25
 # At most this many triangles are sampled for the interpolation-error estimate.
 AGREEMENT_SAMPLES = 4000
@@ -94,7 +94,7 @@ VG_MODIFIER_PREFIX = schema.VG_MODIFIER_PREFIX
 OFF_SURFACE_TOLERANCE = 1e-3
 
 
-from ..core.errors import RokebyError  # noqa: E402, F401 - evaluate.RokebyError, as before
+from ..core.errors import RokebyError  # noqa: E402
 
 
 @dataclass
@@ -112,7 +112,7 @@ class MirrorReport:
     native_ms: float = 0.0
     # The eye the render field is evaluated for: "camera", "frozen" or "none" (view-independent).
     eye: str = "none"
-    # What F12 shows: filled in by rokeby.rendering (True: the edit renders; False: why not).
+    # What F12 shows: filled in by rokeby.reflection.render.rendering (True: the edit renders; False: why not).
     renders: "bool | None" = None
     render_note: str = ""
     # Estimated render-vs-preview difference between vertices, degrees: (99th percentile, max).
@@ -214,7 +214,7 @@ class _State:
         self.refractions: np.ndarray | None = None
         self.field_fingerprints: dict = {}
         # What the reflection field was last computed from (rows, distances or None, regions),
-        # for the viewport preview, which evaluates the same field per pixel (rokeby.viewport).
+        # for the viewport preview, which evaluates the same field per pixel (rokeby.reflection.viewport.draw).
         self.field_inputs: tuple | None = None
         # What the interpolation-error estimate found (kept with the report while nothing changes),
         # when it last ran, and what a deferred one will estimate (None: nothing pending).
@@ -350,7 +350,7 @@ def object_in_scene(obj, scene) -> bool:
     """Whether ``obj`` (a handle or region centre) is still there: not removed, and linked into
     some collection. Deleting with X only unlinks an object that a constraint's pointer still
     uses, so an object whose only users are pointers counts as deleted. Costs no scan of
-    ``scene.objects`` (rokeby.registry); ``scene`` is kept for callers."""
+    ``scene.objects`` (rokeby.reflection.registry); ``scene`` is kept for callers."""
     if obj is None:
         return False
     try:
@@ -1232,7 +1232,7 @@ def write_render_attribute(obj, parts: np.ndarray, state=None, *, ramp: bool = F
     """Write the field's view-independent parts (V, 6) = (x, y, z, w, a, u) for renders
     (RENDER_ATTRIBUTE: x, y, z; RENDER_ATTRIBUTE_WA: (w, a, 0), or with ``ramp`` (one Euclidean
     region) (w, −1, u): the nodes then take a = smoothstep(u) per shading point), what
-    rokeby.shading's node group reads, in two foreach_set calls: per vertex while every
+    rokeby.reflection.render.shading's node group reads, in two foreach_set calls: per vertex while every
     polygon's quaternions share a hemisphere, per face corner otherwise (half turns)."""
     me = obj.data
     if not np.all(np.isfinite(parts)):
@@ -1355,7 +1355,7 @@ def _interpolation_error(geo, parts, eye, rows, kwargs, timer, ramp=False):
     want = np.asarray(want, dtype=np.float64)
     cos = np.einsum("ij,ij->i", got, want) / np.maximum(np.linalg.norm(got, axis=1), 1e-300)
     ang = np.degrees(np.arccos(np.clip(cos, -1.0, 1.0)))
-    # Where e points below the surface, renders fold it back above (rokeby.shading) while the
+    # Where e points below the surface, renders fold it back above (rokeby.reflection.render.shading) while the
     # preview looks it up as it is: those samples are counted apart.
     below = np.einsum("ij,ij->i", want, n) < 0.0
     kept = ang[~below] if (~below).any() else np.zeros(1)

@@ -21,7 +21,7 @@ The evaluator's dirty tracking decides what to recompute. A re-entrance guard ma
 ignore the updates that writing the field itself causes while it runs; ``suspended()`` lets the
 API drive evaluation itself (for example around ``frame_set``).
 
-Heavy scenes: the handlers never scan ``scene.objects``. ``rokeby.registry`` keeps what the add-on
+Heavy scenes: the handlers never scan ``scene.objects``. ``rokeby.reflection.registry`` keeps what the add-on
 owns (mirrors, shadow-edit objects, each mirror's handles, carrier and materials) and is rebuilt
 on load/undo/redo, when the number of objects or a collection changes, and when Rokeby data is
 added or removed; with no Rokeby data an update costs a length and a flag test. Each run first
@@ -37,8 +37,8 @@ import bpy
 from bpy.app.handlers import persistent
 
 from ..blender import compat, hooks
+from ..blender import registry as index
 from . import evaluate, guard, registry
-from .guard import suspended  # noqa: F401 - handlers.suspended(), as before
 from .render import rendering, shading
 
 _busy = False
@@ -90,10 +90,10 @@ def _redraw():
 
 @persistent
 def on_depsgraph_update(scene, depsgraph):
-    registry.note_depsgraph(depsgraph)
+    index.note_depsgraph(depsgraph)
     if _busy or guard.active():
         return
-    with registry.pinned():  # objects counted once per update
+    with index.pinned():  # objects counted once per update
         if registry.has_data():  # else nothing is looked at: heavy scenes pay nothing
             _on_depsgraph_update(scene, depsgraph)
 
@@ -164,7 +164,7 @@ def _sync_materials(ids):
 
 @persistent
 def on_frame_change(scene, depsgraph):
-    with registry.pinned():
+    with index.pinned():
         if registry.has_data():
             _run(scene, depsgraph, all_geometry=True)
 
@@ -187,7 +187,7 @@ def on_render_pre(scene, *_args):
     depsgraph = _depsgraph_of(scene)
     if depsgraph is None:
         return
-    with registry.pinned():
+    with index.pinned():
         if registry.has_data():
             _run(scene, depsgraph, all_geometry=True)
 
@@ -224,7 +224,7 @@ def settle_previews(scene=None) -> int:
         depsgraph = _depsgraph_of(sc) if mirrors else None
         if depsgraph is None:
             continue
-        with registry.pinned():
+        with index.pinned():
             _run(sc, depsgraph)
         done += len(mirrors) - len(evaluate.previews(sc))
     return done

@@ -14,10 +14,10 @@ import bpy
 import numpy as np
 from bpy.props import BoolProperty, EnumProperty, FloatProperty, FloatVectorProperty, IntProperty, StringProperty
 
-from . import edit as api  # reflection editing's entry points (rokeby.api re-exports them)
+from . import api  # reflection editing's entry points (rokeby.api re-exports their __all__)
 from . import evaluate
 from ..core import words
-from .evaluate import RokebyError
+from ..core.errors import RokebyError
 from ..blender.progress import Progress
 from .props import CONSTRAINT_KINDS, METRICS, REGION_KINDS
 
@@ -371,7 +371,7 @@ class ROKEBY_OT_freeze(_Op, bpy.types.Operator):
     action: EnumProperty(name="Action", items=[("TOGGLE", "Toggle", "", 0), ("FREEZE", "Freeze", "", 1), ("UNFREEZE", "Unfreeze", "", 2)], default="TOGGLE")
 
     def run(self, context, mirror):
-        api._require_mirror(mirror)
+        evaluate.require_mirror(mirror)
         frozen = {"TOGGLE": not mirror.rokeby.freeze, "FREEZE": True, "UNFREEZE": False}[self.action]
         eye = None
         if frozen and not len(mirror.rokeby.constraints):
@@ -392,7 +392,7 @@ class ROKEBY_OT_distance_set(_Op, bpy.types.Operator):
     metric: EnumProperty(name="Distance", items=[(m[0], m[1], m[2], i) for i, m in enumerate(METRICS)], default="GEODESIC")
 
     def run(self, context, mirror):
-        api._require_mirror(mirror)
+        evaluate.require_mirror(mirror)
         with Progress(context, 2) as progress:
             mirror.rokeby.metric = self.metric
             progress.step()
@@ -460,7 +460,7 @@ class ROKEBY_OT_reflection_map(_Op, bpy.types.Operator):
     def run(self, context, mirror):
         from .render import reflmap  # noqa: PLC0415
 
-        api._require_mirror(mirror)
+        evaluate.require_mirror(mirror)
         if self.action == "CLEAR":
             reflmap.clear(mirror)
             return

@@ -90,7 +90,7 @@ def _refcounts(found) -> dict:
 
 
 def of_mirrors(obj=None, *_args, **_kwargs) -> list:
-    """For ``transaction.atomic(materials=registry.of_mirrors)``: the materials of ``obj`` and of every mirror (the
+    """For ``transaction.atomic(materials=pointers.of_mirrors)``: the materials of ``obj`` and of every mirror (the
     render nodes of all of them may be synced)."""
     obs = [*mirrors(), obj]
     out = []

@@ -5,7 +5,7 @@ collections on that object; the handles are ordinary empties, so they move, pare
 keyframe like any object. Every number here is animatable (Blender's default for properties of ID
 data), so radii, borders and the freeze eye can be keyed on the timeline.
 
-Property updates only mark the scene for re-evaluation; the work happens in ``rokeby.evaluate``.
+Property updates only mark the scene for re-evaluation; the work happens in ``rokeby.reflection.evaluate``.
 """
 
 from __future__ import annotations
@@ -253,7 +253,7 @@ class RokebyMirror(PropertyGroup):
     active_constraint: IntProperty(name="Active constraint", default=0, min=0)
     regions: CollectionProperty(type=RokebyRegion, name="Regions")
     active_region: IntProperty(name="Active region", default=0, min=0)
-    # Reflection-map mode (rokeby.reflmap); captured on demand, not re-evaluated.
+    # Reflection-map mode (rokeby.reflection.render.reflmap); captured on demand, not re-evaluated.
     render_mode: EnumProperty(name="Render mode", items=RENDER_MODES, default="RAY_TRACED")
     map_resolution: EnumProperty(name="Map resolution", description="Width of the captured panorama (height is half): sharper reflections against capture time", items=MAP_RESOLUTIONS, default="512")
     map_samples: IntProperty(name="Capture samples", description="Cycles samples of the capture", default=32, min=1, soft_max=1024)
@@ -261,7 +261,7 @@ class RokebyMirror(PropertyGroup):
     map_image: PointerProperty(type=bpy.types.Image, name="Reflection map", description="The captured lat-long panorama (Blender's equirectangular convention)")
     map_levels: CollectionProperty(type=RokebyImageRef, name="Blurred levels")
     map_fingerprint: StringProperty(name="Captured scene", options={"HIDDEN"})
-    # Stable per-mirror id in the map's file names (rokeby.reflmap.map_stem): unique where names
+    # Stable per-mirror id in the map's file names (rokeby.reflection.render.reflmap.map_stem): unique where names
     # are not (``Ball.L`` / ``Ball_L``); a copy that inherits it gets its own on its first capture.
     map_id: StringProperty(name="Map id", options={"HIDDEN"})
     map_capture_seconds: FloatProperty(name="Capture time", subtype="TIME_ABSOLUTE", unit="TIME_ABSOLUTE", min=0.0)

@@ -25,11 +25,9 @@ import bpy
 
 from ..blender import registry as index
 from ..blender import transaction
-from ..blender.registry import ensure, in_scene, note_depsgraph, pinned  # noqa: F401 - the index, as before
 from ..core import schema
 from . import pointers
-from .pointers import (  # noqa: F401 - the mirrors and their pointers, as before
-    MIRROR_KIND, _is_mirror, _pointers, _refcounts, invalidate, mirrors, of_mirrors, pointer_counts, pointers_changed)
+from .pointers import _pointers, _refcounts, mirrors, pointers_changed
 from .render import rendering
 
 # On handles and region centres the add-on made (api); older files: membership of HANDLE_COLLECTION.

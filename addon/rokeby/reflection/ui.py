@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import bpy
 
-from . import edit as api  # reflection editing's entry points (rokeby.api re-exports them)
+from . import api  # reflection editing's entry points (rokeby.api re-exports their __all__)
 from . import evaluate
 from ..core import native, words
 from .viewport import draw as viewport

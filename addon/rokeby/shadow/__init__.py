@@ -1,6 +1,6 @@
 """Freeform shadow boundary editing (Mattausch, Igarashi, Wimmer) in Blender.
 
-The numerics run in Rust (``rokeby_native.ShadowEditor`` through :mod:`rokeby.native`): smooth
+The numerics run in Rust (``rokeby_native.ShadowEditor`` through :mod:`rokeby.core.native`): smooth
 silhouette loops of the caster from the light, shadow handles by ray casting, MLS boundary
 deformation and the Laplacian shadow mesh. This module turns Blender objects into the arrays it
 needs (evaluated meshes in world space, read with foreach_get) and the result back into Blender:

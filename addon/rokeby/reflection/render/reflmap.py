@@ -47,7 +47,7 @@ from . import shading
 from ... import envmaps
 from ...blender import transaction
 from .. import evaluate
-from ..evaluate import RokebyError
+from ...core.errors import RokebyError
 from ...core import latlong, schema
 
 # Widths of the panorama (height = width / 2); the UI offers these, the API any power of two.
@@ -126,7 +126,7 @@ def prefilter(px: np.ndarray, roughness_levels=ROUGHNESS_LEVELS) -> list:
 
 
 def _of_mirrors(*args, **kwargs) -> list:
-    """The materials an operation on mirrors may edit (registry.of_mirrors)."""
+    """The materials an operation on mirrors may edit (pointers.of_mirrors)."""
     from .. import pointers  # noqa: PLC0415
 
     return pointers.of_mirrors(*args, **kwargs)

@@ -44,7 +44,7 @@ Materials (``install``/``uninstall``):
   passes through the group.
 * Glass BSDF: it reflects and refracts with one normal, so it is split into
   Mix(Fresnel(IOR), Refraction(n'_t), Glossy), with the Glass's colour, roughness, IOR and
-  distribution (the Glossy's normal is the original one, or n' from rokeby.shading when that
+  distribution (the Glossy's normal is the original one, or n' from rokeby.reflection.render.shading when that
   installs too, so Glass reflections follow reflection edits and its refractions refraction edits).
   For sharp glass (roughness 0) this is the same sum Cycles' Glass evaluates; for rough glass the
   Fresnel factor is taken at the shading normal instead of per microfacet (a small difference).
@@ -387,7 +387,7 @@ def _unsplit(tree, glass) -> None:
     sid = glass.get(SPLIT_ID)
     parts = [nd for nd in tree.nodes if _ours(nd) and nd.get(SOURCE) == sid]
     names = {nd.name for nd in parts}
-    # Edited-normal groups of rokeby.shading that feed only the parts (the Glossy's n') go too.
+    # Edited-normal groups of rokeby.reflection.render.shading that feed only the parts (the Glossy's n') go too.
     for part in list(parts):
         for sock in part.inputs:
             for lk in sock.links:

@@ -3,11 +3,11 @@ in sync with its materials after each evaluation.
 
 A mirror whose final-render edits are on (``rokeby.render_edits``, the default), that is enabled
 and has at least one enabled constraint gets the render nodes of its ``render_mode`` in each of
-its edited materials (rokeby.shading for ray-traced reflections, rokeby.reflmap for reflection-map
-mode, rokeby.refraction for refraction BSDFs). This happens when the mirror gains its first
+its edited materials (rokeby.reflection.render.shading for ray-traced reflections, rokeby.reflection.render.reflmap for reflection-map
+mode, rokeby.reflection.render.refraction for refraction BSDFs). This happens when the mirror gains its first
 constraint, when a material is assigned or swapped, when a slot is added, and when a material's
 node tree changes; a Principled or Glossy BSDF inside a node group is edited through a copy of the
-group local to that material, so the group used elsewhere stays unedited (rokeby.shading).
+group local to that material, so the group used elsewhere stays unedited (rokeby.reflection.render.shading).
 
 A material keeps its nodes while any mirror using it has final-render edits on. When none does
 (Edit Final Renders turned off, the mirror removed), the nodes come out again and the material is
@@ -25,7 +25,7 @@ material slots), so an update costs a tuple comparison per mirror.
 from __future__ import annotations
 
 from . import reflmap, refraction, shading
-from ..evaluate import RokebyError
+from ...core.errors import RokebyError
 
 _KEYS: dict = {}
 _NOTES: dict = {}

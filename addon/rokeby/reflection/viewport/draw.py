@@ -24,6 +24,7 @@ import numpy as np
 import bpy
 
 from ...blender import compat
+from ...blender.gpu import create_shader
 from .. import evaluate
 from . import glsl, gpu_capture, scene_env
 from ...core import schema
@@ -66,7 +67,7 @@ def shader():
     global _shader, _shader_error
     if _shader is None and _shader_error is None:
         try:
-            _shader = glsl.create_shader(glsl.INTERFACE, glsl.INTERFACE_NAME, glsl.read_sources())
+            _shader = create_shader(glsl.INTERFACE, glsl.INTERFACE_NAME, glsl.read_sources())
         except Exception as exc:  # noqa: BLE001 - a driver's compile error, a missing file
             _shader_error = f"shader: {type(exc).__name__}: {exc}"
             _report("shader", _shader_error)

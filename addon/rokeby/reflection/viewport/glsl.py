@@ -1,6 +1,6 @@
 """The viewport preview's shader as data: where its GLSL files are, what they declare, and how the
 per-pixel field's inputs are packed for them. No ``gpu`` and no ``bpy`` here, so the moderngl tests
-and the Blender draw handler (``rokeby.viewport``) share every line of it.
+and the Blender draw handler (``rokeby.reflection.viewport.draw``) share every line of it.
 
 The GLSL lives in ``shaders/`` (see shaders/README.md):
 
@@ -21,9 +21,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ...blender.gpu import create_shader  # noqa: F401 - glsl.create_shader, as before
 from ...core import vecmath
-from ...core.shaders import shader_dir, standalone_from, standalone_header  # noqa: F401 - re-exported
+from ...core.shaders import shader_dir, standalone_from
 
 FILES = {
     "types": "rokeby_field_types.glsl",

@@ -1,5 +1,6 @@
 """Reflection editing's entry points, used by its operators and, through ``rokeby.api`` (which
-re-exports every name here), by background scripts.
+re-exports the names of ``__all__``), by background scripts. The names starting with ``_`` are
+this module's helpers, not part of the API.
 
 Data moves as numpy arrays (``foreach_get``/``foreach_set``), never with Python loops over
 vertices. Functions that need Blender import ``bpy`` lazily, so the maths helpers work in any
@@ -9,13 +10,11 @@ Python with numpy and rokeby_native.
 from __future__ import annotations
 
 import hashlib
-import time
 from collections import OrderedDict
-from dataclasses import dataclass
 
 import numpy as np
 
-from ..core import native, schema, vecmath, words
+from ..core import native, schema, vecmath
 from ..blender import meshes, transaction
 
 __all__ = [
@@ -57,6 +56,8 @@ __all__ = [
     "stored_refraction",
     "set_ior",
     "ior_from_material",
+    "physical_highlight",
+    "add_highlight_constraint",
     "stats",
     "reset_stats",
     "RokebyError",
@@ -65,7 +66,7 @@ __all__ = [
 
 
 def _cancellable(fn):
-    """``fn`` is an operation ``rokeby.native.cancel()`` can stop (KeyboardInterrupt; an
+    """``fn`` is an operation ``rokeby.core.native.cancel()`` can stop (KeyboardInterrupt; an
     operator's Esc, Ctrl-C): see ``native.cancellable``."""
     import functools  # noqa: PLC0415
 
@@ -192,14 +193,12 @@ def geodesic_distances(vertices, faces, sources, *, method: str = DEFAULT_GEODES
 
 
 # --- the scene model: mirrors, constraints and regions as Blender data ---------------------------
-# Everything below needs Blender. The operators in rokeby.operators are thin wrappers of these
+# Everything below needs Blender. The operators in rokeby.reflection.operators are thin wrappers of these
 # functions, and background scripts (render farms, pipelines) call them directly.
 
 from . import evaluate as _ev  # noqa: E402 - aliased: api.evaluate is a function
-from .evaluate import ATTRIBUTE, MirrorReport, RokebyError, rotate  # noqa: E402
-from .registry import of_mirrors as _of_mirrors  # noqa: E402
-
-HANDLE_COLLECTION = schema.HANDLE_COLLECTION
+from .evaluate import MirrorReport, RokebyError, rotate  # noqa: E402
+from .pointers import of_mirrors as _of_mirrors  # noqa: E402
 
 
 def _scene(scene):
@@ -231,10 +230,6 @@ def _camera_eye(scene) -> tuple:
     return tuple(scene.camera.matrix_world.translation)
 
 
-_check_mirror = _ev.check_mirror  # reflection.evaluate: a mesh mirror that can be edited
-_require_mirror = _ev.require_mirror
-
-
 def mirror_of(obj, scene=None):
     """The mirror ``obj`` belongs to: itself if it is a mirror, else the mirror whose constraint
     handle or region centre it is (None when it is neither)."""
@@ -255,7 +250,7 @@ def add_mirror(obj, *, metric: str = "EUCLIDEAN", geodesic_method: str = DEFAULT
     """Make the mesh object ``obj`` a Rokeby mirror (its reflections become editable). New mirrors
     measure geodesics on the dense geodesic graph (DENSE_GRAPH, rokeby_native's default method
     too); the property's own default, which files saved without the setting read back, stays HEAT."""
-    _check_mirror(obj)
+    _ev.check_mirror(obj)
     s = obj.rokeby
     for prop, value in (("metric", metric), ("geodesic_method", geodesic_method), ("polar", polar)):
         allowed = [item.identifier for item in s.bl_rna.properties[prop].enum_items]
@@ -270,9 +265,9 @@ def add_mirror(obj, *, metric: str = "EUCLIDEAN", geodesic_method: str = DEFAULT
 def _handle_collection(scene):
     import bpy  # noqa: PLC0415
 
-    coll = bpy.data.collections.get(HANDLE_COLLECTION)
+    coll = bpy.data.collections.get(schema.HANDLE_COLLECTION)
     if coll is None or coll.library is not None:
-        coll = bpy.data.collections.new(HANDLE_COLLECTION)
+        coll = bpy.data.collections.new(schema.HANDLE_COLLECTION)
     if scene.collection.children.get(coll.name) is None and coll not in scene.collection.children_recursive:
         scene.collection.children.link(coll)
     return coll
@@ -289,14 +284,12 @@ def _new_empty(scene, name, location, display, size, color):
     ob.show_name = False
     from .registry import MADE_KEY  # noqa: PLC0415
 
-    ob[MADE_KEY] = True  # goes with the last mirror that uses it (rokeby.registry)
+    ob[MADE_KEY] = True  # goes with the last mirror that uses it (rokeby.reflection.registry)
     _handle_collection(scene).objects.link(ob)
     return ob
 
 
 def _remove_objects(objs):
-    import bpy  # noqa: PLC0415
-
     from . import registry  # noqa: PLC0415
 
     for ob in objs:
@@ -344,7 +337,7 @@ def add_constraint(mirror, surface_point, reflected_point=None, *, eye=None, vie
     total internal reflection there (η < 1).
     """
     scene = _scene(scene)
-    _require_mirror(mirror)
+    _ev.require_mirror(mirror)
     from .props import CONSTRAINT_KINDS  # noqa: PLC0415 - Blender only
 
     kinds = [item[0] for item in CONSTRAINT_KINDS]
@@ -444,7 +437,7 @@ def _made_here(ob) -> bool:
 def remove_constraint(mirror, index: int, *, delete_handles: bool = True, scene=None):
     """Remove constraint ``index``; its handles are deleted unless another item uses them."""
     scene = _scene(scene)
-    _require_mirror(mirror)
+    _ev.require_mirror(mirror)
     i = _index(mirror.rokeby.constraints, index, "constraint")
     c = mirror.rokeby.constraints[i]
     handles = [h for h in (c.surface_handle, c.target_handle) if h is not None]
@@ -454,7 +447,7 @@ def remove_constraint(mirror, index: int, *, delete_handles: bool = True, scene=
     _remove_objects(doomed)
 
 
-# The reader modifier of free-form regions lives with the region code (rokeby.evaluate), which
+# The reader modifier of free-form regions lives with the region code (rokeby.reflection.evaluate), which
 # keeps it live: remade when applied or removed, repointed when the vertex group is renamed.
 _vertex_group_reader = _ev.vertex_group_reader
 
@@ -481,7 +474,7 @@ def add_region(mirror, kind: str = "EUCLIDEAN", *, center=None, radius: float = 
     import bpy  # noqa: PLC0415
 
     scene = _scene(scene)
-    _require_mirror(mirror)
+    _ev.require_mirror(mirror)
     if kind not in ("EUCLIDEAN", "GEODESIC", "FREEFORM"):
         raise RokebyError(f"kind: '{kind}' is not one of EUCLIDEAN, GEODESIC, FREEFORM")
     for what, x in (("radius", radius), ("border", border)):
@@ -541,7 +534,7 @@ def remove_region(mirror, index: int, *, delete_center: bool = True, scene=None)
     """Remove region ``index`` (and its centre empty when the add-on made it and nothing else
     uses it; an object of the artist's own given as ``center`` stays)."""
     scene = _scene(scene)
-    _require_mirror(mirror)
+    _ev.require_mirror(mirror)
     i = _index(mirror.rokeby.regions, index, "region")
     rg = mirror.rokeby.regions[i]
     doomed = [rg.center] if (delete_center and rg.center is not None and _handle_users(scene, rg.center, skip=rg) == 0
@@ -575,7 +568,7 @@ def remove_mirror(mirror, *, scene=None):
     from .render import rendering  # noqa: PLC0415
 
     scene = _scene(scene)
-    _require_mirror(mirror)
+    _ev.require_mirror(mirror)
     materials = rendering.edited_materials(mirror)
     while len(mirror.rokeby.constraints):
         remove_constraint(mirror, len(mirror.rokeby.constraints) - 1, scene=scene)
@@ -601,11 +594,11 @@ def evaluate(scene=None, frame=None, *, force: bool = False) -> "dict[str, Mirro
     """Bring every mirror of ``scene`` up to date (at ``frame`` when given, which may be
     fractional) and return a report per mirror. Only mirrors whose inputs changed are recomputed,
     unless ``force``. Never raises for a bad mirror: its report says what is wrong."""
-    from . import handlers  # noqa: PLC0415
+    from . import guard  # noqa: PLC0415
 
     global _SETTING_FRAME
     scene = _scene(scene)
-    with handlers.suspended():
+    with guard.suspended():
         if frame is not None:
             try:
                 f = float(frame)
@@ -635,7 +628,7 @@ def evaluate(scene=None, frame=None, *, force: bool = False) -> "dict[str, Mirro
         reports = _ev.evaluate_scene(scene, dg, force=force, geometry_changed=edited, all_geometry=frame is not None)
         from .render import rendering  # noqa: PLC0415
 
-        # Final renders follow: render nodes in every edited material (see rokeby.rendering).
+        # Final renders follow: render nodes in every edited material (see rokeby.reflection.render.rendering).
         rendering.sync_scene(scene, reports, force=force)
         return reports
 
@@ -675,7 +668,7 @@ def stored_refraction(mirror) -> "np.ndarray | None":
 def set_ior(mirror, ior: float):
     """Set the index of refraction refraction constraints and the render nodes use for ``mirror``
     (outside → inside; glass about 1.45–1.5). Must be finite and > 0."""
-    _require_mirror(mirror)
+    _ev.require_mirror(mirror)
     mirror.rokeby.ior = _ev.valid_ior(ior)
 
 
@@ -685,7 +678,7 @@ def ior_from_material(mirror, material=None) -> float:
     order). The IOR must be a plain value, not linked. Returns the IOR now set."""
     from .render import refraction  # noqa: PLC0415
 
-    _require_mirror(mirror)
+    _ev.require_mirror(mirror)
     materials = [material] if material is not None else edited_materials(mirror)
     problems = []
     for mat in materials:
@@ -715,13 +708,13 @@ def edited_materials(mirror) -> list:
     subset was chosen with ``set_edited_materials``."""
     from .render import rendering  # noqa: PLC0415
 
-    _require_mirror(mirror)
+    _ev.require_mirror(mirror)
     return rendering.edited_materials(mirror)
 
 
 def set_edited_materials(mirror, materials=None):
     """Edit the reflections of ``materials`` only (None: all of the mirror's materials)."""
-    _require_mirror(mirror)
+    _ev.require_mirror(mirror)
     s = mirror.rokeby
     if materials is None:
         s.all_materials = True
@@ -744,17 +737,17 @@ def set_edited_materials(mirror, materials=None):
 def install_render_nodes(mirror) -> int:
     """Make final renders (Cycles; EEVEE uses the same nodes) show the edit now. Evaluation does
     this by itself for every mirror with a constraint while its ``render_edits`` is on (the
-    default; this call turns it on): see rokeby.rendering. In the mirror's
+    default; this call turns it on): see rokeby.reflection.render.rendering. In the mirror's
     ``render_mode``: RAY_TRACED — the node group "Rokeby Edited Normal" feeds the edited normal
-    to the specular BSDFs of every edited material (see rokeby.shading); REFLECTION_MAP — their
-    specular lobe becomes a lookup of the captured map in the edited direction (rokeby.reflmap;
+    to the specular BSDFs of every edited material (see rokeby.reflection.render.shading); REFLECTION_MAP — their
+    specular lobe becomes a lookup of the captured map in the edited direction (rokeby.reflection.render.reflmap;
     capture it first with ``capture_reflection_map``). The other mode's nodes are taken out.
     Returns how many BSDF inputs (ray traced) or BSDFs (reflection map) were rewired. In both
     modes "Rokeby Edited Refraction Normal" feeds Refraction BSDFs and split Glass BSDFs first
-    (rokeby.refraction; counted too), so a split Glass's reflection part is edited as well."""
+    (rokeby.reflection.render.refraction; counted too), so a split Glass's reflection part is edited as well."""
     from .render import rendering  # noqa: PLC0415
 
-    _require_mirror(mirror)
+    _ev.require_mirror(mirror)
     count = rendering.install(mirror)
     mirror.rokeby.render_edits = True
     return count
@@ -768,7 +761,7 @@ def remove_render_nodes(mirror) -> int:
     its materials that no other mirror keeps."""
     from .render import rendering  # noqa: PLC0415
 
-    _check_mirror(mirror)
+    _ev.check_mirror(mirror)
     mats = {slot.material for slot in mirror.material_slots if slot.material is not None}
     if not mirror.rokeby.is_mirror:
         # A former mirror (Remove Mirror): its materials lose nodes no remaining mirror keeps.
@@ -776,7 +769,7 @@ def remove_render_nodes(mirror) -> int:
 
         kept = {mat for ob in registry.mirrors() if ob.type == "MESH" and rendering.kept(ob) for mat in rendering.edited_materials(ob)}
         return sum(rendering.uninstall_material(mat) for mat in mats if mat not in kept)
-    # Each material is checked before anything changes (rokeby.shading refuses a split BSDF it
+    # Each material is checked before anything changes (rokeby.reflection.render.shading refuses a split BSDF it
     # cannot rebuild); render_edits goes off once the nodes are out.
     count = sum(rendering.uninstall_material(mat) for mat in mats)
     mirror.rokeby.render_edits = False
@@ -791,7 +784,7 @@ def capture_reflection_map(mirror, *, resolution=None, samples=None, storage: st
     default: the mirror's ``map_resolution``); ``samples``: Cycles samples (default
     ``map_samples``); ``storage``: 'AUTO' (an OpenEXR cache in //rokeby_maps/ when the .blend is
     saved, else packed), 'FILE' or 'PACK'. Materials already in reflection-map mode show the new
-    map at once. Returns the image. See rokeby.reflmap."""
+    map at once. Returns the image. See rokeby.reflection.render.reflmap."""
     from .render import reflmap  # noqa: PLC0415
 
     return reflmap.capture(mirror, resolution=resolution, samples=samples, storage=storage, scene=scene)
@@ -807,16 +800,16 @@ def capture_preview_scene(mirror, *, width: int = 256, samples: int = 16, denois
     rokeby.reflection.viewport.scene_env."""
     from .viewport import scene_env  # noqa: PLC0415
 
-    _require_mirror(mirror)
+    _ev.require_mirror(mirror)
     return scene_env.capture(mirror, _scene(scene), width=width, samples=samples, denoise=denoise)
 
 
 def reflection_map(mirror):
     """The captured lat-long image of ``mirror`` (Blender's equirectangular convention:
-    ``rokeby.reflmap.direction_to_uv``), or None."""
+    ``rokeby.reflection.render.reflmap.direction_to_uv``), or None."""
     from .render import reflmap  # noqa: PLC0415
 
-    _require_mirror(mirror)
+    _ev.require_mirror(mirror)
     return reflmap.image_for(mirror)
 
 
@@ -824,7 +817,7 @@ def freeze(mirror, frozen: bool = True, *, eye=None):
     """Freeze (or unfreeze) ``mirror``: while frozen, reflected directions are evaluated from a
     fixed eye — ``eye`` if given, else the active constraint's generating eye — instead of
     following the camera."""
-    _require_mirror(mirror)
+    _ev.require_mirror(mirror)
     s = mirror.rokeby
     if frozen:
         if eye is None:
@@ -841,7 +834,7 @@ def freeze(mirror, frozen: bool = True, *, eye=None):
 def constraint_view(mirror, index: "int | None" = None) -> dict:
     """The generating view of a constraint (default: the active one): location, rotation
     (w, x, y, z), distance, perspective and eye, as stored when it was made."""
-    _require_mirror(mirror)
+    _ev.require_mirror(mirror)
     s = mirror.rokeby
     i = _index(s.constraints, s.active_constraint if index is None else index, "constraint")
     c = s.constraints[i]
@@ -859,7 +852,7 @@ def edited_reflections(mirror, eye=None, *, scene=None) -> np.ndarray:
     r(q) reflected from the frozen eye when the mirror is frozen, else from ``eye`` (default: the
     scene camera). This is what a renderer shows at each vertex."""
     scene = _scene(scene)
-    _require_mirror(mirror)
+    _ev.require_mirror(mirror)
     s = mirror.rokeby
     if s.freeze:
         eye = tuple(s.freeze_eye)
@@ -898,7 +891,7 @@ def physical_highlight(mirror, light, eye=None, *, scene=None) -> np.ndarray:
     BRDF seen from ``eye`` (default: the scene camera): the visible, lit vertex whose reflected view
     ray points most nearly at the light, refined to the surface point where it points at it."""
     scene = _scene(scene)
-    _require_mirror(mirror)
+    _ev.require_mirror(mirror)
     if light is None or getattr(light, "type", None) != "LIGHT":
         raise RokebyError(f"light: '{getattr(light, 'name', light)}' is not a light object")
     if eye is None:
@@ -969,7 +962,7 @@ def add_highlight_constraint(mirror, light, surface_point=None, *, eye=None, nam
     handle to move the highlight, add a second one to stretch it. Only the specular lobe changes:
     shadows stay where they are (the shading normal does not move shadow rays). Returns the index."""
     scene = _scene(scene)
-    _require_mirror(mirror)
+    _ev.require_mirror(mirror)
     if surface_point is None:
         surface_point = physical_highlight(mirror, light, eye, scene=scene)
     sp, geo, _dg = _surface_of(mirror, scene, surface_point)

@@ -1,10 +1,20 @@
 """The compositing feature's entry points for scripts and operators (Zubiaga et al. 2016): render
-with the passes, reconstruct, edit the normals, recomposite and show the frame; re-exported by
-``rokeby.api``. Bad arguments are ``RokebyError`` (a ValueError) naming them, checked before any
-rendering or reading.
+with the passes, reconstruct, edit the normals, recomposite and show the frame; ``rokeby.api``
+re-exports the names of ``__all__``. Bad arguments are ``RokebyError`` (a ValueError) naming them,
+checked before any rendering or reading.
 """
 
 from __future__ import annotations
+
+__all__ = [
+    "setup_compositing_passes",
+    "recomposite_render",
+    "recomposite_exr",
+    "recomposite_exr_pixels",
+    "use_in_compositor",
+    "open_normal_brush",
+    "paint_normals",
+]
 
 import time
 
@@ -14,7 +24,7 @@ from ..core.errors import RokebyError
 
 
 def _cancellable(fn):
-    """``fn`` is an operation ``rokeby.native.cancel()`` can stop (see ``native.cancellable``)."""
+    """``fn`` is an operation ``rokeby.core.native.cancel()`` can stop (see ``native.cancellable``)."""
     import functools  # noqa: PLC0415
 
     @functools.wraps(fn)
@@ -97,7 +107,7 @@ def recomposite_exr_pixels(path: str, *, edit: str = "emboss", amount: float = 0
                            backend: str = "cpu", warn: bool = True, fit: str = "qp", noise_tolerance: float = 0.0):
     """``recomposite_exr`` without showing the result: returns (pixels (H, W, 3) float32, stats)
     and touches no Blender data, so with the 'cpu' backend it may run on a worker thread (the
-    Recomposite Render operator does, stopping on Esc through ``rokeby.native.cancel()``)."""
+    Recomposite Render operator does, stopping on Esc through ``rokeby.core.native.cancel()``)."""
     if edit not in comp.EDITS:  # before reading the file
         raise RokebyError(f"edit: unknown {edit!r} (expected one of {', '.join(map(repr, comp.EDITS))})")
     _check_fit(fit, noise_tolerance)
