@@ -11,7 +11,7 @@ use pyo3::prelude::*;
 use pyo3::types::{PyDict, PyList};
 use rokeby_core::shadows::mls2d::MlsStyle;
 use rokeby_core::shadows::shadow::{Drag, Handle, ShadowEditor as CoreEditor};
-use rokeby_core::shadows::shadow_mesh::falloff;
+use rokeby_core::shadows::shadow_mesh::falloff_factor;
 use rokeby_core::shadows::silhouette::{silhouettes, ClosedMesh, Light, SilhouetteLoop};
 use std::sync::Mutex;
 
@@ -193,7 +193,7 @@ pub fn shadow_falloff(
 ) -> PyResult<f64> {
     let a = DVec3::from_array(parse_vec3(l_initial, "l_initial")?);
     let b = DVec3::from_array(parse_vec3(l_current, "l_current")?);
-    falloff(a, b, beta).map_err(core_err)
+    falloff_factor(a, b, beta).map_err(core_err)
 }
 
 /// ShadowEditor(vertices, faces, receiver_vertices, receiver_faces, *, light_position=None,
