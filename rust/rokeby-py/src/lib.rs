@@ -6,19 +6,20 @@
 //! `ValueError`, memory → `MemoryError`, numerical failure → `NumericalError` (a `RuntimeError`),
 //! cancelled → `KeyboardInterrupt`, internal bug or panic → `RuntimeError`.
 
-//! One binding file per area of the core: [`field`] (reflection), [`geodesic`] (geometry),
-//! [`environment`] (envmap), [`compositing`], [`shadow`], [`openexr`] (EXR files); [`convert`] and [`errors`] are shared.
+//! One binding file per area of the core, named as the core names it: [`reflection`],
+//! [`geometry`], [`envmaps`], [`shadows`], [`compositing`] and [`exr_io`]; [`convert`] and
+//! [`errors`] are shared.
 
 use pyo3::prelude::*;
 
 mod compositing;
 mod convert;
-mod environment;
+mod envmaps;
 mod errors;
-mod field;
-mod geodesic;
-mod openexr;
-mod shadow;
+mod exr_io;
+mod geometry;
+mod reflection;
+mod shadows;
 
 pub(crate) use convert::{f32_array, i64_array, parse_vec3, shape_str, F32Array};
 pub(crate) use errors::{core_err, run_cancellable, run_detached, NumericalError};
@@ -42,11 +43,11 @@ fn rokeby_native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     let _ = numpy::PyArray1::<f32>::zeros(m.py(), 0, false);
     m.add("NumericalError", m.py().get_type::<NumericalError>())?;
     m.add_function(wrap_pyfunction!(cancel, m)?)?;
-    field::register(m)?;
-    geodesic::register(m)?;
+    reflection::register(m)?;
+    geometry::register(m)?;
     compositing::register(m)?;
-    environment::register(m)?;
-    shadow::register(m)?;
-    openexr::register(m)?;
+    envmaps::register(m)?;
+    shadows::register(m)?;
+    exr_io::register(m)?;
     Ok(())
 }
