@@ -10,7 +10,7 @@ PIP     := $(PY) -m pip
 SHARED  ?= $(abspath ../shared)
 export ROKEBY_SHARED := $(SHARED)
 
-RUST_SRC := Cargo.toml pyproject.toml $(wildcard rust/*/Cargo.toml) $(shell find rust -name '*.rs' 2>/dev/null)
+RUST_SRC := Cargo.toml pyproject.toml $(wildcard rust/*/Cargo.toml) $(shell find rust -name '*.rs' 2>/dev/null) $(wildcard python/rokeby_native/*)
 
 .PHONY: ci-phase2 test-gui gui-root all demo dist test test-blender test-matrix bench cargo-test pytest native venv clean help fuzz fuzz-py lint
 

@@ -41,22 +41,22 @@ def workload(site: str, part: str) -> None:
         nrm = np.zeros_like(pos)
         nrm[..., 2] = 1
         c = random_constraints(rng, 8, spread=0.5, max_edit=0.7, min_edit=0.1)
-        rn.edited_directions(pos, nrm, np.array([0, -0.6, 1.2], np.float32), c, polar="fast")
+        rn.reflection.edited_directions(pos, nrm, np.array([0, -0.6, 1.2], np.float32), c, polar="fast")
     elif part == "rotation_field":
         v = rng.normal(size=(20000, 3)).astype(np.float32)
         c = random_constraints(rng, 8, spread=0, max_edit=0.7, min_edit=0.1, at=v)
-        rn.rotation_field(v, c, polar="fast")
+        rn.reflection.rotation_field(v, c, polar="fast")
     elif part == "recomposite":
         sys.path.insert(0, str(HERE))
         from compositing import hd_frame
 
         args, kw = hd_frame(rng, 320, 240, 10, 32)
-        rn.recomposite(*args, **kw)
+        rn.compositing.recomposite(*args, **kw)
     elif part == "calls":
         v = rng.normal(size=(4, 3)).astype(np.float32)
         c = random_constraints(rng, 1, spread=0, max_edit=0.7, min_edit=0.1, at=v)
         for _ in range(2000):
-            rn.rotation_field(v, c, polar="fast")
+            rn.reflection.rotation_field(v, c, polar="fast")
 
 
 def instructions(site: str, part: str) -> int:

@@ -79,7 +79,7 @@ def bumpy_sphere(w, rng):
     d_true = (sh_basis(n.astype(np.float64)) @ TRUE_SH.T).astype(np.float32)
     occl = rng.random((w, w)) < 0.2
     d0 = d_true * np.where(occl, 0.5, 1.0)[..., None] + rng.normal(0, 0.01, (w, w, 3)).astype(np.float32)
-    r = rn.reflect_dirs(n, np.array([0, 0, 1.0]))
+    r = rn.compositing.reflect_dirs(n, np.array([0, 0, 1.0]))
     r0 = np.where(inside[..., None], reflection_env(np.nan_to_num(r)), 0).astype(np.float32)
     depth = np.where(inside, 5 - z, np.inf).astype(np.float32)
     return n, inside, d0, r, r0, depth
@@ -102,24 +102,24 @@ def stages(w, rng, env_size, region="whole"):
         inside = inside & (np.arange(w)[None, :] < w // 2) & (np.arange(w)[:, None] < w // 2)
     px = int(inside.sum())
     nm, dm = n[inside], d0[inside]
-    t_ls, ls = median_time(lambda: rn.sh_fit(nm, dm, "ls"))
-    t_qp, qp = median_time(lambda: rn.sh_fit(nm, dm, "qp"))
+    t_ls, ls = median_time(lambda: rn.compositing.sh_fit(nm, dm, "ls"))
+    t_qp, qp = median_time(lambda: rn.compositing.sh_fit(nm, dm, "qp"))
     dirs = sphere_dirs()
     truth = sh_basis(dirs) @ TRUE_SH.T
     err = {m: float(np.sqrt(((sh_basis(dirs) @ f["coeffs"].T - truth) ** 2).mean()) / np.abs(truth).mean())
            for m, f in (("ls", ls), ("qp", qp))}
     mask = inside.astype(np.float32)
-    t_part, part = median_time(lambda: rn.reflection_env(r, r0, mask, depth, size=env_size, stage="partial"))
-    t_fill_total, full = median_time(lambda: rn.reflection_env(r, r0, mask, depth, size=env_size, blur_sigma=0.0))
-    t_blur_total, _ = median_time(lambda: rn.reflection_env(r, r0, mask, depth, size=env_size))
+    t_part, part = median_time(lambda: rn.compositing.reflection_env(r, r0, mask, depth, size=env_size, stage="partial"))
+    t_fill_total, full = median_time(lambda: rn.compositing.reflection_env(r, r0, mask, depth, size=env_size, blur_sigma=0.0))
+    t_blur_total, _ = median_time(lambda: rn.compositing.reflection_env(r, r0, mask, depth, size=env_size))
     # Hole filling alone, on the same holes (the pure solve, incl. the texels beyond the equator).
-    t_fill, _ = median_time(lambda: rn.fill_holes(part["map"], part["covered"]))
+    t_fill, _ = median_time(lambda: rn.compositing.fill_holes(part["map"], part["covered"]))
     s = env_size
     uv = (np.arange(s) + 0.5) / s * 2 - 1
     disk = (uv[None, :] ** 2 + uv[:, None] ** 2) <= 1
     cov = part["covered"] | ~disk[None]
     ok = np.isfinite(dirs).all(1)
-    look = rn.envmap_lookup(full["map"], dirs[ok])
+    look = rn.compositing.envmap_lookup(full["map"], dirs[ok])
     visible = dirs[:, 2] > -0.3  # reflected directions the front of a sphere shows, not only at its rim
     env_err = float(np.abs(look - reflection_env(dirs))[visible].mean())
     return {
@@ -139,7 +139,7 @@ def hd_frame(rng, w=1920, h=1080, patches=10, env_size=128):
     """The recompositing benchmark's frame: ``patches`` vertical patches (SH + a 2×env_size² map
     each) between 80-pixel margins, smooth normals (as on rendered objects: neighbouring pixels
     look up neighbouring texels) edited in the top half, α_D = α_R = 0.9, reflectance buffers.
-    Returns (positional args, keyword args) of ``rokeby_native.recomposite``."""
+    Returns (positional args, keyword args) of ``rokeby_native.compositing.recomposite``."""
     ids = np.full((h, w), -1, np.int32)
     for k, c in enumerate(np.array_split(np.arange(w), patches)):
         ids[80:h - 80, c[0]:c[-1] + 1] = k
@@ -165,14 +165,14 @@ def recomposite_bench(rng, w=1920, h=1080, patches=10, env_size=128, repeat=5):
     ids, n, e, view, d0, r0, img, pts = args
     a = kw["alpha_d"]
     before = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
-    run = lambda: rn.recomposite(*args, **kw)  # noqa: E731
+    run = lambda: rn.compositing.recomposite(*args, **kw)  # noqa: E731
     run()
     ts = []
     for _ in range(repeat):
         t = time.perf_counter()
         run()
         ts.append(time.perf_counter() - t)
-    t_id = median_time(lambda: rn.recomposite(ids, n, n, view, d0, r0, img, pts, alpha_d=a, alpha_r=a), repeat)[0]
+    t_id = median_time(lambda: rn.compositing.recomposite(ids, n, n, view, d0, r0, img, pts, alpha_d=a, alpha_r=a), repeat)[0]
     edit = session_bench(args, kw)
     peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
     return {"width": w, "height": h, "patches": patches, "env_size": env_size, "edited_fraction": 0.5 * (h - 160) / h,
@@ -186,7 +186,7 @@ EDIT_GOAL_MS = 8.0  # goal: one recompositing edit of a 1080p frame with ten pat
 
 
 def session_bench(args, kw, repeat=9):
-    """Per-edit time of an artist's loop: ``rokeby_native.Recompositor`` holding the
+    """Per-edit time of an artist's loop: ``rokeby_native.compositing.Recompositor`` holding the
     passes (the default session), each edit passing only the edited normals and writing into the
     same buffer, against the same session keeping the per-pixel terms that do not depend on ñ
     (``prepared=True``) and the former per-edit path in the same run (``rokeby_native.recompose``
@@ -198,21 +198,21 @@ def session_bench(args, kw, repeat=9):
 
     ids, n, e, view, d0, r0, img, pts = args
     t = time.perf_counter()
-    s = rn.Recompositor(ids, n, view, d0, r0, img, pts, **kw)
+    s = rn.compositing.Recompositor(ids, n, view, d0, r0, img, pts, **kw)
     t_make = time.perf_counter() - t
     t = time.perf_counter()
-    prepped = rn.Recompositor(ids, n, view, d0, r0, img, pts, **kw, prepared=True)
+    prepped = rn.compositing.Recompositor(ids, n, view, d0, r0, img, pts, **kw, prepared=True)
     t_make_prepared = time.perf_counter() - t
     out = np.empty_like(img)
     out_prepared = np.empty_like(img)
 
     def old():
-        o, _ = rn.recomposite(*args, **kw)
+        o, _ = rn.compositing.recomposite(*args, **kw)
         np.isfinite(o).all()
 
     new = lambda: s.run(out, e)  # noqa: E731
     prepared = lambda: prepped.run(out_prepared, e)  # noqa: E731
-    ref, _ = rn.recomposite(*args, **kw)
+    ref, _ = rn.compositing.recomposite(*args, **kw)
     new()
     prepared()
     same = out.tobytes() == ref.tobytes() == out_prepared.tobytes()

@@ -120,7 +120,7 @@ def diffuse_against_true(coeffs_screen, irradiance_coeffs, rot, sets: dict) -> d
     out = {}
     for name, dirs in sets.items():
         d = np.asarray(dirs, np.float32)
-        out[name] = rel_rms(rn.sh_eval(np.asarray(coeffs_screen, np.float64), d), true_diffuse(irradiance_coeffs, rot, d))
+        out[name] = rel_rms(rn.compositing.sh_eval(np.asarray(coeffs_screen, np.float64), d), true_diffuse(irradiance_coeffs, rot, d))
     return out
 
 
@@ -131,11 +131,11 @@ def reflection_against_true(env_map, level, rot, dirs_screen, covered=None) -> d
     import rokeby_native as rn
 
     d = np.asarray(dirs_screen, np.float32)
-    rec = np.asarray(rn.envmap_lookup(env_map, d), np.float64)
+    rec = np.asarray(rn.compositing.envmap_lookup(env_map, d), np.float64)
     ref = true_reflection(level, rot, d)
     sets = {"all": np.ones(len(d), bool)}
     if covered is not None:
-        sets["covered"] = rn.envmap_lookup(np.asarray(covered, np.float32)[..., None], d)[:, 0] > 0.999
+        sets["covered"] = rn.compositing.envmap_lookup(np.asarray(covered, np.float32)[..., None], d)[:, 0] > 0.999
     out = {}
     for name, m in sets.items():
         out[f"{name}_fraction"] = float(m.mean())
@@ -330,12 +330,12 @@ def grid_row(sh_screen, true_env, rot, env_map, covered, size: int = 64) -> np.n
 
     bd, bm = ball_dirs(size)
     d_true = true_diffuse(true_env["irradiance_coeffs"], rot, bd.reshape(-1, 3)).reshape(bd.shape)
-    d_rec = np.asarray(rn.sh_eval(np.asarray(sh_screen, np.float64), bd.reshape(-1, 3).astype(np.float32))).reshape(bd.shape)
+    d_rec = np.asarray(rn.compositing.sh_eval(np.asarray(sh_screen, np.float64), bd.reshape(-1, 3).astype(np.float32))).reshape(bd.shape)
     sd = luminance(d_true[bm]).mean()
     pd, pm = paraboloid_dirs(size)
     r_true = true_reflection(true_env["level"], rot, pd.reshape(-1, 3)).reshape(pd.shape)
-    r_rec = np.asarray(rn.envmap_lookup(env_map, pd.reshape(-1, 3).astype(np.float32))).reshape(pd.shape)
-    cov = rn.envmap_lookup(np.asarray(covered, np.float32)[..., None], pd.reshape(-1, 3).astype(np.float32))[:, 0].reshape(pd.shape[:3]) > 0.999
+    r_rec = np.asarray(rn.compositing.envmap_lookup(env_map, pd.reshape(-1, 3).astype(np.float32))).reshape(pd.shape)
+    cov = rn.compositing.envmap_lookup(np.asarray(covered, np.float32)[..., None], pd.reshape(-1, 3).astype(np.float32))[:, 0].reshape(pd.shape[:3]) > 0.999
     sr = luminance(r_true[pm]).mean()
     sep = np.full((size, 2, 3), 0.0)
     tiles = [_pair(d_true, bm, sd), _pair(d_rec, bm, sd), _diff_pair(d_rec, d_true, bm, sd),
@@ -372,10 +372,10 @@ def sphere_measures(pb, env, fib) -> dict:
     out["pass_over_exact_median"] = [float(v) for v in np.median(db[sub] / exact, 0)]
     out["pass_vs_exact_rel_rms"] = rel_rms(db[sub], exact)
     out["true_sh_vs_exact_rel_rms"] = rel_rms(dt[sub], exact)
-    own = rn.sh_fit(n, db, "ls")["coeffs"]
-    out["own_ls_vs_pass_rel_rms"] = rel_rms(rn.sh_eval(own, n), db)
+    own = rn.compositing.sh_fit(n, db, "ls")["coeffs"]
+    out["own_ls_vs_pass_rel_rms"] = rel_rms(rn.compositing.sh_eval(own, n), db)
     out["own_ls_vs_true_sh"] = diffuse_against_true(own, env["irradiance_coeffs"], rot, {"shown": n, "front": fib[fib[:, 2] > 0], "full": fib})
-    r = rn.reflect_dirs(nb, vb)[inner]
+    r = rn.compositing.reflect_dirs(nb, vb)[inner]
     pt = true_reflection(env["level"], rot, r)
     out["gloss_pass_vs_prefiltered_rel_mean_abs"] = rel_mean_abs(rb, pt)
     out["gloss_pass_over_prefiltered_median"] = float(np.median(luminance(rb) / np.maximum(luminance(pt), 1e-12)))
@@ -397,14 +397,14 @@ def sphere_measures(pb, env, fib) -> dict:
     if rec.patches[k]["env"] is not None:
         part = _partial(rec, pb, k)
         out["own_map_vs_prefiltered"] = reflection_against_true(rec.patches[k]["env"], env["level"], rot, fib, part["covered"])
-    out["own_map_at_pixels_vs_pass_rel_mean_abs"] = rel_mean_abs(rn.envmap_lookup(rec.patches[k]["env"], r), rb)
+    out["own_map_at_pixels_vs_pass_rel_mean_abs"] = rel_mean_abs(rn.compositing.envmap_lookup(rec.patches[k]["env"], r), rb)
     return out
 
 
 def _partial(rec, p, k):
     import rokeby_native as rn
 
-    return rn.reflection_env(rn.reflect_dirs(rec.normals, rec.view), p.gloss_dir + p.gloss_ind,
+    return rn.compositing.reflection_env(rn.compositing.reflect_dirs(rec.normals, rec.view), p.gloss_dir + p.gloss_ind,
                              ((rec.ids == k) & (p.reflocc >= 0.5)).astype(np.float32), p.depth, stage="partial")
 
 
@@ -432,7 +432,7 @@ def mesh_measures(pa, pb, pc, env, fib) -> tuple[dict, dict]:
         k = int(np.argmax([r.pixels for r in rec.reports]))
         rep = rec.reports[k]
         sh = rec.patches[k]["sh"]
-        d = rn.sh_eval(sh, nb[inner])
+        d = rn.compositing.sh_eval(sh, nb[inner])
         out[f"diffuse_{method}_rel_rms"] = rel_rms(d, db)
         out[f"diffuse_{method}_rel_mean_abs"] = rel_mean_abs(d, db)
         shown = rec.normals[(rec.ids == k) & (np.abs(rec.normals).sum(-1) > 0)]
@@ -444,12 +444,12 @@ def mesh_measures(pa, pb, pc, env, fib) -> tuple[dict, dict]:
     out["reflection_coverage"] = rep.coverage
     rec = recs["qp"]  # the maps do not depend on the diffuse fit
     env_map = rec.patches[k]["env"]
-    rdir = rn.reflect_dirs(nb, vb)[inner]
-    r = rn.envmap_lookup(env_map, rdir)
+    rdir = rn.compositing.reflect_dirs(nb, vb)[inner]
+    r = rn.compositing.envmap_lookup(env_map, rdir)
     out["reflection_rel_mean_abs"] = rel_mean_abs(r, rb)
     # Only where A's pixels recovered the direction (no hole filling involved).
     part = _partial(rec, pa, k)
-    cov = rn.envmap_lookup(part["covered"][..., None].astype(np.float32), rdir)[:, 0] > 0.999
+    cov = rn.compositing.envmap_lookup(part["covered"][..., None].astype(np.float32), rdir)[:, 0] > 0.999
     out["reflection_covered_fraction_of_sphere_pixels"] = float(cov.mean())
     out["reflection_rel_mean_abs_covered"] = rel_mean_abs(r[cov], rb[cov])
     out["reflection_median_ratio"] = float(np.median(luminance(r) / np.maximum(luminance(rb), 1e-12)))
@@ -457,7 +457,7 @@ def mesh_measures(pa, pb, pc, env, fib) -> tuple[dict, dict]:
     out["reflection_vs_prefiltered"] = reflection_against_true(env_map, env["level"], rot, fib, part["covered"])
     # The teapot's map at its own pixels vs its own glossy pass.
     m = (rec.ids == k) & (pa.reflocc >= 0.5)
-    own = rn.envmap_lookup(env_map, rn.reflect_dirs(rec.normals, rec.view)[m])
+    own = rn.compositing.envmap_lookup(env_map, rn.compositing.reflect_dirs(rec.normals, rec.view)[m])
     out["reflection_own_pixels_rel_mean_abs"] = rel_mean_abs(own, (pa.gloss_dir + pa.gloss_ind)[m])
     grid = {"sh": recs["ls"].patches[k]["sh"], "rot": rot, "env": env_map, "covered": part["covered"]}
     # The bump: A recomposited with C's normals against the C render (same camera, same pixels).

@@ -72,9 +72,9 @@ def main():
         bench_way, one_by_one = [], []
         for _ in range(args.rounds):
             t = time.perf_counter()
-            d = rn.GeodesicSolver(v, f).distances(sources, method="exact")
+            d = rn.geometry.GeodesicSolver(v, f).distances(sources, method="exact")
             bench_way.append((time.perf_counter() - t) / len(sources))
-            solver = rn.GeodesicSolver(v, f)
+            solver = rn.geometry.GeodesicSolver(v, f)
             solver.distances(sources[:1], method="exact")  # the per-mesh tables, made on first use
             t = time.perf_counter()
             for s in sources:

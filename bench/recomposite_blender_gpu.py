@@ -53,7 +53,7 @@ def main():
 
     args, kw = hd_frame(np.random.default_rng(2016))
     out, st = rc(*args, **kw)  # first frame: offscreen, staging arrays
-    ref, rst = rn.recomposite(*args, **kw)
+    ref, rst = rn.compositing.recomposite(*args, **kw)
     res = {"renderer": rc.renderer, "context_s": t_ctx, "compile_ms": 1e3 * t_compile, "stats": st,
            "rust_stats": dict(rst), "max_rel_diff": float((np.abs(out.astype(np.float64) - ref) / (1 + np.abs(ref))).max()),
            "load_before": os.getloadavg()[0]}
@@ -92,7 +92,7 @@ def main():
         res["moderngl_ms"], _ = median_ms(lambda: gl(*args, **kw), a.repeat)
     except Exception as exc:  # noqa: BLE001 - no EGL here
         res["moderngl_error"] = str(exc)
-    res["rust_ms"], _ = median_ms(lambda: rn.recomposite(*args, **kw), a.repeat)
+    res["rust_ms"], _ = median_ms(lambda: rn.compositing.recomposite(*args, **kw), a.repeat)
     res["load_after"] = os.getloadavg()[0]
     text = json.dumps(res, indent=1)
     if a.json:

@@ -123,7 +123,7 @@ def main():
         n = vertex_normals(v, f.astype(np.int32))
         row = {"paper": paper_name, "mesh": what, "triangles": int(len(f)), "vertices": int(len(v))}
         try:
-            t_setup, ed = timed(lambda: rn.ShadowEditor(v, f, tv, tf, light_position=light, normals=n, min_loop_vertices=20), repeat=3)
+            t_setup, ed = timed(lambda: rn.shadows.ShadowEditor(v, f, tv, tf, light_position=light, normals=n, min_loop_vertices=20), repeat=3)
         except ValueError as exc:
             row["error"] = str(exc)
             rows.append(row)

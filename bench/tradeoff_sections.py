@@ -93,7 +93,7 @@ def sh_order_section(emit, peers=None):
     emit()
     emit("E(n)/π of the eight HDR worlds bpy ships against the brute-force irradiance (rokeby.envmaps.reference,")
     emit(f"'lambert'), {r['normals']} Fibonacci normals, relative error of luminance. Orders 0 and 1 are the core's order-2")
-    emit("projection (rokeby_native.env_irradiance) truncated to its first 1 and 4 coefficients (the same projection, so")
+    emit("projection (rokeby_native.envmaps.irradiance) truncated to its first 1 and 4 coefficients (the same projection, so")
     emit("the same fit time); orders 3 and 4 are a numpy projection of the lat-long texels (bench/tradeoffs.py), not in the")
     emit("core; its order-2 twin reproduces the core's order 2 to the printed digits. Order 3 equals order 2 for irradiance:")
     emit("the clamped-cosine coefficient Â₃ is 0 (Ramamoorthi & Hanrahan 2001), measured here too. The numpy fit times are")
@@ -159,7 +159,7 @@ def qp_section(emit, peers=None):
     emit()
     emit("The order-2 SH fit of eq. 1 (Zubiaga et al. 2016) on the bumpy sphere of bench/compositing.py (20% of pixels")
     emit("darkened by half, noise 0.01): least squares, or the QP that keeps the fit above every pixel (D(n) ≥ D0, §3.1).")
-    emit("rokeby_native.sh_fit (median of 3, all cores) against numpy.linalg.lstsq and quadprog.solve_qp (Goldfarb-Idnani,")
+    emit("rokeby_native.compositing.sh_fit (median of 3, all cores) against numpy.linalg.lstsq and quadprog.solve_qp (Goldfarb-Idnani,")
     emit("dense, one run each, .venv-peers) on the same pixels, per channel. Error: relative RMS against the true")
     emit("(unoccluded) environment over the sphere; max residual: the largest D0 - D(n) (the QP's constraint).")
     emit()
@@ -184,7 +184,7 @@ def qp_section(emit, peers=None):
     def ratio(a_, b_):
         v = [t[(w, a_)] / t[(w, b_)] for w in ws if (w, a_) in t and (w, b_) in t]
         return f"{min(v):.1f}-{max(v):.1f}x" if v else "?"
-    ls_, qp_, np_, quad_ = "rokeby_native.sh_fit('ls')", "rokeby_native.sh_fit('qp')", "numpy.linalg.lstsq (peer)", "quadprog.solve_qp (peer)"
+    ls_, qp_, np_, quad_ = "rokeby_native.compositing.sh_fit('ls')", "rokeby_native.compositing.sh_fit('qp')", "numpy.linalg.lstsq (peer)", "quadprog.solve_qp (peer)"
     emit(f"to rounding); rokeby's least squares is {ratio(np_, ls_)} faster than numpy's lstsq. The QP is not consistently more accurate")
     emit("against the truth than least squares here (better at 512², worse at 256² and 1024²): its constraint holds")
     emit("the fit up to the brightest, noisiest pixels; what it buys is a fit that never lies below an unoccluded pixel,")
@@ -206,10 +206,10 @@ def holefill_section(emit, peers=None):
     emit()
     emit(_stamp())
     emit()
-    emit("rokeby_native.fill_holes on a dual-paraboloid map (2 x S x S) holding a known smooth function of direction")
+    emit("rokeby_native.compositing.fill_holes on a dual-paraboloid map (2 x S x S) holding a known smooth function of direction")
     emit("(bench/tradeoffs.py `known`, the reflection environment of bench/compositing.py), with a hole of two caps")
     emit(f"(60° around +x, across the faces' equator, and 35° around +z). Error: mean and max |filled - known| at {r['hole_dirs']:,}")
-    emit("random directions in the hole, through rokeby_native.envmap_lookup (values ~0.2-1). The last column checks the")
+    emit("random directions in the hole, through rokeby_native.compositing.envmap_lookup (values ~0.2-1). The last column checks the")
     emit("map convention: the unfilled full map looked up at random directions. Median of 3 (512: one run).")
     emit()
     emit("| map | hole texels | fill (ms) | mean error | max error | full-map lookup error |")
@@ -223,7 +223,7 @@ def holefill_section(emit, peers=None):
     emit()
     rows = r["rows"]
     _plot(peers, "holefill", {"title": "Harmonic hole filling: time against error", "xlabel": "fill time (ms)", "ylabel": "mean |error| in the hole",
-                              "logx": True, "series": [{"name": "rokeby_native.fill_holes", "x": [x["ms"] for x in rows],
+                              "logx": True, "series": [{"name": "rokeby_native.compositing.fill_holes", "x": [x["ms"] for x in rows],
                                                         "y": [x["mean_abs"] for x in rows], "labels": [f"2x{x['size']}²" for x in rows]}]},
           emit, "hole filling: time against error")
     emit("Recommendation: 128² per face (the default `env_size` of reconstruct) : the fill error is within a few percent")
@@ -241,7 +241,7 @@ def precision_section(emit, peers=None):
     emit(_stamp())
     emit()
     emit(f"{r['points']:,} vertices not on a constraint. Error: rotation angle against the float64 numpy reference")
-    emit("(tests/support/reference.py: eq. 5 summed in float64, batched numpy SVD); for rokeby_native.ortho, against numpy's SVD of")
+    emit("(tests/support/reference.py: eq. 5 summed in float64, batched numpy SVD); for rokeby_native.reflection.ortho, against numpy's SVD of")
     emit("the same float64 matrices (coherent: vertices sorted along y then x, like neighbouring pixels). Medians of 5.")
     emit()
     emit("| what | time (ns / point) | mean error (rad) | 99th pct (rad) | max error (rad) |")
@@ -335,7 +335,7 @@ def field_section(emit, peers=None):
     emit()
     emit(_stamp())
     emit()
-    emit("Per vertex: rokeby_native.rotation_field at the vertices (what the add-on writes to the `rokeby_rotation`")
+    emit("Per vertex: rokeby_native.reflection.rotation_field at the vertices (what the add-on writes to the `rokeby_rotation`")
     emit("attribute), interpolated across each triangle (barycentric nlerp of the quaternions; a renderer does this")
     emit(f"for free, here numpy). Per pixel: rotation_field at every one of {r['pixels']:,} random surface points")
     emit("(area-weighted: a 1280x960 frame full of mirror; the viewport shader's way, and the paper's). Error: rotation")

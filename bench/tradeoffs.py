@@ -2,9 +2,9 @@
 
 * sh: SH order of the irradiance (0, 1, 2 from the core's order-2 projection truncated to its first
   1/4/9 coefficients; 4 from a numpy projection, labelled so) against the exact irradiance.
-* qp: the compositing diffuse fit, least squares against the QP (D(n) >= D0), rokeby_native.sh_fit
+* qp: the compositing diffuse fit, least squares against the QP (D(n) >= D0), rokeby_native.compositing.sh_fit
   against the peers numpy.linalg.lstsq and quadprog (in .venv-peers) on the same pixels.
-* holefill: harmonic hole filling (rokeby_native.fill_holes) at map sizes 32..512, on a known
+* holefill: harmonic hole filling (rokeby_native.compositing.fill_holes) at map sizes 32..512, on a known
   smooth function with a fixed hole on the sphere.
 
 Writes JSON (--json); nothing asserted.
@@ -103,7 +103,7 @@ def sh_section(quick=False):
         for order, ncoef in ((0, 1), (1, 4), (2, 9)):
             t_ev, got = best_time(lambda: real_sh(order, normals) @ c9[:, :ncoef].T, 5)
             e = np.abs(got @ LUM - exact) / np.maximum(np.abs(exact), 1e-12)
-            rows.append({"world": name, "order": order, "how": "core order-2 projection, truncated" if order < 2 else "core (rokeby_native.env_irradiance)",
+            rows.append({"world": name, "order": order, "how": "core order-2 projection, truncated" if order < 2 else "core (rokeby_native.envmaps.irradiance)",
                          "fit_ms": 1e3 * t_fit, "eval_us_per_normal": 1e6 * t_ev / len(normals), "mean": float(e.mean()), "max": float(e.max())})
         # numpy projection at orders 2 and 4 over the lat-long texels (solid-angle weighted).
         h, w = im.shape[:2]
@@ -190,9 +190,9 @@ def qp_section(peers=None, widths=(256, 512, 1024)):
 
             B = sh_basis(nm.astype(np.float64))
             for method in ("ls", "qp"):
-                t, f = best_time(lambda: rn.sh_fit(nm, dm, method), 3)
+                t, f = best_time(lambda: rn.compositing.sh_fit(nm, dm, method), 3)
                 viol = float((dm.astype(np.float64) - B @ f["coeffs"].T).max())
-                rows.append({"width": w, "pixels": int(len(nm)), "solver": f"rokeby_native.sh_fit('{method}')", "kind": method,
+                rows.append({"width": w, "pixels": int(len(nm)), "solver": f"rokeby_native.compositing.sh_fit('{method}')", "kind": method,
                              "ms": 1e3 * t, "rel_rms": score(f["coeffs"]), "max_residual": viol, "peer": False})
             if peers:
                 np.savez(Path(tmp) / "qp.npz", n=nm.astype(np.float64), d=dm.astype(np.float64))
@@ -245,12 +245,12 @@ def holefill_section(sizes=(32, 64, 128, 256, 512)):
         dirs, disk = paraboloid_texel_dirs(s)
         m = known(dirs).astype(np.float32)
         # check the convention: a full map looks up the known function
-        conv = float(np.abs(rn.envmap_lookup(m, test) - known(test)).mean())
+        conv = float(np.abs(rn.compositing.envmap_lookup(m, test) - known(test)).mean())
         covered = ~in_hole(dirs)
         holes = int((~covered & disk[None]).sum())
         m_in = np.where(covered[..., None], m, 0).astype(np.float32)
-        t, filled = best_time(lambda: rn.fill_holes(m_in, covered), 3 if s <= 256 else 1)
-        e = np.abs(rn.envmap_lookup(filled, th) - known(th))
+        t, filled = best_time(lambda: rn.compositing.fill_holes(m_in, covered), 3 if s <= 256 else 1)
+        e = np.abs(rn.compositing.envmap_lookup(filled, th) - known(th))
         rows.append({"size": s, "hole_texels": holes, "ms": 1e3 * t, "mean_abs": float(e.mean()), "max_abs": float(e.max()),
                      "full_map_lookup_err": conv})
     return {"rows": rows, "hole_dirs": int(len(th)), "load_average": [load0, os.getloadavg()[0]], "cpus": os.cpu_count()}
@@ -259,9 +259,9 @@ def holefill_section(sizes=(32, 64, 128, 256, 512)):
 # --- polar method and float32 storage ---------------------------------------------------------------
 
 def precision_section(k=8):
-    """Per-point field on the largest shared mesh, K constraints: rokeby_native.rotation_field
+    """Per-point field on the largest shared mesh, K constraints: rokeby_native.reflection.rotation_field
     (float32 storage) with polar='exact' / 'fast', against the float64 numpy reference of
-    tests/support/reference.py (batched SVD), which is also timed; and rokeby_native.ortho on the float64
+    tests/support/reference.py (batched SVD), which is also timed; and rokeby_native.reflection.ortho on the float64
     matrices of that field, exact / fast, coherent and shuffled order."""
     import rokeby_native as rn
 
@@ -280,9 +280,9 @@ def precision_section(k=8):
     t_ref, want = best_time(lambda: field_matrices(pts.astype(np.float64), c.astype(np.float64)), 3)
     rows = [{"what": "numpy float64 reference (batched SVD, tests/support/reference.py)", "ns_per_point": 1e9 * t_ref / len(pts), "mean": 0.0, "p99": 0.0, "max": 0.0}]
     for polar in ("exact", "fast"):
-        t, q = best_time(lambda: rn.rotation_field(pts, c, polar=polar), 5)
+        t, q = best_time(lambda: rn.reflection.rotation_field(pts, c, polar=polar), 5)
         e = rot_angle(quat_to_matrix(q), want)
-        rows.append({"what": f"rokeby_native.rotation_field, float32 storage, polar='{polar}'", "ns_per_point": 1e9 * t / len(pts),
+        rows.append({"what": f"rokeby_native.reflection.rotation_field, float32 storage, polar='{polar}'", "ns_per_point": 1e9 * t / len(pts),
                      "mean": float(e.mean()), "p99": float(np.percentile(e, 99)), "max": float(e.max())})
     # ortho alone, on the float64 unnormalised matrices of the same field (numpy reference = its SVD)
     d2 = np.sum((pts[:, None, :].astype(np.float64) - c[None, :, :3]) ** 2, axis=-1)
@@ -291,9 +291,9 @@ def precision_section(k=8):
     mats = np.einsum("nk,ki,kj->nij", w_ / w_.max(axis=1, keepdims=True), c[:, 6:9].astype(np.float64), c[:, 3:6].astype(np.float64))
     ref = ortho_ref(mats)
     shuffled = rng.permutation(len(mats))
-    for name, fn, perm in (("rokeby_native.ortho 'exact' (Jacobi SVD, f64)", lambda: rn.ortho(mats, method="exact"), None),
-                           ("rokeby_native.ortho 'fast' (Newton, coherent order)", lambda: rn.ortho(mats, method="fast"), None),
-                           ("rokeby_native.ortho 'fast' (Newton, shuffled order)", lambda: rn.ortho(mats[shuffled], method="fast"), shuffled)):
+    for name, fn, perm in (("rokeby_native.reflection.ortho 'exact' (Jacobi SVD, f64)", lambda: rn.reflection.ortho(mats, method="exact"), None),
+                           ("rokeby_native.reflection.ortho 'fast' (Newton, coherent order)", lambda: rn.reflection.ortho(mats, method="fast"), None),
+                           ("rokeby_native.reflection.ortho 'fast' (Newton, shuffled order)", lambda: rn.reflection.ortho(mats[shuffled], method="fast"), shuffled)):
         t, q = best_time(fn, 5)
         e = rot_angle(quat_to_matrix(q), ref if perm is None else ref[perm])
         rows.append({"what": name, "ns_per_point": 1e9 * t / len(mats), "mean": float(e.mean()), "p99": float(np.percentile(e, 99)), "max": float(e.max())})
@@ -334,7 +334,7 @@ def field_section(k=8, n_pixels=1280 * 960, levels=(0, 1, 2, 3)):
             u[flip] = 1 - u[flip]
             bary = np.column_stack([1 - u.sum(1), u[:, 0], u[:, 1]])
             pts = np.einsum("ni,nij->nj", bary, v64[f[tri]]).astype(np.float32)
-            t_v, qv = best_time(lambda: rn.rotation_field(v, c, polar="exact"), 3)
+            t_v, qv = best_time(lambda: rn.reflection.rotation_field(v, c, polar="exact"), 3)
 
             def interp():
                 q = qv[f[tri]].astype(np.float64)  # (n, 3, 4)
@@ -342,7 +342,7 @@ def field_section(k=8, n_pixels=1280 * 960, levels=(0, 1, 2, 3)):
                 out = np.einsum("ni,nij->nj", bary, q)
                 return out / np.linalg.norm(out, axis=1, keepdims=True)
             t_i, qi = best_time(interp, 1)
-            t_p, qp = best_time(lambda: rn.rotation_field(pts, c, polar="exact"), 1)
+            t_p, qp = best_time(lambda: rn.reflection.rotation_field(pts, c, polar="exact"), 1)
             qp64 = qp.astype(np.float64)
             qp64 /= np.linalg.norm(qp64, axis=1, keepdims=True)
             qp64 *= np.sign(np.sum(qi * qp64, axis=1))[:, None]
@@ -446,7 +446,7 @@ def representation_section(n_samples=100_000):
         N /= np.linalg.norm(N, axis=1, keepdims=True)
         inc = (P - e) / np.linalg.norm(P - e, axis=1, keepdims=True)
         R = inc - 2 * np.einsum("ij,ij->i", inc, N)[:, None] * N
-        want = rn.edited_directions(P.astype(np.float32), N.astype(np.float32), tuple(e), rows, **kw).astype(np.float64)
+        want = rn.reflection.edited_directions(P.astype(np.float32), N.astype(np.float32), tuple(e), rows, **kw).astype(np.float64)
         above = np.einsum("ij,ij->i", want, N) > 0  # renders fold the rest: compared apart
 
         def rotate(q, x):
@@ -466,27 +466,27 @@ def representation_section(n_samples=100_000):
 
         reps = {}
         # A. rotation vectors per vertex, blended towards I (before this issue).
-        t, rv = best_time(lambda: rn.rotation_field(v, rows, output="rotation_vector", **kw), 3)
+        t, rv = best_time(lambda: rn.reflection.rotation_field(v, rows, output="rotation_vector", **kw), 3)
         x = np.einsum("ni,nij->nj", bary, rv[f[tri]].astype(np.float64))
         ang = np.linalg.norm(x, axis=1)
         axis = x / np.maximum(ang, 1e-30)[:, None]
         got = R * np.cos(ang)[:, None] + np.cross(axis, R) * np.sin(ang)[:, None] + axis * np.einsum("ij,ij->i", axis, R)[:, None] * (1 - np.cos(ang))[:, None]
         reps["rotation vector per vertex, eq. 7 towards I (before)"] = (got, t, 12 * len(v), "no")
         # B. quaternions per corner, eq. 7 towards r rᵀ at each vertex for the current eye.
-        t, qv = best_time(lambda: hemi(rn.rotation_field(v, rows, normals=nrm, eye=tuple(e), **kw).astype(np.float64)[f]), 3)
-        reps["quaternion per corner, eq. 7 at the vertices for the eye"] = (rotate(nlerp(hemi(rn.rotation_field(v, rows, normals=nrm, eye=tuple(e), **kw).astype(np.float64)[f[tri]])), R), t, 16 * 3 * len(f), "yes")
+        t, qv = best_time(lambda: hemi(rn.reflection.rotation_field(v, rows, normals=nrm, eye=tuple(e), **kw).astype(np.float64)[f]), 3)
+        reps["quaternion per corner, eq. 7 at the vertices for the eye"] = (rotate(nlerp(hemi(rn.reflection.rotation_field(v, rows, normals=nrm, eye=tuple(e), **kw).astype(np.float64)[f[tri]])), R), t, 16 * 3 * len(f), "yes")
         # C. the edited direction per vertex for the current eye.
-        t, ev = best_time(lambda: rn.edited_directions(v, nrm, tuple(e), rows, **kw), 3)
+        t, ev = best_time(lambda: rn.reflection.edited_directions(v, nrm, tuple(e), rows, **kw), 3)
         x = np.einsum("ni,nij->nj", bary, ev[f[tri]].astype(np.float64))
         reps["edited direction per vertex for the eye"] = (x / np.linalg.norm(x, axis=1, keepdims=True), t, 12 * len(v), "yes")
         # D. eq. 7's view-independent parts per corner, closed form per pixel (the add-on's pick).
         ramp = with_region
-        t, parts = best_time(lambda: hemi(rn.rotation_field(v, rows, output="view_blend", **kw).astype(np.float64)[f]), 3)
-        pi = nlerp(hemi(rn.rotation_field(v, rows, output="view_blend", **kw).astype(np.float64)[f[tri]]))
-        got = rn.view_blend(pi.astype(np.float32), R.astype(np.float32), ramp=ramp).astype(np.float64)
+        t, parts = best_time(lambda: hemi(rn.reflection.rotation_field(v, rows, output="view_blend", **kw).astype(np.float64)[f]), 3)
+        pi = nlerp(hemi(rn.reflection.rotation_field(v, rows, output="view_blend", **kw).astype(np.float64)[f[tri]]))
+        got = rn.reflection.view_blend(pi.astype(np.float32), R.astype(np.float32), ramp=ramp).astype(np.float64)
         reps["view-independent parts per corner, eq. 7 per pixel (the add-on)"] = (got, t, 24 * 3 * len(f), "no")
         # E. the whole field per pixel (the preview's way), timed for a 1280x960 frame.
-        t, _ = best_time(lambda: rn.edited_directions(P.astype(np.float32), N.astype(np.float32), tuple(e), rows, **kw), 3)
+        t, _ = best_time(lambda: rn.reflection.edited_directions(P.astype(np.float32), N.astype(np.float32), tuple(e), rows, **kw), 3)
         reps["whole field per pixel, 1280x960 on this CPU (the preview's way, in GLSL there)"] = (want, t * 1280 * 960 / n_samples, 0, "yes, every frame")
         for rep, (got, t, mem, eye_dep) in reps.items():
             a = np.degrees(np.arccos(np.clip(np.einsum("ij,ij->i", got, want)[above] / np.linalg.norm(got[above], axis=1), -1, 1)))

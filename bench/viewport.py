@@ -38,7 +38,7 @@ def measure(frames: int = 3) -> list:
     n = vertex_normals(v, f)
     centre = v.mean(0)
     size = float(np.linalg.norm(v.max(0) - v.min(0)))
-    solver = rn.GeodesicSolver(v, f)
+    solver = rn.geometry.GeodesicSolver(v, f)
     rng = np.random.default_rng(2009)
     rows = []
     for w, h in RESOLUTIONS:

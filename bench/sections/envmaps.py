@@ -26,7 +26,7 @@ def envmap_section(emit):
         r = json.loads(out.read_text())
     emit(ENVMAP_MARKER + "prefiltering a 1024x512 HDR world (sunset.exr), 8 levels")
     emit()
-    emit("rokeby_native.env_prefilter (multi-scale ring convolution, docs/envmaps.md), all 8 levels of one call,")
+    emit("rokeby_native.envmaps.prefilter (multi-scale ring convolution, docs/envmaps.md), all 8 levels of one call,")
     emit("medians of 5 calls. CPU: the process's CPU time over all threads. Goal: under 1 s for 8 roughness levels.")
     emit()
     emit("| lobe | levels | K (texels per ring radius) | wall (s) | CPU (s) | level heights |")

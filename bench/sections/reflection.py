@@ -39,7 +39,7 @@ def field_section(emit):
     for k in (1, 4, 32):
         c = constraints(rng, k, 0.5)
         for polar in ("exact", "fast"):
-            dt = timeit(lambda: rn.edited_directions(pos, nrm, eye, c, polar=polar), repeat=3)
+            dt = timeit(lambda: rn.reflection.edited_directions(pos, nrm, eye, c, polar=polar), repeat=3)
             ref = f"{PAPER[k]}" if k in PAPER else "—"
             emit(f"| {k} | {polar} | {dt * 1e3:.1f} | {w * h / dt / 1e6:.2f} | {ref} |")
     emit()
@@ -55,7 +55,7 @@ def field_section(emit):
     for k in (1, 8, 32):
         c = constraints(rng, k, 0, centre=v)
         for polar in ("exact", "fast"):
-            dt = timeit(lambda: rn.rotation_field(v, c, polar=polar))
+            dt = timeit(lambda: rn.reflection.rotation_field(v, c, polar=polar))
             emit(f"| {k} | {polar} | {dt * 1e3:.2f} | {len(v) / dt / 1e6:.2f} |")
     emit()
 
@@ -75,9 +75,9 @@ def field_section(emit):
     emit("| method | time per matrix (ns) | mean error (rad) | max error (rad) |")
     emit("|---|---:|---:|---:|")
     rows = [
-        ("exact: one-sided Jacobi SVD, f64 (Rust)", lambda: rn.ortho(mats, method="exact"), None),
-        ("fast: Newton on SO(3), warm start, coherent order (Rust)", lambda: rn.ortho(mats, method="fast"), None),
-        ("fast: Newton on SO(3), incoherent (shuffled) order (Rust)", lambda: rn.ortho(mats[shuffled], method="fast"), shuffled),
+        ("exact: one-sided Jacobi SVD, f64 (Rust)", lambda: rn.reflection.ortho(mats, method="exact"), None),
+        ("fast: Newton on SO(3), warm start, coherent order (Rust)", lambda: rn.reflection.ortho(mats, method="fast"), None),
+        ("fast: Newton on SO(3), incoherent (shuffled) order (Rust)", lambda: rn.reflection.ortho(mats[shuffled], method="fast"), shuffled),
         ("numpy.linalg.svd batched, f64 (peer)", lambda: ortho_ref(mats), "numpy"),
     ]
     for name, fn, perm in rows:
@@ -96,7 +96,7 @@ def field_section(emit):
     # 4. float32 storage against a float64 reference.
     c = constraints(rng, 8, 0, centre=v)
     off = np.min(np.sum((v[:, None, :].astype(np.float64) - c[None, :, :3]) ** 2, axis=-1), axis=1) > 0
-    got = quat_to_matrix(rn.rotation_field(v[off], c))
+    got = quat_to_matrix(rn.reflection.rotation_field(v[off], c))
     want = field_matrices(v[off].astype(np.float64), c.astype(np.float64))
     err = rot_angle(got, want)
     emit("## float32 storage versus a float64 reference (numpy SVD), per-point field, K = 8")
@@ -153,7 +153,7 @@ data = np.load(sys.argv[1])
 v, f = np.array(data["vertices"]), np.array(data["faces"])
 method = sys.argv[3] if len(sys.argv) > 3 else "heat"
 base = hwm()
-s = rn.GeodesicSolver(v, f, boundary=sys.argv[2])
+s = rn.geometry.GeodesicSolver(v, f, boundary=sys.argv[2])
 s.distances([int(data["source"]) if "source" in data else 0], method=method)
 print(hwm() - base)
 """
@@ -194,7 +194,7 @@ def graph_heat_query_ratios(emit, runs=201):
     for p in sorted((SHARED / "meshes").glob("*.obj"), key=lambda p: p.stat().st_size):
         v, f = load_obj(p)
         src = [int(f[len(f) // 4, 0])]
-        solver = rn.GeodesicSolver(v, f)
+        solver = rn.geometry.GeodesicSolver(v, f)
         for method in methods:
             solver.distances(src, method=method)
         times = {m: [] for m in methods}
@@ -213,7 +213,7 @@ def refuted_vertices(exact, vertices, faces, sources):
     """Where a peer's exact distances cannot be right: longer than a path along the mesh's edges
     (Dijkstra's, an upper bound of the geodesic) or shorter than the straight chord to the source
     (a lower bound). Returns the (S, V) mask and the two counts."""
-    solver = rn.GeodesicSolver(vertices, faces)
+    solver = rn.geometry.GeodesicSolver(vertices, faces)
     dj = solver.distances(sources, method="dijkstra").astype(np.float64)
     pts = np.asarray(vertices, np.float64)
     chord = np.linalg.norm(pts[None, :, :] - pts[np.asarray(sources)][:, None, :], axis=2)
@@ -283,7 +283,7 @@ def geodesic_section(emit, peers_python):
                  f"({longer} longer than an edge path, {shorter} shorter than the chord) | | | | |")
             if bad.any():
                 if len(f) <= 150_000:
-                    ours = rn.GeodesicSolver(v, f).distances(sources, method="exact").astype(np.float64)
+                    ours = rn.geometry.GeodesicSolver(v, f).distances(sources, method="exact").astype(np.float64)
                     exact[bad] = ours[bad]
                     emit(f"| {name} | {len(f):,} | (the refuted vertices scored against Rokeby's exact method) | | | | | |")
                 else:
@@ -300,7 +300,7 @@ def geodesic_section(emit, peers_python):
         if exact is None and original is None and len(f) <= 150_000:
             # pygeodesic refuses some meshes (teapot); Rokeby's exact method matches its MMP to 6e-8
             # elsewhere, so it scores them instead.
-            exact = rn.GeodesicSolver(v, f).distances(sources, method="exact").astype(np.float64)
+            exact = rn.geometry.GeodesicSolver(v, f).distances(sources, method="exact").astype(np.float64)
             exact_of[name] = exact
             emit(f"| {name} | {len(f):,} | (scored against Rokeby's exact method) | | | | | |")
         if "exact_error" in peers:
@@ -311,7 +311,7 @@ def geodesic_section(emit, peers_python):
             methods.append(("rokeby exact", "exact", "average"))
         for label, method, boundary in methods:
             t = time.perf_counter()
-            solver = rn.GeodesicSolver(v, f, boundary=boundary)
+            solver = rn.geometry.GeodesicSolver(v, f, boundary=boundary)
             if method == "exact":
                 d = solver.distances(sources, method=method)
                 query, pre = (time.perf_counter() - t) / len(sources), 0.0
@@ -344,7 +344,7 @@ def geodesic_section(emit, peers_python):
     graph_heat_query_ratios(emit)
     if big is not None:
         v, f = big
-        solver = rn.GeodesicSolver(v, f)
+        solver = rn.geometry.GeodesicSolver(v, f)
         srcs = [[0, len(v) // 4, len(v) // 2, 3 * len(v) // 4]]
         one = timeit(lambda: solver.distances([0], method="dijkstra"), repeat=3)
         four = timeit(lambda: solver.distances(srcs, method="dijkstra"), repeat=3)
@@ -353,7 +353,7 @@ def geodesic_section(emit, peers_python):
         hv, hf = load_obj(SHARED / "meshes" / "homer.obj")
         for _ in range(3):
             hv, hf = subdivide_midpoint(hv, hf)
-        hs = rn.GeodesicSolver(hv, hf)
+        hs = rn.geometry.GeodesicSolver(hv, hf)
         hsrcs = [[0, len(hv) // 4, len(hv) // 2, 3 * len(hv) // 4]]
         hfour = timeit(lambda: hs.distances(hsrcs, method="dijkstra"), repeat=11)
         # The same field as four one-source queries (run in parallel by the solver) and their

@@ -49,14 +49,14 @@ def main():
 
     (ids, n, e, view, d0, r0, img, patches), kw = frame()
     out, st = rc(ids, n, n, view, d0, r0, img, patches, **kw)
-    ref, rst = rn.recomposite(ids, n, n, view, d0, r0, img, patches, **kw)
+    ref, rst = rn.compositing.recomposite(ids, n, n, view, d0, r0, img, patches, **kw)
     res["identity"] = {"equal_input": bool(np.array_equal(out, img)), "equal_rust": bool(np.array_equal(out, ref)),
                        "stats": st, "rust_stats": dict(rst), "dtype": str(out.dtype), "shape": list(out.shape)}
 
     untouched = (ids < 0) | (ids >= 5) | (ids == 3)
     res["frames"] = []
     for opts in OPTIONS:
-        ref, rst = rn.recomposite(ids, n, e, view, d0, r0, img, patches, **kw, **opts)
+        ref, rst = rn.compositing.recomposite(ids, n, e, view, d0, r0, img, patches, **kw, **opts)
         out, st = rc(ids, n, e, view, d0, r0, img, patches, **kw, **opts)
         again, _ = rc(ids, n, e, view, d0, r0, img, patches, **kw, **opts)
         res["frames"].append({"opts": opts, "stats": st, "rust_stats": dict(rst), "rel": rel(out, ref),
@@ -85,7 +85,7 @@ def main():
 
     (ids2, n2, e2, _v, d02, r02, img2, patches2), _ = frame(seed=5)
     v = np.array([0.0, 0.0, 1.0])
-    ref, rst = rn.recomposite(ids2, n2, e2, v, d02, r02, img2, patches2)
+    ref, rst = rn.compositing.recomposite(ids2, n2, e2, v, d02, r02, img2, patches2)
     out, st = G.recomposite_blender(ids2, n2, e2, v, d02, r02, img2, patches2)
     res["constant_view"] = {"stats": st, "rust_stats": dict(rst), "rel": rel(out, ref)}
 
@@ -93,11 +93,11 @@ def main():
 
     rng = np.random.default_rng(2016)
     ns, inside, sd0, r, sr0, depth = bc.bumpy_sphere(128, rng)
-    fit = rn.sh_fit(ns[inside], sd0[inside], "ls")
-    env = rn.reflection_env(r, sr0, inside.astype(np.float32), depth, size=64)["map"]
+    fit = rn.compositing.sh_fit(ns[inside], sd0[inside], "ls")
+    env = rn.compositing.reflection_env(r, sr0, inside.astype(np.float32), depth, size=64)["map"]
     sids = np.where(inside, 0, -1).astype(np.int32)
     args = (sids, ns, C.emboss(ns, 0.5, inside), np.array([0, 0, 1.0]), sd0, sr0, sd0 + sr0, [{"sh": fit["coeffs"], "env": env}])
-    ref, rst = rn.recomposite(*args)
+    ref, rst = rn.compositing.recomposite(*args)
     out, st = rc(*args)
     res["sphere"] = {"stats": st, "rust_stats": dict(rst), "rel": rel(out, ref)}
 

@@ -44,7 +44,7 @@ def sphere_image(w):
     n = np.zeros((w, w, 3), np.float32)
     n[..., 0], n[..., 1] = np.where(inside, xx, 0), np.where(inside, yy, 0)
     n[..., 2] = np.where(inside, np.sqrt(np.clip(1 - s, 0, 1)), 0)
-    r = rn.reflect_dirs(n, np.array([0, 0, 1.0]))
+    r = rn.compositing.reflect_dirs(n, np.array([0, 0, 1.0]))
     vals = np.where(inside[..., None], env(np.nan_to_num(r)), 0).astype(np.float32)
     return n, inside.astype(np.float32), r, vals
 
@@ -56,17 +56,17 @@ def test_sh_fit_recovers_order2_and_qp_bounds_from_above(rng):
     c = rng.normal(size=(3, 9))
     vals = sh_basis(n.astype(np.float64)) @ c.T
     for method in ("qp", "ls"):
-        f = rn.sh_fit(n, vals, method)
+        f = rn.compositing.sh_fit(n, vals, method)
         np.testing.assert_allclose(f["coeffs"], c, atol=1e-5)
     noisy = vals - np.where(rng.random((500, 1)) < 0.2, 0.5, 0.0) + 0.02 * rng.normal(size=vals.shape)
-    ls, qp = rn.sh_fit(n, noisy, "ls"), rn.sh_fit(n, noisy, "qp")
+    ls, qp = rn.compositing.sh_fit(n, noisy, "ls"), rn.compositing.sh_fit(n, noisy, "qp")
     assert (ls["max_residual"] > 0.01).all()
     assert (qp["max_residual"] <= 1e-9).all()
     # Recomputed here: D(n) >= D0 everywhere (f32-rounded normals as the fit saw them).
     nn = n.astype(np.float64) / np.linalg.norm(n.astype(np.float64), axis=1, keepdims=True)
     assert (sh_basis(nn) @ qp["coeffs"].T - noisy >= -1e-6).all()
     assert (qp["rms_residual"] >= ls["rms_residual"] - 1e-12).all()
-    np.testing.assert_allclose(rn.sh_eval(qp["coeffs"], n), sh_basis(nn) @ qp["coeffs"].T, atol=1e-5)
+    np.testing.assert_allclose(rn.compositing.sh_eval(qp["coeffs"], n), sh_basis(nn) @ qp["coeffs"].T, atol=1e-5)
 
 
 def test_noise_tolerance_takes_the_qp_off_the_noise_peaks(rng):
@@ -87,8 +87,8 @@ def test_noise_tolerance_takes_the_qp_off_the_noise_peaks(rng):
     est = C.pixel_noise(d0, inside)
     np.testing.assert_allclose(est, sigma, rtol=0.1)
     assert (C.pixel_noise(clean.astype(np.float32), inside) < 0.1 * sigma).all()
-    fits = {"qp": rn.sh_fit(n[inside], d0[inside], "qp"), "ls": rn.sh_fit(n[inside], d0[inside], "ls"),
-            "tol": rn.sh_fit(n[inside], d0[inside], "qp", 3 * est)}
+    fits = {"qp": rn.compositing.sh_fit(n[inside], d0[inside], "qp"), "ls": rn.compositing.sh_fit(n[inside], d0[inside], "ls"),
+            "tol": rn.compositing.sh_fit(n[inside], d0[inside], "qp", 3 * est)}
     dirs = n[inside].astype(np.float64)  # on the normals shown: the back of the sphere is not constrained
     err = {k: np.sqrt(((sh_basis(dirs) @ (f["coeffs"] - c).T) ** 2).mean() / ((sh_basis(dirs) @ c.T) ** 2).mean())
            for k, f in fits.items()}
@@ -96,14 +96,14 @@ def test_noise_tolerance_takes_the_qp_off_the_noise_peaks(rng):
     # up to τ below the unoccluded ones, as the plain QP rests on their noise peaks (~3.8σ here).
     assert err["tol"] < 0.5 * err["qp"] and err["tol"] < 0.7 * err["ls"], err
     assert (fits["tol"]["max_residual"] <= 3 * est + 1e-6).all()
-    np.testing.assert_array_equal(rn.sh_fit(n[inside], d0[inside], "qp", 0.0)["coeffs"], fits["qp"]["coeffs"])
+    np.testing.assert_array_equal(rn.compositing.sh_fit(n[inside], d0[inside], "qp", 0.0)["coeffs"], fits["qp"]["coeffs"])
     for bad, msg in ((-0.1, "≥ 0"), ([0.1, 0.1], "one value per channel"), (float("nan"), "≥ 0")):
         with pytest.raises(ValueError, match=msg):
-            rn.sh_fit(n[inside], d0[inside], "qp", bad)
+            rn.compositing.sh_fit(n[inside], d0[inside], "qp", bad)
     with pytest.raises(ValueError, match="only the constrained fit"):
-        rn.sh_fit(n[inside], d0[inside], "ls", 0.1)
+        rn.compositing.sh_fit(n[inside], d0[inside], "ls", 0.1)
     with pytest.raises(ValueError, match="tolerance: expected a number or one per channel, got an array of 2"):
-        rn.sh_fit(n[inside], d0[inside], "qp", [[0.1, 0.1, 0.1]])
+        rn.compositing.sh_fit(n[inside], d0[inside], "qp", [[0.1, 0.1, 0.1]])
 
 
 def test_sh_fit_masks_nan_pixels_and_says_how_many():
@@ -113,29 +113,29 @@ def test_sh_fit_masks_nan_pixels_and_says_how_many():
     n2 = n.copy()
     n2[7] = np.nan
     n2[8] = 0
-    f = rn.sh_fit(n2, vals)
+    f = rn.compositing.sh_fit(n2, vals)
     assert f["masked"] == 3 and f["pixels"] == 97
-    np.testing.assert_allclose(rn.sh_eval(f["coeffs"], n), 1.0, atol=1e-5)
+    np.testing.assert_allclose(rn.compositing.sh_eval(f["coeffs"], n), 1.0, atol=1e-5)
     with pytest.raises(ValueError, match="normals: no usable pixel"):
-        rn.sh_fit(np.full((4, 3), np.nan), np.ones((4, 3)))
+        rn.compositing.sh_fit(np.full((4, 3), np.nan), np.ones((4, 3)))
 
 
 def test_reflection_env_reproduces_a_known_environment():
     n, mask, r, vals = sphere_image(160)
-    part = rn.reflection_env(r, vals, mask, size=64, stage="partial")
+    part = rn.compositing.reflection_env(r, vals, mask, size=64, stage="partial")
     assert part["coverage"] > 0.8 and part["covered"].dtype == bool
-    full = rn.reflection_env(r, vals, mask, size=64)
+    full = rn.compositing.reflection_env(r, vals, mask, size=64)
     assert full["filled_texels"] > 0 and np.isfinite(full["map"]).all()
     d = fib(3000)
     d = d[d[:, 2] > -0.5]
-    err = np.abs(rn.envmap_lookup(full["map"], d) - env(d)).max()
+    err = np.abs(rn.compositing.envmap_lookup(full["map"], d) - env(d)).max()
     assert err < 0.02, err
     # Occluded (α_R) pixels carry wrong values: masked out, they do not show.
     bad = vals.copy()
     bad[:, :80] = 100.0
     m2 = mask.copy()
     m2[:, :80] = 0
-    assert rn.reflection_env(r, bad, m2, size=48)["map"].max() < 2
+    assert rn.compositing.reflection_env(r, bad, m2, size=48)["map"].max() < 2
 
 
 def test_hole_filling_of_a_constant_and_of_a_linear_front_field():
@@ -151,7 +151,7 @@ def test_hole_filling_of_a_constant_and_of_a_linear_front_field():
     cov[0] &= ~hole
     damaged = m.copy()
     damaged[0, hole] = 0
-    filled = rn.fill_holes(damaged, cov)
+    filled = rn.compositing.fill_holes(damaged, cov)
     assert np.abs(filled[0, hole, 0] - m[0, hole, 0]).max() < 2e-3
     np.testing.assert_array_equal(filled[cov], m[cov])
 
@@ -160,15 +160,15 @@ def _recomp(ids, n, e, img, patches, **kw):
     h, w = ids.shape
     d0 = np.full((h, w, 3), 0.6, np.float32)
     r0 = np.full((h, w, 3), 0.3, np.float32)
-    return rn.recomposite(ids, n, e, np.array([0, 0, 1.0]), d0, r0, img, patches, **kw)
+    return rn.compositing.recomposite(ids, n, e, np.array([0, 0, 1.0]), d0, r0, img, patches, **kw)
 
 
 def test_recomposite_identity_is_bit_exact_and_edits_stay_in_patches():
     n, mask, r, vals = sphere_image(48)
     ids = np.where(mask > 0, 0, -1).astype(np.int32)
     ids[:, :10] = np.where(mask[:, :10] > 0, 1, -1)
-    env_map = rn.reflection_env(r, vals, mask, size=32)["map"]
-    sh = rn.sh_fit(n[mask > 0], env(n[mask > 0]))["coeffs"]
+    env_map = rn.compositing.reflection_env(r, vals, mask, size=32)["map"]
+    sh = rn.compositing.sh_fit(n[mask > 0], env(n[mask > 0]))["coeffs"]
     patches = [{"sh": sh, "env": env_map}, None]
     img = np.random.default_rng(1).random((48, 48, 3)).astype(np.float32)
     out, st = _recomp(ids, n, n, img, patches, alpha_d=mask, alpha_r=mask, gamma=2.2, k_d=1.0)
@@ -185,15 +185,15 @@ def test_recomposite_identity_is_bit_exact_and_edits_stay_in_patches():
 @pytest.mark.parametrize(
     "call, words",
     [
-        (lambda: rn.sh_fit(np.zeros((4, 2)), np.zeros((4, 3))), "normals: expected shape (N, 3)"),
-        (lambda: rn.sh_fit(np.ones((4, 3)), np.zeros((5, 3))), "values: expected shape (4, C)"),
-        (lambda: rn.sh_fit(np.ones((4, 3)), np.zeros((4, 3)), "svd"), "method: unknown fit"),
-        (lambda: rn.reflect_dirs(np.zeros((4, 5, 3)), np.zeros((4, 4, 3))), "view: expected shape (3,) or (4, 5, 3)"),
-        (lambda: rn.reflection_env(np.zeros((4, 5, 3)), np.zeros((4, 6, 3)), np.ones((4, 5))), "values: expected shape (4, 5, 3) like the other passes"),
-        (lambda: rn.reflection_env(np.zeros((4, 5, 3)), np.zeros((4, 5, 3)), np.ones((5, 4))), "mask: expected shape (4, 5)"),
-        (lambda: rn.reflection_env(np.zeros((4, 5, 3)), np.zeros((4, 5, 3)), np.ones((4, 5)), size=3), "size: map size"),
-        (lambda: rn.fill_holes(np.zeros((2, 8, 9, 1)), np.ones((2, 8, 9))), "map: expected a dual-paraboloid map"),
-        (lambda: rn.envmap_lookup(np.full((2, 8, 8, 3), np.nan), np.zeros((1, 3))), "map: value 0 is not finite"),
+        (lambda: rn.compositing.sh_fit(np.zeros((4, 2)), np.zeros((4, 3))), "normals: expected shape (N, 3)"),
+        (lambda: rn.compositing.sh_fit(np.ones((4, 3)), np.zeros((5, 3))), "values: expected shape (4, C)"),
+        (lambda: rn.compositing.sh_fit(np.ones((4, 3)), np.zeros((4, 3)), "svd"), "method: unknown fit"),
+        (lambda: rn.compositing.reflect_dirs(np.zeros((4, 5, 3)), np.zeros((4, 4, 3))), "view: expected shape (3,) or (4, 5, 3)"),
+        (lambda: rn.compositing.reflection_env(np.zeros((4, 5, 3)), np.zeros((4, 6, 3)), np.ones((4, 5))), "values: expected shape (4, 5, 3) like the other passes"),
+        (lambda: rn.compositing.reflection_env(np.zeros((4, 5, 3)), np.zeros((4, 5, 3)), np.ones((5, 4))), "mask: expected shape (4, 5)"),
+        (lambda: rn.compositing.reflection_env(np.zeros((4, 5, 3)), np.zeros((4, 5, 3)), np.ones((4, 5)), size=3), "size: map size"),
+        (lambda: rn.compositing.fill_holes(np.zeros((2, 8, 9, 1)), np.ones((2, 8, 9))), "map: expected a dual-paraboloid map"),
+        (lambda: rn.compositing.envmap_lookup(np.full((2, 8, 8, 3), np.nan), np.zeros((1, 3))), "map: value 0 is not finite"),
         (lambda: _recomp(np.zeros((4, 5)), np.zeros((4, 5, 3)), np.zeros((4, 6, 3)), np.zeros((4, 5, 3)), []), "edited_normals: expected shape (4, 5, 3)"),
         (lambda: _recomp(np.zeros((4, 4)), np.zeros((4, 5, 3)), np.zeros((4, 5, 3)), np.zeros((4, 5, 3)), []), "ids: expected shape (4, 5)"),
         (lambda: _recomp(np.zeros((4, 4), np.int32), np.zeros((4, 5, 3)), np.zeros((4, 5, 3)), np.zeros((4, 5, 3)), []), "ids: expected shape (4, 5)"),
@@ -213,25 +213,25 @@ def test_few_directions_are_refused_holes_covering_most_of_the_sphere():
     few = np.zeros_like(mask)
     few[56:64, 56:64] = 1
     with pytest.raises(ValueError, match="below min_coverage"):
-        rn.reflection_env(r, vals, few, size=64)
+        rn.compositing.reflection_env(r, vals, few, size=64)
     # Allowed when asked for: every texel filled, finite.
-    m = rn.reflection_env(r, vals, few, size=64, min_coverage=0.0)["map"]
+    m = rn.compositing.reflection_env(r, vals, few, size=64, min_coverage=0.0)["map"]
     assert np.isfinite(m).all()
     # Nothing at all recovered: said so.
     with pytest.raises(ValueError, match="no texel was recovered"):
-        rn.reflection_env(r, vals, np.zeros_like(mask), size=32, min_coverage=0.0)
+        rn.compositing.reflection_env(r, vals, np.zeros_like(mask), size=32, min_coverage=0.0)
 
 
 def test_recomposite_masks_nan_pixels():
     n, mask, r, vals = sphere_image(32)
     ids = np.where(mask > 0, 0, -1).astype(np.int32)
-    patches = [{"sh": rn.sh_fit(n[mask > 0], env(n[mask > 0]))["coeffs"], "env": None}]
+    patches = [{"sh": rn.compositing.sh_fit(n[mask > 0], env(n[mask > 0]))["coeffs"], "env": None}]
     e = n.copy()
     e[..., 2] *= 0.5
     img = np.ones((32, 32, 3), np.float32)
     d0 = np.full((32, 32, 3), 0.5, np.float32)
     d0[16, 16] = np.nan
-    out, st = rn.recomposite(ids, n, e, np.array([0, 0, 1.0]), d0, d0 * 0, img, patches)
+    out, st = rn.compositing.recomposite(ids, n, e, np.array([0, 0, 1.0]), d0, d0 * 0, img, patches)
     assert st["masked"] == 1 and (out[16, 16] == 1).all() and np.isfinite(out).all()
 
 
@@ -324,7 +324,7 @@ def test_session_frames_equal_one_shot_recompositing_bit_for_bit():
     alpha_d = np.clip(p.ao.mean(-1), 0, 1)  # what recomposite takes from the AO pass
     for edit, k_d, k_r in [(e, 1.0, 1.0), (C.emboss(n, 0.3), 0.7, 1.3), (n, 1.0, 1.0)]:
         out, st = session(edit, k_d=k_d, k_r=k_r)
-        ref, rst = rn.recomposite(ids, n, edit, view, d0, r0, img, patches, alpha_d=alpha_d, alpha_r=kw["alpha_r"],
+        ref, rst = rn.compositing.recomposite(ids, n, edit, view, d0, r0, img, patches, alpha_d=alpha_d, alpha_r=kw["alpha_r"],
                                   diffuse_color=kw["diffuse_color"], reflection_color=kw["reflection_color"], k_d=k_d, k_r=k_r)
         assert out.tobytes() == ref.tobytes() and st == rst
         assert set(session.timings) == {"check", "recomposite", "total"}

@@ -112,7 +112,7 @@ def test_ls_reconstruction_matches_the_true_sh_after_the_camera_rotation(sphere,
     # ... and against the closed form, in world space
     d = rec.normals[rec.ids == 0]
     import rokeby_native as rn
-    np.testing.assert_allclose(rn.sh_eval(sh, d), irradiance_over_pi(V.to_world(d, rot)), atol=3e-3)
+    np.testing.assert_allclose(rn.compositing.sh_eval(sh, d), irradiance_over_pi(V.to_world(d, rot)), atol=3e-3)
     # The comparison is not blind to the frame: R for Rᵀ, or no rotation, is far off.
     for wrong in (rot.T, np.eye(3)):
         bad = V.diffuse_against_true(sh, truth["irradiance_coeffs"], wrong, {"full": fib})

@@ -1,4 +1,4 @@
-"""EXR files through the Rust core (rokeby.core.exr over rokeby_native.exr_read/exr_write).
+"""EXR files through the Rust core (rokeby.core.exr over rokeby_native.exr_io.read/write).
 
 The add-on and ``python -m rokeby.composite`` read and write EXRs without the OpenEXR Python
 package: its wheel carries its own OpenEXR C library, and in a Blender that links OpenEXR itself

@@ -30,7 +30,7 @@ def test_unmodified_normals_give_the_input_back_bit_for_bit(gl):
     out, st = gl(ids, n, n, view, d0, r0, img, patches, **kw)
     # Exact, not within rounding: the shader returns I untouched where ñ == n (as the Rust core does).
     np.testing.assert_array_equal(out, img)
-    ref, rst = rn.recomposite(ids, n, n, view, d0, r0, img, patches, **kw)
+    ref, rst = rn.compositing.recomposite(ids, n, n, view, d0, r0, img, patches, **kw)
     np.testing.assert_array_equal(out, ref)
     assert st == {"edited": 0, "masked": 0} == dict(rst)
 
@@ -38,7 +38,7 @@ def test_unmodified_normals_give_the_input_back_bit_for_bit(gl):
 @pytest.mark.parametrize("opts", [{}, {"k_d": 0.7, "k_r": 1.3, "gamma": 2.2}, {"epsilon": 0.2}])
 def test_multi_patch_frame_agrees_with_rust(gl, opts):
     (ids, n, e, view, d0, r0, img, patches), kw = frame()
-    ref, rst = rn.recomposite(ids, n, e, view, d0, r0, img, patches, **kw, **opts)
+    ref, rst = rn.compositing.recomposite(ids, n, e, view, d0, r0, img, patches, **kw, **opts)
     out, st = gl(ids, n, e, view, d0, r0, img, patches, **kw, **opts)
     assert st == dict(rst) and st["edited"] > 4000 and st["masked"] >= 2
     assert np.isnan(out).sum() == np.isnan(ref).sum() == 0
@@ -55,7 +55,7 @@ def test_multi_patch_frame_agrees_with_rust(gl, opts):
 def test_constant_view_and_no_optional_buffers(gl):
     (ids, n, e, view, d0, r0, img, patches), _ = frame(seed=5)
     v = np.array([0.0, 0.0, 1.0])
-    ref, rst = rn.recomposite(ids, n, e, v, d0, r0, img, patches)
+    ref, rst = rn.compositing.recomposite(ids, n, e, v, d0, r0, img, patches)
     out, st = GL.recomposite_gpu(ids, n, e, v, d0, r0, img, patches)
     assert st == dict(rst)
     assert (np.abs(out.astype(np.float64) - ref) / (1 + np.abs(ref))).max() < 1e-4
@@ -68,13 +68,13 @@ def test_reconstructed_sphere_edited_by_emboss(gl):
 
     rng = np.random.default_rng(2016)
     n, inside, d0, r, r0, depth = bc.bumpy_sphere(128, rng)
-    fit = rn.sh_fit(n[inside], d0[inside], "ls")
-    env = rn.reflection_env(r, r0, inside.astype(np.float32), depth, size=64)["map"]
+    fit = rn.compositing.sh_fit(n[inside], d0[inside], "ls")
+    env = rn.compositing.reflection_env(r, r0, inside.astype(np.float32), depth, size=64)["map"]
     ids = np.where(inside, 0, -1).astype(np.int32)
     e = C.emboss(n, 0.5, inside)
     img = d0 + r0
     args = (ids, n, e, np.array([0, 0, 1.0]), d0, r0, img, [{"sh": fit["coeffs"], "env": env}])
-    ref, rst = rn.recomposite(*args)
+    ref, rst = rn.compositing.recomposite(*args)
     out, st = gl(*args)
     assert st == dict(rst) and st["edited"] > 5000
     assert (np.abs(out.astype(np.float64) - ref) / (1 + np.abs(ref))).max() < 1e-4

@@ -1,5 +1,5 @@
-"""rokeby_native.Recompositor (the passes held by the Rust core between edits) against the one-shot
-``rokeby_native.recomposite`` (the oracle): the same pixels for whole frames and windows, into the
+"""rokeby_native.compositing.Recompositor (the passes held by the Rust core between edits) against the one-shot
+``rokeby_native.compositing.recomposite`` (the oracle): the same pixels for whole frames and windows, into the
 caller's buffer; bad input refused by name; and RecompositeSession / the brush on top of it."""
 
 import sys
@@ -28,7 +28,7 @@ def _frame(h=200, w=97, patches=4, seed=3):
 
 def _session(args, kw, **extra):
     ids, n, _e, view, d0, r0, img, pts = args
-    return rn.Recompositor(ids, n, view, d0, r0, img, pts, **kw, **extra)
+    return rn.compositing.Recompositor(ids, n, view, d0, r0, img, pts, **kw, **extra)
 
 
 @pytest.mark.parametrize("prepared", [True, False])
@@ -36,7 +36,7 @@ def _session(args, kw, **extra):
 def test_whole_frame_and_windows_equal_one_shot_recompositing(gamma, k_d, k_r, prepared):
     args, kw = _frame()
     ids, n, e, view, d0, r0, img, pts = args
-    ref, rst = rn.recomposite(*args, **kw, k_d=k_d, k_r=k_r, gamma=gamma)
+    ref, rst = rn.compositing.recomposite(*args, **kw, k_d=k_d, k_r=k_r, gamma=gamma)
     assert rst["edited"] > 1000 and rst["masked"] > 0
     s = _session(args, kw, gamma=gamma, prepared=prepared)
     assert s.shape == ids.shape
@@ -79,7 +79,7 @@ def test_new_patches_and_identity():
     swapped = pts[::-1]
     s.set_patches(swapped)
     s.run(out, e)
-    ref, _ = rn.recomposite(ids, n, e, view, d0, r0, img, swapped, **kw)
+    ref, _ = rn.compositing.recomposite(ids, n, e, view, d0, r0, img, swapped, **kw)
     assert out.tobytes() == ref.tobytes()
 
 
@@ -88,15 +88,15 @@ def test_bad_input_is_refused_by_name():
     ids, n, e, view, d0, r0, img, pts = args
     h, w = ids.shape
     with pytest.raises(ValueError, match=r"diffuse: expected shape \(170, 20, 3\)"):
-        rn.Recompositor(ids, n, view, d0[:-1], r0, img, pts)
+        rn.compositing.Recompositor(ids, n, view, d0[:-1], r0, img, pts)
     with pytest.raises(ValueError, match=r"ids: expected shape \(170, 20\)"):
-        rn.Recompositor(ids[:-1], n, view, d0, r0, img, pts)
+        rn.compositing.Recompositor(ids[:-1], n, view, d0, r0, img, pts)
     bad = [{"sh": np.full((3, 9), np.nan), "env": None}]
     with pytest.raises(ValueError, match=r"patches\[0\]\.sh: expected finite coefficients"):
-        rn.Recompositor(ids, n, view, d0, r0, img, bad)
+        rn.compositing.Recompositor(ids, n, view, d0, r0, img, bad)
     nan_map = [{"sh": None, "env": np.full((2, 8, 8, 3), np.nan, np.float32)}]
     with pytest.raises(ValueError, match=r"patches\[0\]\.env: value 0 is not finite"):
-        rn.Recompositor(ids, n, view, d0, r0, img, nan_map)
+        rn.compositing.Recompositor(ids, n, view, d0, r0, img, nan_map)
     with pytest.raises(ValueError, match="gamma: must be in"):
         _session(args, kw, gamma=0.0)
     s = _session(args, kw)
@@ -127,7 +127,7 @@ def test_bad_input_is_refused_by_name():
         s.run(out, e, k_d=3e38)
     # The session goes on after the errors.
     s.run(out, e)
-    assert out.tobytes() == rn.recomposite(*args, **kw)[0].tobytes()
+    assert out.tobytes() == rn.compositing.recomposite(*args, **kw)[0].tobytes()
 
 
 def test_recompose_session_and_brush_use_the_core_session():
@@ -141,7 +141,7 @@ def test_recompose_session_and_brush_use_the_core_session():
     ids, n, e, view, d0, r0, img, patches = args
     session = C.RecompositeSession(p, rec)
     alpha_d = np.clip(p.ao.mean(-1), 0, 1)
-    ref, rst = rn.recomposite(ids, n, e, view, d0, r0, img, patches, alpha_d=alpha_d, alpha_r=kw["alpha_r"],
+    ref, rst = rn.compositing.recomposite(ids, n, e, view, d0, r0, img, patches, alpha_d=alpha_d, alpha_r=kw["alpha_r"],
                               diffuse_color=kw["diffuse_color"], reflection_color=kw["reflection_color"])
     buf = session.buffer
     out, st = session(e, out=buf)

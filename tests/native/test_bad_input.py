@@ -48,7 +48,7 @@ def test_rotation_field_rejects(kwargs, exc, words):
     args.update(kwargs)
     points, constraints = args.pop("points"), args.pop("constraints")
     with pytest.raises(exc) as info:
-        rn.rotation_field(points, constraints, **args)
+        rn.reflection.rotation_field(points, constraints, **args)
     assert words in str(info.value)
 
 
@@ -69,32 +69,32 @@ def test_edited_directions_rejects(change, exc, words):
     args = dict(positions=P, normals=N, eye=EYE, constraints=C)
     args.update(change)
     with pytest.raises(exc) as info:
-        rn.edited_directions(args["positions"], args["normals"], args["eye"], args["constraints"])
+        rn.reflection.edited_directions(args["positions"], args["normals"], args["eye"], args["constraints"])
     assert words in str(info.value)
 
 
 def test_ortho_rejects_bad_matrices():
     with pytest.raises(ValueError, match="matrices: expected shape"):
-        rn.ortho(np.zeros((3, 4)))
+        rn.reflection.ortho(np.zeros((3, 4)))
     with pytest.raises(ValueError, match="matrices: matrix 1 has a non-finite"):
-        rn.ortho(np.stack([np.eye(3), np.full((3, 3), np.inf)]))
+        rn.reflection.ortho(np.stack([np.eye(3), np.full((3, 3), np.inf)]))
 
 
 def test_degenerate_matrices_give_rotations_not_nan():
     m = np.stack([np.zeros((3, 3)), np.diag([1.0, 0, 0]), np.diag([1.0, 1.0, -1.0]), np.diag([-1.0, -1.0, -1.0]), np.full((3, 3), 1e-30), np.full((3, 3), 1e30)])
     for method in ("exact", "fast"):
-        q = rn.ortho(m, method=method)
+        q = rn.reflection.ortho(m, method=method)
         assert np.all(np.isfinite(q))
         np.testing.assert_allclose(np.linalg.norm(q, axis=1), 1.0, atol=1e-6)
 
 
 def test_integer_coordinates_are_accepted():
-    a = rn.rotation_field(P.astype(np.int32), C)
-    np.testing.assert_array_equal(a, rn.rotation_field(P, C))
+    a = rn.reflection.rotation_field(P.astype(np.int32), C)
+    np.testing.assert_array_equal(a, rn.reflection.rotation_field(P, C))
 
 
 def test_inputs_are_not_modified():
     p, c = P.copy(), C.copy()
-    rn.rotation_field(p, c)
+    rn.reflection.rotation_field(p, c)
     np.testing.assert_array_equal(p, P)
     np.testing.assert_array_equal(c, C)

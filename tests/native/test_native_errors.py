@@ -17,16 +17,16 @@ FACE = np.array([[0, 1, 2]], np.int64)
 
 def test_a_singular_geodesic_system_is_a_numerical_error():
     with pytest.raises(rn.NumericalError) as info:
-        rn.geodesic_distances(NEEDLE, FACE, [0], method="heat")
+        rn.geometry.geodesic_distances(NEEDLE, FACE, [0], method="heat")
     assert isinstance(info.value, RuntimeError) and not isinstance(info.value, ValueError)
     assert "not positive definite" in str(info.value)
     # The same mesh is fine for the methods that solve no linear system.
-    d = rn.geodesic_distances(NEEDLE, FACE, [0], method="dijkstra")
+    d = rn.geometry.geodesic_distances(NEEDLE, FACE, [0], method="dijkstra")
     assert np.all(np.isfinite(d))
 
 
 def test_a_numerical_error_is_caught_as_a_runtime_error():
-    solver = rn.GeodesicSolver(NEEDLE, FACE)
+    solver = rn.geometry.GeodesicSolver(NEEDLE, FACE)
     with pytest.raises(RuntimeError):
         solver.distances([0], method="heat")
     assert not solver.factored
@@ -37,15 +37,15 @@ def test_a_numerical_error_is_caught_as_a_runtime_error():
 @pytest.mark.parametrize(
     "call, words",
     [
-        (lambda: rn.ortho(np.stack([np.eye(3), np.full((3, 3), np.nan)])), "matrices: matrix 1 has a non-finite entry"),
-        (lambda: rn.interpolate(np.zeros(3), FACE, [1], [[1, 0, 0]]), "face_index: entry 0 = 1 is out of range"),
-        (lambda: rn.interpolate(np.zeros(3), FACE, [0], [[np.inf, 0, 0]]), "bary: row 0 is not finite"),
-        (lambda: rn.interpolate(np.array([0.0, np.nan, 0.0]), FACE, [0], [[1, 0, 0]]), "values: contains NaN"),
-        (lambda: rn.interpolate(np.zeros(2), FACE, [0], [[1, 0, 0]]), "faces: face 0 refers to vertex 2"),
-        (lambda: rn.GeodesicSolver(NEEDLE, FACE).freeform_region([0.0, 1.5, 1.0]), "weights: weights[1] = 1.5 is not in [0, 1]"),
-        (lambda: rn.GeodesicSolver(NEEDLE, FACE).freeform_region([0.0, 1.0, 1.0], border=-1.0), "border: must be finite and >= 0"),
-        (lambda: rn.GeodesicSolver(NEEDLE, FACE).geodesic_region(0, radius=0.0), "radius: must be finite and > 0"),
-        (lambda: rn.sh_fit(np.zeros((4, 3)), np.ones((4, 3))), "normals: no usable pixel (4 of 4"),
+        (lambda: rn.reflection.ortho(np.stack([np.eye(3), np.full((3, 3), np.nan)])), "matrices: matrix 1 has a non-finite entry"),
+        (lambda: rn.geometry.interpolate(np.zeros(3), FACE, [1], [[1, 0, 0]]), "face_index: entry 0 = 1 is out of range"),
+        (lambda: rn.geometry.interpolate(np.zeros(3), FACE, [0], [[np.inf, 0, 0]]), "bary: row 0 is not finite"),
+        (lambda: rn.geometry.interpolate(np.array([0.0, np.nan, 0.0]), FACE, [0], [[1, 0, 0]]), "values: contains NaN"),
+        (lambda: rn.geometry.interpolate(np.zeros(2), FACE, [0], [[1, 0, 0]]), "faces: face 0 refers to vertex 2"),
+        (lambda: rn.geometry.GeodesicSolver(NEEDLE, FACE).freeform_region([0.0, 1.5, 1.0]), "weights: weights[1] = 1.5 is not in [0, 1]"),
+        (lambda: rn.geometry.GeodesicSolver(NEEDLE, FACE).freeform_region([0.0, 1.0, 1.0], border=-1.0), "border: must be finite and >= 0"),
+        (lambda: rn.geometry.GeodesicSolver(NEEDLE, FACE).geodesic_region(0, radius=0.0), "radius: must be finite and > 0"),
+        (lambda: rn.compositing.sh_fit(np.zeros((4, 3)), np.ones((4, 3))), "normals: no usable pixel (4 of 4"),
     ],
 )
 def test_bad_input_is_a_value_error_naming_the_argument(call, words):

@@ -34,7 +34,7 @@ def shared_inputs():
     u, v = (x + 0.5) / hw * 2 - 1, 1 - (y + 0.5) / hw * 2
     z2 = 1 - u * u - v * v
     sn = np.stack([u, v, np.sqrt(np.clip(z2, 0, None))], -1).astype(np.float32)
-    refl = rn.reflect_dirs(sn, np.array([0, 0, 1], np.float32))
+    refl = rn.compositing.reflect_dirs(sn, np.array([0, 0, 1], np.float32))
     d = fib(500)
     lat = rng.random((16, 32, 3)).astype(np.float32)
     verts = rng.normal(size=(200, 3)).astype(np.float32)
@@ -47,16 +47,16 @@ def shared_inputs():
 
 
 CALLS = {
-    "reflect_dirs": lambda a: rn.reflect_dirs(a["n"], np.array([0, 0, 1], np.float32)),
-    "sh_eval": lambda a: rn.sh_eval(a["coeffs"], a["d"]),
-    "sh_fit": lambda a: rn.sh_fit(a["d"], a["vals"])["coeffs"],
-    "normals_bilateral": lambda a: rn.normals_bilateral(a["n"], a["depth"], sigma_s=2.0),
-    "normals_emboss": lambda a: rn.normals_emboss(a["n"], 0.5),
-    "reflection_env": lambda a: rn.reflection_env(a["refl"], a["refl_vals"], a["refl_mask"], size=16)["map"],
-    "env_sample": lambda a: rn.env_sample(a["lat"], "latlong", a["d"]),
-    "env_prefilter": lambda a: rn.env_prefilter(a["lat"], "ggx", [0.3])[0],
-    "rotation_field": lambda a: rn.rotation_field(a["verts"], a["constraints"]),
-    "ortho": lambda a: rn.ortho(a["mats"]),
+    "reflect_dirs": lambda a: rn.compositing.reflect_dirs(a["n"], np.array([0, 0, 1], np.float32)),
+    "sh_eval": lambda a: rn.compositing.sh_eval(a["coeffs"], a["d"]),
+    "sh_fit": lambda a: rn.compositing.sh_fit(a["d"], a["vals"])["coeffs"],
+    "normals_bilateral": lambda a: rn.compositing.normals_bilateral(a["n"], a["depth"], sigma_s=2.0),
+    "normals_emboss": lambda a: rn.compositing.normals_emboss(a["n"], 0.5),
+    "reflection_env": lambda a: rn.compositing.reflection_env(a["refl"], a["refl_vals"], a["refl_mask"], size=16)["map"],
+    "envmaps.sample": lambda a: rn.envmaps.sample(a["lat"], "latlong", a["d"]),
+    "envmaps.prefilter": lambda a: rn.envmaps.prefilter(a["lat"], "ggx", [0.3])[0],
+    "rotation_field": lambda a: rn.reflection.rotation_field(a["verts"], a["constraints"]),
+    "ortho": lambda a: rn.reflection.ortho(a["mats"]),
 }
 
 
@@ -108,7 +108,7 @@ def test_writing_into_sh_fit_input_while_it_runs_never_returns_nan():
         for _ in range(6):
             for method in ("ls", "qp"):
                 try:
-                    c = rn.sh_fit(d, vals, method)["coeffs"]
+                    c = rn.compositing.sh_fit(d, vals, method)["coeffs"]
                 except ValueError:
                     outcomes.append("ValueError")
                     continue
@@ -126,7 +126,7 @@ def test_writing_into_reflection_env_values_while_it_runs_never_returns_nan():
     u, v = (x + 0.5) / hw * 2 - 1, 1 - (y + 0.5) / hw * 2
     z2 = 1 - u * u - v * v
     n = np.stack([u, v, np.sqrt(np.clip(z2, 0, None))], -1).astype(np.float32)
-    r = rn.reflect_dirs(n, np.array([0, 0, 1], np.float32))
+    r = rn.compositing.reflect_dirs(n, np.array([0, 0, 1], np.float32))
     mask = (z2 > 0.02).astype(np.float32)
     values = (1.5 + 0.3 * r).astype(np.float32)
     stop = threading.Event()
@@ -142,7 +142,7 @@ def test_writing_into_reflection_env_values_while_it_runs_never_returns_nan():
     try:
         for _ in range(4):
             try:
-                m = rn.reflection_env(r, values, mask, size=32)["map"]
+                m = rn.compositing.reflection_env(r, values, mask, size=32)["map"]
             except ValueError:
                 continue
             assert np.isfinite(m).all()

@@ -1,7 +1,7 @@
 """Property-based tests of the rokeby_native entry points of compositing, environment maps and shadows:
-compositing (sh_fit, sh_eval, reflect_dirs, reflection_env, fill_holes, envmap_lookup,
-recomposite), environment maps (env_convert, env_sample, env_prefilter, env_irradiance,
-env_reference) and shadow editing (shadow_silhouettes, shadow_falloff, ShadowEditor).
+rokeby_native.compositing (sh_fit, sh_eval, reflect_dirs, reflection_env, fill_holes, envmap_lookup,
+recomposite), rokeby_native.envmaps (convert, sample, prefilter, irradiance, prefilter_reference)
+and rokeby_native.shadows (silhouettes, falloff_factor, ShadowEditor).
 
 Random valid arrays must give results of the right shape and dtype that are finite and satisfy a
 property of the maths; adversarial arrays (wrong shapes, NaN, inf, empty, wrong dtype) must raise
@@ -59,7 +59,7 @@ def smooth_env(layout, size, c, rng):
     # Any direction convention will do: the map is a smooth function of the texel's direction.
     d = np.stack([np.outer(np.sin(th), np.cos(ph)), np.outer(np.sin(th), np.sin(ph)), np.repeat(np.cos(th)[:, None], w, 1)], -1)
     ll = (a + d @ b.T).astype(np.float32)
-    return ll if layout == "latlong" and size == h else rn.env_convert(ll, "latlong", layout, size, 2)
+    return ll if layout == "latlong" and size == h else rn.envmaps.convert(ll, "latlong", layout, size, 2)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -72,10 +72,10 @@ def test_sh_fit_recovers_sh_eval(seed, n, c):
     rng = np.random.default_rng(seed)
     coeffs = rng.normal(size=(c, 9))
     normals = unit(rng, n) * rng.uniform(0.5, 3.0, (n, 1)).astype(np.float32)  # need not be unit
-    values = rn.sh_eval(coeffs, normals)
+    values = rn.compositing.sh_eval(coeffs, normals)
     assert values.dtype == np.float32 and values.shape == (n, c) and np.all(np.isfinite(values))
     for method in ["ls", "qp"]:
-        r = rn.sh_fit(normals, values, method=method)
+        r = rn.compositing.sh_fit(normals, values, method=method)
         assert r["coeffs"].shape == (c, 9) and r["coeffs"].dtype == np.float64
         assert np.all(np.isfinite(r["coeffs"])) and r["pixels"] == n and r["masked"] == 0
         # float32 values: the recovered coefficients are exact up to the input's rounding.
@@ -83,9 +83,9 @@ def test_sh_fit_recovers_sh_eval(seed, n, c):
         assert np.all(r["rms_residual"] >= 0)
     # The constrained fit keeps D(n) ≥ D0 on arbitrary (non-SH) data.
     raw = rng.normal(size=(n, c)).astype(np.float32)
-    q = rn.sh_fit(normals, raw, method="qp")
+    q = rn.compositing.sh_fit(normals, raw, method="qp")
     assert np.all(q["max_residual"] <= 1e-6 * (1 + np.abs(raw).max()))
-    assert np.all(rn.sh_eval(q["coeffs"], normals) >= raw - 1e-4 * (1 + np.abs(raw).max()))
+    assert np.all(rn.compositing.sh_eval(q["coeffs"], normals) >= raw - 1e-4 * (1 + np.abs(raw).max()))
 
 
 @FEW
@@ -94,9 +94,9 @@ def test_sh_fit_leaves_out_bad_rows(seed, data, bad):
     rng = np.random.default_rng(seed)
     coeffs = rng.normal(size=(1, 9))
     normals = unit(rng, 40)
-    values = rn.sh_eval(coeffs, normals)
+    values = rn.compositing.sh_eval(coeffs, normals)
     nb = with_bad_entry(normals, data, bad)
-    r = rn.sh_fit(nb, values, method="ls")
+    r = rn.compositing.sh_fit(nb, values, method="ls")
     assert r["masked"] == 1 and r["pixels"] == 39
     np.testing.assert_allclose(r["coeffs"], coeffs, atol=2e-3 * (1 + np.abs(coeffs).max()))
 
@@ -106,15 +106,15 @@ def test_sh_fit_leaves_out_bad_rows(seed, data, bad):
 def test_sh_adversarial(n, k, dtype):
     good_n = unit(np.random.default_rng(0), 20)
     good_v = np.ones((20, 1), np.float32)
-    raises_naming("normals", rn.sh_fit, np.ones((20, k), np.float32), good_v)
-    raises_naming("normals", rn.sh_fit, np.ones((20, 3, 1), np.float32), good_v)
-    raises_naming("normals", rn.sh_fit, good_n.astype(dtype), good_v)
-    raises_naming("values", rn.sh_fit, good_n, good_v[: max(0, 20 - n - 1)])
-    raises_naming("normals", rn.sh_fit, np.zeros((n, 3), np.float32), np.ones((n, 1), np.float32))  # zero normals
-    raises_naming("normals", rn.sh_fit, good_n, np.full((20, 1), np.nan, np.float32))  # nothing usable
-    raises_naming("method", rn.sh_fit, good_n, good_v, method="lsqr")
-    raises_naming("coeffs", rn.sh_eval, np.ones((1, 9 - k)), good_n)
-    raises_naming("normals", rn.sh_eval, np.ones((1, 9)), np.ones((20, k), np.float32))
+    raises_naming("normals", rn.compositing.sh_fit, np.ones((20, k), np.float32), good_v)
+    raises_naming("normals", rn.compositing.sh_fit, np.ones((20, 3, 1), np.float32), good_v)
+    raises_naming("normals", rn.compositing.sh_fit, good_n.astype(dtype), good_v)
+    raises_naming("values", rn.compositing.sh_fit, good_n, good_v[: max(0, 20 - n - 1)])
+    raises_naming("normals", rn.compositing.sh_fit, np.zeros((n, 3), np.float32), np.ones((n, 1), np.float32))  # zero normals
+    raises_naming("normals", rn.compositing.sh_fit, good_n, np.full((20, 1), np.nan, np.float32))  # nothing usable
+    raises_naming("method", rn.compositing.sh_fit, good_n, good_v, method="lsqr")
+    raises_naming("coeffs", rn.compositing.sh_eval, np.ones((1, 9 - k)), good_n)
+    raises_naming("normals", rn.compositing.sh_eval, np.ones((1, 9)), np.ones((20, k), np.float32))
 
 
 # ---------------------------------------------------------------------------------------------
@@ -127,7 +127,7 @@ def test_reflect_dirs_is_a_mirror(seed, h, w, ortho):
     rng = np.random.default_rng(seed)
     n = unit(rng, h * w).reshape(h, w, 3) * 2.0
     v = unit(rng, 1)[0] if ortho else unit(rng, h * w).reshape(h, w, 3)
-    r = rn.reflect_dirs(n, v)
+    r = rn.compositing.reflect_dirs(n, v)
     assert r.shape == (h, w, 3) and r.dtype == np.float32 and np.all(np.isfinite(r))
     nn = n / np.linalg.norm(n, axis=-1, keepdims=True)
     vv = np.broadcast_to(v, r.shape)
@@ -138,10 +138,10 @@ def test_reflect_dirs_is_a_mirror(seed, h, w, ortho):
 
 def test_reflect_dirs_adversarial():
     n = unit(np.random.default_rng(0), 12).reshape(3, 4, 3)
-    raises_naming("normals", rn.reflect_dirs, n.reshape(12, 3), n)
-    raises_naming("view", rn.reflect_dirs, n, n[:2])
-    raises_naming("normals", rn.reflect_dirs, n.astype("U4"), n)
-    r = rn.reflect_dirs(np.where(np.arange(3)[:, None, None] == 0, np.nan, n).astype(np.float32), n)
+    raises_naming("normals", rn.compositing.reflect_dirs, n.reshape(12, 3), n)
+    raises_naming("view", rn.compositing.reflect_dirs, n, n[:2])
+    raises_naming("normals", rn.compositing.reflect_dirs, n.astype("U4"), n)
+    r = rn.compositing.reflect_dirs(np.where(np.arange(3)[:, None, None] == 0, np.nan, n).astype(np.float32), n)
     assert np.all(np.isnan(r[0])) and np.all(np.isfinite(r[1:]))  # bad pixels are NaN, not errors
 
 
@@ -151,22 +151,22 @@ def test_envmap_lookup_is_a_bilinear_mean(seed, s, c):
     rng = np.random.default_rng(seed)
     m = rng.uniform(-2, 3, (2, s, s, c)).astype(np.float32)
     d = rng.normal(size=(5, 7, 3)).astype(np.float32)
-    out = rn.envmap_lookup(m, d)
+    out = rn.compositing.envmap_lookup(m, d)
     assert out.shape == (5, 7, c) and out.dtype == np.float32 and np.all(np.isfinite(out))
     assert np.all(out >= m.min() - 1e-5) and np.all(out <= m.max() + 1e-5)
     k = rng.uniform(-1, 1, c).astype(np.float32)
-    np.testing.assert_allclose(rn.envmap_lookup(np.broadcast_to(k, m.shape).copy(), d), np.broadcast_to(k, out.shape), atol=1e-6)
+    np.testing.assert_allclose(rn.compositing.envmap_lookup(np.broadcast_to(k, m.shape).copy(), d), np.broadcast_to(k, out.shape), atol=1e-6)
 
 
 @FEW
 @given(data=st.data(), bad=BAD_FLOATS)
 def test_envmap_lookup_adversarial(data, bad):
     m = np.ones((2, 4, 4, 3), np.float32)
-    raises_naming("map", rn.envmap_lookup, with_bad_entry(m, data, bad), np.ones((1, 3)))
-    raises_naming("map", rn.envmap_lookup, np.ones((2, 4, 5, 3), np.float32), np.ones((1, 3)))
-    raises_naming("map", rn.envmap_lookup, np.ones((3, 4, 4, 3), np.float32), np.ones((1, 3)))
-    raises_naming("map", rn.envmap_lookup, np.ones((2, 0, 0, 3), np.float32), np.ones((1, 3)))
-    raises_naming("dirs", rn.envmap_lookup, m, np.ones((2, 2)))
+    raises_naming("map", rn.compositing.envmap_lookup, with_bad_entry(m, data, bad), np.ones((1, 3)))
+    raises_naming("map", rn.compositing.envmap_lookup, np.ones((2, 4, 5, 3), np.float32), np.ones((1, 3)))
+    raises_naming("map", rn.compositing.envmap_lookup, np.ones((3, 4, 4, 3), np.float32), np.ones((1, 3)))
+    raises_naming("map", rn.compositing.envmap_lookup, np.ones((2, 0, 0, 3), np.float32), np.ones((1, 3)))
+    raises_naming("dirs", rn.compositing.envmap_lookup, m, np.ones((2, 2)))
 
 
 def disk(s):
@@ -181,7 +181,7 @@ def test_fill_holes_keeps_data_and_the_maximum_principle(seed, s, c, frac):
     m = rng.uniform(-1, 2, (2, s, s, c)).astype(np.float32)
     covered = (rng.uniform(size=(2, s, s)) < frac) & disk(s)[None]
     covered[0, s // 2, s // 2] = True
-    out = rn.fill_holes(m, covered)
+    out = rn.compositing.fill_holes(m, covered)
     assert out.shape == m.shape and out.dtype == np.float32 and np.all(np.isfinite(out))
     np.testing.assert_array_equal(out[covered], m[covered])  # Dirichlet values stay
     inside = np.broadcast_to(disk(s)[None], covered.shape)
@@ -192,10 +192,10 @@ def test_fill_holes_keeps_data_and_the_maximum_principle(seed, s, c, frac):
 def test_fill_holes_adversarial():
     m = np.ones((2, 4, 4, 3), np.float32)
     cov = np.ones((2, 4, 4), bool)
-    raises_naming("covered", rn.fill_holes, m, np.zeros((2, 4, 4), bool))
-    raises_naming("covered", rn.fill_holes, m, cov[:, :3])
-    raises_naming("map", rn.fill_holes, m[:, :3], cov)
-    raises_naming("map", rn.fill_holes, np.full_like(m, np.inf), cov)
+    raises_naming("covered", rn.compositing.fill_holes, m, np.zeros((2, 4, 4), bool))
+    raises_naming("covered", rn.compositing.fill_holes, m, cov[:, :3])
+    raises_naming("map", rn.compositing.fill_holes, m[:, :3], cov)
+    raises_naming("map", rn.compositing.fill_holes, np.full_like(m, np.inf), cov)
 
 
 def sphere_image(hw):
@@ -214,35 +214,35 @@ def sphere_image(hw):
 def test_reflection_env_recovers_a_linear_environment(seed, size):
     rng = np.random.default_rng(seed)
     n, mask = sphere_image(40)
-    r = rn.reflect_dirs(n, np.array([0, 0, 1], np.float32))
+    r = rn.compositing.reflect_dirs(n, np.array([0, 0, 1], np.float32))
     a, b = rng.uniform(1, 2, 3), rng.uniform(-0.4, 0.4, (3, 3))
     values = (a + r @ b.T).astype(np.float32)
-    out = rn.reflection_env(r, values, mask, size=size, blur_sigma=0.0)
+    out = rn.compositing.reflection_env(r, values, mask, size=size, blur_sigma=0.0)
     m = out["map"]
     assert m.shape == (2, size, size, 3) and m.dtype == np.float32 and np.all(np.isfinite(m))
     assert 0.3 < out["coverage"] <= 1.0
     # Directions seen by the sphere's interior come back as the environment's values.
     d = r[mask > 0][::7]
     d = d[d[:, 2] > -0.5]
-    np.testing.assert_allclose(rn.envmap_lookup(m, d), a + d @ b.T, atol=0.15)
+    np.testing.assert_allclose(rn.compositing.envmap_lookup(m, d), a + d @ b.T, atol=0.15)
 
 
 def test_reflection_env_adversarial():
     n, mask = sphere_image(16)
-    r = rn.reflect_dirs(n, np.array([0, 0, 1], np.float32))
+    r = rn.compositing.reflect_dirs(n, np.array([0, 0, 1], np.float32))
     vals = np.ones_like(r)
-    raises_naming("mask", rn.reflection_env, r, vals, mask[:-1])
-    raises_naming("values", rn.reflection_env, r, vals[:, :-1], mask)
-    raises_naming("size", rn.reflection_env, r, vals, mask, size=0)
-    raises_naming("stage", rn.reflection_env, r, vals, mask, stage="half")
-    raises_naming("mask", rn.reflection_env, r, vals, np.zeros_like(mask))  # covers nothing
-    raises_naming("depth", rn.reflection_env, r, vals, mask, depth=np.ones((3, 3), np.float32))
+    raises_naming("mask", rn.compositing.reflection_env, r, vals, mask[:-1])
+    raises_naming("values", rn.compositing.reflection_env, r, vals[:, :-1], mask)
+    raises_naming("size", rn.compositing.reflection_env, r, vals, mask, size=0)
+    raises_naming("stage", rn.compositing.reflection_env, r, vals, mask, stage="half")
+    raises_naming("mask", rn.compositing.reflection_env, r, vals, np.zeros_like(mask))  # covers nothing
+    raises_naming("depth", rn.compositing.reflection_env, r, vals, mask, depth=np.ones((3, 3), np.float32))
     for kw in [dict(max_edge_angle=np.nan), dict(blur_sigma=-1.0), dict(blur_sigma=np.nan), dict(min_coverage=np.nan), dict(min_coverage=2.0), dict(max_depth_jump=np.nan)]:
-        raises_naming(next(iter(kw)), rn.reflection_env, r, vals, mask, size=8, **kw)
+        raises_naming(next(iter(kw)), rn.compositing.reflection_env, r, vals, mask, size=8, **kw)
     # NaN pixels are left out, not errors.
     rb = r.copy()
     rb[8, 8] = np.nan
-    assert np.all(np.isfinite(rn.reflection_env(rb, vals, mask, size=8)["map"]))
+    assert np.all(np.isfinite(rn.compositing.reflection_env(rb, vals, mask, size=8)["map"]))
 
 
 # ---------------------------------------------------------------------------------------------
@@ -266,18 +266,18 @@ def test_recomposite_unmodified_normals_return_the_image(seed, h, w, npatch, gam
     rng = np.random.default_rng(seed)
     ids, n, img, dif, ref, patches = recomposite_inputs(rng, h, w, npatch)
     view = np.array([0, 0, 1], np.float32)
-    out, stats = rn.recomposite(ids, n, n.copy(), view, dif, ref, img, patches, gamma=gamma)
+    out, stats = rn.compositing.recomposite(ids, n, n.copy(), view, dif, ref, img, patches, gamma=gamma)
     assert out.shape == (h, w, 3) and out.dtype == np.float32
     np.testing.assert_array_equal(out, img)
     # Edited normals: finite output, pixels outside every patch unchanged.
     e = unit(rng, h * w).reshape(h, w, 3)
-    out, stats = rn.recomposite(ids, n, e, view, dif, ref, img, patches, gamma=gamma, alpha=np.ones((h, w), np.float32))
+    out, stats = rn.compositing.recomposite(ids, n, e, view, dif, ref, img, patches, gamma=gamma, alpha=np.ones((h, w), np.float32))
     assert np.all(np.isfinite(out))
     outside = (ids < 0) | (ids >= npatch)
     np.testing.assert_array_equal(out[outside], img[outside])
     assert stats["edited"] + stats["masked"] <= int((~outside).sum())
     # α = 0 everywhere: eq. 5 adds nothing.
-    out0, _ = rn.recomposite(ids, n, e, view, dif, ref, img, patches, gamma=gamma, alpha=np.zeros((h, w), np.float32))
+    out0, _ = rn.compositing.recomposite(ids, n, e, view, dif, ref, img, patches, gamma=gamma, alpha=np.zeros((h, w), np.float32))
     np.testing.assert_allclose(out0, img, atol=1e-6)
 
 
@@ -291,24 +291,24 @@ def test_recomposite_adversarial(seed, data, bad):
     v = np.array([0, 0, 1], np.float32)
     # A non-finite input pixel is left as the image (masked), never an error or a NaN elsewhere.
     db = with_bad_entry(dif, data, bad)
-    out, st_ = rn.recomposite(ids, n, e, v, db, ref, img, patches)
+    out, st_ = rn.compositing.recomposite(ids, n, e, v, db, ref, img, patches)
     bad_px = ~np.all(np.isfinite(db), -1)
     np.testing.assert_array_equal(out[bad_px], img[bad_px])
     assert np.all(np.isfinite(out)) and st_["masked"] >= 1
-    raises_naming("normals", rn.recomposite, ids, n[:3], e, v, dif, ref, img, patches)
-    raises_naming("edited_normals", rn.recomposite, ids, n, e[..., :2], v, dif, ref, img, patches)
-    raises_naming("view", rn.recomposite, ids, n, e, v[:2], dif, ref, img, patches)
-    raises_naming("image", rn.recomposite, ids, n, e, v, dif, ref, img[:, :4], patches)
-    raises_naming("alpha", rn.recomposite, ids, n, e, v, dif, ref, img, patches, alpha=np.ones((2, 2), np.float32))
-    raises_naming("patches", rn.recomposite, ids, n, e, v, dif, ref, img, "not a list")
-    raises_naming("patches[1]", rn.recomposite, ids, n, e, v, dif, ref, img, [patches[0], 3])
-    raises_naming("patches[0].sh", rn.recomposite, ids, n, e, v, dif, ref, img, [{"sh": np.ones((3, 8))}])
-    raises_naming("patches[0].env", rn.recomposite, ids, n, e, v, dif, ref, img, [{"env": np.ones((2, 4, 4, 2), np.float32)}])
-    raises_naming("patches[0].env", rn.recomposite, ids, n, e, v, dif, ref, img, [{"env": np.ones((2, 0, 0, 3), np.float32)}])
-    raises_naming("gamma", rn.recomposite, ids, n, e, v, dif, ref, img, patches, gamma=0.0)
-    raises_naming("epsilon", rn.recomposite, ids, n, e, v, dif, ref, img, patches, epsilon=-1.0)
-    raises_naming("k_d", rn.recomposite, ids, n, e, v, dif, ref, img, patches, k_d=np.nan)
-    raises_naming("ids", rn.recomposite, ids.astype(np.float32)[:2], n, e, v, dif, ref, img, patches)
+    raises_naming("normals", rn.compositing.recomposite, ids, n[:3], e, v, dif, ref, img, patches)
+    raises_naming("edited_normals", rn.compositing.recomposite, ids, n, e[..., :2], v, dif, ref, img, patches)
+    raises_naming("view", rn.compositing.recomposite, ids, n, e, v[:2], dif, ref, img, patches)
+    raises_naming("image", rn.compositing.recomposite, ids, n, e, v, dif, ref, img[:, :4], patches)
+    raises_naming("alpha", rn.compositing.recomposite, ids, n, e, v, dif, ref, img, patches, alpha=np.ones((2, 2), np.float32))
+    raises_naming("patches", rn.compositing.recomposite, ids, n, e, v, dif, ref, img, "not a list")
+    raises_naming("patches[1]", rn.compositing.recomposite, ids, n, e, v, dif, ref, img, [patches[0], 3])
+    raises_naming("patches[0].sh", rn.compositing.recomposite, ids, n, e, v, dif, ref, img, [{"sh": np.ones((3, 8))}])
+    raises_naming("patches[0].env", rn.compositing.recomposite, ids, n, e, v, dif, ref, img, [{"env": np.ones((2, 4, 4, 2), np.float32)}])
+    raises_naming("patches[0].env", rn.compositing.recomposite, ids, n, e, v, dif, ref, img, [{"env": np.ones((2, 0, 0, 3), np.float32)}])
+    raises_naming("gamma", rn.compositing.recomposite, ids, n, e, v, dif, ref, img, patches, gamma=0.0)
+    raises_naming("epsilon", rn.compositing.recomposite, ids, n, e, v, dif, ref, img, patches, epsilon=-1.0)
+    raises_naming("k_d", rn.compositing.recomposite, ids, n, e, v, dif, ref, img, patches, k_d=np.nan)
+    raises_naming("ids", rn.compositing.recomposite, ids.astype(np.float32)[:2], n, e, v, dif, ref, img, patches)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -321,11 +321,11 @@ def test_env_convert_shapes_constants_and_range(seed, src, dst, size, c, ss):
     rng = np.random.default_rng(seed)
     k = rng.uniform(-1, 2, c).astype(np.float32)
     const = np.broadcast_to(k, env_shape(src, size, c)).copy()
-    out = rn.env_convert(const, src, dst, size, ss)
+    out = rn.envmaps.convert(const, src, dst, size, ss)
     assert out.shape == env_shape(dst, size, c) and out.dtype == np.float32
     np.testing.assert_allclose(out, np.broadcast_to(k, out.shape), atol=1e-5)
     m = rng.uniform(-1, 2, env_shape(src, size, c)).astype(np.float32)
-    out = rn.env_convert(m, src, dst, size, ss)
+    out = rn.envmaps.convert(m, src, dst, size, ss)
     assert np.all(np.isfinite(out)) and out.min() >= m.min() - 1e-5 and out.max() <= m.max() + 1e-5
 
 
@@ -334,8 +334,8 @@ def test_env_convert_shapes_constants_and_range(seed, src, dst, size, c, ss):
 def test_env_convert_round_trips_a_smooth_environment(seed, via):
     rng = np.random.default_rng(seed)
     ll = smooth_env("latlong", 64, 3, rng)
-    there = rn.env_convert(ll, "latlong", via, 64, 2)
-    back = rn.env_convert(there, via, "latlong", 64, 2)
+    there = rn.envmaps.convert(ll, "latlong", via, 64, 2)
+    back = rn.envmaps.convert(there, via, "latlong", 64, 2)
     err = np.abs(back - ll)
     # The sphere map squeezes the hemisphere behind it into its rim: judge it by the median.
     assert (np.median(err) if via == "sphere" else err.max()) < 0.03, f"round trip through {via}: error {err.max():.3g}"
@@ -347,42 +347,42 @@ def test_env_sample_is_a_bilinear_mean(seed, layout, size, c):
     rng = np.random.default_rng(seed)
     m = rng.uniform(-1, 2, env_shape(layout, size, c)).astype(np.float32)
     d = rng.normal(size=(3, 4, 3)).astype(np.float32)
-    out = rn.env_sample(m, layout, d)
+    out = rn.envmaps.sample(m, layout, d)
     assert out.shape == (3, 4, c) and out.dtype == np.float32 and np.all(np.isfinite(out))
     assert out.min() >= m.min() - 1e-5 and out.max() <= m.max() + 1e-5
     # Scale invariance: directions need not be unit.
-    np.testing.assert_allclose(rn.env_sample(m, layout, d * 7.5), out, atol=1e-5)
+    np.testing.assert_allclose(rn.envmaps.sample(m, layout, d * 7.5), out, atol=1e-5)
 
 
 @FEW
 @given(data=st.data(), bad=BAD_FLOATS, layout=st.sampled_from(LAYOUTS))
 def test_environment_adversarial(data, bad, layout):
     m = np.ones(env_shape(layout, 4, 3), np.float32)
-    raises_naming("image", rn.env_convert, with_bad_entry(m, data, bad), layout, "latlong", 4)
-    raises_naming("image", rn.env_convert, m[..., :0], layout, "latlong", 4)
-    raises_naming("image", rn.env_convert, m.reshape(-1), layout, "latlong", 4)
-    raises_naming("image", rn.env_convert, m.astype("U3"), layout, "latlong", 4)
-    raises_naming("layout_out", rn.env_convert, m, layout, "octahedral", 4)
-    raises_naming("size", rn.env_convert, m, layout, "cube", 0)
-    raises_naming("supersample", rn.env_convert, m, layout, "cube", 4, 0)
-    raises_naming("directions", rn.env_sample, m, layout, np.zeros((2, 3), np.float32))
-    raises_naming("directions", rn.env_sample, m, layout, with_bad_entry(np.ones((2, 3)), data, bad))
-    raises_naming("directions", rn.env_sample, m, layout, np.ones((2, 4)))
-    raises_naming("layout", rn.env_sample, m, "Cube ", np.ones((1, 3)))
+    raises_naming("image", rn.envmaps.convert, with_bad_entry(m, data, bad), layout, "latlong", 4)
+    raises_naming("image", rn.envmaps.convert, m[..., :0], layout, "latlong", 4)
+    raises_naming("image", rn.envmaps.convert, m.reshape(-1), layout, "latlong", 4)
+    raises_naming("image", rn.envmaps.convert, m.astype("U3"), layout, "latlong", 4)
+    raises_naming("layout_out", rn.envmaps.convert, m, layout, "octahedral", 4)
+    raises_naming("size", rn.envmaps.convert, m, layout, "cube", 0)
+    raises_naming("supersample", rn.envmaps.convert, m, layout, "cube", 4, 0)
+    raises_naming("directions", rn.envmaps.sample, m, layout, np.zeros((2, 3), np.float32))
+    raises_naming("directions", rn.envmaps.sample, m, layout, with_bad_entry(np.ones((2, 3)), data, bad))
+    raises_naming("directions", rn.envmaps.sample, m, layout, np.ones((2, 4)))
+    raises_naming("layout", rn.envmaps.sample, m, "Cube ", np.ones((1, 3)))
     ll = np.ones((4, 8, 3), np.float32)
-    raises_naming("lobe", rn.env_prefilter, ll, "blinn", [1.0])
-    raises_naming("params[0]", rn.env_prefilter, ll, "phong", [bad])
-    raises_naming("params[1]", rn.env_prefilter, ll, "ggx", [0.5, 1.5])
-    raises_naming("params[0]", rn.env_prefilter, ll, "torrance_sparrow", [-0.1])
-    raises_naming("params[0]", rn.env_prefilter, ll, "gaussian", [bad])
-    raises_naming("image", rn.env_prefilter, np.ones((4, 9, 3), np.float32), "gaussian", [0.3])  # odd width
-    raises_naming("texels_per_radius", rn.env_prefilter, ll, "phong", [1.0], texels_per_radius=0.0)
-    raises_naming("tail", rn.env_prefilter, ll, "phong", [1.0], tail=bad)
-    raises_naming("image", rn.env_prefilter, np.ones((4, 4, 3), np.float32)[:1], "phong", [1.0])
-    raises_naming("image", rn.env_irradiance, with_bad_entry(ll, data, bad))
-    raises_naming("size", rn.env_irradiance, ll, 0)
-    raises_naming("directions", rn.env_reference, ll, "lambert", np.zeros((1, 3)))
-    raises_naming("lobe", rn.env_reference, ll, "mirror", np.ones((1, 3)))
+    raises_naming("lobe", rn.envmaps.prefilter, ll, "blinn", [1.0])
+    raises_naming("params[0]", rn.envmaps.prefilter, ll, "phong", [bad])
+    raises_naming("params[1]", rn.envmaps.prefilter, ll, "ggx", [0.5, 1.5])
+    raises_naming("params[0]", rn.envmaps.prefilter, ll, "torrance_sparrow", [-0.1])
+    raises_naming("params[0]", rn.envmaps.prefilter, ll, "gaussian", [bad])
+    raises_naming("image", rn.envmaps.prefilter, np.ones((4, 9, 3), np.float32), "gaussian", [0.3])  # odd width
+    raises_naming("texels_per_radius", rn.envmaps.prefilter, ll, "phong", [1.0], texels_per_radius=0.0)
+    raises_naming("tail", rn.envmaps.prefilter, ll, "phong", [1.0], tail=bad)
+    raises_naming("image", rn.envmaps.prefilter, np.ones((4, 4, 3), np.float32)[:1], "phong", [1.0])
+    raises_naming("image", rn.envmaps.irradiance, with_bad_entry(ll, data, bad))
+    raises_naming("size", rn.envmaps.irradiance, ll, 0)
+    raises_naming("directions", rn.envmaps.prefilter_reference, ll, "lambert", np.zeros((1, 3)))
+    raises_naming("lobe", rn.envmaps.prefilter_reference, ll, "mirror", np.ones((1, 3)))
 
 
 @FEW
@@ -392,7 +392,7 @@ def test_env_prefilter_and_reference_are_normalised_means(seed, lobe, h, c):
     params = {"phong": [0.0, 5.0, 200.0], "ggx": [0.0, 0.3, 1.0], "torrance_sparrow": [0.0, 0.2, 0.8], "gaussian": [0.0, 0.3, 1.0]}[lobe]  # σ = 0 Phong: uniform
     k = rng.uniform(0.1, 2, c).astype(np.float32)
     const = np.broadcast_to(k, (h, 2 * h, c)).copy()
-    levels = rn.env_prefilter(const, lobe, params)
+    levels = rn.envmaps.prefilter(const, lobe, params)
     assert len(levels) == len(params)
     for lv in levels:
         assert lv.ndim == 3 and lv.shape[2] == c and lv.shape[1] == 2 * lv.shape[0] and lv.dtype == np.float32
@@ -400,15 +400,15 @@ def test_env_prefilter_and_reference_are_normalised_means(seed, lobe, h, c):
     if lobe != "phong":
         np.testing.assert_array_equal(levels[0], const)  # the mirror lobe copies the input
     m = rng.uniform(0, 2, (h, 2 * h, c)).astype(np.float32)
-    for lv in rn.env_prefilter(m, lobe, params):
+    for lv in rn.envmaps.prefilter(m, lobe, params):
         assert np.all(np.isfinite(lv)) and lv.min() >= m.min() - 1e-4 and lv.max() <= m.max() + 1e-4
     d = rng.normal(size=(6, 3))
     for p in params:
-        ref = rn.env_reference(const, lobe, d, p)
+        ref = rn.envmaps.prefilter_reference(const, lobe, d, p)
         assert ref.shape == (6, c) and ref.dtype == np.float64
         np.testing.assert_allclose(ref, np.broadcast_to(k, ref.shape), rtol=1e-6)
     # The seed's quadrature (sin θ at texel centres) is within a few percent of the exact E/π.
-    np.testing.assert_allclose(rn.env_reference(const, "lambert", d), np.broadcast_to(k, (6, c)), rtol=3e-2)
+    np.testing.assert_allclose(rn.envmaps.prefilter_reference(const, "lambert", d), np.broadcast_to(k, (6, c)), rtol=3e-2)
 
 
 @FEW
@@ -418,7 +418,7 @@ def test_env_irradiance_of_a_constant_is_the_constant(seed, h, size, c):
     # 0.16% at 16×32, 0.04% at 32×64): checked where it is below 2e-3.
     rng = np.random.default_rng(seed)
     k = rng.uniform(0.1, 2, c).astype(np.float32)
-    r = rn.env_irradiance(np.broadcast_to(k, (h, 2 * h, c)).copy(), size)
+    r = rn.envmaps.irradiance(np.broadcast_to(k, (h, 2 * h, c)).copy(), size)
     assert r["image"].shape == (size, 2 * size, c) and r["coeffs"].shape == (c, 9)
     np.testing.assert_allclose(r["image"], np.broadcast_to(k, r["image"].shape), rtol=2e-3)
     np.testing.assert_allclose(r["coeffs"][:, 0], k * np.sqrt(4 * np.pi), rtol=1e-4)  # L00 = k·4π·Y00
@@ -426,10 +426,10 @@ def test_env_irradiance_of_a_constant_is_the_constant(seed, h, size, c):
     np.testing.assert_allclose(r["coeffs"][:, 4:], 0, atol=2e-2 * k.max())
     # SH irradiance of a random map against the brute-force reference (order 2 is within ~10%).
     m = rng.uniform(0.5, 1.5, (h, 2 * h, c)).astype(np.float32)
-    ir = rn.env_irradiance(m, size)
+    ir = rn.envmaps.irradiance(m, size)
     d = rng.normal(size=(8, 3))
-    ref = rn.env_reference(m, "lambert", d)
-    np.testing.assert_allclose(rn.sh_eval(ir["irradiance_coeffs"], d.astype(np.float32)), ref, rtol=0.1)
+    ref = rn.envmaps.prefilter_reference(m, "lambert", d)
+    np.testing.assert_allclose(rn.compositing.sh_eval(ir["irradiance_coeffs"], d.astype(np.float32)), ref, rtol=0.1)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -449,9 +449,9 @@ def test_sphere_silhouette_is_the_tangent_circle(c, r, d, point, dist):
     normals = (v - c.astype(np.float32)) / np.float32(r)  # exact normals: silhouette on the true sphere's edges
     if point:
         light = c - d * dist * r
-        loops = rn.shadow_silhouettes(v, f, light_position=light, normals=normals)
+        loops = rn.shadows.silhouettes(v, f, light_position=light, normals=normals)
     else:
-        loops = rn.shadow_silhouettes(v, f, light_direction=d, normals=normals)
+        loops = rn.shadows.silhouettes(v, f, light_direction=d, normals=normals)
     assert len(loops) >= 1
     big = loops[0]
     k = len(big["points"])
@@ -476,38 +476,38 @@ def test_sphere_silhouette_is_the_tangent_circle(c, r, d, point, dist):
 def test_shadow_silhouettes_adversarial(data, bad):
     v, f = uv_sphere((0, 0, 2), 1.0, 6, 8)
     L = dict(light_direction=[0, 0, -1])
-    raises_naming("vertices", rn.shadow_silhouettes, with_bad_entry(v, data, bad), f, **L)
-    raises_naming("vertices", rn.shadow_silhouettes, v[:, :2], f, **L)
-    raises_naming("faces", rn.shadow_silhouettes, v, f[:-1], **L)  # open mesh
-    raises_naming("faces", rn.shadow_silhouettes, v, np.where(f == 0, len(v), f), **L)  # out of range
-    raises_naming("faces", rn.shadow_silhouettes, v, f.astype(np.float32) + 0.5, **L)
-    raises_naming("faces", rn.shadow_silhouettes, v, np.zeros((0, 3), np.int64), **L)
-    raises_naming("light", rn.shadow_silhouettes, v, f)
-    raises_naming("light", rn.shadow_silhouettes, v, f, light_direction=[0, 0, 1], light_position=[0, 0, 9])
-    raises_naming("light", rn.shadow_silhouettes, v, f, light_direction=[0, 0, 0])
-    raises_naming("light", rn.shadow_silhouettes, v, f, light_direction=[0, 0, 1e300])
-    raises_naming("light", rn.shadow_silhouettes, v, f, light_position=[0, bad, 9])
-    raises_naming("normals", rn.shadow_silhouettes, v, f, normals=v[:-1], **L)
+    raises_naming("vertices", rn.shadows.silhouettes, with_bad_entry(v, data, bad), f, **L)
+    raises_naming("vertices", rn.shadows.silhouettes, v[:, :2], f, **L)
+    raises_naming("faces", rn.shadows.silhouettes, v, f[:-1], **L)  # open mesh
+    raises_naming("faces", rn.shadows.silhouettes, v, np.where(f == 0, len(v), f), **L)  # out of range
+    raises_naming("faces", rn.shadows.silhouettes, v, f.astype(np.float32) + 0.5, **L)
+    raises_naming("faces", rn.shadows.silhouettes, v, np.zeros((0, 3), np.int64), **L)
+    raises_naming("light", rn.shadows.silhouettes, v, f)
+    raises_naming("light", rn.shadows.silhouettes, v, f, light_direction=[0, 0, 1], light_position=[0, 0, 9])
+    raises_naming("light", rn.shadows.silhouettes, v, f, light_direction=[0, 0, 0])
+    raises_naming("light", rn.shadows.silhouettes, v, f, light_direction=[0, 0, 1e300])
+    raises_naming("light", rn.shadows.silhouettes, v, f, light_position=[0, bad, 9])
+    raises_naming("normals", rn.shadows.silhouettes, v, f, normals=v[:-1], **L)
 
 
 @SOME
 @given(a=vec3, b=vec3, beta=st.floats(0, 50))
 def test_shadow_falloff_is_a_clamped_power(a, b, beta):
     a, b = np.asarray(a), np.asarray(b)
-    x = rn.shadow_falloff(a, b, beta)
+    x = rn.shadows.falloff_factor(a, b, beta)
     c = float(a @ b / np.linalg.norm(a) / np.linalg.norm(b))
     assert 0.0 <= x <= 1.0
     assert x == pytest.approx(1.0 if beta == 0 else max(c, 0.0) ** beta, rel=1e-5, abs=1e-9)
-    assert rn.shadow_falloff(a, 3.0 * a, beta) == pytest.approx(1.0)
-    raises_naming("beta", rn.shadow_falloff, a, b, -beta - 1e-3)
-    raises_naming("beta", rn.shadow_falloff, a, b, np.nan)
-    raises_naming("light", rn.shadow_falloff, a, [0, 0, 0], beta)
-    raises_naming("light", rn.shadow_falloff, [np.inf, 0, 0], b, beta)
+    assert rn.shadows.falloff_factor(a, 3.0 * a, beta) == pytest.approx(1.0)
+    raises_naming("beta", rn.shadows.falloff_factor, a, b, -beta - 1e-3)
+    raises_naming("beta", rn.shadows.falloff_factor, a, b, np.nan)
+    raises_naming("light", rn.shadows.falloff_factor, a, [0, 0, 0], beta)
+    raises_naming("light", rn.shadows.falloff_factor, [np.inf, 0, 0], b, beta)
 
 
 def make_editor(light):
     v, f = uv_sphere((0, 0, 1.5), 0.5, 16, 24)
-    return rn.ShadowEditor(v, f, PLANE_V, PLANE_F, light_position=light, min_loop_vertices=10), v
+    return rn.shadows.ShadowEditor(v, f, PLANE_V, PLANE_F, light_position=light, min_loop_vertices=10), v
 
 
 lights = st.tuples(st.floats(-1.5, 1.5), st.floats(-1.5, 1.5), st.floats(4.0, 8.0))
@@ -545,7 +545,7 @@ def test_editor_drag_at_rest_is_the_identity_and_reset_restores(light, seed, sty
 @given(bad=BAD_FLOATS, light=lights)
 def test_editor_adversarial(bad, light):
     v, f = uv_sphere((0, 0, 1.5), 0.5, 8, 12)
-    ed = rn.ShadowEditor(v, f, PLANE_V, PLANE_F, light_position=np.asarray(light), min_loop_vertices=4)
+    ed = rn.shadows.ShadowEditor(v, f, PLANE_V, PLANE_F, light_position=np.asarray(light), min_loop_vertices=4)
     k = len(ed.loops()[0]["points"])
     t = ed.handles(0)["points"][1]
     raises_naming("loop", ed.drag, 99, (0, 2), 1, t)
@@ -559,9 +559,9 @@ def test_editor_adversarial(bad, light):
     raises_naming("loop", ed.handles, 7)
     raises_naming("eye", ed.handles, 0, eye=[bad, 0, 1])
     np.testing.assert_allclose(ed.shadow_mesh(), v, atol=1e-4)  # bad drags changed nothing
-    raises_naming("light", rn.ShadowEditor, v, f, PLANE_V, PLANE_F, light_position=[0, 0, 1.5])  # inside the caster
-    raises_naming("receiver_vertices", rn.ShadowEditor, v, f, PLANE_V[:, :2], PLANE_F, light_position=light)
-    raises_naming("receiver_faces", rn.ShadowEditor, v, f, PLANE_V, PLANE_F + 4, light_position=light)
-    raises_naming("w_z", rn.ShadowEditor, v, f, PLANE_V, PLANE_F, light_position=light, w_z=bad)
-    raises_naming("constraint_weight", rn.ShadowEditor, v, f, PLANE_V, PLANE_F, light_position=light, constraint_weight=0.0)
-    raises_naming("vertices", rn.ShadowEditor, np.where(np.arange(len(v))[:, None] == 3, bad, v).astype(np.float32), f, PLANE_V, PLANE_F, light_position=light)
+    raises_naming("light", rn.shadows.ShadowEditor, v, f, PLANE_V, PLANE_F, light_position=[0, 0, 1.5])  # inside the caster
+    raises_naming("receiver_vertices", rn.shadows.ShadowEditor, v, f, PLANE_V[:, :2], PLANE_F, light_position=light)
+    raises_naming("receiver_faces", rn.shadows.ShadowEditor, v, f, PLANE_V, PLANE_F + 4, light_position=light)
+    raises_naming("w_z", rn.shadows.ShadowEditor, v, f, PLANE_V, PLANE_F, light_position=light, w_z=bad)
+    raises_naming("constraint_weight", rn.shadows.ShadowEditor, v, f, PLANE_V, PLANE_F, light_position=light, constraint_weight=0.0)
+    raises_naming("vertices", rn.shadows.ShadowEditor, np.where(np.arange(len(v))[:, None] == 3, bad, v).astype(np.float32), f, PLANE_V, PLANE_F, light_position=light)

@@ -91,10 +91,10 @@ def main():
 
     st = evaluate.state_of(mirror)
     rows, distances, regions = st.field_inputs
-    want = rn.edited_directions(out["position"][mask][:, :3], out["normal"][mask][:, :3], eye.astype(np.float32), rows, regions=regions)
+    want = rn.reflection.edited_directions(out["position"][mask][:, :3], out["normal"][mask][:, :3], eye.astype(np.float32), rows, regions=regions)
     got = out["direction"][mask][:, :3].astype(np.float64)
     err = np.arctan2(np.linalg.norm(np.cross(got, want), axis=1), np.sum(got * want, axis=1))
-    plain = rn.edited_directions(out["position"][mask][:, :3], out["normal"][mask][:, :3], eye.astype(np.float32), rows[:0])
+    plain = rn.reflection.edited_directions(out["position"][mask][:, :3], out["normal"][mask][:, :3], eye.astype(np.float32), rows[:0])
     edit = np.arctan2(np.linalg.norm(np.cross(got, plain), axis=1), np.sum(got * plain, axis=1))
     overlay = colour[..., 3] > 0
     print("RESULT " + json.dumps({

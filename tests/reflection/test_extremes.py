@@ -33,10 +33,10 @@ def _same_rotation(a, b, atol):
 def test_field_is_scale_invariant(scale, polar):
     rng = np.random.default_rng(7)
     pts, _, rows = _scene(rng)
-    ref = rn.rotation_field(pts, rows, polar=polar)
+    ref = rn.reflection.rotation_field(pts, rows, polar=polar)
     scaled = rows.copy()
     scaled[:, :3] *= scale
-    got = rn.rotation_field(pts * np.float32(scale), scaled, polar=polar)
+    got = rn.reflection.rotation_field(pts * np.float32(scale), scaled, polar=polar)
     assert np.isfinite(got).all()
     np.testing.assert_allclose(np.linalg.norm(got, axis=1), 1.0, atol=1e-5)
     ok, err = _same_rotation(got, ref, 2e-4)
@@ -49,12 +49,12 @@ def test_regions_and_per_pixel_path_are_scale_invariant(scale):
     pts, nrm, rows = _scene(rng, n=64 * 64)
     eye = np.array([0.0, -5.0, 0.5], np.float32)
     region = {"kind": "euclidean", "center": [0.0, -1.0, 0.0], "radius": 1.2, "border": 0.4}
-    ref = rn.edited_directions(pts.reshape(64, 64, 3), nrm.reshape(64, 64, 3), eye, rows, regions=[region])
+    ref = rn.reflection.edited_directions(pts.reshape(64, 64, 3), nrm.reshape(64, 64, 3), eye, rows, regions=[region])
     s = np.float32(scale)
     scaled = rows.copy()
     scaled[:, :3] *= s
     reg_s = dict(region, center=[0.0, -scale, 0.0], radius=1.2 * scale, border=0.4 * scale)
-    got = rn.edited_directions((pts * s).reshape(64, 64, 3), nrm.reshape(64, 64, 3), eye * s, scaled, regions=[reg_s])
+    got = rn.reflection.edited_directions((pts * s).reshape(64, 64, 3), nrm.reshape(64, 64, 3), eye * s, scaled, regions=[reg_s])
     assert np.isfinite(got).all()
     np.testing.assert_allclose(got, ref, atol=5e-4)
 
@@ -69,11 +69,11 @@ def test_ten_thousand_constraints():
     e = r + 0.3 * rng.normal(size=(k, 3))
     e /= np.linalg.norm(e, axis=1, keepdims=True)
     rows = np.hstack([cp, r, e]).astype(np.float32)
-    q = rn.rotation_field(pts, rows, polar="fast")
+    q = rn.reflection.rotation_field(pts, rows, polar="fast")
     assert q.shape == (3000, 4) and np.isfinite(q).all()
     np.testing.assert_allclose(np.linalg.norm(q, axis=1), 1.0, atol=1e-5)
     # At a constraint's own position its weight 1/d² dominates: the constraint is met.
-    at = rn.rotation_field(rows[:50, :3], rows, polar="exact")
+    at = rn.reflection.rotation_field(rows[:50, :3], rows, polar="exact")
     rot = _rotate(at, rows[:50, 3:6])
     cos = (rot * rows[:50, 6:9]).sum(1)
     assert np.median(cos) > 0.999
@@ -96,7 +96,7 @@ def test_constraints_closer_than_float_precision(gap):
     rows = np.array([np.r_[p, r, e1], np.r_[p + gap, r, e2]], np.float32)
     pts = np.array([p, p + gap / 2, p + [0.1, 0, 0], p + [1e3, 0, 0]], np.float32)
     for polar in ("exact", "fast"):
-        q = rn.rotation_field(pts, rows, polar=polar)
+        q = rn.reflection.rotation_field(pts, rows, polar=polar)
         assert np.isfinite(q).all()
         np.testing.assert_allclose(np.linalg.norm(q, axis=1), 1.0, atol=1e-5)
         out = _rotate(q, np.broadcast_to(r, (4, 3)))
@@ -117,10 +117,10 @@ def test_every_pixel_on_a_silhouette():
     nrm = nrm.astype(np.float32)
     _, _, rows = _scene(rng, k=4)
     for k in (0, 4):
-        e = rn.edited_directions(pos, nrm, eye, rows[:k])
+        e = rn.reflection.edited_directions(pos, nrm, eye, rows[:k])
         assert np.isfinite(e).all()
         np.testing.assert_allclose(np.linalg.norm(e, axis=-1), 1.0, atol=1e-4)
-    e0 = rn.edited_directions(pos, nrm, eye, rows[:0])
+    e0 = rn.reflection.edited_directions(pos, nrm, eye, rows[:0])
     v = view / np.linalg.norm(view, axis=-1, keepdims=True)
     np.testing.assert_allclose(e0, v, atol=2e-3)  # grazing: the reflection continues the ray
 
@@ -143,7 +143,7 @@ def test_near_degenerate_triangles_in_geodesics():
     faces.append([n // 2, n // 2 + 1, len(verts) - 1])
     faces = np.array(faces, np.int64)
     for method in ("dijkstra", "heat"):
-        d = rn.geodesic_distances(verts.astype(np.float32), faces, [0], method=method)[0]
+        d = rn.geometry.geodesic_distances(verts.astype(np.float32), faces, [0], method=method)[0]
         assert np.isfinite(d[: 2 * n]).all(), method
         along = d[:n]
         assert np.all(np.diff(along[::4]) > 0), method
@@ -160,9 +160,9 @@ def test_identical_constraints_at_different_places_are_one_constraint():
     rows = np.array([np.r_[p, r, e] for p in rng.normal(size=(4, 3))], np.float32)
     pts = rng.normal(size=(300, 3)).astype(np.float32)
     for polar in ("exact", "fast"):
-        ok, err = _same_rotation(rn.rotation_field(pts, rows, polar=polar), rn.rotation_field(pts, rows[:1], polar=polar), 1e-5)
+        ok, err = _same_rotation(rn.reflection.rotation_field(pts, rows, polar=polar), rn.reflection.rotation_field(pts, rows[:1], polar=polar), 1e-5)
         assert ok, (polar, err)
     nrm = rng.normal(size=(300, 3))
     nrm = (nrm / np.linalg.norm(nrm, axis=1, keepdims=True)).astype(np.float32)
     eye = np.array([0.0, -5.0, 0.0], np.float32)
-    np.testing.assert_allclose(rn.edited_directions(pts, nrm, eye, rows), rn.edited_directions(pts, nrm, eye, rows[:1]), atol=1e-5)
+    np.testing.assert_allclose(rn.reflection.edited_directions(pts, nrm, eye, rows), rn.reflection.edited_directions(pts, nrm, eye, rows[:1]), atol=1e-5)

@@ -22,7 +22,7 @@ def realistic_constraints(rng, k, spread=1.0, max_edit=1.0):
 def test_matches_float64_reference(rng, k, polar):
     c = realistic_constraints(rng, k)
     pts = rng.uniform(-1.5, 1.5, (400, 3)).astype(np.float32)
-    got = quat_to_matrix(rn.rotation_field(pts, c, polar=polar))
+    got = quat_to_matrix(rn.reflection.rotation_field(pts, c, polar=polar))
     if k == 1:
         # Rank 1: every rotation taking r to e fits; the documented answer is the smallest.
         r, e = c[0, 3:6].astype(np.float64), c[0, 6:9].astype(np.float64)
@@ -42,7 +42,7 @@ def test_matches_float64_reference(rng, k, polar):
 def test_rotations_are_proper_and_unit(rng, polar):
     c = realistic_constraints(rng, 6, max_edit=3.1)
     pts = rng.uniform(-3, 3, (2000, 3)).astype(np.float32)
-    q = rn.rotation_field(pts, c, polar=polar)
+    q = rn.reflection.rotation_field(pts, c, polar=polar)
     assert q.dtype == np.float32 and q.shape == (2000, 4)
     assert np.all(q[:, 3] >= 0)
     np.testing.assert_allclose(np.linalg.norm(q, axis=1), 1.0, atol=1e-6)
@@ -61,7 +61,7 @@ def test_constraints_interpolated_on_real_mesh(spot, rng):
         rows.append(row)
     c = np.array(rows)
     for polar in ("exact", "fast"):
-        q = rn.rotation_field(v, c, polar=polar)
+        q = rn.reflection.rotation_field(v, c, polar=polar)
         e_at = api.rotate(q[picks], c[:, 3:6])
         assert np.max(dir_angle(e_at, c[:, 6:9])) < 1e-4
 
@@ -73,7 +73,7 @@ def test_fresh_constraint_changes_nothing(spot):
     i = 123
     green = api.physical_reflected_point(v[i], n[i], eye, 2.5)
     c = api.constraint_row(v[i], n[i], green, eye)[None]
-    q = rn.rotation_field(v, c)
+    q = rn.reflection.rotation_field(v, c)
     assert np.max(api.quat_angle(q)) < 1e-5
 
 
@@ -81,11 +81,11 @@ def test_scale_invariance_on_real_mesh(spot, rng):
     v, f, n = spot
     c = realistic_constraints(rng, 4, spread=0.5)
     c[:, :3] = v[rng.choice(len(v), 4, replace=False)]
-    base = quat_to_matrix(rn.rotation_field(v, c))
+    base = quat_to_matrix(rn.reflection.rotation_field(v, c))
     for s in (1e-4, 1e4):
         cs = c.copy()
         cs[:, :3] *= s
-        got = quat_to_matrix(rn.rotation_field(v * np.float32(s), cs))
+        got = quat_to_matrix(rn.reflection.rotation_field(v * np.float32(s), cs))
         assert np.max(rot_angle(base, got)) < 1e-4, f"scale {s}"
 
 
@@ -96,18 +96,18 @@ def test_equivariance(rng):
     a *= np.sign(np.linalg.det(a))
     t = np.array([3.0, -1.0, 2.0])
     c2 = np.hstack([c[:, :3] @ a.T + t, c[:, 3:6] @ a.T, c[:, 6:9] @ a.T])
-    r1 = quat_to_matrix(rn.rotation_field(pts, c))
-    r2 = quat_to_matrix(rn.rotation_field(pts @ a.T + t, c2))
+    r1 = quat_to_matrix(rn.reflection.rotation_field(pts, c))
+    r2 = quat_to_matrix(rn.reflection.rotation_field(pts @ a.T + t, c2))
     assert np.max(rot_angle(a @ r1 @ a.T, r2)) < 1e-4
 
 
 def test_no_constraints_is_identity(rng):
     pts = rng.uniform(-1, 1, (10, 3))
-    q = rn.rotation_field(pts, np.zeros((0, 9)))
+    q = rn.reflection.rotation_field(pts, np.zeros((0, 9)))
     np.testing.assert_array_equal(q, np.tile([0, 0, 0, 1], (10, 1)))
     nrm = np.tile([0.0, 0.0, 1.0], (10, 1))
     eye = np.array([0.0, 0.0, 5.0])
-    e = rn.edited_directions(pts, nrm, eye, np.zeros((0, 9)))
+    e = rn.reflection.edited_directions(pts, nrm, eye, np.zeros((0, 9)))
     r = api.reflect((pts - eye) / np.linalg.norm(pts - eye, axis=1, keepdims=True), nrm)
     np.testing.assert_allclose(e, r, atol=1e-6)
 
@@ -116,8 +116,8 @@ def test_antiparallel_edit_is_a_half_turn(rng):
     r = np.array([0.2, -0.3, 0.9])
     r /= np.linalg.norm(r)
     c = np.concatenate([[0, 0, 0], r, -r])[None]
-    q1 = rn.rotation_field(rng.uniform(-1, 1, (50, 3)), c)
-    q2 = rn.rotation_field(rng.uniform(-1, 1, (50, 3)), c)
+    q1 = rn.reflection.rotation_field(rng.uniform(-1, 1, (50, 3)), c)
+    q2 = rn.reflection.rotation_field(rng.uniform(-1, 1, (50, 3)), c)
     np.testing.assert_allclose(api.rotate(q1, r), np.broadcast_to(-r, (50, 3)), atol=1e-6)
     np.testing.assert_array_equal(q1[0], q2[0])  # deterministic
 
@@ -128,7 +128,7 @@ def test_coincident_constraints_and_query_on_them():
     e1 = np.array([0.6, 0.0, 0.8])
     e2 = np.array([-0.6, 0.0, 0.8])
     c = np.array([np.r_[p, r, e1], np.r_[p, r, e2]])
-    q = rn.rotation_field(np.array([p, [1.0, 1.0, 1.0]]), c)
+    q = rn.reflection.rotation_field(np.array([p, [1.0, 1.0, 1.0]]), c)
     assert np.all(np.isfinite(q))
     np.testing.assert_allclose(api.rotate(q, r), np.broadcast_to(r, (2, 3)), atol=1e-6)
 
@@ -136,7 +136,7 @@ def test_coincident_constraints_and_query_on_them():
 def test_thousand_constraints(rng):
     c = realistic_constraints(rng, 1000, spread=10.0)
     pts = np.vstack([c[::50, :3], rng.uniform(-10, 10, (200, 3))]).astype(np.float32)
-    q = rn.rotation_field(pts, c)
+    q = rn.reflection.rotation_field(pts, c)
     assert np.all(np.isfinite(q))
     hit = api.rotate(q[:20], c[::50, 3:6])
     assert np.max(dir_angle(hit, c[::50, 6:9])) < 1e-4
@@ -148,12 +148,12 @@ def test_geodesic_style_distances_are_used(rng):
     c = realistic_constraints(rng, 3)
     pts = rng.uniform(-1, 1, (100, 3)).astype(np.float32)
     d = np.linalg.norm(pts[None, :, :].astype(np.float64) - c[:, None, :3], axis=-1)
-    a = quat_to_matrix(rn.rotation_field(pts, c))
-    b = quat_to_matrix(rn.rotation_field(pts, c, distances=d))
+    a = quat_to_matrix(rn.reflection.rotation_field(pts, c))
+    b = quat_to_matrix(rn.reflection.rotation_field(pts, c, distances=d))
     assert np.max(rot_angle(a, b)) < 1e-5
     d[2] = np.inf
-    only01 = quat_to_matrix(rn.rotation_field(pts, c[:2]))
-    got = quat_to_matrix(rn.rotation_field(pts, c, distances=d))
+    only01 = quat_to_matrix(rn.reflection.rotation_field(pts, c[:2]))
+    got = quat_to_matrix(rn.reflection.rotation_field(pts, c, distances=d))
     assert np.max(rot_angle(only01, got)) < 1e-5
 
 
@@ -161,7 +161,7 @@ def test_euclidean_region_is_equation_7(rng):
     c = realistic_constraints(rng, 3, spread=0.3)
     region = {"kind": "euclidean", "center": [0.0, 0.0, 0.0], "radius": 1.0, "border": 0.6}
     pts = rng.uniform(-1.2, 1.2, (500, 3))
-    got = quat_to_matrix(rn.rotation_field(pts, c, regions=[region]))
+    got = quat_to_matrix(rn.reflection.rotation_field(pts, c, regions=[region]))
     dist = np.linalg.norm(pts, axis=1)
     t = np.clip((dist - 0.4) / 0.6, 0, 1)
     a = 1 - t * t * (3 - 2 * t)
@@ -181,7 +181,7 @@ def test_region_with_view_blends_towards_r_rT(rng):
     eye = np.array([0.0, -5.0, 1.0])
     inc = (pts - eye) / np.linalg.norm(pts - eye, axis=1, keepdims=True)
     r = api.reflect(inc, nrm)
-    q = rn.rotation_field(pts, c, regions=[region], normals=nrm, eye=eye)
+    q = rn.reflection.rotation_field(pts, c, regions=[region], normals=nrm, eye=eye)
     dist = np.linalg.norm(pts, axis=1)
     t = np.clip((dist - 0.2) / 0.8, 0, 1)
     a = 1 - t * t * (3 - 2 * t)
@@ -189,7 +189,7 @@ def test_region_with_view_blends_towards_r_rT(rng):
     e_ref = np.einsum("nij,nj->ni", ref, r)
     assert np.max(dir_angle(api.rotate(q, r), e_ref)) < 1e-4
     for polar in ("exact", "fast"):
-        e = rn.edited_directions(pts, nrm, eye, c, regions=[region], polar=polar)
+        e = rn.reflection.edited_directions(pts, nrm, eye, c, regions=[region], polar=polar)
         assert np.max(dir_angle(e, e_ref)) < 1e-4
 
 
@@ -201,13 +201,13 @@ def test_per_point_region_weights_and_membership(rng):
     vals = np.zeros(200, np.float32)
     vals[:100] = 1.0
     vals[100:150] = 0.5
-    only0 = rn.rotation_field(pts, c[:1])
-    got = rn.rotation_field(pts, c, regions=[{"kind": "weights", "values": vals, "at_constraints": [1.0, 0.0]}])
+    only0 = rn.reflection.rotation_field(pts, c[:1])
+    got = rn.reflection.rotation_field(pts, c, regions=[{"kind": "weights", "values": vals, "at_constraints": [1.0, 0.0]}])
     np.testing.assert_allclose(got[:100], only0[:100], atol=1e-6)
     assert np.all(api.quat_angle(got[150:]) < 1e-7)
     half = api.quat_angle(got[100:150])
     assert np.all(half < api.quat_angle(only0[100:150]) + 1e-6)
-    empty = rn.rotation_field(pts, c, regions=[{"kind": "weights", "values": vals, "at_constraints": [0.0, 0.0]}])
+    empty = rn.reflection.rotation_field(pts, c, regions=[{"kind": "weights", "values": vals, "at_constraints": [0.0, 0.0]}])
     assert np.all(api.quat_angle(empty) < 1e-7)
 
 
@@ -218,10 +218,10 @@ def test_per_pixel_gbuffer_shape_and_agreement(rng):
     nrm = np.stack([-0.1 * np.cos(xs / 5.0) / 5.0, np.zeros_like(xs, float), np.ones_like(xs, float)], -1).astype(np.float32)
     eye = np.array([0.0, -1.0, 2.0], np.float32)
     c = realistic_constraints(rng, 4, spread=0.4)
-    e = rn.edited_directions(pos, nrm, eye, c)
+    e = rn.reflection.edited_directions(pos, nrm, eye, c)
     assert e.shape == (h, w, 3) and e.dtype == np.float32
     flat = pos.reshape(-1, 3)
-    q = rn.rotation_field(flat, c)
+    q = rn.reflection.rotation_field(flat, c)
     inc = flat - eye
     inc /= np.linalg.norm(inc, axis=1, keepdims=True)
     nn = nrm.reshape(-1, 3) / np.linalg.norm(nrm.reshape(-1, 3), axis=1, keepdims=True)
@@ -233,8 +233,8 @@ def test_float64_and_strided_inputs_are_accepted(rng):
     c = realistic_constraints(rng, 3)
     pts = rng.uniform(-1, 1, (64, 3))
     strided = np.asfortranarray(pts.astype(np.float32))
-    a = rn.rotation_field(pts, c.astype(np.float64))
-    b = rn.rotation_field(strided, c)
+    a = rn.reflection.rotation_field(pts, c.astype(np.float64))
+    b = rn.reflection.rotation_field(strided, c)
     np.testing.assert_allclose(a, b, atol=1e-6)
 
 
@@ -255,17 +255,17 @@ def test_any_valid_input_gives_rotations(p, r, e, q):
     for polar in ("exact", "fast"):
         if zero.any():
             with pytest.raises(ValueError, match="constraints"):
-                rn.rotation_field(q, c, polar=polar)
+                rn.reflection.rotation_field(q, c, polar=polar)
             continue
-        out = rn.rotation_field(np.vstack([q, p]), c, polar=polar)
+        out = rn.reflection.rotation_field(np.vstack([q, p]), c, polar=polar)
         assert np.all(np.isfinite(out))
         np.testing.assert_allclose(np.linalg.norm(out, axis=1), 1.0, atol=1e-5)
 
 
 def test_ortho_methods_agree(rng):
     m = rng.normal(size=(500, 3, 3))
-    a = quat_to_matrix(rn.ortho(m, method="exact"))
-    b = quat_to_matrix(rn.ortho(m, method="fast"))
+    a = quat_to_matrix(rn.reflection.ortho(m, method="exact"))
+    b = quat_to_matrix(rn.reflection.ortho(m, method="fast"))
     from support.reference import ortho
 
     ref = ortho(m)
@@ -284,7 +284,7 @@ def test_gil_is_released_during_the_work(rng):
 
     def work():
         started.set()
-        rn.rotation_field(pts, c, polar="exact")
+        rn.reflection.rotation_field(pts, c, polar="exact")
         done.set()
 
     t = threading.Thread(target=work)
@@ -307,11 +307,11 @@ def test_rotation_vector_output_matches_the_quaternions(rng):
     c = random_constraints(rng, 6)
     c[0, 6:9] = -c[0, 3:6]  # a half turn at one constraint
     pts[:2] = c[:2, :3]
-    q = rn.rotation_field(pts, c, polar="exact")
-    v = rn.rotation_field(pts, c, polar="exact", output="rotation_vector")
+    q = rn.reflection.rotation_field(pts, c, polar="exact")
+    v = rn.reflection.rotation_field(pts, c, polar="exact", output="rotation_vector")
     assert v.shape == (500, 3) and np.all(np.isfinite(v))
     np.testing.assert_allclose(np.linalg.norm(v, axis=1), 2 * np.arctan2(np.linalg.norm(q[:, :3], axis=1), q[:, 3]), atol=2e-6)
     np.testing.assert_allclose(evaluate.quaternions(v), q, atol=2e-6)
     assert np.linalg.norm(v, axis=1).max() <= np.pi + 1e-6
     with pytest.raises(ValueError, match="output: expected"):
-        rn.rotation_field(pts, c, output="euler")
+        rn.reflection.rotation_field(pts, c, output="euler")

@@ -26,19 +26,19 @@ def force(monkeypatch, kernel):
     """Sets ROKEBY_SIMD; a kernel this CPU lacks is skipped (forcing it runs a narrower one, which
     its own parameter already tests)."""
     monkeypatch.setenv("ROKEBY_SIMD", kernel)
-    if rn.field_kernel() != kernel:
-        pytest.skip(f"this CPU lacks {kernel} (ROKEBY_SIMD={kernel} runs {rn.field_kernel()})")
+    if rn.reflection.field_kernel() != kernel:
+        pytest.skip(f"this CPU lacks {kernel} (ROKEBY_SIMD={kernel} runs {rn.reflection.field_kernel()})")
 
 
 def test_rokeby_simd_forces_a_kernel_and_never_an_unsupported_one(monkeypatch):
     monkeypatch.setenv("ROKEBY_SIMD", "scalar")
-    assert rn.field_kernel() == "scalar"
+    assert rn.reflection.field_kernel() == "scalar"
     monkeypatch.setenv("ROKEBY_SIMD", "portable")
-    assert rn.field_kernel() == "portable"
+    assert rn.reflection.field_kernel() == "portable"
     monkeypatch.setenv("ROKEBY_SIMD", "avx512")
-    assert rn.field_kernel() in ("avx512", "avx2", "portable")
+    assert rn.reflection.field_kernel() in ("avx512", "avx2", "portable")
     monkeypatch.delenv("ROKEBY_SIMD")
-    assert rn.field_kernel() != "scalar"  # the widest this CPU runs
+    assert rn.reflection.field_kernel() != "scalar"  # the widest this CPU runs
 
 
 @pytest.mark.parametrize("kernel", KERNELS)
@@ -49,9 +49,9 @@ def test_per_pixel_kernel_matches_the_f64_reference(monkeypatch, rng, kernel, k)
     c = random_constraints(rng, k, spread=0.8, max_edit=0.8)
     c[:, :3] = pos.reshape(-1, 3)[rng.choice(37 * 53, k, replace=False)]  # on the mirror, one on a pixel
     monkeypatch.setenv("ROKEBY_SIMD", "scalar")
-    want = rn.edited_directions(pos, nrm, eye, c, polar="exact")
+    want = rn.reflection.edited_directions(pos, nrm, eye, c, polar="exact")
     force(monkeypatch, kernel)
-    got = rn.edited_directions(pos, nrm, eye, c, polar="fast")
+    got = rn.reflection.edited_directions(pos, nrm, eye, c, polar="fast")
     assert got.shape == want.shape
     assert np.max(dir_angle(got.reshape(-1, 3), want.reshape(-1, 3))) <= TOL
 
@@ -65,15 +65,15 @@ def test_per_vertex_field_as_the_addon_writes_it_matches_the_f64_reference(monke
     c[:, :3] = pts[rng.choice(len(pts), 8, replace=False)]
     kw = {"regions": [{"kind": "euclidean", "center": (0.1, 0.0, 0.1), "radius": 0.8, "border": 0.3}]} if region else {}
     monkeypatch.setenv("ROKEBY_SIMD", "scalar")
-    want = rn.rotation_field(pts, c, output="view_blend", polar="exact", **kw)
+    want = rn.reflection.rotation_field(pts, c, output="view_blend", polar="exact", **kw)
     force(monkeypatch, kernel)
-    got = rn.rotation_field(pts, c, output="view_blend", polar="fast", **kw)
+    got = rn.reflection.rotation_field(pts, c, output="view_blend", polar="fast", **kw)
     assert np.max(rot_angle(quat_to_matrix(got[:, :4]), quat_to_matrix(want[:, :4]))) <= TOL
     np.testing.assert_allclose(got[:, 4:], want[:, 4:], atol=1e-6)
     # What the renderer makes of it per shading point agrees too.
     r = api.reflect(np.tile([[0.0, 0.3, -1.0]], (len(pts), 1)) / np.hypot(0.3, 1.0), np.tile([[0.0, 0.0, 1.0]], (len(pts), 1)))
-    e_got = rn.view_blend(got, r.astype(np.float32))
-    e_want = rn.view_blend(want, r.astype(np.float32))
+    e_got = rn.reflection.view_blend(got, r.astype(np.float32))
+    e_want = rn.reflection.view_blend(want, r.astype(np.float32))
     assert np.max(dir_angle(e_got, e_want)) <= TOL
 
 
@@ -88,10 +88,10 @@ def test_exact_polar_by_the_f64_lanes_is_the_scalar_svd(monkeypatch, rng, kernel
     c = random_constraints(rng, 8, spread=0.8, max_edit=0.8)
     c[:, :3] = pts[rng.choice(len(pts), 8, replace=False)]
     monkeypatch.setenv("ROKEBY_SIMD", "scalar")
-    want_px = rn.edited_directions(pos, nrm, eye, c, polar="exact")
-    want_pt = rn.rotation_field(pts, c, output="view_blend", polar="exact")
+    want_px = rn.reflection.edited_directions(pos, nrm, eye, c, polar="exact")
+    want_pt = rn.reflection.rotation_field(pts, c, output="view_blend", polar="exact")
     force(monkeypatch, kernel)
-    got_px = rn.edited_directions(pos, nrm, eye, c, polar="exact")
-    got_pt = rn.rotation_field(pts, c, output="view_blend", polar="exact")
+    got_px = rn.reflection.edited_directions(pos, nrm, eye, c, polar="exact")
+    got_pt = rn.reflection.rotation_field(pts, c, output="view_blend", polar="exact")
     assert np.max(dir_angle(got_px.reshape(-1, 3), want_px.reshape(-1, 3))) <= 3e-7
     assert np.max(rot_angle(quat_to_matrix(got_pt[:, :4]), quat_to_matrix(want_pt[:, :4]))) <= 3e-7

@@ -11,7 +11,7 @@ from support import DATA, mesh_path
 @pytest.fixture(scope="module")
 def spot_solver():
     v, f = load_obj(mesh_path("spot.obj"))
-    return v, f, rn.GeodesicSolver(v, f)
+    return v, f, rn.geometry.GeodesicSolver(v, f)
 
 
 def flat_grid(n=41):
@@ -36,18 +36,18 @@ def test_source_forms_and_shapes(spot_solver):
     corners = v[f[5]].astype(np.float64)
     x = np.array([0.2, 0.3, 0.5]) @ corners
     np.testing.assert_allclose(p[0, f[5]], np.linalg.norm(corners - x, axis=1), atol=1e-6)
-    at = rn.interpolate(p, f, [5], [[0.2, 0.3, 0.5]])
+    at = rn.geometry.interpolate(p, f, [5], [[0.2, 0.3, 0.5]])
     assert at.shape == (1, 1) and at[0, 0] < 0.05 * np.linalg.norm(v.max(0) - v.min(0))
 
 
 def test_solver_keeps_its_factorisation(spot_solver):
     v, f, _ = spot_solver
-    s = rn.GeodesicSolver(v, f)
+    s = rn.geometry.GeodesicSolver(v, f)
     assert not s.factored
     a = s.distances([3], method="heat")
     assert s.factored
     np.testing.assert_array_equal(a, s.distances([3], method="heat"))
-    np.testing.assert_allclose(a, rn.geodesic_distances(v, f, [3], method="heat"), atol=1e-6)
+    np.testing.assert_allclose(a, rn.geometry.geodesic_distances(v, f, [3], method="heat"), atol=1e-6)
 
 
 def centred_plane():
@@ -62,7 +62,7 @@ def centred_plane():
 
 def test_heat_is_more_accurate_than_dijkstra_on_a_plane():
     v, f, src, error = centred_plane()
-    err = {method: error(rn.geodesic_distances(v, f, [src], method=method)[0]) for method in ("heat", "dijkstra")}
+    err = {method: error(rn.geometry.geodesic_distances(v, f, [src], method=method)[0]) for method in ("heat", "dijkstra")}
     assert err["heat"] < 0.02
     assert err["dijkstra"] > 2 * err["heat"]
 
@@ -82,7 +82,7 @@ def test_distances_behave_like_a_metric_on_a_real_mesh(spot_solver):
 
 def test_real_scan_with_islands_gives_inf_not_nan():
     v, f = load_obj(mesh_path("stanford-bunny.obj"))
-    s = rn.GeodesicSolver(v, f)
+    s = rn.geometry.GeodesicSolver(v, f)
     for method in ("dijkstra", "heat"):
         d = s.distances([0], method=method)[0]
         assert not np.any(np.isnan(d))
@@ -93,23 +93,23 @@ def test_real_scan_with_islands_gives_inf_not_nan():
 @pytest.mark.parametrize(
     "call, exc, words",
     [
-        (lambda v, f: rn.geodesic_distances(v, f.astype(np.float32), [0]), TypeError, "faces: must be an array of integers"),
-        (lambda v, f: rn.geodesic_distances(v[:, :2], f, [0]), ValueError, "vertices: expected shape (V, 3)"),
-        (lambda v, f: rn.geodesic_distances(v, f[:, :2], [0]), ValueError, "faces: expected shape (F, 3)"),
-        (lambda v, f: rn.geodesic_distances(v, f + len(v), [0]), ValueError, "faces: face 0 refers to vertex"),
-        (lambda v, f: rn.geodesic_distances(v, -f - 1, [0]), ValueError, "faces: face 0 refers to vertex -1"),
-        (lambda v, f: rn.geodesic_distances(v[:0], f[:0], [0]), ValueError, "vertices: the mesh has no vertices"),
-        (lambda v, f: rn.geodesic_distances(v, f[:0], [0]), ValueError, "faces: the mesh has no faces"),
-        (lambda v, f: rn.geodesic_distances(np.where(np.arange(len(v))[:, None] == 3, np.nan, v), f, [0]), ValueError, "vertices: vertex 3 is not finite"),
-        (lambda v, f: rn.geodesic_distances(v, f, [len(v)]), ValueError, "sources: source 0: vertex"),
-        (lambda v, f: rn.geodesic_distances(v, f, [-1]), ValueError, "sources: source 0: vertex index -1 is negative"),
-        (lambda v, f: rn.geodesic_distances(v, f, []), ValueError, "sources: is empty"),
-        (lambda v, f: rn.geodesic_distances(v, f, [(len(f), (1, 0, 0))]), ValueError, "sources: source 0: face"),
-        (lambda v, f: rn.geodesic_distances(v, f, [(0, (0, 0, 0))]), ValueError, "barycentric"),
-        (lambda v, f: rn.geodesic_distances(v, f, ["x"]), TypeError, "sources: source 0 must be"),
-        (lambda v, f: rn.geodesic_distances(v, f, [0], method="mmp"), ValueError, "method: unknown method"),
-        (lambda v, f: rn.interpolate(np.zeros(len(v)), f, [0], [[1, 0]]), ValueError, "bary: expected shape (1, 3)"),
-        (lambda v, f: rn.interpolate(np.zeros(len(v)), f, [len(f)], [[1, 0, 0]]), ValueError, "face_index: entry 0"),
+        (lambda v, f: rn.geometry.geodesic_distances(v, f.astype(np.float32), [0]), TypeError, "faces: must be an array of integers"),
+        (lambda v, f: rn.geometry.geodesic_distances(v[:, :2], f, [0]), ValueError, "vertices: expected shape (V, 3)"),
+        (lambda v, f: rn.geometry.geodesic_distances(v, f[:, :2], [0]), ValueError, "faces: expected shape (F, 3)"),
+        (lambda v, f: rn.geometry.geodesic_distances(v, f + len(v), [0]), ValueError, "faces: face 0 refers to vertex"),
+        (lambda v, f: rn.geometry.geodesic_distances(v, -f - 1, [0]), ValueError, "faces: face 0 refers to vertex -1"),
+        (lambda v, f: rn.geometry.geodesic_distances(v[:0], f[:0], [0]), ValueError, "vertices: the mesh has no vertices"),
+        (lambda v, f: rn.geometry.geodesic_distances(v, f[:0], [0]), ValueError, "faces: the mesh has no faces"),
+        (lambda v, f: rn.geometry.geodesic_distances(np.where(np.arange(len(v))[:, None] == 3, np.nan, v), f, [0]), ValueError, "vertices: vertex 3 is not finite"),
+        (lambda v, f: rn.geometry.geodesic_distances(v, f, [len(v)]), ValueError, "sources: source 0: vertex"),
+        (lambda v, f: rn.geometry.geodesic_distances(v, f, [-1]), ValueError, "sources: source 0: vertex index -1 is negative"),
+        (lambda v, f: rn.geometry.geodesic_distances(v, f, []), ValueError, "sources: is empty"),
+        (lambda v, f: rn.geometry.geodesic_distances(v, f, [(len(f), (1, 0, 0))]), ValueError, "sources: source 0: face"),
+        (lambda v, f: rn.geometry.geodesic_distances(v, f, [(0, (0, 0, 0))]), ValueError, "barycentric"),
+        (lambda v, f: rn.geometry.geodesic_distances(v, f, ["x"]), TypeError, "sources: source 0 must be"),
+        (lambda v, f: rn.geometry.geodesic_distances(v, f, [0], method="mmp"), ValueError, "method: unknown method"),
+        (lambda v, f: rn.geometry.interpolate(np.zeros(len(v)), f, [0], [[1, 0]]), ValueError, "bary: expected shape (1, 3)"),
+        (lambda v, f: rn.geometry.interpolate(np.zeros(len(v)), f, [len(f)], [[1, 0, 0]]), ValueError, "face_index: entry 0"),
     ],
 )
 def test_bad_input(call, exc, words):
@@ -124,7 +124,7 @@ def test_geodesic_region_on_a_plane_and_other_components():
     # A second, separate copy of the grid far away: another connected component.
     v2 = np.vstack([v, v + [10.0, 0.0, 0.0]]).astype(np.float32)
     f2 = np.vstack([f, f + len(v)])
-    s = rn.GeodesicSolver(v2, f2)
+    s = rn.geometry.GeodesicSolver(v2, f2)
     centre = 20 * 41 + 20
     a = s.geodesic_region(centre, 0.3, 0.1)
     r = np.linalg.norm(v - v[centre], axis=1)
@@ -135,7 +135,7 @@ def test_geodesic_region_on_a_plane_and_other_components():
     assert np.all((a[: len(v)][band] > 0) & (a[: len(v)][band] < 1))
     # Usable as a region of the field, with a(pₙ) by interpolation at the constraint's point.
     c = np.array([[v[centre][0], v[centre][1], 0, 0, 0.6, 0.8, 0.3, 0.6, 0.74]], np.float32)
-    q = rn.rotation_field(v2, c, regions=[{"kind": "weights", "values": a, "at_constraints": [a[centre]]}])
+    q = rn.reflection.rotation_field(v2, c, regions=[{"kind": "weights", "values": a, "at_constraints": [a[centre]]}])
     from rokeby import api
 
     assert np.all(api.quat_angle(q[len(v):]) < 1e-7)
@@ -144,7 +144,7 @@ def test_geodesic_region_on_a_plane_and_other_components():
 
 def test_freeform_region_fades_inside_the_painted_area():
     v, f = flat_grid(41)
-    s = rn.GeodesicSolver(v, f)
+    s = rn.geometry.GeodesicSolver(v, f)
     w = ((v[:, 0] > 0.25) & (v[:, 0] < 0.75) & (v[:, 1] > 0.25) & (v[:, 1] < 0.75)).astype(np.float32)
     a = s.freeform_region(w, border=0.1)
     assert np.all(a[w == 0] == 0)
@@ -165,10 +165,10 @@ def test_boundary_choice_trades_accuracy_near_the_boundary():
     """Averaging Neumann and Dirichlet heat flows is more accurate on a mesh with boundary; the
     Neumann-only solver is the cheaper option, still far better than edge paths."""
     v, f, src, error = centred_plane()
-    err = {b: error(rn.GeodesicSolver(v, f, boundary=b).distances([src], method="heat")[0]) for b in ("average", "neumann")}
+    err = {b: error(rn.geometry.GeodesicSolver(v, f, boundary=b).distances([src], method="heat")[0]) for b in ("average", "neumann")}
     assert err["average"] < err["neumann"] < 0.02
     with pytest.raises(ValueError, match="boundary: unknown condition"):
-        rn.GeodesicSolver(v, f, boundary="dirichlet")
+        rn.geometry.GeodesicSolver(v, f, boundary="dirichlet")
 
 
 def test_against_exact_polyhedral_geodesics_on_a_real_mesh():
@@ -178,7 +178,7 @@ def test_against_exact_polyhedral_geodesics_on_a_real_mesh():
     ref = np.load(DATA / "spot_exact_geodesics.npz")
     v, f = load_obj(mesh_path("spot.obj"))
     assert int(ref["num_vertices"]) == len(v)
-    s = rn.GeodesicSolver(v, f)
+    s = rn.geometry.GeodesicSolver(v, f)
     errors = {}
     for method in ("heat", "dijkstra"):
         d = s.distances(ref["sources"], method=method).astype(np.float64)
@@ -219,7 +219,7 @@ def test_no_distance_is_shorter_than_the_straight_chord(name):
     up to ~10x too large. Random surface points (inside faces, on an edge, on a corner) and
     vertices, one source and a set of two, every method."""
     v, f = load_obj(mesh_path(name))
-    s = rn.GeodesicSolver(v, f)
+    s = rn.geometry.GeodesicSolver(v, f)
     rng = np.random.default_rng(21)
     sources = []
     for k in range(6):
@@ -257,7 +257,7 @@ def test_exact_method_matches_pygeodesic_mmp():
 
     ref = np.load(DATA / "spot_exact_geodesics.npz")
     v, f = load_obj(mesh_path("spot.obj"))
-    s = rn.GeodesicSolver(v, f)
+    s = rn.geometry.GeodesicSolver(v, f)
     d = s.distances(ref["sources"], method="exact").astype(np.float64)
     ex = ref["distances"]
     pos = ex > 0
@@ -276,7 +276,7 @@ def test_mirror_geodesic_methods_keep_their_stored_numbers():
 
     assert sorted((i[0], i[4]) for i in props.GEODESIC_METHODS) == [("DENSE_GRAPH", 4), ("DIJKSTRA", 1), ("EXACT", 2), ("GRAPH", 3), ("HEAT", 0)]
     v, f = flat_grid(9)
-    s = rn.GeodesicSolver(v, f)
+    s = rn.geometry.GeodesicSolver(v, f)
     for name in ("heat", "dijkstra", "exact", "graph", "dense_graph"):
         assert np.isfinite(s.distances([40], method=name)).all()
 
@@ -289,7 +289,7 @@ def test_graph_method_is_within_half_a_percent_of_exact_mmp():
 
     ref = np.load(DATA / "spot_exact_geodesics.npz")
     v, f = load_obj(mesh_path("spot.obj"))
-    s = rn.GeodesicSolver(v, f)
+    s = rn.geometry.GeodesicSolver(v, f)
     d = s.distances(ref["sources"], method="graph").astype(np.float64)
     heat = s.distances(ref["sources"], method="heat").astype(np.float64)
     errors, heat_errors = [], []

@@ -139,7 +139,7 @@ MESHES = {"seam torus": seam_torus, "sphere with holes": holes_sphere, "three pi
 def _mean_error(v, f, method, upper=True):
     """Mean relative error (outside each source's 1-ring) over three sources, against exact."""
     v, f = np.asarray(v, np.float32), np.asarray(f, np.int32)
-    s = rn.GeodesicSolver(v, f)
+    s = rn.geometry.GeodesicSolver(v, f)
     sources = [int(f[len(f) * k // 4, 0]) for k in (1, 2, 3)]
     exact = s.distances(sources, method="exact").astype(np.float64)
     d = s.distances(sources, method=method).astype(np.float64)
@@ -182,23 +182,23 @@ def test_one_default_method_at_every_entry_point():
     mirrors all default to the dense graph."""
     from rokeby.reflection import api, evaluate  # noqa: F401 - evaluate: the enum → native map
 
-    assert _default_of(rn.geodesic_distances) == DEFAULT
-    for meth in (rn.GeodesicSolver.distances, rn.GeodesicSolver.geodesic_region, rn.GeodesicSolver.freeform_region):
+    assert _default_of(rn.geometry.geodesic_distances) == DEFAULT
+    for meth in (rn.geometry.GeodesicSolver.distances, rn.geometry.GeodesicSolver.geodesic_region, rn.geometry.GeodesicSolver.freeform_region):
         assert _default_of(meth) == DEFAULT, meth
     assert _default_of(api.add_mirror, "geodesic_method").lower() == DEFAULT
     assert _default_of(api.geodesic_distances) == DEFAULT
     v, f = seam_torus()
     v, f = v.astype(np.float32), f.astype(np.int32)
-    s = rn.GeodesicSolver(v, f)
+    s = rn.geometry.GeodesicSolver(v, f)
     np.testing.assert_array_equal(s.distances([5]), s.distances([5], method=DEFAULT))
-    np.testing.assert_array_equal(rn.geodesic_distances(v, f, [5]), s.distances([5], method=DEFAULT))
+    np.testing.assert_array_equal(rn.geometry.geodesic_distances(v, f, [5]), s.distances([5], method=DEFAULT))
 
 
 def test_saved_graph_method_keeps_its_distances():
     """Files saved with "graph" render as before: its distances differ from the new default's
     (so the default is a method of its own), and the two agree within the coarse graph's error."""
     v, f = load_obj(mesh_path("spot.obj"))
-    s = rn.GeodesicSolver(v, f)
+    s = rn.geometry.GeodesicSolver(v, f)
     g, d = s.distances([100], method="graph")[0], s.distances([100], method=DEFAULT)[0]
     assert np.any(g != d)
     ok = d > 0

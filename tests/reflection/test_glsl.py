@@ -1,4 +1,4 @@
-"""The viewport preview's GLSL (shaders/) against rokeby_native.edited_directions.
+"""The viewport preview's GLSL (shaders/) against rokeby_native.reflection.edited_directions.
 
 The shader is compiled with moderngl on a headless EGL context (Mesa llvmpipe here) from the same
 files the Blender draw handler compiles (rokeby.reflection.viewport.glsl). A real mesh (spot) is rasterised; the
@@ -104,7 +104,7 @@ def test_gbuffer_is_the_rasterised_mesh(scene):
 def test_no_constraints_gives_the_physical_reflection(scene):
     s = scene
     got = shader_directions(s, np.zeros((0, 9), np.float32))
-    want = rn.edited_directions(s["pos"], s["nrm"], s["eye"], np.zeros((0, 9), np.float32))
+    want = rn.reflection.edited_directions(s["pos"], s["nrm"], s["eye"], np.zeros((0, 9), np.float32))
     i = s["pos"] - s["eye"]
     i /= np.linalg.norm(i, axis=1, keepdims=True)
     nn = s["nrm"] / np.linalg.norm(s["nrm"], axis=1, keepdims=True)
@@ -119,10 +119,10 @@ def test_euclidean_field_matches_rust(scene, k):
     rng = np.random.default_rng(100 + k)
     rows = random_constraints(rng, k, 0, max_edit=0.8, min_edit=0.1, at=s["v"])
     got = shader_directions(s, rows)
-    want = rn.edited_directions(s["pos"], s["nrm"], s["eye"], rows)
+    want = rn.reflection.edited_directions(s["pos"], s["nrm"], s["eye"], rows)
     check(got, want)
     # The edit is visible: the directions differ from the physical reflection.
-    plain = rn.edited_directions(s["pos"], s["nrm"], s["eye"], rows[:0])
+    plain = rn.reflection.edited_directions(s["pos"], s["nrm"], s["eye"], rows[:0])
     assert angle(got, plain).mean() > 0.05
 
 
@@ -133,12 +133,12 @@ def test_per_vertex_geodesic_distances_match_rust(scene, method):
     picks = rng.choice(len(s["v"]), 6, replace=False)
     rows = random_constraints(rng, 6, 0, max_edit=0.8, min_edit=0.1)
     rows[:, :3] = s["v"][picks]
-    d = rn.GeodesicSolver(s["v"], s["f"]).distances([int(i) for i in picks], method=method)
+    d = rn.geometry.GeodesicSolver(s["v"], s["f"]).distances([int(i) for i in picks], method=method)
     got = shader_directions(s, rows, distances=d)
-    want = rn.edited_directions(s["pos"], s["nrm"], s["eye"], rows, distances=per_pixel(s, d))
+    want = rn.reflection.edited_directions(s["pos"], s["nrm"], s["eye"], rows, distances=per_pixel(s, d))
     check(got, want)
     # Geodesic and Euclidean fields differ on this non-convex mesh: the distances were used.
-    euclid = rn.edited_directions(s["pos"], s["nrm"], s["eye"], rows)
+    euclid = rn.reflection.edited_directions(s["pos"], s["nrm"], s["eye"], rows)
     assert angle(got, euclid).max() > 1e-2
 
 
@@ -165,16 +165,16 @@ def test_regions_euclidean_and_per_vertex_match_rust(scene):
     assert len(plan.groups) == 2 and all(len(g.members) >= 1 for g in plan.groups)
     got = shader_directions(s, rows, regions=regions)
     px_regions = [regions[0], {"kind": "weights", "values": per_pixel(s, values), "at_constraints": at}]
-    want = rn.edited_directions(s["pos"], s["nrm"], s["eye"], rows, regions=px_regions)
+    want = rn.reflection.edited_directions(s["pos"], s["nrm"], s["eye"], rows, regions=px_regions)
     check(got, want)
-    plain = rn.edited_directions(s["pos"], s["nrm"], s["eye"], rows[:0])
+    plain = rn.reflection.edited_directions(s["pos"], s["nrm"], s["eye"], rows[:0])
     outside = angle(want, plain) == 0
     assert 0.05 < outside.mean() < 0.95, "part of the mirror lies outside both regions"
     assert np.all(angle(got[outside], plain[outside]) < 1e-5), "outside every region the reflection is unchanged"
     # With per-vertex distances and regions together.
-    d = rn.GeodesicSolver(v, s["f"]).distances([int(i) for i in picks], method="dijkstra")
+    d = rn.geometry.GeodesicSolver(v, s["f"]).distances([int(i) for i in picks], method="dijkstra")
     got = shader_directions(s, rows, regions=regions, distances=d)
-    want = rn.edited_directions(s["pos"], s["nrm"], s["eye"], rows, regions=px_regions, distances=per_pixel(s, d))
+    want = rn.reflection.edited_directions(s["pos"], s["nrm"], s["eye"], rows, regions=px_regions, distances=per_pixel(s, d))
     check(got, want)
 
 
@@ -184,7 +184,7 @@ def test_regions_without_constraints_change_nothing(scene):
     far = (s["v"].max(0) + 100.0).tolist()
     regions = [{"kind": "euclidean", "center": far, "radius": 1.0, "border": 0.5}]
     got = shader_directions(s, rows, regions=regions)
-    check(got, rn.edited_directions(s["pos"], s["nrm"], s["eye"], rows[:0]))
+    check(got, rn.reflection.edited_directions(s["pos"], s["nrm"], s["eye"], rows[:0]))
 
 
 def test_half_turns_and_rank_deficient_inputs(scene):
@@ -197,21 +197,21 @@ def test_half_turns_and_rank_deficient_inputs(scene):
     r /= np.linalg.norm(r)
     one = np.array([[*v[10], *r, *(-r)]], np.float32)
     got = shader_directions(s, one)
-    check(got, rn.edited_directions(s["pos"], s["nrm"], s["eye"], one))
+    check(got, rn.reflection.edited_directions(s["pos"], s["nrm"], s["eye"], one))
     # Two constraints, both half turns: M = -(w1 r1 r1^T + w2 r2 r2^T) is rank 2 and negative
     # semi-definite; ortho(M) is the half turn about r1 x r2.
     r2 = np.array([-0.6, 0.2, 0.7])
     r2 /= np.linalg.norm(r2)
     two = np.array([[*v[10], *r, *(-r)], [*v[2000], *r2, *(-r2)]], np.float32)
     got = shader_directions(s, two)
-    check(got, rn.edited_directions(s["pos"], s["nrm"], s["eye"], two))
+    check(got, rn.reflection.edited_directions(s["pos"], s["nrm"], s["eye"], two))
     # A pixel exactly on a constraint: interpolation, with a rank-1 M there whose twist the
     # other constraints choose (ortho_tiebreak).
     rows = random_constraints(rng, 3, 0, max_edit=0.8, min_edit=0.2, at=v)
     hit = len(s["pos"]) // 2
     rows[0, :3] = s["pos"][hit]
     got = shader_directions(s, rows)
-    want = rn.edited_directions(s["pos"], s["nrm"], s["eye"], rows)
+    want = rn.reflection.edited_directions(s["pos"], s["nrm"], s["eye"], rows)
     check(got, want)
     assert angle(got[hit:hit + 1], want[hit:hit + 1])[0] < 1e-4
 
@@ -233,7 +233,7 @@ def test_environment_lookup_follows_blenders_equirectangular_convention(scene):
         out = r.render(s["vp"], s["eye"], glsl.OUT_COLOR)[s["mask"]][:, :3]
     finally:
         r.env_tex = None
-    d = rn.edited_directions(s["pos"], s["nrm"], s["eye"], np.zeros((0, 9), np.float32)).astype(np.float64)
+    d = rn.reflection.edited_directions(s["pos"], s["nrm"], s["eye"], np.zeros((0, 9), np.float32)).astype(np.float64)
     u = 0.5 - np.arctan2(d[:, 1], d[:, 0]) / (2 * np.pi)
     vv = np.arctan2(d[:, 2], np.hypot(d[:, 0], d[:, 1])) / np.pi + 0.5
     fu, fv = u * cells_u, vv * cells_v
@@ -254,13 +254,13 @@ def test_beyond_the_constraint_limit_the_per_vertex_field_is_shown(scene):
     rows = random_constraints(np.random.default_rng(9), glsl.MAX_CONSTRAINTS + 6, 0, max_edit=0.6, at=v)
     with pytest.raises(ValueError, match="needs the stored rotation vectors"):
         glsl.plan_field(rows, n_vertices=len(v))
-    rv = rn.rotation_field(v, rows, output="rotation_vector")
+    rv = rn.reflection.rotation_field(v, rows, output="rotation_vector")
     plan = glsl.plan_field(rows, n_vertices=len(v), rotations=rv)
     assert plan.mode == glsl.PER_VERTEX_FIELD and "70 constraints" in plan.message and "per-vertex" in plan.message
     got = shader_directions(s, rows, rotations=rv)
     # e = R(interpolated rotation vector) r, as the render node group does.
     rvp = per_pixel(s, rv.T).T.astype(np.float64)
-    physical = rn.edited_directions(s["pos"], s["nrm"], s["eye"], rows[:0]).astype(np.float64)
+    physical = rn.reflection.edited_directions(s["pos"], s["nrm"], s["eye"], rows[:0]).astype(np.float64)
     ang = np.linalg.norm(rvp, axis=1, keepdims=True)
     k = rvp / np.maximum(ang, 1e-30)
     want = physical * np.cos(ang) + np.cross(k, physical) * np.sin(ang) + k * np.sum(k * physical, 1, keepdims=True) * (1 - np.cos(ang))

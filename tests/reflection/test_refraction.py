@@ -144,13 +144,13 @@ def test_fresh_refraction_constraint_is_the_identity_and_matches_native(register
     api.evaluate()
     got = api.stored_refraction(mirror)
     row = np.concatenate([p, t, _unit(np.array([0.6, 0.9, -1.8]) - p)])[None].astype(np.float32)
-    q = rokeby_native.rotation_field(api.mesh_arrays(mirror).vertices, row, polar="fast")
+    q = rokeby_native.reflection.rotation_field(api.mesh_arrays(mirror).vertices, row, polar="fast")
     np.testing.assert_allclose(got, rotation_vectors(q), atol=2e-5)
     assert np.abs(got).max() > 0.3
     # The reflection field did not move, and is what its own constraint alone gives.
     np.testing.assert_array_equal(api.stored_field(mirror), reflection)
     refl_row = api.constraint_row(np.array(mirror.rokeby.constraints[0].surface_handle.matrix_world.translation), (0, 0, 1), (0.5, 1.0, 2.0), eye)
-    q = rokeby_native.rotation_field(api.mesh_arrays(mirror).vertices, refl_row[None], polar="fast")
+    q = rokeby_native.reflection.rotation_field(api.mesh_arrays(mirror).vertices, refl_row[None], polar="fast")
     np.testing.assert_allclose(reflection, rotation_vectors(q), atol=2e-5)
     # A reflection edit leaves the refraction field alone.
     mirror.rokeby.constraints[0].target_handle.location = (-1.0, 1.0, 2.0)

@@ -21,7 +21,7 @@ PLANE_F = np.array([[0, 1, 2], [0, 2, 3]], np.int64)
 @pytest.fixture
 def editor():
     v, f = uv_sphere((0, 0, 1.5), 0.5)
-    return rn.ShadowEditor(v, f, PLANE_V, PLANE_F, light_position=LIGHT, min_loop_vertices=10), v, f
+    return rn.shadows.ShadowEditor(v, f, PLANE_V, PLANE_F, light_position=LIGHT, min_loop_vertices=10), v, f
 
 
 def test_handles_lie_on_the_plane_along_light_rays(editor):
@@ -33,7 +33,7 @@ def test_handles_lie_on_the_plane_along_light_rays(editor):
     assert h["hit"].all() and not h["on_caster"].any()
     want = LIGHT + (s - LIGHT) * (LIGHT[2] / (LIGHT[2] - s[:, 2]))[:, None]
     np.testing.assert_allclose(h["points"], want, atol=1e-5)
-    sil = rn.shadow_silhouettes(v, f, light_position=LIGHT)
+    sil = rn.shadows.silhouettes(v, f, light_position=LIGHT)
     np.testing.assert_allclose(sil[0]["points"], s, atol=1e-6)
     assert sil[0]["edges"].shape == (len(s), 2) and 0 < sil[0]["length"] < 2 * np.pi * 0.5
 
@@ -61,9 +61,9 @@ def test_drag_then_shadow_mesh_and_rest_identity(editor):
 
 
 def test_falloff():
-    assert rn.shadow_falloff([0, 0, 1], [0, 0, 1], 3.0) == pytest.approx(1.0)
+    assert rn.shadows.falloff_factor([0, 0, 1], [0, 0, 1], 3.0) == pytest.approx(1.0)
     a = np.radians(20)
-    assert rn.shadow_falloff([0, 0, 1], [0, np.sin(a), np.cos(a)], 2.0) == pytest.approx(np.cos(a) ** 2)
+    assert rn.shadows.falloff_factor([0, 0, 1], [0, np.sin(a), np.cos(a)], 2.0) == pytest.approx(np.cos(a) ** 2)
 
 
 @pytest.mark.parametrize(
@@ -97,7 +97,7 @@ def test_bad_inputs_are_clear_errors(kwargs, words):
         else:
             kw[k] = val
     with pytest.raises((ValueError, TypeError)) as e:
-        rn.ShadowEditor(v, f, rv, rf, **kw)
+        rn.shadows.ShadowEditor(v, f, rv, rf, **kw)
     assert words in str(e.value)
 
 

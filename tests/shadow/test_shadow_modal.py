@@ -77,7 +77,7 @@ def _shadow_boundary_reach(rn, ob, lamp, centre, direction):
     m = np.array(ob.matrix_world)
     v = (v @ m[:3, :3].T + m[:3, 3]).astype(np.float32)
     light = np.array(lamp.location, np.float64)
-    loops = rn.shadow_silhouettes(v, t.reshape(-1, 3), light_position=light)
+    loops = rn.shadows.silhouettes(v, t.reshape(-1, 3), light_position=light)
     s = max((lp["points"] for lp in loops), key=len).astype(np.float64)
     g = light + (s - light) * (light[2] / (light[2] - s[:, 2]))[:, None]
     return float(((g - centre) @ direction).max())

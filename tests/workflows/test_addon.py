@@ -108,7 +108,7 @@ def test_field_on_a_blender_mesh_matches_the_native_call():
     q = api.rotation_field(m.vertices, rows)
     import rokeby_native
 
-    np.testing.assert_array_equal(q, rokeby_native.rotation_field(m.vertices, rows))
+    np.testing.assert_array_equal(q, rokeby_native.reflection.rotation_field(m.vertices, rows))
     assert np.all(np.isfinite(q))
 
 

@@ -75,10 +75,14 @@ def old_tree(tmp_path_factory):
         _run([git, "-C", str(ROOT), "worktree", "prune"])
 
 
-def _env(addon: Path) -> dict:
+def _env(addon: Path, *extra: Path) -> dict:
     env = dict(os.environ)
-    env["PYTHONPATH"] = str(addon)
+    env["PYTHONPATH"] = os.pathsep.join(map(str, (addon, *extra)))
     return env
+
+
+# The previous release calls rokeby_native by the names it had then (see its sitecustomize.py).
+PREVIOUS_NATIVE = ROOT / "tests" / "blend_fixtures" / "previous_native"
 
 
 @pytest.fixture(scope="module")
@@ -90,7 +94,7 @@ def written(old_tree, tmp_path_factory):
         script.parent.mkdir(parents=True, exist_ok=True)
         shutil.copy(ROOT / SCRIPT, script)
     out = tmp_path_factory.mktemp("fixtures")
-    _result(_run([sys.executable, str(script), "write", str(out)], cwd=old_tree, env=_env(old_tree / "addon")),
+    _result(_run([sys.executable, str(script), "write", str(out)], cwd=old_tree, env=_env(old_tree / "addon", PREVIOUS_NATIVE)),
             f"writing the fixtures with {PREVIOUS_RELEASE}")
     return out, json.loads((out / "fixtures.json").read_text())
 

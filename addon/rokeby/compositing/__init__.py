@@ -545,7 +545,7 @@ def reconstruct(p: Passes, *, method: str = "qp", env_size: int = 128, min_pixel
     d0 = p.diff_dir + p.diff_ind
     r0 = p.gloss_dir + p.gloss_ind
     finite = np.isfinite(normals).all(-1) & (np.abs(normals).sum(-1) > 0) & np.isfinite(d0).all(-1) & np.isfinite(r0).all(-1)
-    refl = nm.reflect_dirs(normals, view)
+    refl = nm.compositing.reflect_dirs(normals, view)
     patches, reports = [], []
     t_sh = t_env = 0.0
     for k, key in enumerate(keys):
@@ -562,7 +562,7 @@ def reconstruct(p: Passes, *, method: str = "qp", env_size: int = 128, min_pixel
                 sigma = pixel_noise(d0, m)
                 tol = noise_tolerance * sigma
                 rep.noise_sigma, rep.sh_tolerance = tuple(map(float, sigma)), tuple(map(float, tol))
-            fit = nm.sh_fit(normals[m], d0[m], method, tol)
+            fit = nm.compositing.sh_fit(normals[m], d0[m], method, tol)
             t_sh += time.perf_counter() - t0
             entry["sh"] = fit["coeffs"]
             rep.diffuse = method
@@ -574,7 +574,7 @@ def reconstruct(p: Passes, *, method: str = "qp", env_size: int = 128, min_pixel
                 mask = (m & (p.reflocc >= occlusion_threshold)).astype(np.float32)
                 t0 = time.perf_counter()
                 try:
-                    env = nm.reflection_env(refl, r0, mask, p.depth, size=env_size, blur_sigma=blur_sigma, min_coverage=min_coverage)
+                    env = nm.compositing.reflection_env(refl, r0, mask, p.depth, size=env_size, blur_sigma=blur_sigma, min_coverage=min_coverage)
                     entry["env"] = env["map"]
                     rep.reflection = "ok"
                     rep.coverage = float(env["coverage"])
@@ -611,14 +611,14 @@ def recomposite(p: Passes, rec: Reconstruction, edited_normals: np.ndarray, *, k
             raise CompositingError(f"edited_normals: expected shape {(h, w, 3)} like the passes, got {e.shape}")
         _check_k(k_d, k_r)
         a, kw = _recomposite_args(p, rec, use_occlusion)
-        out = native.module().recomposite(a[0], a[1], e, *a[3:], **kw, k_d=k_d, k_r=k_r)
+        out = native.module().compositing.recomposite(a[0], a[1], e, *a[3:], **kw, k_d=k_d, k_r=k_r)
         _check_output(out, a[6])
         return out
     return RecompositeSession(p, rec, use_occlusion=use_occlusion, backend=backend)(edited_normals, k_d=k_d, k_r=k_r)
 
 
 def _recomposite_args(p: Passes, rec: Reconstruction, use_occlusion: bool) -> tuple[tuple, dict]:
-    """``rokeby_native.recomposite``'s arguments (edited_normals None) and keywords for a frame."""
+    """``rokeby_native.compositing.recomposite``'s arguments (edited_normals None) and keywords for a frame."""
     ao = p.ao.mean(-1) if p.ao.ndim == 3 else p.ao
     args = (rec.ids, rec.normals, None, rec.view, p.diff_dir + p.diff_ind, p.gloss_dir + p.gloss_ind, p.image, rec.patches)
     kw = {"alpha_d": np.clip(ao, 0, 1) if use_occlusion else None,
@@ -631,7 +631,7 @@ class RecompositeSession:
     """Interactive recompositing of one rendered frame: an artist's slider loop. The passes and the
     reconstruction are checked and packed once, here; each call takes new edited normals (and
     k_D, k_R) and returns (image, stats) as ``recomposite`` does. On the CPU backend the passes
-    are held by the Rust core (``rokeby_native.Recompositor``), each call passes only the edited
+    are held by the Rust core (``rokeby_native.compositing.Recompositor``), each call passes only the edited
     normals and writes into ``out`` (or a new array), the GIL released, and the core refuses
     overflow itself (no pass over the result here). On a GLSL backend only the edited normals go to
     the GPU again: the other ten images and the reflection maps stay there, as long as no other
@@ -700,11 +700,11 @@ class RecompositeSession:
         return result
 
     def _core(self):
-        """The passes copied into the Rust core once (``rokeby_native.Recompositor``): the CPU
+        """The passes copied into the Rust core once (``rokeby_native.compositing.Recompositor``): the CPU
         backend's frames and every backend's windows."""
         if self._native is None:
             a = self._args
-            self._native = native.module().Recompositor(a[0], a[1], *a[3:], **self._kw)
+            self._native = native.module().compositing.Recompositor(a[0], a[1], *a[3:], **self._kw)
         return self._native
 
     def _run(self, out, edited, rows, cols, k_d, k_r) -> dict:
@@ -856,7 +856,7 @@ def emboss(normals: np.ndarray, beta: float, mask=None) -> np.ndarray:
     leaves unchanged keep their input bits (``rokeby_core::normals``, rows in parallel)."""
     if not 0 < beta <= 1:
         raise CompositingError(f"beta: must be in (0, 1], got {beta}")
-    return _native_edit(native.module().normals_emboss, normals, beta, mask)
+    return _native_edit(native.module().compositing.normals_emboss, normals, beta, mask)
 
 
 def _decal_place(shape, center, radius):
@@ -896,7 +896,7 @@ def noise_decal(shape, size: float = 16.0, octaves: int = 3, seed: int = 0, cent
         raise CompositingError(f"seed: expected an integer in [0, 2^32), got {seed!r}")
     if not (isinstance(octaves, (int, np.integer)) and 1 <= octaves <= 8):
         raise CompositingError(f"octaves: must be 1 to 8, got {octaves!r}")
-    return _native_edit(native.module().normals_noise_decal, int(h), int(w), float(size), int(octaves), int(seed),
+    return _native_edit(native.module().compositing.normals_noise_decal, int(h), int(w), float(size), int(octaves), int(seed),
                         (float(cx), float(cy)), float(radius))
 
 
@@ -907,7 +907,7 @@ def bump(normals: np.ndarray, height: np.ndarray, strength: float = 1.0, mask=No
     height = np.asarray(height)
     if height.shape != np.shape(normals)[:2]:
         raise CompositingError(f"height: expected shape {np.shape(normals)[:2]} like the normals, got {height.shape}")
-    return _native_edit(native.module().normals_bump, normals, height, float(strength), mask)
+    return _native_edit(native.module().compositing.normals_bump, normals, height, float(strength), mask)
 
 
 def bilateral_smooth(normals: np.ndarray, depth: np.ndarray, sigma_s: float = 3.0, sigma_d: float = 0.02,
@@ -916,7 +916,7 @@ def bilateral_smooth(normals: np.ndarray, depth: np.ndarray, sigma_s: float = 3.
     (relative depth difference, σ_d), so occluding contours are kept; n_z = √(1 − |n̄|²). Window
     radius ⌈2σ_s⌉ (σ_s ≤ 50 pixels); pixels without a finite depth or normal neither move nor
     weigh. Kept pixels as for ``emboss``."""
-    return _native_edit(native.module().normals_bilateral, normals, depth, float(sigma_s), float(sigma_d), mask)
+    return _native_edit(native.module().compositing.normals_bilateral, normals, depth, float(sigma_s), float(sigma_d), mask)
 
 
 # --- Command line: python -m rokeby.composite, and the farm's recompositing job ----------------

@@ -4,7 +4,7 @@ The same shader files as the moderngl path (``shaders/rokeby_recomposite_{vert,f
 compiled by ``glsl.create_shader`` from the one declared interface
 ``compositing.gl.RECOMPOSITE_INTERFACE``; a fullscreen triangle into a ``GPUOffScreen`` with an
 RGBA32F colour buffer, read back as float32. Arguments and result are those of
-``rokeby_native.recomposite``: (image (H, W, 3) float32, {"edited", "masked"}).
+``rokeby_native.compositing.recomposite``: (image (H, W, 3) float32, {"edited", "masked"}).
 
 Needs a GPU context: inside Blender's UI there always is one; in background mode (bpy as a
 module, ``blender -b``) the ``gpu`` module has none until something has drawn — one EEVEE render
@@ -97,7 +97,7 @@ def ensure_context() -> None:
 
 class BlenderRecompositor:
     """The recompositing shader drawn by Blender's ``gpu`` module into an RGBA32F offscreen buffer.
-    Call it with ``rokeby_native.recomposite``'s arguments. Make it (and call it) only where a GPU
+    Call it with ``rokeby_native.compositing.recomposite``'s arguments. Make it (and call it) only where a GPU
     context exists (see ``ensure_context``)."""
 
     def __init__(self):
@@ -222,7 +222,7 @@ def blender_recompositor() -> BlenderRecompositor:
 
 def recomposite_blender(ids, normals, edited_normals, view, diffuse, reflection, image, patches, **kw):
     """Eqs. 3–5 by the GLSL shader drawn through Blender's ``gpu`` module: the arguments and the result
-    (image (H, W, 3) float32, {"edited", "masked"}) of ``rokeby_native.recomposite``. Bad inputs raise
+    (image (H, W, 3) float32, {"edited", "masked"}) of ``rokeby_native.compositing.recomposite``. Bad inputs raise
     ``CompositingError`` naming the argument; no GPU context raises ``NoGPUContext``."""
     return blender_recompositor()(ids, normals, edited_normals, view, diffuse, reflection, image, patches, **kw)
 

@@ -166,7 +166,7 @@ def _check_output(out, image) -> None:
 def recomposite_frame(ids, normals, edited_normals, view, diffuse, reflection, image, patches, alpha_d=None,
                       alpha_r=None, alpha=None, diffuse_color=None, reflection_color=None, k_d=1.0, k_r=1.0, gamma=1.0,
                       epsilon=0.005 * math.pi) -> RecompositeFrame:
-    """``rokeby_native.recomposite``'s arguments checked (a ``CompositingError`` names the wrong one)
+    """``rokeby_native.compositing.recomposite``'s arguments checked (a ``CompositingError`` names the wrong one)
     and packed as the shader's textures and push constants; shared by every GLSL backend."""
     n = _gpu_image(normals, "normals", None, None, 3)
     h, w = n.shape[:2]
@@ -382,7 +382,7 @@ def gl_recompositor() -> GLRecompositor:
 
 def recomposite_gpu(ids, normals, edited_normals, view, diffuse, reflection, image, patches, **kw):
     """Eqs. 3–5 by the GLSL shader (shaders/rokeby_recomposite_frag.glsl): the arguments and the
-    result (image (H, W, 3) float32, {"edited", "masked"}) of ``rokeby_native.recomposite``, in
+    result (image (H, W, 3) float32, {"edited", "masked"}) of ``rokeby_native.compositing.recomposite``, in
     float32 on the GPU. Runs on a headless moderngl/EGL context made on first use; inside Blender,
     ``rokeby.compositing.blender_gpu.recomposite_blender`` draws the same shader through the ``gpu`` module."""
     return gl_recompositor()(ids, normals, edited_normals, view, diffuse, reflection, image, patches, **kw)

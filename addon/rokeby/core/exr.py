@@ -1,4 +1,4 @@
-"""OpenEXR files, read and written by the Rust core (``rokeby_native.exr_read``/``exr_write``,
+"""OpenEXR files, read and written by the Rust core (``rokeby_native.exr_io.read``/``write``,
 the pure-Rust ``exr`` crate).
 
 Every EXR the add-on and ``python -m rokeby.composite`` read or write goes through here. No
@@ -63,7 +63,7 @@ def decode(data: bytes, name: str = "data", dwa: bool = False) -> list[Part]:
     ``dwa``: decode DWAA/DWAB files too (a few pixels may differ from OpenEXR's decoding by a
     rounding) instead of refusing them."""
     try:
-        parts = native.module().exr_read(data, dwa)
+        parts = native.module().exr_io.read(data, dwa)
     except ValueError as exc:
         why = str(exc)
         raise ExrError(name, why[len("data: "):] if why.startswith("data: ") else why) from None
@@ -84,7 +84,7 @@ def encode(channels: dict, header: dict | None = None, compression: str = "zip",
     row 0 at the top; float, or half for the names in ``half``), ``header`` name → string
     attributes, ``compression`` one of ``WRITE_COMPRESSIONS``."""
     chans = {k: np.ascontiguousarray(v, np.float32) for k, v in channels.items()}
-    return native.module().exr_write(chans, dict(header or {}), compression, list(half))
+    return native.module().exr_io.write(chans, dict(header or {}), compression, list(half))
 
 
 def save(path, data: bytes) -> None:

@@ -94,24 +94,24 @@ def cancellable():
 
 
 def rotation_field(*args, **kwargs):
-    return module().rotation_field(*args, **kwargs)
+    return module().reflection.rotation_field(*args, **kwargs)
 
 
 def edited_directions(*args, **kwargs):
-    return module().edited_directions(*args, **kwargs)
+    return module().reflection.edited_directions(*args, **kwargs)
 
 
 def ortho(*args, **kwargs):
-    return module().ortho(*args, **kwargs)
+    return module().reflection.ortho(*args, **kwargs)
 
 
 def view_blend(*args, **kwargs):
-    return module().view_blend(*args, **kwargs)
+    return module().reflection.view_blend(*args, **kwargs)
 
 
 def view_blend_render_rows(*args, **kwargs):
-    return module().view_blend_render_rows(*args, **kwargs)
+    return module().reflection.view_blend_render_rows(*args, **kwargs)
 
 
 def view_blend_rotation_vectors(*args, **kwargs):
-    return module().view_blend_rotation_vectors(*args, **kwargs)
+    return module().reflection.view_blend_rotation_vectors(*args, **kwargs)

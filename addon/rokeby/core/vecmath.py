@@ -9,7 +9,7 @@ One home each for the rules the features must agree on:
   there the refracted direction is the zero vector. The render node groups (Cycles, EEVEE) use
   GLSL's ``refract``, so the Python twins agree with the renders at the boundary too;
 - :func:`smooth_step` and :func:`region_falloff` — the region border, as ``rokeby_core::region``
-  defines it (rust/rokeby-core/src/reflection/region.rs ``smooth_step``/``falloff``), NaN distances
+  defines it (rust/rokeby-core/src/reflection/region.rs ``smooth_step``/``influence``), NaN distances
   (unreachable points) included: they get weight 0.
 """
 
@@ -68,7 +68,7 @@ def smooth_step(t) -> np.ndarray:
 
 
 def region_falloff(d, radius: float, border: float) -> np.ndarray:
-    """Influence at distance ``d`` from a region's centre (region.rs ``falloff``): 1 for
+    """Influence at distance ``d`` from a region's centre (region.rs ``influence``): 1 for
     d ≤ radius − border, 1 − smooth_step over the border band, 0 for d ≥ radius and for NaN
     distances; a border larger than the radius is clamped to it, a border of 0 is a hard edge."""
     d = np.asarray(d, dtype=np.float64)

@@ -98,7 +98,7 @@ def read_hdr(path) -> np.ndarray:
     if not path.exists():
         raise FileNotFoundError(f"read_hdr: {path} does not exist")
     try:
-        return native.module().rgbe_decode(path.read_bytes())
+        return native.module().envmaps.rgbe_decode(path.read_bytes())
     except ValueError as e:
         raise ValueError(f"read_hdr: {path}: {e}") from None
 
@@ -111,7 +111,7 @@ def write_hdr(path, pixels) -> Path:
     if px.ndim != 3 or px.shape[2] not in (3, 4):
         raise ValueError(f"write_hdr: pixels must have shape (H, W, 3) or (H, W, 4), got {px.shape}")
     path = Path(path)
-    path.write_bytes(native.module().rgbe_encode(np.ascontiguousarray(px[..., :3])))
+    path.write_bytes(native.module().envmaps.rgbe_encode(np.ascontiguousarray(px[..., :3])))
     return path
 
 
@@ -186,23 +186,23 @@ def flip_rows(pixels: np.ndarray) -> np.ndarray:
 def convert(image, layout_in: str, layout_out: str, size: int, supersample: int = 1) -> np.ndarray:
     """The environment ``image`` (``layout_in``) on ``layout_out``: lat-long maps are size × 2·size,
     faces size × size; each texel averages supersample² bilinear, seam-correct lookups."""
-    return native.module().env_convert(image, layout_in, layout_out, int(size), int(supersample))
+    return native.module().envmaps.convert(image, layout_in, layout_out, int(size), int(supersample))
 
 
 def sample(image, layout: str, directions) -> np.ndarray:
     """Bilinear, seam-correct lookups E(d): (..., 3) directions → (..., C)."""
-    return native.module().env_sample(image, layout, directions)
+    return native.module().envmaps.sample(image, layout, directions)
 
 
 def prefilter(image, lobe: str = "ggx", params=ROUGHNESS_LEVELS, texels_per_radius: float = 6.0, tail: float = 1e-5) -> list:
     """Specular prefiltering of a lat-long image: one lat-long array per lobe parameter (GGX or
     Phong/Torrance–Sparrow σ), each at its own resolution (see docs/envmaps.md)."""
-    return native.module().env_prefilter(image, lobe, [float(p) for p in params], float(texels_per_radius), float(tail))
+    return native.module().envmaps.prefilter(image, lobe, [float(p) for p in params], float(texels_per_radius), float(tail))
 
 
 def irradiance(image, size: int = 32) -> dict:
     """Order-2 SH irradiance: {'coeffs', 'irradiance_coeffs', 'image'} (E(n)/π map, size × 2·size)."""
-    return native.module().env_irradiance(image, int(size))
+    return native.module().envmaps.irradiance(image, int(size))
 
 
 def sh_irradiance(irradiance_coeffs, normals) -> np.ndarray:
@@ -231,7 +231,7 @@ def sh_irradiance(irradiance_coeffs, normals) -> np.ndarray:
 def reference(image, lobe: str, directions, param: float = 0.0) -> np.ndarray:
     """The seed's brute-force sum over every texel (the validation reference): lobe 'phong',
     'ggx', 'torrance_sparrow' (normalised like the prefiltered maps) or 'lambert' (E(n)/π)."""
-    return native.module().env_reference(image, lobe, directions, float(param))
+    return native.module().envmaps.prefilter_reference(image, lobe, directions, float(param))
 
 
 def lookup_levels(levels, params, directions, param) -> np.ndarray:

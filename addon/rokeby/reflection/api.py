@@ -136,13 +136,13 @@ def mesh_arrays(obj, depsgraph=None, *, world: bool = True) -> MeshArrays:
 
 def rotation_field(points, constraints, **kwargs) -> np.ndarray:
     """The MLS rotation field at ``points`` as (N, 4) quaternions (x, y, z, w); see
-    ``rokeby_native.rotation_field`` for the keyword arguments (distances, regions, normals, eye,
+    ``rokeby_native.reflection.rotation_field`` for the keyword arguments (distances, regions, normals, eye,
     polar)."""
     return native.rotation_field(points, constraints, **kwargs)
 
 
 def edited_directions(positions, normals, eye, constraints, **kwargs) -> np.ndarray:
-    """Edited reflection directions per pixel/point; see ``rokeby_native.edited_directions``."""
+    """Edited reflection directions per pixel/point; see ``rokeby_native.reflection.edited_directions``."""
     return native.edited_directions(positions, normals, eye, constraints, **kwargs)
 
 
@@ -164,14 +164,14 @@ def _digest(a: np.ndarray) -> str:
 
 
 def geodesic_solver(vertices, faces, *, boundary: str = "average"):
-    """A ``rokeby_native.GeodesicSolver`` for this mesh, reused while neither its faces (topology)
+    """A ``rokeby_native.geometry.GeodesicSolver`` for this mesh, reused while neither its faces (topology)
     nor its vertex positions change; otherwise a new one (keeps the 8 most recent meshes)."""
     v = np.asarray(vertices, dtype=np.float32)
     f = np.asarray(faces)
     key = (_digest(f), _digest(v), boundary)
     solver = _SOLVER_CACHE.get(key)
     if solver is None:
-        solver = native.module().GeodesicSolver(v, f, boundary=boundary)
+        solver = native.module().geometry.GeodesicSolver(v, f, boundary=boundary)
         _SOLVER_CACHE[key] = solver
         while len(_SOLVER_CACHE) > _SOLVER_CACHE_SIZE:
             _SOLVER_CACHE.popitem(last=False)
@@ -188,7 +188,7 @@ DEFAULT_GEODESIC_METHOD = "dense_graph"
 
 def geodesic_distances(vertices, faces, sources, *, method: str = DEFAULT_GEODESIC_METHOD, boundary: str = "average") -> np.ndarray:
     """Geodesic distances (S, V) through the cached solver of this mesh; see
-    ``rokeby_native.GeodesicSolver.distances`` for the forms ``sources`` may take."""
+    ``rokeby_native.geometry.GeodesicSolver.distances`` for the forms ``sources`` may take."""
     return geodesic_solver(vertices, faces, boundary=boundary).distances(sources, method=method)
 
 

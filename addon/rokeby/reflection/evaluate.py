@@ -954,7 +954,7 @@ def _solver(state: _State, geo: _Geometry, timer):
     """The mirror's GeodesicSolver, kept while its geometry version is unchanged (no hashing of
     the mesh per handle move); its factorisation is made on the first heat query."""
     if state.solver is None or state.solver_version != state.geometry_version:
-        state.solver = timer(native.module().GeodesicSolver, geo.vertices, geo.triangles)
+        state.solver = timer(native.module().geometry.GeodesicSolver, geo.vertices, geo.triangles)
         state.solver_version = state.geometry_version
     return state.solver
 
@@ -1154,7 +1154,7 @@ def _regions_for_native(state, geo, specs, points, method, timer):
     def at_constraints(values):
         if len(points) == 0:
             return np.zeros(0, dtype=np.float32)
-        return timer(native.module().interpolate, values, geo.triangles, face_index, bary)[0]
+        return timer(native.module().geometry.interpolate, values, geo.triangles, face_index, bary)[0]
 
     for spec in specs:
         if spec[0] == "EUCLIDEAN":

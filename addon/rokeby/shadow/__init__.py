@@ -1,6 +1,6 @@
 """Freeform shadow boundary editing (Mattausch, Igarashi, Wimmer) in Blender.
 
-The numerics run in Rust (``rokeby_native.ShadowEditor`` through :mod:`rokeby.core.native`): smooth
+The numerics run in Rust (``rokeby_native.shadows.ShadowEditor`` through :mod:`rokeby.core.native`): smooth
 silhouette loops of the caster from the light, shadow handles by ray casting, MLS boundary
 deformation and the Laplacian shadow mesh. This module turns Blender objects into the arrays it
 needs (evaluated meshes in world space, read with foreach_get) and the result back into Blender:
@@ -245,7 +245,7 @@ def start(caster, light, receivers=None, *, scene=None, min_loop_vertices: int =
     opts = {"min_loop_vertices": int(min_loop_vertices), "w_z": float(w_z), "constraint_weight": float(constraint_weight), **kw}
     try:
         # A point light inside the caster's bounds gets one frustum per silhouette loop (§5.2).
-        ed = native.module().ShadowEditor(cm.vertices, cm.triangles.astype(np.int64), rv, rf, normals=cm.normals, **opts)
+        ed = native.module().shadows.ShadowEditor(cm.vertices, cm.triangles.astype(np.int64), rv, rf, normals=cm.normals, **opts)
     except ValueError as exc:
         raise ShadowEditError(f"cannot edit the shadow of '{caster.name}' from '{light.name}': {exc}") from exc
     m = np.array(caster.matrix_world, dtype=np.float64)
@@ -978,7 +978,7 @@ def configuration_weights(shadow_object, light, beta: float = 0.0, *, caster=Non
     c = np.clip(vs @ cur, -1.0, 1.0)
     theta = np.arccos(c)
     nearest = int(np.argmin(theta))
-    fall = float(native.module().shadow_falloff(vs[nearest], cur, float(beta))) if beta > 0 else 1.0
+    fall = float(native.module().shadows.falloff_factor(vs[nearest], cur, float(beta))) if beta > 0 else 1.0
     if len(vs) == 1 or theta[nearest] < 1e-9:
         w = np.zeros(len(vs))
         w[nearest] = 1.0
@@ -1037,7 +1037,7 @@ def falloff_factor(shadow_object, light, beta: float, *, caster=None) -> float:
     cur = _current_light_vector(caster, light)
     vs = configuration_vectors(shadow_object)
     initial = vs[int(np.argmax(vs @ cur))]
-    return float(native.module().shadow_falloff(initial, cur, float(beta)))
+    return float(native.module().shadows.falloff_factor(initial, cur, float(beta)))
 
 
 def update_falloff(shadow_object, light, beta: float, *, caster=None) -> float:

@@ -18,11 +18,11 @@ fuzz_target!(|data: &[u8]| {
     let p: Vec<DVec2> = (0..np).map(|_| if adversarial { inp.v2(10.0) } else { inp.v2_finite(10.0) }).collect();
     let identity = inp.bool();
     let q: Vec<DVec2> = if identity { p.clone() } else { (0..np + if adversarial { inp.below(2) } else { 0 }).map(|_| if adversarial { inp.v2(10.0) } else { inp.v2_finite(10.0) }).collect() };
-    let falloff = if adversarial { inp.f64_in(3.0) } else { inp.range(0.5, 2.0) };
-    if let Ok(m) = Mls2d::new(p.clone(), q.clone(), style, falloff) {
+    let alpha = if adversarial { inp.f64_in(3.0) } else { inp.range(0.5, 2.0) };
+    if let Ok(m) = Mls2d::new(p.clone(), q.clone(), style, alpha) {
         let v = inp.v2_finite(20.0);
         let f = m.deform(v);
-        assert!(f.is_finite(), "{style:?} falloff {falloff}: deform({v:?}) = {f:?} for {p:?} → {q:?}");
+        assert!(f.is_finite(), "{style:?} alpha {alpha}: deform({v:?}) = {f:?} for {p:?} → {q:?}");
         // Distinct control points (at least 1e-3 apart) are interpolated.
         let distinct = p.iter().enumerate().all(|(i, a)| p.iter().skip(i + 1).all(|b| (*a - *b).length() > 1e-3));
         // Exactness is asserted for the tame inputs: 1e30 control points leave no precision for

@@ -1,6 +1,6 @@
 //! light_space and shadow_mesh (§5.1, §6): light frames of arbitrary lights around
 //! closed meshes, frustum round trips and drag targets, cotangent weights, the shadow-mesh solver
-//! and the §6.2 falloff. Never a panic; from_frustum(to_frustum(p)) = p; zero offsets give the
+//! and the §6.2 falloff factor. Never a panic; from_frustum(to_frustum(p)) = p; zero offsets give the
 //! rest mesh back; non-zero offsets give finite vertices; falloff ∈ [0, 1].
 #![no_main]
 mod common;
@@ -8,14 +8,14 @@ use common::{octahedron, uv_sphere, Input};
 use glam::DVec2;
 use libfuzzer_sys::fuzz_target;
 use rokeby_core::shadows::light_space::LightFrame;
-use rokeby_core::shadows::shadow_mesh::{cotangent_weights, falloff, EdgePoint, ShadowMeshSolver};
+use rokeby_core::shadows::shadow_mesh::{cotangent_weights, falloff_factor, EdgePoint, ShadowMeshSolver};
 use rokeby_core::shadows::silhouette::{ClosedMesh, Light};
 
 fuzz_target!(|data: &[u8]| {
     let mut inp = Input::new(data);
-    let fo = falloff(inp.v3(1.0), inp.v3(1.0), inp.f64_in(4.0));
+    let fo = falloff_factor(inp.v3(1.0), inp.v3(1.0), inp.f64_in(4.0));
     if let Ok(x) = fo {
-        assert!((0.0..=1.0).contains(&x), "falloff {x}");
+        assert!((0.0..=1.0).contains(&x), "falloff factor {x}");
     }
     let (s, c) = (inp.range(0.01, 5.0), inp.v3_finite(3.0));
     let (v, f) = if inp.bool() { octahedron(&mut inp, s, c, 0.2) } else { uv_sphere(2 + inp.below(6), 3 + inp.below(8), s, c) };

@@ -12,6 +12,7 @@
 //!   direction formulas, seam-correct bilinear lookups, conversions) and their prefiltering under
 //!   environment light (Fraser): order-2 SH irradiance, Phong/GGX/Torrance–Sparrow lobes;
 //!   [`envmaps::rgbe`] reads and writes Radiance `.hdr` files.
+//! * [`unit_vector`] — unit vectors (v/‖v‖, or no direction), the one normalisation of the core.
 //! * [`exr_io`] — OpenEXR files (Blender's multilayer renders, recomposited frames, environment
 //!   maps) in pure Rust, so no second OpenEXR library enters Blender's process.
 //! * [`shadows::silhouette`], [`geometry::bvh`], [`shadows::light_space`], [`shadows::mls2d`], [`shadows::shadow_mesh`], [`shadows::shadow`] — freeform
@@ -29,5 +30,6 @@ pub mod geometry;
 pub mod numerical;
 pub mod reflection;
 pub mod shadows;
+pub mod unit_vector;
 
 pub use error::{Result, RokebyError};

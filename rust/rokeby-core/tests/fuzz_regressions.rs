@@ -178,14 +178,14 @@ fn sharp_ggx_kernel_is_finite() {
     assert!((Lobe::Ggx { alpha: 0.3 }.kernel(c) - k0).abs() < 1e-12 * k0);
 }
 
-/// Fuzzer (shadow_mesh): falloff of two nearly equal unit directions was 1 + 9e-16.
+/// Fuzzer (shadow_mesh): falloff factor of two nearly equal unit directions was 1 + 9e-16.
 #[test]
 fn falloff_stays_within_unit_interval() {
-    use rokeby_core::shadows::shadow_mesh::falloff;
+    use rokeby_core::shadows::shadow_mesh::falloff_factor;
     let a = DVec3::new(0.1, 0.7, 0.3);
     for k in 0..200 {
         let b = a * (1.0 + k as f64 * 1e-3);
-        let x = falloff(a, b, 0.5 + k as f64).unwrap();
+        let x = falloff_factor(a, b, 0.5 + k as f64).unwrap();
         assert!((0.0..=1.0).contains(&x), "{x}");
     }
 }
@@ -274,10 +274,10 @@ fn mls_rejects_overflowing_controls() {
     assert!(m.deform(DVec2::new(2.52, -12.36)).is_finite());
 }
 
-/// Fuzzer (mls2d): falloff α = 1e30 made every weight 1/d^{2α} zero or infinite (NaN result);
+/// Fuzzer (mls2d): α = 1e30 made every weight 1/d^{2α} zero or infinite (NaN result);
 /// the weights are now relative to the nearest control point's.
 #[test]
-fn mls_with_huge_falloff_is_finite_and_interpolates() {
+fn mls_with_huge_alpha_is_finite_and_interpolates() {
     use rokeby_core::shadows::mls2d::{Mls2d, MlsStyle};
     let p = vec![
         DVec2::new(1.92, 3.0),

@@ -8,7 +8,7 @@ use rokeby_core::geometry::bvh::Bvh;
 use rokeby_core::shadows::light_space::LightFrame;
 use rokeby_core::shadows::mls2d::{sinusoidal_noise, Mls2d, MlsStyle};
 use rokeby_core::shadows::shadow::{Drag, ShadowEditor};
-use rokeby_core::shadows::shadow_mesh::falloff;
+use rokeby_core::shadows::shadow_mesh::falloff_factor;
 use rokeby_core::shadows::silhouette::{silhouettes, ClosedMesh, Light};
 
 /// A UV sphere (poles + `lat`−1 rings of `lon` vertices), faces counter-clockwise from outside.
@@ -311,11 +311,13 @@ fn sinusoidal_noise_offsets_along_the_normal() {
 fn falloff_follows_the_angle() {
     let a = DVec3::Z;
     let b = DVec3::new(0.0, (20f64).to_radians().sin(), (20f64).to_radians().cos());
-    assert_eq!(falloff(a, b, 0.0).unwrap(), 1.0);
-    assert!((falloff(a, b, 4.0).unwrap() - (20f64).to_radians().cos().powi(4)).abs() < 1e-12);
-    assert_eq!(falloff(a, -a, 2.0).unwrap(), 0.0);
-    assert!(falloff(a, b, -1.0).is_err());
-    assert!(falloff(DVec3::ZERO, b, 1.0).is_err());
+    assert_eq!(falloff_factor(a, b, 0.0).unwrap(), 1.0);
+    assert!(
+        (falloff_factor(a, b, 4.0).unwrap() - (20f64).to_radians().cos().powi(4)).abs() < 1e-12
+    );
+    assert_eq!(falloff_factor(a, -a, 2.0).unwrap(), 0.0);
+    assert!(falloff_factor(a, b, -1.0).is_err());
+    assert!(falloff_factor(DVec3::ZERO, b, 1.0).is_err());
 }
 
 /// A sphere of radius 0.5 at height 1.5 over the plane z = 0, lit from above.

@@ -686,7 +686,7 @@ fn bound(
 /// `prepared_bytes`) instead of computing it in every run — the same values; 0.72× the instructions
 /// of an edit but no faster on a quiet machine (docs/compositing.md), so off by default.
 /// Methods: run(...), set_patches(patches); `shape` (H, W).
-#[pyclass(frozen, name = "Recompositor", module = "rokeby_native")]
+#[pyclass(frozen, name = "Recompositor", module = "rokeby_native.compositing")]
 pub struct PyRecompositor {
     inner: std::sync::Mutex<core_recomposite::Recompositor>,
     shape: (usize, usize),

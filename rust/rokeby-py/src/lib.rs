@@ -6,19 +6,22 @@
 //! `ValueError`, memory → `MemoryError`, numerical failure → `NumericalError` (a `RuntimeError`),
 //! cancelled → `KeyboardInterrupt`, internal bug or panic → `RuntimeError`.
 
-//! One binding file per area of the core: [`field`] (reflection), [`geodesic`] (geometry),
-//! [`environment`] (envmap), [`compositing`], [`shadow`], [`openexr`] (EXR files); [`convert`] and [`errors`] are shared.
+//! One binding file per area of the core, named as the core names it, and one Python submodule
+//! per area with the same name: [`reflection`], [`geometry`], [`envmaps`], [`shadows`],
+//! [`compositing`] and [`exr_io`] (`rokeby_native.reflection.rotation_field`, ...). The top level
+//! holds only what spans the areas: `__version__`, `NumericalError` and `cancel`. [`convert`] and
+//! [`errors`] are shared.
 
 use pyo3::prelude::*;
 
 mod compositing;
 mod convert;
-mod environment;
+mod envmaps;
 mod errors;
-mod field;
-mod geodesic;
-mod openexr;
-mod shadow;
+mod exr_io;
+mod geometry;
+mod reflection;
+mod shadows;
 
 pub(crate) use convert::{f32_array, i64_array, parse_vec3, shape_str, F32Array};
 pub(crate) use errors::{core_err, run_cancellable, run_detached, NumericalError};
@@ -42,11 +45,30 @@ fn rokeby_native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     let _ = numpy::PyArray1::<f32>::zeros(m.py(), 0, false);
     m.add("NumericalError", m.py().get_type::<NumericalError>())?;
     m.add_function(wrap_pyfunction!(cancel, m)?)?;
-    field::register(m)?;
-    geodesic::register(m)?;
-    compositing::register(m)?;
-    environment::register(m)?;
-    shadow::register(m)?;
-    openexr::register(m)?;
+    add_area(m, "reflection", reflection::register)?;
+    add_area(m, "geometry", geometry::register)?;
+    add_area(m, "envmaps", envmaps::register)?;
+    add_area(m, "shadows", shadows::register)?;
+    add_area(m, "compositing", compositing::register)?;
+    add_area(m, "exr_io", exr_io::register)?;
+    Ok(())
+}
+
+/// The submodule `rokeby_native.<name>` filled by `register`, set as an attribute of the top
+/// module and entered in `sys.modules`, so that `import rokeby_native.<name>` and
+/// `from rokeby_native.<name> import ...` work as for a Python package.
+fn add_area(
+    top: &Bound<'_, PyModule>,
+    name: &str,
+    register: fn(&Bound<'_, PyModule>) -> PyResult<()>,
+) -> PyResult<()> {
+    let py = top.py();
+    let qualified = format!("rokeby_native.{name}");
+    let area = PyModule::new(py, &qualified)?;
+    register(&area)?;
+    top.add(name, &area)?;
+    py.import("sys")?
+        .getattr("modules")?
+        .set_item(&qualified, &area)?;
     Ok(())
 }

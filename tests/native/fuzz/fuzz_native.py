@@ -271,7 +271,7 @@ def k_edited_directions(draw):
                 constraints=draw(farr((k, 9))), polar=draw(st.sampled_from(["fast", "exact"])))
 
 
-test_edited_directions = fuzz(rn.edited_directions, k_edited_directions())
+test_reflection_edited_directions = fuzz(rn.reflection.edited_directions, k_edited_directions())
 
 
 @st.composite
@@ -281,7 +281,7 @@ def k_env_convert(draw):
                 size=draw(st.one_of(st.integers(1, 8), NASTY_INTS)), supersample=draw(st.one_of(st.integers(1, 3), NASTY_INTS)))
 
 
-test_env_convert = fuzz(rn.env_convert, k_env_convert())
+test_envmaps_convert = fuzz(rn.envmaps.convert, k_env_convert())
 
 
 @st.composite
@@ -290,7 +290,7 @@ def k_latlong(draw):
     return draw(farr((s, 2 * s, draw(st.sampled_from([1, 3]))), 0, 4))
 
 
-test_env_irradiance = fuzz(rn.env_irradiance, st.builds(dict, image=k_latlong(), size=st.one_of(st.integers(1, 8), NASTY_INTS)))
+test_envmaps_irradiance = fuzz(rn.envmaps.irradiance, st.builds(dict, image=k_latlong(), size=st.one_of(st.integers(1, 8), NASTY_INTS)))
 
 
 @st.composite
@@ -302,7 +302,7 @@ def k_env_prefilter(draw):
                 tail=draw(st.one_of(st.floats(1e-6, 0.1), NASTY_FLOATS)))
 
 
-test_env_prefilter = fuzz(rn.env_prefilter, k_env_prefilter())
+test_envmaps_prefilter = fuzz(rn.envmaps.prefilter, k_env_prefilter())
 
 
 @st.composite
@@ -311,7 +311,7 @@ def k_env_reference(draw):
                 directions=draw(farr((draw(sizes), 3), -1, 1)), param=draw(st.one_of(st.floats(0.01, 100.0), NASTY_FLOATS)))
 
 
-test_env_reference = fuzz(rn.env_reference, k_env_reference())
+test_envmaps_prefilter_reference = fuzz(rn.envmaps.prefilter_reference, k_env_reference())
 
 
 @st.composite
@@ -320,7 +320,7 @@ def k_env_sample(draw):
     return dict(image=draw(farr(env_shape(layout, s, 3), 0, 4)), layout=layout, directions=draw(farr((draw(sizes), 3), -1, 1)))
 
 
-test_env_sample = fuzz(rn.env_sample, k_env_sample())
+test_envmaps_sample = fuzz(rn.envmaps.sample, k_env_sample())
 
 
 @st.composite
@@ -329,7 +329,7 @@ def k_dual_map(draw):
     return draw(farr((2, s, s, draw(st.sampled_from([1, 3]))), 0, 4))
 
 
-test_envmap_lookup = fuzz(rn.envmap_lookup, st.builds(dict, map=k_dual_map(), dirs=farr((4, 3), -1, 1)))
+test_compositing_envmap_lookup = fuzz(rn.compositing.envmap_lookup, st.builds(dict, map=k_dual_map(), dirs=farr((4, 3), -1, 1)))
 
 
 @st.composite
@@ -338,7 +338,7 @@ def k_fill_holes(draw):
     return dict(map=m, covered=draw(arrays(np.bool_, m.shape[:3])))
 
 
-test_fill_holes = fuzz(rn.fill_holes, k_fill_holes())
+test_compositing_fill_holes = fuzz(rn.compositing.fill_holes, k_fill_holes())
 
 
 @st.composite
@@ -348,7 +348,7 @@ def k_geodesic(draw):
                 method=draw(st.sampled_from(["heat", "exact", "dijkstra", "fmm"])))
 
 
-test_geodesic_distances = fuzz(rn.geodesic_distances, k_geodesic(), allow_inf=True)
+test_geometry_geodesic_distances = fuzz(rn.geometry.geodesic_distances, k_geodesic(), allow_inf=True)
 
 
 @st.composite
@@ -363,13 +363,13 @@ def k_interpolate(draw):
 
 # inf values are legitimate input here (unreachable distances); NaN out is what is checked.
 def interpolate_checked(**kw):
-    out = rn.interpolate(**kw)
+    out = rn.geometry.interpolate(**kw)
     if isinstance(out, np.ndarray):
         assert not np.isnan(out).any(), "interpolate: NaN"
     return out
 
 
-test_interpolate = fuzz(interpolate_checked, k_interpolate(), allow_inf=True)
+test_geometry_interpolate = fuzz(interpolate_checked, k_interpolate(), allow_inf=True)
 
 
 @st.composite
@@ -380,7 +380,7 @@ def k_bilateral(draw):
                 mask=draw(st.one_of(st.none(), farr((h, w), 0, 1))))
 
 
-test_normals_bilateral = fuzz(rn.normals_bilateral, k_bilateral())
+test_compositing_normals_bilateral = fuzz(rn.compositing.normals_bilateral, k_bilateral())
 
 
 @st.composite
@@ -390,7 +390,7 @@ def k_bump(draw):
                 strength=draw(st.one_of(st.floats(-10, 10), NASTY_FLOATS)), mask=draw(st.one_of(st.none(), farr((h, w), 0, 1))))
 
 
-test_normals_bump = fuzz(rn.normals_bump, k_bump())
+test_compositing_normals_bump = fuzz(rn.compositing.normals_bump, k_bump())
 
 
 @st.composite
@@ -400,7 +400,7 @@ def k_emboss(draw):
                 mask=draw(st.one_of(st.none(), farr((h, w), 0, 1))))
 
 
-test_normals_emboss = fuzz(rn.normals_emboss, k_emboss())
+test_compositing_normals_emboss = fuzz(rn.compositing.normals_emboss, k_emboss())
 
 
 @st.composite
@@ -410,9 +410,9 @@ def k_decal(draw):
                 center=(draw(st.floats(-20, 20)), draw(st.floats(-20, 20))), radius=draw(st.one_of(st.floats(0, 30), NASTY_FLOATS)))
 
 
-test_normals_noise_decal = fuzz(rn.normals_noise_decal, k_decal())
+test_compositing_normals_noise_decal = fuzz(rn.compositing.normals_noise_decal, k_decal())
 
-test_ortho = fuzz(rn.ortho, st.builds(dict, matrices=st.integers(0, 4).flatmap(lambda n: farr((n, 3, 3), -1e3, 1e3)),
+test_reflection_ortho = fuzz(rn.reflection.ortho, st.builds(dict, matrices=st.integers(0, 4).flatmap(lambda n: farr((n, 3, 3), -1e3, 1e3)),
                                       method=st.sampled_from(["exact", "fast", "svd", "newton"])))
 
 
@@ -431,7 +431,7 @@ def k_recomposite(draw):
                 gamma=draw(st.one_of(st.floats(0.1, 3), NASTY_FLOATS)))
 
 
-test_recomposite = fuzz(rn.recomposite, k_recomposite())
+test_compositing_recomposite = fuzz(rn.compositing.recomposite, k_recomposite())
 
 
 @st.composite
@@ -440,7 +440,7 @@ def k_reflect(draw):
     return dict(normals=draw(farr((h, w, 3), -1, 1)), view=draw(st.one_of(farr((3,), -1, 1), farr((h, w, 3), -1, 1))))
 
 
-test_reflect_dirs = fuzz(rn.reflect_dirs, k_reflect())
+test_compositing_reflect_dirs = fuzz(rn.compositing.reflect_dirs, k_reflect())
 
 
 @st.composite
@@ -460,9 +460,9 @@ def k_reflection_env(draw):
                 min_coverage=draw(st.floats(0.0, 0.5)), stage=draw(st.sampled_from(["full", "partial", "half"])))
 
 
-test_reflection_env = fuzz(rn.reflection_env, k_reflection_env())
+test_compositing_reflection_env = fuzz(rn.compositing.reflection_env, k_reflection_env())
 
-test_rgbe_encode = fuzz(rn.rgbe_encode, st.builds(dict, pixels=st.integers(0, 40).flatmap(
+test_envmaps_rgbe_encode = fuzz(rn.envmaps.rgbe_encode, st.builds(dict, pixels=st.integers(0, 40).flatmap(
     lambda w: farr((2, w, 3), 0, 3e38))))
 
 
@@ -477,7 +477,7 @@ def hdr_bytes(draw):
     kind = draw(st.integers(0, 2))
     if kind == 0:
         px = draw(farr((draw(st.integers(1, 4)), draw(st.integers(1, 40)), 3), 0, 100))
-        data = bytearray(rn.rgbe_encode(px))
+        data = bytearray(rn.envmaps.rgbe_encode(px))
         for _ in range(draw(st.integers(0, 4))):
             i = draw(st.integers(0, len(data) - 1))
             data[i] = draw(st.integers(0, 255))
@@ -491,7 +491,7 @@ def hdr_bytes(draw):
     return draw(st.binary(max_size=200))
 
 
-test_rgbe_decode = fuzz(rn.rgbe_decode, st.builds(dict, data=hdr_bytes()))
+test_envmaps_rgbe_decode = fuzz(rn.envmaps.rgbe_decode, st.builds(dict, data=hdr_bytes()))
 
 
 @st.composite
@@ -510,7 +510,7 @@ def k_rotation_field(draw):
                 output=draw(st.sampled_from(["quaternion", "rotation_vector", "view_blend", "euler"])))
 
 
-test_rotation_field = fuzz(rn.rotation_field, k_rotation_field())
+test_reflection_rotation_field = fuzz(rn.reflection.rotation_field, k_rotation_field())
 
 
 @st.composite
@@ -520,7 +520,7 @@ def k_sh_eval(draw):
     return dict(coeffs=draw(farr((c, 9), -1e3, 1e3)), normals=n)
 
 
-test_sh_eval = fuzz(rn.sh_eval, k_sh_eval())
+test_compositing_sh_eval = fuzz(rn.compositing.sh_eval, k_sh_eval())
 
 
 @st.composite
@@ -531,9 +531,9 @@ def k_sh_fit(draw):
                 tolerance=draw(st.one_of(st.none(), st.floats(0, 1), NASTY_FLOATS)))
 
 
-test_sh_fit = fuzz(rn.sh_fit, k_sh_fit())
+test_compositing_sh_fit = fuzz(rn.compositing.sh_fit, k_sh_fit())
 
-test_shadow_falloff = fuzz(rn.shadow_falloff, st.builds(dict, l_initial=farr((3,), -1, 1), l_current=farr((3,), -1, 1),
+test_shadows_falloff_factor = fuzz(rn.shadows.falloff_factor, st.builds(dict, l_initial=farr((3,), -1, 1), l_current=farr((3,), -1, 1),
                                                         beta=st.one_of(st.floats(0, 100), NASTY_FLOATS)))
 
 
@@ -549,7 +549,7 @@ def k_silhouettes(draw):
     return kw
 
 
-test_shadow_silhouettes = fuzz(rn.shadow_silhouettes, k_silhouettes())
+test_shadows_silhouettes = fuzz(rn.shadows.silhouettes, k_silhouettes())
 
 
 @st.composite
@@ -567,7 +567,7 @@ def k_view_blend(draw):
     return dict(parts=p, directions=unit_vectors(len(p), draw(seeds)), ramp=draw(st.booleans()))
 
 
-test_view_blend = fuzz(rn.view_blend, k_view_blend())
+test_reflection_view_blend = fuzz(rn.reflection.view_blend, k_view_blend())
 
 
 @st.composite
@@ -578,21 +578,21 @@ def k_render_rows(draw):
                 first_vert=draw(arrays(np.int64, (c,), elements=st.integers(-1, n))), ramp=draw(st.booleans()))
 
 
-test_view_blend_render_rows = fuzz(rn.view_blend_render_rows, k_render_rows())
-test_view_blend_rotation_vectors = fuzz(rn.view_blend_rotation_vectors, st.builds(dict, parts=k_parts()))
+test_reflection_view_blend_render_rows = fuzz(rn.reflection.view_blend_render_rows, k_render_rows())
+test_reflection_view_blend_rotation_vectors = fuzz(rn.reflection.view_blend_rotation_vectors, st.builds(dict, parts=k_parts()))
 
 
 def test_cancel():
     rn.cancel()  # nothing in flight: harmless, and the next call is not cancelled
-    call(rn.normals_bilateral, unit_vectors(4, 0).reshape(2, 2, 3), np.ones((2, 2), np.float32))
+    call(rn.compositing.normals_bilateral, unit_vectors(4, 0).reshape(2, 2, 3), np.ones((2, 2), np.float32))
 
 
-def test_field_kernel():
+def test_reflection_field_kernel():
     # No arguments: the kernel the field functions run now, one of the documented names; extra
     # arguments are refused by pyo3 with a TypeError, not a crash.
-    assert rn.field_kernel() in ("scalar", "portable", "avx2", "avx512")
+    assert rn.reflection.field_kernel() in ("scalar", "portable", "avx2", "avx512")
     try:
-        rn.field_kernel(1)
+        rn.reflection.field_kernel(1)
     except TypeError:
         pass
     else:
@@ -606,7 +606,7 @@ def test_field_kernel():
 def test_geodesic_solver(data):
     kw = data.draw(mutated(dict(data.draw(st.builds(lambda m: dict(vertices=m[0], faces=m[1]), mesh())),
                                 boundary=data.draw(st.sampled_from(["average", "neumann", "dirichlet"])))))
-    s = call(rn.GeodesicSolver, **kw)
+    s = call(rn.geometry.GeodesicSolver, **kw)
     if s is None:
         return
     nv = s.num_vertices
@@ -635,7 +635,7 @@ def test_recompositor(data):
     for k in ("edited_normals", "k_d", "k_r"):
         kw.pop(k)
     kw["prepared"] = data.draw(st.booleans())
-    s = call(rn.Recompositor, **data.draw(mutated(kw)))
+    s = call(rn.compositing.Recompositor, **data.draw(mutated(kw)))
     if s is None:
         return
     assert s.shape == (h, w)
@@ -661,7 +661,7 @@ def test_shadow_editor(data):
     kw = dict(vertices=SPHERE_V, faces=SPHERE_F, receiver_vertices=PLANE_V, receiver_faces=PLANE_F,
               light_position=np.asarray(light, np.float32), min_loop_vertices=data.draw(st.one_of(st.integers(0, 20), NASTY_INTS)),
               w_z=data.draw(st.one_of(st.floats(0, 5), NASTY_FLOATS)), constraint_weight=data.draw(st.floats(0.1, 20)))
-    ed = call(rn.ShadowEditor, **data.draw(mutated(kw)))
+    ed = call(rn.shadows.ShadowEditor, **data.draw(mutated(kw)))
     if ed is None:
         return
     _ = (ed.num_loops, ed.num_receiver_faces, ed.factored)
@@ -777,12 +777,12 @@ EXR_COMPRESSIONS = ["none", "rle", "zips", "zip", "piz", "pxr24", "b44", "b44a"]
 
 @st.composite
 def written_exr_bytes(draw):
-    """A file rn.exr_write wrote (any writable compression, half and float channels), then cut,
+    """A file rn.exr_io.write wrote (any writable compression, half and float channels), then cut,
     changed byte by byte, or its header kept and the rest noise."""
     h, w = draw(st.integers(1, 24)), draw(st.integers(1, 24))
     rng = np.random.default_rng(draw(seeds))
     chans = {c: rng.standard_normal((h, w)).astype(np.float32) for c in draw(st.sampled_from(["RGB", "Y", "RGBA"]))}
-    data = bytearray(rn.exr_write(chans, {"Note": "fuzz"}, draw(st.sampled_from(EXR_COMPRESSIONS)),
+    data = bytearray(rn.exr_io.write(chans, {"Note": "fuzz"}, draw(st.sampled_from(EXR_COMPRESSIONS)),
                                   half=draw(st.sampled_from([[], sorted(chans)[:1]]))))
     kind = draw(st.integers(0, 3))
     if kind == 0:
@@ -799,14 +799,14 @@ def written_exr_bytes(draw):
 
 @settings(max_examples=max(10, EXAMPLES))
 @given(data=st.one_of(written_exr_bytes(), exr_bytes(), st.binary(max_size=64)), dwa=st.booleans())
-def test_exr_read(data, dwa):
+def test_exr_io_read(data, dwa):
     """Any bytes: parts whose channels cover their data windows, or ValueError/MemoryError."""
     try:
-        parts = rn.exr_read(data, dwa)
+        parts = rn.exr_io.read(data, dwa)
     except (ValueError, MemoryError):
         return
     except BaseException as e:
-        raise AssertionError(f"exr_read raised {type(e).__name__}: {e}") from e
+        raise AssertionError(f"exr_io.read raised {type(e).__name__}: {e}") from e
     for p in parts:
         x0, y0, x1, y1 = p["data_window"]
         assert set(p["channels"]) == set(p["types"])
@@ -830,17 +830,17 @@ def k_exr_write(draw):
 
 
 @given(data=st.data())
-def test_exr_write(data):
-    """Channels, header, compression and half flags, hostile or not: bytes that exr_read reads
+def test_exr_io_write(data):
+    """Channels, header, compression and half flags, hostile or not: bytes that exr_io.read reads
     back with the same float (or half-rounded) values, or ValueError/TypeError/MemoryError."""
     kw = data.draw(k_exr_write())
     try:
-        out = rn.exr_write(**kw)
+        out = rn.exr_io.write(**kw)
     except ALLOWED:
         return
     except BaseException as e:
-        raise AssertionError(f"exr_write raised {type(e).__name__}: {e}") from e
-    (part,) = rn.exr_read(out)
+        raise AssertionError(f"exr_io.write raised {type(e).__name__}: {e}") from e
+    (part,) = rn.exr_io.read(out)
     for name, a in kw["channels"].items():
         with np.errstate(over="ignore"):  # beyond half's range is inf, as the writer stores it
             want = np.asarray(a, np.float32)
@@ -851,13 +851,25 @@ def test_exr_write(data):
 
 
 def test_every_native_entry_point_is_fuzzed():
-    """A new rokeby_native function or method must get a fuzz test here."""
+    """A new rokeby_native function or method must get a fuzz test here, named
+    test_<submodule>_<function> (test_cancel for the top level's cancel)."""
+    import types
     fuzzed = {n[len("test_"):] for n in globals() if n.startswith("test_")}
-    public = {n for n in dir(rn) if not n.startswith("_") and n not in ("NumericalError", "rokeby_native")}
-    missing = {n for n in public if n not in fuzzed and n not in ("GeodesicSolver", "ShadowEditor", "Recompositor")}
+    public = {"cancel"}
+    classes = []
+    for area in (n for n in dir(rn) if isinstance(getattr(rn, n), types.ModuleType) and n != "rokeby_native"):
+        for n in (n for n in dir(getattr(rn, area)) if not n.startswith("_")):
+            obj = getattr(getattr(rn, area), n)
+            if isinstance(obj, type):
+                classes.append(obj)
+            else:
+                public.add(f"{area}_{n}")
+    missing = {n for n in public if n not in fuzzed}
     assert not missing, f"not fuzzed: {sorted(missing)}"
-    for cls, test in ((rn.GeodesicSolver, test_geodesic_solver), (rn.ShadowEditor, test_shadow_editor),
-                      (rn.Recompositor, test_recompositor)):
+    tests = {rn.geometry.GeodesicSolver: test_geodesic_solver, rn.shadows.ShadowEditor: test_shadow_editor,
+             rn.compositing.Recompositor: test_recompositor}
+    assert set(classes) == set(tests), f"classes without a fuzz test: {set(classes) - set(tests)}"
+    for cls, test in tests.items():
         src = test.hypothesis.inner_test.__code__.co_consts + test.hypothesis.inner_test.__code__.co_names
         for m in (m for m in dir(cls) if not m.startswith("_")):
             assert any(m in str(c) for c in src), f"{cls.__name__}.{m} not fuzzed"

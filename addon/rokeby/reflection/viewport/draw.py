@@ -2,7 +2,7 @@
 
 A POST_VIEW draw handler on the 3D View draws every mirror that shows its preview with the
 per-pixel field shader of ``shaders/`` (the same files the moderngl tests check against
-``rokeby_native.edited_directions``): e(q) = R_a(q) r(q) at every pixel, looked up in the
+``rokeby_native.reflection.edited_directions``): e(q) = R_a(q) r(q) at every pixel, looked up in the
 mirror's reflection map when it has one, else in the world's equirectangular image, else in a
 built-in sky with a 15° grid. Overlays: the red and green handles, a red-to-green line per
 constraint, region borders (the outer and inner circle of Euclidean regions, facing the view; the

@@ -144,7 +144,7 @@ def _unit_rows(rows) -> np.ndarray:
 
 def plan_field(rows, regions=None, *, n_vertices: int, distances=None, rotations=None) -> FieldPlan:
     """Prepare one mirror's field for the shader, from the inputs the evaluator gives
-    ``rokeby_native.rotation_field`` (rows (K, 9), regions as its list of dicts, distances
+    ``rokeby_native.reflection.rotation_field`` (rows (K, 9), regions as its list of dicts, distances
     (K, V) or None for Euclidean) and, for the fallback, the stored rotation vectors (V, 3).
 
     More than RK_MAX_CONSTRAINTS constraints, or more than RK_MAX_REGIONS regions holding

@@ -20,6 +20,8 @@
 //! Rows run in parallel (rayon); the output does not depend on the number of threads.
 
 use crate::error::{Result, RokebyError};
+use crate::unit_vector::unit_f32;
+use glam::Vec3;
 use rayon::prelude::*;
 
 /// The largest spatial σ of [`bilateral`], in pixels (its window is ⌈2σ⌉ pixels each way).
@@ -67,15 +69,11 @@ impl Frame<'_> {
     }
 }
 
-/// f32 unit vector as `compositing._unit` makes it: e/‖e‖ when ‖e‖ > 1e-12, else 0.
+/// f32 unit vector as `compositing._unit` makes it ([`unit_f32`]: e/‖e‖ in f32), 0 where e has no
+/// direction.
 #[inline]
 fn unit(e: [f32; 3]) -> [f32; 3] {
-    let l = (e[0] * e[0] + e[1] * e[1] + e[2] * e[2]).sqrt();
-    if l > 1e-12 {
-        [e[0] / l, e[1] / l, e[2] / l]
-    } else {
-        [0.0; 3]
-    }
+    unit_f32(Vec3::from_array(e)).map_or([0.0; 3], |u| u.to_array())
 }
 
 /// The rule shared by the tools: for each pixel, `edit(i, n)` proposes ñ; the result is

@@ -34,6 +34,7 @@
 
 use crate::error::{Result, RokebyError};
 use crate::numerical::Triplet;
+use crate::unit_vector::unit_row;
 use faer::linalg::solvers::Solve;
 use faer::Mat;
 use glam::DVec3;
@@ -198,11 +199,11 @@ pub fn reflect_dirs(normals: &[f32], view: &[f32]) -> Result<Vec<f32>> {
     }
     let mut out = vec![0.0f32; normals.len()];
     out.par_chunks_mut(3).enumerate().for_each(|(p, o)| {
-        let n = unit(&normals[3 * p..3 * p + 3]);
+        let n = unit_row(&normals[3 * p..3 * p + 3]);
         let vv = if view.len() == 3 {
-            unit(view)
+            unit_row(view)
         } else {
-            unit(&view[3 * p..3 * p + 3])
+            unit_row(&view[3 * p..3 * p + 3])
         };
         let finite = normals[3 * p..3 * p + 3].iter().all(|x| x.is_finite())
             && if view.len() == 3 {
@@ -224,17 +225,6 @@ pub fn reflect_dirs(normals: &[f32], view: &[f32]) -> Result<Vec<f32>> {
 #[inline]
 pub fn reflect(v: DVec3, n: DVec3) -> DVec3 {
     2.0 * n.dot(v) * n - v
-}
-
-#[inline]
-pub(crate) fn unit(c: &[f32]) -> Option<DVec3> {
-    let v = DVec3::new(c[0] as f64, c[1] as f64, c[2] as f64);
-    let l = v.length();
-    if l.is_finite() && l > 1e-12 {
-        Some(v * (1.0 / l))
-    } else {
-        None
-    }
 }
 
 /// Rectified normal n'(r) = (r + z)/‖r + z‖ (undefined for r = −z).
@@ -497,7 +487,7 @@ pub fn partial(
                 if !depth.is_empty() && !depth[p].is_finite() {
                     continue;
                 }
-                let Some(r) = unit(&refl[3 * p..3 * p + 3]) else {
+                let Some(r) = unit_row(&refl[3 * p..3 * p + 3]) else {
                     continue;
                 };
                 let Some(n) = rectify(r) else { continue };
@@ -864,7 +854,7 @@ pub(crate) fn partial_reference(
             if !depth.is_empty() && !depth[p].is_finite() {
                 return None;
             }
-            let r = unit(&refl[3 * p..3 * p + 3])?;
+            let r = unit_row(&refl[3 * p..3 * p + 3])?;
             Some((r, rectify(r)?))
         })
         .collect();

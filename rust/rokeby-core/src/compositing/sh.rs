@@ -24,6 +24,7 @@
 //! part of the sphere (a plane: rank 1) still have a unique, minimal-norm-like solution.
 
 use crate::error::{Result, RokebyError};
+use crate::unit_vector::unit_row;
 use rayon::prelude::*;
 
 /// Number of order-2 real SH basis functions.
@@ -145,30 +146,11 @@ fn unit_normals(normals: &[f32], arg: &str) -> Result<Vec<[f64; 3]>> {
         .chunks_exact(3)
         .enumerate()
         .map(|(i, c)| {
-            let v = [c[0] as f64, c[1] as f64, c[2] as f64];
-            let l = (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt();
-            if !l.is_finite() || l < 1e-12 {
-                Err(RokebyError::invalid(
-                    arg,
-                    format!("normal {i} is zero or not finite"),
-                ))
-            } else {
-                Ok([v[0] / l, v[1] / l, v[2] / l])
-            }
+            unit_row(c).map(|u| u.to_array()).ok_or_else(|| {
+                RokebyError::invalid(arg, format!("normal {i} is zero or not finite"))
+            })
         })
         .collect()
-}
-
-/// The unit normal of one f32 row, normalised in f64 (None when zero or not finite).
-#[inline]
-fn unit_row(c: &[f32]) -> Option<[f64; 3]> {
-    let v = [c[0] as f64, c[1] as f64, c[2] as f64];
-    let l = (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt();
-    if !l.is_finite() || l < 1e-12 {
-        None
-    } else {
-        Some([v[0] / l, v[1] / l, v[2] / l])
-    }
 }
 
 /// Pixels per work unit of the passes over the patch. Fixed, so that the partial sums and their
@@ -705,7 +687,11 @@ fn qp_screened(
     // Round 0: a regular sample of the pixels (every k-th), those violated at x0 (no pass).
     let k = (n / SCREEN_SAMPLE).max(1);
     for p in (0..n).step_by(k) {
-        let a = basis(unit_row(&normals[3 * p..3 * p + 3]).expect("validated"));
+        let a = basis(
+            unit_row(&normals[3 * p..3 * p + 3])
+                .expect("validated")
+                .to_array(),
+        );
         for c in 0..channels {
             let bv = values[p * channels + c] as f64 - slack[c];
             if dot9(&a, &st[c].x) - bv < -tols[c] {
@@ -744,7 +730,11 @@ fn qp_screened(
                     .iter()
                     .filter_map(|&p| {
                         let pu = p as usize;
-                        let a = basis(unit_row(&normals[3 * pu..3 * pu + 3]).expect("validated"));
+                        let a = basis(
+                            unit_row(&normals[3 * pu..3 * pu + 3])
+                                .expect("validated")
+                                .to_array(),
+                        );
                         let sl = dot9(&a, &x) - (values[pu * channels + c] as f64 - slack[c]);
                         (sl < -tols[c]).then_some((p, sl))
                     })
@@ -814,7 +804,9 @@ fn add_most_violated(
     for &(p, _) in v.iter() {
         let p = p as usize;
         rows[c].push(basis(
-            unit_row(&normals[3 * p..3 * p + 3]).expect("validated"),
+            unit_row(&normals[3 * p..3 * p + 3])
+                .expect("validated")
+                .to_array(),
         ));
         rhs[c].push(values[p * channels + c] as f64 - slack[c]);
     }
@@ -1272,7 +1264,7 @@ mod tests {
             let len = 0.5 + rand01(&mut st);
             let u = [r * phi.cos(), r * phi.sin(), z];
             ns.extend(u.map(|x| (x * len) as f32));
-            let un = unit_row(&ns[ns.len() - 3..]).unwrap();
+            let un = unit_row(&ns[ns.len() - 3..]).unwrap().to_array();
             let dark = if rand01(&mut st) < occl { 0.5 } else { 1.0 };
             for c in 0..channels {
                 let e = noise * (2.0 * rand01(&mut st) - 1.0);
@@ -1466,7 +1458,7 @@ mod tests {
             // Rebuild H, g and the slacks.
             let rows: Vec<[f64; SH_COEFFS]> = ns
                 .chunks_exact(3)
-                .map(|c| basis(unit_row(c).unwrap()))
+                .map(|c| basis(unit_row(c).unwrap().to_array()))
                 .collect();
             let b: Vec<f64> = vs.iter().map(|&v| v as f64).collect();
             let mut h = [[0.0f64; SH_COEFFS]; SH_COEFFS];

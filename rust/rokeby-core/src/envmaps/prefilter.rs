@@ -298,7 +298,7 @@ fn resample(env: &EnvMap, height: usize, width: usize) -> EnvMap {
 
 /// Smooth step from 1 (x ≤ 1) to 0 (x ≥ 2), C¹: the ring partition of unity.
 #[inline]
-fn falloff(x: f64) -> f64 {
+fn ring_step(x: f64) -> f64 {
     if x <= 1.0 {
         1.0
     } else if x >= 2.0 {
@@ -342,7 +342,7 @@ fn ring_pass(src: &EnvMap, lobe: &Lobe, r_in: Option<f64>, r_out: Option<f64>, c
     let hi = r_out.map_or(cut, |r| (2.0 * r).min(cut));
     // (`hi + half` below: the horizon ramp reaches half a texel past c = 0.)
     let window =
-        |g: f64| r_out.map_or(1.0, |r| falloff(g / r)) - r_in.map_or(0.0, |r| falloff(g / r));
+        |g: f64| r_out.map_or(1.0, |r| ring_step(g / r)) - r_in.map_or(0.0, |r| ring_step(g / r));
     // Each source row twice in a row, so that any circular shift is one contiguous slice.
     let mut dbl = vec![0.0f32; h * 2 * w * c];
     dbl.par_chunks_mut(2 * w * c)

@@ -29,6 +29,7 @@
 use crate::error::{Result, RokebyError};
 use crate::reflection::polar::{self, min_rotation, PolarMethod};
 use crate::reflection::region::Region;
+use crate::unit_vector::unit_longer_than;
 use glam::{DMat3, DQuat, DVec3};
 use rayon::prelude::*;
 use std::sync::atomic::{AtomicU64, Ordering};
@@ -112,15 +113,13 @@ fn outer(a: DVec3, b: DVec3) -> DMat3 {
     DMat3::from_cols(a * b.x, a * b.y, a * b.z)
 }
 
+/// The unit vector of a constraint's direction (finite; any length above 1e-20 is a direction).
 fn unit(v: DVec3, arg: &str, what: &str) -> Result<DVec3> {
     if !v.is_finite() {
         return Err(RokebyError::invalid(arg, format!("{what} is not finite")));
     }
-    let len = v.length();
-    if len.is_nan() || len <= 1e-20 {
-        return Err(RokebyError::invalid(arg, format!("{what} has zero length")));
-    }
-    Ok(v / len)
+    unit_longer_than(v, 1e-20)
+        .ok_or_else(|| RokebyError::invalid(arg, format!("{what} has zero length")))
 }
 
 /// The form in which the per-point field is returned.

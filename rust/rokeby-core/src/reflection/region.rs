@@ -24,7 +24,7 @@ pub fn smooth_step(t: f64) -> f64 {
 /// `border` wide, lies inside the radius: a = 1 for d ≤ radius − border, 0 for d ≥ radius.
 /// A border of 0 is a hard edge; a border larger than the radius is clamped to the radius.
 #[inline]
-pub fn falloff(d: f64, radius: f64, border: f64) -> f64 {
+pub fn influence(d: f64, radius: f64, border: f64) -> f64 {
     let border = border.min(radius);
     // A NaN distance (an unreachable point) goes to 0 too (found by fuzzing).
     if d.is_nan() || radius.is_nan() || d >= radius {
@@ -132,7 +132,7 @@ impl Region {
                 center,
                 radius,
                 border,
-            } => falloff(q.distance(*center), *radius, *border),
+            } => influence(q.distance(*center), *radius, *border),
             Region::PerPoint { values, .. } => values[index] as f64,
         }
     }
@@ -144,7 +144,7 @@ impl Region {
                 center,
                 radius,
                 border,
-            } => falloff(p.distance(*center), *radius, *border),
+            } => influence(p.distance(*center), *radius, *border),
             Region::PerPoint { at_constraints, .. } => at_constraints[k] as f64,
         }
     }
@@ -159,7 +159,7 @@ pub fn geodesic_weights(distances: &[f32], radius: f64, border: f64) -> Result<V
         .iter()
         .map(|&d| {
             if d.is_finite() {
-                falloff(d as f64, radius, border) as f32
+                influence(d as f64, radius, border) as f32
             } else {
                 0.0
             }
@@ -326,14 +326,14 @@ mod tests {
     }
 
     #[test]
-    fn falloff_is_smooth_and_bounded() {
-        assert_eq!(falloff(0.0, 1.0, 0.2), 1.0);
-        assert_eq!(falloff(0.8, 1.0, 0.2), 1.0);
-        assert!((falloff(0.9, 1.0, 0.2) - 0.5).abs() < 1e-12);
-        assert_eq!(falloff(1.0, 1.0, 0.2), 0.0);
-        assert_eq!(falloff(0.99, 1.0, 0.0), 1.0);
-        assert_eq!(falloff(1.0, 1.0, 0.0), 0.0);
+    fn influence_is_smooth_and_bounded() {
+        assert_eq!(influence(0.0, 1.0, 0.2), 1.0);
+        assert_eq!(influence(0.8, 1.0, 0.2), 1.0);
+        assert!((influence(0.9, 1.0, 0.2) - 0.5).abs() < 1e-12);
+        assert_eq!(influence(1.0, 1.0, 0.2), 0.0);
+        assert_eq!(influence(0.99, 1.0, 0.0), 1.0);
+        assert_eq!(influence(1.0, 1.0, 0.0), 0.0);
         // border wider than the radius is clamped: falls from the centre.
-        assert!(falloff(0.5, 1.0, 5.0) > 0.0 && falloff(0.5, 1.0, 5.0) < 1.0);
+        assert!(influence(0.5, 1.0, 5.0) > 0.0 && influence(0.5, 1.0, 5.0) < 1.0);
     }
 }

@@ -3,7 +3,7 @@
 //! in the light's frustum, and the sinusoidal boundary noise of §5.3.
 //!
 //! For a point v with control points p_i → q_i and weights w_i = 1/|p_i − v|^{2a} (Schaefer's α,
-//! here `falloff`), with p* = Σ w_i p_i / Σ w_i, q* likewise, p̂_i = p_i − p*, q̂_i = q_i − q*:
+//! here `alpha`), with p* = Σ w_i p_i / Σ w_i, q* likewise, p̂_i = p_i − p*, q̂_i = q_i − q*:
 //!
 //! * affine (Schaefer eq. 5): f(v) = (v − p*) (Σ w_i p̂_iᵀ p̂_i)⁻¹ Σ w_j p̂_jᵀ q̂_j + q*;
 //! * similarity (§2.2): the best rotation-and-scale, written with complex numbers:
@@ -41,12 +41,12 @@ pub struct Mls2d {
     p: Vec<DVec2>,
     q: Vec<DVec2>,
     style: MlsStyle,
-    falloff: f64,
+    alpha: f64,
 }
 
 impl Mls2d {
-    /// `falloff` is Schaefer's α (weights 1/d^{2α}); 1 is the paper's choice.
-    pub fn new(p: Vec<DVec2>, q: Vec<DVec2>, style: MlsStyle, falloff: f64) -> Result<Self> {
+    /// `alpha` is Schaefer's α (weights 1/d^{2α}); 1 is the paper's choice.
+    pub fn new(p: Vec<DVec2>, q: Vec<DVec2>, style: MlsStyle, alpha: f64) -> Result<Self> {
         if p.len() != q.len() {
             return Err(RokebyError::invalid(
                 "controls",
@@ -73,18 +73,13 @@ impl Mls2d {
                 "control point coordinates must be within ±1e150",
             ));
         }
-        if !(falloff.is_finite() && falloff > 0.0) {
+        if !(alpha.is_finite() && alpha > 0.0) {
             return Err(RokebyError::invalid(
-                "falloff",
-                format!("must be positive and finite, got {falloff}"),
+                "mls_alpha",
+                format!("must be positive and finite, got {alpha}"),
             ));
         }
-        Ok(Mls2d {
-            p,
-            q,
-            style,
-            falloff,
-        })
+        Ok(Mls2d { p, q, style, alpha })
     }
 
     /// f(v).
@@ -100,10 +95,7 @@ impl Mls2d {
         // Weights 1/d^{2α} scaled by the nearest one's, (d²_min/d²)^α ∈ (0, 1] (the deformation is
         // invariant to a common factor): the fuzzer found α = 1e30 making every 1/d^{2α} 0 or inf.
         let dmin = d2s.iter().fold(f64::INFINITY, |a, &b| a.min(b));
-        let w: Vec<f64> = d2s
-            .iter()
-            .map(|&d2| (dmin / d2).powf(self.falloff))
-            .collect();
+        let w: Vec<f64> = d2s.iter().map(|&d2| (dmin / d2).powf(self.alpha)).collect();
         let ws: f64 = w.iter().sum();
         let ps = self
             .p

@@ -308,7 +308,7 @@ impl ShadowMeshSolver {
 
 /// §6.2: the blend factor (l_initial · l_current)^β between shadow mesh (1) and original (0);
 /// directions are normalised, opposite half-spaces give 0, β = 0 gives no falloff.
-pub fn falloff(l_initial: DVec3, l_current: DVec3, beta: f64) -> Result<f64> {
+pub fn falloff_factor(l_initial: DVec3, l_current: DVec3, beta: f64) -> Result<f64> {
     if !(beta.is_finite() && beta >= 0.0) {
         return Err(RokebyError::invalid(
             "beta",

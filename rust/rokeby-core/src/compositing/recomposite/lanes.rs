@@ -4,15 +4,15 @@
 use super::*;
 
 /// Squared lengths (f32) for which [`unit_lanes`] decides in f32: inside, the f64 squared length
-/// is within a few ulps of it, far from [`unit`]'s limits (length > 1e-12, finite) and from f32
+/// is within a few ulps of it, far from [`unit_row`]'s limits (length > 1e-12, finite) and from f32
 /// underflow/overflow of the squares; outside (tiny, huge, NaN or inf), the lane is redone in f64.
 pub(super) const SQ_MIN: f32 = 1e-20;
 pub(super) const SQ_MAX: f32 = 1e36;
 
 /// Unit vectors of the lanes `v` (into `u`, in f32: 1/√(x² + y² + z²)), and whether each could
-/// be normalised, exactly as [`unit`] decides it (finite, f64 length > 1e-12): lanes whose f32
+/// be normalised, exactly as [`unit_row`] decides it (finite, f64 length > 1e-12): lanes whose f32
 /// squared length is outside (SQ_MIN, SQ_MAX) — rare: tiny, huge or non-finite — are classified
-/// and normalised in f64 as [`unit`] does. `ok` is and-ed with the result.
+/// and normalised in f64 as [`unit_row`] does. `ok` is and-ed with the result.
 #[inline(always)]
 pub(super) fn unit_lanes(v: &[Lanes; 3], u: &mut [Lanes; 3], ok: &mut [bool; LANES], nb: usize) {
     let nb = nb.min(LANES);
@@ -24,7 +24,7 @@ pub(super) fn unit_lanes(v: &[Lanes; 3], u: &mut [Lanes; 3], ok: &mut [bool; LAN
         rare |= !clear;
         // 1/√s from f32 (≈ 1e-7 relative), then a Newton step in f64 on the f64 squared length
         // (exact squares of f32 values): ≈ 1e-14 relative, so the rounded components are
-        // [`unit`]'s except in rare near-ties (1 ulp there).
+        // [`unit_row`]'s except in rare near-ties (1 ulp there).
         let (xd, yd, zd) = (x as f64, y as f64, z as f64);
         let sd = xd * xd + yd * yd + zd * zd;
         let r0 = (1.0 / s.sqrt()) as f64;

@@ -33,7 +33,7 @@
 //! order, no FMA contraction; tested). Against a one-pixel-at-a-time implementation (the tests'
 //! reference, `tests.rs`) they differ only by rounding: n, ñ and v are normalised with a
 //! Newton-refined f32 estimate of 1/‖·‖ (≈ 1e-14 relative; which normals are rejected is exactly
-//! [`unit`]'s), and x^(1/γ) for γ ≠ 1 comes from f64 polynomials (within 1 ulp of `powf`). The
+//! [`unit_row`]'s), and x^(1/γ) for γ ≠ 1 comes from f64 polynomials (within 1 ulp of `powf`). The
 //! texels of a batch are prefetched before eq. 3 is evaluated and fetched after it (eight lanes
 //! per gather in the AVX2 instantiation); runs of 64 consecutive pixels are de-interleaved with
 //! AVX2 shuffles there. Each thread keeps its lane arrays: an edit allocates nothing per chunk.
@@ -41,9 +41,10 @@
 //! v, validity, eq. 5's subtracted term), computed once by the same lane functions: the same
 //! bits, fewer instructions per edit (tested against [`recomposite`] for every kind of view).
 
-use crate::compositing::reconstruct::{unit, ParaboloidMap};
+use crate::compositing::reconstruct::ParaboloidMap;
 use crate::compositing::sh::{self, SH_COEFFS};
 use crate::error::{Result, RokebyError};
+use crate::unit_vector::unit_row;
 use rayon::prelude::*;
 use std::mem::MaybeUninit;
 
@@ -311,7 +312,7 @@ fn frame<'a>(b: &'a Buffers<'a>, patches: &'a [Patch], p: &Params, simd: bool) -
         },
         view: match b.view.len() == 3 {
             false => View::PerPixel,
-            true => unit(b.view).map_or(View::Invalid, |v| View::Constant(to32(v))),
+            true => unit_row(b.view).map_or(View::Invalid, |v| View::Constant(to32(v))),
         },
         avx2: simd && avx2_available(),
         small_maps: patches
@@ -458,7 +459,10 @@ pub fn eval_diffuse(ids: &[i32], normals: &[f32], patches: &[Patch]) -> Result<V
         if id < 0 || id as usize >= patches.len() {
             return;
         }
-        if let (Some(co), Some(n)) = (&patches[id as usize].sh, unit(&normals[3 * i..3 * i + 3])) {
+        if let (Some(co), Some(n)) = (
+            &patches[id as usize].sh,
+            unit_row(&normals[3 * i..3 * i + 3]),
+        ) {
             for c in 0..3 {
                 o[c] = sh::eval(&co[c], n.to_array()) as f32;
             }

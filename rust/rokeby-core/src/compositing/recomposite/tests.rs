@@ -1,7 +1,7 @@
 use super::*;
 
 /// A per-pixel implementation of eqs. 3–5, the reference of these tests: one pixel at a
-/// time, scalar, f64 normalisation of n, ñ and v (as [`unit`]) and f32 arithmetic after it.
+/// time, scalar, f64 normalisation of n, ñ and v (as [`unit_row`]) and f32 arithmetic after it.
 fn recomposite_scalar(b: &Buffers, patches: &[Patch], p: &Params) -> Result<(Vec<f32>, Stats)> {
     validate(b, patches, p)?;
     // Per-patch constants, once per frame: f32 SH coefficients (channel-major) and flags.
@@ -20,7 +20,7 @@ fn recomposite_scalar(b: &Buffers, patches: &[Patch], p: &Params) -> Result<(Vec
         (2.0 * (0.5 * p.epsilon).sin()) as f32
     };
     let const_view = if b.view.len() == 3 {
-        unit(b.view).map(to32)
+        unit_row(b.view).map(to32)
     } else {
         None
     };
@@ -87,9 +87,10 @@ fn recomposite_scalar(b: &Buffers, patches: &[Patch], p: &Params) -> Result<(Vec
                 let vv = match const_view {
                     Some(v) => Some(v),
                     None if b.view.len() == 3 => None,
-                    None => unit(&b.view[3 * i..3 * i + 3]).map(to32),
+                    None => unit_row(&b.view[3 * i..3 * i + 3]).map(to32),
                 };
-                let (Some(nn), Some(ne), Some(vv)) = (unit(nb).map(to32), unit(eb).map(to32), vv)
+                let (Some(nn), Some(ne), Some(vv)) =
+                    (unit_row(nb).map(to32), unit_row(eb).map(to32), vv)
                 else {
                     st.masked += 1;
                     continue;
@@ -218,7 +219,7 @@ impl Rng {
 /// beyond the list; unmodified, slightly and strongly edited normals (v from asin and v = 1);
 /// zero and non-finite normals, NaN/inf shading and α; a pixel count that is not a multiple
 /// of 8 (nor are the edited pixels of a chunk); γ = 1 and 2.2; k_D, k_R = 1 and not; per-pixel
-/// and constant views; tiny, huge and nearly-too-short normals (classified as [`unit`] does).
+/// and constant views; tiny, huge and nearly-too-short normals (classified as [`unit_row`] does).
 /// The same edited/masked counts, values within 2e-5·(1 + |I~|) of the reference (the batched
 /// path normalises with a Newton-refined f32 estimate and raises to 1/γ by polynomials, not
 /// `powf`), and the same bits from the portable and the AVX2 paths.
@@ -319,7 +320,7 @@ fn recomposite_batches_match_scalar_reference() {
             // Beyond f32 squares (the f64 fallback): accepted.
             7 => edited[3 * i..3 * i + 3].copy_from_slice(&[3e20, -1e20, 2e19]),
             8 => view[3 * i..3 * i + 3].copy_from_slice(&[0.0, 2e-20, 1e-20]),
-            // Around unit()'s 1e-12 limit: 9.9999998e-13 (as f32) is too short, 2e-12 not.
+            // Around unit_row()'s 1e-12 limit: 9.9999998e-13 (as f32) is too short, 2e-12 not.
             9 => normals[3 * i..3 * i + 3].copy_from_slice(&[1e-12, 0.0, 0.0]),
             10 => edited[3 * i..3 * i + 3].copy_from_slice(&[0.0, -2e-12, 0.0]),
             11 => edited[3 * i..3 * i + 3].copy_from_slice(&[f32::INFINITY, 0.0, 1.0]),

@@ -10,7 +10,7 @@ use pyo3::prelude::*;
 use pyo3::types::{PyBytes, PyDict, PyList, PyTuple};
 use rokeby_core::exr_io::{self, AttrValue, Samples, WriteChannel};
 
-/// exr_read(data, dwa=False) -> list[dict]
+/// read(data, dwa=False) -> list[dict]
 ///
 /// Every part of the OpenEXR file `data` (bytes), as dicts: ``name`` (str or None),
 /// ``data_window`` and ``display_window`` ((xmin, ymin, xmax, ymax), inclusive), ``compression``
@@ -22,7 +22,7 @@ use rokeby_core::exr_io::{self, AttrValue, Samples, WriteChannel};
 /// DWAB files unless ``dwa`` is true (their decoding differs from OpenEXR's in a few pixels).
 #[pyfunction]
 #[pyo3(signature = (data, dwa=false))]
-pub fn exr_read<'py>(py: Python<'py>, data: &[u8], dwa: bool) -> PyResult<Bound<'py, PyList>> {
+pub fn read<'py>(py: Python<'py>, data: &[u8], dwa: bool) -> PyResult<Bound<'py, PyList>> {
     let parts = run_detached(py, || exr_io::read(data, dwa))?;
     let out = PyList::empty(py);
     for p in parts {
@@ -58,7 +58,7 @@ pub fn exr_read<'py>(py: Python<'py>, data: &[u8], dwa: bool) -> PyResult<Bound<
     Ok(out)
 }
 
-/// exr_write(channels, header=None, compression="zip", half=()) -> bytes
+/// write(channels, header=None, compression="zip", half=()) -> bytes
 ///
 /// The bytes of a one-part scanline OpenEXR file: ``channels`` maps names to (H, W) float arrays
 /// of one shape (row 0 at the top; stored as float, or as half for the names in ``half``),
@@ -66,7 +66,7 @@ pub fn exr_read<'py>(py: Python<'py>, data: &[u8], dwa: bool) -> PyResult<Bound<
 /// "zip", "piz", "pxr24", "b44", "b44a". Data and display windows are (0, 0)–(W−1, H−1).
 #[pyfunction]
 #[pyo3(signature = (channels, header=None, compression="zip", half=None))]
-pub fn exr_write<'py>(
+pub fn write<'py>(
     py: Python<'py>,
     channels: &Bound<'py, PyDict>,
     header: Option<&Bound<'py, PyDict>>,
@@ -141,7 +141,7 @@ pub fn exr_write<'py>(
 }
 
 pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
-    m.add_function(wrap_pyfunction!(exr_read, m)?)?;
-    m.add_function(wrap_pyfunction!(exr_write, m)?)?;
+    m.add_function(wrap_pyfunction!(read, m)?)?;
+    m.add_function(wrap_pyfunction!(write, m)?)?;
     Ok(())
 }

@@ -11,8 +11,8 @@ use pyo3::prelude::*;
 use pyo3::types::{PyDict, PyList};
 use rokeby_core::shadows::mls2d::MlsStyle;
 use rokeby_core::shadows::shadow::{Drag, Handle, ShadowEditor as CoreEditor};
-use rokeby_core::shadows::shadow_mesh::falloff;
-use rokeby_core::shadows::silhouette::{silhouettes, ClosedMesh, Light, SilhouetteLoop};
+use rokeby_core::shadows::shadow_mesh;
+use rokeby_core::shadows::silhouette::{self, ClosedMesh, Light, SilhouetteLoop};
 use std::sync::Mutex;
 
 fn arr<'py, T: numpy::Element>(
@@ -160,12 +160,12 @@ fn handles_dict<'py>(py: Python<'py>, hs: &[Handle]) -> PyResult<Bound<'py, PyDi
     Ok(d)
 }
 
-/// shadow_silhouettes(vertices, faces, *, light_position=None, light_direction=None, normals=None)
+/// silhouettes(vertices, faces, *, light_position=None, light_direction=None, normals=None)
 /// → list of loops (longest first), each a dict: points (K, 3) float32, edges (K, 2) int64
 /// (back-facing, front-facing vertex), alpha (K,) float64, length, active (always True here).
 #[pyfunction]
 #[pyo3(signature = (vertices, faces, *, light_position=None, light_direction=None, normals=None))]
-pub fn shadow_silhouettes<'py>(
+pub fn silhouettes<'py>(
     py: Python<'py>,
     vertices: &Bound<'py, PyAny>,
     faces: &Bound<'py, PyAny>,
@@ -175,7 +175,7 @@ pub fn shadow_silhouettes<'py>(
 ) -> PyResult<Bound<'py, PyList>> {
     let light = parse_light(light_position, light_direction)?;
     let mesh = caster(vertices, faces, normals)?;
-    let loops = run_detached(py, move || silhouettes(&mesh, &light))?;
+    let loops = run_detached(py, move || silhouette::silhouettes(&mesh, &light))?;
     let out = PyList::empty(py);
     for l in &loops {
         out.append(loop_dict(py, l, None, true)?)?;
@@ -183,17 +183,17 @@ pub fn shadow_silhouettes<'py>(
     Ok(out)
 }
 
-/// shadow_falloff(l_initial, l_current, beta) → (l_initial · l_current)^β (§6.2), directions
+/// falloff_factor(l_initial, l_current, beta) → (l_initial · l_current)^β (§6.2), directions
 /// normalised, 0 for opposite half-spaces.
 #[pyfunction]
-pub fn shadow_falloff(
+pub fn falloff_factor(
     l_initial: &Bound<'_, PyAny>,
     l_current: &Bound<'_, PyAny>,
     beta: f64,
 ) -> PyResult<f64> {
     let a = DVec3::from_array(parse_vec3(l_initial, "l_initial")?);
     let b = DVec3::from_array(parse_vec3(l_current, "l_current")?);
-    falloff(a, b, beta).map_err(core_err)
+    shadow_mesh::falloff_factor(a, b, beta).map_err(core_err)
 }
 
 /// ShadowEditor(vertices, faces, receiver_vertices, receiver_faces, *, light_position=None,
@@ -203,7 +203,7 @@ pub fn shadow_falloff(
 /// one array; world space). Receiver triangles come first in `triangle` indices, then the
 /// caster's. Methods: loops(), handles(loop, eye=None), drag(...), commit(), cancel(), reset(),
 /// shadow_mesh().
-#[pyclass(frozen, name = "ShadowEditor", module = "rokeby_native")]
+#[pyclass(frozen, name = "ShadowEditor", module = "rokeby_native.shadows")]
 pub struct PyShadowEditor {
     inner: Mutex<CoreEditor>,
 }
@@ -453,8 +453,8 @@ impl PyShadowEditor {
 }
 
 pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
-    m.add_function(wrap_pyfunction!(shadow_silhouettes, m)?)?;
-    m.add_function(wrap_pyfunction!(shadow_falloff, m)?)?;
+    m.add_function(wrap_pyfunction!(silhouettes, m)?)?;
+    m.add_function(wrap_pyfunction!(falloff_factor, m)?)?;
     m.add_class::<PyShadowEditor>()?;
     Ok(())
 }

@@ -15,7 +15,7 @@ use pyo3::prelude::*;
 use pyo3::types::{PyBytes, PyDict, PyList};
 use rokeby_core::compositing::sh::SH_COEFFS;
 use rokeby_core::envmaps::envmap::{EnvMap, Layout};
-use rokeby_core::envmaps::prefilter::{self, Lobe, PrefilterParams, A_HAT};
+use rokeby_core::envmaps::prefilter::{self as core_prefilter, Lobe, PrefilterParams, A_HAT};
 use rokeby_core::RokebyError;
 
 fn parse_layout(name: &str, arg: &str) -> PyResult<Layout> {
@@ -110,7 +110,7 @@ fn parse_lobe(kind: &str, p: f64, arg: &str) -> PyResult<Lobe> {
 /// or face size; each texel averages `supersample`² bilinear lookups.
 #[pyfunction]
 #[pyo3(signature = (image, layout_in, layout_out, size, supersample = 1))]
-pub fn env_convert<'py>(
+pub fn convert<'py>(
     py: Python<'py>,
     image: &Bound<'py, PyAny>,
     layout_in: &str,
@@ -138,7 +138,7 @@ pub fn env_convert<'py>(
 /// Bilinear, seam-correct lookups: (..., 3) directions → (..., C).
 #[pyfunction]
 #[pyo3(signature = (image, layout, directions))]
-pub fn env_sample<'py>(
+pub fn sample<'py>(
     py: Python<'py>,
     image: &Bound<'py, PyAny>,
     layout: &str,
@@ -158,7 +158,7 @@ pub fn env_sample<'py>(
 /// lobes, a coarser one for rough ones).
 #[pyfunction]
 #[pyo3(signature = (image, lobe, params, texels_per_radius = 6.0, tail = 1e-5))]
-pub fn env_prefilter<'py>(
+pub fn prefilter<'py>(
     py: Python<'py>,
     image: &Bound<'py, PyAny>,
     lobe: &str,
@@ -181,7 +181,7 @@ pub fn env_prefilter<'py>(
         texels_per_radius,
         tail,
     };
-    let levels = run_cancellable(py, || prefilter::prefilter(&env, &lobes, &pp))?;
+    let levels = run_cancellable(py, || core_prefilter::prefilter(&env, &lobes, &pp))?;
     let out = PyList::empty(py);
     for lv in levels {
         out.append(out_array(py, lv.map)?)?;
@@ -194,7 +194,7 @@ pub fn env_prefilter<'py>(
 /// 'image': (size, 2·size, C) lat-long map of E(n)/π}.
 #[pyfunction]
 #[pyo3(signature = (image, size = 32))]
-pub fn env_irradiance<'py>(
+pub fn irradiance<'py>(
     py: Python<'py>,
     image: &Bound<'py, PyAny>,
     size: usize,
@@ -206,7 +206,7 @@ pub fn env_irradiance<'py>(
         )));
     }
     let (map, coeffs) = run_cancellable(py, || {
-        prefilter::irradiance_map(&env, size, size.saturating_mul(2))
+        core_prefilter::irradiance_map(&env, size, size.saturating_mul(2))
     })?;
     let c = coeffs.len();
     let flat: Vec<f64> = coeffs.iter().flatten().copied().collect();
@@ -226,7 +226,7 @@ pub fn env_irradiance<'py>(
 /// (normalised as the prefiltered maps are), or 'lambert' for E(n)/π. (..., 3) → (..., C) float64.
 #[pyfunction]
 #[pyo3(signature = (image, lobe, directions, param = 0.0))]
-pub fn env_reference<'py>(
+pub fn prefilter_reference<'py>(
     py: Python<'py>,
     image: &Bound<'py, PyAny>,
     lobe: &str,
@@ -241,10 +241,10 @@ pub fn env_reference<'py>(
         rokeby_core::envmaps::envmap::finite_dirs(&d, "directions").map(|_| ())
     })?;
     let out = if lobe.eq_ignore_ascii_case("lambert") {
-        run_detached(py, || prefilter::brute_force_irradiance(&env, &d))?
+        run_detached(py, || core_prefilter::brute_force_irradiance(&env, &d))?
     } else {
         let l = parse_lobe(lobe, param, "param")?;
-        run_detached(py, || prefilter::brute_force(&env, &l, &d))?
+        run_detached(py, || core_prefilter::brute_force(&env, &l, &d))?
     };
     let mut shape = lead;
     shape.push(env.channels);
@@ -289,12 +289,12 @@ pub fn rgbe_encode<'py>(
 }
 
 pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
-    m.add_function(wrap_pyfunction!(env_convert, m)?)?;
+    m.add_function(wrap_pyfunction!(convert, m)?)?;
     m.add_function(wrap_pyfunction!(rgbe_decode, m)?)?;
     m.add_function(wrap_pyfunction!(rgbe_encode, m)?)?;
-    m.add_function(wrap_pyfunction!(env_sample, m)?)?;
-    m.add_function(wrap_pyfunction!(env_prefilter, m)?)?;
-    m.add_function(wrap_pyfunction!(env_irradiance, m)?)?;
-    m.add_function(wrap_pyfunction!(env_reference, m)?)?;
+    m.add_function(wrap_pyfunction!(sample, m)?)?;
+    m.add_function(wrap_pyfunction!(prefilter, m)?)?;
+    m.add_function(wrap_pyfunction!(irradiance, m)?)?;
+    m.add_function(wrap_pyfunction!(prefilter_reference, m)?)?;
     Ok(())
 }

@@ -162,7 +162,7 @@ fn geodesic_distances<'py>(
 /// The mesh is fixed for a solver: make a new one when vertices or faces change.
 /// boundary="average" (default) averages the Neumann and Dirichlet heat flows on meshes with
 /// boundary (Crane et al. 2013 §3.3, more accurate there); "neumann" saves one factorisation.
-#[pyclass(frozen, name = "GeodesicSolver", module = "rokeby_native")]
+#[pyclass(frozen, name = "GeodesicSolver", module = "rokeby_native.geometry")]
 struct PyGeodesicSolver {
     inner: Arc<CoreSolver>,
 }

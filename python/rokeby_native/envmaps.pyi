@@ -1,0 +1,23 @@
+"""rokeby_native.envmaps: environment maps (layouts, conversions, lookups), their prefiltering
+under environment light and Radiance .hdr files, rust/rokeby-core/src/envmaps."""
+
+from collections.abc import Sequence
+from typing import Any
+
+from ._types import _F32, _F64, _Array, _Layout
+
+def convert(
+    image: _Array, layout_in: _Layout, layout_out: _Layout, size: int, supersample: int = 1
+) -> _F32: ...
+def sample(image: _Array, layout: _Layout, directions: _Array) -> _F32: ...
+def prefilter(
+    image: _Array,
+    lobe: str,
+    params: Sequence[float] | _Array,
+    texels_per_radius: float = 6.0,
+    tail: float = 1e-5,
+) -> list[_F32]: ...
+def irradiance(image: _Array, size: int = 32) -> dict[str, Any]: ...
+def prefilter_reference(image: _Array, lobe: str, directions: _Array, param: float = 0.0) -> _F64: ...
+def rgbe_decode(data: bytes) -> _F32: ...
+def rgbe_encode(pixels: _Array) -> bytes: ...
