@@ -14,6 +14,7 @@ import rokeby_native as rn  # noqa: E402
 from support import bench_module  # noqa: E402
 from support.recomposite_frames import bad_inputs, frame, passes_and_reconstruction  # noqa: E402
 from rokeby import compositing as C  # noqa: E402
+from rokeby.compositing.gl import _CurrentGL  # noqa: E402
 from rokeby import recomposite_gpu as G  # noqa: E402
 
 OPTIONS = [{}, {"k_d": 0.7, "k_r": 1.3, "gamma": 2.2}, {"epsilon": 0.2}]
@@ -67,16 +68,16 @@ def main():
     # The same shader on moderngl/EGL (when there is one) gives the same pixels, and using it in this
     # process leaves Blender's context current (Blender's next draw is still right).
     before, _ = rc(ids, n, e, view, d0, r0, img, patches, **kw)
-    blender_ctx = C._CurrentGL().egl
+    blender_ctx = _CurrentGL().egl
     try:
         gl = C.GLRecompositor()
     except Exception as exc:  # noqa: BLE001 - no moderngl or no EGL: recorded, the test skips that check
         res["moderngl"] = {"error": str(exc)}
     else:
-        kept = [C._CurrentGL().egl == blender_ctx]
+        kept = [_CurrentGL().egl == blender_ctx]
         after_create, _ = rc(ids, n, e, view, d0, r0, img, patches, **kw)
         mgl, _ = gl(ids, n, e, view, d0, r0, img, patches, **kw)
-        kept.append(C._CurrentGL().egl == blender_ctx)
+        kept.append(_CurrentGL().egl == blender_ctx)
         after_draw, _ = rc(ids, n, e, view, d0, r0, img, patches, **kw)
         res["moderngl"] = {"rel": rel(before, mgl), "equal": bool(np.array_equal(before, mgl)),
                            "blender_after_equal": bool(np.array_equal(after_create, before) and np.array_equal(after_draw, before)),

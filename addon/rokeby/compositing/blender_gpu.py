@@ -2,7 +2,7 @@
 
 The same shader files as the moderngl path (``shaders/rokeby_recomposite_{vert,frag}.glsl``),
 compiled by ``glsl.create_shader`` from the one declared interface
-``compositing.RECOMPOSITE_INTERFACE``; a fullscreen triangle into a ``GPUOffScreen`` with an
+``gl.RECOMPOSITE_INTERFACE``; a fullscreen triangle into a ``GPUOffScreen`` with an
 RGBA32F colour buffer, read back as float32. Arguments and result are those of
 ``rokeby_native.recomposite``: (image (H, W, 3) float32, {"edited", "masked"}).
 
