@@ -306,15 +306,17 @@ def test_unreached_rule_inside_a_region():
 
 def test_fallback_helpers():
     """The rule as the evaluator applies it to the (K, V) distances, and the piece labels."""
+    from rokeby.reflection import unreached_pieces  # noqa: PLC0415
+
     tri = np.array([[0, 1, 2], [1, 3, 2], [4, 5, 6]])
-    labels = evaluate.mesh_pieces(tri, 8)
+    labels = unreached_pieces.mesh_pieces(tri, 8)
     np.testing.assert_array_equal(labels, [0, 0, 0, 0, 4, 4, 4, -1])
     v = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [1, 1, 0], [5, 0, 0], [6, 0, 0], [5, 1, 0], [9, 9, 9]], np.float32)
     rows = np.zeros((2, 9), np.float32)
     rows[:, :3] = v[[0, 3]]
     inf = np.inf
     d = np.array([[0, 1, 1, 1.4, inf, inf, inf, inf], [1.4, 1, 1, 0, inf, inf, inf, inf]], np.float32)
-    out = evaluate.unreached_fallback(d, rows, v)
+    out = unreached_pieces.unreached_fallback(d, rows, v)
     np.testing.assert_array_equal(out[:, :4], d[:, :4])  # reached: geodesic as it was
     np.testing.assert_allclose(out[:, 4:], np.linalg.norm(v[None, 4:] - rows[:, None, :3], axis=2), rtol=1e-6)
     assert np.isinf(d[:, 4:]).all()  # the cached input is not modified
@@ -323,5 +325,5 @@ def test_fallback_helpers():
     d2[1, :4] = inf
     regions = [{"kind": "weights", "values": None, "at_constraints": np.array([1.0, 1.0])},
                {"kind": "weights", "values": None, "at_constraints": np.array([0.0, 1.0])}]
-    out = evaluate.unreached_fallback(d2, rows, v, regions)
+    out = unreached_pieces.unreached_fallback(d2, rows, v, regions)
     assert np.isinf(out[1, :4]).all() and np.isfinite(out[:, 4:7]).all()
