@@ -196,6 +196,7 @@ def geodesic_distances(vertices, faces, sources, *, method: str = DEFAULT_GEODES
 # functions, and background scripts (render farms, pipelines) call them directly.
 
 from . import evaluate as _ev  # noqa: E402 - aliased: api.evaluate is a function
+from . import freeform_regions as _freeform  # noqa: E402
 from .evaluate import ATTRIBUTE, MirrorReport, RokebyError, rotate  # noqa: E402
 from .registry import of_mirrors as _of_mirrors  # noqa: E402
 
@@ -454,18 +455,18 @@ def remove_constraint(mirror, index: int, *, delete_handles: bool = True, scene=
     _remove_objects(doomed)
 
 
-# The reader modifier of free-form regions lives with the region code (rokeby.evaluate), which
+# The reader modifier of free-form regions lives with the region code (freeform_regions.py), which
 # keeps it live: remade when applied or removed, repointed when the vertex group is renamed.
-_vertex_group_reader = _ev.vertex_group_reader
+_vertex_group_reader = _freeform.vertex_group_reader
 
 
 def _ensure_reader(mirror, group):
-    _ev.ensure_reader(mirror, group)
-    return _ev.find_reader(mirror, group)
+    _freeform.ensure_reader(mirror, group)
+    return _freeform.find_reader(mirror, group)
 
 
 def _drop_unused_readers(mirror):
-    _ev.drop_unused_readers(mirror)
+    _freeform.drop_unused_readers(mirror)
 
 
 @transaction.atomic(materials=_of_mirrors)
@@ -526,7 +527,7 @@ def add_region(mirror, kind: str = "EUCLIDEAN", *, center=None, radius: float = 
         item.vertex_group = vertex_group
         if kind == "FREEFORM":
             item.vertex_group_index = mirror.vertex_groups.find(vertex_group)
-            _ev.remember_groups(mirror)
+            _freeform.remember_groups(mirror)
         item.center = centre_ob
         mirror.rokeby.active_region = len(mirror.rokeby.regions) - 1
     except Exception:

@@ -37,7 +37,7 @@ import bpy
 from bpy.app.handlers import persistent
 
 from ..blender import compat, hooks
-from . import evaluate, guard, registry
+from . import evaluate, freeform_regions, guard, registry
 from .guard import suspended  # noqa: F401 - handlers.suspended(), as before
 from .render import rendering, shading
 
@@ -115,7 +115,7 @@ def _updates_needed(depsgraph) -> bool:
         if ob.type != "MESH" or (ob.data is not None and ob.data.shape_keys is not None):
             return True
         # The readers of free-form regions read the mirror's own data (a MESH update).
-        if any(not (m.type == "NODES" and m.name.startswith(evaluate.VG_MODIFIER_PREFIX)) for m in ob.modifiers):
+        if any(not (m.type == "NODES" and m.name.startswith(freeform_regions.VG_MODIFIER_PREFIX)) for m in ob.modifiers):
             return True
     return False
 
