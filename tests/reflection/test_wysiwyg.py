@@ -19,6 +19,7 @@ from support import ROOT
 bpy = pytest.importorskip("bpy")
 
 from rokeby import api, evaluate, handlers, native  # noqa: E402
+from rokeby.reflection import field_carriers  # noqa: E402
 from support.wysiwyg import (EYE, SIZE, add_aovs, agreement, angles_deg, directions, drag, mirror_material,  # noqa: E402,F401
                               new_scene, physical, read_layers, render, sphere)
 
@@ -319,13 +320,13 @@ def test_subdivided_mirror_gets_the_field_of_the_surface_it_renders(tmp_path):
     # Removing the modifier goes back to the mesh itself; removing the mirror cleans up.
     ball.modifiers.remove(sub)
     rep = api.evaluate(force=True)["Ball"]
-    assert rep.field_mesh == "evaluated" and evaluate.carrier_of(ball) is None and not ball.modifiers
+    assert rep.field_mesh == "evaluated" and field_carriers.carrier_of(ball) is None and not ball.modifiers
     ball.modifiers.new("Subdivision", "SUBSURF").levels = 2
     api.evaluate(force=True)
-    assert evaluate.carrier_of(ball) is not None
+    assert field_carriers.carrier_of(ball) is not None
     api.remove_mirror(ball)
-    assert evaluate.carrier_of(ball) is None and [m.type for m in ball.modifiers] == ["SUBSURF"]
-    assert not [o for o in bpy.data.objects if o.name.startswith(evaluate.CARRIER_PREFIX)]
+    assert field_carriers.carrier_of(ball) is None and [m.type for m in ball.modifiers] == ["SUBSURF"]
+    assert not [o for o in bpy.data.objects if o.name.startswith(field_carriers.CARRIER_PREFIX)]
 
 
 # --- 8. a fresh highlight constraint is neutral ---------------------------------------------

@@ -196,6 +196,7 @@ def geodesic_distances(vertices, faces, sources, *, method: str = DEFAULT_GEODES
 # functions, and background scripts (render farms, pipelines) call them directly.
 
 from . import evaluate as _ev  # noqa: E402 - aliased: api.evaluate is a function
+from . import field_carriers as _carriers  # noqa: E402
 from . import freeform_regions as _freeform  # noqa: E402
 from .evaluate import ATTRIBUTE, MirrorReport, RokebyError, rotate  # noqa: E402
 from .registry import of_mirrors as _of_mirrors  # noqa: E402
@@ -583,8 +584,8 @@ def remove_mirror(mirror, *, scene=None):
     while len(mirror.rokeby.regions):
         remove_region(mirror, len(mirror.rokeby.regions) - 1, scene=scene)
     if not _other_mirrors_of_mesh(mirror):
-        _ev.strip_field(mirror.data)
-    _ev.remove_carrier(mirror)
+        _carriers.strip_field(mirror.data)
+    _carriers.remove_carrier(mirror)
     mirror.rokeby.is_mirror = False
     # Its materials come back as they were (unless another mirror still edits them), also when
     # the render nodes were installed before the file was loaded (nothing synced them yet).
@@ -655,7 +656,7 @@ def stored_field(mirror) -> "np.ndarray | None":
     """The rotation vectors stored for ``mirror`` (the view-independent form, eq. 7 towards I): per
     vertex of its mesh, or of its evaluated mesh when a modifier changes the vertex count or the
     mesh is shared with other objects (then held by its own field carrier)."""
-    carrier = _ev.carrier_of(mirror)
+    carrier = _carriers.carrier_of(mirror)
     return _ev.read_attribute(carrier if carrier is not None else mirror)
 
 
@@ -669,7 +670,7 @@ def stored_refraction(mirror) -> "np.ndarray | None":
     """The rotation vectors (V, 3) of the refraction field stored in the mesh attribute
     ``rokeby_refraction``, or in the mirror's field carrier as for ``stored_field`` (None when
     the mirror has no refraction constraint)."""
-    carrier = _ev.carrier_of(mirror)
+    carrier = _carriers.carrier_of(mirror)
     return _ev.read_attribute(carrier if carrier is not None else mirror, _ev.REFRACTION_ATTRIBUTE)
 
 

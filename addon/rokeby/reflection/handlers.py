@@ -37,7 +37,7 @@ import bpy
 from bpy.app.handlers import persistent
 
 from ..blender import compat, hooks
-from . import evaluate, freeform_regions, guard, registry
+from . import evaluate, field_carriers, freeform_regions, guard, registry
 from .guard import suspended  # noqa: F401 - handlers.suspended(), as before
 from .render import rendering, shading
 
@@ -254,7 +254,7 @@ def migrate_file():
     caster, light and twin get pointers (``shadow.migrate``)."""
     from .props import DATA_VERSION  # noqa: PLC0415
 
-    evaluate.claim_carriers()  # carriers saved before they had an owner (Shift+D copies shared one)
+    field_carriers.claim_carriers()  # carriers saved before they had an owner (Shift+D copies shared one)
     for ob in registry.mirrors():
         s = getattr(ob, "rokeby", None)
         if s is None or not s.is_mirror or s.data_version >= DATA_VERSION or ob.library is not None:
