@@ -196,6 +196,7 @@ def geodesic_distances(vertices, faces, sources, *, method: str = DEFAULT_GEODES
 # functions, and background scripts (render farms, pipelines) call them directly.
 
 from . import evaluate as _ev  # noqa: E402 - aliased: api.evaluate is a function
+from . import field_attributes as _attributes  # noqa: E402
 from . import field_carriers as _carriers  # noqa: E402
 from . import freeform_regions as _freeform  # noqa: E402
 from .evaluate import ATTRIBUTE, MirrorReport, RokebyError, rotate  # noqa: E402
@@ -657,7 +658,7 @@ def stored_field(mirror) -> "np.ndarray | None":
     vertex of its mesh, or of its evaluated mesh when a modifier changes the vertex count or the
     mesh is shared with other objects (then held by its own field carrier)."""
     carrier = _carriers.carrier_of(mirror)
-    return _ev.read_attribute(carrier if carrier is not None else mirror)
+    return _attributes.read_attribute(carrier if carrier is not None else mirror)
 
 
 def refraction_field(mirror) -> "np.ndarray | None":
@@ -671,7 +672,7 @@ def stored_refraction(mirror) -> "np.ndarray | None":
     ``rokeby_refraction``, or in the mirror's field carrier as for ``stored_field`` (None when
     the mirror has no refraction constraint)."""
     carrier = _carriers.carrier_of(mirror)
-    return _ev.read_attribute(carrier if carrier is not None else mirror, _ev.REFRACTION_ATTRIBUTE)
+    return _attributes.read_attribute(carrier if carrier is not None else mirror, _ev.REFRACTION_ATTRIBUTE)
 
 
 def set_ior(mirror, ior: float):
