@@ -19,7 +19,7 @@ from support import ROOT
 bpy = pytest.importorskip("bpy")
 
 from rokeby import api, evaluate, handlers, native  # noqa: E402
-from rokeby.reflection import field_carriers  # noqa: E402
+from rokeby.reflection import field_carriers, mirror_surface  # noqa: E402
 from support.wysiwyg import (EYE, SIZE, add_aovs, agreement, angles_deg, directions, drag, mirror_material,  # noqa: E402,F401
                               new_scene, physical, read_layers, render, sphere)
 
@@ -184,7 +184,7 @@ def _seen_at_red_handle(ball, c=0, eye=EYE):
     con = ball.rokeby.constraints[c]
     st = evaluate.state_of(ball)
     rows, _dist, regions = st.field_inputs
-    sp = evaluate.project_to_surface(ball, bpy.context.evaluated_depsgraph_get(), st.geometry, np.array(con.surface_handle.matrix_world.translation), np.array(ball.matrix_world))
+    sp = mirror_surface.project_to_surface(ball, bpy.context.evaluated_depsgraph_get(), st.geometry, np.array(con.surface_handle.matrix_world.translation), np.array(ball.matrix_world))
     kwargs = {"regions": regions} if regions else {}
     got = native.edited_directions(sp.point[None].astype(np.float32), sp.normal[None].astype(np.float32), eye, rows, **kwargs)[0]
     to_green = np.array(con.target_handle.matrix_world.translation) - sp.point

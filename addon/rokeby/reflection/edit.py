@@ -199,6 +199,7 @@ from . import evaluate as _ev  # noqa: E402 - aliased: api.evaluate is a functio
 from . import field_attributes as _attributes  # noqa: E402
 from . import field_carriers as _carriers  # noqa: E402
 from . import freeform_regions as _freeform  # noqa: E402
+from . import mirror_surface as _surface  # noqa: E402
 from .evaluate import ATTRIBUTE, MirrorReport, RokebyError, rotate  # noqa: E402
 from .registry import of_mirrors as _of_mirrors  # noqa: E402
 
@@ -321,9 +322,9 @@ def _view_from_eye(eye, target):
 
 def _surface_of(mirror, scene, point):
     dg = _depsgraph(scene)
-    m = _ev._finite_matrix(mirror.evaluated_get(dg).matrix_world, f"mirror '{mirror.name}'")
-    geo = _ev.read_geometry(mirror, dg, m)
-    return _ev.project_to_surface(mirror, dg, geo, _vec3(point, "surface_point"), m), geo, dg
+    m = _surface._finite_matrix(mirror.evaluated_get(dg).matrix_world, f"mirror '{mirror.name}'")
+    geo = _surface.read_geometry(mirror, dg, m)
+    return _surface.project_to_surface(mirror, dg, geo, _vec3(point, "surface_point"), m), geo, dg
 
 
 @transaction.atomic(materials=_of_mirrors)
@@ -561,7 +562,7 @@ def _other_mirrors_of_mesh(mirror) -> list:
     import bpy  # noqa: PLC0415
 
     me = mirror.data
-    if me is None or not _ev.shares_mesh(mirror):
+    if me is None or not _surface.shares_mesh(mirror):
         return []
     return [ob for ob in bpy.data.objects if ob != mirror and ob.data == me and ob.rokeby.is_mirror]
 
@@ -889,7 +890,7 @@ def edited_reflections(mirror, eye=None, *, scene=None) -> np.ndarray:
 def _light_point(light, p: np.ndarray, far: float) -> np.ndarray:
     """Where ``light`` is as seen from the points ``p`` (..., 3): its position, or for a sun the
     points ``far`` away against its direction of travel."""
-    m = _ev._finite_matrix(light.matrix_world, f"light '{light.name}'")
+    m = _surface._finite_matrix(light.matrix_world, f"light '{light.name}'")
     if light.data.type == "SUN":
         towards = m[:3, 2]  # a sun shines along its local −Z
         return p + towards / np.linalg.norm(towards) * far
