@@ -56,6 +56,20 @@ def _refresh_section(emit, out, marker, section):
         doc.write_text("\n".join(out) + "\n")
 
 
+def keep_other_sections(new: str, old: str) -> str:
+    """The report of a whole run, followed by the old report's ``## `` sections this run does not
+    write (measurements made by hand or by other scripts, each with its own date): the guides
+    quote them, so a whole run must not drop them."""
+    def sections(text):
+        parts = text.split("\n## ")
+        return [("## " + part).split("\n", 1)[0] for part in parts[1:]], parts[1:]
+
+    written, _ = sections(new)
+    headings, bodies = sections(old)
+    kept = [body for heading, body in zip(headings, bodies) if heading not in written]
+    return new.rstrip("\n") + "".join("\n\n## " + body.rstrip("\n") for body in kept) + "\n"
+
+
 def main():
     ap = argparse.ArgumentParser(description="Rokeby benchmarks")
     ap.add_argument("--peers", default=None, help="python of .venv-peers (exact geodesics, potpourri3d, libigl, matplotlib)")
@@ -152,7 +166,9 @@ def main():
 
     docs = ROOT / "docs"
     docs.mkdir(exist_ok=True)
-    (docs / "benchmarks.md").write_text("\n".join(out) + "\n")
+    doc = docs / "benchmarks.md"
+    new = "\n".join(out) + "\n"
+    doc.write_text(keep_other_sections(new, doc.read_text() if doc.exists() else ""))
     print(f"\nwritten to {docs / 'benchmarks.md'}")
 
 

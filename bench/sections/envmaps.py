@@ -40,7 +40,7 @@ def envmap_section(emit):
     emit("Error against the brute-force sum over all 524,288 texels (Fraser eq. 2, same lobe normalisation),")
     emit("relative error of luminance: at texel centres of each level's map (the algorithm) and at random")
     emit("directions through bilinear lookups (what a shader sees), 32 directions per level; mean over the")
-    emit("7 non-mirror levels of the per-level mean, and the largest single error. Per level: docs/envmaps.md.")
+    emit("7 non-mirror levels of the per-level mean, and the largest single error. Per level: \"Environment maps: measured errors per level\" below.")
     emit()
     emit("| world | lobe | K | texel mean | texel max | lookup mean | lookup max |")
     emit("|---|---|---:|---:|---:|---:|---:|")

@@ -88,7 +88,7 @@ def test_constant_world_stays_constant():
 
 def test_sh_irradiance_on_the_shipped_worlds(worlds):
     """Order-2 SH against the exact (brute-force) irradiance: Ramamoorthi & Hanrahan report about
-    1% average error for typical lighting; bright small suns do worse (figures in docs/envmaps.md)."""
+    1% average error for typical lighting; bright small suns do worse (figures in docs/benchmarks.md)."""
     normals = fibonacci(64)
     errs = {}
     for name in ("courtyard", "studio", "forest"):

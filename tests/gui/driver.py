@@ -67,6 +67,10 @@ class UI:
         return bpy.context.temp_override(window=self.window, screen=self.window.screen, area=area,
                                          region=self.region(region_type, area))
 
+    def now(self) -> float:
+        """Seconds on a monotonic clock (for durations a scenario reports)."""
+        return time.monotonic()
+
     # --- waiting --------------------------------------------------------------------------------
     def until(self, pred, timeout: float = 60.0, what: str | None = None):
         """``yield from ui.until(pred)``: continue when ``pred()`` is true; TimeoutError after ``timeout`` s.
@@ -170,6 +174,29 @@ class UI:
         yield from self.until(lambda: ADDON in bpy.context.preferences.addons, 60, "the add-on enabled")
         return sys.modules[ADDON]
 
+    def start(self):
+        """``yield from ui.start()``: what every scenario opens with: the window up, the splash
+        dismissed with Esc, the zip installed and enabled (``install``); returns the add-on."""
+        yield from self.until(lambda: self.area() is not None, 60, "the window")
+        yield from self.move(800, 500)
+        yield from self.key("Escape")  # the splash
+        yield from self.redraws(2)
+        return (yield from self.install())
+
+    def pixels(self, path: str):
+        """A screenshot's pixels as a float array (H, W, 4) in [0, 1], row 0 at the top (screen
+        order, as ``screen_xy`` counts), read with Blender's image loader."""
+        import numpy as np
+
+        img = bpy.data.images.load(path)
+        try:
+            w, h = img.size
+            px = np.empty(w * h * 4, np.float32)
+            img.pixels.foreach_get(px)
+        finally:
+            bpy.data.images.remove(img)
+        return px.reshape(h, w, 4)[::-1]
+
     def addon(self, sub: str = ""):
         """The installed add-on's package (``bl_ext.user_default.rokeby``), or one of its modules:
         ``ui.addon("api")`` is rokeby.api, ``ui.addon("appearance.preview")``."""
@@ -226,6 +253,7 @@ def _step():
     gen = _state["gen"]
     try:
         if gen is None:
+            sys.path.insert(0, os.path.dirname(SCENARIO))  # scenarios import their shared scenes.py
             spec = importlib.util.spec_from_file_location("gui_scenario", SCENARIO)
             mod = importlib.util.module_from_spec(spec)
             spec.loader.exec_module(mod)

@@ -26,6 +26,15 @@ COMPOSITING_BACKENDS = [
     ("GPU", "GPU (Blender)", "Eqs. 3–5 by the GLSL shader through Blender's gpu module (needs a GPU context)", 1),
 ]
 
+SCENE_CAPTURES = [
+    ("CYCLES", "Cycles (as F12 renders)", "The preview's scene is rendered with Cycles from each mirror: the render's "
+                                          "materials and lights, per-pixel agreement with F12; tenths of seconds to "
+                                          "seconds per capture", 0),
+    ("VIEWPORT", "Viewport (GPU)", "The preview's scene is drawn on the GPU as the 3D view's Solid shading draws it "
+                                   "(materials in their Viewport Display colour): milliseconds per capture; Cycles "
+                                   "where no 3D view is open", 1),
+]
+
 
 class RokebyPreferences(bpy.types.AddonPreferences):
     bl_idname = PACKAGE
@@ -50,6 +59,12 @@ class RokebyPreferences(bpy.types.AddonPreferences):
                     "a fifth of the cost per pixel on a software renderer",
         default=True,
     )
+    scene_capture: EnumProperty(
+        name="Scene Capture",
+        description="How the reflection preview captures the scene around each mirror",
+        items=SCENE_CAPTURES,
+        default="CYCLES",
+    )
     cache_folder: StringProperty(
         name="Reflection Map Cache",
         description="Folder captured reflection maps are written to when they are stored as files (empty: "
@@ -67,12 +82,14 @@ class RokebyPreferences(bpy.types.AddonPreferences):
         col = layout.column(heading="GPU")
         col.prop(self, "gpu_viewport_preview")
         col.prop(self, "preview_parallax")
+        col.prop(self, "scene_capture")
         col = layout.column(heading="Reflection Maps")
         col.prop(self, "cache_folder")
 
 
 # What ``get`` answers where Blender does not list the add-on (the class's defaults; a test keeps them equal).
-DEFAULTS = {"compositing_backend": "CPU", "gpu_viewport_preview": True, "preview_parallax": True, "cache_folder": ""}
+DEFAULTS = {"compositing_backend": "CPU", "gpu_viewport_preview": True, "preview_parallax": True, "scene_capture": "CYCLES",
+            "cache_folder": ""}
 
 
 def get(context=None):

@@ -114,7 +114,8 @@ class ROKEBY_PT_main(bpy.types.Panel):
                 ui_text.label(col, context, f"render vs preview: {p99:.2f}° (99th percentile), {worst:.2f}° max", icon="CHECKMARK" if p99 <= evaluate.AGREEMENT_DEGREES else "ERROR")
             cap = scene_env.current(mirror)
             if cap is not None:  # short: details in docs/addon.md, "Viewport preview"
-                col.label(text=f"Scene {cap.seconds:.1f} s, {cap.nbytes / 2**20:.1f} MB", icon="WORLD")
+                where = "GPU" if cap.route == "VIEWPORT" else "Cycles"
+                col.label(text=f"Scene ({where}) {cap.seconds:.2f} s, {cap.nbytes / 2**20:.1f} MB", icon="WORLD")
             elif scene_env.error_of(mirror):
                 col.label(text="Scene capture failed", icon="ERROR")
             if rep.recomputed or rep.python_ms:

@@ -1,12 +1,13 @@
-"""The shadow-editing feature registers itself: its operators, panel and overlay (``ui``), and its
-steps in the add-on's live updates (``rokeby.blender.hooks``): after each update deleted parts are
-repaired and each shadow mesh's falloff follows its light; after loading, old files migrate."""
+"""The shadow-editing feature registers itself: its operators, panel and overlay (``ui``), the
+display of its meshes following the views' shading (``display``), and its steps in the add-on's
+live updates (``rokeby.blender.hooks``): after each update deleted parts are repaired, each shadow
+mesh's falloff follows its light and its display the views; after loading, old files migrate."""
 
 from __future__ import annotations
 
 from .. import shadow
 from ..blender import hooks
-from . import linking, ui
+from . import display, linking, ui
 
 OWNER = "shadow"
 
@@ -29,10 +30,12 @@ def _migrate():
 
 def register():
     ui.register()
+    display.register()
     hooks.add_step(OWNER, "scene_update", _scene_update)
     hooks.add_step(OWNER, "migrate", _migrate)
 
 
 def unregister():
     hooks.remove(OWNER)
+    display.unregister()
     ui.unregister()

@@ -19,11 +19,7 @@ def roughness():
 
 
 def scenario(ui):
-    yield from ui.until(lambda: ui.area() is not None, 60, "the window")
-    yield from ui.move(800, 500)
-    yield from ui.key("Escape")  # the splash
-    yield from ui.redraws(2)
-    yield from ui.install()
+    yield from ui.start()
     area = ui.area()
     area.spaces.active.show_region_ui = True
     yield from ui.redraws(2)

@@ -41,11 +41,7 @@ def grab(ui, ob, dx, dy, finish="click"):
 
 
 def scenario(ui):
-    yield from ui.until(lambda: ui.area() is not None, 60, "the window")
-    yield from ui.move(800, 500)
-    yield from ui.key("Escape")
-    yield from ui.redraws(2)
-    yield from ui.install()
+    yield from ui.start()
     api = ui.addon("api")
     evaluate = ui.addon("reflection.evaluate")
     scene = bpy.context.scene

@@ -11,11 +11,7 @@ def panels():
 
 
 def scenario(ui):
-    yield from ui.until(lambda: ui.area() is not None, 60, "the window")
-    yield from ui.move(800, 500)
-    yield from ui.key("Escape")  # the splash of a fresh user configuration
-    yield from ui.redraws(2)
-    yield from ui.install()
+    yield from ui.start()
     ui.result["enabled"] = ADDON in bpy.context.preferences.addons
     ui.result["panels_installed"] = panels()
     region = yield from ui.show_sidebar_tab("Rokeby")

@@ -6,6 +6,7 @@ import importlib
 
 import bpy
 import numpy as np
+import scenes
 
 ADDON = "bl_ext.user_default.rokeby"
 
@@ -33,30 +34,10 @@ def state():
 
 
 def scenario(ui):
-    yield from ui.until(lambda: ui.area() is not None, 60, "the window")
-    yield from ui.move(800, 500)
-    yield from ui.key("Escape")  # the splash
-    yield from ui.redraws(2)
-    yield from ui.install()
-    # The scene, as a user would make it: a ball over a ground plane under a point light.
-    with ui.override():
-        for ob in list(bpy.data.objects):
-            if ob.type == "MESH":
-                bpy.data.objects.remove(ob)
-        bpy.ops.mesh.primitive_plane_add(size=12)
-        bpy.context.object.name = "Ground"
-        bpy.ops.mesh.primitive_uv_sphere_add(segments=48, ring_count=24, radius=0.5, location=(0, 0, 1.5))
-        bpy.context.object.name = "Ball"
-        lamp = next(o for o in bpy.data.objects if o.type == "LIGHT")
-        lamp.location = (0.3, 0.2, 4.0)
-        lamp.data.type = "POINT"
-        bpy.ops.ed.undo_push(message="scene set up")
+    yield from ui.start()
+    _ball, _ground, lamp = scenes.ball_over_ground(ui)
     area = ui.area()
-    rv3d = ui.region("WINDOW", area).data
-    rv3d.view_perspective = "PERSP"
-    rv3d.view_rotation = (1.0, 0.0, 0.0, 0.0)  # looking down
-    rv3d.view_location = (0.0, 0.0, 0.0)
-    rv3d.view_distance = 7.0
+    scenes.look_down(ui)
     yield from ui.redraws(2)
     with ui.override():
         bpy.context.view_layer.objects.active = bpy.data.objects["Ball"]

@@ -14,11 +14,7 @@ def values(name):
 
 
 def scenario(ui):
-    yield from ui.until(lambda: ui.area() is not None, 60, "the window")
-    yield from ui.move(800, 500)
-    yield from ui.key("Escape")
-    yield from ui.redraws(2)
-    yield from ui.install()
+    yield from ui.start()
     appearance = ui.addon("appearance")
     schema = ui.addon("core.schema")
     attr = schema.APPEARANCE_ATTRIBUTES["roughness"]

@@ -9,11 +9,7 @@ def vec(v):
 
 
 def scenario(ui):
-    yield from ui.until(lambda: ui.area() is not None, 60, "the window")
-    yield from ui.move(800, 500)
-    yield from ui.key("Escape")
-    yield from ui.redraws(2)
-    yield from ui.install()
+    yield from ui.start()
     api = ui.addon("api")
     bpy.data.objects.remove(bpy.data.objects["Cube"])
     with ui.override():

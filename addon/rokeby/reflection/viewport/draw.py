@@ -25,7 +25,7 @@ import bpy
 
 from ...blender import compat
 from .. import evaluate
-from . import glsl, scene_env
+from . import glsl, gpu_capture, scene_env
 from ...core import schema
 
 DEPTH_BIAS = 2e-5
@@ -376,6 +376,8 @@ def _draw_callback():
 
         if not prefs.get(context).gpu_viewport_preview:  # the machine's opt-out (add-on preferences)
             return
+        if gpu_capture.CAPTURING[0]:  # the scene is being drawn from a mirror for its capture
+            return
         rv3d, region = context.region_data, context.region
         if rv3d is None or region is None or context.scene is None:
             return
@@ -395,6 +397,7 @@ def _draw_callback():
             shading=getattr(getattr(context.space_data, "shading", None), "type", None),
             parallax=prefs.get(context).preview_parallax,
         )
+        scene_env.check_look(context.scene, context.space_data)
         _last_error = None
     except Exception as exc:  # noqa: BLE001 - a draw callback must never raise into Blender
         _last_error = f"{type(exc).__name__}: {exc}"

@@ -16,7 +16,8 @@ Kept current, never in the way:
   positions, materials and their node values, lights' settings). Handles are empties and the
   field the mirror stores changes no vertex position, so handle drags never recapture;
 - in a window, depsgraph updates only mark the previews dirty; a timer captures once the updates
-  have paused for ``DEBOUNCE_SECONDS`` (a transform in progress keeps postponing it), with
+  have paused for ``DEBOUNCE_SECONDS`` and no transform runs (a transform in progress postpones it
+  until it is confirmed or cancelled), with
   progress shown on the cursor while it renders;
 - captures are cached per mirror (runtime only, never saved: a reload recaptures on first draw);
   ``stats`` counts them, and each records its time and memory for the sidebar and ``make bench``.
@@ -34,6 +35,7 @@ import numpy as np
 
 from ...blender import compat
 from ..render import reflmap
+from . import gpu_capture
 
 DEFAULT_WIDTH = 256  # panorama width (height = width / 2)
 DEFAULT_SAMPLES = 16
@@ -54,6 +56,9 @@ class SceneCapture:
     serial: int
     world_image: str = ""  # the world's lat-long image standing in for the world's texels ("" for none)
     world_scale: tuple | None = None  # its scale to the capture (the Background strength and colour nodes)
+    route: str = "CYCLES"  # CYCLES (as F12 renders) or VIEWPORT (drawn on the GPU as the 3D view draws)
+    stages: dict | None = None  # seconds per stage of a VIEWPORT capture (views, triangles, distance, resample)
+    look: str = ""  # a VIEWPORT capture: the 3D view's shading it was drawn with (gpu_capture.look_of)
 
     @property
     def nbytes(self) -> int:
@@ -120,17 +125,19 @@ def _socket_values(h, tree, seen):
         h.update(f"{link.from_node.name}.{link.from_socket.identifier}>{link.to_node.name}.{link.to_socket.identifier}".encode())
 
 
-def fingerprint(mirror, scene, depsgraph=None, *, width: int = DEFAULT_WIDTH, samples: int = DEFAULT_SAMPLES) -> str:
-    """A digest of everything a capture of ``mirror`` shows: the capture point and settings, the
-    world, and every other rendering object's transform, evaluated vertex positions, materials
-    (node values) and light settings. Empties (the handles) are left out."""
+def fingerprint(mirror, scene, depsgraph=None, *, width: int = DEFAULT_WIDTH, samples: int = DEFAULT_SAMPLES, route: str = "CYCLES",
+                look: str = "") -> str:
+    """A digest of everything a capture of ``mirror`` shows: the capture point and settings (the
+    route, and for a VIEWPORT capture the 3D view's shading, ``look``), the world, and every other
+    rendering object's transform, evaluated vertex positions, materials (node values) and light
+    settings. Empties (the handles) are left out."""
     import bpy  # noqa: PLC0415
 
     stats["fingerprints"] += 1
     dg = depsgraph if depsgraph is not None else bpy.context.evaluated_depsgraph_get()
     h = hashlib.blake2b(digest_size=16)
     h.update(np.round(reflmap.capture_origin(mirror, dg), 6).tobytes())
-    h.update(f"{width}|{samples}".encode())
+    h.update(f"{width}|{samples}|{route}|{look}".encode())
     world = scene.world
     h.update(repr(world.name if world else None).encode())
     seen: set = set()
@@ -220,36 +227,77 @@ def fit_world(texels: np.ndarray, image) -> tuple | None:
 # --- capturing -----------------------------------------------------------------------------------
 
 
-def capture(mirror, scene=None, *, width: int = DEFAULT_WIDTH, samples: int = DEFAULT_SAMPLES, denoise: bool = False, depsgraph=None) -> SceneCapture:
-    """Capture the scene around ``mirror`` now (Cycles, colour and distance) and cache it."""
+def route_of(scene) -> tuple:
+    """(route, 3D view or None): VIEWPORT with the view it draws like where the add-on preferences
+    ask for the GPU capture and a window shows ``scene``; else CYCLES."""
+    import bpy  # noqa: PLC0415
+
+    from ...blender import prefs  # noqa: PLC0415
+
+    if not bpy.app.background and getattr(prefs.get(), "scene_capture", "CYCLES") == "VIEWPORT":
+        view = gpu_capture.view_of(scene)
+        if view is not None:
+            return "VIEWPORT", view
+    return "CYCLES", None
+
+
+def capture(mirror, scene=None, *, width: int = DEFAULT_WIDTH, samples: int = DEFAULT_SAMPLES, denoise: bool = False, depsgraph=None,
+            route: str | None = None) -> SceneCapture:
+    """Capture the scene around ``mirror`` now (colour and distance) and cache it: with Cycles, or
+    (``route`` VIEWPORT; default: ``route_of``) on the GPU as the largest 3D view showing the
+    scene draws it (``gpu_capture``)."""
     global _serial
     import bpy  # noqa: PLC0415
 
     scene = scene if scene is not None else bpy.context.scene
     reflmap._resolution(width)
+    chosen, view = route_of(scene)
+    if route == "VIEWPORT" and view is None:
+        view = gpu_capture.view_of(scene)
+        if view is None:
+            raise LookupError("route: VIEWPORT needs a 3D view showing the scene (a window); none is open")
+    route = route or chosen
     dg = depsgraph if depsgraph is not None else bpy.context.evaluated_depsgraph_get()
-    print_ = fingerprint(mirror, scene, dg, width=width, samples=samples)
     origin = reflmap.capture_origin(mirror, dg)
     t0 = time.perf_counter()
-    colour, dist = reflmap._render_panorama(scene, mirror, origin, width, int(samples), distance=True, denoise=denoise, camera_only=True)
+    stages, look = None, ""
+    if route == "VIEWPORT":
+        colour, dist, stages, look = gpu_capture.capture(mirror, scene, origin, width, view=view)
+        dg = bpy.context.evaluated_depsgraph_get()
+    else:
+        colour, dist = reflmap._render_panorama(scene, mirror, origin, width, int(samples), distance=True, denoise=denoise, camera_only=True)
     seconds = time.perf_counter() - t0
+    print_ = fingerprint(mirror, scene, dg, width=width, samples=samples, route=route, look=look)
     texels = np.empty(colour.shape[:2] + (4,), np.float32)
     texels[..., :3] = np.nan_to_num(colour, nan=0.0, posinf=0.0, neginf=0.0)
     with np.errstate(divide="ignore"):
         texels[..., 3] = np.where(np.isfinite(dist) & (dist > 0), 1.0 / dist, 0.0)
     _serial += 1
     stats["captures"] += 1
-    image = world_image(scene)
+    image = world_image(scene) if route == "CYCLES" else None  # the viewport draws its own background
     scale = fit_world(texels, image) if image is not None else None
     cap = SceneCapture(texels, origin, print_, seconds, width, int(samples), _serial,
-                       world_image=image.name if scale is not None else "", world_scale=scale)
+                       world_image=image.name if scale is not None else "", world_scale=scale, route=route, stages=stages, look=look)
     _captures[_key(mirror)] = cap
     return cap
 
 
+def _settings(scene, cap) -> tuple:
+    """(route, look) a capture of ``scene`` would be taken with now (see ``route_of``); a 3D view
+    showing another shading than Solid keeps ``cap``'s look (the capture draws Solid shading)."""
+    route, view = route_of(scene)
+    look = gpu_capture.look_of(view[2]) if view is not None else ""
+    if route == "VIEWPORT" and not look and cap is not None:
+        look = cap.look
+    return route, look
+
+
 def is_current(mirror, scene, depsgraph=None) -> bool:
     cap = current(mirror)
-    return cap is not None and cap.fingerprint == fingerprint(mirror, scene, depsgraph, width=cap.width, samples=cap.samples)
+    if cap is None:
+        return False
+    route, look = _settings(scene, cap)
+    return cap.fingerprint == fingerprint(mirror, scene, depsgraph, width=cap.width, samples=cap.samples, route=route, look=look)
 
 
 def ensure(mirror, scene=None, *, width: int | None = None, samples: int | None = None, depsgraph=None) -> SceneCapture:
@@ -260,8 +308,9 @@ def ensure(mirror, scene=None, *, width: int | None = None, samples: int | None 
     cap = current(mirror)
     width = width or (cap.width if cap is not None else DEFAULT_WIDTH)
     samples = samples or (cap.samples if cap is not None else DEFAULT_SAMPLES)
+    route, look = _settings(scene, cap)
     if cap is not None and cap.width == width and cap.samples == samples \
-            and cap.fingerprint == fingerprint(mirror, scene, depsgraph, width=width, samples=samples):
+            and cap.fingerprint == fingerprint(mirror, scene, depsgraph, width=width, samples=samples, route=route, look=look):
         return cap
     return capture(mirror, scene, width=width, samples=samples, depsgraph=depsgraph)
 
@@ -331,13 +380,38 @@ def request():
         evaluate._schedule(_timer, DEBOUNCE_SECONDS)
 
 
+def transform_running() -> bool:
+    """Whether a window runs a transform (G, R, S, a gizmo drag): the mouse holding still inside
+    one is no pause; the capture waits for its confirm or cancel."""
+    import bpy  # noqa: PLC0415
+
+    for window in getattr(getattr(bpy.context, "window_manager", None), "windows", []):
+        for op in getattr(window, "modal_operators", ()):
+            if op.bl_idname.startswith(("TRANSFORM_OT_", "transform.")):
+                return True
+    return False
+
+
+def shaders_compiling() -> bool:
+    """Whether Blender compiles material shaders now (EEVEE draws an object only once its shader is
+    ready): a GPU capture taken meanwhile would miss objects, so it waits."""
+    import bpy  # noqa: PLC0415
+
+    if bpy.app.background:  # no jobs there (and the query crashes Blender as a Python module)
+        return False
+    try:
+        return bool(bpy.app.is_job_running("SHADER_COMPILATION"))
+    except (AttributeError, TypeError, ValueError):  # a Blender without the job query
+        return False
+
+
 def _timer():
     global _pending
     from .. import guard  # noqa: PLC0415
 
     wait = DEBOUNCE_SECONDS - (time.perf_counter() - _last_change)
-    if wait > 0 or guard.active():
-        return max(wait, 0.05)
+    if wait > 0 or guard.active() or transform_running() or shaders_compiling():
+        return max(wait, 0.1)
     _pending = False
     try:
         if refresh():
@@ -355,6 +429,24 @@ def _redraw():
         for area in window.screen.areas:
             if area.type == "VIEW_3D":
                 area.tag_redraw()
+
+
+def check_look(scene, space) -> None:
+    """A 3D view is drawn with ``space``'s shading: a VIEWPORT capture drawn with other Solid shading
+    settings is taken again (changing them updates no depsgraph)."""
+    if not _captures or space is None or getattr(space, "type", None) != "VIEW_3D":
+        return
+    view = gpu_capture.view_of(scene)
+    if view is None or view[2] != space:  # the capture draws like the largest 3D view only
+        return
+    look = gpu_capture.look_of(space)
+    if not look:  # another shading than Solid: the capture keeps the Solid look it was drawn with
+        return
+    for ob in previewed(scene):
+        cap = current(ob)
+        if cap is not None and cap.route == "VIEWPORT" and cap.look != look:
+            request()
+            return
 
 
 def on_depsgraph_update(scene, depsgraph):

@@ -1,0 +1,30 @@
+"""Scenes the window scenarios share, made as a user would make them (operators in the window)."""
+
+import bpy
+
+
+def ball_over_ground(ui):
+    """A ball (radius 0.5, 1.5 above the origin) over a 12 m ground plane under a point light:
+    the factory scene's meshes removed, one undo step "scene set up"; returns (ball, ground, light)."""
+    with ui.override():
+        for ob in list(bpy.data.objects):
+            if ob.type == "MESH":
+                bpy.data.objects.remove(ob)
+        bpy.ops.mesh.primitive_plane_add(size=12)
+        bpy.context.object.name = "Ground"
+        bpy.ops.mesh.primitive_uv_sphere_add(segments=48, ring_count=24, radius=0.5, location=(0, 0, 1.5))
+        bpy.context.object.name = "Ball"
+        lamp = next(o for o in bpy.data.objects if o.type == "LIGHT")
+        lamp.location = (0.3, 0.2, 4.0)
+        lamp.data.type = "POINT"
+        bpy.ops.ed.undo_push(message="scene set up")
+    return bpy.data.objects["Ball"], bpy.data.objects["Ground"], lamp
+
+
+def look_down(ui, distance=7.0):
+    """The largest 3D view looking straight down at the origin from ``distance``."""
+    rv3d = ui.region("WINDOW", ui.area()).data
+    rv3d.view_perspective = "PERSP"
+    rv3d.view_rotation = (1.0, 0.0, 0.0, 0.0)
+    rv3d.view_location = (0.0, 0.0, 0.0)
+    rv3d.view_distance = distance
