@@ -35,6 +35,7 @@ import time
 import numpy as np
 
 from . import compositing as C
+from .compositing import gl
 from .core import exr
 from .blender import transaction
 
@@ -167,7 +168,7 @@ def _frame(a) -> int:
         print(f"rokeby.composite: {problem}", file=sys.stderr)
         return 2
     try:  # before any work, named by its flag
-        C._check_k(a.kd, a.kr)
+        gl._check_k(a.kd, a.kr)
     except C.CompositingError as exc:
         print(f"rokeby.composite: argument {'--kd' if str(exc).startswith('k_d') else '--kr'}: {exc} (see --help)", file=sys.stderr)
         return 2

@@ -13,6 +13,7 @@ from mathutils import Matrix
 from support.bpy_process import gpu_context, offscreen_pixels
 from rokeby import appearance, envmaps
 from rokeby.appearance import glsl as appearance_glsl, preview as appearance_preview
+from rokeby.appearance import attributes
 
 W, H = 128, 64
 # Orthographic from y = −10 along +Y, z up; screen x ∈ [−1, 3], z ∈ [−1, 1].
@@ -34,10 +35,10 @@ def main():
     ob.data.materials.append(mat)
     appearance.setup(ob)
     n = len(ob.data.vertices)
-    appearance._write(ob, "diffuse", np.tile(np.float32([0.02, 0.02, 0.02, 1.0]), (n, 1)))
-    appearance._write(ob, "specular", np.full(n, 1.0, np.float32))
-    appearance._write(ob, "roughness", np.full(n, 0.25, np.float32))
-    appearance._write(ob, "metallic", np.zeros(n, np.float32))
+    attributes._write(ob, "diffuse", np.tile(np.float32([0.02, 0.02, 0.02, 1.0]), (n, 1)))
+    attributes._write(ob, "specular", np.full(n, 1.0, np.float32))
+    attributes._write(ob, "roughness", np.full(n, 0.25, np.float32))
+    attributes._write(ob, "metallic", np.zeros(n, np.float32))
 
     def view(light, pos=(2.0, -3.0, 0.0)):
         return offscreen_pixels(lambda: appearance_preview.draw_view(scene, RV3D, [ob], "PRINCIPLED", None, light, pos, 20.0), W, H)
@@ -71,7 +72,7 @@ def main():
                                                  np.full(3, 0.02), 1.0, 0.25, 0.0)
     out["point_rel"] = float(np.abs(beside[inside][:, :3] - want).mean() / np.abs(want).mean())
     # the specular colour painted red: the point-lit highlight turns red
-    appearance._write(ob, "specular_tint", np.tile(np.float32([1.0, 0.0, 0.0, 1.0]), (n, 1)))
+    attributes._write(ob, "specular_tint", np.tile(np.float32([1.0, 0.0, 0.0, 1.0]), (n, 1)))
     red = view("BESIDE")
     lum = red[:, right, :3].sum(-1)
     top = red[:, right, :3][lum >= 0.5 * lum.max()].mean(axis=0)
@@ -81,7 +82,7 @@ def main():
 
     # The same on a texture target, painted with the brush: the preview reads the painted image
     # (the per-point attribute stays white), in both views.
-    appearance._write(ob, "specular_tint", np.ones((n, 4), np.float32))
+    attributes._write(ob, "specular_tint", np.ones((n, 4), np.float32))
     appearance.setup(ob, target="TEXTURE", resolution=64)
 
     ys, xs = np.mgrid[0:H, 0:W] + 0.5

@@ -11,6 +11,7 @@ import bpy
 from support.bpy_process import gpu_context, offscreen_pixels
 from rokeby import appearance, envmaps
 from rokeby.appearance import preview as appearance_preview
+from rokeby.appearance import attributes
 
 W = H = 96
 S = 1 / 1.1
@@ -38,9 +39,9 @@ def draw(ob, world, depsgraph=None):
 def paint_all(ob, base, metallic, roughness):
     """Sets the per-point values exactly (a dab's Gaussian would leave them a little short)."""
     n = len(ob.data.vertices)
-    appearance._write(ob, "diffuse", np.tile(np.append(np.asarray(base, np.float32), 1.0), (n, 1)))
-    appearance._write(ob, "metallic", np.full(n, metallic, np.float32))
-    appearance._write(ob, "roughness", np.full(n, roughness, np.float32))
+    attributes._write(ob, "diffuse", np.tile(np.append(np.asarray(base, np.float32), 1.0), (n, 1)))
+    attributes._write(ob, "metallic", np.full(n, metallic, np.float32))
+    attributes._write(ob, "roughness", np.full(n, roughness, np.float32))
 
 
 def screen(p):

@@ -9,6 +9,7 @@ bpy = pytest.importorskip("bpy")
 
 from rokeby import appearance, envmaps  # noqa: E402
 from rokeby.blender import compat  # noqa: E402
+from rokeby.appearance import parameters, texture  # noqa: E402
 
 
 @pytest.fixture
@@ -140,7 +141,7 @@ def test_texture_and_point_targets_agree(ball):
     col = appearance.paint(tb, "diffuse", dabs[:1], radius=0.5, value=(1.0, 0.0, 0.0))
     assert img.shape == (512, 512) and col.shape == (512, 512, 4)
     # texels: the Gaussian dabs at their own surface points (the mesh's flat triangles)
-    ras = appearance._raster(tb, tb.data.uv_layers.active.name, 512)
+    ras = texture._raster(tb, tb.data.uv_layers.active.name, 512)
     p = ras["points"] + [0.3, 0.0, 0.0]
     want = np.full(len(p), 0.1)
     for d in dabs:
@@ -249,7 +250,7 @@ def test_operators_choose_the_texture_target(ball):
         s.target, s.resolution = "TEXTURE", 64
         assert bpy.ops.rokeby.appearance_setup() == {"FINISHED"}
         assert appearance.target(ball) == "TEXTURE"
-        assert tuple(appearance._texture_image(ball, "roughness").size) == (64, 64)
+        assert tuple(parameters._texture_image(ball, "roughness").size) == (64, 64)
         s.brush, s.radius, s.strength, s.value = "blur", 0.5, 1.0, 0.6
         attr_before = appearance.read(ball, "roughness").copy()
         assert bpy.ops.rokeby.appearance_paint(stroke=[{"name": "", "location": (1.0, 0.0, 0.0)}]) == {"FINISHED"}
@@ -270,13 +271,13 @@ def test_operators_choose_the_texture_target(ball):
 
 def test_raster_is_cached_and_follows_mesh_edits(ball):
     appearance.setup(ball, target="TEXTURE", resolution=32)
-    a = appearance._raster(ball, "UVMap", 32)
-    assert appearance._raster(ball, "UVMap", 32) is a
+    a = texture._raster(ball, "UVMap", 32)
+    assert texture._raster(ball, "UVMap", 32) is a
     co = np.empty(3 * len(ball.data.vertices), np.float32)
     ball.data.vertices.foreach_get("co", co)
     ball.data.vertices.foreach_set("co", co * 2.0)
     ball.data.update()
-    b = appearance._raster(ball, "UVMap", 32)
+    b = texture._raster(ball, "UVMap", 32)
     assert b is not a
     np.testing.assert_array_equal(b["texel"], a["texel"])
     np.testing.assert_allclose(b["points"], 2.0 * a["points"], rtol=1e-6, atol=1e-7)
@@ -307,7 +308,7 @@ def test_stretch_on_a_texture_turns_the_anisotropy_like_the_point_target(ball):
     texel nearest the +X pole the rotation is ¼ for a stroke along +Z, 0 along +Y, ⅛ along the
     diagonal; its anisotropy rises; a far texel keeps rotation 0."""
     appearance.setup(ball, target="TEXTURE", resolution=256)
-    ras = appearance._raster(ball, "UVMap", 256)
+    ras = texture._raster(ball, "UVMap", 256)
     pole = int(np.argmax(ras["points"][:, 0]))
     p0 = ras["points"][pole]
     for direction, want in (((0, 0, 1), 0.25), ((0, 1, 0), 0.0), ((0, 1, 1), 0.125)):

@@ -537,14 +537,15 @@ def test_recomposite_exr_edits_a_rendered_frame_without_rendering_or_reconstruct
     import bpy
     from rokeby import api
     from rokeby import compositing as C
-    from rokeby.compositing import gl as GL
+    from rokeby.compositing import gl as GL  # noqa: F401
+    from rokeby.compositing import render_edit
 
     sc = pass_scene()
     path = str(tmp_path / "frame.exr")
     api.recomposite_render(path, edit="none", scene=sc)
     calls = []
     real = C.reconstruct
-    monkeypatch.setattr(C, "reconstruct", lambda *a, **k: calls.append(1) or real(*a, **k))
+    monkeypatch.setattr(render_edit, "reconstruct", lambda *a, **k: calls.append(1) or real(*a, **k))
     img, st = api.recomposite_exr(path, edit="emboss", amount=0.4, image_name="e1")
     assert st["reused"] and not calls  # recomposite_render left the frame open
     px1 = np.array(img.pixels[:]).reshape(48, 64, 4)
@@ -591,7 +592,7 @@ def test_recomposite_exr_edits_a_rendered_frame_without_rendering_or_reconstruct
     # Another diffuse fit of the open frame: reconstructed again from the passes kept, not read again.
     reads = []
     real_read = C.read_exr
-    monkeypatch.setattr(C, "read_exr", lambda *a, **k: reads.append(1) or real_read(*a, **k))
+    monkeypatch.setattr(render_edit, "read_exr", lambda *a, **k: reads.append(1) or real_read(*a, **k))
     img6, st6 = api.recomposite_exr(path, edit="emboss", amount=0.8, k_d=0.5, fit="ls", image_name="e6")
     assert st6["reused"] and len(calls) == 3 and not reads and isinstance(st6["warnings"], list)
     p = real_read(path)

@@ -18,6 +18,7 @@ import rokeby  # noqa: E402
 from rokeby import api  # noqa: E402
 from rokeby.reflection import evaluate  # noqa: E402
 from rokeby.core.meshio import load_obj  # noqa: E402
+from rokeby.reflection import freeform_regions  # noqa: E402
 
 from support import cycles, mesh_path  # noqa: E402
 
@@ -126,8 +127,8 @@ def test_renamed_vertex_group_is_followed_and_keeps_following(tmp_path):
     assert rep.status == "OK", rep.summary()  # the old main: ERROR for the whole mirror
     rg = ball.rokeby.regions[0]
     assert rg.vertex_group == "Shine"
-    assert evaluate.find_reader(ball, "Shine") is not None and evaluate.find_reader(ball, "Patch") is None
-    assert [m.name for m in ball.modifiers if m.name.startswith(evaluate.VG_MODIFIER_PREFIX)] == [evaluate.VG_MODIFIER_PREFIX + "Shine"]
+    assert freeform_regions.find_reader(ball, "Shine") is not None and freeform_regions.find_reader(ball, "Patch") is None
+    assert [m.name for m in ball.modifiers if m.name.startswith(freeform_regions.VG_MODIFIER_PREFIX)] == [freeform_regions.VG_MODIFIER_PREFIX + "Shine"]
     np.testing.assert_allclose(api.field(ball), before, atol=1e-6)
     # Saved and reloaded, the next rename is followed too, and so is the painting.
     path = str(tmp_path / "renamed.blend")
@@ -165,7 +166,7 @@ def test_rename_in_a_window_is_followed_through_the_depsgraph_handler():
 def test_applied_reader_modifier_is_remade_and_the_region_follows_the_painting(tmp_path):
     ball, patch = _ball()
     edited = _render(tmp_path / "edited.png")
-    name = evaluate.VG_MODIFIER_PREFIX + "Patch"
+    name = freeform_regions.VG_MODIFIER_PREFIX + "Patch"
     with bpy.context.temp_override(object=ball, active_object=ball):
         assert bpy.ops.object.modifier_apply(modifier=name) == {"FINISHED"}
     ball.vertex_groups["Patch"].add(patch.tolist(), 0.0, "REPLACE")  # erase every weight
@@ -173,7 +174,7 @@ def test_applied_reader_modifier_is_remade_and_the_region_follows_the_painting(t
     assert rep.status == "OK", rep.summary()
     assert _angle(api.field(ball)).max() < 1e-6  # the old main kept the baked weights: the edit stayed
     assert name in ball.modifiers  # remade
-    assert (evaluate.REGION_ATTRIBUTE_PREFIX + "Patch") not in ball.data.attributes  # the frozen copy is gone
+    assert (freeform_regions.REGION_ATTRIBUTE_PREFIX + "Patch") not in ball.data.attributes  # the frozen copy is gone
     erased = _render(tmp_path / "erased.png")
     ball.rokeby.render_edits = False
     api.evaluate()
@@ -209,7 +210,7 @@ def test_deleted_group_warns_naming_it_and_the_status_says_what_renders_show():
     assert _angle(api.field(ball)[outside]).min() > 0.01
     stored = api.stored_field(ball)
     np.testing.assert_allclose(evaluate.quaternions(stored), api.field(ball), atol=1e-5)
-    assert not [m for m in ball.modifiers if m.name.startswith(evaluate.VG_MODIFIER_PREFIX)]  # its reader went
+    assert not [m for m in ball.modifiers if m.name.startswith(freeform_regions.VG_MODIFIER_PREFIX)]  # its reader went
 
 
 def test_choosing_another_group_in_the_sidebar_reads_that_group():
@@ -224,7 +225,7 @@ def test_choosing_another_group_in_the_sidebar_reads_that_group():
     ring = np.setdiff1d(patch, core)
     far = ring[co[ring, 1] > -0.75]  # in Patch, well outside Core and its border
     assert _angle(q[core]).max() > 0.05 and _angle(q[far]).max() < 1e-6
-    assert evaluate.find_reader(ball, "Core") is not None and evaluate.find_reader(ball, "Patch") is None
+    assert freeform_regions.find_reader(ball, "Core") is not None and freeform_regions.find_reader(ball, "Patch") is None
 
 
 # --- problem 4: geodesic distances on a mesh of several pieces ----------------------------------
@@ -307,15 +308,17 @@ def test_unreached_rule_inside_a_region():
 
 def test_fallback_helpers():
     """The rule as the evaluator applies it to the (K, V) distances, and the piece labels."""
+    from rokeby.reflection import unreached_pieces  # noqa: PLC0415
+
     tri = np.array([[0, 1, 2], [1, 3, 2], [4, 5, 6]])
-    labels = evaluate.mesh_pieces(tri, 8)
+    labels = unreached_pieces.mesh_pieces(tri, 8)
     np.testing.assert_array_equal(labels, [0, 0, 0, 0, 4, 4, 4, -1])
     v = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [1, 1, 0], [5, 0, 0], [6, 0, 0], [5, 1, 0], [9, 9, 9]], np.float32)
     rows = np.zeros((2, 9), np.float32)
     rows[:, :3] = v[[0, 3]]
     inf = np.inf
     d = np.array([[0, 1, 1, 1.4, inf, inf, inf, inf], [1.4, 1, 1, 0, inf, inf, inf, inf]], np.float32)
-    out = evaluate.unreached_fallback(d, rows, v)
+    out = unreached_pieces.unreached_fallback(d, rows, v)
     np.testing.assert_array_equal(out[:, :4], d[:, :4])  # reached: geodesic as it was
     np.testing.assert_allclose(out[:, 4:], np.linalg.norm(v[None, 4:] - rows[:, None, :3], axis=2), rtol=1e-6)
     assert np.isinf(d[:, 4:]).all()  # the cached input is not modified
@@ -324,5 +327,5 @@ def test_fallback_helpers():
     d2[1, :4] = inf
     regions = [{"kind": "weights", "values": None, "at_constraints": np.array([1.0, 1.0])},
                {"kind": "weights", "values": None, "at_constraints": np.array([0.0, 1.0])}]
-    out = evaluate.unreached_fallback(d2, rows, v, regions)
+    out = unreached_pieces.unreached_fallback(d2, rows, v, regions)
     assert np.isinf(out[1, :4]).all() and np.isfinite(out[:, 4:7]).all()

@@ -21,6 +21,7 @@ bpy = pytest.importorskip("bpy")
 from rokeby import api  # noqa: E402
 from rokeby.reflection import evaluate, guard  # noqa: E402
 from rokeby.core import native  # noqa: E402
+from rokeby.reflection import field_carriers, mirror_surface  # noqa: E402
 from support.wysiwyg import (EYE, SIZE, add_aovs, agreement, angles_deg, directions, drag, mirror_material,  # noqa: E402,F401
                               new_scene, physical, read_layers, render, sphere)
 
@@ -185,7 +186,7 @@ def _seen_at_red_handle(ball, c=0, eye=EYE):
     con = ball.rokeby.constraints[c]
     st = evaluate.state_of(ball)
     rows, _dist, regions = st.field_inputs
-    sp = evaluate.project_to_surface(ball, bpy.context.evaluated_depsgraph_get(), st.geometry, np.array(con.surface_handle.matrix_world.translation), np.array(ball.matrix_world))
+    sp = mirror_surface.project_to_surface(ball, bpy.context.evaluated_depsgraph_get(), st.geometry, np.array(con.surface_handle.matrix_world.translation), np.array(ball.matrix_world))
     kwargs = {"regions": regions} if regions else {}
     got = native.edited_directions(sp.point[None].astype(np.float32), sp.normal[None].astype(np.float32), eye, rows, **kwargs)[0]
     to_green = np.array(con.target_handle.matrix_world.translation) - sp.point
@@ -321,13 +322,13 @@ def test_subdivided_mirror_gets_the_field_of_the_surface_it_renders(tmp_path):
     # Removing the modifier goes back to the mesh itself; removing the mirror cleans up.
     ball.modifiers.remove(sub)
     rep = api.evaluate(force=True)["Ball"]
-    assert rep.field_mesh == "evaluated" and evaluate.carrier_of(ball) is None and not ball.modifiers
+    assert rep.field_mesh == "evaluated" and field_carriers.carrier_of(ball) is None and not ball.modifiers
     ball.modifiers.new("Subdivision", "SUBSURF").levels = 2
     api.evaluate(force=True)
-    assert evaluate.carrier_of(ball) is not None
+    assert field_carriers.carrier_of(ball) is not None
     api.remove_mirror(ball)
-    assert evaluate.carrier_of(ball) is None and [m.type for m in ball.modifiers] == ["SUBSURF"]
-    assert not [o for o in bpy.data.objects if o.name.startswith(evaluate.CARRIER_PREFIX)]
+    assert field_carriers.carrier_of(ball) is None and [m.type for m in ball.modifiers] == ["SUBSURF"]
+    assert not [o for o in bpy.data.objects if o.name.startswith(field_carriers.CARRIER_PREFIX)]
 
 
 # --- 8. a fresh highlight constraint is neutral ---------------------------------------------

@@ -12,6 +12,7 @@ bpy = pytest.importorskip("bpy")
 
 from support import shadow as ts  # noqa: E402
 from rokeby import shadow  # noqa: E402
+from rokeby.shadow import linking  # noqa: E402
 
 
 def _settle(sc):
@@ -116,9 +117,9 @@ def _write_as_main_did(ob):
     ob["rokeby_shadow_of"], ob["rokeby_light"] = caster.name, light.name
     twin["rokeby_twin_of"] = light.name
     light["rokeby_linking_before"] = ["" if c is None else c.name for c in (ll.receivers_before, ll.blockers_before)]
-    for attr, role in zip(shadow._COLLECTION_ATTRS, shadow._OURS):
+    for attr, role in zip(linking._COLLECTION_ATTRS, linking._OURS):
         c = getattr(ll, attr)
-        c.name = shadow._collection_name(light.name, role)
+        c.name = linking._collection_name(light.name, role)
         del c[shadow.LINKING_TAG]
     for o in (ob, twin, light):
         o.property_unset("rokeby_shadow")
@@ -212,7 +213,7 @@ def test_a_session_survives_renames_and_derived_parts_follow_the_names(tmp_path)
     assert (ob2, twin2) == (ob, twin)  # the same parts, found by pointer, renamed after their owners
     assert ob.name == "Orb" + shadow.SHADOW_SUFFIX and twin.name == "Key" + shadow.TWIN_SUFFIX
     assert sorted(c.name for c in bpy.data.collections if shadow.LINKING_TAG in c) == sorted(
-        shadow._collection_name("Key", r) for r in shadow._OURS)
+        linking._collection_name("Key", r) for r in linking._OURS)
     assert {o.name for o in bpy.data.objects if o.rokeby_shadow.role != "NONE"} == {ob.name, twin.name}
     _settle(sc)
     np.testing.assert_allclose(ts.render(bpy, sc, tmp_path / "reapplied.png"), edited, atol=1e-6)
@@ -263,8 +264,8 @@ def test_an_edit_from_a_copied_light_leaves_the_original_whole(tmp_path):
     s.commit()
     _ob2, twin2 = shadow.apply(s)
     assert twin2 != twin and lamp.rokeby_shadow.twin == twin and copy.rokeby_shadow.twin == twin2
-    colls = {a: getattr(lamp.rokeby_shadow, a) for a in shadow._COLLECTION_ATTRS}
-    assert not {getattr(copy.rokeby_shadow, a) for a in shadow._COLLECTION_ATTRS} & set(colls.values())
+    colls = {a: getattr(lamp.rokeby_shadow, a) for a in linking._COLLECTION_ATTRS}
+    assert not {getattr(copy.rokeby_shadow, a) for a in linking._COLLECTION_ATTRS} & set(colls.values())
     assert ball.name in colls["receivers_caster"].objects and ob.name in colls["blockers_caster"].objects
     _settle(sc)
     assert shadow.repair(sc) == []

@@ -17,6 +17,7 @@ import rokeby  # noqa: E402
 from rokeby import api  # noqa: E402
 from rokeby.blender import compat  # noqa: E402
 from rokeby.reflection import evaluate  # noqa: E402
+from rokeby.reflection import freeform_regions  # noqa: E402
 
 from support import cycles  # noqa: E402
 
@@ -118,8 +119,8 @@ def test_modifier_inputs_set_read_and_survive_reload(tmp_path):
     group = plane.vertex_groups.new(name="paint")
     group.add([0, 1], 0.75, "REPLACE")
     mod = plane.modifiers.new("reader", "NODES")
-    mod.node_group = evaluate.vertex_group_reader()
-    ids = evaluate._reader_ids(mod)
+    mod.node_group = freeform_regions.vertex_group_reader()
+    ids = freeform_regions._reader_ids(mod)
     compat.set_modifier_input(mod, ids["Vertex Group"], "paint")
     compat.set_modifier_input(mod, ids["Attribute"], "rk_read")
     assert compat.modifier_input(mod, ids["Vertex Group"]) == "paint"

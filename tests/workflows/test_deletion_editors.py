@@ -15,6 +15,7 @@ bpy = pytest.importorskip("bpy")
 import rokeby  # noqa: E402
 from support import shadow as ts  # noqa: E402
 from rokeby import appearance, shadow  # noqa: E402
+from rokeby.shadow import linking  # noqa: E402
 from support.ui import Layout  # noqa: E402
 
 
@@ -75,7 +76,7 @@ def test_delete_anything_a_shadow_edit_uses(role, registered, tmp_path):
         "receiver": "Ground",
     }.get(role)
     if role == "linking collection":
-        bpy.data.collections.remove(bpy.data.collections[shadow._collection_name("Lamp", shadow.BLOCKERS_EDITED)])
+        bpy.data.collections.remove(bpy.data.collections[linking._collection_name("Lamp", shadow.BLOCKERS_EDITED)])
     else:
         bpy.data.objects.remove(bpy.data.objects[victim], do_unlink=True)
     _settle(sc)

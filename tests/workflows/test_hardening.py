@@ -524,16 +524,18 @@ def test_nearest_triangle_without_a_bvh_matches_blenders_bvh(spot):
     triangle as near as Blender's BVH does, near and far from the surface."""
     from mathutils.bvhtree import BVHTree
 
+    from rokeby.reflection import mirror_surface
+
     v, f, _n = spot
     v, f = v.astype(np.float32), f.astype(np.int32)
-    geo = evaluate._Geometry(v, np.zeros_like(v), f, np.arange(len(f), dtype=np.int32), "evaluated")
+    geo = mirror_surface._Geometry(v, np.zeros_like(v), f, np.arange(len(f), dtype=np.int32), "evaluated")
     geo.local = v
     bvh = BVHTree.FromPolygons(v.tolist(), f.tolist(), all_triangles=True)
     size = float(np.linalg.norm(v.max(0) - v.min(0)))
     rng = np.random.default_rng(24)
     for k in range(120):
         x = v[rng.integers(len(v))] + rng.normal(size=3) * size * (0.01 if k % 2 else 0.3)
-        t = evaluate.nearest_triangle(geo, x)
+        t = mirror_surface.nearest_triangle(geo, x)
         one = BVHTree.FromPolygons(v[f[t]].tolist(), [[0, 1, 2]], all_triangles=True)
         assert one.find_nearest(x.tolist())[3] <= bvh.find_nearest(x.tolist())[3] + 1e-6 * size
 

@@ -17,6 +17,7 @@ from rokeby import api  # noqa: E402
 from rokeby.blender import compat  # noqa: E402
 from rokeby.reflection import evaluate, guard, handlers  # noqa: E402
 from rokeby.core import native  # noqa: E402
+from rokeby.reflection import field_carriers  # noqa: E402
 
 LEFT, RIGHT = (-0.65, 0.0, 0.0), (0.65, 0.0, 0.0)
 SCALE = 0.5
@@ -91,8 +92,8 @@ def test_two_mirrors_sharing_one_mesh_each_render_their_own_edit(tmp_path):
     _owns_its_field(right, layers, 1)
     # Each carries its own field; the shared mesh holds none.
     assert reports["Left"].field_mesh == reports["Right"].field_mesh == "transfer"
-    assert evaluate.carrier_of(left) is not evaluate.carrier_of(right)
-    assert not any(left.data.attributes.get(n) for n in evaluate.FIELD_ATTRIBUTES)
+    assert field_carriers.carrier_of(left) is not field_carriers.carrier_of(right)
+    assert not any(left.data.attributes.get(n) for n in field_carriers.FIELD_ATTRIBUTES)
 
     # Saved and reopened: both fields are in the file, and render the same pixels.
     stored = {ob.name: api.stored_field(ob).copy() for ob in (left, right)}
@@ -109,7 +110,7 @@ def test_two_mirrors_sharing_one_mesh_each_render_their_own_edit(tmp_path):
     # Remove Mirror on one: the other's render does not change; the removed one renders the
     # physical mirror, although it still shares the mesh and the material with an edited one.
     api.remove_mirror(right)
-    assert evaluate.carrier_of(left) is not None and not right.modifiers
+    assert field_carriers.carrier_of(left) is not None and not right.modifiers
     after = render(tmp_path, "removed")
     np.testing.assert_allclose(after["Combined"][left_px], layers["Combined"][left_px], atol=1e-5)
     assert np.percentile(_turned(after, _mask(after, 1)), 99) < 0.2
@@ -117,7 +118,7 @@ def test_two_mirrors_sharing_one_mesh_each_render_their_own_edit(tmp_path):
     # Linked to one object again (Make Single User on the other): the field goes back into the mesh.
     right.data = right.data.copy()
     rep = api.evaluate()["Left"]
-    assert rep.field_mesh == "evaluated" and evaluate.carrier_of(left) is None and not left.modifiers
+    assert rep.field_mesh == "evaluated" and field_carriers.carrier_of(left) is None and not left.modifiers
     np.testing.assert_allclose(render(tmp_path, "single")["Combined"][left_px], layers["Combined"][left_px], atol=1e-5)
 
 
@@ -209,7 +210,7 @@ def test_copies_of_a_subdivided_mirror_never_share_its_carrier():
     api.add_mirror(ball)
     api.add_constraint(ball, (0.0, -1.0, 0.0), (0.6, -3.0, 1.0))
     api.evaluate()
-    carrier = evaluate.carrier_of(ball)
+    carrier = field_carriers.carrier_of(ball)
     assert carrier is not None
     for linked in (False, True):
         copy = _duplicate(ball, linked)
@@ -217,17 +218,17 @@ def test_copies_of_a_subdivided_mirror_never_share_its_carrier():
         api.evaluate()
         copy.rokeby.constraints[0].target_handle.location.z -= 1.0  # its own edit now
         api.evaluate()
-        mine = evaluate.carrier_of(copy)
-        assert mine is not None and mine is not carrier and evaluate.carrier_of(ball) is carrier
-        mod = copy.modifiers[evaluate.TRANSFER_MODIFIER]
+        mine = field_carriers.carrier_of(copy)
+        assert mine is not None and mine is not carrier and field_carriers.carrier_of(ball) is carrier
+        mod = copy.modifiers[field_carriers.TRANSFER_MODIFIER]
         source = next(i.identifier for i in mod.node_group.interface.items_tree if getattr(i, "in_out", "") == "INPUT" and i.name == "Source")
         assert compat.modifier_input(mod, source) == mine
-        assert compat.modifier_input(ball.modifiers[evaluate.TRANSFER_MODIFIER], source) == carrier
+        assert compat.modifier_input(ball.modifiers[field_carriers.TRANSFER_MODIFIER], source) == carrier
         # Each carrier holds its own mirror's field.
         for ob in (ball, copy):
             np.testing.assert_allclose(api.stored_field(ob), evaluate.state_of(ob).rotations, atol=1e-6)
         api.remove_mirror(copy)
-        assert evaluate.carrier_of(ball) is carrier and carrier.name in bpy.data.objects
+        assert field_carriers.carrier_of(ball) is carrier and carrier.name in bpy.data.objects
         np.testing.assert_allclose(api.stored_field(ball), evaluate.state_of(ball).rotations, atol=1e-6)
 
 
@@ -240,7 +241,7 @@ def test_a_carrier_saved_without_an_owner_is_claimed_by_its_mirror_at_load():
     api.add_mirror(ball)
     api.add_constraint(ball, (0.0, -1.0, 0.0), (0.6, -3.0, 1.0))
     api.evaluate()
-    carrier = evaluate.carrier_of(ball)
+    carrier = field_carriers.carrier_of(ball)
     copy = bpy.data.objects.new("Ball copy", ball.data.copy())
     bpy.context.scene.collection.objects.link(copy)
     for mod in ball.modifiers:
@@ -252,9 +253,9 @@ def test_a_carrier_saved_without_an_owner_is_claimed_by_its_mirror_at_load():
         carrier.parent = None  # as saved by the previous version
     handlers.migrate_file()
     assert carrier.parent == ball
-    assert evaluate.carrier_of(copy) is None and evaluate.carrier_of(ball) is carrier
+    assert field_carriers.carrier_of(copy) is None and field_carriers.carrier_of(ball) is carrier
     api.evaluate()
-    assert evaluate.carrier_of(copy) not in (None, carrier)
+    assert field_carriers.carrier_of(copy) not in (None, carrier)
 
 
 def test_a_red_handle_kept_on_another_object_is_reported():

@@ -24,6 +24,7 @@ import numpy as np
 
 from .. import appearance, envmaps
 from . import glsl as appearance_glsl
+from . import parameters
 from ..blender import gpu as glsl
 from ..core import schema
 
@@ -235,7 +236,7 @@ def material_state(obj):
 
     bits, textures = 0, {}
     for param, bit in appearance_glsl.TEXTURE_BITS.items():
-        img = appearance._texture_image(obj, param)
+        img = parameters._texture_image(obj, param)
         if img is not None:
             bits |= bit
             textures[param] = gpu.texture.from_image(img)

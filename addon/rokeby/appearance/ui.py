@@ -13,6 +13,7 @@ import bpy
 from bpy.props import CollectionProperty, EnumProperty, FloatProperty, FloatVectorProperty, IntProperty, PointerProperty, StringProperty
 
 from .. import appearance
+from . import parameters
 from ..blender import compat, ui_text
 from ..core import words
 from ..core import schema
@@ -559,7 +560,7 @@ class ROKEBY_PT_appearance(bpy.types.Panel):
                 row.operator(ROKEBY_OT_appearance_setup.bl_idname, text="Set Up Appearance Painting")
                 row.operator(ROKEBY_OT_appearance_setup.bl_idname, text="", icon="LINKED").replace_links = True
         else:
-            img = appearance._texture_image(ob, "roughness")
+            img = parameters._texture_image(ob, "roughness")
             ui_text.label(layout, context, f"Target: images {img.size[0]}² on UV map '{ob.active_material.node_tree.nodes[appearance.NODE_PREFIX + 'uv'].uv_map}'" if img else "Target: images", icon="IMAGE_DATA")
             layout.operator(ROKEBY_OT_appearance_texture_remove.bl_idname, text="Back to Per-Point Attributes")
             missing = appearance.missing_images(ob)

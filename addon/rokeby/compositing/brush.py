@@ -38,6 +38,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .. import compositing as comp
+from . import compositor_input
 from ..core import schema
 
 MODES = ("emboss", "bump", "smooth")
@@ -466,7 +467,7 @@ def show_step(session: BrushSession):
         return _show(session)
     img.pixels.foreach_set(session.rgba.reshape(-1))
     img.update()
-    comp._keep_compositor_current(img)
+    compositor_input._keep_compositor_current(img)
     return img
 
 

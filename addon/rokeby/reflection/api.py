@@ -197,7 +197,11 @@ def geodesic_distances(vertices, faces, sources, *, method: str = DEFAULT_GEODES
 # functions, and background scripts (render farms, pipelines) call them directly.
 
 from . import evaluate as _ev  # noqa: E402 - aliased: api.evaluate is a function
-from .evaluate import MirrorReport, RokebyError, rotate  # noqa: E402
+from . import field_attributes as _attributes  # noqa: E402
+from . import field_carriers as _carriers  # noqa: E402
+from . import freeform_regions as _freeform  # noqa: E402
+from . import mirror_surface as _surface  # noqa: E402
+from .evaluate import ATTRIBUTE, MirrorReport, RokebyError, rotate  # noqa: E402
 from .pointers import of_mirrors as _of_mirrors  # noqa: E402
 
 
@@ -311,9 +315,9 @@ def _view_from_eye(eye, target):
 
 def _surface_of(mirror, scene, point):
     dg = _depsgraph(scene)
-    m = _ev._finite_matrix(mirror.evaluated_get(dg).matrix_world, f"mirror '{mirror.name}'")
-    geo = _ev.read_geometry(mirror, dg, m)
-    return _ev.project_to_surface(mirror, dg, geo, _vec3(point, "surface_point"), m), geo, dg
+    m = _surface._finite_matrix(mirror.evaluated_get(dg).matrix_world, f"mirror '{mirror.name}'")
+    geo = _surface.read_geometry(mirror, dg, m)
+    return _surface.project_to_surface(mirror, dg, geo, _vec3(point, "surface_point"), m), geo, dg
 
 
 @transaction.atomic(materials=_of_mirrors)
@@ -447,18 +451,18 @@ def remove_constraint(mirror, index: int, *, delete_handles: bool = True, scene=
     _remove_objects(doomed)
 
 
-# The reader modifier of free-form regions lives with the region code (rokeby.reflection.evaluate), which
+# The reader modifier of free-form regions lives with the region code (freeform_regions.py), which
 # keeps it live: remade when applied or removed, repointed when the vertex group is renamed.
-_vertex_group_reader = _ev.vertex_group_reader
+_vertex_group_reader = _freeform.vertex_group_reader
 
 
 def _ensure_reader(mirror, group):
-    _ev.ensure_reader(mirror, group)
-    return _ev.find_reader(mirror, group)
+    _freeform.ensure_reader(mirror, group)
+    return _freeform.find_reader(mirror, group)
 
 
 def _drop_unused_readers(mirror):
-    _ev.drop_unused_readers(mirror)
+    _freeform.drop_unused_readers(mirror)
 
 
 @transaction.atomic(materials=_of_mirrors)
@@ -519,7 +523,7 @@ def add_region(mirror, kind: str = "EUCLIDEAN", *, center=None, radius: float = 
         item.vertex_group = vertex_group
         if kind == "FREEFORM":
             item.vertex_group_index = mirror.vertex_groups.find(vertex_group)
-            _ev.remember_groups(mirror)
+            _freeform.remember_groups(mirror)
         item.center = centre_ob
         mirror.rokeby.active_region = len(mirror.rokeby.regions) - 1
     except Exception:
@@ -551,7 +555,7 @@ def _other_mirrors_of_mesh(mirror) -> list:
     import bpy  # noqa: PLC0415
 
     me = mirror.data
-    if me is None or not _ev.shares_mesh(mirror):
+    if me is None or not _surface.shares_mesh(mirror):
         return []
     return [ob for ob in bpy.data.objects if ob != mirror and ob.data == me and ob.rokeby.is_mirror]
 
@@ -575,8 +579,8 @@ def remove_mirror(mirror, *, scene=None):
     while len(mirror.rokeby.regions):
         remove_region(mirror, len(mirror.rokeby.regions) - 1, scene=scene)
     if not _other_mirrors_of_mesh(mirror):
-        _ev.strip_field(mirror.data)
-    _ev.remove_carrier(mirror)
+        _carriers.strip_field(mirror.data)
+    _carriers.remove_carrier(mirror)
     mirror.rokeby.is_mirror = False
     # Its materials come back as they were (unless another mirror still edits them), also when
     # the render nodes were installed before the file was loaded (nothing synced them yet).
@@ -647,8 +651,8 @@ def stored_field(mirror) -> "np.ndarray | None":
     """The rotation vectors stored for ``mirror`` (the view-independent form, eq. 7 towards I): per
     vertex of its mesh, or of its evaluated mesh when a modifier changes the vertex count or the
     mesh is shared with other objects (then held by its own field carrier)."""
-    carrier = _ev.carrier_of(mirror)
-    return _ev.read_attribute(carrier if carrier is not None else mirror)
+    carrier = _carriers.carrier_of(mirror)
+    return _attributes.read_attribute(carrier if carrier is not None else mirror)
 
 
 def refraction_field(mirror) -> "np.ndarray | None":
@@ -661,8 +665,8 @@ def stored_refraction(mirror) -> "np.ndarray | None":
     """The rotation vectors (V, 3) of the refraction field stored in the mesh attribute
     ``rokeby_refraction``, or in the mirror's field carrier as for ``stored_field`` (None when
     the mirror has no refraction constraint)."""
-    carrier = _ev.carrier_of(mirror)
-    return _ev.read_attribute(carrier if carrier is not None else mirror, _ev.REFRACTION_ATTRIBUTE)
+    carrier = _carriers.carrier_of(mirror)
+    return _attributes.read_attribute(carrier if carrier is not None else mirror, _ev.REFRACTION_ATTRIBUTE)
 
 
 def set_ior(mirror, ior: float):
@@ -879,7 +883,7 @@ def edited_reflections(mirror, eye=None, *, scene=None) -> np.ndarray:
 def _light_point(light, p: np.ndarray, far: float) -> np.ndarray:
     """Where ``light`` is as seen from the points ``p`` (..., 3): its position, or for a sun the
     points ``far`` away against its direction of travel."""
-    m = _ev._finite_matrix(light.matrix_world, f"light '{light.name}'")
+    m = _surface._finite_matrix(light.matrix_world, f"light '{light.name}'")
     if light.data.type == "SUN":
         towards = m[:3, 2]  # a sun shines along its local −Z
         return p + towards / np.linalg.norm(towards) * far

@@ -38,7 +38,7 @@ from bpy.app.handlers import persistent
 
 from ..blender import compat, hooks
 from ..blender import registry as index
-from . import evaluate, guard, registry
+from . import evaluate, field_carriers, freeform_regions, guard, registry
 from .render import rendering, shading
 
 _busy = False
@@ -115,7 +115,7 @@ def _updates_needed(depsgraph) -> bool:
         if ob.type != "MESH" or (ob.data is not None and ob.data.shape_keys is not None):
             return True
         # The readers of free-form regions read the mirror's own data (a MESH update).
-        if any(not (m.type == "NODES" and m.name.startswith(evaluate.VG_MODIFIER_PREFIX)) for m in ob.modifiers):
+        if any(not (m.type == "NODES" and m.name.startswith(freeform_regions.VG_MODIFIER_PREFIX)) for m in ob.modifiers):
             return True
     return False
 
@@ -254,7 +254,7 @@ def migrate_file():
     caster, light and twin get pointers (``shadow.migrate``)."""
     from .props import DATA_VERSION  # noqa: PLC0415
 
-    evaluate.claim_carriers()  # carriers saved before they had an owner (Shift+D copies shared one)
+    field_carriers.claim_carriers()  # carriers saved before they had an owner (Shift+D copies shared one)
     for ob in registry.mirrors():
         s = getattr(ob, "rokeby", None)
         if s is None or not s.is_mirror or s.data_version >= DATA_VERSION or ob.library is not None:

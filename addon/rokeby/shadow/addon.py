@@ -7,7 +7,7 @@ from __future__ import annotations
 
 from .. import shadow
 from ..blender import hooks
-from . import display, ui
+from . import display, linking, ui
 
 OWNER = "shadow"
 
@@ -15,7 +15,7 @@ OWNER = "shadow"
 def _scene_update(scene) -> int:
     """Deleted casters, lights, twins or shadow meshes leave no half set-up behind; the falloff of
     each shadow mesh follows its light (writes only changed values, so the update settles)."""
-    if not any(shadow._parts()):
+    if not any(linking._parts()):
         return 0
     for msg in shadow.repair(scene):
         print(f"Rokeby: {msg}")

@@ -43,11 +43,11 @@ def sync(meshes) -> int:
 
 
 def _on_shading_changed(*_args):
-    from .. import shadow  # noqa: PLC0415
+    from . import linking  # noqa: PLC0415
 
     try:
-        meshes, _twins, _lights = shadow._parts()
-        sync([*meshes, *shadow._self_blockers()])
+        meshes, _twins, _lights = linking._parts()
+        sync([*meshes, *linking._self_blockers()])
     except Exception as exc:  # noqa: BLE001 - a message-bus callback must never raise into Blender
         print(f"Rokeby: shadow mesh display not updated: {type(exc).__name__}: {exc}")
 

@@ -21,6 +21,7 @@ from ..blender import compat, hooks
 from ..blender.modal import undo_key, view3d_at as _view_at
 from .. import shadow
 from ..core import schema, words
+from . import linking
 
 _SESSIONS: dict = {}
 _OVERLAY: dict = {}
@@ -165,7 +166,7 @@ def _light(context, name: str):
             raise shadow.ShadowEditError(f"light: no light object named {name!r}")
         return ob
     # Twin lights made for edited shadows are never what the artist means.
-    ok = lambda o: o.type == "LIGHT" and shadow._role(o) != "TWIN"  # noqa: E731
+    ok = lambda o: o.type == "LIGHT" and linking._role(o) != "TWIN"  # noqa: E731
     lights = [o for o in context.selected_objects if ok(o)] or [o for o in context.scene.objects if ok(o)]
     if len(lights) != 1:
         raise shadow.ShadowEditError(f"light: select one light (found {len(lights)}) or name it")
