@@ -109,7 +109,6 @@ def remove_texture(obj, material=None, delete_images: bool = True) -> None:
     """Back to per-point targets: removes the Image Texture and UV Map nodes and relinks the
     attribute nodes, so the material is exactly as :func:`setup` left it (nodes, links, values);
     the images are deleted unless ``delete_images`` is False."""
-    import bpy
 
     mat = material if material is not None else obj.active_material
     nodes = mat.node_tree.nodes if mat is not None and mat.use_nodes else None

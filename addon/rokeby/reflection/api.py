@@ -201,7 +201,7 @@ from . import field_attributes as _attributes  # noqa: E402
 from . import field_carriers as _carriers  # noqa: E402
 from . import freeform_regions as _freeform  # noqa: E402
 from . import mirror_surface as _surface  # noqa: E402
-from .evaluate import ATTRIBUTE, MirrorReport, RokebyError, rotate  # noqa: E402
+from .evaluate import MirrorReport, RokebyError, rotate  # noqa: E402
 from .pointers import of_mirrors as _of_mirrors  # noqa: E402
 
 

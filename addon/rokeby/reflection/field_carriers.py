@@ -150,7 +150,6 @@ def ensure_carrier(obj, depsgraph):
 def remove_carrier(obj) -> bool:
     """Remove the transfer modifier and the carrier of ``obj`` (the vertex count matches again,
     or the mirror goes)."""
-    import bpy  # noqa: PLC0415
 
     found = False
     mod = obj.modifiers.get(TRANSFER_MODIFIER)
