@@ -8,7 +8,7 @@ Rust: rokeby_native) and the whole view_layer.update() including Blender's depsg
 
 Red-handle drags with geodesic distances: the red handle of one constraint moves per
 step (each step a new surface point, so a new solve); during the drag the moved constraint's
-distances come from evaluate.DRAG_METHOD (a preview), and on release (``handlers.settle_previews``,
+distances come from geodesic_cache.DRAG_METHOD (a preview), and on release (``handlers.settle_previews``,
 what the end-of-drag timer runs) the mirror's own method recomputes them. Printed: the drag step,
 the release, one accurate solve by itself, and a step that solves accurately every time (what a
 drag cost before the preview).
@@ -113,13 +113,13 @@ def measure(kind: str, shared: Path, metric: str, method: str, polar: str, steps
 
 def measure_red(shared: Path, method: str, update: bool = True, steps: int = 20, accurate_steps: int = 5) -> dict:
     """A red-handle drag on the 100k sphere with geodesic distances by ``method``; the preview
-    updates the accurate distances (``update``, evaluate.DRAG_UPDATE) or solves by DRAG_METHOD."""
+    updates the accurate distances (``update``, geodesic_cache.DRAG_UPDATE) or solves by DRAG_METHOD."""
     import bpy
 
     from rokeby import api
-    from rokeby.reflection import evaluate, handlers
+    from rokeby.reflection import evaluate, geodesic_cache, handlers, mirror_state
 
-    evaluate.DRAG_UPDATE = update
+    geodesic_cache.DRAG_UPDATE = update
     mirror, size = _scene("sphere", shared)
     handlers.WINDOW_UPDATES = True
     evaluate._schedule = lambda fn, seconds: None  # the end-of-drag timer is run by hand below
@@ -146,9 +146,9 @@ def measure_red(shared: Path, method: str, update: bool = True, steps: int = 20,
     step = drag(steps, True)
     # How far the preview's distances of the moved constraint are from the accurate ones, at the
     # end of the drag (0.28 of the radius from where it started).
-    preview_row = np.array(evaluate.state_of(mirror).field_inputs[1][3])
+    preview_row = np.array(mirror_state.state_of(mirror).field_inputs[1][3])
     handlers.settle_previews()
-    accurate_row = np.array(evaluate.state_of(mirror).field_inputs[1][3])
+    accurate_row = np.array(mirror_state.state_of(mirror).field_inputs[1][3])
     ok = np.isfinite(accurate_row) & (accurate_row > 1e-6 * size)
     err = np.abs(preview_row[ok] - accurate_row[ok]) / accurate_row[ok]
     drag(1, True)
@@ -164,12 +164,12 @@ def measure_red(shared: Path, method: str, update: bool = True, steps: int = 20,
     handlers.settle_previews()
     accurate = drag(accurate_steps, False)
     # One accurate solve by itself (the solver of the mirror, its graph or factorisation made).
-    solver = evaluate.state_of(mirror).solver
-    tri = evaluate.state_of(mirror).geometry.triangles
+    solver = mirror_state.state_of(mirror).solver
+    tri = mirror_state.state_of(mirror).geometry.triangles
     rng = np.random.default_rng(7)
     solves, solve_cpu, drag_solves, drag_cpu = [], [], [], []
     for f in rng.choice(len(tri), 7, replace=False):
-        for m, wall, cpu in ((method.lower(), solves, solve_cpu), (evaluate.DRAG_METHOD, drag_solves, drag_cpu)):
+        for m, wall, cpu in ((method.lower(), solves, solve_cpu), (geodesic_cache.DRAG_METHOD, drag_solves, drag_cpu)):
             t0, c0 = time.perf_counter(), time.process_time()
             solver.distances([(int(f), (0.2, 0.3, 0.5))], method=m)
             wall.append((time.perf_counter() - t0) * 1e3)
@@ -179,10 +179,10 @@ def measure_red(shared: Path, method: str, update: bool = True, steps: int = 20,
         "mesh": "sphere",
         "vertices": len(mirror.data.vertices),
         "method": method,
-        "drag_method": "update" if update else evaluate.DRAG_METHOD,
+        "drag_method": "update" if update else geodesic_cache.DRAG_METHOD,
         "preview_error_mean": float(err.mean()),
         "preview_error_p99": float(np.percentile(err, 99)),
-        "solver": evaluate.DRAG_METHOD,
+        "solver": geodesic_cache.DRAG_METHOD,
         "step_python_ms": step[0],
         "step_rust_ms": step[1],
         "step_update_ms": step[2],

@@ -102,7 +102,7 @@ def addon_section(emit):
     emit("Each figure is wall / CPU time (the process's, all threads: steadier on a shared machine).")
     emit()
     emit("Preview: `update` (the accurate distances from where the drag started, updated by the change of the")
-    emit("straight-line distances, `evaluate.DRAG_UPDATE`) or a Dijkstra solve; its error: the moved constraint's")
+    emit("straight-line distances, `geodesic_cache.DRAG_UPDATE`) or a Dijkstra solve; its error: the moved constraint's")
     emit("preview distances against the accurate ones at the end of the drag (0.28 of the radius long), relative,")
     emit("mean and 99th percentile over the vertices. One Dijkstra solve is printed for comparison.")
     emit()

@@ -16,7 +16,7 @@ import numpy as np
 
 import rokeby
 from rokeby import api, envmaps
-from rokeby.reflection import evaluate
+from rokeby.reflection import mirror_state
 from rokeby.reflection.render import reflmap
 
 OUT = Path(__file__).resolve().parent
@@ -27,7 +27,7 @@ SAMPLES = 16
 def scene():
     bpy.ops.wm.read_factory_settings(use_empty=True)
     rokeby.register()
-    evaluate.reset()
+    mirror_state.reset()
     sc = bpy.context.scene
     sc.render.engine = "CYCLES"
     sc.cycles.device = "CPU"

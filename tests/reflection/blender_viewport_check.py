@@ -11,7 +11,7 @@ import bpy
 
 import rokeby
 from rokeby import api
-from rokeby.reflection import evaluate
+from rokeby.reflection import mirror_state
 from rokeby.reflection.viewport import glsl, draw as viewport
 
 W, H = 96, 72
@@ -89,7 +89,7 @@ def main():
     mask = out["direction"][..., 3] > 0
     import rokeby_native as rn
 
-    st = evaluate.state_of(mirror)
+    st = mirror_state.state_of(mirror)
     rows, distances, regions = st.field_inputs
     want = rn.reflection.edited_directions(out["position"][mask][:, :3], out["normal"][mask][:, :3], eye.astype(np.float32), rows, regions=regions)
     got = out["direction"][mask][:, :3].astype(np.float64)

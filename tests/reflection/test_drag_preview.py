@@ -9,7 +9,7 @@ import pytest
 bpy = pytest.importorskip("bpy")
 
 from rokeby import api  # noqa: E402
-from rokeby.reflection import evaluate, handlers  # noqa: E402
+from rokeby.reflection import evaluate, geodesic_cache, handlers, mirror_state  # noqa: E402
 from support.wysiwyg import new_scene, read_layers, sphere  # noqa: E402
 
 FIELDS = (evaluate.ATTRIBUTE, evaluate.RENDER_ATTRIBUTE, evaluate.RENDER_ATTRIBUTE_WA)
@@ -46,7 +46,7 @@ def _drag_red(ball, to):
 
 
 def _read(me, name):
-    attr = me.attributes[name]  # per vertex, or per face corner (rokeby.reflection.evaluate)
+    attr = me.attributes[name]  # per vertex, or per face corner (rokeby.reflection.field_attributes)
     a = np.empty(3 * len(attr.data), np.float32)
     attr.data.foreach_get("vector", a)
     return a.reshape(-1, 3)
@@ -60,7 +60,7 @@ def _accurate(ball):
     """The field a direct, non-interactive evaluation stores for the same scene, its geodesic
     distances solved afresh (the mesh and its surface queries kept, so that the handles project
     to the very same surface points)."""
-    st = evaluate.state_of(ball)
+    st = mirror_state.state_of(ball)
     st.distance_cache.clear()
     st.distances_ready = None
     rep = api.evaluate(force=True)["Ball"]
@@ -74,9 +74,9 @@ def _differs(a, b):
 
 @pytest.mark.parametrize("preview", ["update", "dijkstra"])
 def test_a_drag_shows_a_preview_and_the_release_stores_the_accurate_field(window, monkeypatch, preview):
-    """Either preview: the accurate distances updated from the drag's start (evaluate.DRAG_UPDATE),
+    """Either preview: the accurate distances updated from the drag's start (geodesic_cache.DRAG_UPDATE),
     or a Dijkstra solve (where the update is no fair guess, or with DRAG_UPDATE off)."""
-    monkeypatch.setattr(evaluate, "DRAG_UPDATE", preview == "update")
+    monkeypatch.setattr(geodesic_cache, "DRAG_UPDATE", preview == "update")
     ball = _mirror()
     for to in STEPS:
         _drag_red(ball, to)
@@ -85,14 +85,14 @@ def test_a_drag_shows_a_preview_and_the_release_stores_the_accurate_field(window
         assert any(m.startswith("drag preview:") and "dijkstra" in m and "graph" in m for m in rep.messages)
     # Which preview ran: updates ("drag"; the last step is beyond DRAG_UPDATE_REACH of the start,
     # so Dijkstra solves there), or Dijkstra only.
-    kinds = {key[0] for key in evaluate.state_of(ball).distance_cache}
+    kinds = {key[0] for key in mirror_state.state_of(ball).distance_cache}
     assert kinds == ({"graph", "drag", "dijkstra"} if preview == "update" else {"graph", "dijkstra"}), kinds
     settle = [fn for fn in window if fn is handlers._settle_timer]
     assert len(settle) == 1, "the end of the drag was not scheduled (once)"
     preview = _stored(ball)
     # The updates go on: the timer waits.
-    assert settle[0]() > 0 and evaluate.state_of(ball).preview
-    evaluate.state_of(ball).interactive_time -= 10.0  # the pause: the artist let go
+    assert settle[0]() > 0 and mirror_state.state_of(ball).preview
+    mirror_state.state_of(ball).interactive_time -= 10.0  # the pause: the artist let go
     assert settle[0]() is None
     rep = api.report(ball)
     assert not rep.drag_preview and not any(m.startswith("drag preview") for m in rep.messages), rep.summary()

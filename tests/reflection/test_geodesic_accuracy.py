@@ -228,7 +228,7 @@ def test_sidebar_marks_heat_on_a_mesh_with_open_seams():
     bpy = pytest.importorskip("bpy")
     import rokeby
     from rokeby import api
-    from rokeby.reflection import evaluate, props
+    from rokeby.reflection import mirror_state, props
     from support.ui import draw_sidebar
 
     rokeby.register()
@@ -244,8 +244,8 @@ def test_sidebar_marks_heat_on_a_mesh_with_open_seams():
     api.add_mirror(cut, metric="GEODESIC", geodesic_method="HEAT")
     api.add_constraint(cut, tuple(map(float, cut.data.vertices[100].co)), eye=(0.0, -5.0, 3.0))
     api.evaluate()
-    assert evaluate.heat_seams(cut) == 180
-    assert len(evaluate.HEAT_SEAMS_STATUS) <= 30
+    assert mirror_state.heat_seams(cut) == 180
+    assert len(mirror_state.HEAT_SEAMS_STATUS) <= 30
     assert "seams" in dict((i[0], i[2]) for i in props.GEODESIC_METHODS)["HEAT"]
 
     def labels(ob):
@@ -254,12 +254,12 @@ def test_sidebar_marks_heat_on_a_mesh_with_open_seams():
         draw_sidebar(log)
         return [t for kind, t in log if kind == "label"]
 
-    assert evaluate.HEAT_SEAMS_STATUS in labels(cut)
+    assert mirror_state.HEAT_SEAMS_STATUS in labels(cut)
     cut.rokeby.geodesic_method = "DENSE_GRAPH"
-    assert evaluate.heat_seams(cut) == 0 and evaluate.HEAT_SEAMS_STATUS not in labels(cut)
+    assert mirror_state.heat_seams(cut) == 0 and mirror_state.HEAT_SEAMS_STATUS not in labels(cut)
     v, f = _sphere(8)
     ball = mirror("welded ball", v, f)
     api.add_mirror(ball, metric="GEODESIC", geodesic_method="HEAT")
     api.add_constraint(ball, tuple(map(float, ball.data.vertices[10].co)), eye=(0.0, -5.0, 3.0))
     api.evaluate()
-    assert evaluate.heat_seams(ball) == 0 and evaluate.HEAT_SEAMS_STATUS not in labels(ball)
+    assert mirror_state.heat_seams(ball) == 0 and mirror_state.HEAT_SEAMS_STATUS not in labels(ball)

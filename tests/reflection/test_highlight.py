@@ -11,7 +11,7 @@ bpy = pytest.importorskip("bpy")
 
 import rokeby  # noqa: E402
 from rokeby import api  # noqa: E402
-from rokeby.reflection import evaluate  # noqa: E402
+from rokeby.reflection import mirror_state  # noqa: E402
 from rokeby.core.errors import RokebyError  # noqa: E402
 
 SIZE = 64
@@ -21,7 +21,7 @@ SIZE = 64
 def lit_ball():
     bpy.ops.wm.read_factory_settings(use_empty=True)
     rokeby.register()
-    evaluate.reset()
+    mirror_state.reset()
     sc = bpy.context.scene
     cycles(sc, SIZE, 16, seed=1)
     sc.world = bpy.data.worlds.new("Dim")

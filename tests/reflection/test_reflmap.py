@@ -12,7 +12,7 @@ bpy = pytest.importorskip("bpy")
 import rokeby  # noqa: E402
 from rokeby import api  # noqa: E402
 from rokeby.blender import compat  # noqa: E402
-from rokeby.reflection import evaluate  # noqa: E402
+from rokeby.reflection import mirror_state  # noqa: E402
 from rokeby.reflection.render import reflmap  # noqa: E402
 from rokeby.core.errors import RokebyError  # noqa: E402
 
@@ -23,7 +23,7 @@ ENC_W, ENC_H = 64, 32
 def _scene_basics():
     bpy.ops.wm.read_factory_settings(use_empty=True)
     rokeby.register()
-    evaluate.reset()
+    mirror_state.reset()
     sc = bpy.context.scene
     cycles(sc, SIZE, 8, seed=1)
     return sc

@@ -10,7 +10,7 @@ bpy = pytest.importorskip("bpy")
 
 import rokeby  # noqa: E402
 from rokeby import api  # noqa: E402
-from rokeby.reflection import evaluate  # noqa: E402
+from rokeby.reflection import mirror_state  # noqa: E402
 from rokeby.reflection.render import refraction  # noqa: E402
 
 from support import cycles  # noqa: E402
@@ -116,7 +116,7 @@ def test_generalised_half_vector_of_a_constant_edit_is_not_the_reflection_half_v
 @pytest.fixture
 def registered():
     rokeby.register()
-    evaluate.reset()
+    mirror_state.reset()
     yield
 
 
@@ -158,7 +158,7 @@ def test_fresh_refraction_constraint_is_the_identity_and_matches_native(register
     assert np.abs(api.stored_field(mirror) - reflection).max() > 0.05
     np.testing.assert_array_equal(api.stored_refraction(mirror), got)
     # Only the field whose rows changed is recomputed (the other is not rewritten).
-    st = evaluate._STATE[mirror.session_uid]
+    st = mirror_state._STATE[mirror.session_uid]
     before = st.rotations
     c.target_handle.location = (0.2, 0.9, -1.8)
     api.evaluate()
@@ -182,7 +182,7 @@ def test_refraction_regions_and_geodesic_distances(registered):
     far = np.linalg.norm(v - [0.5, 0.0, 0.0], axis=1) > 0.6
     assert np.abs(got[far]).max() < 1e-6 and np.abs(got[~far]).max() > 0.1
     assert np.abs(api.stored_field(mirror)).max() == 0.0  # no reflection constraint
-    assert len(evaluate._STATE[mirror.session_uid].distance_cache) == 1
+    assert len(mirror_state._STATE[mirror.session_uid].distance_cache) == 1
 
 
 def test_bad_refraction_input_is_refused_clearly(registered):
@@ -228,7 +228,7 @@ def test_kind_and_ior_survive_save_and_reload(registered, tmp_path):
     path = tmp_path / "refraction.blend"
     bpy.ops.wm.save_as_mainfile(filepath=str(path))
     bpy.ops.wm.open_mainfile(filepath=str(path))
-    evaluate.reset()
+    mirror_state.reset()
     mirror = bpy.data.objects["Plane"]
     assert [c.kind for c in mirror.rokeby.constraints] == ["REFLECTION", "REFRACTION"]
     assert mirror.rokeby.ior == pytest.approx(1.52)
@@ -270,7 +270,7 @@ def glass_ball():
     grey, so a black pixel can only be a killed path)."""
     bpy.ops.wm.read_factory_settings(use_empty=True)
     rokeby.register()
-    evaluate.reset()
+    mirror_state.reset()
     sc = bpy.context.scene
     cycles(sc, SIZE, 8, seed=1)
     sc.render.image_settings.file_format = "OPEN_EXR"

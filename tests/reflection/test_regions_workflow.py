@@ -16,7 +16,7 @@ bpy = pytest.importorskip("bpy")
 
 import rokeby  # noqa: E402
 from rokeby import api  # noqa: E402
-from rokeby.reflection import evaluate  # noqa: E402
+from rokeby.reflection import mirror_state  # noqa: E402
 from rokeby.core.meshio import load_obj  # noqa: E402
 from rokeby.reflection import freeform_regions  # noqa: E402
 
@@ -27,7 +27,7 @@ from support import cycles, mesh_path  # noqa: E402
 def registered():
     bpy.ops.wm.read_homefile(use_empty=True)
     rokeby.register()
-    evaluate.reset()
+    mirror_state.reset()
     yield
 
 
@@ -209,7 +209,7 @@ def test_deleted_group_warns_naming_it_and_the_status_says_what_renders_show():
     outside = np.setdiff1d(np.arange(len(ball.data.vertices)), patch)
     assert _angle(api.field(ball)[outside]).min() > 0.01
     stored = api.stored_field(ball)
-    np.testing.assert_allclose(evaluate.quaternions(stored), api.field(ball), atol=1e-5)
+    np.testing.assert_allclose(mirror_state.quaternions(stored), api.field(ball), atol=1e-5)
     assert not [m for m in ball.modifiers if m.name.startswith(freeform_regions.VG_MODIFIER_PREFIX)]  # its reader went
 
 
@@ -282,7 +282,7 @@ def test_pieces_no_constraint_reaches_follow_one_rule_for_any_number_of_constrai
         if k == 2:
             assert _quat_diff(geodesic[body], euclidean[body]).max() > 3e-3  # the body blends geodesically
         reports.append(rep)
-        stored = evaluate.quaternions(api.stored_field(ob))
+        stored = mirror_state.quaternions(api.stored_field(ob))
         assert np.isfinite(stored).all()
     for rep in reports:  # the status says how many pieces no constraint reaches, for K = 1 and 2
         assert rep.unreached_pieces == (3, 4), rep.unreached_pieces  # lid, knob and spout

@@ -9,7 +9,7 @@ bpy = pytest.importorskip("bpy")
 
 import rokeby  # noqa: E402
 from rokeby import api  # noqa: E402
-from rokeby.reflection import evaluate  # noqa: E402
+from rokeby.reflection import mirror_state  # noqa: E402
 from rokeby.reflection import freeform_regions  # noqa: E402
 
 from support import SHARED  # noqa: E402
@@ -24,7 +24,7 @@ import rokeby_native  # noqa: E402
 @pytest.fixture(autouse=True)
 def registered():
     rokeby.register()
-    evaluate.reset()
+    mirror_state.reset()
     yield
 
 
@@ -244,7 +244,7 @@ def test_deforming_mirror_uses_the_evaluated_mesh():
     # The red handle follows the deformed surface (Shrinkwrap) and the field uses that surface.
     red = mirror.rokeby.constraints[0].surface_handle
     assert red.matrix_world.translation.z > 0.2
-    st = evaluate._STATE[mirror.session_uid]
+    st = mirror_state._STATE[mirror.session_uid]
     np.testing.assert_allclose(st.geometry.vertices, _world_vertices(mirror), atol=1e-6)
 
 
@@ -253,7 +253,7 @@ def test_geodesic_metric_and_one_solve_per_moved_handle():
     mirror.rokeby.metric = "GEODESIC"
     rep = api.evaluate(frame=20)["Spot"]
     assert rep.status != "ERROR", rep.summary()  # the fixture's frame-20 edit folds below the surface: warned
-    st = evaluate._STATE[mirror.session_uid]
+    st = mirror_state._STATE[mirror.session_uid]
     assert len(st.distance_cache) == 2
     geodesic = api.stored_field(mirror).copy()
     mirror.rokeby.metric = "EUCLIDEAN"

@@ -19,7 +19,7 @@ from support import ROOT
 bpy = pytest.importorskip("bpy")
 
 from rokeby import api  # noqa: E402
-from rokeby.reflection import evaluate, guard  # noqa: E402
+from rokeby.reflection import evaluate, guard, mirror_state  # noqa: E402
 from rokeby.core import native  # noqa: E402
 from rokeby.reflection import field_carriers, mirror_surface  # noqa: E402
 from support.wysiwyg import (EYE, SIZE, add_aovs, agreement, angles_deg, directions, drag, mirror_material,  # noqa: E402,F401
@@ -115,7 +115,7 @@ def test_render_agrees_with_the_preview_per_pixel(tmp_path, region):
     assert rep.interpolation_error is not None and rep.interpolation_error[0] < 1.0
     assert ball.data.attributes[evaluate.RENDER_ATTRIBUTE].domain == "POINT"  # no seam: per vertex
     # api.edited_reflections gives what the render shows at each vertex: the preview's field there.
-    st = evaluate.state_of(ball)
+    st = mirror_state.state_of(ball)
     rows, _dist, regions = st.field_inputs
     kwargs = {"regions": regions} if regions else {}
     at_vertices = native.edited_directions(st.geometry.vertices, st.geometry.normals, EYE, rows, **kwargs)
@@ -184,7 +184,7 @@ def _seen_at_red_handle(ball, c=0, eye=EYE):
     """What the field shows from ``eye`` exactly at the red handle, and the direction from there
     to the green handle."""
     con = ball.rokeby.constraints[c]
-    st = evaluate.state_of(ball)
+    st = mirror_state.state_of(ball)
     rows, _dist, regions = st.field_inputs
     sp = mirror_surface.project_to_surface(ball, bpy.context.evaluated_depsgraph_get(), st.geometry, np.array(con.surface_handle.matrix_world.translation), np.array(ball.matrix_world))
     kwargs = {"regions": regions} if regions else {}
@@ -394,7 +394,7 @@ def test_a_drag_defers_the_estimate_and_it_follows_when_the_updates_pause(monkey
         during = evaluate.evaluate_mirror(ball, sc, dg, force=True, interactive=True)
     assert during.recomputed and scheduled  # the estimate waits for a pause:
     assert any("too coarse" in m for m in during.messages)  # the last one still stands
-    evaluate.state_of(ball).estimate_time -= 10.0  # the pause
+    mirror_state.state_of(ball).estimate_time -= 10.0  # the pause
     assert scheduled[0]() is None
     after = api.report(ball)
     assert after.interpolation_error[0] < first.interpolation_error[0]

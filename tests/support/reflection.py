@@ -15,11 +15,11 @@ def chrome_ball():
 
     import rokeby
     from rokeby import envmaps
-    from rokeby.reflection import evaluate
+    from rokeby.reflection import mirror_state
 
     bpy.ops.wm.read_factory_settings(use_empty=True)
     rokeby.register()
-    evaluate.reset()
+    mirror_state.reset()
     sc = bpy.context.scene
     cycles(sc, CHROME_BALL_SIZE, 8, seed=1)
     envmaps.use_studio_world(sc, "forest")

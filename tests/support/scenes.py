@@ -15,12 +15,12 @@ def empty_scene(reset_state: bool = True):
     evaluator's per-session state dropped). Returns the scene."""
     bpy = pytest.importorskip("bpy")
     import rokeby
-    from rokeby.reflection import evaluate
+    from rokeby.reflection import mirror_state
 
     bpy.ops.wm.read_factory_settings(use_empty=True)
     rokeby.register()
     if reset_state:
-        evaluate.reset()
+        mirror_state.reset()
     return bpy.context.scene
 
 

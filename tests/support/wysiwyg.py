@@ -13,7 +13,7 @@ bpy = pytest.importorskip("bpy")
 
 import rokeby  # noqa: E402
 from rokeby.blender import compat  # noqa: E402
-from rokeby.reflection import evaluate  # noqa: E402
+from rokeby.reflection import mirror_state  # noqa: E402
 from rokeby.core import native  # noqa: E402
 
 SIZE = 64
@@ -59,7 +59,7 @@ def add_aovs(nt):
 def new_scene():
     bpy.ops.wm.read_factory_settings(use_empty=True)
     rokeby.register()
-    evaluate.reset()
+    mirror_state.reset()
     sc = bpy.context.scene
     cycles(sc, SIZE, 1, seed=1)
     sc.cycles.filter_width = 0.01
@@ -118,7 +118,7 @@ def hit_mask(layers):
 def preview_directions(mirror, layers, eye=EYE):
     """What the viewport preview evaluates at each hit pixel: ``edited_directions`` of the field's
     own inputs at the rendered positions and normals."""
-    st = evaluate.state_of(mirror)
+    st = mirror_state.state_of(mirror)
     rows, dist, regions = st.field_inputs
     assert dist is None and all(r["kind"] == "euclidean" for r in regions), "Euclidean fields only here"
     m = hit_mask(layers)

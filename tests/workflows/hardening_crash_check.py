@@ -16,7 +16,7 @@ import numpy as np
 
 import rokeby
 from rokeby import api
-from rokeby.reflection import evaluate
+from rokeby.reflection import mirror_state
 
 case = sys.argv[1]
 bpy.ops.wm.read_factory_settings(use_empty=True)
@@ -58,7 +58,7 @@ finally:
 victim = None  # a Python reference to a removed ID: never touched again
 rep = api.report(ball)
 in_handler = api.stored_field(ball).copy()
-evaluate.reset()
+mirror_state.reset()
 api.evaluate(force=True)
 fresh = api.stored_field(ball)
 print("RESULT " + json.dumps({

@@ -9,7 +9,7 @@ bpy = pytest.importorskip("bpy")
 import rokeby  # noqa: E402
 from rokeby import api, demo_scene as ds  # noqa: E402
 from rokeby.blender import compat  # noqa: E402
-from rokeby.reflection import evaluate  # noqa: E402
+from rokeby.reflection import mirror_state  # noqa: E402
 
 from support import SHARED, mesh_path  # noqa: E402
 
@@ -19,7 +19,7 @@ def venus():
     mesh_path("homer.obj")
     demo = ds.build(SHARED, width=64, height=36, samples=1)
     rokeby.register()
-    evaluate.reset()
+    mirror_state.reset()
     return demo
 
 

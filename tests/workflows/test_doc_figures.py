@@ -152,7 +152,7 @@ ERROR_WORDS = re.compile(r"error|accura|over-?estimat|too long|\bmean\b|p99|perc
 # papers' own numbers. (guide, text of the figure, the words around it that identify it) -> why.
 ALLOWED: dict[tuple[str, str, str], str] = {
     ("docs/envmaps.md", "6 minutes", "pre-rendered for 6 minutes per image"): "the paper's (Fraser's) figure",
-    ("docs/addon.md", "0.25 s", "updates pause for 0.25 s"): "a setting: evaluate.SETTLE_INTERVAL",
+    ("docs/addon.md", "0.25 s", "updates pause for 0.25 s"): "a setting: geodesic_cache.SETTLE_INTERVAL",
     ("docs/addon.md", "0.4 s", "it runs at most every 0.4 s"): "a setting: evaluate.ESTIMATE_INTERVAL",
     ("docs/addon.md", "0.4 s", '("Scene (Cycles) 0.4 s, 0.5 MB")'): "an example of the status text",
     ("docs/addon.md", "0.4 s", "until the changes pause (0.4 s"): "a setting: scene_env.DEBOUNCE_SECONDS",

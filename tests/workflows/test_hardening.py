@@ -18,7 +18,7 @@ bpy = pytest.importorskip("bpy")
 
 import rokeby  # noqa: E402
 from rokeby import api  # noqa: E402
-from rokeby.reflection import evaluate  # noqa: E402
+from rokeby.reflection import mirror_state  # noqa: E402
 from rokeby.reflection.render import reflmap  # noqa: E402
 
 import make_fixtures  # noqa: E402
@@ -29,7 +29,7 @@ HERE = Path(__file__).resolve().parent
 def _fresh():
     bpy.ops.wm.read_factory_settings(use_empty=True)
     rokeby.register()
-    evaluate.reset()
+    mirror_state.reset()
     return bpy.context.scene
 
 
@@ -262,7 +262,7 @@ def test_evaluate_after_a_script_edits_the_mesh_matches_a_fresh_evaluation(how):
     rep = api.evaluate()[mirror.name]
     assert rep.recomputed
     edited = api.stored_field(mirror).copy()
-    evaluate.reset()
+    mirror_state.reset()
     api.evaluate(force=True)
     fresh = api.stored_field(mirror)
     assert np.abs(fresh - flat).max() > 0.1  # the edit matters

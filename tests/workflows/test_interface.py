@@ -21,7 +21,7 @@ bpy = pytest.importorskip("bpy")
 import rokeby  # noqa: E402
 from rokeby import api  # noqa: E402
 from rokeby.blender import compat, progress  # noqa: E402
-from rokeby.reflection import evaluate  # noqa: E402
+from rokeby.reflection import mirror_state  # noqa: E402
 from rokeby.core import words  # noqa: E402
 
 from support import ROOT  # noqa: E402
@@ -33,7 +33,7 @@ ADDON = ROOT / "addon" / "rokeby"
 def registered():
     bpy.ops.wm.read_factory_settings(use_empty=True)
     rokeby.register()
-    evaluate.reset()
+    mirror_state.reset()
     yield bpy.context.scene
     rokeby.unregister()
 

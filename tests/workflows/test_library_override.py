@@ -9,7 +9,7 @@ import pytest
 
 import rokeby
 from rokeby import api
-from rokeby.reflection import evaluate
+from rokeby.reflection import mirror_state, scene_inputs
 
 
 @pytest.fixture
@@ -57,7 +57,7 @@ def test_the_override_mirror_evaluates_and_the_linked_one_is_read_only(linked_an
     sc, original, override = linked_and_override
     reps = api.evaluate(force=True)  # raised AttributeError before (a carrier on the linked mirror)
     rep = reps["Ball"]
-    assert evaluate.report_of(override) is rep
+    assert mirror_state.report_of(override) is rep
     assert "deleted" not in rep.summary() and rep.status != "ERROR", rep.summary()
     assert rep.constraints_used == 1
     # Its mesh is the asset's (linked, shared with the original): the field lives in a carrier.
@@ -67,7 +67,7 @@ def test_the_override_mirror_evaluates_and_the_linked_one_is_read_only(linked_an
     # The linked original cannot store a field for this scene: an error saying so, listed under
     # its library's file name (the plain name is the override's).
     note = reps["Ball (asset.blend)"]
-    assert evaluate.report_of(original) is note
+    assert mirror_state.report_of(original) is note
     assert note.status == "ERROR" and "linked from library" in note.summary() and "library override" in note.summary()
     # The scene's mirrors are found by identity: both are in it, the override is evaluated.
-    assert {(o.library is not None) for o in evaluate.mirrors_of(sc)} == {True, False}
+    assert {(o.library is not None) for o in scene_inputs.mirrors_of(sc)} == {True, False}

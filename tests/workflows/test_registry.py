@@ -16,7 +16,7 @@ bpy = pytest.importorskip("bpy")
 
 import rokeby  # noqa: E402
 from rokeby import api  # noqa: E402
-from rokeby.reflection import evaluate  # noqa: E402
+from rokeby.reflection import scene_inputs  # noqa: E402
 
 try:
     from rokeby.reflection import registry  # noqa: E402
@@ -118,7 +118,7 @@ def _check(sc, what):
     sc.view_layers[0].update()
     got = sorted(ob.name for ob in registry.mirrors())
     assert got == _brute(), (what, got, _brute())
-    assert sorted(ob.name for ob in evaluate.mirrors_of(sc)) == _brute(sc), what
+    assert sorted(ob.name for ob in scene_inputs.mirrors_of(sc)) == _brute(sc), what
     assert sorted(api.evaluate(sc)) == _brute(sc), what
 
 

@@ -15,7 +15,7 @@ bpy = pytest.importorskip("bpy")
 
 from rokeby import api  # noqa: E402
 from rokeby.blender import compat  # noqa: E402
-from rokeby.reflection import evaluate, guard, handlers  # noqa: E402
+from rokeby.reflection import duplicates, evaluate, guard, handlers, mirror_state  # noqa: E402
 from rokeby.core import native  # noqa: E402
 from rokeby.reflection import field_carriers  # noqa: E402
 
@@ -45,7 +45,7 @@ def _mask(layers, side):
 def _agreement(mirror, layers, mask):
     """Angles between the rendered directions and ``mirror``'s own preview at ``mask``'s pixels
     (edited directions folded below the surface left out, as in test_wysiwyg.agreement)."""
-    rows, dist, regions = evaluate.state_of(mirror).field_inputs
+    rows, dist, regions = mirror_state.state_of(mirror).field_inputs
     assert dist is None
     p = layers["P"][mask].astype(np.float32)
     n = layers["N"][mask]
@@ -152,7 +152,7 @@ def test_a_copy_of_a_mirror_gets_its_own_handles_and_field(tmp_path, linked):
     # Its own handles, kept on the copy, where the original's sit relative to the original.
     assert c.surface_handle not in (red, green) and c.target_handle not in (red, green)
     assert copy.rokeby.regions[0].center != ball.rokeby.regions[0].center
-    assert evaluate.shrinkwrap_target(c.surface_handle) == copy and evaluate.shrinkwrap_target(red) == ball
+    assert duplicates.shrinkwrap_target(c.surface_handle) == copy and duplicates.shrinkwrap_target(red) == ball
     shift = np.array(RIGHT) - np.array(LEFT)
     for mine, theirs in ((c.surface_handle, red), (c.target_handle, green)):
         np.testing.assert_allclose(np.array(mine.matrix_world.translation), np.array(theirs.matrix_world.translation) + shift, atol=1e-5)
@@ -168,14 +168,14 @@ def test_a_copy_of_a_mirror_gets_its_own_handles_and_field(tmp_path, linked):
     np.testing.assert_allclose(layers["Combined"][left_px], before["Combined"][left_px], atol=1e-5)
     _owns_its_field(copy, layers, 1)
     # The same edit relative to each ball: the same e at translated surface points.
-    rows_a, rows_b = evaluate.state_of(ball).field_inputs[0], evaluate.state_of(copy).field_inputs[0]
+    rows_a, rows_b = mirror_state.state_of(ball).field_inputs[0], mirror_state.state_of(copy).field_inputs[0]
     np.testing.assert_allclose(rows_b[:, :3], rows_a[:, :3] + shift, atol=1e-4)
     np.testing.assert_allclose(rows_b[:, 6:], rows_a[:, 6:], atol=1e-4)
 
     # Removing the copy's mirror leaves the original's render and handles as they were.
     api.remove_mirror(copy)
     assert red.name in bpy.data.objects and green.name in bpy.data.objects
-    assert evaluate.shrinkwrap_target(red) == ball
+    assert duplicates.shrinkwrap_target(red) == ball
     after = render(tmp_path, "copy-removed")
     np.testing.assert_allclose(after["Combined"][left_px], before["Combined"][left_px], atol=1e-5)
     assert np.percentile(_turned(after, _mask(after, 1)), 99) < 0.2
@@ -200,7 +200,7 @@ def test_handles_duplicated_with_the_mirror_stay_as_blender_made_them():
     api.evaluate()
     assert len(bpy.data.objects) == count
     red = copy.rokeby.constraints[0].surface_handle
-    assert red != c0.surface_handle and evaluate.shrinkwrap_target(red) == copy and red.parent is None
+    assert red != c0.surface_handle and duplicates.shrinkwrap_target(red) == copy and red.parent is None
 
 
 def test_copies_of_a_subdivided_mirror_never_share_its_carrier():
@@ -226,10 +226,10 @@ def test_copies_of_a_subdivided_mirror_never_share_its_carrier():
         assert compat.modifier_input(ball.modifiers[field_carriers.TRANSFER_MODIFIER], source) == carrier
         # Each carrier holds its own mirror's field.
         for ob in (ball, copy):
-            np.testing.assert_allclose(api.stored_field(ob), evaluate.state_of(ob).rotations, atol=1e-6)
+            np.testing.assert_allclose(api.stored_field(ob), mirror_state.state_of(ob).rotations, atol=1e-6)
         api.remove_mirror(copy)
         assert field_carriers.carrier_of(ball) is carrier and carrier.name in bpy.data.objects
-        np.testing.assert_allclose(api.stored_field(ball), evaluate.state_of(ball).rotations, atol=1e-6)
+        np.testing.assert_allclose(api.stored_field(ball), mirror_state.state_of(ball).rotations, atol=1e-6)
 
 
 def test_a_carrier_saved_without_an_owner_is_claimed_by_its_mirror_at_load():
@@ -298,7 +298,7 @@ def test_refraction_fields_of_mirrors_sharing_a_mesh_stay_their_own():
     assert all(r.status != "ERROR" for r in reports.values()), [r.summary() for r in reports.values()]
     fields = {}
     for ob in (left, right):
-        own = evaluate.state_of(ob).refractions
+        own = mirror_state.state_of(ob).refractions
         assert own is not None and np.abs(own).max() > 0.02
         np.testing.assert_allclose(_evaluated_attribute(ob, evaluate.REFRACTION_ATTRIBUTE), own, atol=1e-6)
         np.testing.assert_allclose(api.stored_refraction(ob), own, atol=1e-6)

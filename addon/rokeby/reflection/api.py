@@ -15,6 +15,7 @@ from collections import OrderedDict
 import numpy as np
 
 from ..core import native, schema, vecmath
+from ..core.errors import RokebyError
 from ..blender import meshes, transaction
 
 __all__ = [
@@ -146,6 +147,16 @@ def edited_directions(positions, normals, eye, constraints, **kwargs) -> np.ndar
     return native.edited_directions(positions, normals, eye, constraints, **kwargs)
 
 
+def rotate(quats: np.ndarray, vectors: np.ndarray) -> np.ndarray:
+    """Apply unit quaternions (..., 4) as (x, y, z, w) to vectors (..., 3), vectorised."""
+    q = np.asarray(quats, dtype=np.float64)
+    v = np.asarray(vectors, dtype=np.float64)
+    u, w = q[..., :3], q[..., 3:4]
+    t = 2.0 * np.cross(u, v)
+    return v + w * t + np.cross(u, t)
+
+
+
 def quat_angle(quats: np.ndarray) -> np.ndarray:
     """Rotation angle in radians of each quaternion (..., 4), accurate for small angles."""
     q = np.asarray(quats, dtype=np.float64)
@@ -200,8 +211,10 @@ from . import evaluate as _ev  # noqa: E402 - aliased: api.evaluate is a functio
 from . import field_attributes as _attributes  # noqa: E402
 from . import field_carriers as _carriers  # noqa: E402
 from . import freeform_regions as _freeform  # noqa: E402
+from . import mirror_state as _state  # noqa: E402
 from . import mirror_surface as _surface  # noqa: E402
-from .evaluate import MirrorReport, RokebyError, rotate  # noqa: E402
+from . import scene_inputs as _inputs  # noqa: E402
+from .mirror_state import MirrorReport  # noqa: E402
 from .pointers import of_mirrors as _of_mirrors  # noqa: E402
 
 
@@ -254,7 +267,7 @@ def add_mirror(obj, *, metric: str = "EUCLIDEAN", geodesic_method: str = DEFAULT
     """Make the mesh object ``obj`` a Rokeby mirror (its reflections become editable). New mirrors
     measure geodesics on the dense geodesic graph (DENSE_GRAPH, rokeby_native's default method
     too); the property's own default, which files saved without the setting read back, stays HEAT."""
-    _ev.check_mirror(obj)
+    _inputs.check_mirror(obj)
     s = obj.rokeby
     for prop, value in (("metric", metric), ("geodesic_method", geodesic_method), ("polar", polar)):
         allowed = [item.identifier for item in s.bl_rna.properties[prop].enum_items]
@@ -341,13 +354,13 @@ def add_constraint(mirror, surface_point, reflected_point=None, *, eye=None, vie
     total internal reflection there (η < 1).
     """
     scene = _scene(scene)
-    _ev.require_mirror(mirror)
+    _inputs.require_mirror(mirror)
     from .props import CONSTRAINT_KINDS  # noqa: PLC0415 - Blender only
 
     kinds = [item[0] for item in CONSTRAINT_KINDS]
     if kind not in kinds:
         raise RokebyError(f"kind: '{kind}' is not one of {kinds}")
-    ior = _ev.valid_ior(mirror.rokeby.ior) if kind == "REFRACTION" else None
+    ior = _inputs.valid_ior(mirror.rokeby.ior) if kind == "REFRACTION" else None
     if eye is None:
         eye = _camera_eye(scene)
     eye = _vec3(eye, "eye")
@@ -357,7 +370,7 @@ def add_constraint(mirror, surface_point, reflected_point=None, *, eye=None, vie
     if not np.linalg.norm(incident) > 1e-12 * max(geo.size, 1e-30):
         raise RokebyError("eye: lies on the surface point")
     if kind == "REFRACTION":
-        r = _ev._transmitted(incident / np.linalg.norm(incident), sp.normal, ior, "surface_point")
+        r = _inputs._transmitted(incident / np.linalg.norm(incident), sp.normal, ior, "surface_point")
     else:
         r = reflect(incident / np.linalg.norm(incident), sp.normal)
     r /= np.linalg.norm(r)
@@ -441,7 +454,7 @@ def _made_here(ob) -> bool:
 def remove_constraint(mirror, index: int, *, delete_handles: bool = True, scene=None):
     """Remove constraint ``index``; its handles are deleted unless another item uses them."""
     scene = _scene(scene)
-    _ev.require_mirror(mirror)
+    _inputs.require_mirror(mirror)
     i = _index(mirror.rokeby.constraints, index, "constraint")
     c = mirror.rokeby.constraints[i]
     handles = [h for h in (c.surface_handle, c.target_handle) if h is not None]
@@ -478,7 +491,7 @@ def add_region(mirror, kind: str = "EUCLIDEAN", *, center=None, radius: float = 
     import bpy  # noqa: PLC0415
 
     scene = _scene(scene)
-    _ev.require_mirror(mirror)
+    _inputs.require_mirror(mirror)
     if kind not in ("EUCLIDEAN", "GEODESIC", "FREEFORM"):
         raise RokebyError(f"kind: '{kind}' is not one of EUCLIDEAN, GEODESIC, FREEFORM")
     for what, x in (("radius", radius), ("border", border)):
@@ -529,7 +542,7 @@ def add_region(mirror, kind: str = "EUCLIDEAN", *, center=None, radius: float = 
     except Exception:
         _remove_objects(created)
         raise
-    _ev.mark_dirty(mirror)
+    _state.mark_dirty(mirror)
     return len(mirror.rokeby.regions) - 1
 
 
@@ -538,7 +551,7 @@ def remove_region(mirror, index: int, *, delete_center: bool = True, scene=None)
     """Remove region ``index`` (and its centre empty when the add-on made it and nothing else
     uses it; an object of the artist's own given as ``center`` stays)."""
     scene = _scene(scene)
-    _ev.require_mirror(mirror)
+    _inputs.require_mirror(mirror)
     i = _index(mirror.rokeby.regions, index, "region")
     rg = mirror.rokeby.regions[i]
     doomed = [rg.center] if (delete_center and rg.center is not None and _handle_users(scene, rg.center, skip=rg) == 0
@@ -547,7 +560,7 @@ def remove_region(mirror, index: int, *, delete_center: bool = True, scene=None)
     mirror.rokeby.active_region = min(mirror.rokeby.active_region, max(len(mirror.rokeby.regions) - 1, 0))
     _drop_unused_readers(mirror)
     _remove_objects(doomed)
-    _ev.mark_dirty(mirror)
+    _state.mark_dirty(mirror)
 
 
 def _other_mirrors_of_mesh(mirror) -> list:
@@ -572,7 +585,7 @@ def remove_mirror(mirror, *, scene=None):
     from .render import rendering  # noqa: PLC0415
 
     scene = _scene(scene)
-    _ev.require_mirror(mirror)
+    _inputs.require_mirror(mirror)
     materials = rendering.edited_materials(mirror)
     while len(mirror.rokeby.constraints):
         remove_constraint(mirror, len(mirror.rokeby.constraints) - 1, scene=scene)
@@ -639,12 +652,12 @@ def evaluate(scene=None, frame=None, *, force: bool = False) -> "dict[str, Mirro
 
 def report(mirror) -> "MirrorReport | None":
     """The last evaluation report of ``mirror`` (None before its first evaluation)."""
-    return _ev.report_of(mirror)
+    return _state.report_of(mirror)
 
 
 def field(mirror) -> "np.ndarray | None":
     """The last computed rotation field of ``mirror``: (V, 4) quaternions (x, y, z, w)."""
-    return _ev.rotations_of(mirror)
+    return _state.rotations_of(mirror)
 
 
 def stored_field(mirror) -> "np.ndarray | None":
@@ -658,7 +671,7 @@ def stored_field(mirror) -> "np.ndarray | None":
 def refraction_field(mirror) -> "np.ndarray | None":
     """The last computed refraction field of ``mirror`` as (V, 4) quaternions (x, y, z, w), or
     None while it has no usable refraction constraint."""
-    return _ev.refractions_of(mirror)
+    return _state.refractions_of(mirror)
 
 
 def stored_refraction(mirror) -> "np.ndarray | None":
@@ -666,14 +679,14 @@ def stored_refraction(mirror) -> "np.ndarray | None":
     ``rokeby_refraction``, or in the mirror's field carrier as for ``stored_field`` (None when
     the mirror has no refraction constraint)."""
     carrier = _carriers.carrier_of(mirror)
-    return _attributes.read_attribute(carrier if carrier is not None else mirror, _ev.REFRACTION_ATTRIBUTE)
+    return _attributes.read_attribute(carrier if carrier is not None else mirror, schema.REFRACTION_ATTRIBUTE)
 
 
 def set_ior(mirror, ior: float):
     """Set the index of refraction refraction constraints and the render nodes use for ``mirror``
     (outside → inside; glass about 1.45–1.5). Must be finite and > 0."""
-    _ev.require_mirror(mirror)
-    mirror.rokeby.ior = _ev.valid_ior(ior)
+    _inputs.require_mirror(mirror)
+    mirror.rokeby.ior = _inputs.valid_ior(ior)
 
 
 def ior_from_material(mirror, material=None) -> float:
@@ -682,7 +695,7 @@ def ior_from_material(mirror, material=None) -> float:
     order). The IOR must be a plain value, not linked. Returns the IOR now set."""
     from .render import refraction  # noqa: PLC0415
 
-    _ev.require_mirror(mirror)
+    _inputs.require_mirror(mirror)
     materials = [material] if material is not None else edited_materials(mirror)
     problems = []
     for mat in materials:
@@ -700,11 +713,11 @@ def ior_from_material(mirror, material=None) -> float:
 
 def stats() -> dict:
     """How often mirrors were checked, recomputed or skipped (nothing had changed)."""
-    return _ev.stats()
+    return _state.stats()
 
 
 def reset_stats():
-    _ev.reset_stats()
+    _state.reset_stats()
 
 
 def edited_materials(mirror) -> list:
@@ -712,13 +725,13 @@ def edited_materials(mirror) -> list:
     subset was chosen with ``set_edited_materials``."""
     from .render import rendering  # noqa: PLC0415
 
-    _ev.require_mirror(mirror)
+    _inputs.require_mirror(mirror)
     return rendering.edited_materials(mirror)
 
 
 def set_edited_materials(mirror, materials=None):
     """Edit the reflections of ``materials`` only (None: all of the mirror's materials)."""
-    _ev.require_mirror(mirror)
+    _inputs.require_mirror(mirror)
     s = mirror.rokeby
     if materials is None:
         s.all_materials = True
@@ -751,7 +764,7 @@ def install_render_nodes(mirror) -> int:
     (rokeby.reflection.render.refraction; counted too), so a split Glass's reflection part is edited as well."""
     from .render import rendering  # noqa: PLC0415
 
-    _ev.require_mirror(mirror)
+    _inputs.require_mirror(mirror)
     count = rendering.install(mirror)
     mirror.rokeby.render_edits = True
     return count
@@ -765,7 +778,7 @@ def remove_render_nodes(mirror) -> int:
     its materials that no other mirror keeps."""
     from .render import rendering  # noqa: PLC0415
 
-    _ev.check_mirror(mirror)
+    _inputs.check_mirror(mirror)
     mats = {slot.material for slot in mirror.material_slots if slot.material is not None}
     if not mirror.rokeby.is_mirror:
         # A former mirror (Remove Mirror): its materials lose nodes no remaining mirror keeps.
@@ -804,7 +817,7 @@ def capture_preview_scene(mirror, *, width: int = 256, samples: int = 16, denois
     rokeby.reflection.viewport.scene_env."""
     from .viewport import scene_env  # noqa: PLC0415
 
-    _ev.require_mirror(mirror)
+    _inputs.require_mirror(mirror)
     return scene_env.capture(mirror, _scene(scene), width=width, samples=samples, denoise=denoise)
 
 
@@ -813,7 +826,7 @@ def reflection_map(mirror):
     ``rokeby.reflection.render.reflmap.direction_to_uv``), or None."""
     from .render import reflmap  # noqa: PLC0415
 
-    _ev.require_mirror(mirror)
+    _inputs.require_mirror(mirror)
     return reflmap.image_for(mirror)
 
 
@@ -821,7 +834,7 @@ def freeze(mirror, frozen: bool = True, *, eye=None):
     """Freeze (or unfreeze) ``mirror``: while frozen, reflected directions are evaluated from a
     fixed eye — ``eye`` if given, else the active constraint's generating eye — instead of
     following the camera."""
-    _ev.require_mirror(mirror)
+    _inputs.require_mirror(mirror)
     s = mirror.rokeby
     if frozen:
         if eye is None:
@@ -838,7 +851,7 @@ def freeze(mirror, frozen: bool = True, *, eye=None):
 def constraint_view(mirror, index: "int | None" = None) -> dict:
     """The generating view of a constraint (default: the active one): location, rotation
     (w, x, y, z), distance, perspective and eye, as stored when it was made."""
-    _ev.require_mirror(mirror)
+    _inputs.require_mirror(mirror)
     s = mirror.rokeby
     i = _index(s.constraints, s.active_constraint if index is None else index, "constraint")
     c = s.constraints[i]
@@ -856,7 +869,7 @@ def edited_reflections(mirror, eye=None, *, scene=None) -> np.ndarray:
     r(q) reflected from the frozen eye when the mirror is frozen, else from ``eye`` (default: the
     scene camera). This is what a renderer shows at each vertex."""
     scene = _scene(scene)
-    _ev.require_mirror(mirror)
+    _inputs.require_mirror(mirror)
     s = mirror.rokeby
     if s.freeze:
         eye = tuple(s.freeze_eye)
@@ -864,7 +877,7 @@ def edited_reflections(mirror, eye=None, *, scene=None) -> np.ndarray:
         eye = _camera_eye(scene)
     eye = _vec3(eye, "eye")
     evaluate(scene)
-    st = _ev._STATE.get(mirror.session_uid)
+    st = _state._STATE.get(mirror.session_uid)
     if st is None or st.geometry is None or st.view_parts is None:
         rep = report(mirror)
         raise RokebyError(f"mirror '{mirror.name}' has no field: {rep.summary() if rep else 'not evaluated'}")
@@ -895,7 +908,7 @@ def physical_highlight(mirror, light, eye=None, *, scene=None) -> np.ndarray:
     BRDF seen from ``eye`` (default: the scene camera): the visible, lit vertex whose reflected view
     ray points most nearly at the light, refined to the surface point where it points at it."""
     scene = _scene(scene)
-    _ev.require_mirror(mirror)
+    _inputs.require_mirror(mirror)
     if light is None or getattr(light, "type", None) != "LIGHT":
         raise RokebyError(f"light: '{getattr(light, 'name', light)}' is not a light object")
     if eye is None:
@@ -966,7 +979,7 @@ def add_highlight_constraint(mirror, light, surface_point=None, *, eye=None, nam
     handle to move the highlight, add a second one to stretch it. Only the specular lobe changes:
     shadows stay where they are (the shading normal does not move shadow rays). Returns the index."""
     scene = _scene(scene)
-    _ev.require_mirror(mirror)
+    _inputs.require_mirror(mirror)
     if surface_point is None:
         surface_point = physical_highlight(mirror, light, eye, scene=scene)
     sp, geo, _dg = _surface_of(mirror, scene, surface_point)

@@ -7,8 +7,8 @@
   mesh is re-read because animation can deform it.
 - ``render_pre``: before every final render the mirrors are evaluated for the render camera.
 - Drag previews: while a red handle is dragged in a window, the moved constraint's geodesic
-  distances come from a fast method (``evaluate.DRAG_METHOD``); when the updates pause for
-  ``evaluate.SETTLE_INTERVAL`` (the drag ended) a timer recomputes them with the mirror's own
+  distances come from a fast method (``geodesic_cache.DRAG_METHOD``); when the updates pause for
+  ``geodesic_cache.SETTLE_INTERVAL`` (the drag ended) a timer recomputes them with the mirror's own
   method. ``render_pre``, ``save_pre`` and every non-interactive evaluation (API, frame change) do
   the same at once, so renders and saved files never hold the drag-time field.
 - After each evaluation, ``rendering.sync_scene`` keeps the render nodes in the mirrors'
@@ -38,7 +38,7 @@ from bpy.app.handlers import persistent
 
 from ..blender import compat, hooks
 from ..blender import registry as index
-from . import evaluate, field_carriers, freeform_regions, guard, registry
+from . import evaluate, field_carriers, freeform_regions, geodesic_cache, guard, mirror_state, registry
 from .render import rendering, shading
 
 _busy = False
@@ -202,12 +202,12 @@ def _settle_later():
     global _settle_pending
     if not _settle_pending:
         _settle_pending = True
-        evaluate._schedule(_settle_timer, evaluate.SETTLE_INTERVAL)
+        evaluate._schedule(_settle_timer, geodesic_cache.SETTLE_INTERVAL)
 
 
 def _settle_timer():
     global _settle_pending
-    wait = evaluate.SETTLE_INTERVAL - (time.perf_counter() - evaluate.last_interactive_update())
+    wait = geodesic_cache.SETTLE_INTERVAL - (time.perf_counter() - mirror_state.last_interactive_update())
     if wait > 0 or _busy or guard.active():
         return max(wait, 0.05)  # still dragging (or the API is at work): look again later
     _settle_pending = False
@@ -220,13 +220,13 @@ def settle_previews(scene=None) -> int:
     preview with its own geodesic method, as when the drag ends; returns how many were."""
     done = 0
     for sc in [scene] if scene is not None else list(bpy.data.scenes):
-        mirrors = evaluate.previews(sc)
+        mirrors = mirror_state.previews(sc)
         depsgraph = _depsgraph_of(sc) if mirrors else None
         if depsgraph is None:
             continue
         with index.pinned():
             _run(sc, depsgraph)
-        done += len(mirrors) - len(evaluate.previews(sc))
+        done += len(mirrors) - len(mirror_state.previews(sc))
     return done
 
 
@@ -243,7 +243,7 @@ def on_load(*_args):
     _settle_pending = False  # loading a file drops the timers (and the previews go with the state)
     registry.reset()
     migrate_file()
-    evaluate.reset()
+    mirror_state.reset()
     rendering.reset()
 
 
@@ -273,7 +273,7 @@ def migrate_file():
 @persistent
 def on_undo_redo(*_args):
     registry.reset()
-    evaluate.reset()
+    mirror_state.reset()
     rendering.reset()
     # Painted images (#8): pixels in memory follow the packed data the step brought back
     # (each feature's "undo_redo" step, rokeby.blender.hooks).
@@ -300,4 +300,4 @@ def register():
 
 def unregister():
     hooks.remove("reflection")
-    evaluate.reset()
+    mirror_state.reset()

@@ -15,7 +15,7 @@ import numpy as np
 from bpy.props import BoolProperty, EnumProperty, FloatProperty, FloatVectorProperty, IntProperty, StringProperty
 
 from . import api  # reflection editing's entry points (rokeby.api re-exports their __all__)
-from . import evaluate
+from . import scene_inputs
 from ..core import words
 from ..core.errors import RokebyError
 from ..blender.progress import Progress
@@ -52,7 +52,7 @@ def poll_mirror(cls, context):
     m = api.mirror_of(ob, scene) if ob is not None and scene is not None else None
     if m is not None:
         return m
-    if scene is not None and evaluate.mirrors_of(scene):
+    if scene is not None and scene_inputs.mirrors_of(scene):
         return True
     if ob is not None and ob.type == "MESH":
         return _fail(cls, f"'{ob.name}' is not a Rokeby mirror: click Add Mirror first")
@@ -371,7 +371,7 @@ class ROKEBY_OT_freeze(_Op, bpy.types.Operator):
     action: EnumProperty(name="Action", items=[("TOGGLE", "Toggle", "", 0), ("FREEZE", "Freeze", "", 1), ("UNFREEZE", "Unfreeze", "", 2)], default="TOGGLE")
 
     def run(self, context, mirror):
-        evaluate.require_mirror(mirror)
+        scene_inputs.require_mirror(mirror)
         frozen = {"TOGGLE": not mirror.rokeby.freeze, "FREEZE": True, "UNFREEZE": False}[self.action]
         eye = None
         if frozen and not len(mirror.rokeby.constraints):
@@ -392,7 +392,7 @@ class ROKEBY_OT_distance_set(_Op, bpy.types.Operator):
     metric: EnumProperty(name="Distance", items=[(m[0], m[1], m[2], i) for i, m in enumerate(METRICS)], default="GEODESIC")
 
     def run(self, context, mirror):
-        evaluate.require_mirror(mirror)
+        scene_inputs.require_mirror(mirror)
         with Progress(context, 2) as progress:
             mirror.rokeby.metric = self.metric
             progress.step()
@@ -460,7 +460,7 @@ class ROKEBY_OT_reflection_map(_Op, bpy.types.Operator):
     def run(self, context, mirror):
         from .render import reflmap  # noqa: PLC0415
 
-        evaluate.require_mirror(mirror)
+        scene_inputs.require_mirror(mirror)
         if self.action == "CLEAR":
             reflmap.clear(mirror)
             return
@@ -511,7 +511,7 @@ class ROKEBY_OT_update(bpy.types.Operator):
 
     @classmethod
     def poll(cls, context):
-        if context.scene is None or not evaluate.mirrors_of(context.scene):
+        if context.scene is None or not scene_inputs.mirrors_of(context.scene):
             return _fail(cls, "There is no Rokeby mirror in this scene to update")
         return True
 

@@ -53,9 +53,9 @@ REGION_KINDS = [
 
 def _touch(self, context):
     """Property update: the evaluator compares fingerprints, so a tag is all that is needed."""
-    from . import evaluate
+    from . import mirror_state
 
-    evaluate.mark_dirty(self.id_data)
+    mirror_state.mark_dirty(self.id_data)
 
 
 def _region_radius_changed(self, context):

@@ -10,7 +10,7 @@ from __future__ import annotations
 import bpy
 
 from . import api  # reflection editing's entry points (rokeby.api re-exports their __all__)
-from . import evaluate
+from . import interpolation_error, mirror_state, scene_inputs
 from ..core import native, words
 from .viewport import draw as viewport
 from .viewport import scene_env
@@ -68,7 +68,7 @@ class ROKEBY_PT_main(bpy.types.Panel):
             for line in _wrap(native.missing_hint(), 48):
                 col.label(text=line)
             return
-        mirrors = evaluate.mirrors_of(context.scene)
+        mirrors = scene_inputs.mirrors_of(context.scene)
         box = layout.box()
         box.label(text=f"Mirrors ({len(mirrors)})", icon="MOD_MIRROR")
         box.prop(context.scene, schema.SCENE_VIEWPORT_PREVIEW_PROP, icon="SHADING_RENDERED")
@@ -79,7 +79,7 @@ class ROKEBY_PT_main(bpy.types.Panel):
         if viewport.last_error():
             ui_text.label(box, context, f"Preview: {viewport.last_error()}"[:240], icon="ERROR", boxed=True)
         for m in mirrors:
-            rep = evaluate.report_of(m)
+            rep = mirror_state.report_of(m)
             row = box.row(align=True)
             row.label(text=m.name, icon=_STATUS_ICON.get(rep.status, "QUESTION") if rep else "TIME")
             row.prop(m.rokeby, "enabled", text="")
@@ -98,7 +98,7 @@ class ROKEBY_PT_main(bpy.types.Panel):
         row.prop(mirror.rokeby, "enabled", text="")
         op = row.operator("rokeby.mirror_remove", text="", icon="TRASH")
         op.mirror = mirror.name
-        rep = evaluate.report_of(mirror)
+        rep = mirror_state.report_of(mirror)
         if rep is not None:
             col = layout.column(align=True)
             col.alert = rep.status == "ERROR"
@@ -111,7 +111,7 @@ class ROKEBY_PT_main(bpy.types.Panel):
                 ui_text.label(row, context, rep.render_note[:240], icon={True: "RENDER_STILL", False: "ERROR", None: "INFO"}[rep.renders])
             if rep.interpolation_error is not None:
                 p99, worst = rep.interpolation_error[:2]
-                ui_text.label(col, context, f"render vs preview: {p99:.2f}° (99th percentile), {worst:.2f}° max", icon="CHECKMARK" if p99 <= evaluate.AGREEMENT_DEGREES else "ERROR")
+                ui_text.label(col, context, f"render vs preview: {p99:.2f}° (99th percentile), {worst:.2f}° max", icon="CHECKMARK" if p99 <= interpolation_error.AGREEMENT_DEGREES else "ERROR")
             cap = scene_env.current(mirror)
             if cap is not None:  # short: details in docs/addon.md, "Viewport preview"
                 where = "GPU" if cap.route == "VIEWPORT" else "Cycles"
@@ -226,11 +226,11 @@ class ROKEBY_PT_settings(_MirrorSubPanel, bpy.types.Panel):
             op.mirror, op.metric = mirror.name, ident
         if s.metric == "GEODESIC":
             col.prop(s, "geodesic_method")
-            if evaluate.heat_seams(mirror):
+            if mirror_state.heat_seams(mirror):
                 # A short row; the method's tooltip (the enum item's description) has the details.
                 row = col.row()
                 row.alert = True
-                row.label(text=evaluate.HEAT_SEAMS_STATUS, icon="ERROR")
+                row.label(text=mirror_state.HEAT_SEAMS_STATUS, icon="ERROR")
         # Short names: a field's name gets a quarter of the sidebar's width (the tooltip has the full one).
         col.prop(s, "polar", text="Polar")
         col.prop(s, "eye_source", text="Eye")

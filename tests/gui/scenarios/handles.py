@@ -43,7 +43,7 @@ def grab(ui, ob, dx, dy, finish="click"):
 def scenario(ui):
     yield from ui.start()
     api = ui.addon("api")
-    evaluate = ui.addon("reflection.evaluate")
+    mirror_state = ui.addon("reflection.mirror_state")
     scene = bpy.context.scene
     bpy.data.objects.remove(bpy.data.objects["Cube"])
     with ui.override():
@@ -74,8 +74,8 @@ def scenario(ui):
     g0 = green.location.copy()
     yield from grab(ui, green, 30, -15)
     yield from ui.until(lambda: (green.location - g0).length > 1e-3, 10, "the green handle moved")
-    yield from ui.until(lambda: evaluate.report_of(sphere) is not None, 20, "a report")
-    rep = evaluate.report_of(sphere)
+    yield from ui.until(lambda: mirror_state.report_of(sphere) is not None, 20, "a report")
+    rep = mirror_state.report_of(sphere)
     r["green"] = {"before": vec(g0), "after": vec(green.location), "status": rep.status, "messages": list(rep.messages)}
     ui.screenshot("green-moved", crop=ui.region_box(ui.region("WINDOW")))
     # Ctrl+Z with the pointer over the 3D view: the handle goes back.
@@ -96,7 +96,7 @@ def scenario(ui):
     yield from ui.until(lambda: (red.location - r0).length > 1e-3, 10, "the red handle moved")
     yield from ui.redraws(2)
     sphere = bpy.data.objects["Mirror"]
-    rep = evaluate.report_of(sphere)
+    rep = mirror_state.report_of(sphere)
     r["red"] = {"before": vec(r0), "after": vec(red.location), "radius_after": round(red.matrix_world.translation.length, 4),
                 "status": rep.status if rep else None, "messages": list(rep.messages) if rep else None}
     ui.screenshot("red-moved", crop=ui.region_box(ui.region("WINDOW")))

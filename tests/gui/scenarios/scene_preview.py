@@ -236,11 +236,11 @@ def offscreen_at(ui, sc, mirror, red):
 
     draw = ui.addon("reflection.viewport.draw")
     glsl = ui.addon("reflection.viewport.glsl")
-    evaluate = ui.addon("reflection.evaluate")
+    mirror_state = ui.addon("reflection.mirror_state")
     region = ui.region("WINDOW")
     rv3d = region.data
     eye = tuple(rv3d.view_matrix.inverted().translation)
-    rows = np.asarray(evaluate.state_of(mirror).field_inputs[0])
+    rows = np.asarray(mirror_state.state_of(mirror).field_inputs[0])
     out = {"constraint_e": np.round(rows[0, 6:9], 4).tolist()}
     q = location_3d_to_region_2d(region, rv3d, red.matrix_world.translation)
     x, y = int(round(q.x)), int(round(q.y))

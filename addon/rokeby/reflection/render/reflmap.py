@@ -46,7 +46,7 @@ import numpy as np
 from . import shading
 from ... import envmaps
 from ...blender import transaction
-from .. import evaluate
+from .. import scene_inputs
 from ...core.errors import RokebyError
 from ...core import latlong, schema
 
@@ -216,7 +216,7 @@ def capture_origin(mirror, depsgraph=None) -> np.ndarray:
     set, else the centre of the mirror's world-space bounding box (of the evaluated mesh)."""
     import bpy  # noqa: PLC0415
 
-    evaluate.require_mirror(mirror)
+    scene_inputs.require_mirror(mirror)
     origin = mirror.rokeby.map_origin
     if origin is not None:
         p = np.array(origin.matrix_world.translation, dtype=np.float64)
@@ -519,7 +519,7 @@ def capture(mirror, *, resolution=None, samples=None, storage: str = "AUTO", sce
     import bpy  # noqa: PLC0415
 
     scene = scene if scene is not None else bpy.context.scene
-    evaluate.require_mirror(mirror)
+    scene_inputs.require_mirror(mirror)
     s = mirror.rokeby
     width = _resolution(s.map_resolution if resolution is None else resolution)
     samples = s.map_samples if samples is None else samples

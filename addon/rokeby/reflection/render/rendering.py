@@ -165,9 +165,9 @@ def sync_scene(scene, reports=None, *, changed_materials=(), force=False) -> boo
             _NOTES[m.session_uid] = (None, f"renders show no edit: {why}")
         rep = (reports or {}).get(m.name)
         if rep is None:
-            from .. import evaluate  # noqa: PLC0415
+            from .. import mirror_state  # noqa: PLC0415
 
-            rep = evaluate.report_of(m)
+            rep = mirror_state.report_of(m)
         note = _NOTES.get(m.session_uid)
         if rep is None or note is None:
             continue

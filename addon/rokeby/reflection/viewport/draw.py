@@ -8,7 +8,7 @@ built-in sky with a 15° grid. Overlays: the red and green handles, a red-to-gre
 constraint, region borders (the outer and inner circle of Euclidean regions, facing the view; the
 edge and the full-effect core of geodesic and free-form regions as lines on the surface).
 
-Inputs are the evaluator's (``evaluate.state_of``): its world-space mesh, its constraint rows,
+Inputs are the evaluator's (``mirror_state.state_of``): its world-space mesh, its constraint rows,
 geodesic distances and region weights, so the preview and the stored field agree. Beyond
 RK_MAX_CONSTRAINTS constraints or RK_MAX_REGIONS regions the shader interpolates the stored
 per-vertex field instead, and ``status_of`` says so (the sidebar shows it).
@@ -25,7 +25,7 @@ import bpy
 
 from ...blender import compat
 from ...blender.gpu import create_shader
-from .. import evaluate
+from .. import mirror_state, scene_inputs
 from . import glsl, gpu_capture, scene_env
 from ...core import schema
 
@@ -160,7 +160,7 @@ def draw_mirror(obj, scene, view_projection, eye, *, eye_is_direction=False, out
     import gpu  # noqa: PLC0415
     from mathutils import Matrix  # noqa: PLC0415
 
-    st = evaluate.state_of(obj)
+    st = mirror_state.state_of(obj)
     if st is None or st.geometry is None or st.field_inputs is None:
         _status[obj.name] = "preview: waiting for the first evaluation"
         return False
@@ -264,8 +264,8 @@ def overlay_geometry(obj, scene, view_right, view_up) -> dict:
     for c in obj.rokeby.constraints:
         if not c.enabled:
             continue
-        red = c.surface_handle if evaluate.object_in_scene(c.surface_handle, scene) else None
-        green = c.target_handle if evaluate.object_in_scene(c.target_handle, scene) else None
+        red = c.surface_handle if scene_inputs.object_in_scene(c.surface_handle, scene) else None
+        green = c.target_handle if scene_inputs.object_in_scene(c.target_handle, scene) else None
         ends = []
         for ob, colour in ((red, RED), (green, GREEN)):
             if ob is not None:
@@ -278,9 +278,9 @@ def overlay_geometry(obj, scene, view_right, view_up) -> dict:
                 lines.append(p)
                 line_colours.append(colour)
     outer, core = [], []
-    st = evaluate.state_of(obj)
+    st = mirror_state.state_of(obj)
     for rg in obj.rokeby.regions:
-        if rg.enabled and rg.kind == "EUCLIDEAN" and evaluate.object_in_scene(rg.center, scene) and rg.radius > 0:
+        if rg.enabled and rg.kind == "EUCLIDEAN" and scene_inputs.object_in_scene(rg.center, scene) and rg.radius > 0:
             centre = np.array(rg.center.matrix_world.translation)
             outer.append(circle(centre, rg.radius, view_right, view_up))
             inner = rg.radius - min(rg.border, rg.radius)
@@ -354,7 +354,7 @@ def draw_scene(scene, view_projection, eye, *, eye_is_direction=False, viewport_
     ``shading``: the view's shading type (see ``steps_aside``)."""
     drawn = 0
     aside = steps_aside(scene, shading)
-    for obj in evaluate.mirrors_of(scene):
+    for obj in scene_inputs.mirrors_of(scene):
         s = obj.rokeby
         if not (s.enabled and s.show_preview) or obj.type != "MESH" or not obj.visible_get():
             _status.pop(obj.name, None)

@@ -318,11 +318,11 @@ def ensure(mirror, scene=None, *, width: int | None = None, samples: int | None 
 def previewed(scene) -> list:
     """The mirrors of ``scene`` whose preview is drawn (the scene switch on, the mirror's too)."""
     from ...core import schema  # noqa: PLC0415
-    from .. import evaluate  # noqa: PLC0415
+    from .. import scene_inputs  # noqa: PLC0415
 
     if not getattr(scene, schema.SCENE_VIEWPORT_PREVIEW_PROP, False):
         return []
-    return [ob for ob in evaluate.mirrors_of(scene) if ob.type == "MESH" and ob.rokeby.enabled and ob.rokeby.show_preview and ob.visible_get()]
+    return [ob for ob in scene_inputs.mirrors_of(scene) if ob.type == "MESH" and ob.rokeby.enabled and ob.rokeby.show_preview and ob.visible_get()]
 
 
 def refresh(scene=None) -> int:
