@@ -36,6 +36,7 @@ from __future__ import annotations
 import hashlib
 import os
 import time
+from typing import NamedTuple
 
 import numpy as np
 
@@ -130,6 +131,17 @@ def _schedule(fn, seconds: float):
     bpy.app.timers.register(fn, first_interval=seconds)
 
 
+class _Inputs(NamedTuple):
+    """What one evaluation read from the scene (rokeby.reflection.scene_inputs)."""
+
+    rows: np.ndarray  # reflection constraints [p, r, e], (K, 9)
+    points: list  # their surface points
+    specs: list  # region specs
+    t_rows: np.ndarray  # refraction constraints [p, t, e_t], (T, 9)
+    t_points: list
+    ior: "float | None"  # the mirror's IOR, while it has refraction constraints
+
+
 def evaluate_mirror(obj, scene, depsgraph, *, force=False, reread_geometry=False, interactive=False) -> MirrorReport:
     """Evaluate one mirror if its inputs changed (or ``force``); never raises. ``interactive``
     (the depsgraph handler, while the artist drags): the render-vs-preview estimate runs at most
@@ -144,55 +156,12 @@ def evaluate_mirror(obj, scene, depsgraph, *, force=False, reread_geometry=False
     uid = obj.session_uid
     state = _STATE.setdefault(uid, _State())
     try:
-        if obj.type != "MESH":
-            raise RokebyError(f"mirror '{name}' is {words.kind(obj.type)}, not a mesh")
-        if obj.library is not None:
-            # Read-only: its field cannot follow this scene's camera or edits (no carrier, no
-            # attribute can be written to it); a library override is a mirror of its own.
-            raise RokebyError(f"mirror '{name}' is linked from library '{obj.library.filepath}' and cannot store the field: "
-                              "make it local or a library override")
+        _check_writable(obj, name)
         settings = obj.rokeby
-        if obj.mode == "EDIT":
-            # Edit Mode writes its own mesh back on exit; the field follows when it does.
-            report.warn("paused while the mirror is in Edit Mode")
-            _DIRTY.add(uid)
-            state.report = report
-            return report
-        changes = sync_freeform_regions(obj)
-        if changes:
-            # The reader's weights are in the next evaluation of the mesh; the ones at hand are
-            # stale, so nothing is computed now and the previous field stays, as the status says.
-            _DIRTY.add(uid)
-            state.fingerprint = None
-            for msg in changes:
-                report.warn(f"{msg}; the field follows at the next update (until then renders show the previous one)")
-            report.pending = True
-            state.report = report
+        if _waits(obj, state, report):
             return report
         mirror_matrix = _finite_matrix(obj.evaluated_get(depsgraph).matrix_world, f"mirror '{name}'")
-        groups = sorted({rg.vertex_group for rg in settings.regions if rg.enabled and rg.kind == "FREEFORM" and rg.vertex_group})
-        geo = state.geometry
-        if (geo is None or reread_geometry or force or uid in _DIRTY or geo.shared != shares_mesh(obj)
-                or not np.array_equal(getattr(geo, "matrix", None), mirror_matrix)):
-            _DIRTY.discard(uid)
-            try:
-                new = read_geometry(obj, depsgraph, mirror_matrix, groups)
-            except RokebyError:
-                state.geometry = None
-                raise
-            new.matrix = mirror_matrix
-            if not new.same_positions(geo):
-                state.geometry_version += 1
-                state.distance_cache.clear()
-                state.region_cache.clear()
-            else:
-                new.bvh, new._poly_start, new.edges = geo.bvh, geo._poly_start, geo.edges
-                new.uses, new.max_edge = geo.uses, geo.max_edge
-            if new.bvh is None and geo is not None and geo.local is not None \
-                    and np.array_equal(geo.local, new.local) and np.array_equal(geo.triangles, new.triangles):
-                # moved, not reshaped: the object-space BVH (or the count towards one) still holds
-                new.bvh, new.uses, new.max_edge = geo.bvh, geo.uses, geo.max_edge
-            state.geometry = geo = new
+        geo = _current_geometry(obj, state, depsgraph, mirror_matrix, reread=reread_geometry or force)
         geo.uses += 1
         report.vertices = len(geo.vertices)
         report.field_mesh = geo.source
@@ -200,25 +169,11 @@ def evaluate_mirror(obj, scene, depsgraph, *, force=False, reread_geometry=False
         if settings.freeze and not getattr(settings, "freeze_eye_set", True):
             report.warn("frozen, but no eye was stored (it had no constraint and the scene no camera): renders reflect from the frozen eye "
                         f"{tuple(round(float(x), 3) for x in settings.freeze_eye)}; unfreeze and freeze again, or set the frozen eye")
-        t_rows, t_points, ior = np.zeros((0, 9), np.float32), [], None
-        if not settings.enabled:
-            rows, points, specs = np.zeros((0, 9), np.float32), [], []
-        else:
-            rows, points = _constraint_inputs(obj, scene, depsgraph, geo, mirror_matrix, report, eye_now=eye_now)
-            specs = _region_inputs(obj, scene, depsgraph, geo, mirror_matrix, report)
-            if eye_now is None and len(settings.constraints):
-                report.warn("the scene has no camera, so the render eye is unknown: constraints use the views they were made from and region borders blend view-independently; set a scene camera (or freeze the mirror)")
-            if any(c.enabled and getattr(c, "kind", "REFLECTION") == "REFRACTION" for c in settings.constraints):
-                try:
-                    ior = valid_ior(settings.ior)
-                except RokebyError as exc:
-                    report.warn(f"mirror '{name}': {exc}; its refraction constraints are skipped")
-                else:
-                    t_rows, t_points = _constraint_inputs(obj, scene, depsgraph, geo, mirror_matrix, report, "REFRACTION", ior, eye_now=eye_now)
+        inputs = _read_inputs(obj, scene, depsgraph, geo, mirror_matrix, report, eye_now)
         # The stored field does not depend on the eye (renders blend eq. 7 per pixel); the rows
         # carry it when constraints are seen from the camera.
-        fp_reflection = _fingerprint(obj, state.geometry_version, mirror_matrix, rows, specs)
-        fp_refraction = _fingerprint(obj, state.geometry_version, mirror_matrix, t_rows, specs, (ior,))
+        fp_reflection = _fingerprint(obj, state.geometry_version, mirror_matrix, inputs.rows, inputs.specs)
+        fp_refraction = _fingerprint(obj, state.geometry_version, mirror_matrix, inputs.t_rows, inputs.specs, (inputs.ior,))
         fp = fp_reflection + fp_refraction
         # The drag has ended (or a render, a save or the API asks): fields shown with drag-time
         # distances are recomputed with the mirror's own method, whatever else changed.
@@ -227,105 +182,17 @@ def evaluate_mirror(obj, scene, depsgraph, *, force=False, reread_geometry=False
             state.interactive_time = time.perf_counter()
         if fp == state.fingerprint and not force and not settle and state.report is not None and state.report.status != "ERROR":
             _STATS["skipped"] += 1
-            if geo.shared:
-                strip_field(obj.data)  # e.g. left by this mirror before its mesh was linked to another object
-            kept = state.report
-            kept.recomputed = False
-            # Same field, but the warnings describe the scene as it is now (e.g. a deleted light
-            # whose highlight handle stayed where it was).
-            kept.messages, kept.status, kept.notes = list(report.messages), report.status, list(report.notes)
-            if state.reach_note is not None:
-                kept.note(state.reach_note)
-            if state.preview:
-                kept.note(_preview_note(obj))
-            for msg in state.field_notes:
-                kept.warn(msg)
-            kept.eye = report.eye
-            return kept
-        report.constraints_used = len(rows) + len(t_rows)
+            return _kept_report(obj, state, geo, report)
+        report.constraints_used = len(inputs.rows) + len(inputs.t_rows)
         method = {"HEAT": "heat", "DIJKSTRA": "dijkstra", "EXACT": "exact", "GRAPH": "graph", "DENSE_GRAPH": "dense_graph"}[settings.geodesic_method]
         polar = "exact" if settings.polar == "EXACT" else "fast"
-        distances = None
-        previewed = False
-        if len(rows) + len(t_rows) and settings.metric == "GEODESIC":
-            # One query for both kinds: the per-point cache keeps every current constraint's solve.
-            distances, previewed = _geodesic_distances(state, geo, points + t_points, method, timer, drag=interactive)
-            if np.all(np.isinf(distances)):
-                report.warn("no constraint reaches this mesh over its surface; it takes the field of straight-line distances")
-            report.unreached_pieces = _unreached_pieces(state, geo, distances)
-        state.reach_note = None
-        if report.unreached_pieces is not None:
-            n, total = report.unreached_pieces
-            state.reach_note = (
-                f"{n} of {total} pieces of the mesh have no constraint on them: geodesic distances do not cross gaps, "
-                "so there the constraints blend by straight-line distance")
-            report.note(state.reach_note)
-        old = state.field_fingerprints
-        transfer = geo.source == "transfer"
-        target = carrier_of(obj) if transfer else obj
-        stored = target is not None and _has_attribute(target, ATTRIBUTE) and _has_render_attribute(target)
-        if force or settle or old.get(ATTRIBUTE) != fp_reflection or not stored:
-            kwargs = {"polar": polar}
-            if specs:
-                kwargs["regions"] = _regions_for_native(state, geo, specs, points, method, timer)
-            if distances is not None and len(rows):
-                kwargs["distances"] = unreached_fallback(distances[: len(rows)], rows, geo.vertices, kwargs.get("regions"))
-            # One field for the preview and the render: the parts of eq. 7 that do not depend on
-            # the view, blended towards r rᵀ per shading point by the render nodes.
-            parts = timer(native.rotation_field, geo.vertices, rows, output="view_blend", **kwargs)
-            if specs:
-                if geo.edges is None:
-                    geo.edges = mesh_edges(geo.triangles)
-                parts = extend_rotations_outward(parts, geo.edges)
-            # The view-independent form for scripts and tools (eq. 7 towards I).
-            rv = timer(native.view_blend_rotation_vectors, parts)
-            ramp = ramp_form(specs)
-            if transfer:
-                target = ensure_carrier(obj, depsgraph)
-            else:
-                remove_carrier(obj)
-            write_attribute(target, rv, update=False)
-            write_render_attribute(target, parts, state, ramp=ramp, timer=timer)
-            state.view_parts = (parts, ramp)
-            state.rotations = rv
-            state.field_inputs = (rows, kwargs.get("distances"), kwargs.get("regions") or [])
-            report.interpolation_error = None
-            if eye_now is None or not len(rows):
-                state.field_notes, state.estimate_args = [], None
-            else:
-                args = (geo, parts, eye_now, rows, kwargs, ramp)
-                if interactive and time.perf_counter() - state.estimate_time < ESTIMATE_INTERVAL:
-                    # In the middle of a drag: the last estimate stands, a new one follows when
-                    # the updates pause (a timer), so each drag step pays only for the field.
-                    report.interpolation_error = state.report.interpolation_error if state.report is not None else None
-                    _defer_estimate(obj, state, args)
-                else:
-                    report.interpolation_error = _estimate(state, args, timer)
-            for msg in state.field_notes:
-                report.warn(msg)
-            old[ATTRIBUTE] = fp_reflection
-        elif state.report is not None:
-            report.interpolation_error = state.report.interpolation_error
-            for msg in state.field_notes:
-                report.warn(msg)
-        # The refraction field goes where the reflection field went (the mirror's own carrier when
-        # the mesh is shared or its vertex count changes).
-        target = (carrier_of(obj) or ensure_carrier(obj, depsgraph)) if transfer else obj
-        if not len(t_rows):
-            old.pop(REFRACTION_ATTRIBUTE, None)
-            state.refractions = None
-            remove_attribute(target, REFRACTION_ATTRIBUTE)
-        elif force or settle or old.get(REFRACTION_ATTRIBUTE) != fp_refraction or not _has_attribute(target, REFRACTION_ATTRIBUTE):
-            kwargs = {"polar": polar}
-            if specs:
-                kwargs["regions"] = _regions_for_native(state, geo, specs, t_points, method, timer)
-            if distances is not None:
-                kwargs["distances"] = unreached_fallback(distances[len(rows):], t_rows, geo.vertices, kwargs.get("regions"))
-            tv = timer(native.rotation_field, geo.vertices, t_rows, output="rotation_vector", **kwargs)
-            write_attribute(target, tv, REFRACTION_ATTRIBUTE)
-            state.refractions = tv
-            old[REFRACTION_ATTRIBUTE] = fp_refraction
-        if transfer and geo.shared:
+        geodesic = bool(len(inputs.rows) + len(inputs.t_rows)) and settings.metric == "GEODESIC"
+        distances, previewed = _distances(state, geo, report, inputs, method, timer, geodesic=geodesic, drag=interactive)
+        _reflection_field(obj, depsgraph, state, geo, report, inputs, distances, method, polar, eye_now, timer,
+                          again=force or settle, fingerprint=fp_reflection, interactive=interactive)
+        _refraction_field(obj, depsgraph, state, geo, inputs, distances, method, polar, timer,
+                          again=force or settle, fingerprint=fp_refraction)
+        if geo.source == "transfer" and geo.shared:
             # Every object using a shared mesh carries its own field: none stays in the mesh,
             # where it would render on objects that are not (or no longer) this mirror.
             strip_field(obj.data)
@@ -355,6 +222,215 @@ def evaluate_mirror(obj, scene, depsgraph, *, force=False, reread_geometry=False
     report.python_ms = (time.perf_counter() - t0) * 1e3 - report.native_ms
     state.report = report
     return report
+
+
+def _check_writable(obj, name: str):
+    """A RokebyError unless ``obj`` is a mesh object the field can be written to."""
+    if obj.type != "MESH":
+        raise RokebyError(f"mirror '{name}' is {words.kind(obj.type)}, not a mesh")
+    if obj.library is not None:
+        # Read-only: its field cannot follow this scene's camera or edits (no carrier, no
+        # attribute can be written to it); a library override is a mirror of its own.
+        raise RokebyError(f"mirror '{name}' is linked from library '{obj.library.filepath}' and cannot store the field: "
+                          "make it local or a library override")
+
+
+def _waits(obj, state, report) -> bool:
+    """Whether the mirror's field waits for a later update (the previous one stays; ``report``,
+    now the mirror's report, says why): in Edit Mode, or while a free-form region's reader is
+    being (re)made."""
+    uid = obj.session_uid
+    if obj.mode == "EDIT":
+        # Edit Mode writes its own mesh back on exit; the field follows when it does.
+        report.warn("paused while the mirror is in Edit Mode")
+        _DIRTY.add(uid)
+        state.report = report
+        return True
+    changes = sync_freeform_regions(obj)
+    if changes:
+        # The reader's weights are in the next evaluation of the mesh; the ones at hand are
+        # stale, so nothing is computed now and the previous field stays, as the status says.
+        _DIRTY.add(uid)
+        state.fingerprint = None
+        for msg in changes:
+            report.warn(f"{msg}; the field follows at the next update (until then renders show the previous one)")
+        report.pending = True
+        state.report = report
+        return True
+    return False
+
+
+def _current_geometry(obj, state, depsgraph, mirror_matrix, *, reread: bool):
+    """The mirror's geometry for this evaluation: the last one read, or read again (``reread``,
+    the mirror marked dirty, its mesh newly shared or unshared, or moved). New positions start a
+    new geometry version, which empties the distance and region caches."""
+    uid = obj.session_uid
+    groups = sorted({rg.vertex_group for rg in obj.rokeby.regions if rg.enabled and rg.kind == "FREEFORM" and rg.vertex_group})
+    geo = state.geometry
+    if (geo is None or reread or uid in _DIRTY or geo.shared != shares_mesh(obj)
+            or not np.array_equal(getattr(geo, "matrix", None), mirror_matrix)):
+        _DIRTY.discard(uid)
+        try:
+            new = read_geometry(obj, depsgraph, mirror_matrix, groups)
+        except RokebyError:
+            state.geometry = None
+            raise
+        new.matrix = mirror_matrix
+        if not new.same_positions(geo):
+            state.geometry_version += 1
+            state.distance_cache.clear()
+            state.region_cache.clear()
+        else:
+            new.bvh, new._poly_start, new.edges = geo.bvh, geo._poly_start, geo.edges
+            new.uses, new.max_edge = geo.uses, geo.max_edge
+        if new.bvh is None and geo is not None and geo.local is not None \
+                and np.array_equal(geo.local, new.local) and np.array_equal(geo.triangles, new.triangles):
+            # moved, not reshaped: the object-space BVH (or the count towards one) still holds
+            new.bvh, new.uses, new.max_edge = geo.bvh, geo.uses, geo.max_edge
+        state.geometry = geo = new
+    return geo
+
+
+def _read_inputs(obj, scene, depsgraph, geo, mirror_matrix, report, eye_now) -> _Inputs:
+    """The constraint rows of both kinds and the region specs of an enabled mirror (none while
+    it is disabled); what cannot be used is reported."""
+    settings = obj.rokeby
+    t_rows, t_points, ior = np.zeros((0, 9), np.float32), [], None
+    if not settings.enabled:
+        return _Inputs(np.zeros((0, 9), np.float32), [], [], t_rows, t_points, ior)
+    rows, points = _constraint_inputs(obj, scene, depsgraph, geo, mirror_matrix, report, eye_now=eye_now)
+    specs = _region_inputs(obj, scene, depsgraph, geo, mirror_matrix, report)
+    if eye_now is None and len(settings.constraints):
+        report.warn("the scene has no camera, so the render eye is unknown: constraints use the views they were made from and region borders blend view-independently; set a scene camera (or freeze the mirror)")
+    if any(c.enabled and getattr(c, "kind", "REFLECTION") == "REFRACTION" for c in settings.constraints):
+        try:
+            ior = valid_ior(settings.ior)
+        except RokebyError as exc:
+            report.warn(f"mirror '{report.mirror}': {exc}; its refraction constraints are skipped")
+        else:
+            t_rows, t_points = _constraint_inputs(obj, scene, depsgraph, geo, mirror_matrix, report, "REFRACTION", ior, eye_now=eye_now)
+    return _Inputs(rows, points, specs, t_rows, t_points, ior)
+
+
+def _kept_report(obj, state, geo, report) -> MirrorReport:
+    """The mirror's last report, for an evaluation that found nothing changed: the same field,
+    with the warnings of ``report``, which describe the scene as it is now (e.g. a deleted light
+    whose highlight handle stayed where it was)."""
+    if geo.shared:
+        strip_field(obj.data)  # e.g. left by this mirror before its mesh was linked to another object
+    kept = state.report
+    kept.recomputed = False
+    kept.messages, kept.status, kept.notes = list(report.messages), report.status, list(report.notes)
+    if state.reach_note is not None:
+        kept.note(state.reach_note)
+    if state.preview:
+        kept.note(_preview_note(obj))
+    for msg in state.field_notes:
+        kept.warn(msg)
+    kept.eye = report.eye
+    return kept
+
+
+def _distances(state, geo, report, inputs, method, timer, *, geodesic: bool, drag: bool):
+    """The (K + T, V) geodesic distances of both kinds of constraints (None unless ``geodesic``)
+    and whether any row is a drag preview; pieces of the mesh no constraint reaches are noted on
+    the report."""
+    distances = None
+    previewed = False
+    if geodesic:
+        # One query for both kinds: the per-point cache keeps every current constraint's solve.
+        distances, previewed = _geodesic_distances(state, geo, inputs.points + inputs.t_points, method, timer, drag=drag)
+        if np.all(np.isinf(distances)):
+            report.warn("no constraint reaches this mesh over its surface; it takes the field of straight-line distances")
+        report.unreached_pieces = _unreached_pieces(state, geo, distances)
+    state.reach_note = None
+    if report.unreached_pieces is not None:
+        n, total = report.unreached_pieces
+        state.reach_note = (
+            f"{n} of {total} pieces of the mesh have no constraint on them: geodesic distances do not cross gaps, "
+            "so there the constraints blend by straight-line distance")
+        report.note(state.reach_note)
+    return distances, previewed
+
+
+def _reflection_field(obj, depsgraph, state, geo, report, inputs, distances, method, polar, eye_now, timer, *,
+                      again: bool, fingerprint: bytes, interactive: bool):
+    """Compute and write the reflection field when its inputs changed, its attributes are
+    missing, or ``again`` (forced, or a drag preview to replace); then estimate how close renders
+    come to the preview (deferred in the middle of a drag). Otherwise the last estimate stands."""
+    rows, points, specs = inputs.rows, inputs.points, inputs.specs
+    old = state.field_fingerprints
+    transfer = geo.source == "transfer"
+    target = carrier_of(obj) if transfer else obj
+    stored = target is not None and _has_attribute(target, ATTRIBUTE) and _has_render_attribute(target)
+    if again or old.get(ATTRIBUTE) != fingerprint or not stored:
+        kwargs = {"polar": polar}
+        if specs:
+            kwargs["regions"] = _regions_for_native(state, geo, specs, points, method, timer)
+        if distances is not None and len(rows):
+            kwargs["distances"] = unreached_fallback(distances[: len(rows)], rows, geo.vertices, kwargs.get("regions"))
+        # One field for the preview and the render: the parts of eq. 7 that do not depend on
+        # the view, blended towards r rᵀ per shading point by the render nodes.
+        parts = timer(native.rotation_field, geo.vertices, rows, output="view_blend", **kwargs)
+        if specs:
+            if geo.edges is None:
+                geo.edges = mesh_edges(geo.triangles)
+            parts = extend_rotations_outward(parts, geo.edges)
+        # The view-independent form for scripts and tools (eq. 7 towards I).
+        rv = timer(native.view_blend_rotation_vectors, parts)
+        ramp = ramp_form(specs)
+        if transfer:
+            target = ensure_carrier(obj, depsgraph)
+        else:
+            remove_carrier(obj)
+        write_attribute(target, rv, update=False)
+        write_render_attribute(target, parts, state, ramp=ramp, timer=timer)
+        state.view_parts = (parts, ramp)
+        state.rotations = rv
+        state.field_inputs = (rows, kwargs.get("distances"), kwargs.get("regions") or [])
+        report.interpolation_error = None
+        if eye_now is None or not len(rows):
+            state.field_notes, state.estimate_args = [], None
+        else:
+            args = (geo, parts, eye_now, rows, kwargs, ramp)
+            if interactive and time.perf_counter() - state.estimate_time < ESTIMATE_INTERVAL:
+                # In the middle of a drag: the last estimate stands, a new one follows when
+                # the updates pause (a timer), so each drag step pays only for the field.
+                report.interpolation_error = state.report.interpolation_error if state.report is not None else None
+                _defer_estimate(obj, state, args)
+            else:
+                report.interpolation_error = _estimate(state, args, timer)
+        for msg in state.field_notes:
+            report.warn(msg)
+        old[ATTRIBUTE] = fingerprint
+    elif state.report is not None:
+        report.interpolation_error = state.report.interpolation_error
+        for msg in state.field_notes:
+            report.warn(msg)
+
+
+def _refraction_field(obj, depsgraph, state, geo, inputs, distances, method, polar, timer, *, again: bool, fingerprint: bytes):
+    """Compute and write the refraction field when its inputs changed, its attribute is missing,
+    or ``again``; remove it while the mirror has no usable refraction constraint."""
+    rows, t_rows, t_points, specs = inputs.rows, inputs.t_rows, inputs.t_points, inputs.specs
+    old = state.field_fingerprints
+    # The refraction field goes where the reflection field went (the mirror's own carrier when
+    # the mesh is shared or its vertex count changes).
+    target = (carrier_of(obj) or ensure_carrier(obj, depsgraph)) if geo.source == "transfer" else obj
+    if not len(t_rows):
+        old.pop(REFRACTION_ATTRIBUTE, None)
+        state.refractions = None
+        remove_attribute(target, REFRACTION_ATTRIBUTE)
+    elif again or old.get(REFRACTION_ATTRIBUTE) != fingerprint or not _has_attribute(target, REFRACTION_ATTRIBUTE):
+        kwargs = {"polar": polar}
+        if specs:
+            kwargs["regions"] = _regions_for_native(state, geo, specs, t_points, method, timer)
+        if distances is not None:
+            kwargs["distances"] = unreached_fallback(distances[len(rows):], t_rows, geo.vertices, kwargs.get("regions"))
+        tv = timer(native.rotation_field, geo.vertices, t_rows, output="rotation_vector", **kwargs)
+        write_attribute(target, tv, REFRACTION_ATTRIBUTE)
+        state.refractions = tv
+        old[REFRACTION_ATTRIBUTE] = fingerprint
 
 
 def mesh_fingerprint(obj) -> bytes:
