@@ -253,7 +253,7 @@ def scene_model_demo(bpy, api, mirror, eye, size, picks, m):
     rep = api.report(mirror)
     print(f"  green handle dragged up: field recomputed by the depsgraph handler in {rep.python_ms + rep.native_ms:.1f} ms")
     print(f"    (Python {rep.python_ms:.1f} ms, Rust {rep.native_ms:.1f} ms), largest turn now {np.degrees(api.quat_angle(api.field(mirror)).max()):.1f} deg,")
-    print(f"    written to the point attribute '{rokeby.reflection.evaluate.ATTRIBUTE}' of mesh '{mirror.data.name}'")
+    print(f"    written to the point attribute '{rokeby.core.schema.ROTATION_ATTRIBUTE}' of mesh '{mirror.data.name}'")
     api.reset_stats()
     for _ in range(3):
         api.evaluate()

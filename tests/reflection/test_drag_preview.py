@@ -9,10 +9,11 @@ import pytest
 bpy = pytest.importorskip("bpy")
 
 from rokeby import api  # noqa: E402
+from rokeby.core import schema  # noqa: E402
 from rokeby.reflection import evaluate, geodesic_cache, handlers, mirror_state  # noqa: E402
 from support.wysiwyg import new_scene, read_layers, sphere  # noqa: E402
 
-FIELDS = (evaluate.ATTRIBUTE, evaluate.RENDER_ATTRIBUTE, evaluate.RENDER_ATTRIBUTE_WA)
+FIELDS = (schema.ROTATION_ATTRIBUTE, schema.RENDER_ATTRIBUTE, schema.RENDER_ATTRIBUTE_WA)
 # Red-handle positions of the drag (on the side of the ball the camera sees).
 STEPS = [(0.25, -0.95, 0.1), (0.4, -0.9, 0.15), (0.55, -0.8, 0.2)]
 

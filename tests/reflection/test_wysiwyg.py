@@ -20,7 +20,7 @@ bpy = pytest.importorskip("bpy")
 
 from rokeby import api  # noqa: E402
 from rokeby.reflection import evaluate, guard, mirror_state  # noqa: E402
-from rokeby.core import native  # noqa: E402
+from rokeby.core import native, schema  # noqa: E402
 from rokeby.reflection import field_carriers, mirror_surface  # noqa: E402
 from support.wysiwyg import (EYE, SIZE, add_aovs, agreement, angles_deg, directions, drag, mirror_material,  # noqa: E402,F401
                               new_scene, physical, read_layers, render, sphere)
@@ -113,7 +113,7 @@ def test_render_agrees_with_the_preview_per_pixel(tmp_path, region):
     assert np.percentile(ang, 99) < 1.0, np.percentile(ang, 99)
     # The status's own estimate agrees: no coarse-mesh warning on this mesh.
     assert rep.interpolation_error is not None and rep.interpolation_error[0] < 1.0
-    assert ball.data.attributes[evaluate.RENDER_ATTRIBUTE].domain == "POINT"  # no seam: per vertex
+    assert ball.data.attributes[schema.RENDER_ATTRIBUTE].domain == "POINT"  # no seam: per vertex
     # api.edited_reflections gives what the render shows at each vertex: the preview's field there.
     st = mirror_state.state_of(ball)
     rows, _dist, regions = st.field_inputs
@@ -152,7 +152,7 @@ def test_half_turns_do_not_tear(tmp_path):
     ang = agreement(plane, layers, eye)
     turn = np.degrees(api.quat_angle(api.field(plane)))
     assert (turn > 165).mean() > 0.9 and (turn > 179).any()  # the field passes through 180°
-    assert plane.data.attributes[evaluate.RENDER_ATTRIBUTE].domain == "CORNER"  # stored per corner there
+    assert plane.data.attributes[schema.RENDER_ATTRIBUTE].domain == "CORNER"  # stored per corner there
     assert np.percentile(ang, 99) < 1.0 and ang.max() < 10.0, (np.percentile(ang, 99), ang.max())
 
 
@@ -485,13 +485,13 @@ def test_each_drag_reaches_the_evaluated_mesh_and_the_render(tmp_path):
             out.append(a)
         return out
 
-    old, _ = evaluated(evaluate.RENDER_ATTRIBUTE)
+    old, _ = evaluated(schema.RENDER_ATTRIBUTE)
     for step, to in enumerate([(-0.8, -3.0, -0.6), (-1.2, -2.5, 0.8)]):
         drag(ball, 0, to)
-        for name in (evaluate.RENDER_ATTRIBUTE, evaluate.RENDER_ATTRIBUTE_WA, evaluate.ATTRIBUTE):
+        for name in (schema.RENDER_ATTRIBUTE, schema.RENDER_ATTRIBUTE_WA, schema.ROTATION_ATTRIBUTE):
             orig, ev = evaluated(name)
             np.testing.assert_array_equal(ev, orig, err_msg=f"step {step}: {name}")
-        new, _ = evaluated(evaluate.RENDER_ATTRIBUTE)
+        new, _ = evaluated(schema.RENDER_ATTRIBUTE)
         assert np.abs(new - old).max() > 0.05, f"step {step}: the drag did not change the field"
         old = new
     layers = render(tmp_path, "after")

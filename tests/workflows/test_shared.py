@@ -15,8 +15,8 @@ bpy = pytest.importorskip("bpy")
 
 from rokeby import api  # noqa: E402
 from rokeby.blender import compat  # noqa: E402
-from rokeby.reflection import duplicates, evaluate, guard, handlers, mirror_state  # noqa: E402
-from rokeby.core import native  # noqa: E402
+from rokeby.reflection import duplicates, guard, handlers, mirror_state  # noqa: E402
+from rokeby.core import native, schema  # noqa: E402
 from rokeby.reflection import field_carriers  # noqa: E402
 
 LEFT, RIGHT = (-0.65, 0.0, 0.0), (0.65, 0.0, 0.0)
@@ -300,14 +300,14 @@ def test_refraction_fields_of_mirrors_sharing_a_mesh_stay_their_own():
     for ob in (left, right):
         own = mirror_state.state_of(ob).refractions
         assert own is not None and np.abs(own).max() > 0.02
-        np.testing.assert_allclose(_evaluated_attribute(ob, evaluate.REFRACTION_ATTRIBUTE), own, atol=1e-6)
+        np.testing.assert_allclose(_evaluated_attribute(ob, schema.REFRACTION_ATTRIBUTE), own, atol=1e-6)
         np.testing.assert_allclose(api.stored_refraction(ob), own, atol=1e-6)
         fields[ob.name] = own
     assert np.abs(fields["Left"] - fields["Right"]).max() > 0.02
     # Without refraction constraints the right one's refraction field is gone; the left's stays.
     api.remove_constraint(right, 0)
     api.evaluate()
-    gone = _evaluated_attribute(right, evaluate.REFRACTION_ATTRIBUTE)
+    gone = _evaluated_attribute(right, schema.REFRACTION_ATTRIBUTE)
     assert gone is None or not np.abs(gone).any()  # zeros read as no attribute: the identity
     assert api.stored_refraction(right) is None
-    np.testing.assert_allclose(_evaluated_attribute(left, evaluate.REFRACTION_ATTRIBUTE), fields["Left"], atol=1e-6)
+    np.testing.assert_allclose(_evaluated_attribute(left, schema.REFRACTION_ATTRIBUTE), fields["Left"], atol=1e-6)

@@ -52,20 +52,8 @@ from .mirror_surface import _finite_matrix, read_geometry, shares_mesh
 from .scene_inputs import _constraint_inputs, _region_inputs, mirrors_of, render_eye, valid_ior
 from .unreached_pieces import _unreached_pieces, unreached_fallback
 
-ATTRIBUTE = schema.ROTATION_ATTRIBUTE
-# What final renders read (rokeby.reflection.render.shading): the field's view-independent parts per vertex (per
-# face corner where a polygon's quaternions straddle the antipodal seam),
-# the region rotation R as a unit quaternion (x, y, z in RENDER_ATTRIBUTE; w and the region weight
-# a in RENDER_ATTRIBUTE_WA as (w, a, 0)). The render nodes form eq. 7's R_a r per shading point for
-# the render camera's (or the frozen eye's) own r, as the per-pixel preview does. The corners of
-# each polygon are kept in one hemisphere of the quaternion sphere, so interpolation across a face
-# never crosses the antipodal seam that rotation vectors have at half turns.
-RENDER_ATTRIBUTE = schema.RENDER_ATTRIBUTE
-RENDER_ATTRIBUTE_WA = schema.RENDER_ATTRIBUTE_WA
 # While the artist drags, the estimate runs at most this often (seconds), and once after.
 ESTIMATE_INTERVAL = 0.4
-# The second field, from refraction constraints [p, t, e_t] (present only while the mirror has some).
-REFRACTION_ATTRIBUTE = schema.REFRACTION_ATTRIBUTE
 
 
 class _NativeTimer:
@@ -362,8 +350,8 @@ def _reflection_field(obj, depsgraph, state, geo, report, inputs, distances, met
     old = state.field_fingerprints
     transfer = geo.source == "transfer"
     target = carrier_of(obj) if transfer else obj
-    stored = target is not None and _has_attribute(target, ATTRIBUTE) and _has_render_attribute(target)
-    if again or old.get(ATTRIBUTE) != fingerprint or not stored:
+    stored = target is not None and _has_attribute(target, schema.ROTATION_ATTRIBUTE) and _has_render_attribute(target)
+    if again or old.get(schema.ROTATION_ATTRIBUTE) != fingerprint or not stored:
         kwargs = {"polar": polar}
         if specs:
             kwargs["regions"] = _regions_for_native(state, geo, specs, points, method, timer)
@@ -402,7 +390,7 @@ def _reflection_field(obj, depsgraph, state, geo, report, inputs, distances, met
                 report.interpolation_error = _estimate(state, args, timer)
         for msg in state.field_notes:
             report.warn(msg)
-        old[ATTRIBUTE] = fingerprint
+        old[schema.ROTATION_ATTRIBUTE] = fingerprint
     elif state.report is not None:
         report.interpolation_error = state.report.interpolation_error
         for msg in state.field_notes:
@@ -418,19 +406,19 @@ def _refraction_field(obj, depsgraph, state, geo, inputs, distances, method, pol
     # the mesh is shared or its vertex count changes).
     target = (carrier_of(obj) or ensure_carrier(obj, depsgraph)) if geo.source == "transfer" else obj
     if not len(t_rows):
-        old.pop(REFRACTION_ATTRIBUTE, None)
+        old.pop(schema.REFRACTION_ATTRIBUTE, None)
         state.refractions = None
-        remove_attribute(target, REFRACTION_ATTRIBUTE)
-    elif again or old.get(REFRACTION_ATTRIBUTE) != fingerprint or not _has_attribute(target, REFRACTION_ATTRIBUTE):
+        remove_attribute(target, schema.REFRACTION_ATTRIBUTE)
+    elif again or old.get(schema.REFRACTION_ATTRIBUTE) != fingerprint or not _has_attribute(target, schema.REFRACTION_ATTRIBUTE):
         kwargs = {"polar": polar}
         if specs:
             kwargs["regions"] = _regions_for_native(state, geo, specs, t_points, method, timer)
         if distances is not None:
             kwargs["distances"] = unreached_fallback(distances[len(rows):], t_rows, geo.vertices, kwargs.get("regions"))
         tv = timer(native.rotation_field, geo.vertices, t_rows, output="rotation_vector", **kwargs)
-        write_attribute(target, tv, REFRACTION_ATTRIBUTE)
+        write_attribute(target, tv, schema.REFRACTION_ATTRIBUTE)
         state.refractions = tv
-        old[REFRACTION_ATTRIBUTE] = fingerprint
+        old[schema.REFRACTION_ATTRIBUTE] = fingerprint
 
 
 def mesh_fingerprint(obj) -> bytes:
