@@ -18,8 +18,10 @@ eyes, region settings, the mirror's transform and, when Blender reports that its
 or the frame changed, its evaluated vertex positions). When the fingerprint is unchanged nothing
 is recomputed; ``mirror_state.stats()`` counts both cases. Geodesic distances and region weights
 are cached (rokeby.reflection.geodesic_cache), so a handle move costs one solve for the handle
-that moved, and a drag in a window shows a fast preview until it ends. The runtime state of each
-mirror and its report live in rokeby.reflection.mirror_state.
+that moved, and a drag in a window shows a fast preview until it ends; during a drag the
+render-vs-preview estimate runs at most every ``ESTIMATE_INTERVAL`` seconds and once more when the
+updates pause (a timer, ``_schedule``). The runtime state of each mirror and its report live in
+rokeby.reflection.mirror_state.
 
 Shared meshes (Alt+D copies, Ctrl+L ▸ Link Object Data): a mesh used by more than one object
 holds no field; each mirror using it writes its field to a carrier of its own
