@@ -15,7 +15,6 @@ bpy = pytest.importorskip("bpy")
 import rokeby  # noqa: E402
 from rokeby import api  # noqa: E402
 from rokeby.blender import compat  # noqa: E402
-from rokeby.reflection.evaluate import ATTRIBUTE  # noqa: E402
 from support.scenes import add_front_camera, add_point_lamp, empty_scene  # noqa: E402
 
 

@@ -5,6 +5,8 @@ lookups E(d), computed by the Rust core (``rokeby_core::envmaps::envmap``)."""
 
 from __future__ import annotations
 
+import numpy as np
+
 from ..core import native
 
 LAYOUTS = ("latlong", "cube", "sphere", "paraboloid")
