@@ -122,6 +122,19 @@ class UI:
         yield from self.release(button)
         yield from self.redraws(settle)
 
+    def drag(self, points, settle: int = 1):
+        """Press at ``points[0]``, move through the others, release: a press-drag-release with the
+        window drawn ``settle`` times after each step, and twice after the release."""
+        yield from self.move(*points[0])
+        yield from self.redraws(settle)
+        yield from self.press()
+        yield from self.redraws(settle)
+        for x, y in points[1:]:
+            yield from self.move(x, y)
+            yield from self.redraws(settle)
+        yield from self.release()
+        yield from self.redraws(2)
+
     def key(self, *keys: str):
         """``yield from ui.key("g")``, ``ui.key("ctrl+z")``, ``ui.key("shift+alt+c")``: xdotool key names."""
         self.xdo("key", *keys)

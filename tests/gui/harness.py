@@ -3,6 +3,7 @@ inside tools/guiroot (Debian 13's blender 4.3 on Xvfb with Mesa's llvmpipe) and 
 scenario reported. The API (tests/gui/README.md):
 
     run_scenario(name, zip_path, timeout=300) -> Run
+    scenario_result(name, zip_path, timeout=300) -> dict   (the result; fails on an error or traceback)
 
 runs tests/gui/scenarios/<name>.py in a fresh Blender (fresh HOME, the zip installed by the scenario
 with ``ui.install()``), with its output under target/gui/<name>/ (result.json, blender.log and the
@@ -83,3 +84,11 @@ def run_scenario(name: str, zip_path: Path, timeout: int = 300) -> Run:
     data = json.loads(res.read_text())
     run.result, run.error, run.shots, run.steps = data["result"], data["error"], data["shots"], data["steps"]
     return run
+
+
+def scenario_result(name: str, zip_path: Path, timeout: int = 300) -> dict:
+    """The result of a scenario that must run through: no error, no traceback in Blender's log."""
+    run = run_scenario(name, zip_path, timeout)
+    assert run.error is None, run.describe()
+    assert not run.tracebacks, run.describe()
+    return run.result

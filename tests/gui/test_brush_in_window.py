@@ -2,14 +2,11 @@
 runs never reaches past it (before its first stroke it is refused, so Set Up Appearance Painting
 stays), a stroke is one undo step, and a click on the sidebar while it runs goes to the sidebar."""
 
-from harness import run_scenario
+from harness import scenario_result
 
 
 def test_ctrl_z_and_sidebar_clicks_while_the_brush_runs(dist_zip):
-    run = run_scenario("appearance_brush", dist_zip)
-    assert run.error is None, run.describe()
-    assert not run.tracebacks, run.describe()
-    r = run.result
+    r = scenario_result("appearance_brush", dist_zip)
     assert r["setup"] == ["FINISHED"] and r["set_up"] and r["brush"] == ["RUNNING_MODAL"], r
     assert r["undo_before_stroke_kept_setup"], r
     assert r["stroke_changed"] and r["stroke_changed"] > 5, r

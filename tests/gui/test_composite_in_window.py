@@ -5,15 +5,12 @@ pixels along it only, Esc ends the brush, Ctrl+Z restores the frame."""
 
 import pytest
 
-from harness import run_scenario
+from harness import scenario_result
 
 
 @pytest.fixture(scope="module")
 def painted(dist_zip):
-    run = run_scenario("composite_paint", dist_zip, timeout=400)
-    assert run.error is None, run.describe()
-    assert not run.tracebacks, run.describe()
-    return run.result
+    return scenario_result("composite_paint", dist_zip, timeout=400)
 
 
 def test_render_and_recomposite_in_the_window(painted):

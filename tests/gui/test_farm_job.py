@@ -30,6 +30,26 @@ keyframed_chrome_spot(file_format="PNG", denoise=False)
 bpy.ops.wm.save_as_mainfile(filepath=sys.argv[-1])
 """
 
+
+def run_openjd(work: Path, bundle: Path, step: str) -> str:
+    """``openjd run`` of ``bundle``'s ``step`` with Debian's Blender (a fresh user configuration
+    inside the root; tools/guiroot sets HOME=/root otherwise) as the worker; asserts it succeeded
+    and returns its log (also written to ``work``/openjd.log)."""
+    blender = work / "blender"
+    blender.write_text(f"#!/bin/bash\nexec {GUIROOT} bash -c 'export HOME={work}/home; mkdir -p \"$HOME\"; exec blender \"$@\"' blender \"$@\"\n")
+    blender.chmod(0o755)
+    values = {p["name"]: p["value"] for p in json.loads((bundle / "parameter_values.yaml").read_text())["parameterValues"]}
+    values["BlenderExecutable"] = str(blender)
+    # The session's files (the embedded task script) must be visible inside the root: under the project.
+    env = dict(os.environ, TMPDIR=str(work / "tmp"))
+    r = subprocess.run([str(Path(sys.executable).parent / "openjd"), "run", str(bundle / "template.yaml"), "--step", step,
+                        "-p", json.dumps(values)], capture_output=True, text=True, timeout=900, env=env)
+    log = r.stdout + r.stderr
+    (work / "openjd.log").write_text(log)
+    assert r.returncode == 0, log[-4000:]
+    return log
+
+
 def test_openjd_runs_the_render_job_with_debian_blender(dist_zip):
     pytest.importorskip("openjd.cli", reason="openjd-cli is not installed here (requirements-test.txt pins it)")
     from rokeby.farm import api as farm
@@ -42,19 +62,7 @@ def test_openjd_runs_the_render_job_with_debian_blender(dist_zip):
     assert made.returncode == 0 and blend.is_file(), made.stderr[-2000:]
     out = work / "out"
     bundle = farm.write_render_job(blend, work / "bundle", frames="1-20", chunk=19, zip_path=dist_zip, output_dir=out)
-    blender = work / "blender"
-    # A fresh user configuration inside the root (tools/guiroot sets HOME=/root otherwise).
-    blender.write_text(f"#!/bin/bash\nexec {GUIROOT} bash -c 'export HOME={work}/home; mkdir -p \"$HOME\"; exec blender \"$@\"' blender \"$@\"\n")
-    blender.chmod(0o755)
-    values = {p["name"]: p["value"] for p in json.loads((bundle / "parameter_values.yaml").read_text())["parameterValues"]}
-    values["BlenderExecutable"] = str(blender)
-    # The session's files (the embedded task script) must be visible inside the root: under the project.
-    env = dict(os.environ, TMPDIR=str(work / "tmp"))
-    r = subprocess.run([str(Path(sys.executable).parent / "openjd"), "run", str(bundle / "template.yaml"), "--step", "Render",
-                        "-p", json.dumps(values)], capture_output=True, text=True, timeout=900, env=env)
-    log = r.stdout + r.stderr
-    (work / "openjd.log").write_text(log)
-    assert r.returncode == 0, log[-4000:]
+    log = run_openjd(work, bundle, "Render")
     assert 'Installed "rokeby"' in log, log[-4000:]  # the real `extension install-file` ran in the environment
     frames = sorted(p.name for p in out.iterdir())
     assert frames == [f"frame_{f:04d}.png" for f in range(1, 21)], frames
@@ -96,17 +104,7 @@ def test_openjd_runs_the_recompositing_job_with_debian_blender(dist_zip):
     out = work / "out"
     bundle = farm.write_recomposite_job(frames, out, work / "bundle", pattern="shot_####.exr", edit_options=edit, chunk=2,
                                         zip_path=dist_zip)
-    blender = work / "blender"
-    blender.write_text(f"#!/bin/bash\nexec {GUIROOT} bash -c 'export HOME={work}/home; mkdir -p \"$HOME\"; exec blender \"$@\"' blender \"$@\"\n")
-    blender.chmod(0o755)
-    values = {p["name"]: p["value"] for p in json.loads((bundle / "parameter_values.yaml").read_text())["parameterValues"]}
-    values["BlenderExecutable"] = str(blender)
-    env = dict(os.environ, TMPDIR=str(work / "tmp"))
-    r = subprocess.run([str(Path(sys.executable).parent / "openjd"), "run", str(bundle / "template.yaml"), "--step", "Recomposite",
-                        "-p", json.dumps(values)], capture_output=True, text=True, timeout=900, env=env)
-    log = r.stdout + r.stderr
-    (work / "openjd.log").write_text(log)
-    assert r.returncode == 0, log[-4000:]
+    log = run_openjd(work, bundle, "Recomposite")
     assert "is enabled in Blender 4.3" in log, log[-4000:]  # the check environment ran in the real Blender
     assert sorted(p.name for p in out.iterdir()) == [f"shot_{k:04d}.exr" for k in (1, 2, 3)]
     # Debian's Blender runs the reconstruction with Debian's numpy (2.2; here 1.26): the same pixels

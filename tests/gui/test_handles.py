@@ -6,15 +6,12 @@ import math
 
 import pytest
 
-from harness import run_scenario
+from harness import scenario_result
 
 
 @pytest.fixture(scope="module")
 def handles(dist_zip):
-    run = run_scenario("handles", dist_zip)
-    assert run.error is None, run.describe()
-    assert not run.tracebacks, run.describe()
-    return run.result
+    return scenario_result("handles", dist_zip)
 
 
 def test_green_handle_drag_and_undo(handles):

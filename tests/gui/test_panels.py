@@ -4,15 +4,12 @@ rows drawn, every panel open, and Set Up Appearance run from F3 search for its r
 
 import pytest
 
-from harness import run_scenario
+from harness import scenario_result
 
 
 @pytest.fixture(scope="module")
 def panels(dist_zip):
-    run = run_scenario("panels", dist_zip)
-    assert run.error is None, run.describe()
-    assert not run.tracebacks, run.describe()
-    return run.result
+    return scenario_result("panels", dist_zip)
 
 
 def test_every_panel_reads_whole(panels):

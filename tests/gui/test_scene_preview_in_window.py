@@ -4,15 +4,12 @@ Cycles render does, no capture for a handle drag, one after a cube's transform i
 
 import pytest
 
-from harness import run_scenario
+from harness import scenario_result
 
 
 @pytest.fixture(scope="module")
 def preview(dist_zip):
-    run = run_scenario("scene_preview", dist_zip, timeout=400)
-    assert run.error is None, run.describe()
-    assert not run.tracebacks, run.describe()
-    return run.result
+    return scenario_result("scene_preview", dist_zip, timeout=400)
 
 
 def magenta(rgb) -> bool:

@@ -4,15 +4,12 @@ shading shows it as a wire."""
 
 import pytest
 
-from harness import run_scenario
+from harness import scenario_result
 
 
 @pytest.fixture(scope="module")
 def shown(dist_zip):
-    run = run_scenario("shadow_rendered", dist_zip)
-    assert run.error is None, run.describe()
-    assert not run.tracebacks, run.describe()
-    return run.result
+    return scenario_result("shadow_rendered", dist_zip)
 
 
 def test_solid_shading_shows_the_shadow_mesh_as_a_wire(shown):

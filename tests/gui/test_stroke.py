@@ -1,13 +1,10 @@
 """An appearance stroke with the mouse in a real window (tests/gui/scenarios/stroke.py)."""
 
-from harness import run_scenario
+from harness import scenario_result
 
 
 def test_appearance_stroke_and_undo(dist_zip):
-    run = run_scenario("stroke", dist_zip)
-    assert run.error is None, run.describe()
-    assert not run.tracebacks, run.describe()
-    r = run.result
+    r = scenario_result("stroke", dist_zip)
     assert r["changed"] > 10, r
     # Every vertex within the brush radius of the stroke painted; none beyond the dabs' reach
     # (CUTOFF radii, where the Gaussian is below float32's resolution), 5 % for the chord.

@@ -5,15 +5,12 @@ import math
 
 import pytest
 
-from harness import run_scenario
+from harness import scenario_result
 
 
 @pytest.fixture(scope="module")
 def views(dist_zip):
-    run = run_scenario("views", dist_zip)
-    assert run.error is None, run.describe()
-    assert not run.tracebacks, run.describe()
-    return run.result
+    return scenario_result("views", dist_zip)
 
 
 def test_return_to_view(views):

@@ -6,7 +6,6 @@ contract forbids: docs/errors.md, "The native core") must still never produce Na
 import threading
 
 import numpy as np
-import pytest
 import rokeby_native as rn
 
 

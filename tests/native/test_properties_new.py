@@ -13,7 +13,6 @@ import pytest
 import rokeby_native as rn
 from hypothesis import given, settings
 from hypothesis import strategies as st
-from hypothesis.extra.numpy import arrays
 from support.reference import uv_sphere
 
 FEW = settings(max_examples=25, deadline=None, derandomize=True)

@@ -173,7 +173,6 @@ def test_boundary_choice_trades_accuracy_near_the_boundary():
 
 def test_against_exact_polyhedral_geodesics_on_a_real_mesh():
     """Ground truth from pygeodesic's exact MMP algorithm (bench/make_exact_fixture.py)."""
-    from pathlib import Path
 
     ref = np.load(DATA / "spot_exact_geodesics.npz")
     v, f = load_obj(mesh_path("spot.obj"))
@@ -253,7 +252,6 @@ def test_exact_method_matches_pygeodesic_mmp():
     """the exact method (window propagation) gives MMP's distances (pygeodesic, the
     fixture of bench/make_exact_fixture.py) to float32 precision, at every vertex; a surface point
     on a vertex is that vertex."""
-    from pathlib import Path
 
     ref = np.load(DATA / "spot_exact_geodesics.npz")
     v, f = load_obj(mesh_path("spot.obj"))
@@ -285,7 +283,6 @@ def test_graph_method_is_within_half_a_percent_of_exact_mmp():
     """the geodesic graph (new mirrors' default) against pygeodesic's exact MMP on spot:
     under 0.5 % mean error outside the source's 1-ring, never below the exact distance (every
     graph edge is a path on the surface), and exact next to the source."""
-    from pathlib import Path
 
     ref = np.load(DATA / "spot_exact_geodesics.npz")
     v, f = load_obj(mesh_path("spot.obj"))

@@ -5,7 +5,6 @@ one JSON line: RESULT {...}."""
 
 import json
 
-import numpy as np
 import bpy
 
 from support.bpy_process import gpu_context, offscreen_pixels

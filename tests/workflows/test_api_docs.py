@@ -85,12 +85,14 @@ def problems(api: types.ModuleType, features: list[types.ModuleType], section: s
 
 
 def _features():
+    from rokeby.appearance import api as appearance
     from rokeby.compositing import api as compositing
+    from rokeby.envmaps import api as envmaps
     from rokeby.farm import api as farm
     from rokeby.reflection import api as reflection
     from rokeby.shadow import api as shadow
 
-    return [reflection, compositing, shadow, farm]
+    return [reflection, compositing, shadow, appearance, envmaps, farm]
 
 
 def test_rokeby_api_exports_the_features_entry_points_and_documents_them():
@@ -106,6 +108,9 @@ def test_every_feature_api_is_reexported():
     pkg = ROOT / "addon" / "rokeby"
     with_api = sorted(p.parent.name for p in pkg.glob("*/api.py"))
     assert with_api == sorted(m.__name__.split(".")[1] for m in _features())
+    # every feature package (not the core, the Blender layer or the facade) has one
+    packages = sorted(p.parent.name for p in pkg.glob("*/__init__.py") if p.parent.name not in ("core", "blender", "api"))
+    assert packages == with_api, f"feature packages without an api.py: {sorted(set(packages) - set(with_api))}"
 
 
 # --- the check itself, on synthetic modules and documents ---------------------------------------------

@@ -15,7 +15,7 @@ import pytest
 bpy = pytest.importorskip("bpy")
 
 import rokeby  # noqa: E402
-from support.atomic_harness import each_fault, snapshot  # noqa: E402
+from support.atomic_harness import each_fault  # noqa: E402
 from support import cycles  # noqa: E402
 from support.scenes import add_front_camera, add_point_lamp, empty_scene, plastic_material  # noqa: E402
 from rokeby import api  # noqa: E402

@@ -16,7 +16,6 @@ OpenEXR = pytest.importorskip("OpenEXR")
 import rokeby  # noqa: E402
 from rokeby import api  # noqa: E402
 from rokeby.blender import compat  # noqa: E402
-from rokeby.reflection import evaluate  # noqa: E402
 from rokeby.reflection import freeform_regions  # noqa: E402
 
 from support import cycles  # noqa: E402

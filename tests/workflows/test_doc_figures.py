@@ -375,7 +375,7 @@ def test_geodesics_md_methods_and_defaults_match_the_code(reflection_props):
     new_default = _add_mirror_default("geodesic_method").lower()
     marked = [m for m, r in methods.items() if "(the default" in r]
     assert marked == [new_default], f"docs/geodesics.md marks {marked} as the default; new mirrors get {new_default}"
-    stub = (ROOT / "rokeby_native.pyi").read_text()
+    stub = _native_stubs()
     native_defaults = set(re.findall(r'method: _GeodesicMethod = "(\w+)"', stub))
     assert native_defaults == {new_default}, f"rokeby_native's defaults {native_defaults} differ from new mirrors' {new_default}"
     # "Accurate (default)" (dense_graph, item 4), ...: labels and item numbers in the prose
@@ -388,6 +388,11 @@ def test_geodesics_md_methods_and_defaults_match_the_code(reflection_props):
         assert int(number) == by_label[label][1], f"docs/geodesics.md: {label!r} is item {by_label[label][1]}, not {number}"
         if ident:
             assert ident.upper() == by_label[label][0], f"docs/geodesics.md: {label!r} is {by_label[label][0]}, not {ident}"
+
+
+def _native_stubs() -> str:
+    """rokeby_native's type stubs (python/rokeby_native/*.pyi), one text."""
+    return "\n".join(p.read_text() for p in sorted((ROOT / "python" / "rokeby_native").glob("*.pyi")))
 
 
 def test_readme_names_the_default_geodesic_method(reflection_props):
@@ -473,7 +478,7 @@ def test_whole_bench_run_keeps_the_sections_it_does_not_write(monkeypatch):
 
 
 def test_python_api_md_geodesic_methods_match_the_stub_and_the_enum(reflection_props):
-    stub = (ROOT / "rokeby_native.pyi").read_text()
+    stub = _native_stubs()
     literal = re.search(r"_GeodesicMethod = Literal\[([^\]]*)\]", stub).group(1)
     native = re.findall(r'"(\w+)"', literal)
     assert set(native) == {ident.lower() for ident, *_ in reflection_props.GEODESIC_METHODS}, (native, "the enum")

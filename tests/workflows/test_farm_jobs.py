@@ -101,6 +101,13 @@ def _names(folder) -> list:
     return sorted(p.name for p in Path(folder).iterdir()) if Path(folder).exists() else []
 
 
+def _assert_same_frames(out, ref):
+    """``out`` holds the frames of ``ref``, bit for bit."""
+    assert _names(out) == _names(ref)
+    for name in _names(ref):
+        np.testing.assert_array_equal(envmaps.read_exr(out / name), envmaps.read_exr(ref / name), err_msg=name)
+
+
 @pytest.fixture(scope="module")
 def shot(tmp_path_factory):
     """A keyframed reflection edit saved to a .blend, and the interactive session's frames 1-4 and 20."""
@@ -246,9 +253,7 @@ def test_openjd_run_recomposites_the_sequence_as_the_single_process_command(sequ
     bundle = api.write_recomposite_job(frames, out, tmp_path / "bundle", pattern=PATTERN, edit_options=EDIT, chunk=4, zip_path=z)
     r = _openjd(bundle, "Recomposite", tmp_path)
     assert r.returncode == 0, (r.stdout + r.stderr)[-4000:]
-    assert _names(out) == _names(ref)
-    for name in _names(ref):
-        np.testing.assert_array_equal(envmaps.read_exr(out / name), envmaps.read_exr(ref / name), err_msg=name)
+    _assert_same_frames(out, ref)
 
 
 def test_an_environment_that_cannot_install_or_enable_the_addon_fails_the_job(shot, tmp_path):
@@ -359,9 +364,7 @@ def test_a_cancelled_recompositing_job_leaves_no_partial_frame_and_its_rerun_fin
     stale.write_bytes(b"half a frame")
     r = _openjd(bundle, "Recomposite", tmp_path)
     assert r.returncode == 0, (r.stdout + r.stderr)[-3000:]
-    assert _names(out) == _names(ref)
-    for name in _names(ref):
-        np.testing.assert_array_equal(envmaps.read_exr(out / name), envmaps.read_exr(ref / name), err_msg=name)
+    _assert_same_frames(out, ref)
 
 
 # --- the operators -------------------------------------------------------------------------------

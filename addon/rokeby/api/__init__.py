@@ -10,6 +10,8 @@ re-exports exactly the ``__all__`` of each feature's ``api`` module, in this ord
 - ``rokeby.compositing.api``: shape editing at the compositing stage (passes, recompositing, the
   normal brush);
 - ``rokeby.shadow.api``: shadow boundary editing;
+- ``rokeby.appearance.api``: appearance (BRDF) painting;
+- ``rokeby.envmaps.api``: the HDR worlds bpy ships and HDR image files;
 - ``rokeby.farm.api``: render-farm job bundles (bpy-free).
 
 Every name is documented in docs/python-api.md (tests/workflows/test_api_docs.py checks both
@@ -74,6 +76,14 @@ from ..reflection.api import (
     stored_refraction,
 )
 from ..shadow.api import apply_shadow_edit, remove_shadow_edit, start_shadow_edit
+from ..appearance.api import (
+    appearance_values,
+    paint_appearance,
+    remove_appearance_painting,
+    set_appearance_scale,
+    setup_appearance_painting,
+)
+from ..envmaps.api import read_exr, read_hdr, studio_world, use_studio_world, write_exr, write_hdr
 
 __all__ = [
     # rokeby.reflection.api
@@ -91,6 +101,11 @@ __all__ = [
     "use_in_compositor", "open_normal_brush", "paint_normals",
     # rokeby.shadow.api
     "start_shadow_edit", "apply_shadow_edit", "remove_shadow_edit",
+    # rokeby.appearance.api
+    "setup_appearance_painting", "paint_appearance", "appearance_values", "set_appearance_scale",
+    "remove_appearance_painting",
+    # rokeby.envmaps.api
+    "studio_world", "use_studio_world", "read_exr", "write_exr", "read_hdr", "write_hdr",
     # rokeby.farm.api
     "write_render_job", "write_recomposite_job",
 ]

@@ -3,7 +3,9 @@ Environment Lighting", §"Painting"): per-point BRDF parameters stored as mesh a
 images through the UV map) and wired into the material's Principled BSDF, brushes with a radius
 and Gaussian falloff that write them, and global sliders that scale them for the whole object.
 
-Entry points, by the module that holds them:
+Scripts use ``rokeby.api`` (this feature's part: ``api.py``: :func:`setup_appearance_painting`,
+:func:`paint_appearance`, :func:`appearance_values`, :func:`set_appearance_scale`,
+:func:`remove_appearance_painting`). The implementation, by the module that holds it:
 
 * ``material_nodes.py``: :func:`setup` a material for painting, :func:`set_global`, :func:`remove`,
   :func:`migrate` (old files, at load);

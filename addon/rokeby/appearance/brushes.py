@@ -110,22 +110,22 @@ def paint(obj, brush: str, centres, radius: float, value=None, strength: float =
         w = falloff(pts[idx], dab, radius, strength)
         if param in COLORS:
             w = w[:, None]
-        v = vals[idx]
-        if mode == "MIX":
-            v = v + w * (target - v)
-        else:
-            v = v + (1.0 if mode == "ADD" else -1.0) * w * target
-        if param == "anisotropic_rotation":
-            v = np.mod(v, 1.0)
-        elif param not in COLORS:
-            v = np.clip(v, lo, hi)
-        else:
-            v = np.maximum(v, 0.0)
-        vals[idx] = v
+        vals[idx] = _dab_values(vals[idx], w, target, mode, param, lo, hi)
     _write(obj, param, vals)
     if brush == "stretch" and len(path) >= 2:
         _stretch_direction(obj, pts, m, path, len(path) - len(c), radius, strength, np.unique(np.concatenate(reached)))
     return vals.astype(np.float32)
+
+
+def _dab_values(v, w, target, mode: str, param: str, lo, hi) -> np.ndarray:
+    """Values ``v`` after a dab of weights ``w``: towards ``target`` (MIX) or by it (ADD, SUBTRACT),
+    then kept in the parameter's range (the anisotropic rotation wraps, colours stay ≥ 0)."""
+    v = v + w * (target - v) if mode == "MIX" else v + (1.0 if mode == "ADD" else -1.0) * w * target
+    if param == "anisotropic_rotation":
+        return np.mod(v, 1.0)
+    if param not in COLORS:
+        return np.clip(v, lo, hi)
+    return np.maximum(v, 0.0)
 
 
 def _radial_tangent_frame(obj, m, idx):
@@ -215,13 +215,7 @@ def _paint_texture(obj, img, param, c, radius, strength, mode, target):
             w = w[:, None]
         else:
             v = px[rows, 0].astype(np.float64)
-        v = v + w * (target - v) if mode == "MIX" else v + (1.0 if mode == "ADD" else -1.0) * w * target
-        if param == "anisotropic_rotation":
-            v = np.mod(v, 1.0)
-        elif param not in COLORS:
-            v = np.clip(v, lo, hi)
-        else:
-            v = np.maximum(v, 0.0)
+        v = _dab_values(v, w, target, mode, param, lo, hi)
         if param in COLORS:
             px[rows] = v
         else:

@@ -13,7 +13,7 @@ import bpy
 from bpy.props import CollectionProperty, EnumProperty, FloatProperty, FloatVectorProperty, IntProperty, PointerProperty, StringProperty
 
 from .. import appearance
-from . import parameters
+from . import api, parameters
 from ..blender import compat, ui_text
 from ..core import words
 from ..core import schema
@@ -156,8 +156,8 @@ class ROKEBY_OT_appearance_setup(bpy.types.Operator):
     def execute(self, context):
         s = _settings(context)
         try:
-            appearance.setup(context.active_object, target=s.target, resolution=s.resolution,
-                             linked="REPLACE" if self.replace_links else "REFUSE")
+            api.setup_appearance_painting(context.active_object, target=s.target, resolution=s.resolution,
+                                          replace_links=self.replace_links)
         except ValueError as e:
             self.report({"ERROR"}, str(e))
             return {"CANCELLED"}
@@ -185,7 +185,7 @@ class ROKEBY_OT_appearance_remove(bpy.types.Operator):
 
     def execute(self, context):
         try:
-            appearance.remove(context.active_object)
+            api.remove_appearance_painting(context.active_object)
         except ValueError as e:
             self.report({"ERROR"}, str(e))
             return {"CANCELLED"}

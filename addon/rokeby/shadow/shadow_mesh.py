@@ -49,9 +49,9 @@ SELF_CUTOFF = 0.02  # self-shadow displacements under this fraction of the large
 
 
 def _local_displacement(session: ShadowSession, world: np.ndarray) -> np.ndarray:
-    disp = np.asarray(world, np.float64) - session.rest_world
-    local = disp @ np.linalg.inv(session.matrix_world[:3, :3]).T  # one 3x3 inverse: fast per drag step
-    with np.errstate(over="ignore", invalid="ignore"):
+    with np.errstate(over="ignore", invalid="ignore"):  # an overflowing drag is refused below, not warned about
+        disp = np.asarray(world, np.float64) - session.rest_world
+        local = disp @ np.linalg.inv(session.matrix_world[:3, :3]).T  # one 3x3 inverse: fast per drag step
         if not (np.isfinite(world).all() and np.isfinite(local.astype(np.float32)).all()):
             raise ShadowEditError("the edited shadow mesh has non-finite or float32-overflowing positions (a drag too large?); "
                                   "nothing was written: undo the drag (cancel) and drag again")

@@ -9,6 +9,8 @@ import os
 import bpy
 import numpy as np
 
+import scenes
+
 
 def image_pixels(img):
     px = np.empty(img.size[0] * img.size[1] * 4, np.float32)
@@ -20,11 +22,7 @@ def scenario(ui):
     yield from ui.start()
     schema = ui.addon("core.schema")
     sc = bpy.context.scene
-    bpy.data.objects.remove(bpy.data.objects["Cube"])
-    with ui.override():
-        bpy.ops.mesh.primitive_uv_sphere_add(segments=48, ring_count=24, radius=1.0, location=(0, 0, 0))
-        bpy.ops.object.shade_smooth()
-    sphere = bpy.context.view_layer.objects.active
+    sphere = scenes.smooth_sphere(ui)
     mat = bpy.data.materials.new("Glossy")
     mat.use_nodes = True
     mat.node_tree.nodes["Principled BSDF"].inputs["Roughness"].default_value = 0.3
@@ -81,15 +79,7 @@ def scenario(ui):
     yield from ui.key("Return")
     yield from ui.redraws(2)
     r["brush_running"] = any(op.bl_idname == "ROKEBY_OT_composite_brush" for op in ui.window.modal_operators)
-    yield from ui.move(x1, y1)
-    yield from ui.redraws(1)
-    yield from ui.press()
-    yield from ui.redraws(1)
-    for i in range(1, 7):
-        yield from ui.move(x1 + (x2 - x1) * i / 6, y1 + (y2 - y1) * i / 6)
-        yield from ui.redraws(1)
-    yield from ui.release()
-    yield from ui.redraws(2)
+    yield from ui.drag([(x1 + (x2 - x1) * i / 6, y1 + (y2 - y1) * i / 6) for i in range(7)])
     ui.screenshot("stroke", crop=ui.region_box(region))
     yield from ui.key("Escape")
     yield from ui.redraws(2)

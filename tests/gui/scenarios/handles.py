@@ -6,6 +6,8 @@ Shift+Alt+C and a click on the mirror (a constraint added where the click landed
 import bpy
 from mathutils import Vector
 
+import scenes
+
 OUT = {}
 
 
@@ -13,43 +15,12 @@ def vec(v):
     return [round(float(x), 5) for x in v]
 
 
-def select_only(ui, ob):
-    for o in bpy.context.view_layer.objects:
-        o.select_set(o == ob)
-    bpy.context.view_layer.objects.active = ob
-
-
-def grab(ui, ob, dx, dy, finish="click"):
-    """G over the 3D view with ``ob`` selected, the pointer moved by (dx, dy) in steps, then a click
-    (confirm) or Esc (cancel); waits until the window has drawn the result."""
-    select_only(ui, ob)
-    yield from ui.redraws(1)
-    x, y = ui.point_xy(ob.matrix_world.translation)
-    yield from ui.move(x, y)
-    yield from ui.redraws(1)
-    yield from ui.key("g")
-    yield from ui.redraws(1)
-    for i in range(1, 5):
-        yield from ui.move(x + dx * i / 4, y + dy * i / 4)
-        yield from ui.redraws(1)
-    if finish == "click":
-        yield from ui.press()
-        yield from ui.release()
-    else:
-        yield from ui.key("Escape")
-    yield from ui.redraws(2)
-
-
 def scenario(ui):
     yield from ui.start()
     api = ui.addon("api")
     mirror_state = ui.addon("reflection.mirror_state")
     scene = bpy.context.scene
-    bpy.data.objects.remove(bpy.data.objects["Cube"])
-    with ui.override():
-        bpy.ops.mesh.primitive_uv_sphere_add(segments=48, ring_count=24, radius=1.0, location=(0, 0, 0))
-        bpy.ops.object.shade_smooth()
-    sphere = bpy.context.view_layer.objects.active
+    sphere = scenes.smooth_sphere(ui)
     sphere.name = "Mirror"
     mat = bpy.data.materials.new("Chrome")
     mat.use_nodes = True
@@ -72,7 +43,7 @@ def scenario(ui):
 
     # Green handle: G, move, click.
     g0 = green.location.copy()
-    yield from grab(ui, green, 30, -15)
+    yield from scenes.grab(ui, green, 30, -15)
     yield from ui.until(lambda: (green.location - g0).length > 1e-3, 10, "the green handle moved")
     yield from ui.until(lambda: mirror_state.report_of(sphere) is not None, 20, "a report")
     rep = mirror_state.report_of(sphere)
@@ -86,13 +57,13 @@ def scenario(ui):
 
     # Esc cancels a G drag: nothing moves.
     g1 = green.location.copy()
-    yield from grab(ui, green, 60, 50, finish="esc")
+    yield from scenes.grab(ui, green, 60, 50, finish="esc")
     r["green_esc"] = {"before": vec(g1), "after": vec(green.location)}
 
     # Red handle: G, move, click (it slides on the mirror's surface).
     red = bpy.data.objects[rname]
     r0 = red.location.copy()
-    yield from grab(ui, red, -12, -8)
+    yield from scenes.grab(ui, red, -12, -8)
     yield from ui.until(lambda: (red.location - r0).length > 1e-3, 10, "the red handle moved")
     yield from ui.redraws(2)
     sphere = bpy.data.objects["Mirror"]
@@ -107,7 +78,7 @@ def scenario(ui):
     # Shift+Alt+C, then a click on the mirror: a new constraint whose red handle is where the click hit.
     sphere = bpy.data.objects["Mirror"]
     n0 = len(sphere.rokeby.constraints)
-    select_only(ui, sphere)
+    scenes.select_only(sphere)
     p = Vector((-0.5, -0.7, 0.5)).normalized()
     x, y = ui.point_xy(p)
     yield from ui.move(x, y)

@@ -5,35 +5,19 @@ pixel at the red handle shows the magenta cube, as a Cycles render of the same v
 dragged with G and the mouse triggers no capture; a cube dragged with G triggers none while the
 mouse moves and exactly one after the click that confirms it."""
 
+import os
+import sys
+
 import bpy
 import numpy as np
 
+import scenes
+
+sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", ".."))  # tests/: the shared scene helpers
+from support.scene_preview import material, mirror_material  # noqa: E402
+
 MAGENTA = (0.8, 0.05, 0.5)
 EYE = (1.2, -6.8, 1.4)
-
-
-def material(name, colour):
-    mat = bpy.data.materials.new(name)
-    mat.use_nodes = True
-    bsdf = mat.node_tree.nodes["Principled BSDF"]
-    bsdf.inputs["Base Color"].default_value = (*colour, 1.0)
-    bsdf.inputs["Roughness"].default_value = 1.0
-    (bsdf.inputs.get("Specular IOR Level") or bsdf.inputs.get("Specular")).default_value = 0.0
-    bsdf.inputs["Emission Color"].default_value = (*colour, 1.0)
-    bsdf.inputs["Emission Strength"].default_value = 1.0  # its colour reads the same from every side
-    mat.diffuse_color = (*colour, 1.0)
-    return mat
-
-
-def chrome():
-    mat = bpy.data.materials.new("Chrome")
-    mat.use_nodes = True
-    nt = mat.node_tree
-    nt.nodes.remove(nt.nodes["Principled BSDF"])
-    glossy = nt.nodes.new("ShaderNodeBsdfGlossy")
-    glossy.inputs["Roughness"].default_value = 0.0
-    nt.links.new(glossy.outputs["BSDF"], nt.nodes["Material Output"].inputs["Surface"])
-    return mat
 
 
 def build(ui):
@@ -51,7 +35,7 @@ def build(ui):
         bpy.ops.object.shade_smooth()
     mirror = bpy.context.view_layer.objects.active
     mirror.name = "Mirror"
-    mirror.data.materials.append(chrome())
+    mirror.data.materials.append(mirror_material())
     cubes = {}
     for name, loc, size, colour in (("Magenta", (0.35, -1.75, -1.35), 0.6, MAGENTA),
                                      ("Red", (1.9, -1.0, 0.3), 0.6, (0.8, 0.1, 0.05)),
@@ -60,7 +44,7 @@ def build(ui):
             bpy.ops.mesh.primitive_cube_add(size=size, location=loc)
         ob = bpy.context.view_layer.objects.active
         ob.name = name
-        ob.data.materials.append(material(name, colour))
+        ob.data.materials.append(material(name, colour, emission=1.0))  # its colour reads the same from every side
         cubes[name] = ob
     return sc, mirror, cubes
 
@@ -162,7 +146,7 @@ def scenario(ui):
     # A green-handle drag with G and the mouse: the field changes, the scene does not: no capture.
     n0 = scene_env.stats["captures"]
     r["green_before"] = [round(float(v), 4) for v in green.location]
-    yield from grab(ui, green, 25, -10)
+    yield from scenes.grab(ui, green, 25, -10)
     yield 1.5  # past the debounce: a capture would have run by now
     yield from ui.redraws(2)
     r["captures_handle_drag"] = scene_env.stats["captures"] - n0
@@ -176,7 +160,7 @@ def scenario(ui):
     def during():
         counts.append(scene_env.stats["captures"] - n0)
 
-    yield from grab(ui, cube, 40, 20, steps=8, each=during, finish=None)
+    yield from scenes.grab(ui, cube, 40, 20, steps=8, each=during, finish=None)
     yield 1.0  # the mouse held still inside the transform: still no capture
     during()
     yield from ui.press()
@@ -255,26 +239,3 @@ def offscreen_at(ui, sc, mirror, red):
     finally:
         off.free()
     return out
-
-
-def grab(ui, ob, dx, dy, steps=4, each=None, finish="click"):
-    """G over the 3D view with only ``ob`` selected, the pointer moved by (dx, dy) in ``steps``
-    (``each()`` after every one, the window drawn between), then a click (or nothing)."""
-    for o in bpy.context.view_layer.objects:
-        o.select_set(o == ob)
-    bpy.context.view_layer.objects.active = ob
-    yield from ui.redraws(1)
-    x, y = ui.point_xy(ob.matrix_world.translation)
-    yield from ui.move(x, y)
-    yield from ui.redraws(1)
-    yield from ui.key("g")
-    yield from ui.redraws(1)
-    for i in range(1, steps + 1):
-        yield from ui.move(x + dx * i / steps, y + dy * i / steps)
-        yield from ui.redraws(1)
-        if each is not None:
-            each()
-    if finish == "click":
-        yield from ui.press()
-        yield from ui.release()
-        yield from ui.redraws(2)

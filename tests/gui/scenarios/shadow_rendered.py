@@ -31,14 +31,7 @@ def scenario(ui):
     h = np.array(shadow_ui.session(sc).handles(0)["points"], np.float64)
     m = int(np.argmax(h[:, 0]))
     c = h.mean(axis=0)
-    yield from ui.move(*ui.point_xy(h[m]))
-    yield from ui.redraws(1)
-    yield from ui.press()
-    for f in (1.1, 1.25, 1.4):
-        yield from ui.move(*ui.point_xy(c + (h[m] - c) * f))
-        yield from ui.redraws(1)
-    yield from ui.release()
-    yield from ui.redraws(2)
+    yield from ui.drag([ui.point_xy(c + (h[m] - c) * f) for f in (1.0, 1.1, 1.25, 1.4)])
     mesh = shadow.shadow_mesh_of(ball)
     r = ui.result
     r["shadow_mesh"] = mesh is not None

@@ -54,14 +54,7 @@ def scenario(ui):
     x0, y0 = ui.point_xy(h[m])
     ui.result["press_at"] = [x0, y0]
     # 1. Press on the handle, drag outward, release: one drag, the shadow mesh made.
-    yield from ui.move(x0, y0)
-    yield from ui.redraws(1)
-    yield from ui.press()
-    for f in (1.1, 1.2, 1.3):
-        yield from ui.move(*ui.point_xy(c + (h[m] - c) * f))
-        yield from ui.redraws(1)
-    yield from ui.release()
-    yield from ui.redraws(2)
+    yield from ui.drag([(x0, y0)] + [ui.point_xy(c + (h[m] - c) * f) for f in (1.1, 1.2, 1.3)])
     ui.result["shortcut_dragged"] = state()["drags"] == 1
     if not ui.result["shortcut_dragged"]:
         # No shortcut (an add-on without one): the drag started as F3 starts it, the mouse on the handle.
