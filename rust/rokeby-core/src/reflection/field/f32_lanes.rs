@@ -10,13 +10,13 @@
 //! rounding cannot move the rotation by more than about 1e-6 rad: λ_min(H) ≥ `COND` ‖M‖_F, H having
 //! eigenvalues σ₂+σ₃, σ₁+σ₃, σ₁+σ₂ at the optimum, so this bounds δR ≈ δM / λ_min. Every other
 //! lane (near a constraint, rank-deficient M, unreachable points, a region border, non-finite or
-//! suspicious input) is recomputed in f64: by the f64 lanes of `wide` in blocks of 4, and by the
+//! suspicious input) is recomputed in f64: by the f64 lanes of `f64_lanes` in blocks of 4, and by the
 //! scalar f64 path where those cannot vouch. The scalar path stays the reference (the oracle of the
 //! tests; `ROKEBY_SIMD=scalar` uses it everywhere).
 
+use super::lane_vectors::{dot3, Mk, Portable, Simd, L, Q};
 #[cfg(target_arch = "x86_64")]
 use super::lane_vectors::{Avx2, Avx512};
-use super::lane_vectors::{Mk, Portable, Simd, L};
 use super::{Field, FieldOutput};
 use crate::reflection::region::Region;
 use glam::{DQuat, DVec3};
@@ -229,88 +229,11 @@ unsafe fn run_avx2(inp: &Inputs, start: usize, out: &mut [f32]) -> Leftover {
 
 // ---- the kernel ----------------------------------------------------------------------------
 
-/// Unit quaternion lanes (x, y, z, w).
-#[derive(Clone, Copy)]
-struct Q<S: Simd> {
-    x: L<S>,
-    y: L<S>,
-    z: L<S>,
-    w: L<S>,
-}
-
-impl<S: Simd> Q<S> {
-    #[inline(always)]
-    fn splat(q: [f32; 4]) -> Self {
-        Q {
-            x: L::splat(q[0]),
-            y: L::splat(q[1]),
-            z: L::splat(q[2]),
-            w: L::splat(q[3]),
-        }
-    }
-    /// Row-major rotation matrix.
-    #[inline(always)]
-    fn matrix(&self) -> [L<S>; 9] {
-        let (x, y, z, w) = (self.x, self.y, self.z, self.w);
-        let one = L::splat(1.0);
-        let two = L::splat(2.0);
-        let (xx, yy, zz) = (x * x, y * y, z * z);
-        let (xy, xz, yz) = (x * y, x * z, y * z);
-        let (xw, yw, zw) = (x * w, y * w, z * w);
-        [
-            one - two * (yy + zz),
-            two * (xy - zw),
-            two * (xz + yw),
-            two * (xy + zw),
-            one - two * (xx + zz),
-            two * (yz - xw),
-            two * (xz - yw),
-            two * (yz + xw),
-            one - two * (xx + yy),
-        ]
-    }
-    /// v rotated: v + 2w (u × v) + 2 u × (u × v).
-    #[inline(always)]
-    fn rotate(&self, v: [L<S>; 3]) -> [L<S>; 3] {
-        let u = [self.x, self.y, self.z];
-        let t = cross(u, v).map(|c| c + c);
-        let ut = cross(u, t);
-        [
-            self.w.mul_add(t[0], v[0]) + ut[0],
-            self.w.mul_add(t[1], v[1]) + ut[1],
-            self.w.mul_add(t[2], v[2]) + ut[2],
-        ]
-    }
-    #[inline(always)]
-    fn lane(&self, l: usize) -> [f32; 4] {
-        [
-            self.x.arr()[l],
-            self.y.arr()[l],
-            self.z.arr()[l],
-            self.w.arr()[l],
-        ]
-    }
-}
-
-#[inline(always)]
-fn cross<S: Simd>(a: [L<S>; 3], b: [L<S>; 3]) -> [L<S>; 3] {
-    [
-        a[1] * b[2] - a[2] * b[1],
-        a[2] * b[0] - a[0] * b[2],
-        a[0] * b[1] - a[1] * b[0],
-    ]
-}
-
-#[inline(always)]
-fn dot3<S: Simd>(a: [L<S>; 3], b: [L<S>; 3]) -> L<S> {
-    a[0].mul_add(b[0], a[1].mul_add(b[1], a[2] * b[2]))
-}
-
 /// Loads lanes of an (N, 3) array at points base..base + count (padding repeats the last point).
 #[inline(always)]
 // Gathers three lane arrays from one (N, 3) row index per lane: one subscript, three arrays.
 #[allow(clippy::needless_range_loop)]
-fn load3<S: Simd>(a: &[f32], base: usize, count: usize) -> [L<S>; 3] {
+fn load3<S: Simd<E = f32>>(a: &[f32], base: usize, count: usize) -> [L<S>; 3] {
     if count == S::W {
         return S::load3(&a[3 * base..3 * (base + S::W)]).map(L);
     }
@@ -330,7 +253,7 @@ fn load3<S: Simd>(a: &[f32], base: usize, count: usize) -> [L<S>; 3] {
 
 /// Stores lanes 0..count of a 3-vector into an (N, 3) block.
 #[inline(always)]
-fn store3<S: Simd>(o: &mut [f32], v: &[L<S>; 3], count: usize) {
+fn store3<S: Simd<E = f32>>(o: &mut [f32], v: &[L<S>; 3], count: usize) {
     if count == S::W {
         S::store3(o, [v[0].0, v[1].0, v[2].0]);
         return;
@@ -348,7 +271,7 @@ fn store3<S: Simd>(o: &mut [f32], v: &[L<S>; 3], count: usize) {
 #[inline(always)]
 // `x − x` is deliberate: 0 for finite lanes, NaN for ±∞ and NaN (the finiteness test).
 #[allow(clippy::eq_op)]
-fn finite<S: Simd>(v: &[L<S>]) -> Mk<S> {
+fn finite<S: Simd<E = f32>>(v: &[L<S>]) -> Mk<S> {
     // x − x is 0 for finite x and NaN otherwise.
     let mut acc = L::<S>::splat(0.0);
     for x in v {
@@ -360,7 +283,7 @@ fn finite<S: Simd>(v: &[L<S>]) -> Mk<S> {
 /// Newton's method on SO(3) for ortho(M), M row-major, from `q`; returns the result and the
 /// lanes it accepts (see the module docs).
 #[inline(always)]
-fn ortho_lanes<S: Simd>(m: &[L<S>; 9], mut q: Q<S>, cond_min: f32) -> (Q<S>, Mk<S>) {
+fn ortho_lanes<S: Simd<E = f32>>(m: &[L<S>; 9], mut q: Q<S>, cond_min: f32) -> (Q<S>, Mk<S>) {
     let mut fro2 = L::splat(0.0);
     for e in m {
         fro2 = e.mul_add(*e, fro2);
@@ -441,12 +364,7 @@ fn ortho_lanes<S: Simd>(m: &[L<S>; 9], mut q: Q<S>, cond_min: f32) -> (Q<S>, Mk<
         };
         let w = w.map(|c| c * hw);
         // q ← q · (ω/2, 1), normalised.
-        let qv = [q.x, q.y, q.z];
-        let c = cross(qv, w);
-        let nx = q.w.mul_add(w[0], q.x) + c[0];
-        let ny = q.w.mul_add(w[1], q.y) + c[1];
-        let nz = q.w.mul_add(w[2], q.z) + c[2];
-        let nw = q.w - dot3(qv, w);
+        let [nx, ny, nz, nw] = q.times(w);
         let len2 = nx.mul_add(nx, ny.mul_add(ny, nz.mul_add(nz, nw * nw)));
         let il = len2.rsqrt();
         q = Q {
@@ -465,7 +383,7 @@ fn ortho_lanes<S: Simd>(m: &[L<S>; 9], mut q: Q<S>, cond_min: f32) -> (Q<S>, Mk<
 
 /// The lanes over points [start, start + out.len() / width).
 #[inline(always)]
-fn run_lanes<S: Simd>(inp: &Inputs, start: usize, out: &mut [f32]) -> Leftover {
+fn run_lanes<S: Simd<E = f32>>(inp: &Inputs, start: usize, out: &mut [f32]) -> Leftover {
     let width = match inp.job {
         Job::Pixels { .. } => 3,
         Job::Points { output, .. } => super::output_width(output),

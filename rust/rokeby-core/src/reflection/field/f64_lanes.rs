@@ -1,5 +1,5 @@
-//! The field of eq. 5 over f64 lanes of 4 (AVX2 + FMA: one 256-bit register; elsewhere two SSE2
-//! registers): for the points the f32 lanes cannot pin to 1e-5 rad (next to a constraint, where M is
+//! The field of eq. 5 over f64 lanes of 4 (`lane_vectors`' `Avx2F64`, one 256-bit register, on
+//! CPUs with AVX2 + FMA; `PortableF64` elsewhere): for the points the f32 lanes cannot pin to 1e-5 rad (next to a constraint, where M is
 //! nearly rank 1), gathered into blocks of 4, and for every point of the exact polar method.
 //!
 //! Per lane: M = Σₙ eₙrₙᵀ / d²ₙ in f64 as `Field::solve_group` forms it (then scaled by d²_min:
@@ -17,6 +17,9 @@
 //! returns None and is computed by the scalar path (the SVD with its rank-1 tie-break).
 
 use super::f32_lanes::Plan;
+#[cfg(target_arch = "x86_64")]
+use super::lane_vectors::Avx2F64;
+use super::lane_vectors::{dot3, Mk, PortableF64, Simd, L, Q};
 use glam::DQuat;
 
 /// Conditioning the exact lanes need: λ_min(H) ≥ EXACT_COND ‖M‖_F, so the rounding of S = RᵀM
@@ -68,13 +71,13 @@ pub(super) fn solve4(
         return unsafe { solve4_avx2(ctx, idx, warm) };
     }
     let _ = kernel;
-    solve::<false>(ctx, idx, warm)
+    solve::<PortableF64>(ctx, idx, warm)
 }
 
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2,fma")]
 unsafe fn solve4_avx2(ctx: &Ctx, idx: [usize; 4], warm: [DQuat; 4]) -> [Option<DQuat>; 4] {
-    solve::<true>(ctx, idx, warm)
+    solve::<Avx2F64>(ctx, idx, warm)
 }
 
 /// Plan rows in f64.
@@ -91,187 +94,79 @@ pub(super) fn rows64(field: &super::Field, plan: &Plan) -> Vec<Row64> {
         .collect()
 }
 
-// ---- f64 lanes ---------------------------------------------------------------------------------
+// ---- the kernel --------------------------------------------------------------------------------
 
-/// Four f64 lanes; `F`: fused multiply-add (compiled with FMA), else a · b + c.
-#[derive(Clone, Copy)]
-struct D<const F: bool>([f64; 4]);
-
-macro_rules! op {
-    ($tr:ident, $f:ident, $o:tt) => {
-        impl<const F: bool> std::ops::$tr for D<F> {
-            type Output = Self;
-            #[inline(always)]
-            fn $f(self, o: Self) -> Self {
-                D([
-                    self.0[0] $o o.0[0],
-                    self.0[1] $o o.0[1],
-                    self.0[2] $o o.0[2],
-                    self.0[3] $o o.0[3],
-                ])
-            }
-        }
-    };
-}
-op!(Add, add, +);
-op!(Sub, sub, -);
-op!(Mul, mul, *);
-op!(Div, div, /);
-
-impl<const F: bool> std::ops::Neg for D<F> {
-    type Output = Self;
-    #[inline(always)]
-    fn neg(self) -> Self {
-        D(self.0.map(|x| -x))
-    }
+/// The lane of each of 4 values.
+#[inline(always)]
+fn lanes<S: Simd<E = f64>>(a: [f64; 4]) -> L<S> {
+    L::from_array(&a)
 }
 
-impl<const F: bool> D<F> {
-    #[inline(always)]
-    fn splat(x: f64) -> Self {
-        D([x; 4])
-    }
-    #[inline(always)]
-    fn mul_add(self, b: Self, c: Self) -> Self {
-        if F {
-            D(std::array::from_fn(|l| self.0[l].mul_add(b.0[l], c.0[l])))
-        } else {
-            self * b + c
-        }
-    }
-    #[inline(always)]
-    fn sqrt(self) -> Self {
-        D(self.0.map(f64::sqrt))
-    }
-    #[inline(always)]
-    fn abs(self) -> Self {
-        D(self.0.map(f64::abs))
-    }
-    #[inline(always)]
-    fn min(self, o: Self) -> Self {
-        D(std::array::from_fn(|l| {
-            if o.0[l] < self.0[l] {
-                o.0[l]
-            } else {
-                self.0[l]
-            }
-        }))
-    }
-    /// Lanes where `m` holds take `a`, the others `b`.
-    #[inline(always)]
-    fn select(m: [bool; 4], a: Self, b: Self) -> Self {
-        D(std::array::from_fn(|l| if m[l] { a.0[l] } else { b.0[l] }))
-    }
+/// Lane l of a mask.
+#[inline(always)]
+fn lane_set<S: Simd>(m: Mk<S>, l: usize) -> bool {
+    m.bits() >> l & 1 != 0
 }
 
 #[inline(always)]
-fn cross<const F: bool>(a: [D<F>; 3], b: [D<F>; 3]) -> [D<F>; 3] {
-    [
-        a[1] * b[2] - a[2] * b[1],
-        a[2] * b[0] - a[0] * b[2],
-        a[0] * b[1] - a[1] * b[0],
-    ]
-}
-
-#[inline(always)]
-fn dot3<const F: bool>(a: [D<F>; 3], b: [D<F>; 3]) -> D<F> {
-    a[0].mul_add(b[0], a[1].mul_add(b[1], a[2] * b[2]))
-}
-
-/// Row-major rotation matrix of unit quaternion lanes (x, y, z, w).
-#[inline(always)]
-fn matrix<const F: bool>(q: [D<F>; 4]) -> [D<F>; 9] {
-    let [x, y, z, w] = q;
-    let one = D::splat(1.0);
-    let two = D::splat(2.0);
-    let (xx, yy, zz) = (x * x, y * y, z * z);
-    let (xy, xz, yz) = (x * y, x * z, y * z);
-    let (xw, yw, zw) = (x * w, y * w, z * w);
-    [
-        one - two * (yy + zz),
-        two * (xy - zw),
-        two * (xz + yw),
-        two * (xy + zw),
-        one - two * (xx + zz),
-        two * (yz - xw),
-        two * (xz - yw),
-        two * (yz + xw),
-        one - two * (xx + yy),
-    ]
-}
-
-/// q · (v, 1), normalised (the step of `polar::ortho_iterative`, v = ω/2).
-#[inline(always)]
-fn step<const F: bool>(q: [D<F>; 4], v: [D<F>; 3]) -> [D<F>; 4] {
-    let qv = [q[0], q[1], q[2]];
-    let c = cross(qv, v);
-    let nx = q[3].mul_add(v[0], q[0]) + c[0];
-    let ny = q[3].mul_add(v[1], q[1]) + c[1];
-    let nz = q[3].mul_add(v[2], q[2]) + c[2];
-    let nw = q[3] - dot3(qv, v);
-    let len = nx
-        .mul_add(nx, ny.mul_add(ny, nz.mul_add(nz, nw * nw)))
-        .sqrt();
-    let il = D::splat(1.0) / len;
-    [nx * il, ny * il, nz * il, nw * il]
-}
-
-#[inline(always)]
-fn lane<const F: bool>(q: &[D<F>; 4], l: usize) -> DQuat {
-    DQuat::from_xyzw(q[0].0[l], q[1].0[l], q[2].0[l], q[3].0[l])
-}
-
-#[inline(always)]
-fn solve<const F: bool>(ctx: &Ctx, idx: [usize; 4], warm: [DQuat; 4]) -> [Option<DQuat>; 4] {
+fn solve<S: Simd<E = f64>>(ctx: &Ctx, idx: [usize; 4], warm: [DQuat; 4]) -> [Option<DQuat>; 4] {
+    const { assert!(S::W == 4) };
     let mut out = [None; 4];
+    let zero = L::<S>::splat(0.0);
+    let inf = L::<S>::splat(f64::INFINITY);
     // M' = Σₙ eₙrₙᵀ / d²ₙ, as `Field::solve_group` sums it.
-    let pt = |c: usize| D::<F>(idx.map(|i| ctx.points[3 * i + c] as f64));
+    let pt = |c: usize| lanes::<S>(idx.map(|i| ctx.points[3 * i + c] as f64));
     let q = [pt(0), pt(1), pt(2)];
-    let mut m = [D::<F>::splat(0.0); 9];
-    let mut dmin2 = D::<F>::splat(f64::INFINITY);
+    let mut m = [zero; 9];
+    let mut dmin2 = inf;
     for row in ctx.rows {
         let d2 = match ctx.dist {
             None => {
                 let d = [
-                    q[0] - D::splat(row.p[0]),
-                    q[1] - D::splat(row.p[1]),
-                    q[2] - D::splat(row.p[2]),
+                    q[0] - L::splat(row.p[0]),
+                    q[1] - L::splat(row.p[1]),
+                    q[2] - L::splat(row.p[2]),
                 ];
                 dot3(d, d)
             }
             Some(dist) => {
-                let v = D(idx.map(|i| dist[row.k * ctx.n + i] as f64));
+                let v = lanes::<S>(idx.map(|i| dist[row.k * ctx.n + i] as f64));
                 v * v
             }
         };
         dmin2 = dmin2.min(d2);
-        let w = D::splat(1.0) / d2;
+        let w = L::splat(1.0) / d2;
         for (e, &er) in m.iter_mut().zip(&row.er) {
-            *e = w.mul_add(D::splat(er), *e);
+            *e = w.mul_add(L::splat(er), *e);
         }
     }
     // On a constraint (interpolation) or unreachable: the scalar path.
-    let usable: [bool; 4] = std::array::from_fn(|l| dmin2.0[l] > 0.0 && dmin2.0[l] < f64::INFINITY);
-    let m = m.map(|e| e * D::select(usable, dmin2, D::splat(0.0)));
-    let mut fro2 = D::<F>::splat(0.0);
+    let usable = dmin2.gt(zero).and(dmin2.lt(inf));
+    let m = m.map(|e| e * L::select(usable, dmin2, zero));
+    let mut fro2 = zero;
     for e in &m {
         fro2 = e.mul_add(*e, fro2);
     }
     let scale = fro2.sqrt();
     // Lanes still iterating.
-    let mut open: [bool; 4] =
-        std::array::from_fn(|l| usable[l] && fro2.0[l] > 0.0 && fro2.0[l].is_finite());
-    let mut qv = [0, 1, 2, 3].map(|c| D::<F>(warm.map(|w| w.to_array()[c])));
-    let half = D::splat(0.5);
-    let tol = scale * D::splat(1e-6);
+    let open = usable.and(fro2.gt(zero)).and(fro2.lt(inf));
+    let mut open: [bool; 4] = std::array::from_fn(|l| lane_set(open, l));
+    let mut qv = Q::<S> {
+        x: lanes(warm.map(|w| w.x)),
+        y: lanes(warm.map(|w| w.y)),
+        z: lanes(warm.map(|w| w.z)),
+        w: lanes(warm.map(|w| w.w)),
+    };
+    let tol = scale * L::splat(1e-6);
     let (tol2, tol3) = (tol * tol, tol * tol * tol);
+    let half = L::splat(0.5);
     for _ in 0..MAX_ITER {
         if !open.iter().any(|&o| o) {
             break;
         }
-        let r = matrix(qv);
+        let r = qv.matrix();
         // S = Rᵀ M: S_ij = Σ_k R_ki M_kj.
-        let s: [D<F>; 9] = std::array::from_fn(|ij| {
+        let s: [L<S>; 9] = std::array::from_fn(|ij| {
             let (i, j) = (ij / 3, ij % 3);
             r[i].mul_add(m[j], r[3 + i].mul_add(m[3 + j], r[6 + i] * m[6 + j]))
         });
@@ -291,63 +186,75 @@ fn solve<const F: bool>(ctx: &Ctx, idx: [usize; 4], warm: [DQuat; 4]) -> [Option
         let a12 = h01 * h02 - h00 * h12;
         let det = h00.mul_add(a00, h01.mul_add(a01, h02 * a02));
         // H positive definite (`polar::positive_definite` with tolerance 1e-6 ‖M‖).
-        let newton: [bool; 4] = std::array::from_fn(|l| {
-            h00.0[l] > tol.0[l] && a22.0[l] > tol2.0[l] && det.0[l] > tol3.0[l]
-        });
+        let newton = h00.gt(tol).and(a22.gt(tol2)).and(det.gt(tol3));
         // Newton: ω = adj(H) g / det H; elsewhere the damped step g / (|tr| + ε).
-        let inv = D::splat(1.0) / D::select(newton, det, tr.abs() + scale * D::splat(1e-12));
+        let inv = L::splat(1.0) / L::select(newton, det, tr.abs() + scale * L::splat(1e-12));
         let w = [
-            D::select(
+            L::select(
                 newton,
                 a00.mul_add(g[0], a01.mul_add(g[1], a02 * g[2])),
                 g[0],
             ) * inv,
-            D::select(
+            L::select(
                 newton,
                 a01.mul_add(g[0], a11.mul_add(g[1], a12 * g[2])),
                 g[1],
             ) * inv,
-            D::select(
+            L::select(
                 newton,
                 a02.mul_add(g[0], a12.mul_add(g[1], a22 * g[2])),
                 g[2],
             ) * inv,
         ];
         let w2 = dot3(w, w);
-        // At most a quarter turn per step.
+        // At most a quarter turn per step (a branch: rarely taken).
         let qt = std::f64::consts::FRAC_PI_2;
-        let hw: [f64; 4] = std::array::from_fn(|l| {
-            if w2.0[l] > qt * qt {
-                0.5 * qt / w2.0[l].sqrt()
-            } else {
-                0.5
-            }
-        });
-        let next = step(qv, w.map(|c| c * D(hw)));
+        let big = w2.gt(L::splat(qt * qt));
+        let hw = if big.bits() != 0 {
+            L::select(big, L::splat(0.5 * qt) / w2.sqrt(), half)
+        } else {
+            half
+        };
+        // q ← q · (ω/2, 1), normalised.
+        let [nx, ny, nz, nw] = qv.times(w.map(|c| c * hw));
+        let il = L::splat(1.0)
+            / nx.mul_add(nx, ny.mul_add(ny, nz.mul_add(nz, nw * nw)))
+                .sqrt();
+        let next = Q {
+            x: nx * il,
+            y: ny * il,
+            z: nz * il,
+            w: nw * il,
+        };
+        let (w2, tr, fro2, det, scale) = (w2.arr(), tr.arr(), fro2.arr(), det.arr(), scale.arr());
         for l in 0..4 {
             if !open[l] {
                 continue;
             }
-            let (nw, w2l, trl, f2) = (newton[l], w2.0[l], tr.0[l], fro2.0[l]);
+            let (nw, w2l, trl, f2) = (lane_set(newton, l), w2[l], tr[l], fro2[l]);
             if !(w2l.is_finite() && trl.is_finite()) {
                 open[l] = false;
                 continue;
             }
+            let accept = || {
+                let [x, y, z, w] = next.lane(l);
+                Some(DQuat::from_xyzw(x, y, z, w))
+            };
             match ctx.exact {
                 Exactness::Fast => {
                     if nw && w2l < 1e-8 {
                         open[l] = false;
                         // Numerically rank 1: the twist is chosen by the tie-break (scalar).
                         if trl * trl - f2 >= 1e-6 * f2 {
-                            out[l] = Some(lane(&next, l));
+                            out[l] = accept();
                         }
                         continue;
                     }
                 }
                 Exactness::Exact => {
                     // λ_min(H) ≥ 4 det H / tr(H)², tr(H) = 2 tr S.
-                    let four_det = 4.0 * det.0[l];
-                    let s_trh2 = scale.0[l] * 4.0 * trl * trl;
+                    let four_det = 4.0 * det[l];
+                    let s_trh2 = scale[l] * 4.0 * trl * trl;
                     if nw && w2l < 1e-8 {
                         if four_det < EXACT_COND * s_trh2 {
                             open[l] = false; // ill-conditioned: the SVD
@@ -355,7 +262,7 @@ fn solve<const F: bool>(ctx: &Ctx, idx: [usize; 4], warm: [DQuat; 4]) -> [Option
                         }
                         if w2l * s_trh2 < EXACT_STEP_ERR * four_det {
                             open[l] = false;
-                            out[l] = Some(lane(&next, l));
+                            out[l] = accept();
                             continue;
                         }
                     }
