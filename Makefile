@@ -73,7 +73,7 @@ $(LINT)/.deps: requirements-lint.txt
 	@touch $@
 
 lint: $(LINT)/.deps
-	$(LINT)/bin/ruff check --select E9,F63,F7,F82 addon tests bench tools
+	$(LINT)/bin/ruff check --select E9,F63,F7,F82,F401 addon tests bench tools
 	cargo fmt --all --check
 	cargo clippy --workspace --all-targets -- -D warnings
 	$(LINT)/bin/python tools/api_check.py
