@@ -135,6 +135,17 @@ class UI:
         yield from self.release()
         yield from self.redraws(2)
 
+    def search(self, text: str, run: bool = True):
+        """F3 (the operator search) under the pointer, ``text`` typed; Return runs the first match
+        unless ``run`` is False (the menu left open)."""
+        yield from self.key("F3")
+        yield from self.redraws(2)
+        yield from self.type(text)
+        yield from self.redraws(3)
+        if run:
+            yield from self.key("Return")
+            yield from self.redraws(2)
+
     def key(self, *keys: str):
         """``yield from ui.key("g")``, ``ui.key("ctrl+z")``, ``ui.key("shift+alt+c")``: xdotool key names."""
         self.xdo("key", *keys)

@@ -86,10 +86,7 @@ def scenario(ui):
     # The redo panel of Set Up Appearance Painting, run as a user would: F3, its name, Return.
     x, y = ui.screen_xy(ui.region("WINDOW"), 400, 400)
     yield from ui.move(x, y)
-    yield from ui.key("F3")
-    yield from ui.redraws(2)
-    yield from ui.type(bpy.ops.rokeby.appearance_setup.get_rna_type().name)
-    yield from ui.redraws(3)
+    yield from ui.search(bpy.ops.rokeby.appearance_setup.get_rna_type().name, run=False)
     yield from ui.key("Return")
     hud = yield from ui.until(lambda: next((r for r in ui.area().regions if r.type == "HUD" and r.width > 1), None), 20, "the redo panel")
     yield from ui.redraws(3)
