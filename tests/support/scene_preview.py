@@ -140,14 +140,9 @@ def render(sc, path: str) -> np.ndarray:
     compat.set_single_layer_exr(sc.render.image_settings, "32")
     sc.render.image_settings.color_mode = "RGB"
     bpy.ops.render.render(write_still=True, scene=sc.name)
-    img = bpy.data.images.load(path)
-    try:
-        w, h = img.size
-        px = np.empty(w * h * 4, np.float32)
-        img.pixels.foreach_get(px)
-    finally:
-        bpy.data.images.remove(img)
-    return px.reshape(h, w, 4)[..., :3]
+    from rokeby import envmaps
+
+    return np.ascontiguousarray(envmaps.read_exr(path)[::-1, :, :3])  # the file's rows are top-down
 
 
 def camera_view_projection(sc, w: int, h: int) -> np.ndarray:
