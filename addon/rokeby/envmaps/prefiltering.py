@@ -30,26 +30,13 @@ def irradiance(image, size: int = 32) -> dict:
 
 
 def sh_irradiance(irradiance_coeffs, normals) -> np.ndarray:
-    """E(n)/π from ``irradiance(...)['irradiance_coeffs']`` at (..., 3) normals (numpy, vectorised;
-    the basis of rokeby_core::sh, Ramamoorthi & Hanrahan 2001)."""
+    """E(n)/π from ``irradiance(...)['irradiance_coeffs']`` at (..., 3) normals, (..., C): the
+    order-2 SH basis of the Rust core (``rokeby_core::compositing::sh``, Ramamoorthi & Hanrahan
+    2001) at the normalised normals."""
     n = np.asarray(normals, dtype=np.float64)
     n = n / np.linalg.norm(n, axis=-1, keepdims=True)
-    x, y, z = n[..., 0], n[..., 1], n[..., 2]
-    basis = np.stack(
-        [
-            np.full_like(x, 0.28209479177387814),
-            0.4886025119029199 * y,
-            0.4886025119029199 * z,
-            0.4886025119029199 * x,
-            1.0925484305920792 * x * y,
-            1.0925484305920792 * y * z,
-            0.31539156525252005 * (3 * z * z - 1),
-            1.0925484305920792 * x * z,
-            0.5462742152960396 * (x * x - y * y),
-        ],
-        axis=-1,
-    )
-    return basis @ np.asarray(irradiance_coeffs, dtype=np.float64).T
+    coeffs = np.atleast_2d(np.asarray(irradiance_coeffs, dtype=np.float64))
+    return native.module().compositing.sh_eval(coeffs, n.astype(np.float32)).astype(np.float64)
 
 
 def reference(image, lobe: str, directions, param: float = 0.0) -> np.ndarray:
