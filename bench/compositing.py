@@ -189,7 +189,7 @@ def session_bench(args, kw, repeat=9):
     """Per-edit time of an artist's loop: ``rokeby_native.compositing.Recompositor`` holding the
     passes (the default session), each edit passing only the edited normals and writing into the
     same buffer, against the same session keeping the per-pixel terms that do not depend on ñ
-    (``prepared=True``) and the former per-edit path in the same run (``rokeby_native.recompose``
+    (``prepared=True``) and the one-shot path in the same run (``rokeby_native.compositing.recomposite``
     converting every pass and the patches again, a new image, and the add-on's pass over it for
     non-finite pixels), medians of ``repeat`` alternating runs. And the memory-bound estimate: the bytes one edit has
     to move (every pixel's ids, n, ñ and I read, I~ written; the edited pixels' shading,

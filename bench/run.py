@@ -143,7 +143,7 @@ def main():
             doc.write_text("\n".join(out) + "\n")
         return
     if args.only == "geodesic":
-        # Refresh that section in place (it used to overwrite the whole report).
+        # Refresh that section in place; the rest of the report stays.
         _refresh_section(emit, out, GEODESIC_MARKER, lambda e: geodesic_section(e, args.peers))
         return
     if args.only != "field":
@@ -158,7 +158,7 @@ def main():
     render_section(emit)
     envmap_section(emit)
     appearance_section(emit)
-    # Sections that used to exist only through --only (a whole run dropped them from the report).
+    # Sections that --only can also run alone.
     compositing_section(emit)
     shadow_section(emit)
     for _marker, section in TRADEOFFS.values():

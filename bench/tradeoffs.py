@@ -43,7 +43,7 @@ def best_time(fn, repeat=5):
 # --- SH order -------------------------------------------------------------------------------
 
 def real_sh(lmax, d):
-    """Real SH basis, bands 0..lmax (orthonormal; the sign convention of rokeby_core::sh for l <= 2),
+    """Real SH basis, bands 0..lmax (orthonormal; the sign convention of rokeby_core::compositing::sh for l <= 2),
     by the associated Legendre recurrence; (..., (lmax+1)^2)."""
     x, y, z = d[..., 0], d[..., 1], d[..., 2]
     phi = np.arctan2(y, x)
@@ -218,7 +218,7 @@ def known(d):
 
 
 def paraboloid_texel_dirs(s):
-    """(2, S, S, 3) texel-centre directions of a dual-paraboloid map (rokeby_core::envmap
+    """(2, S, S, 3) texel-centre directions of a dual-paraboloid map (rokeby_core::envmaps::envmap
     paraboloid_dir: (2u, 2v, ±(1 − u² − v²))/(1 + u² + v²), u from the column, v from the row)."""
     c = (np.arange(s) + 0.5) / s * 2 - 1
     v, u = np.meshgrid(c, c, indexing="ij")

@@ -2,7 +2,7 @@
  * the chosen lobe in one lat-long atlas (levels at roughness l / (levels - 1), stacked top to
  * bottom) and order-2 SH irradiance. Needs: the block rk_appearance (RokebyAppearance), the
  * samplers rk_env_atlas and rk_brdf_lut (GGX directional albedo: r = scale, g = bias of F0, at
- * (n.v, roughness)). numpy twin: rokeby.appearance_glsl.shade_reference. */
+ * (n.v, roughness)). numpy twin: rokeby.appearance.glsl.shade_reference. */
 
 const float RK_PI = 3.14159265358979;
 
@@ -20,7 +20,7 @@ vec3 rk_level_texel(int level, int i, int j, int h, int w)
   return texelFetch(rk_env_atlas, ivec2(j, level * h + i), 0).rgb;
 }
 
-/* Bilinear, wrapping in u and crossing the poles at u + 1/2, exactly like rokeby_core::envmap. */
+/* Bilinear, wrapping in u and crossing the poles at u + 1/2, exactly like rokeby_core::envmaps::envmap. */
 vec3 rk_level(vec3 d, int level)
 {
   ivec2 size = textureSize(rk_env_atlas, 0);
@@ -48,7 +48,7 @@ vec3 rk_specular(vec3 r, float roughness)
   return mix(rk_level(r, l0), rk_level(r, l1), x - float(l0));
 }
 
-/* E(n)/pi from the irradiance coefficients (Ramamoorthi & Hanrahan 2001; rokeby_core::sh basis). */
+/* E(n)/pi from the irradiance coefficients (Ramamoorthi & Hanrahan 2001; rokeby_core::compositing::sh basis). */
 vec3 rk_irradiance(vec3 n)
 {
   n = normalize(n);
@@ -106,7 +106,7 @@ vec3 rk_shade(vec3 n, vec3 v, vec3 base, float specular, float roughness, float 
 
 /* Fraser's second view: the same painted parameters under one point light (light.xyz, intensity
  * light.w, falling off as 1/d^2), each model's BRDF evaluated directly (numpy twin:
- * rokeby.appearance_glsl.shade_point_reference). p: the shaded point (world space).
+ * rokeby.appearance.glsl.shade_point_reference). p: the shaded point (world space).
  * Principled: GGX D, Smith height-correlated visibility, Schlick F (alpha = roughness^2), the
  * diffuse weighted by what the specular layer leaves, as in rk_shade. Phong: the paper's
  * (1 + s)/(2 pi) k_s max(0, r.l)^s / (l.n), s = (2/alpha^2 - 2)/4 as the atlas levels use.

@@ -1,7 +1,7 @@
 /* Rokeby viewport preview: the constants of the per-pixel field (Ritschel et al. 2009, §6.1).
  *
  * One std140 uniform block holds everything that is the same for every pixel of a mirror. It is
- * packed by rokeby.glsl.pack_field (Python), which states the byte offsets it writes; a test
+ * packed by rokeby.reflection.viewport.glsl.pack_field (Python), which states the byte offsets it writes; a test
  * checks them against the block size the driver reports. Blender passes this file to
  * GPUShaderCreateInfo.typedef_source, the moderngl tests paste it before the block declaration.
  */

@@ -1,4 +1,4 @@
-/* Rokeby viewport preview, vertex stage. Declarations come from rokeby.glsl.INTERFACE (Blender's
+/* Rokeby viewport preview, vertex stage. Declarations come from rokeby.reflection.viewport.glsl.INTERFACE (Blender's
  * GPUShaderCreateInfo, or the #version header the moderngl tests generate from it).
  * The mesh arrives as a triangle soup (three vertices per triangle) so that each fragment knows
  * its barycentric coordinates and the three mesh vertices it lies between. */

@@ -1,5 +1,5 @@
 /* Rokeby recompositing: Zubiaga et al. 2016 eqs. 3–5 per pixel, written as
- * rust/rokeby-core/src/recomposite.rs does (so that unmodified normals give I back bit for bit):
+ * rust/rokeby-core/src/compositing/recomposite/ does (so that unmodified normals give I back bit for bit):
  *
  *   D~ = D0 + a_D ([D0 + Σ_k c_k (Y_k(ñ) − Y_k(n))] − D0),  [x] = max(x, min(0, D0))     (eq. 3)
  *   R~ = R0 + v a_R (R(r~) − R0),  v = min(1, θ/ε), θ = 2 asin(|r − r~| / 2)            (eq. 4)

@@ -1,5 +1,5 @@
 /* Rokeby recompositing, vertex stage: one triangle covering the viewport, no inputs.
- * Declarations come from rokeby.compositing.RECOMPOSITE_INTERFACE (a #version header for
+ * Declarations come from rokeby.compositing.gl.RECOMPOSITE_INTERFACE (a #version header for
  * moderngl, GPUShaderCreateInfo in Blender). */
 
 void main()

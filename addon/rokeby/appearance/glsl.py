@@ -28,7 +28,7 @@ Torrance–Sparrow preview is from it.
 
 The atlas stacks the levels top to bottom, each resampled to the same H×W lat-long grid (row 0 at
 the top, Blender's convention); lookups are bilinear with texelFetch, wrapping in u and crossing
-the poles at u + ½, exactly like rokeby_core::envmap.
+the poles at u + ½, exactly like rokeby_core::envmaps::envmap.
 """
 
 from __future__ import annotations
@@ -319,7 +319,7 @@ def render_difference(pixels, model: str, base=(0.8, 0.8, 0.8), specular: float 
     """How much a render (Principled/GGX) differs from ``model``'s preview of the same painted
     values under the lat-long world ``pixels``: mean |render − preview| / mean |preview| over a
     sphere seen head-on (``size``² pixels), both shaded as the preview shades them (the
-    Principled preview matches Cycles within 4 %, tests/test_appearance.py). The world is
+    Principled preview matches Cycles within 4 %, tests/appearance/test_appearance.py). The world is
     resampled to RENDER_DIFFERENCE_ROWS rows first. 0 for PRINCIPLED."""
     m = str(model).upper()
     if m not in MODELS:

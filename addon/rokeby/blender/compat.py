@@ -26,7 +26,7 @@ number, and is computed once:
   ``Depsgraph.id_type_updated`` accepts; a type a release does not name is left out.
 * **Text drawn into images** (:func:`blf_draws_into_images`): ``blf.bind_imbuf`` and
   ``blf.draw_buffer`` exist from 4.3; 4.2 draws text only on the screen.
-* **Node custom properties** (``node["key"]``) work on every supported release (tests/test_compat.py
+* **Node custom properties** (``node["key"]``) work on every supported release (tests/workflows/test_compat.py
   checks it on each leg); nothing to choose.
 """
 

@@ -3,7 +3,7 @@
 Edit ▸ Preferences ▸ Add-ons ▸ Rokeby: the default compositing backend, the GPU opt-ins and the
 folder reflection maps are cached in. They are saved with Blender's preferences (userpref.blend),
 never in a .blend; settings that belong to a file (brush settings, the viewport preview switch)
-live on the Scene (see ``appearance_ui`` and ``viewport``).
+live on the Scene (see ``appearance.ui`` and ``reflection.viewport.draw``).
 
 The class's ``bl_idname`` is the add-on's package name: ``rokeby`` as a legacy add-on,
 ``bl_ext.<repository>.rokeby`` as an extension; this module sits in the package's ``blender``

@@ -15,7 +15,7 @@ re-rendering (numerics in the Rust core). The pipeline, by the module that holds
    :func:`show_image`, :func:`feed_compositor`; ``command_line.py``: ``python -m rokeby.composite``.
 
 Scripts use ``rokeby.api`` (this feature's part: ``api.py``); ``brush.py`` is the normal brush, ``ui.py`` and
-``brush_ui.py`` the operators and panels. Tests: tests/compositing/ (test_compositing.py,
+``brush_ui.py`` the operators and panels, ``errors.py`` the feature's errors, ``addon.py`` registers it. Tests: tests/compositing/ (test_compositing.py,
 test_exr_io.py, test_recompositor.py, test_recomposite_glsl.py, test_compositing_brush.py, ...).
 """
 

@@ -16,7 +16,7 @@ from .reconstruction import Reconstruction
 
 
 def _native_edit(fn, *args, **kw) -> np.ndarray:
-    """A normal tool of the Rust core (``rokeby_core::normals``), its ValueErrors as CompositingError."""
+    """A normal tool of the Rust core (``rokeby_core::compositing::normals``), its ValueErrors as CompositingError."""
     try:
         return fn(*args, **kw)
     except ValueError as exc:
@@ -26,7 +26,7 @@ def _native_edit(fn, *args, **kw) -> np.ndarray:
 def emboss(normals: np.ndarray, beta: float, mask=None) -> np.ndarray:
     """Normal embossing (LUMO): n_z → β n_z, renormalised; β ∈ (0, 1] makes the surface bulge.
     Background pixels (|n|₁ = 0), pixels outside ``mask`` (H, W; > 0.5 edits) and pixels the edit
-    leaves unchanged keep their input bits (``rokeby_core::normals``, rows in parallel)."""
+    leaves unchanged keep their input bits (``rokeby_core::compositing::normals``, rows in parallel)."""
     if not 0 < beta <= 1:
         raise CompositingError(f"beta: must be in (0, 1], got {beta}")
     return _native_edit(native.module().compositing.normals_emboss, normals, beta, mask)

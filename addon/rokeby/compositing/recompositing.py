@@ -24,7 +24,7 @@ def recomposite(p: Passes, rec: Reconstruction, edited_normals: np.ndarray, *, k
     """Eqs. 3–5: the image (H, W, 3) with the edited screen-space normals. Returns (image, stats).
 
     ``backend``: 'cpu' (the Rust core, f32), 'blender_gpu' (the GLSL shader drawn by Blender's
-    ``gpu`` module, ``rokeby.recomposite_gpu``; in background mode the first call makes the GPU
+    ``gpu`` module, ``rokeby.compositing.blender_gpu.recomposite_blender``; in background mode the first call makes the GPU
     context with one 8×8 EEVEE render) or 'moderngl' (the same shader on a headless EGL context).
     All three agree within 1e-4 relative and give unmodified normals back bit for bit. For many
     edits of one frame (a slider), ``RecompositeSession`` packs and uploads the passes once."""

@@ -112,7 +112,7 @@ class ROKEBY_OT_composite_setup_passes(bpy.types.Operator):
         return {"FINISHED"}
 
 
-MAX_SMOOTH_SIGMA = 50.0  # rokeby_core::normals::MAX_SIGMA_S: the smoothing's largest σ in pixels
+MAX_SMOOTH_SIGMA = 50.0  # rokeby_core::compositing::normals::MAX_SIGMA_S: the smoothing's largest σ in pixels
 LAST_EXR = schema.COMPOSITE_LAST_EXR_KEY  # scene custom property: the EXR the last Render and Recomposite wrote
 
 

@@ -2,7 +2,7 @@
 
 Blender's convention (its Environment Texture node, Z up): u = 0.5 − atan2(y, x)/2π, so +X at
 u = 0.5, +Y at u = 0.25, −Y at u = 0.75, −X on the seam; v = 0.5 + latitude/π, row 0 at the bottom.
-The same formulas as ``rokeby_core::envmap::latlong_uv`` / ``latlong_dir``
+The same formulas as ``rokeby_core::envmaps::envmap::latlong_uv`` / ``latlong_dir``
 (rust/rokeby-core/src/envmaps/envmap.rs), which the environment-map conversions use.
 """
 

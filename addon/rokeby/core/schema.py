@@ -9,8 +9,8 @@ changes what saved scenes mean, so:
 - a name is never renamed or reused; a changed meaning bumps the data version of its owner
   (``DATA_VERSION``, ``SHADOW_DATA_VERSION``, the node groups' versions) and gets a load-time
   migration; :data:`SCHEMA_VERSION` counts the changes to this module's list;
-- ``tests/test_saved_names.py`` compares what a scene of each feature writes with a checked-in
-  snapshot (docs/saved-data.md), and ``tests/test_layers.py`` checks that no module outside this
+- ``tests/workflows/test_saved_names.py`` compares what a scene of each feature writes with a checked-in
+  snapshot (docs/saved-data.md), and ``tests/workflows/test_layers.py`` checks that no module outside this
   one spells a ``rokeby…`` name that is saved.
 
 Enum item numbers (what Blender stores for an enum) are declared with the enums themselves

@@ -8,7 +8,7 @@ One home each for the rules the features must agree on:
   k = 1 − η²(1 − c²), the ray is totally internally reflected where k < 0 (and where k is NaN);
   there the refracted direction is the zero vector. The render node groups (Cycles, EEVEE) use
   GLSL's ``refract``, so the Python twins agree with the renders at the boundary too;
-- :func:`smooth_step` and :func:`region_falloff` — the region border, as ``rokeby_core::region``
+- :func:`smooth_step` and :func:`region_falloff` — the region border, as ``rokeby_core::reflection::region``
   defines it (rust/rokeby-core/src/reflection/region.rs ``smooth_step``/``influence``), NaN distances
   (unreachable points) included: they get weight 0.
 """

@@ -5,7 +5,8 @@ Entry points (``rokeby.farm.api``, re-exported by ``rokeby.api``): ``write_rende
 .blend's frames) and ``write_recomposite_job`` (a folder of multilayer EXRs through
 ``python -m rokeby.composite``). Command line: ``python -m rokeby.farm render|recomposite …``.
 ``marker`` records in saved files which Rokeby saved them; ``worker`` is what the jobs run inside
-the worker's Blender. Guide: docs/farm.md; tests: tests/workflows/test_farm_jobs.py.
+the worker's Blender; ``ui.py`` is the *Export Farm Job…* operator, ``addon.py`` registers it,
+``__main__.py`` is the command line. Guide: docs/farm.md; tests: tests/workflows/test_farm_jobs.py.
 """
 
 from .api import write_recomposite_job, write_render_job

@@ -63,7 +63,7 @@ def write_render_attribute(obj, parts: np.ndarray, state=None, *, ramp: bool = F
     """Write the field's view-independent parts (V, 6) = (x, y, z, w, a, u) for renders
     (schema.RENDER_ATTRIBUTE: x, y, z; schema.RENDER_ATTRIBUTE_WA: (w, a, 0), or with ``ramp`` (one Euclidean
     region) (w, −1, u): the nodes then take a = smoothstep(u) per shading point), what
-    rokeby.shading's node group reads, in two foreach_set calls: per vertex while every
+    rokeby.reflection.render.shading's node group reads, in two foreach_set calls: per vertex while every
     polygon's quaternions share a hemisphere, per face corner otherwise (half turns)."""
     me = obj.data
     if not np.all(np.isfinite(parts)):

@@ -275,7 +275,7 @@ def on_undo_redo(*_args):
     registry.reset()
     mirror_state.reset()
     rendering.reset()
-    # Painted images (#8): pixels in memory follow the packed data the step brought back
+    # Painted images: pixels in memory follow the packed data the step brought back
     # (each feature's "undo_redo" step, rokeby.blender.hooks).
     for step in hooks.steps("undo_redo"):
         step()

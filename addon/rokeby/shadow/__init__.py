@@ -10,6 +10,8 @@ Entry points, by the module that holds them:
 * ``repair.py``: :func:`repair` after deletions, :func:`migrate` old files (the add-on's steps, ``addon.py``);
 * ``configurations.py``: keyed configurations and the falloff (§6.2), :func:`sync_falloffs`;
 * ``live_preview.py``: the shadow while dragging, :func:`live_begin` / :func:`live_step` / :func:`live_end`;
+* ``light.py`` (the light's position or direction), ``errors.py`` (``ShadowEditError``), ``display.py``
+  (how shadow meshes are drawn in each shading);
 * ``ui.py``: operators, panel and overlay; ``addon.py`` registers them.
 
 Scripts use ``rokeby.api`` (``api.py``: ``start_shadow_edit``, ``apply_shadow_edit``,

@@ -190,7 +190,7 @@ fn falloff_stays_within_unit_interval() {
     }
 }
 
-/// tests/test_properties_new.py (reflection_env): NaN parameters were accepted, and
+/// tests/native/test_properties_new.py (reflection_env): NaN parameters were accepted, and
 /// blur_sigma = NaN gave a NaN map; each is now an error naming it.
 #[test]
 fn reflection_params_are_checked() {

@@ -236,7 +236,7 @@ pub fn prefilter_reference<'py>(
     let env = env_from(image, Layout::LatLong, "image")?;
     let (d, lead) = self::directions(directions, "directions")?;
     // Checked here so that a zero or non-finite direction is reported as `directions` (the core's
-    // irradiance reference calls them "normals"); found by tests/test_properties_new.py.
+    // irradiance reference calls them "normals").
     run_detached(py, || {
         rokeby_core::envmaps::envmap::finite_dirs(&d, "directions").map(|_| ())
     })?;

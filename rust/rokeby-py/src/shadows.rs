@@ -35,8 +35,8 @@ fn points<'py>(py: Python<'py>, p: &[DVec3]) -> PyResult<Bound<'py, PyArrayDyn<f
     )
 }
 
-/// A loop or vertex index: negative ones are a ValueError naming the argument (as a usize
-/// parameter they were an OverflowError that named nothing; found by tests/test_properties_new.py).
+/// A loop or vertex index: negative ones are a ValueError naming the argument (a usize parameter
+/// would make them an OverflowError that names nothing).
 fn index(i: i64, name: &str) -> PyResult<usize> {
     usize::try_from(i).map_err(|_| {
         PyValueError::new_err(format!("{name}: must be a non-negative index, got {i}"))

@@ -80,7 +80,7 @@ TAG = schema.REFLMAP_TAG
 MAP_VERSION = 1
 MAP_VERSION_KEY = schema.REFLMAP_VERSION_KEY
 # The panorama camera's rotation (XYZ Euler) that makes Cycles' equirectangular image match the
-# Environment Texture convention above (checked by tests/test_reflmap.py).
+# Environment Texture convention above (checked by tests/reflection/test_reflmap.py).
 PANO_ROTATION = (math.pi / 2, 0.0, -math.pi / 2)
 
 

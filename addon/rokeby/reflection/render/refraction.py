@@ -28,7 +28,7 @@ transmitted ray out through the surface: the path dies, a dark pixel): r = refle
 folded about the plane r·N = ε (ε = 0.05, or V·N when less) and n'_t = normalize(V + r) rebuilt;
 the transmitted direction is then refract(−V, n'_t), below the surface for η > 1. Every step
 leaves the identity untouched and is continuous. No black and no NaN pixels: measured in
-tests/test_refraction.py.
+tests/reflection/test_refraction.py.
 
 Back faces (rays leaving the object) keep N: the edit acts where rays enter, as in the paper,
 where the exiting direction is the edited one. The same holds where the physical ray has no

@@ -92,7 +92,7 @@ def _rotate_nodes(ng, u, w, k, v, inverse=False):
 
 
 def view_blend_nodes(ng, u, wa, r):
-    """Eq. 7 per shading point (rokeby_core::field::view_blend, derived there): the corner
+    """Eq. 7 per shading point (rokeby_core::reflection::field::view_blend, derived there): the corner
     attributes give the region rotation R = (u, w) and weight a (``wa`` = (w, a, 0), or
     (w, −1, u) for a = smoothstep(u)); with
     s = Rᵀ r, φ = ∠(r, s), θ = atan2((1 − a) sin φ, 2a + (1 − a) cos φ) and t the unit part of s
@@ -102,7 +102,7 @@ def view_blend_nodes(ng, u, wa, r):
     ng.links.new(wa, parts.inputs[0])
     w, a_stored, u_ramp = parts.outputs["X"], parts.outputs["Y"], parts.outputs["Z"]
     # (w, −1, u) marks the ramp form (one Euclidean region): a = smoothstep(u) per shading point,
-    # rokeby_core::region::smooth_step (3t² − 2t³ on [0, 1]) as Map Range's Smooth Step does.
+    # rokeby_core::reflection::region::smooth_step (3t² − 2t³ on [0, 1]) as Map Range's Smooth Step does.
     ramp = scalar_math(ng, "LESS_THAN", a_stored, values=(-0.5,)).outputs["Value"]
     step = ng.nodes.new("ShaderNodeMapRange")
     step.interpolation_type = "SMOOTHSTEP"

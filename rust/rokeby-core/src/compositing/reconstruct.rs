@@ -292,7 +292,7 @@ fn check_partial_args(
             format!("map size must be in 8..=4096, got {}", params.size),
         ));
     }
-    // tests/test_properties_new.py found NaN parameters accepted (blur_sigma = NaN gave a NaN map).
+    // Every parameter must be finite and in range: a NaN (blur_sigma = NaN) would give a NaN map.
     if !(params.max_edge_angle.is_finite() && params.max_edge_angle > 0.0) {
         return Err(RokebyError::invalid(
             "max_edge_angle",

@@ -8,7 +8,7 @@
 //!
 //! * [`Layout::LatLong`] — equirectangular, Blender's convention (EEVEE's
 //!   `node_tex_environment_equirectangular`, Cycles' `direction_to_equirectangular`; +X at the
-//!   image centre, as `rokeby.reflmap.direction_to_uv`):
+//!   image centre, as `rokeby.reflection.render.reflmap.direction_to_uv`):
 //!   ```text
 //!   u = ½ − atan2(d_y, d_x)/(2π),   v = ½ + atan2(d_z, hypot(d_x, d_y))/π
 //!   x = u·W,  y = (1 − v)·H                    (z up: the top row of the file looks up)

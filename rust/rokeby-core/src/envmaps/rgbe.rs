@@ -2,7 +2,7 @@
 //! format environment maps come in (Poly Haven, most HDRI sites), beside OpenEXR.
 //!
 //! A pixel is three 8-bit mantissas sharing one 8-bit exponent: `m · 2^(e − 136)` per channel, 0
-//! when `e = 0` — as Blender reads them (measured: tests/test_envmap.py; Radiance's own reader adds
+//! when `e = 0` — as Blender reads them (measured: tests/envmaps/test_envmap.py; Radiance's own reader adds
 //! ½ to m), so a file reads the same here as in Blender. [`from_float`] rounds to the nearest
 //! mantissa (Blender's writer truncates), which keeps the round trip within ½ unit. Files hold an ASCII header
 //! (`#?RADIANCE` or `#?RGBE`, `FORMAT=32-bit_rle_rgbe`, a blank line), the resolution line

@@ -26,7 +26,7 @@ pub struct Mesh {
 /// (F×3, 0-based; polygons fanned from their first corner, `a/b/c` corners and negative, relative
 /// indices read). Other lines are ignored. A number that does not parse is an error naming its
 /// line. The one OBJ reader of the Rust side (tests, examples); the add-on reads OBJ in Python
-/// (`rokeby.meshio`).
+/// (`rokeby.core.meshio`).
 pub fn parse_obj(text: &str) -> Result<(Vec<f32>, Vec<i64>)> {
     let (mut v, mut f) = (Vec::new(), Vec::new());
     for (n, line) in text.lines().enumerate() {

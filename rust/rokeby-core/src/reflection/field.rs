@@ -158,7 +158,7 @@ pub fn output_width(output: FieldOutput) -> usize {
 /// a + (1 − a) cos φ > 0, φ = ∠(r, s); otherwise the closest rotation in P, the continuous
 /// choice a shader can make), by θ = atan2((1 − a) sin φ, 2a + (1 − a) cos φ) from r towards s.
 /// Hence R_a r = R (cos θ r + sin θ t), t the unit part of s orthogonal to r. a = 1 gives R r,
-/// a = 0 gives r. The render nodes (rokeby.shading) implement the same lines.
+/// a = 0 gives r. The render nodes (rokeby.reflection.render.shading) implement the same lines.
 pub fn view_blend(rot: DQuat, a: f64, r: DVec3) -> DVec3 {
     let a = a.clamp(0.0, 1.0);
     let b = 1.0 - a;

@@ -322,7 +322,8 @@ pub fn ortho_iterative(m: &DMat3, init: DQuat, max_iter: usize) -> Iterated {
 
 /// M scaled so its largest entry is 1. The polar factor of s·M is that of M for any s > 0, and
 /// at unit size the SVD's and Newton's products stay far from overflow and underflow for entries
-/// anywhere in f64's range (found by the `polar` fuzz target: entries of 1e122 overflowed).
+/// anywhere in f64's range (entries of 1e122 would overflow unscaled; the `polar` fuzz target
+/// covers it).
 fn unit_scale(m: &DMat3) -> DMat3 {
     let s = m.to_cols_array().iter().fold(0.0f64, |a, x| a.max(x.abs()));
     if s.is_finite() && s > 0.0 {

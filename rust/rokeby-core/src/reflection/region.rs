@@ -14,7 +14,7 @@ use glam::DVec3;
 #[inline]
 pub fn smooth_step(t: f64) -> f64 {
     if t.is_nan() || t <= 0.0 {
-        return 0.0; // t ≤ 0, and NaN (found by fuzzing: a NaN distance gave a NaN weight)
+        return 0.0; // t ≤ 0, and NaN: a NaN distance must not give a NaN weight
     }
     let t = t.min(1.0);
     t * t * (3.0 - 2.0 * t)
@@ -26,7 +26,7 @@ pub fn smooth_step(t: f64) -> f64 {
 #[inline]
 pub fn influence(d: f64, radius: f64, border: f64) -> f64 {
     let border = border.min(radius);
-    // A NaN distance (an unreachable point) goes to 0 too (found by fuzzing).
+    // A NaN distance (an unreachable point) goes to 0 too.
     if d.is_nan() || radius.is_nan() || d >= radius {
         return 0.0;
     }
