@@ -23,7 +23,7 @@ from rokeby.blender import compat  # noqa: E402
 from rokeby import compositing as C  # noqa: E402
 from rokeby.compositing import brush as B  # noqa: E402
 from rokeby import envmaps  # noqa: E402
-from rokeby.compositing.ui import LAST_EXR  # noqa: E402
+from rokeby.core import schema  # noqa: E402
 
 SIZE = 48
 
@@ -41,7 +41,7 @@ def _render_frame(path):
     bpy.ops.object.camera_add(location=(0.0, -3.2, 0.0), rotation=(np.pi / 2, 0, 0))
     sc.camera = bpy.context.object
     C.render_passes(sc, str(path))
-    sc[LAST_EXR] = str(path)
+    sc[schema.COMPOSITE_LAST_EXR_KEY] = str(path)
 
 
 @pytest.fixture(scope="module")
@@ -98,7 +98,7 @@ def test_a_stroke_changes_the_image_under_it_only_and_reaches_the_compositor(reg
     node = bpy.ops.rokeby.composite_to_compositor(image_name="Brushed")
     assert node == {"FINISHED"}
     tree = compat.compositor_tree(registered)
-    tree.links.new(tree.nodes[C.COMPOSITOR_NODE].outputs["Image"], compat.compositor_output(tree))
+    tree.links.new(tree.nodes[schema.COMPOSITOR_NODE].outputs["Image"], compat.compositor_output(tree))
     got = B.paint_stroke(s, [A, Bp], RADIUS, 0.8, "emboss")
     after = _pixels(bpy.data.images["Brushed"])
     changed = (after != before).any(-1)
@@ -108,7 +108,7 @@ def test_a_stroke_changes_the_image_under_it_only_and_reaches_the_compositor(reg
     inner = (dist < RADIUS - 1.5) & s.on
     assert changed[inner].mean() > 0.95  # and the sphere's pixels well inside it change
     assert np.isfinite(after).all()
-    assert img[B.SOURCE_KEY] == str(frame) and len(img[B.STROKES_KEY]) == 1
+    assert img[schema.BRUSH_SOURCE_KEY] == str(frame) and len(img[schema.BRUSH_STROKES_KEY]) == 1
     # the compositor's Image node reads the brushed image: a render through it outputs the stroke
     registered.render.use_compositing = True
     compat.set_single_layer_exr(registered.render.image_settings, "32")
@@ -262,7 +262,7 @@ def test_bad_inputs_are_named(registered, frame):
         bpy.ops.rokeby.composite_brush(image_name="Brushed")
     with pytest.raises(RuntimeError, match="outside the 48×48 image"):
         bpy.ops.rokeby.composite_brush(image_name="Brushed", stroke=[{"name": "", "pixel": (-90.0, 5.0)}])
-    del registered[LAST_EXR]
+    del registered[schema.COMPOSITE_LAST_EXR_KEY]
     B.close_all()
     assert not bpy.ops.rokeby.composite_brush.poll()  # no frame rendered, no brush open: greyed out, saying why
 

@@ -20,6 +20,7 @@ from support import cycles  # noqa: E402
 from rokeby.blender import compat  # noqa: E402
 from rokeby import compositing as C  # noqa: E402
 from rokeby import envmaps  # noqa: E402
+from rokeby.core import schema  # noqa: E402
 
 
 def _render_frame(path):
@@ -76,7 +77,7 @@ def test_use_in_compositor_feeds_an_image_node_that_follows_every_recomposite(fr
         before = sorted((lk.from_node.name, lk.to_node.name) for lk in tree0.links if lk.to_node.bl_idname != "CompositorNodeViewer")
         assert bpy.ops.rokeby.composite_to_compositor() == {"FINISHED"}
         tree = compat.compositor_tree(bpy.context.scene)
-        node = tree.nodes[C.COMPOSITOR_NODE]
+        node = tree.nodes[schema.COMPOSITOR_NODE]
         assert node.image == img
         viewer = next(n for n in tree.nodes if n.bl_idname == "CompositorNodeViewer")
         assert viewer.inputs[0].links[0].from_node == node
@@ -94,7 +95,7 @@ def test_use_in_compositor_feeds_an_image_node_that_follows_every_recomposite(fr
         np.testing.assert_allclose(out2, second, rtol=1e-4, atol=1e-5)
         # a frame of another size makes a new image: the node follows it
         new = C.show_image("Rokeby Recomposited", np.full((8, 10, 3), 0.25, np.float32))
-        assert tree.nodes[C.COMPOSITOR_NODE].image == new and tuple(new.size) == (10, 8)
+        assert tree.nodes[schema.COMPOSITOR_NODE].image == new and tuple(new.size) == (10, 8)
         with pytest.raises(RuntimeError, match="no image 'Nothing'"):
             bpy.ops.rokeby.composite_to_compositor(image_name="Nothing")
     finally:

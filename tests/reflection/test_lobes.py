@@ -13,6 +13,7 @@ OpenEXR = pytest.importorskip("OpenEXR")
 from rokeby import api  # noqa: E402
 from rokeby.blender import compat  # noqa: E402
 from rokeby.reflection.render import shading  # noqa: E402
+from rokeby.core import schema  # noqa: E402
 from rokeby.compositing import exr_pass_names  # noqa: E402
 from support.reflection import CHROME_BALL_SIZE as SIZE  # noqa: E402  (chrome_ball: tests/reflection/conftest.py)
 
@@ -75,7 +76,7 @@ def _show_normal(mat, source=None):
         aov = tree.nodes.new("ShaderNodeOutputAOV")
         aov.aov_name = "rokeby_n"
     if source is None:
-        spec = next((n for n in tree.nodes if n.get(shading.ROLE) == "specular"), None)
+        spec = next((n for n in tree.nodes if n.get(schema.ROLE_KEY) == "specular"), None)
         if spec is not None:
             source = spec.inputs["Normal"].links[0].from_socket
         else:
@@ -104,7 +105,7 @@ def test_split_keeps_diffuse_and_moves_specular(plastic_ball, tmp_path):
     before = _tree_state(mat.node_tree)
     plain = _passes(tmp_path, "plain")
     assert api.install_render_nodes(ball) == 1
-    roles = sorted(n.get(shading.ROLE) for n in mat.node_tree.nodes if n.get(shading.LINK_TAG))
+    roles = sorted(n.get(schema.ROLE_KEY) for n in mat.node_tree.nodes if n.get(schema.LINK_TAG))
     assert {"diffuse", "specular", "normal", "sum"} <= set(roles) and "metal" not in roles
     assert not bsdf.outputs["BSDF"].is_linked  # the split stands in for it
     aov = _show_normal(mat)
@@ -185,7 +186,7 @@ def test_artist_edits_reach_the_split_parts(plastic_ball, tmp_path):
     api.install_render_nodes(ball)
     bsdf.inputs["Base Color"].default_value = (0.05, 0.05, 0.6, 1.0)  # red → blue, after install
     bpy.context.view_layer.update()  # the depsgraph handler syncs the parts
-    diffuse = next(n for n in mat.node_tree.nodes if n.get(shading.ROLE) == "diffuse")
+    diffuse = next(n for n in mat.node_tree.nodes if n.get(schema.ROLE_KEY) == "diffuse")
     assert tuple(diffuse.inputs["Base Color"].default_value) == pytest.approx((0.05, 0.05, 0.6, 1.0))
     col = _passes(tmp_path, "blue")["DiffCol"]
     on_ball = col.sum(-1) > 0.05
@@ -193,8 +194,8 @@ def test_artist_edits_reach_the_split_parts(plastic_ball, tmp_path):
     # Metallic turned to 1: the split goes away, the BSDF gets n' directly.
     bsdf.inputs["Metallic"].default_value = 1.0
     assert shading.sync(mat)
-    assert not [n for n in mat.node_tree.nodes if n.get(shading.ROLE) in ("diffuse", "specular")]
-    assert bsdf.inputs["Normal"].links[0].from_node.get(shading.ROLE) == "normal"
+    assert not [n for n in mat.node_tree.nodes if n.get(schema.ROLE_KEY) in ("diffuse", "specular")]
+    assert bsdf.inputs["Normal"].links[0].from_node.get(schema.ROLE_KEY) == "normal"
 
 
 def test_coat_and_partly_metallic(plastic_ball, tmp_path):
@@ -203,13 +204,13 @@ def test_coat_and_partly_metallic(plastic_ball, tmp_path):
     bsdf.inputs["Metallic"].default_value = 0.5
     before = _tree_state(mat.node_tree)
     api.install_render_nodes(ball)
-    roles = [n.get(shading.ROLE) for n in mat.node_tree.nodes if n.get(shading.LINK_TAG)]
+    roles = [n.get(schema.ROLE_KEY) for n in mat.node_tree.nodes if n.get(schema.LINK_TAG)]
     assert "metal" in roles and "metallic" in roles
     for role in ("specular", "metal"):
-        part = next(n for n in mat.node_tree.nodes if n.get(shading.ROLE) == role)
+        part = next(n for n in mat.node_tree.nodes if n.get(schema.ROLE_KEY) == role)
         for name in ("Normal", "Coat Normal"):
-            assert part.inputs[name].links[0].from_node.get(shading.ROLE) == "normal", (role, name)
-    diffuse = next(n for n in mat.node_tree.nodes if n.get(shading.ROLE) == "diffuse")
+            assert part.inputs[name].links[0].from_node.get(schema.ROLE_KEY) == "normal", (role, name)
+    diffuse = next(n for n in mat.node_tree.nodes if n.get(schema.ROLE_KEY) == "diffuse")
     assert not diffuse.inputs["Normal"].is_linked and diffuse.inputs["Coat Weight"].default_value == 0.0
     identity = _passes(tmp_path, "identity")
     _edit(ball)

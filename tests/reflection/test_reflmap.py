@@ -14,6 +14,7 @@ from rokeby import api  # noqa: E402
 from rokeby.blender import compat  # noqa: E402
 from rokeby.reflection import mirror_state  # noqa: E402
 from rokeby.reflection.render import reflmap  # noqa: E402
+from rokeby.core import schema  # noqa: E402
 from rokeby.core.errors import RokebyError  # noqa: E402
 
 SIZE = 48
@@ -193,7 +194,7 @@ def test_prefilter_blurs_by_the_lobe_width_and_keeps_energy():
     assert [lv.shape[1] for lv in levels] == [256, 256, 128, 32]
     for lv in reflmap.prefilter(np.ones((h, w, 3), np.float32), (0.0, 0.3, 0.7)):
         np.testing.assert_allclose(lv, 1.0, atol=1e-5)
-    for r, lv in zip(reflmap.ROUGHNESS_LEVELS[1:], levels[1:]):
+    for r, lv in zip(schema.REFLMAP_ROUGHNESS_LEVELS[1:], levels[1:]):
         hh, ww = lv.shape[:2]
         yy, xx = np.mgrid[0:hh, 0:ww]
         dirs = reflmap.uv_to_direction((xx + 0.5) / ww, (yy + 0.5) / hh)
@@ -276,7 +277,7 @@ def test_prefilter_gives_the_levels_maps_were_captured_with(h, w):
     new, old = reflmap.prefilter(px), _old_prefilter(px)
     assert [lv.shape for lv in new] == [lv.shape for lv in old]
     assert new[0] is px
-    for r, a, b in zip(reflmap.ROUGHNESS_LEVELS[1:], new[1:], old[1:]):
+    for r, a, b in zip(schema.REFLMAP_ROUGHNESS_LEVELS[1:], new[1:], old[1:]):
         assert a.dtype == np.float32 and np.isfinite(a).all()
         err = float(np.abs(a.astype(np.float64) - b).max())
         assert err <= 1e-5 * float(np.abs(b).max()), (r, err, float(np.abs(b).max()))
@@ -302,7 +303,7 @@ def test_capture_sees_the_surroundings_not_the_mirror(encoded_room):
     np.testing.assert_allclose(got[~near_cube], enc[~near_cube], atol=2e-3)
     # Blurred levels for rough materials, each smaller.
     levels = reflmap.levels_for(ball)
-    assert [r for r, _ in levels] == list(reflmap.ROUGHNESS_LEVELS)
+    assert [r for r, _ in levels] == list(schema.REFLMAP_ROUGHNESS_LEVELS)
     assert [im.size[0] for _, im in levels] == [64, 64, 64, 32]
     assert not reflmap.is_stale(ball)
     bpy.data.objects["Red"].location.x += 1.0
@@ -378,7 +379,7 @@ def test_edit_in_map_mode_stays_in_its_region_and_removal_restores(chrome_ball, 
     api.capture_reflection_map(ball, resolution=256, samples=4)
     assert api.install_render_nodes(ball) == 1
     assert api.install_render_nodes(ball) == 1  # idempotent: one set of nodes
-    assert sum(1 for n in mat.node_tree.nodes if n.get(reflmap.TAG)) == 3
+    assert sum(1 for n in mat.node_tree.nodes if n.get(schema.REFLMAP_TAG)) == 3
     fresh = _render(tmp_path, "fresh")
     green = ball.rokeby.constraints[0].target_handle
     green.location.z += 3.0
@@ -421,7 +422,7 @@ def test_dielectric_and_glossy_materials_are_restored_exactly(chrome_ball):
     # The Principled BSDF keeps its diffuse lobe only; its inputs feed the lookup group.
     assert bsdf.inputs["Metallic"].default_value == 0.0 and bsdf.inputs["Specular IOR Level"].default_value == 0.0
     assert not bsdf.inputs["Specular IOR Level"].is_linked
-    group = next(n for n in tree.nodes if n.get(reflmap.TAG) == "group" and n["rokeby_bsdf"] == bsdf.name)
+    group = next(n for n in tree.nodes if n.get(schema.REFLMAP_TAG) == "group" and n["rokeby_bsdf"] == bsdf.name)
     assert group.inputs["Color"].links[0].from_node == tex and group.inputs["Normal"].links[0].from_node == bump
     assert bsdf.inputs["Base Color"].links[0].from_node == group
     assert not glossy.outputs["BSDF"].is_linked  # replaced by its map lookup
@@ -462,10 +463,10 @@ def test_save_and_reload_keep_the_map_and_the_mode(chrome_ball, tmp_path):
     assert ball.rokeby.render_mode == "REFLECTION_MAP"
     img = reflmap.image_for(ball)
     np.testing.assert_allclose(_pixels(img), cached, rtol=1e-3, atol=1e-3)
-    assert len(reflmap.levels_for(ball)) == len(reflmap.ROUGHNESS_LEVELS)
+    assert len(reflmap.levels_for(ball)) == len(schema.REFLMAP_ROUGHNESS_LEVELS)
     mat = bpy.data.materials["Chrome"]
     assert reflmap.installed(mat)
-    group = next(n for n in mat.node_tree.nodes if n.get(reflmap.TAG) == "group")
+    group = next(n for n in mat.node_tree.nodes if n.get(schema.REFLMAP_TAG) == "group")
     assert group.node_tree.nodes["Level 0"].image == img
 
 

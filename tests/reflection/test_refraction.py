@@ -12,6 +12,7 @@ import rokeby  # noqa: E402
 from rokeby import api  # noqa: E402
 from rokeby.reflection import mirror_state  # noqa: E402
 from rokeby.reflection.render import refraction  # noqa: E402
+from rokeby.core import schema  # noqa: E402
 
 from support import cycles  # noqa: E402
 from support.reference import rotation_vectors  # noqa: E402
@@ -409,7 +410,7 @@ def test_cycles_refraction_edit_shows_inside_its_region_only(glass_ball, tmp_pat
     # The reflection field is untouched by the refraction edit.
     assert np.abs(api.stored_field(ball)).max() == 0.0
     assert api.remove_render_nodes(ball) == 1
-    assert [n.bl_idname for n in nt.nodes if n.get(refraction.TAG)] == []
+    assert [n.bl_idname for n in nt.nodes if n.get(schema.REFRACTION_TAG)] == []
     np.testing.assert_array_equal(_render(tmp_path, "again"), plain)
 
 
@@ -430,12 +431,12 @@ def test_glass_is_split_identity_holds_extreme_edits_stay_finite_and_removal_res
     api.evaluate()
     # The Glass (refraction) and the Glossy part it was split into (rokeby.reflection.render.shading); idempotent.
     assert api.install_render_nodes(ball) == 2 and api.install_render_nodes(ball) == 2
-    roles = sorted(n[refraction.TAG] for n in tree.nodes if n.get(refraction.TAG))
+    roles = sorted(n[schema.REFRACTION_TAG] for n in tree.nodes if n.get(schema.REFRACTION_TAG))
     assert roles == ["fresnel", "mix", "normal", "reflection", "refraction"]
-    group = next(n for n in tree.nodes if n.get(refraction.TAG) == "normal")
+    group = next(n for n in tree.nodes if n.get(schema.REFRACTION_TAG) == "normal")
     assert group.inputs["Normal"].links[0].from_node == bump  # the bump passes through
     # The split Glossy got the reflection group of rokeby.reflection.render.shading (reflection edits show too).
-    glossy = next(n for n in tree.nodes if n.get(refraction.TAG) == "reflection")
+    glossy = next(n for n in tree.nodes if n.get(schema.REFRACTION_TAG) == "reflection")
     assert glossy.inputs["Normal"].links[0].from_node.node_tree.name == "Rokeby Edited Normal"
     fresh = _render(tmp_path, "fresh")
     # Same expectation, different sampling (Cycles picks reflection or refraction differently):

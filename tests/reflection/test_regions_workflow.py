@@ -19,6 +19,7 @@ from rokeby import api  # noqa: E402
 from rokeby.reflection import mirror_state  # noqa: E402
 from rokeby.core.meshio import load_obj  # noqa: E402
 from rokeby.reflection import freeform_regions  # noqa: E402
+from rokeby.core import schema  # noqa: E402
 
 from support import cycles, mesh_path  # noqa: E402
 
@@ -128,7 +129,7 @@ def test_renamed_vertex_group_is_followed_and_keeps_following(tmp_path):
     rg = ball.rokeby.regions[0]
     assert rg.vertex_group == "Shine"
     assert freeform_regions.find_reader(ball, "Shine") is not None and freeform_regions.find_reader(ball, "Patch") is None
-    assert [m.name for m in ball.modifiers if m.name.startswith(freeform_regions.VG_MODIFIER_PREFIX)] == [freeform_regions.VG_MODIFIER_PREFIX + "Shine"]
+    assert [m.name for m in ball.modifiers if m.name.startswith(schema.VG_MODIFIER_PREFIX)] == [schema.VG_MODIFIER_PREFIX + "Shine"]
     np.testing.assert_allclose(api.field(ball), before, atol=1e-6)
     # Saved and reloaded, the next rename is followed too, and so is the painting.
     path = str(tmp_path / "renamed.blend")
@@ -166,7 +167,7 @@ def test_rename_in_a_window_is_followed_through_the_depsgraph_handler():
 def test_applied_reader_modifier_is_remade_and_the_region_follows_the_painting(tmp_path):
     ball, patch = _ball()
     edited = _render(tmp_path / "edited.png")
-    name = freeform_regions.VG_MODIFIER_PREFIX + "Patch"
+    name = schema.VG_MODIFIER_PREFIX + "Patch"
     with bpy.context.temp_override(object=ball, active_object=ball):
         assert bpy.ops.object.modifier_apply(modifier=name) == {"FINISHED"}
     ball.vertex_groups["Patch"].add(patch.tolist(), 0.0, "REPLACE")  # erase every weight
@@ -174,7 +175,7 @@ def test_applied_reader_modifier_is_remade_and_the_region_follows_the_painting(t
     assert rep.status == "OK", rep.summary()
     assert _angle(api.field(ball)).max() < 1e-6  # the old main kept the baked weights: the edit stayed
     assert name in ball.modifiers  # remade
-    assert (freeform_regions.REGION_ATTRIBUTE_PREFIX + "Patch") not in ball.data.attributes  # the frozen copy is gone
+    assert (schema.REGION_ATTRIBUTE_PREFIX + "Patch") not in ball.data.attributes  # the frozen copy is gone
     erased = _render(tmp_path / "erased.png")
     ball.rokeby.render_edits = False
     api.evaluate()
@@ -210,7 +211,7 @@ def test_deleted_group_warns_naming_it_and_the_status_says_what_renders_show():
     assert _angle(api.field(ball)[outside]).min() > 0.01
     stored = api.stored_field(ball)
     np.testing.assert_allclose(mirror_state.quaternions(stored), api.field(ball), atol=1e-5)
-    assert not [m for m in ball.modifiers if m.name.startswith(freeform_regions.VG_MODIFIER_PREFIX)]  # its reader went
+    assert not [m for m in ball.modifiers if m.name.startswith(schema.VG_MODIFIER_PREFIX)]  # its reader went
 
 
 def test_choosing_another_group_in_the_sidebar_reads_that_group():

@@ -10,7 +10,7 @@ bpy = pytest.importorskip("bpy")
 import rokeby  # noqa: E402
 from rokeby import api  # noqa: E402
 from rokeby.reflection import mirror_state  # noqa: E402
-from rokeby.reflection import freeform_regions  # noqa: E402
+from rokeby.core import schema  # noqa: E402
 
 from support import SHARED  # noqa: E402
 from support.reference import rotation_vectors  # noqa: E402
@@ -301,7 +301,7 @@ def test_regions_limit_the_edit():
     assert np.abs(api.quat_angle(q[unpainted])).max() < 1e-6
     assert api.quat_angle(q[painted]).max() > 1e-3
     api.remove_region(mirror, 0)
-    assert not [m for m in mirror.modifiers if m.name.startswith(freeform_regions.VG_MODIFIER_PREFIX)]
+    assert not [m for m in mirror.modifiers if m.name.startswith(schema.VG_MODIFIER_PREFIX)]
 
 
 def test_freeze_stops_reflections_following_the_camera_and_return_to_view():

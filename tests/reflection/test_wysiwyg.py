@@ -328,7 +328,7 @@ def test_subdivided_mirror_gets_the_field_of_the_surface_it_renders(tmp_path):
     assert field_carriers.carrier_of(ball) is not None
     api.remove_mirror(ball)
     assert field_carriers.carrier_of(ball) is None and [m.type for m in ball.modifiers] == ["SUBSURF"]
-    assert not [o for o in bpy.data.objects if o.name.startswith(field_carriers.CARRIER_PREFIX)]
+    assert not [o for o in bpy.data.objects if o.name.startswith(schema.CARRIER_PREFIX)]
 
 
 # --- 8. a fresh highlight constraint is neutral ---------------------------------------------

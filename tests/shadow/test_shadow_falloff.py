@@ -8,6 +8,7 @@ bpy = pytest.importorskip("bpy")
 
 import rokeby  # noqa: E402
 from rokeby import api, shadow  # noqa: E402
+from rokeby.core import schema  # noqa: E402
 from support.shadow import LIGHT, blender_scene  # noqa: E402
 
 
@@ -25,7 +26,7 @@ def _edit(beta):
 
 
 def _key(ob):
-    return ob.data.shape_keys.key_blocks[shadow.EDIT_KEY].value
+    return ob.data.shape_keys.key_blocks[schema.SHADOW_EDIT_KEY].value
 
 
 def test_falloff_follows_the_light_through_the_handlers():

@@ -38,6 +38,7 @@ def _edge(img, lamp_pos):
 def test_two_keyed_configurations_blend_at_the_midpoint(tmp_path):
     bpy, sc, ball, lamp, ground = ts.blender_scene()
     from rokeby import api, shadow
+    from rokeby.core import schema
 
     ball.visible_camera = False
     l1, l2, mid = ts.LIGHT.astype(float), _rotated(30.0), _rotated(15.0)
@@ -51,7 +52,7 @@ def test_two_keyed_configurations_blend_at_the_midpoint(tmp_path):
     s2 = _edit(api, ball, lamp, ground, 0.75)  # made under l2: the +x edge pulled in
     ob2, _ = api.apply_shadow_edit(s2, add_configuration=True)
     assert ob2 == ob and s2.configuration == 1
-    assert [k.name for k in ob.data.shape_keys.key_blocks] == ["Basis", shadow.EDIT_KEY, shadow.configuration_key(1)]
+    assert [k.name for k in ob.data.shape_keys.key_blocks] == ["Basis", schema.SHADOW_EDIT_KEY, shadow.configuration_key(1)]
     np.testing.assert_allclose(shadow.configuration_weights(ob, lamp), [0.0, 1.0], atol=1e-6)
     lamp.location = tuple(l1)
     sc.view_layers[0].update()
@@ -81,6 +82,7 @@ def _render(bpy, sc, path):
 def test_a_file_with_two_configurations_reloads_them(tmp_path):
     bpy, sc, ball, lamp, ground = ts.blender_scene()
     from rokeby import api, shadow
+    from rokeby.core import schema
 
     s1 = _edit(api, ball, lamp, ground, 1.3)
     api.apply_shadow_edit(s1)
@@ -99,7 +101,7 @@ def test_a_file_with_two_configurations_reloads_them(tmp_path):
     ball, ground = bpy.data.objects["Ball"], bpy.data.objects["Ground"]
     ob, _ = api.apply_shadow_edit(_edit(api, ball, lamp, ground, 1.2))
     assert shadow.configuration_vectors(ob).shape == (1, 3)
-    assert [k.name for k in ob.data.shape_keys.key_blocks] == ["Basis", shadow.EDIT_KEY]
+    assert [k.name for k in ob.data.shape_keys.key_blocks] == ["Basis", schema.SHADOW_EDIT_KEY]
 
 
 def test_add_configuration_from_another_light_is_refused(tmp_path):
@@ -119,9 +121,9 @@ def test_add_configuration_from_another_light_is_refused(tmp_path):
 
 
 def _key(ob, name=None):
-    from rokeby import shadow
+    from rokeby.core import schema
 
-    k = ob.data.shape_keys.key_blocks[name or shadow.EDIT_KEY]
+    k = ob.data.shape_keys.key_blocks[name or schema.SHADOW_EDIT_KEY]
     co = np.empty(len(ob.data.vertices) * 3, np.float32)
     k.data.foreach_get("co", co)
     return co.reshape(-1, 3)

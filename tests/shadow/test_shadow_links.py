@@ -13,6 +13,7 @@ bpy = pytest.importorskip("bpy")
 from support import shadow as ts  # noqa: E402
 from rokeby import shadow  # noqa: E402
 from rokeby.shadow import linking  # noqa: E402
+from rokeby.core import schema  # noqa: E402
 
 
 def _settle(sc):
@@ -120,7 +121,7 @@ def _write_as_main_did(ob):
     for attr, role in zip(linking._COLLECTION_ATTRS, linking._OURS):
         c = getattr(ll, attr)
         c.name = linking._collection_name(light.name, role)
-        del c[shadow.LINKING_TAG]
+        del c[schema.SHADOW_LINKING_TAG]
     for o in (ob, twin, light):
         o.property_unset("rokeby_shadow")
     assert all(o.rokeby_shadow.role == "NONE" and o.rokeby_shadow.twin is None for o in (ob, twin, light))
@@ -212,7 +213,7 @@ def test_a_session_survives_renames_and_derived_parts_follow_the_names(tmp_path)
     ob2, twin2 = shadow.apply(s)
     assert (ob2, twin2) == (ob, twin)  # the same parts, found by pointer, renamed after their owners
     assert ob.name == "Orb" + shadow.SHADOW_SUFFIX and twin.name == "Key" + shadow.TWIN_SUFFIX
-    assert sorted(c.name for c in bpy.data.collections if shadow.LINKING_TAG in c) == sorted(
+    assert sorted(c.name for c in bpy.data.collections if schema.SHADOW_LINKING_TAG in c) == sorted(
         linking._collection_name("Key", r) for r in linking._OURS)
     assert {o.name for o in bpy.data.objects if o.rokeby_shadow.role != "NONE"} == {ob.name, twin.name}
     _settle(sc)

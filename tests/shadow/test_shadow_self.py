@@ -97,6 +97,7 @@ def test_a_self_shadow_loop_dragged_changes_the_caster_there_and_only_there(tmp_
     bpy, sc, caster, lamp, ground = _scene(cap_z)
     sc.render.engine = engine
     from rokeby import api, shadow
+    from rokeby.core import schema
 
     plain = _render(bpy, sc, tmp_path / "plain.png")
     # "Within noise": 4 samples leave the anti-aliased edge pixels noisy, and another light set-up
@@ -130,7 +131,7 @@ def test_a_self_shadow_loop_dragged_changes_the_caster_there_and_only_there(tmp_
     # The unedited-but-installed state (every edit key at 0: self-shadow mesh = the caster a hair
     # inside itself) renders as the plain scene: no acne, no light leak at the contact.
     for o in (ob, b):
-        o.data.shape_keys.key_blocks[shadow.EDIT_KEY].value = 0.0
+        o.data.shape_keys.key_blocks[schema.SHADOW_EDIT_KEY].value = 0.0
     sc.view_layers[0].update()
     zero = _render(bpy, sc, tmp_path / "zero.png")
     diff = np.abs(zero - plain)

@@ -20,6 +20,7 @@ import rokeby  # noqa: E402
 from rokeby import api  # noqa: E402
 from rokeby.reflection import mirror_state  # noqa: E402
 from rokeby.reflection.render import reflmap  # noqa: E402
+from rokeby.core import schema  # noqa: E402
 
 import make_fixtures  # noqa: E402
 
@@ -167,7 +168,7 @@ def test_reflection_maps_of_similar_names_stay_apart_after_reopening(names, tmp_
     # Every file lies in //rokeby_maps/ (nothing else was written next to the .blend).
     written = sorted(p.relative_to(tmp_path).as_posix() for p in tmp_path.rglob("*") if p.is_file())
     assert all(w.startswith("rokeby_maps/") or w.startswith("maps.blend") for w in written), written
-    assert len([w for w in written if w.startswith("rokeby_maps/")]) == 2 * len(reflmap.ROUGHNESS_LEVELS)
+    assert len([w for w in written if w.startswith("rokeby_maps/")]) == 2 * len(schema.REFLMAP_ROUGHNESS_LEVELS)
 
 
 def test_capturing_a_copy_of_a_captured_mirror_keeps_the_originals_map(tmp_path):
@@ -212,7 +213,7 @@ def test_maps_of_files_saved_before_the_ids_still_load(tmp_path):
     api.capture_reflection_map(ball, resolution=32, samples=1)
     # Rewrite it the way the old version stored it: //rokeby_maps/Ball.exr, no map id.
     for k, img in enumerate([ball.rokeby.map_image] + [r.image for r in ball.rokeby.map_levels]):
-        old = "Ball.exr" if k == 0 else f"Ball_r{reflmap.ROUGHNESS_LEVELS[k]:g}.exr"
+        old = "Ball.exr" if k == 0 else f"Ball_r{schema.REFLMAP_ROUGHNESS_LEVELS[k]:g}.exr"
         os.replace(bpy.path.abspath(img.filepath), tmp_path / "rokeby_maps" / old)
         img.filepath = "//rokeby_maps/" + old
     ball.rokeby.map_id = ""
@@ -376,7 +377,7 @@ def test_shadow_noise_amplitude_that_overflows_is_refused_and_writes_nothing():
     s2.drag(0, fixed, m, target, noise_amplitude=0.05, noise_frequency=3.0)
     s2.commit()
     ob, _twin = api.apply_shadow_edit(s2)
-    key = ob.data.shape_keys.key_blocks[shadow.EDIT_KEY]
+    key = ob.data.shape_keys.key_blocks[schema.SHADOW_EDIT_KEY]
     co = np.empty(3 * len(key.data), np.float32)
     key.data.foreach_get("co", co)
     assert np.isfinite(co).all()

@@ -12,6 +12,7 @@ from support import cycles  # noqa: E402
 from support.scenes import add_front_camera, add_point_lamp, empty_scene, plastic_material  # noqa: E402
 from rokeby import api  # noqa: E402
 from rokeby.reflection.render import refraction, rendering, shading  # noqa: E402
+from rokeby.core import schema  # noqa: E402
 
 
 def _tree_state(tree):
@@ -104,7 +105,7 @@ def test_renamed_split_bsdf_leaks_no_parts():
     nt = mat.node_tree
     _edit(ball)
     ours = len([n for n in nt.nodes if shading._ours(n)])
-    split = next(n for n in nt.nodes if shading.SPLIT in n)
+    split = next(n for n in nt.nodes if schema.SPLIT_KEY in n)
     split.name = "My Plastic"
     split.inputs["Roughness"].default_value = 0.35  # an edit: the parts are rebuilt
     assert shading.sync(mat)
@@ -214,8 +215,8 @@ def test_removal_refuses_when_the_bsdf_and_its_parts_are_gone():
     sc, ball, mat = _scene()
     _edit(ball)
     nt = mat.node_tree
-    nt.nodes.remove(next(n for n in nt.nodes if shading.SPLIT in n))
-    nt.nodes.remove(next(n for n in nt.nodes if n.get(shading.ROLE) == "diffuse"))
+    nt.nodes.remove(next(n for n in nt.nodes if schema.SPLIT_KEY in n))
+    nt.nodes.remove(next(n for n in nt.nodes if n.get(schema.ROLE_KEY) == "diffuse"))
     state = _tree_state(nt)
     with pytest.raises(api.RokebyError, match="Principled BSDF that Rokeby split was deleted"):
         api.remove_render_nodes(ball)
@@ -230,12 +231,12 @@ def test_old_file_parts_found_after_renaming_the_split_bsdf():
     nt = mat.node_tree
     before = _tree_state(nt)
     _edit(ball)
-    split = next(n for n in nt.nodes if shading.SPLIT in n)
+    split = next(n for n in nt.nodes if schema.SPLIT_KEY in n)
     for n in nt.nodes:  # as an older version stored it
-        if shading._ours(n) and shading.SOURCE in n:
-            n[shading.SOURCE] = split.name
-            del n[shading.SOURCE_NAME]
-    del split[shading.SPLIT_ID]
+        if shading._ours(n) and schema.SOURCE_KEY in n:
+            n[schema.SOURCE_KEY] = split.name
+            del n[schema.SOURCE_NAME_KEY]
+    del split[schema.SPLIT_ID_KEY]
     split.name = "My Plastic"
     api.remove_render_nodes(ball)
     nt.nodes["My Plastic"].name = "Principled BSDF"

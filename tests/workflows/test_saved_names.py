@@ -3,7 +3,7 @@ registers on Blender's types, compared with a checked-in snapshot (tests/data/sa
 
 Files keep what the add-on wrote under these names: renaming one, reordering an enum or dropping a
 property silently changes (or loses) what saved scenes hold. A change here is deliberate only with a
-load-time migration (handlers.migrate_file, props.DATA_VERSION) and a regenerated snapshot:
+load-time migration (handlers.migrate_file, schema.DATA_VERSION) and a regenerated snapshot:
 
     ROKEBY_UPDATE_SNAPSHOT=1 PYTHONPATH=$PWD/addon python -m pytest tests/workflows/test_saved_names.py
 
@@ -253,7 +253,7 @@ def test_saved_names_match_the_snapshot(tmp_path):
         pytest.fail(
             "Names the add-on writes into .blend/EXR files, or the properties it registers, changed.\n"
             "Saved files keep the old names: a changed name, property, enum identifier or enum number needs a\n"
-            "load-time migration (handlers.migrate_file, bump props.DATA_VERSION) so older files keep their meaning.\n"
+            "load-time migration (handlers.migrate_file, bump schema.DATA_VERSION) so older files keep their meaning.\n"
             "If the change is deliberate and migrated (or only adds names), regenerate the snapshot:\n"
             "    ROKEBY_UPDATE_SNAPSHOT=1 PYTHONPATH=$PWD/addon python -m pytest tests/workflows/test_saved_names.py\n"
             "and commit tests/data/saved_names.json with the change.\n\n" + _diff(old, now))

@@ -220,10 +220,10 @@ def test_copies_of_a_subdivided_mirror_never_share_its_carrier():
         api.evaluate()
         mine = field_carriers.carrier_of(copy)
         assert mine is not None and mine is not carrier and field_carriers.carrier_of(ball) is carrier
-        mod = copy.modifiers[field_carriers.TRANSFER_MODIFIER]
+        mod = copy.modifiers[schema.TRANSFER_MODIFIER]
         source = next(i.identifier for i in mod.node_group.interface.items_tree if getattr(i, "in_out", "") == "INPUT" and i.name == "Source")
         assert compat.modifier_input(mod, source) == mine
-        assert compat.modifier_input(ball.modifiers[field_carriers.TRANSFER_MODIFIER], source) == carrier
+        assert compat.modifier_input(ball.modifiers[schema.TRANSFER_MODIFIER], source) == carrier
         # Each carrier holds its own mirror's field.
         for ob in (ball, copy):
             np.testing.assert_allclose(api.stored_field(ob), mirror_state.state_of(ob).rotations, atol=1e-6)

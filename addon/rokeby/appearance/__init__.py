@@ -27,12 +27,12 @@ from __future__ import annotations
 from .attributes import read
 from .brushes import CUTOFF, falloff, paint
 from .image_packing import pack, pack_painted, reload_after_undo
-from .material_nodes import LINKED, REPLACED_KEY, migrate, remove, set_global, setup
-from .parameters import BRUSHES, COLORS, MAX_COLOR, NODE_PREFIX, PARAMS
+from .material_nodes import LINKED, migrate, remove, set_global, setup
+from .parameters import BRUSHES, COLORS, MAX_COLOR, PARAMS
 from .texture import TEXTURE_MARGIN, missing_images, point_values, read_texture, remove_texture, setup_texture, target
 
 __all__ = [
-    "BRUSHES", "COLORS", "CUTOFF", "LINKED", "MAX_COLOR", "NODE_PREFIX", "PARAMS", "REPLACED_KEY", "TEXTURE_MARGIN",
+    "BRUSHES", "COLORS", "CUTOFF", "LINKED", "MAX_COLOR", "PARAMS", "TEXTURE_MARGIN",
     "falloff", "migrate", "missing_images", "pack", "pack_painted", "paint", "point_values", "read", "read_texture",
     "reload_after_undo", "remove", "remove_texture", "set_global", "setup", "setup_texture", "target",
 ]

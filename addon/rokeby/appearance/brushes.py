@@ -13,7 +13,8 @@ import numpy as np
 
 from .attributes import _finite32, _write, read
 from .image_packing import _ensure_save_handler, pack_painted
-from .parameters import BRUSHES, COLORS, MAX_COLOR, NODE_PREFIX, PARAMS, _check_mesh, _texture_image
+from ..core import schema
+from .parameters import BRUSHES, COLORS, MAX_COLOR, PARAMS, _check_mesh, _texture_image
 from .texture import _raster, _world_index, missing_images
 
 
@@ -163,7 +164,7 @@ def _stretch_direction(obj, pts, m, path, first, radius, strength, idx):
     ρ = atan2(s·B, s·T)/2π. Anisotropy is a line, not an arrow, so ρ is blended on its double
     angle: (cos 4πρ, sin 4πρ) mixed with the dab's Gaussian weights."""
     mat = obj.active_material
-    tan = mat.node_tree.nodes.get(NODE_PREFIX + "tangent") if mat is not None and mat.use_nodes else None
+    tan = mat.node_tree.nodes.get(schema.APPEARANCE_NODE_PREFIX + "tangent") if mat is not None and mat.use_nodes else None
     if tan is None or not tan.outputs["Tangent"].is_linked:
         raise ValueError("brush: 'stretch' directions are relative to the radial tangent that Set Up Appearance Painting wires; this material's Tangent input is driven by something else")
     t, b, _ = _radial_tangent_frame(obj, m, idx)
@@ -187,7 +188,7 @@ def _stretch_direction(obj, pts, m, path, first, radius, strength, idx):
 
 def _paint_texture(obj, img, param, c, radius, strength, mode, target):
     nodes = obj.active_material.node_tree.nodes
-    uvn = nodes.get(NODE_PREFIX + "uv")
+    uvn = nodes.get(schema.APPEARANCE_NODE_PREFIX + "uv")
     uv_name = uvn.uv_map if uvn is not None and uvn.uv_map else (obj.data.uv_layers.active.name if obj.data.uv_layers.active else "")
     res = img.size[0]
     if img.size[1] != res:
@@ -233,14 +234,14 @@ def _stretch_direction_texture(obj, path, first, radius, strength):
     """:func:`_stretch_direction` on the texels of the ``anisotropic_rotation`` image: each texel's
     frame from its surface point and its triangle's interpolated vertex normal."""
     mat = obj.active_material
-    tan = mat.node_tree.nodes.get(NODE_PREFIX + "tangent")
+    tan = mat.node_tree.nodes.get(schema.APPEARANCE_NODE_PREFIX + "tangent")
     if tan is None or not tan.outputs["Tangent"].is_linked:
         raise ValueError("brush: 'stretch' directions are relative to the radial tangent that Set Up Appearance Painting wires; this material's Tangent input is driven by something else")
     img = _texture_image(obj, "anisotropic_rotation")
     if img is None:
         raise ValueError(f"obj: '{obj.name}' has no texture for 'anisotropic_rotation'")
     res = img.size[0]
-    ras = _raster(obj, mat.node_tree.nodes[NODE_PREFIX + "uv"].uv_map, res)
+    ras = _raster(obj, mat.node_tree.nodes[schema.APPEARANCE_NODE_PREFIX + "uv"].uv_map, res)
     m = np.asarray(obj.matrix_world, np.float64)
     _, order, spts, xs = _world_index(ras, m)
     r = CUTOFF * radius

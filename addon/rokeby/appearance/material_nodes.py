@@ -12,7 +12,7 @@ import numpy as np
 
 from ..blender import transaction
 from ..core import schema
-from .parameters import COLORS, MAX_COLOR, NODE_PREFIX, PARAMS, _check_mesh
+from .parameters import COLORS, MAX_COLOR, PARAMS, _check_mesh
 from .texture import _check_texture_args, remove_texture, setup_texture
 
 
@@ -27,9 +27,8 @@ def _principled(mat):
 
 # What setup does with a painted Principled input that another node (a texture) already drives.
 LINKED = ("REFUSE", "REPLACE")
-# Custom property on a rokeby_global_<param> node: [node name, output identifier] of the link it
+# schema.APPEARANCE_REPLACED_KEY, on a rokeby_global_<param> node: [node name, output identifier] of the link it
 # replaced (setup(linked='REPLACE')), put back by remove().
-REPLACED_KEY = schema.APPEARANCE_REPLACED_KEY
 
 
 def _foreign_links(bsdf) -> list:
@@ -40,7 +39,7 @@ def _foreign_links(bsdf) -> list:
         sock = bsdf.inputs[socket_name]
         if sock.is_linked:
             link = sock.links[0]
-            if not link.from_node.name.startswith(NODE_PREFIX):
+            if not link.from_node.name.startswith(schema.APPEARANCE_NODE_PREFIX):
                 out.append((param, socket_name, link))
     return out
 
@@ -100,7 +99,7 @@ def setup(obj, material=None, target: str = "POINT", resolution: int = 1024, uv_
         # The tangent Cycles and EEVEE use when none is given, made explicit: stroke directions
         # are turned into anisotropic rotations relative to it (paint(..., 'stretch')).
         tan = nt.nodes.new("ShaderNodeTangent")
-        tan.name = tan.label = NODE_PREFIX + "tangent"
+        tan.name = tan.label = schema.APPEARANCE_NODE_PREFIX + "tangent"
         tan.direction_type = "RADIAL"
         tan.axis = "Z"
         tan.location = (bsdf.location.x - 250, bsdf.location.y - 520)
@@ -114,14 +113,14 @@ def setup(obj, material=None, target: str = "POINT", resolution: int = 1024, uv_
             else:
                 a = me.attributes.new(attr, "FLOAT", "POINT")
                 a.data.foreach_set("value", np.full(n, float(sock.default_value), np.float32))
-        node_attr = nt.nodes.get(NODE_PREFIX + param)
+        node_attr = nt.nodes.get(schema.APPEARANCE_NODE_PREFIX + param)
         if node_attr is None:
             node_attr = nt.nodes.new("ShaderNodeAttribute")
-            node_attr.name = node_attr.label = NODE_PREFIX + param
+            node_attr.name = node_attr.label = schema.APPEARANCE_NODE_PREFIX + param
             node_attr.attribute_type = "GEOMETRY"
             node_attr.attribute_name = attr
             node_attr.location = (bsdf.location.x - 500, bsdf.location.y - 80 * list(PARAMS).index(param))
-        glob = nt.nodes.get(NODE_PREFIX + "global_" + param)
+        glob = nt.nodes.get(schema.APPEARANCE_NODE_PREFIX + "global_" + param)
         if glob is None:
             if param in COLORS:
                 glob = nt.nodes.new("ShaderNodeMix")
@@ -138,10 +137,10 @@ def setup(obj, material=None, target: str = "POINT", resolution: int = 1024, uv_
                 glob.inputs[1].default_value = 1.0
                 nt.links.new(node_attr.outputs["Fac"], glob.inputs[0])
                 out = glob.outputs[0]
-            glob.name = glob.label = NODE_PREFIX + "global_" + param
+            glob.name = glob.label = schema.APPEARANCE_NODE_PREFIX + "global_" + param
             glob.location = (bsdf.location.x - 250, node_attr.location.y)
             if param in replaced:
-                glob[REPLACED_KEY] = replaced[param]
+                glob[schema.APPEARANCE_REPLACED_KEY] = replaced[param]
             nt.links.new(out, sock)
     if target == "TEXTURE":
         setup_texture(obj, resolution, uv_map, mat)
@@ -157,16 +156,16 @@ def remove(obj, material=None, delete_attributes: bool = False) -> None:
     _check_mesh(obj)
     mat = material if material is not None else obj.active_material
     nodes = mat.node_tree.nodes if mat is not None and mat.node_tree is not None else None
-    if nodes is None or not any(nodes.get(NODE_PREFIX + "global_" + p) is not None for p in PARAMS):
+    if nodes is None or not any(nodes.get(schema.APPEARANCE_NODE_PREFIX + "global_" + p) is not None for p in PARAMS):
         raise ValueError(f"material: '{getattr(mat, 'name', mat)}' is not set up for painting")
-    if nodes.get(NODE_PREFIX + "uv") is not None:
+    if nodes.get(schema.APPEARANCE_NODE_PREFIX + "uv") is not None:
         remove_texture(obj, mat)
     bsdf = _principled(mat)
     nt = mat.node_tree
     for param, (attr, socket_name, _d, _r) in PARAMS.items():
-        glob = nodes.get(NODE_PREFIX + "global_" + param)
-        rec = list(glob.get(REPLACED_KEY, [])) if glob is not None else []
-        for name in (NODE_PREFIX + "global_" + param, NODE_PREFIX + param):
+        glob = nodes.get(schema.APPEARANCE_NODE_PREFIX + "global_" + param)
+        rec = list(glob.get(schema.APPEARANCE_REPLACED_KEY, [])) if glob is not None else []
+        for name in (schema.APPEARANCE_NODE_PREFIX + "global_" + param, schema.APPEARANCE_NODE_PREFIX + param):
             node = nodes.get(name)
             if node is not None:
                 transaction.remove_node(nt, node)
@@ -177,7 +176,7 @@ def remove(obj, material=None, delete_attributes: bool = False) -> None:
                 nt.links.new(out, bsdf.inputs[socket_name])
         if delete_attributes and obj.data.attributes.get(attr) is not None:
             obj.data.attributes.remove(obj.data.attributes[attr])
-    tan = nodes.get(NODE_PREFIX + "tangent")
+    tan = nodes.get(schema.APPEARANCE_NODE_PREFIX + "tangent")
     if tan is not None:
         transaction.remove_node(nt, tan)
 
@@ -187,7 +186,7 @@ def set_global(mat, param: str, value) -> None:
     the colours an RGB tint)."""
     if param not in PARAMS:
         raise ValueError(f"param: unknown parameter {param!r} (expected one of {', '.join(PARAMS)})")
-    node = mat.node_tree.nodes.get(NODE_PREFIX + "global_" + param) if mat is not None and mat.use_nodes else None
+    node = mat.node_tree.nodes.get(schema.APPEARANCE_NODE_PREFIX + "global_" + param) if mat is not None and mat.use_nodes else None
     if node is None:
         raise ValueError(f"material: '{getattr(mat, 'name', mat)}' is not set up for painting: click Set Up Appearance Painting first (Rokeby ▸ Appearance Painting)")
     if param in COLORS:
@@ -219,16 +218,16 @@ def migrate() -> list[str]:
         for slot in ob.material_slots:
             mat = slot.material
             nodes = mat.node_tree.nodes if mat is not None and mat.use_nodes and mat.node_tree is not None else None
-            if nodes is None or nodes.get(NODE_PREFIX + "global_roughness") is None or mat.library is not None:
+            if nodes is None or nodes.get(schema.APPEARANCE_NODE_PREFIX + "global_roughness") is None or mat.library is not None:
                 continue
-            missing = [p for p in PARAMS if nodes.get(NODE_PREFIX + "global_" + p) is None
-                       or (nodes.get(NODE_PREFIX + "uv") is not None and nodes.get(NODE_PREFIX + "tex_" + p) is None)]
+            missing = [p for p in PARAMS if nodes.get(schema.APPEARANCE_NODE_PREFIX + "global_" + p) is None
+                       or (nodes.get(schema.APPEARANCE_NODE_PREFIX + "uv") is not None and nodes.get(schema.APPEARANCE_NODE_PREFIX + "tex_" + p) is None)]
             if not missing:
                 continue
-            uvn = nodes.get(NODE_PREFIX + "uv")
+            uvn = nodes.get(schema.APPEARANCE_NODE_PREFIX + "uv")
             kw = {}
             if uvn is not None:
-                img = next((t.image for p in PARAMS if (t := nodes.get(NODE_PREFIX + "tex_" + p)) is not None and t.image is not None), None)
+                img = next((t.image for p in PARAMS if (t := nodes.get(schema.APPEARANCE_NODE_PREFIX + "tex_" + p)) is not None and t.image is not None), None)
                 kw = {"target": "TEXTURE", "resolution": img.size[0] if img is not None else 1024,
                       "uv_map": uvn.uv_map if uvn.uv_map in ob.data.uv_layers else None}
             try:

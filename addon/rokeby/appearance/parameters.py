@@ -42,7 +42,6 @@ COLORS = ("diffuse", "specular_tint")
 MAX_COLOR = 1e4
 # Fraser's brush names on top of the parameters.
 BRUSHES = {"sharpen": ("roughness", "SUBTRACT"), "blur": ("roughness", "ADD"), "stretch": ("anisotropic", "ADD")}
-NODE_PREFIX = schema.APPEARANCE_NODE_PREFIX
 
 
 def _check_mesh(obj):
@@ -58,7 +57,7 @@ def _tex_node(obj, param):
     mat = obj.active_material
     if mat is None or not mat.use_nodes:
         return None
-    return mat.node_tree.nodes.get(NODE_PREFIX + "tex_" + param)
+    return mat.node_tree.nodes.get(schema.APPEARANCE_NODE_PREFIX + "tex_" + param)
 
 
 def _texture_image(obj, param):

@@ -244,21 +244,21 @@ def material_state(obj):
     mat = obj.active_material
     nodes = mat.node_tree.nodes if mat is not None and mat.use_nodes else None
     if nodes is not None:
-        g = nodes.get(appearance.NODE_PREFIX + "global_diffuse")
+        g = nodes.get(schema.APPEARANCE_NODE_PREFIX + "global_diffuse")
         if g is not None:
             tint = tuple(g.inputs[7].default_value)
         for k, param in enumerate(appearance_glsl.POINT_PARAMS):
-            g = nodes.get(appearance.NODE_PREFIX + "global_" + param)
+            g = nodes.get(schema.APPEARANCE_NODE_PREFIX + "global_" + param)
             if g is not None:
                 scale[k] = float(g.inputs[1].default_value)
-        g = nodes.get(appearance.NODE_PREFIX + "global_specular_tint")
+        g = nodes.get(schema.APPEARANCE_NODE_PREFIX + "global_specular_tint")
         if g is not None:
             spec_tint = tuple(g.inputs[7].default_value)[:3]
     return bits, textures, tint, tuple(scale), spec_tint
 
 
 def _uv_name(obj, me=None):
-    uvn = obj.active_material.node_tree.nodes.get(appearance.NODE_PREFIX + "uv")
+    uvn = obj.active_material.node_tree.nodes.get(schema.APPEARANCE_NODE_PREFIX + "uv")
     me = obj.data if me is None else me
     if uvn is None or uvn.uv_map not in me.uv_layers:
         raise ValueError(f"obj: '{obj.name}' lacks the UV map its texture target reads")

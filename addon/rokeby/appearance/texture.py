@@ -11,7 +11,7 @@ from ..blender import transaction
 from ..core import schema
 from .attributes import read
 from .image_packing import _ensure_save_handler, pack_painted
-from .parameters import COLORS, NODE_PREFIX, PARAMS, _check_mesh, _texture_image
+from .parameters import COLORS, PARAMS, _check_mesh, _texture_image
 
 
 # setup(obj, target='TEXTURE') adds, per parameter, an Image Texture node ``rokeby_tex_<param>``
@@ -53,21 +53,21 @@ def setup_texture(obj, resolution: int = 1024, uv_map: str | None = None, materi
     _check_texture_args(obj, resolution, uv_map)
     mat = material if material is not None else obj.active_material
     nodes = mat.node_tree.nodes if mat is not None and mat.use_nodes else None
-    if nodes is None or nodes.get(NODE_PREFIX + "global_roughness") is None:
+    if nodes is None or nodes.get(schema.APPEARANCE_NODE_PREFIX + "global_roughness") is None:
         raise ValueError(f"material: '{getattr(mat, 'name', mat)}' is not set up for painting: click Set Up Appearance Painting first (Rokeby ▸ Appearance Painting)")
     nt = mat.node_tree
     uv_name = uv_map if uv_map is not None else obj.data.uv_layers.active.name
-    uvn = nodes.get(NODE_PREFIX + "uv")
+    uvn = nodes.get(schema.APPEARANCE_NODE_PREFIX + "uv")
     if uvn is None:
         uvn = nodes.new("ShaderNodeUVMap")
-        uvn.name = uvn.label = NODE_PREFIX + "uv"
-        g = nodes[NODE_PREFIX + "global_roughness"]
+        uvn.name = uvn.label = schema.APPEARANCE_NODE_PREFIX + "uv"
+        g = nodes[schema.APPEARANCE_NODE_PREFIX + "global_roughness"]
         uvn.location = (g.location.x - 800, g.location.y)
     uvn.uv_map = uv_name
     ras = _raster(obj, uv_name, resolution)
     for param in PARAMS:
-        glob = nodes[NODE_PREFIX + "global_" + param]
-        tex = nodes.get(NODE_PREFIX + "tex_" + param)
+        glob = nodes[schema.APPEARANCE_NODE_PREFIX + "global_" + param]
+        tex = nodes.get(schema.APPEARANCE_NODE_PREFIX + "tex_" + param)
         if tex is not None and tex.image is not None:
             continue
         img = bpy.data.images.get(_image_name(mat, param))
@@ -92,7 +92,7 @@ def setup_texture(obj, resolution: int = 1024, uv_map: str | None = None, materi
         img.update()
         if tex is None:
             tex = nodes.new("ShaderNodeTexImage")
-            tex.name = tex.label = NODE_PREFIX + "tex_" + param
+            tex.name = tex.label = schema.APPEARANCE_NODE_PREFIX + "tex_" + param
             tex.location = (glob.location.x - 520, glob.location.y)
         tex.image = img
         tex.interpolation = "Linear"
@@ -112,13 +112,13 @@ def remove_texture(obj, material=None, delete_images: bool = True) -> None:
 
     mat = material if material is not None else obj.active_material
     nodes = mat.node_tree.nodes if mat is not None and mat.use_nodes else None
-    if nodes is None or nodes.get(NODE_PREFIX + "uv") is None:
+    if nodes is None or nodes.get(schema.APPEARANCE_NODE_PREFIX + "uv") is None:
         raise ValueError(f"material: '{getattr(mat, 'name', mat)}' has no texture target to remove")
     nt = mat.node_tree
     for param in PARAMS:
-        tex = nodes.get(NODE_PREFIX + "tex_" + param)
-        glob = nodes.get(NODE_PREFIX + "global_" + param)
-        attr = nodes.get(NODE_PREFIX + param)
+        tex = nodes.get(schema.APPEARANCE_NODE_PREFIX + "tex_" + param)
+        glob = nodes.get(schema.APPEARANCE_NODE_PREFIX + "global_" + param)
+        attr = nodes.get(schema.APPEARANCE_NODE_PREFIX + param)
         if tex is not None:
             img = tex.image
             transaction.remove_node(nt, tex)
@@ -129,13 +129,13 @@ def remove_texture(obj, material=None, delete_images: bool = True) -> None:
                 nt.links.new(attr.outputs["Color"], glob.inputs[6])
             else:
                 nt.links.new(attr.outputs["Fac"], glob.inputs[0])
-    transaction.remove_node(nt, nodes[NODE_PREFIX + "uv"])
+    transaction.remove_node(nt, nodes[schema.APPEARANCE_NODE_PREFIX + "uv"])
 
 
 def target(obj) -> str:
     """'TEXTURE' when the active material reads images through ``rokeby_uv``, else 'POINT'."""
     mat = obj.active_material
-    return "TEXTURE" if mat is not None and mat.use_nodes and mat.node_tree.nodes.get(NODE_PREFIX + "uv") is not None else "POINT"
+    return "TEXTURE" if mat is not None and mat.use_nodes and mat.node_tree.nodes.get(schema.APPEARANCE_NODE_PREFIX + "uv") is not None else "POINT"
 
 
 def missing_images(obj) -> list[str]:
@@ -144,7 +144,7 @@ def missing_images(obj) -> list[str]:
     if target(obj) != "TEXTURE":
         return []
     nodes = obj.active_material.node_tree.nodes
-    return [p for p in PARAMS if (t := nodes.get(NODE_PREFIX + "tex_" + p)) is None or t.image is None]
+    return [p for p in PARAMS if (t := nodes.get(schema.APPEARANCE_NODE_PREFIX + "tex_" + p)) is None or t.image is None]
 
 
 def _raster(obj, uv_name: str, res: int) -> dict:
@@ -268,7 +268,7 @@ def point_values(obj, param) -> np.ndarray:
     if img is None:
         return read(obj, param)
     me = obj.data
-    uvn = obj.active_material.node_tree.nodes.get(NODE_PREFIX + "uv")
+    uvn = obj.active_material.node_tree.nodes.get(schema.APPEARANCE_NODE_PREFIX + "uv")
     uv_name = uvn.uv_map if uvn is not None and uvn.uv_map in me.uv_layers else None
     if uv_name is None:
         raise ValueError(f"obj: '{obj.name}' lacks the UV map its texture target reads")

@@ -179,7 +179,7 @@ class ROKEBY_OT_appearance_remove(bpy.types.Operator):
             return False
         mat = context.active_object.active_material
         nodes = mat.node_tree.nodes if mat is not None and mat.node_tree is not None else None
-        if nodes is None or not any(nodes.get(appearance.NODE_PREFIX + "global_" + p) is not None for p in appearance.PARAMS):
+        if nodes is None or not any(nodes.get(schema.APPEARANCE_NODE_PREFIX + "global_" + p) is not None for p in appearance.PARAMS):
             return _fail(cls, f"'{context.active_object.name}' has no appearance painting in its active material")
         return True
 
@@ -561,7 +561,7 @@ class ROKEBY_PT_appearance(bpy.types.Panel):
                 row.operator(ROKEBY_OT_appearance_setup.bl_idname, text="", icon="LINKED").replace_links = True
         else:
             img = parameters._texture_image(ob, "roughness")
-            ui_text.label(layout, context, f"Target: images {img.size[0]}² on UV map '{ob.active_material.node_tree.nodes[appearance.NODE_PREFIX + 'uv'].uv_map}'" if img else "Target: images", icon="IMAGE_DATA")
+            ui_text.label(layout, context, f"Target: images {img.size[0]}² on UV map '{ob.active_material.node_tree.nodes[schema.APPEARANCE_NODE_PREFIX + 'uv'].uv_map}'" if img else "Target: images", icon="IMAGE_DATA")
             layout.operator(ROKEBY_OT_appearance_texture_remove.bl_idname, text="Back to Per-Point Attributes")
             missing = appearance.missing_images(ob)
             if missing:
@@ -631,7 +631,7 @@ class ROKEBY_PT_appearance_sliders(_PaintedSubPanel, bpy.types.Panel):
         nodes = mat.node_tree.nodes if mat is not None and mat.use_nodes else {}
         col = layout.column()
         for param in appearance.PARAMS:
-            node = nodes.get(appearance.NODE_PREFIX + "global_" + param)
+            node = nodes.get(schema.APPEARANCE_NODE_PREFIX + "global_" + param)
             if node is not None:
                 col.prop(node.inputs[7 if param in appearance.COLORS else 1], "default_value", text=_SLIDER_NAMES.get(param, param))
 

@@ -502,25 +502,22 @@ def write_whole(path, write) -> None:
             os.remove(tmp)
 
 
-DOOMED = schema.DOOMED_KEY
-
-
 def remove_node(tree, node) -> None:
     """Delete ``node`` from ``tree``: now outside ``all_or_nothing``; inside, its links go at once
-    and it is tagged ``DOOMED`` (the add-on's node tests skip it), deleted when the operation
+    and it is tagged ``schema.DOOMED_KEY`` (the add-on's node tests skip it), deleted when the operation
     succeeds."""
     if not _active:
         tree.nodes.remove(node)
         return
     for lk in [lk for lk in tree.links if lk.from_node == node or lk.to_node == node]:
         tree.links.remove(lk)
-    node[DOOMED] = True
+    node[schema.DOOMED_KEY] = True
     _active[-1].nodes.append((tree, node))
 
 
 def live(node) -> bool:
     """Whether ``node`` is not waiting for its deletion (``remove_node``)."""
-    return not node.get(DOOMED)
+    return not node.get(schema.DOOMED_KEY)
 
 
 def remove_unused(idb) -> None:

@@ -22,7 +22,7 @@ test_exr_io.py, test_recompositor.py, test_recomposite_glsl.py, test_compositing
 from __future__ import annotations
 
 from .command_line import command_parser, edit_options, one_knob_options
-from .compositor_input import COMPOSITOR_NODE, feed_compositor, show_image
+from .compositor_input import feed_compositor, show_image
 from .errors import CompositingError, MissingPasses
 from .exr_io import read_exr, sequence_frames, write_exr
 from .normal_tools import EDITS, bilateral_smooth, bump, edit_normals, emboss, noise_decal, ripple
@@ -34,7 +34,7 @@ from .render_edit import RenderEdit, close_render, open_render
 from .screen import camera_rotation, screen_space
 
 __all__ = [
-    "COMPOSITOR_NODE", "EDITS", "PASSES", "RECOMPOSITE_BACKENDS", "CompositingError", "MissingPasses", "Passes", "PatchReport", "Reconstruction", "RecompositeSession", "RenderEdit", "bilateral_smooth",
+    "EDITS", "PASSES", "RECOMPOSITE_BACKENDS", "CompositingError", "MissingPasses", "Passes", "PatchReport", "Reconstruction", "RecompositeSession", "RenderEdit", "bilateral_smooth",
     "bump", "camera_rotation", "close_render", "command_parser", "edit_normals", "edit_options", "emboss",
     "exr_pass_names", "feed_compositor", "noise_decal", "one_knob_options", "open_render",
     "patch_ids", "pixel_noise", "read_exr", "recomposite", "reconstruct", "render_passes", "ripple", "screen_space", "sequence_frames", "setup_passes",

@@ -135,7 +135,7 @@ def _check_fit(fit, noise_tolerance):
 
 def use_in_compositor(image_name: str = schema.RECOMPOSITED_IMAGE, *, scene=None):
     """Feeds the recomposited image ``image_name`` into the scene's compositor: an Image node
-    (``compositing.COMPOSITOR_NODE``) that later recomposites of that image keep current, linked to
+    (``schema.COMPOSITOR_NODE``) that later recomposites of that image keep current, linked to
     a Viewer for the backdrop; chain it with other compositor nodes. Returns the node."""
     import bpy  # noqa: PLC0415
 

@@ -24,7 +24,7 @@ not reach keep their bits (normals and image).
 recomposited image and the strokes with what they replaced (to undo them). The Blender side:
 ``open_brush`` / ``paint_stroke`` write the result into a Blender image (``compositing.show_image``,
 which keeps the compositor's Image node current) and record each stroke on that image (ID
-properties ``STROKES_KEY``, ``SOURCE_KEY``), so that Blender's undo steps hold the strokes and
+properties ``schema.BRUSH_STROKES_KEY``, ``schema.BRUSH_SOURCE_KEY``), so that Blender's undo steps hold the strokes and
 ``sync_after_undo`` brings the pixels back in line; a file saved and opened again replays them.
 """
 
@@ -47,10 +47,8 @@ BUMP_HEIGHT = 0.5  # ridge height per unit strength, in brush radii
 SMOOTH_SIGMA = (0.5, 4.0)  # σ_s = radius / 4, clamped to this (pixels)
 MAX_RADIUS = 1000.0  # pixels
 
-# ID properties on the brushed Blender image (saved in the .blend).
-STROKES_KEY = schema.BRUSH_STROKES_KEY  # list of {"id", "mode", "radius", "strength", "points"}
-SOURCE_KEY = schema.BRUSH_SOURCE_KEY  # the multilayer EXR the strokes edit
-BASE_KEY = schema.BRUSH_BASE_KEY  # the one-knob edit the image showed before its strokes (Render and Recomposite)
+# ID properties on the brushed Blender image (saved in the .blend): schema.BRUSH_STROKES_KEY,
+# schema.BRUSH_SOURCE_KEY and schema.BRUSH_BASE_KEY.
 NO_BASE = {"edit": "none", "amount": 0.0, "k_d": 1.0, "k_r": 1.0, "fit": "qp", "noise_tolerance": 0.0}
 
 _IDS = itertools.count(int(time.time() * 1000) % (1 << 30))
@@ -179,7 +177,7 @@ class Stroke:
     ident: int = field(default_factory=lambda: next(_IDS))
 
     def record(self) -> dict:
-        """The stroke as an ID property value (``STROKES_KEY``)."""
+        """The stroke as an ID property value (``schema.BRUSH_STROKES_KEY``)."""
         return {"id": int(self.ident), "mode": MODES.index(self.mode), "radius": float(self.radius),
                 "strength": float(self.strength), "points": [float(x) for x in self.points.reshape(-1)]}
 
@@ -406,12 +404,12 @@ def close_all() -> None:
 
 def _show(session: BrushSession):
     img = comp.show_image(session.image_name, session.image)  # keeps the compositor's Image node current
-    img[SOURCE_KEY] = session.path
+    img[schema.BRUSH_SOURCE_KEY] = session.path
     return img
 
 
 def _record(session: BrushSession, img) -> None:
-    img[STROKES_KEY] = session.records()
+    img[schema.BRUSH_STROKES_KEY] = session.records()
     if session.strokes:
         img.use_fake_user = True  # painted: kept in the file (with its strokes) even where no editor shows it
 
@@ -428,8 +426,8 @@ def open_brush(path: str, image_name: str = schema.RECOMPOSITED_IMAGE, *, fit: s
     if not image_name:
         raise BrushError("image_name: give the name of the image to paint on")
     img = bpy.data.images.get(image_name)
-    shown = img is not None and img.get(SOURCE_KEY) == path and img.get(BASE_KEY) is not None
-    base = img[BASE_KEY].to_dict() if shown else None
+    shown = img is not None and img.get(schema.BRUSH_SOURCE_KEY) == path and img.get(schema.BRUSH_BASE_KEY) is not None
+    base = img[schema.BRUSH_BASE_KEY].to_dict() if shown else None
     if base is not None:  # the image shows a one-knob edit: the strokes go on top of it, with its fit
         fit, noise_tolerance = str(base.get("fit", fit)), float(base.get("noise_tolerance", noise_tolerance))
     opened = comp.open_render(path, backend="cpu", warn=False, method=fit, noise_tolerance=noise_tolerance)
@@ -437,8 +435,8 @@ def open_brush(path: str, image_name: str = schema.RECOMPOSITED_IMAGE, *, fit: s
     if s is None or s.opened is not opened or s.opened.reconstructed or s.base_edit != {**NO_BASE, **(base or {})}:
         s = BrushSession(opened, image_name, base)
         _SESSIONS[image_name] = s
-    if img is not None and img.get(SOURCE_KEY) == path:
-        s.sync(list(img.get(STROKES_KEY, [])))
+    if img is not None and img.get(schema.BRUSH_SOURCE_KEY) == path:
+        s.sync(list(img.get(schema.BRUSH_STROKES_KEY, [])))
     img = _show(s)
     _record(s, img)
     return s
@@ -449,10 +447,10 @@ def record_edit(img, path: str, *, edit: str, amount: float, k_d: float = 1.0, k
     """Records on the Blender image ``img`` that it now shows the one-knob edit of the EXR ``path``
     (Render and Recomposite, Recomposite Render) and no strokes: Paint Normals opened on it
     starts from what it shows. A brush open on the image is closed (its pixels are replaced)."""
-    img[SOURCE_KEY] = path
-    img[BASE_KEY] = {"edit": str(edit), "amount": float(amount), "k_d": float(k_d), "k_r": float(k_r), "fit": str(fit),
+    img[schema.BRUSH_SOURCE_KEY] = path
+    img[schema.BRUSH_BASE_KEY] = {"edit": str(edit), "amount": float(amount), "k_d": float(k_d), "k_r": float(k_r), "fit": str(fit),
                      "noise_tolerance": float(noise_tolerance)}
-    img[STROKES_KEY] = []
+    img[schema.BRUSH_STROKES_KEY] = []
     _SESSIONS.pop(img.name, None)
 
 
@@ -463,7 +461,7 @@ def show_step(session: BrushSession):
 
     img = bpy.data.images.get(session.image_name)
     h, w = session.shape
-    if img is None or tuple(img.size) != (w, h) or not img.is_float or img.get(SOURCE_KEY) != session.path:
+    if img is None or tuple(img.size) != (w, h) or not img.is_float or img.get(schema.BRUSH_SOURCE_KEY) != session.path:
         return _show(session)
     img.pixels.foreach_set(session.rgba.reshape(-1))
     img.update()
@@ -506,7 +504,7 @@ def sync_after_undo() -> int:
     done = 0
     for name, s in list(_SESSIONS.items()):
         img = bpy.data.images.get(name)
-        if img is None or img.get(SOURCE_KEY, s.path) != s.path:
+        if img is None or img.get(schema.BRUSH_SOURCE_KEY, s.path) != s.path:
             s.cancel()
             continue
         was_painting = s.painting  # (not from the UI: the brush holds Ctrl+Z until the stroke ends)
@@ -514,7 +512,7 @@ def sync_after_undo() -> int:
         # Only when the strokes changed: undo keeps an image's pixels as they are, and they may be
         # another edit's now (Recomposite Render into the same image), which an unrelated undo
         # must not overwrite.
-        if s.sync(list(img.get(STROKES_KEY, []))) or was_painting:
+        if s.sync(list(img.get(schema.BRUSH_STROKES_KEY, []))) or was_painting:
             show_step(s)
             done += 1
     return done

@@ -22,7 +22,6 @@ from ..blender import compat, hooks
 from ..blender.modal import undo_key
 from ..core import schema
 from . import brush
-from .ui import LAST_EXR  # the EXR the scene's last Render and Recomposite wrote
 
 # Explicit item numbers: the operator's remembered settings store the number.
 MODES = [
@@ -51,10 +50,10 @@ def _source(context, image_name: str, filepath: str = "") -> str:
     if filepath:
         return bpy.path.abspath(filepath)
     img = bpy.data.images.get(image_name) if image_name else None
-    if img is not None and img.get(brush.SOURCE_KEY):
-        return img[brush.SOURCE_KEY]
+    if img is not None and img.get(schema.BRUSH_SOURCE_KEY):
+        return img[schema.BRUSH_SOURCE_KEY]
     sc = getattr(context, "scene", None)
-    return sc.get(LAST_EXR, "") if sc is not None else ""
+    return sc.get(schema.COMPOSITE_LAST_EXR_KEY, "") if sc is not None else ""
 
 
 class RokebyBrushPoint(bpy.types.PropertyGroup):
@@ -177,10 +176,10 @@ class ROKEBY_OT_composite_brush(bpy.types.Operator):
             img = space.image
             if img is None:
                 return _fail(cls, "The Image Editor shows no image: open the recomposited frame (Render and Recomposite makes it)")
-            if not (brush.has_session(img.name) or img.get(brush.SOURCE_KEY) or context.scene.get(LAST_EXR)):
+            if not (brush.has_session(img.name) or img.get(schema.BRUSH_SOURCE_KEY) or context.scene.get(schema.COMPOSITE_LAST_EXR_KEY)):
                 return _fail(cls, f"'{img.name}' has no rendered passes to paint on: click Render and Recomposite first")
             return True
-        if not (context.scene.get(LAST_EXR) or any(brush.has_session(i.name) for i in bpy.data.images)):
+        if not (context.scene.get(schema.COMPOSITE_LAST_EXR_KEY) or any(brush.has_session(i.name) for i in bpy.data.images)):
             return _fail(cls, "No rendered frame to paint on: click Render and Recomposite, then open its image in an Image Editor")
         return True
 

@@ -12,11 +12,9 @@ from .errors import CompositingError
 # --- the compositor's input ------------------------------------------------------------
 # Zubiaga et al. edit normals inside a node-based compositor. Rokeby's recompositing runs outside
 # Blender's compositor (Rust or GLSL), so its result enters the compositor as an Image node named
-# COMPOSITOR_NODE that every recomposite of the same image keeps pointing at the current pixels
+# schema.COMPOSITOR_NODE that every recomposite of the same image keeps pointing at the current pixels
 # (show_image → _keep_compositor_current): the artist chains it with other compositor nodes, and a
 # Viewer shows it in the backdrop. The Composite node (what F12 renders write) is not touched.
-COMPOSITOR_NODE = schema.COMPOSITOR_NODE
-COMPOSITOR_IMAGE_KEY = schema.COMPOSITOR_IMAGE_KEY  # custom property on that node: the image it follows
 
 
 def show_image(name: str, pixels: np.ndarray):
@@ -40,7 +38,7 @@ def show_image(name: str, pixels: np.ndarray):
 
 def feed_compositor(scene, image):
     """Puts ``image`` (a recomposited Blender image) into ``scene``'s compositor: turns the
-    compositor on, adds (or reuses) the Image node COMPOSITOR_NODE reading it, and feeds the
+    compositor on, adds (or reuses) the Image node schema.COMPOSITOR_NODE reading it, and feeds the
     Viewer with it (one is added when the tree has none) so the backdrop shows it, as clicking a
     node with Ctrl+Shift does. The Composite node (what renders write) and the artist's other
     links stay as they are. Returns the node; later recomposites of the same image name update
@@ -52,15 +50,15 @@ def feed_compositor(scene, image):
     from ..blender import compat  # noqa: PLC0415
 
     tree = compat.compositor_tree(scene, create=True)
-    node = tree.nodes.get(COMPOSITOR_NODE)
+    node = tree.nodes.get(schema.COMPOSITOR_NODE)
     if node is None or node.bl_idname != "CompositorNodeImage":
         node = tree.nodes.new("CompositorNodeImage")
-        node.name = COMPOSITOR_NODE
+        node.name = schema.COMPOSITOR_NODE
         node.label = schema.RECOMPOSITED_IMAGE
         xs = [n.location.x for n in tree.nodes if n != node]
         node.location = (min(xs) if xs else 0.0, min((n.location.y for n in tree.nodes if n != node), default=0.0) - 350.0)
     node.image = image
-    node[COMPOSITOR_IMAGE_KEY] = image.name
+    node[schema.COMPOSITOR_IMAGE_KEY] = image.name
     viewer = next((n for n in tree.nodes if n.bl_idname == "CompositorNodeViewer"), None)
     if viewer is None:
         viewer = tree.nodes.new("CompositorNodeViewer")
@@ -70,7 +68,7 @@ def feed_compositor(scene, image):
 
 
 def _keep_compositor_current(img) -> None:
-    """Every scene's COMPOSITOR_NODE that follows ``img``'s name reads ``img`` (show_image makes a
+    """Every scene's schema.COMPOSITOR_NODE that follows ``img``'s name reads ``img`` (show_image makes a
     new image when the frame size changes) and the compositor sees the new pixels."""
     import bpy
 
@@ -78,8 +76,8 @@ def _keep_compositor_current(img) -> None:
 
     for sc in bpy.data.scenes:
         tree = compat.compositor_tree(sc)
-        node = tree.nodes.get(COMPOSITOR_NODE) if tree is not None else None
-        if node is not None and node.get(COMPOSITOR_IMAGE_KEY) == img.name:
+        node = tree.nodes.get(schema.COMPOSITOR_NODE) if tree is not None else None
+        if node is not None and node.get(schema.COMPOSITOR_IMAGE_KEY) == img.name:
             if node.image != img:
                 node.image = img
             tree.update_tag()

@@ -12,10 +12,7 @@ from __future__ import annotations
 from ..blender import transaction
 from ..core import schema
 from .exr_io import read_exr
-from .passes import AOV_CAMERA_X, AOV_CAMERA_Y, AOV_INCOMING_CAM, AOV_REFLOCC, PASSES, Passes
-
-
-NODE_TAG = schema.COMPOSITING_NODE_TAG
+from .passes import PASSES, Passes
 
 
 def _material_nodes(mat) -> None:
@@ -24,13 +21,13 @@ def _material_nodes(mat) -> None:
     nt = mat.node_tree
     ours = [n for n in nt.nodes if n.get(schema.COMPOSITING_NODE_KEY)]
     have = {n.aov_name for n in ours if n.bl_idname == "ShaderNodeOutputAOV" and n.inputs[0].is_linked}
-    if have >= {AOV_REFLOCC, AOV_CAMERA_X, AOV_CAMERA_Y, AOV_INCOMING_CAM}:
+    if have >= {schema.AOV_REFLOCC, schema.AOV_CAMERA_X, schema.AOV_CAMERA_Y, schema.AOV_INCOMING_CAM}:
         return
     for n in ours:
         nt.nodes.remove(n)
     def node(kind, label):
         n = nt.nodes.new(kind)
-        n.label = f"{NODE_TAG}: {label}"
+        n.label = f"{schema.COMPOSITING_NODE_TAG}: {label}"
         n[schema.COMPOSITING_NODE_KEY] = True
         n.location = (-900, -600 - 120 * len([x for x in nt.nodes if x.get(schema.COMPOSITING_NODE_KEY)]))
         return n
@@ -40,12 +37,12 @@ def _material_nodes(mat) -> None:
     ao.samples = 8
     ao.inputs["Distance"].default_value = 1e4
     nt.links.new(tex.outputs["Reflection"], ao.inputs["Normal"])
-    out_r = node("ShaderNodeOutputAOV", AOV_REFLOCC)
-    out_r.aov_name = AOV_REFLOCC
+    out_r = node("ShaderNodeOutputAOV", schema.AOV_REFLOCC)
+    out_r.aov_name = schema.AOV_REFLOCC
     nt.links.new(ao.outputs["AO"], out_r.inputs["Value"])
     geo = node("ShaderNodeNewGeometry", "view vector")
     # The world X and Y axes in camera space: the camera's rotation, exact at every pixel.
-    for name, axis in ((AOV_CAMERA_X, (1.0, 0.0, 0.0)), (AOV_CAMERA_Y, (0.0, 1.0, 0.0))):
+    for name, axis in ((schema.AOV_CAMERA_X, (1.0, 0.0, 0.0)), (schema.AOV_CAMERA_Y, (0.0, 1.0, 0.0))):
         ax = node("ShaderNodeCombineXYZ", f"world axis {name[-1]}")
         ax.inputs[0].default_value, ax.inputs[1].default_value, ax.inputs[2].default_value = axis
         tr = node("ShaderNodeVectorTransform", f"world axis {name[-1]} in camera space")
@@ -57,8 +54,8 @@ def _material_nodes(mat) -> None:
     vt = node("ShaderNodeVectorTransform", "view vector in camera space")
     vt.vector_type, vt.convert_from, vt.convert_to = "VECTOR", "WORLD", "CAMERA"
     nt.links.new(geo.outputs["Incoming"], vt.inputs["Vector"])
-    out_c = node("ShaderNodeOutputAOV", AOV_INCOMING_CAM)
-    out_c.aov_name = AOV_INCOMING_CAM
+    out_c = node("ShaderNodeOutputAOV", schema.AOV_INCOMING_CAM)
+    out_c.aov_name = schema.AOV_INCOMING_CAM
     nt.links.new(vt.outputs["Vector"], out_c.inputs["Color"])
 
 
@@ -74,7 +71,7 @@ def setup_passes(scene, view_layer=None) -> list[str]:
                  "use_pass_material_index", "use_pass_ambient_occlusion", "use_pass_z"):
         setattr(vl, attr, True)
     have = {a.name for a in vl.aovs}
-    for name, kind in ((AOV_REFLOCC, "VALUE"), (AOV_CAMERA_X, "COLOR"), (AOV_CAMERA_Y, "COLOR"), (AOV_INCOMING_CAM, "COLOR")):
+    for name, kind in ((schema.AOV_REFLOCC, "VALUE"), (schema.AOV_CAMERA_X, "COLOR"), (schema.AOV_CAMERA_Y, "COLOR"), (schema.AOV_INCOMING_CAM, "COLOR")):
         if name not in have:
             a = vl.aovs.add()
             a.name, a.type = name, kind

@@ -11,12 +11,6 @@ from ..core import schema
 from .errors import CompositingError
 
 
-AOV_REFLOCC = schema.AOV_REFLOCC
-AOV_CAMERA_X = schema.AOV_CAMERA_X
-AOV_CAMERA_Y = schema.AOV_CAMERA_Y
-AOV_INCOMING_CAM = schema.AOV_INCOMING_CAM
-
-
 # Pass name in a Blender multilayer EXR → (field, number of channels).
 PASSES = {
     "Combined": ("image", 4),
@@ -31,10 +25,10 @@ PASSES = {
     "IndexMA": ("index_ma", 1),
     "AO": ("ao", 3),
     "Depth": ("depth", 1),
-    AOV_REFLOCC: ("reflocc", 1),
-    AOV_CAMERA_X: ("camera_x", 3),
-    AOV_CAMERA_Y: ("camera_y", 3),
-    AOV_INCOMING_CAM: ("incoming_cam", 3),
+    schema.AOV_REFLOCC: ("reflocc", 1),
+    schema.AOV_CAMERA_X: ("camera_x", 3),
+    schema.AOV_CAMERA_Y: ("camera_y", 3),
+    schema.AOV_INCOMING_CAM: ("incoming_cam", 3),
 }
 
 # The names the passes have in a multilayer EXR: up to Blender 4.5 the short ones of PASSES, from

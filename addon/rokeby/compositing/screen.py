@@ -5,8 +5,9 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..core import schema
 from .errors import CompositingError
-from .passes import AOV_CAMERA_X, AOV_CAMERA_Y, Passes
+from .passes import Passes
 
 
 # Blender's Vector Transform "Camera" space has z pointing forward; Blender's camera object (and
@@ -28,7 +29,7 @@ def camera_rotation(camera_x: np.ndarray, camera_y: np.ndarray) -> np.ndarray:
     y = camera_y.reshape(-1, 3).astype(np.float64)
     ok = (np.abs(np.linalg.norm(x, axis=1) - 1) < 1e-3) & (np.abs(np.linalg.norm(y, axis=1) - 1) < 1e-3)
     if not ok.any():
-        raise CompositingError(f"passes {AOV_CAMERA_X}/{AOV_CAMERA_Y}: no surface pixel holds the camera rotation "
+        raise CompositingError(f"passes {schema.AOV_CAMERA_X}/{schema.AOV_CAMERA_Y}: no surface pixel holds the camera rotation "
                                "(a material without the AOV outputs? Set Up Compositing Passes adds them again)")
     cx = _CAM_FLIP @ x[ok].mean(0)
     cy = _CAM_FLIP @ y[ok].mean(0)

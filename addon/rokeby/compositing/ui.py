@@ -113,7 +113,6 @@ class ROKEBY_OT_composite_setup_passes(bpy.types.Operator):
 
 
 MAX_SMOOTH_SIGMA = 50.0  # rokeby_core::compositing::normals::MAX_SIGMA_S: the smoothing's largest σ in pixels
-LAST_EXR = schema.COMPOSITE_LAST_EXR_KEY  # scene custom property: the EXR the last Render and Recomposite wrote
 
 
 def _edit_args(op, context=None) -> dict:
@@ -172,7 +171,7 @@ class ROKEBY_OT_composite_render(_EditProps, bpy.types.Operator):
         except (comp.CompositingError, RokebyError, ValueError, RuntimeError) as exc:
             self.report({"ERROR"}, f"Rokeby: {exc}")
             return {"CANCELLED"}
-        context.scene[LAST_EXR] = path
+        context.scene[schema.COMPOSITE_LAST_EXR_KEY] = path
         for msg in comp.Reconstruction.warnings_of(reports):
             self.report({"WARNING"}, f"Rokeby: {msg}")
         self.report({"INFO"}, f"Rokeby: image '{img.name}' recomposited; edit it again without rendering: "
@@ -199,13 +198,13 @@ class ROKEBY_OT_composite_edit(_EditProps, bpy.types.Operator):
         return True
 
     def invoke(self, context, event):
-        if not self.filepath and not context.scene.get(LAST_EXR, ""):  # nothing rendered yet: pick an EXR
+        if not self.filepath and not context.scene.get(schema.COMPOSITE_LAST_EXR_KEY, ""):  # nothing rendered yet: pick an EXR
             context.window_manager.fileselect_add(self)
             return {"RUNNING_MODAL"}
         return self._start(context)
 
     def _path(self, context) -> str:
-        return bpy.path.abspath(self.filepath) if self.filepath else context.scene.get(LAST_EXR, "")
+        return bpy.path.abspath(self.filepath) if self.filepath else context.scene.get(schema.COMPOSITE_LAST_EXR_KEY, "")
 
     def _start(self, context):
         """With a window and the CPU backend: read, reconstruct and recomposite on a worker thread

@@ -13,7 +13,6 @@ from __future__ import annotations
 
 from ..core import schema
 
-KEY = schema.SCENE_SAVED_WITH_KEY
 _FIELD_ATTRIBUTES = (schema.ROTATION_ATTRIBUTE, schema.RENDER_ATTRIBUTE, schema.RENDER_ATTRIBUTE_WA,
                      schema.REFRACTION_ATTRIBUTE)
 
@@ -41,16 +40,16 @@ def mark(version: str) -> bool:
         if scene.library is not None:
             continue  # a linked scene belongs to its own file
         if marked:
-            if scene.get(KEY) != version:
-                scene[KEY] = version
-        elif KEY in scene:
-            del scene[KEY]
+            if scene.get(schema.SCENE_SAVED_WITH_KEY) != version:
+                scene[schema.SCENE_SAVED_WITH_KEY] = version
+        elif schema.SCENE_SAVED_WITH_KEY in scene:
+            del scene[schema.SCENE_SAVED_WITH_KEY]
     return marked
 
 
 def saved_with(scene) -> "str | None":
     """The Rokeby version that saved ``scene``'s file (None: not marked)."""
-    value = scene.get(KEY)
+    value = scene.get(schema.SCENE_SAVED_WITH_KEY)
     return str(value) if value is not None else None
 
 

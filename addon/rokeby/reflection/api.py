@@ -299,9 +299,7 @@ def _new_empty(scene, name, location, display, size, color):
     ob.location = [float(x) for x in location]
     ob.color = color
     ob.show_name = False
-    from .registry import MADE_KEY  # noqa: PLC0415
-
-    ob[MADE_KEY] = True  # goes with the last mirror that uses it (rokeby.reflection.registry)
+    ob[schema.MADE_KEY] = True  # goes with the last mirror that uses it (rokeby.reflection.registry)
     _handle_collection(scene).objects.link(ob)
     return ob
 

@@ -25,14 +25,12 @@ from __future__ import annotations
 
 from ..core import schema
 
-SHRINKWRAP_NAME = schema.SHRINKWRAP_NAME
-
 
 def shrinkwrap_target(handle):
     """The object a handle's "Rokeby: stay on mirror" Shrinkwrap keeps it on (None: it has none,
     or no target)."""
     for con in handle.constraints:
-        if con.type == "SHRINKWRAP" and con.name.startswith(SHRINKWRAP_NAME):
+        if con.type == "SHRINKWRAP" and con.name.startswith(schema.SHRINKWRAP_NAME):
             return con.target
     return None
 
@@ -118,4 +116,4 @@ def _own_handles(copy, orig) -> int:
     return len(made)
 
 
-__all__ = ["SHRINKWRAP_NAME", "original_of", "separate_copies"]
+__all__ = ["original_of", "separate_copies"]

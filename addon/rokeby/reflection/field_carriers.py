@@ -8,9 +8,6 @@ from __future__ import annotations
 from ..core import schema
 
 
-CARRIER_PREFIX = schema.CARRIER_PREFIX
-TRANSFER_GROUP = schema.TRANSFER_GROUP
-TRANSFER_MODIFIER = schema.TRANSFER_MODIFIER
 # 2: the refraction field is copied too (zeros, read as the identity, where the carrier has none).
 TRANSFER_VERSION = 2
 FIELD_ATTRIBUTES = (schema.ROTATION_ATTRIBUTE, schema.RENDER_ATTRIBUTE, schema.RENDER_ATTRIBUTE_WA, schema.REFRACTION_ATTRIBUTE)
@@ -62,7 +59,7 @@ def claim_carriers():
         if c is not None and ob.library is None and c.library is None and c.parent is None:
             users.setdefault(c.name, (c, []))[1].append(ob)
     for c, obs in users.values():
-        named = [o for o in obs if c.name == CARRIER_PREFIX + o.name]
+        named = [o for o in obs if c.name == schema.CARRIER_PREFIX + o.name]
         c.parent = (named or obs)[0]
 
 
@@ -74,11 +71,11 @@ def _transfer_group():
     one: the identity."""
     import bpy  # noqa: PLC0415
 
-    ng = bpy.data.node_groups.get(TRANSFER_GROUP)
+    ng = bpy.data.node_groups.get(schema.TRANSFER_GROUP)
     if ng is not None and ng.bl_idname == "GeometryNodeTree" and ng.get(schema.VERSION_KEY) == TRANSFER_VERSION:
         return ng
     if ng is None or ng.bl_idname != "GeometryNodeTree":
-        ng = bpy.data.node_groups.new(TRANSFER_GROUP, "GeometryNodeTree")
+        ng = bpy.data.node_groups.new(schema.TRANSFER_GROUP, "GeometryNodeTree")
     ng.nodes.clear()
     ng.interface.clear()
     ng.interface.new_socket("Geometry", in_out="INPUT", socket_type="NodeSocketGeometry")
@@ -121,9 +118,9 @@ def ensure_carrier(obj, depsgraph):
     carrier = carrier_of(obj)
     if carrier is None or len(carrier.data.vertices) != len(me_eval.vertices) or len(carrier.data.loops) != len(me_eval.loops):
         mesh = bpy.data.meshes.new_from_object(ob_eval, preserve_all_data_layers=False)
-        mesh.name = CARRIER_PREFIX + obj.name
+        mesh.name = schema.CARRIER_PREFIX + obj.name
         if carrier is None:
-            carrier = bpy.data.objects.new(CARRIER_PREFIX + obj.name, mesh)  # in no scene: never drawn
+            carrier = bpy.data.objects.new(schema.CARRIER_PREFIX + obj.name, mesh)  # in no scene: never drawn
             carrier.parent = obj
         else:
             old = carrier.data
@@ -133,11 +130,11 @@ def ensure_carrier(obj, depsgraph):
         obj.rokeby.field_carrier = carrier
     if carrier.parent is None:
         carrier.parent = obj
-    mod = obj.modifiers.get(TRANSFER_MODIFIER)
+    mod = obj.modifiers.get(schema.TRANSFER_MODIFIER)
     if mod is None or mod.type != "NODES":
-        mod = obj.modifiers.new(TRANSFER_MODIFIER, "NODES")
+        mod = obj.modifiers.new(schema.TRANSFER_MODIFIER, "NODES")
         mod.show_in_editmode = False
-    if mod.node_group is None or mod.node_group.name != TRANSFER_GROUP or mod.node_group.get(schema.VERSION_KEY) != TRANSFER_VERSION:
+    if mod.node_group is None or mod.node_group.name != schema.TRANSFER_GROUP or mod.node_group.get(schema.VERSION_KEY) != TRANSFER_VERSION:
         mod.node_group = _transfer_group()
     from ..blender import compat  # noqa: PLC0415
 
@@ -152,7 +149,7 @@ def remove_carrier(obj) -> bool:
     or the mirror goes)."""
 
     found = False
-    mod = obj.modifiers.get(TRANSFER_MODIFIER)
+    mod = obj.modifiers.get(schema.TRANSFER_MODIFIER)
     if mod is not None:
         obj.modifiers.remove(mod)
         found = True

@@ -16,10 +16,6 @@ import numpy as np
 from ..core import schema
 from ..core.errors import RokebyError
 
-REGION_ATTRIBUTE_PREFIX = schema.REGION_ATTRIBUTE_PREFIX
-VG_NODE_GROUP = schema.VG_NODE_GROUP
-VG_MODIFIER_PREFIX = schema.VG_MODIFIER_PREFIX
-
 
 def _vertex_group_weights(obj, me, group: str) -> np.ndarray:
     """Per-vertex weights of a vertex group, read without a Python loop: the reader modifier
@@ -30,10 +26,10 @@ def _vertex_group_weights(obj, me, group: str) -> np.ndarray:
         raise RokebyError(f"vertex group '{group}' was deleted (or renamed while the add-on could not follow)")
     mod = find_reader(obj, group)
     if mod is None:
-        raise RokebyError(f"vertex group '{group}' has no reader modifier '{VG_MODIFIER_PREFIX}{group}'")
+        raise RokebyError(f"vertex group '{group}' has no reader modifier '{schema.VG_MODIFIER_PREFIX}{group}'")
     if not mod.show_viewport:
         raise RokebyError(f"the reader modifier '{mod.name}' of vertex group '{group}' is disabled in the viewport; enable it")
-    attr = me.attributes.get(REGION_ATTRIBUTE_PREFIX + group)
+    attr = me.attributes.get(schema.REGION_ATTRIBUTE_PREFIX + group)
     if attr is None or attr.domain != "POINT" or attr.data_type != "FLOAT":
         raise RokebyError(f"the reader modifier '{mod.name}' of vertex group '{group}' gave no weights (is a modifier above it removing them?)")
     w = np.empty(len(me.vertices), dtype=np.float32)
@@ -42,7 +38,7 @@ def _vertex_group_weights(obj, me, group: str) -> np.ndarray:
 
 
 def _reader_tree(ng) -> bool:
-    return ng is not None and ng.bl_idname == "GeometryNodeTree" and ng.name.split(".")[0] == VG_NODE_GROUP
+    return ng is not None and ng.bl_idname == "GeometryNodeTree" and ng.name.split(".")[0] == schema.VG_NODE_GROUP
 
 
 def vertex_group_reader():
@@ -50,10 +46,10 @@ def vertex_group_reader():
     evaluator reads painted weights with foreach_get instead of a loop over vertices."""
     import bpy  # noqa: PLC0415
 
-    ng = bpy.data.node_groups.get(VG_NODE_GROUP)
+    ng = bpy.data.node_groups.get(schema.VG_NODE_GROUP)
     if ng is not None and ng.bl_idname == "GeometryNodeTree" and ng.library is None:
         return ng
-    ng = bpy.data.node_groups.new(VG_NODE_GROUP, "GeometryNodeTree")
+    ng = bpy.data.node_groups.new(schema.VG_NODE_GROUP, "GeometryNodeTree")
     ng.interface.new_socket("Geometry", in_out="INPUT", socket_type="NodeSocketGeometry")
     ng.interface.new_socket("Vertex Group", in_out="INPUT", socket_type="NodeSocketString")
     ng.interface.new_socket("Attribute", in_out="INPUT", socket_type="NodeSocketString")
@@ -105,7 +101,7 @@ def ensure_reader(obj, group: str, renamed_from: "str | None" = None) -> "str | 
     evaluated again before the weights can be read (None: nothing)."""
     from ..blender import compat  # noqa: PLC0415
 
-    attribute = REGION_ATTRIBUTE_PREFIX + group
+    attribute = schema.REGION_ATTRIBUTE_PREFIX + group
     mod = find_reader(obj, group)
     why = None
     if mod is None and renamed_from is not None:
@@ -118,7 +114,7 @@ def ensure_reader(obj, group: str, renamed_from: "str | None" = None) -> "str | 
             why = f"the reader modifier of vertex group '{group}' was applied, which froze its weights; it was added again so the region follows the painting"
         else:
             why = f"vertex group '{group}' had no reader modifier; it was added"
-        mod = obj.modifiers.new(VG_MODIFIER_PREFIX + group, "NODES")
+        mod = obj.modifiers.new(schema.VG_MODIFIER_PREFIX + group, "NODES")
         mod.node_group = vertex_group_reader()
         mod.show_in_editmode = False
     ids = _reader_ids(mod)
@@ -126,8 +122,8 @@ def ensure_reader(obj, group: str, renamed_from: "str | None" = None) -> "str | 
         compat.set_modifier_input(mod, ids["Vertex Group"], group)
         compat.set_modifier_input(mod, ids["Attribute"], attribute)
         why = why or f"the reader modifier of vertex group '{group}' was repointed"
-    if renamed_from is not None and mod.name.startswith(VG_MODIFIER_PREFIX):
-        mod.name = VG_MODIFIER_PREFIX + group
+    if renamed_from is not None and mod.name.startswith(schema.VG_MODIFIER_PREFIX):
+        mod.name = schema.VG_MODIFIER_PREFIX + group
     if why is not None:
         obj.update_tag()
     return why

@@ -38,7 +38,8 @@ from bpy.app.handlers import persistent
 
 from ..blender import compat, hooks
 from ..blender import registry as index
-from . import evaluate, field_carriers, freeform_regions, geodesic_cache, guard, mirror_state, registry
+from ..core import schema
+from . import evaluate, field_carriers, geodesic_cache, guard, mirror_state, registry
 from .render import rendering, shading
 
 _busy = False
@@ -115,7 +116,7 @@ def _updates_needed(depsgraph) -> bool:
         if ob.type != "MESH" or (ob.data is not None and ob.data.shape_keys is not None):
             return True
         # The readers of free-form regions read the mirror's own data (a MESH update).
-        if any(not (m.type == "NODES" and m.name.startswith(freeform_regions.VG_MODIFIER_PREFIX)) for m in ob.modifiers):
+        if any(not (m.type == "NODES" and m.name.startswith(schema.VG_MODIFIER_PREFIX)) for m in ob.modifiers):
             return True
     return False
 
@@ -252,18 +253,16 @@ def migrate_file():
     from the views they were made from, and final renders show the edit only where the artist
     had installed the render nodes (then they stay in sync). Shadow edits that named their
     caster, light and twin get pointers (``shadow.migrate``)."""
-    from .props import DATA_VERSION  # noqa: PLC0415
-
     field_carriers.claim_carriers()  # carriers saved before they had an owner (Shift+D copies shared one)
     for ob in registry.mirrors():
         s = getattr(ob, "rokeby", None)
-        if s is None or not s.is_mirror or s.data_version >= DATA_VERSION or ob.library is not None:
+        if s is None or not s.is_mirror or s.data_version >= schema.DATA_VERSION or ob.library is not None:
             continue
         s.eye_source = "CREATION"
         mats = [slot.material for slot in ob.material_slots if slot.material is not None]
         s.render_edits = any(rendering.installed(m) for m in mats)
         s.freeze_eye_set = True
-        s.data_version = DATA_VERSION
+        s.data_version = schema.DATA_VERSION
     # Shadow edits saved with names get pointers; appearance painting saved before the specular
     # colour brush gets its parameter (each feature's "migrate" step, rokeby.blender.hooks).
     for step in hooks.steps("migrate"):

@@ -68,9 +68,9 @@ def _region_radius_changed(self, context):
 
 def _is_mirror_changed(self, context):
     # A mirror made now (by the API, the operator or a script setting the flag) is current data;
-    # only files saved before DATA_VERSION existed load with 0 (handlers.on_load migrates them).
-    if self.is_mirror and self.data_version < DATA_VERSION:
-        self.data_version = DATA_VERSION
+    # only files saved before schema.DATA_VERSION existed load with 0 (handlers.on_load migrates them).
+    if self.is_mirror and self.data_version < schema.DATA_VERSION:
+        self.data_version = schema.DATA_VERSION
     from . import pointers
 
     pointers.invalidate()  # the add-on's registry of mirrors (no scan of scene.objects per update)
@@ -110,8 +110,9 @@ EYE_SOURCES = [
     ("CAMERA", "Scene Camera", "Constraints' reflected directions r are taken from the render eye (the scene camera, or the frozen eye), so renders hit every green handle from the camera", "CAMERA_DATA", 0),
     ("CREATION", "View at Creation", "Each constraint keeps the eye of the view it was made from (Return to View shows it); renders from elsewhere miss its green handle by the angle the status reports", "VIEW3D", 1),
 ]
-# Saved with each mirror: 0 = made before these settings existed (load_post migrates it), 1 = now.
-DATA_VERSION = schema.DATA_VERSION
+# schema.DATA_VERSION is saved with each mirror: 0 = made before these settings existed (load_post
+# migrates it), 1 = now.
+
 MAP_RESOLUTIONS = [(str(w), f"{w} × {w // 2}", f"Capture a {w} × {w // 2} panorama", i) for i, w in enumerate((256, 512, 1024, 2048))]
 
 
@@ -271,7 +272,6 @@ class RokebyMirror(PropertyGroup):
 # Renaming a caster, a light or anything derived keeps every link; a new object under an old
 # name takes nothing over. Files saved before this (names in custom properties) are migrated at
 # load (shadow.migrate, called by handlers.migrate_file).
-SHADOW_DATA_VERSION = schema.SHADOW_DATA_VERSION
 SHADOW_ROLES = [
     ("NONE", "None", "Not a part of a shadow edit (lights that have edits keep their links here too)", 0),
     ("SHADOW_MESH", "Shadow mesh", "The edited copy of a caster, seen by shadow rays only", 1),

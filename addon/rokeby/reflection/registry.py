@@ -30,9 +30,8 @@ from . import pointers
 from .pointers import _pointers, _refcounts, mirrors, pointers_changed
 from .render import rendering
 
-# On handles and region centres the add-on made (api); older files: membership of HANDLE_COLLECTION.
-MADE_KEY = schema.MADE_KEY
-HANDLE_COLLECTION = schema.HANDLE_COLLECTION
+# schema.MADE_KEY is on handles and region centres the add-on made (api); older files: membership of
+# schema.HANDLE_COLLECTION.
 
 _records: dict = {}  # mirror uid -> (its name, what it uses: dict of lists)
 _STATS = {"released": 0, "removed": 0}
@@ -88,9 +87,9 @@ def refresh(found=None) -> None:
 def made_by_addon(ob) -> bool:
     """Whether the add-on made ``ob`` (a handle or region centre), so that it goes with the last
     mirror using it; empties an artist brought (a region centre of their own) stay."""
-    if ob.get(MADE_KEY):
+    if ob.get(schema.MADE_KEY):
         return True
-    coll = bpy.data.collections.get(HANDLE_COLLECTION)
+    coll = bpy.data.collections.get(schema.HANDLE_COLLECTION)
     return coll is not None and any(o == ob for o in coll.objects)
 
 
@@ -183,7 +182,7 @@ def release(found, objects=(), carrier=(), materials=()) -> None:
 def drop_empty_handle_collection() -> bool:
     """Remove the "Rokeby Handles" collection once it holds nothing (it is made with the first
     handle, so a file goes back to the collections it had)."""
-    coll = bpy.data.collections.get(HANDLE_COLLECTION)
+    coll = bpy.data.collections.get(schema.HANDLE_COLLECTION)
     if coll is None or coll.library is not None or len(coll.objects) or len(coll.children) or transaction.doomed(coll):
         return False
     transaction.remove(coll)

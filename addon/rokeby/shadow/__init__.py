@@ -22,18 +22,18 @@ test_shadow_falloff.py, test_shadow_modal.py, test_shadow_undo.py, test_shadow_i
 
 from __future__ import annotations
 
-from .configurations import (EDIT_KEY, configuration_key, configuration_vectors, configuration_weights, falloff_factor,
+from .configurations import (configuration_key, configuration_vectors, configuration_weights, falloff_factor,
                              sync_falloffs, update_falloff)
 from .errors import ShadowEditError
 from .light import light_arguments
-from .linking import BLOCKERS_CASTER, BLOCKERS_EDITED, LINKING_TAG, RECEIVERS_CASTER, RECEIVERS_EDITED, TWIN_SUFFIX, remove, shadow_mesh_of
+from .linking import BLOCKERS_CASTER, BLOCKERS_EDITED, RECEIVERS_CASTER, RECEIVERS_EDITED, TWIN_SUFFIX, remove, shadow_mesh_of
 from .live_preview import LivePreview, live_begin, live_end, live_step
 from .repair import migrate, repair
 from .session import MAX_DRAG_PARAMETER, ShadowSession, start
 from .shadow_mesh import SELF_SUFFIX, SHADOW_SUFFIX, apply
 
 __all__ = [
-    "BLOCKERS_CASTER", "BLOCKERS_EDITED", "EDIT_KEY", "LINKING_TAG", "MAX_DRAG_PARAMETER", "RECEIVERS_CASTER",
+    "BLOCKERS_CASTER", "BLOCKERS_EDITED", "MAX_DRAG_PARAMETER", "RECEIVERS_CASTER",
     "RECEIVERS_EDITED", "SELF_SUFFIX", "SHADOW_SUFFIX", "TWIN_SUFFIX", "LivePreview", "ShadowEditError", "ShadowSession",
     "apply", "configuration_key", "configuration_vectors", "configuration_weights", "falloff_factor", "light_arguments",
     "live_begin", "live_end", "live_step", "migrate", "remove", "repair", "shadow_mesh_of", "start", "sync_falloffs",

@@ -13,12 +13,10 @@ from .errors import ShadowEditError
 from .light import _current_light_vector
 from .linking import _parts, _role
 
-EDIT_KEY = schema.SHADOW_EDIT_KEY
-
 
 def configuration_key(i: int) -> str:
     """Name of the shape key of keyed configuration ``i`` (§6.2; 0 is the first edit)."""
-    return EDIT_KEY if i == 0 else f"{EDIT_KEY} {i + 1}"
+    return schema.SHADOW_EDIT_KEY if i == 0 else f"{schema.SHADOW_EDIT_KEY} {i + 1}"
 
 
 def configuration_vectors(shadow_object) -> np.ndarray:
@@ -41,7 +39,7 @@ def _drop_configurations(ob) -> None:
         keys = None if o is None else o.data.shape_keys
         if keys is None:
             continue
-        for k in [k for k in keys.key_blocks if k.name.startswith(EDIT_KEY + " ")]:
+        for k in [k for k in keys.key_blocks if k.name.startswith(schema.SHADOW_EDIT_KEY + " ")]:
             o.shape_key_remove(k)
 
 
@@ -122,7 +120,7 @@ def sync_falloffs(scene) -> int:
             continue
         light = ob.rokeby_shadow.light
         keys = ob.data.shape_keys
-        if light is None or light.type != "LIGHT" or keys is None or EDIT_KEY not in keys.key_blocks:
+        if light is None or light.type != "LIGHT" or keys is None or schema.SHADOW_EDIT_KEY not in keys.key_blocks:
             continue
         beta = float(ob.get(schema.SHADOW_FALLOFF_BETA_KEY, 0.0))
         several = len(ob.get(schema.SHADOW_LIGHT_CONFIGURATIONS_KEY, [])) >= 3

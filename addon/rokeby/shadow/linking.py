@@ -24,7 +24,6 @@ TWIN_SUFFIX = " (edited shadows)"
 # an object made later under an old name takes nothing over. Names of derived parts (shadow mesh,
 # twin, collections) follow their owner's name when the edit is applied or its linking made again.
 
-LINKING_TAG = schema.SHADOW_LINKING_TAG  # on the four linking collections: which role (they are ours)
 _COLLECTION_ATTRS = ("receivers_caster", "blockers_caster", "receivers_edited", "blockers_edited")
 
 
@@ -59,7 +58,7 @@ def _in_scene(ob) -> bool:
 
 def _only_in_linking_collections(ob) -> bool:
     """Whether ``ob`` is in no collection but the linking ones (an object deleted with X is)."""
-    return all(LINKING_TAG in c for c in ob.users_collection)
+    return all(schema.SHADOW_LINKING_TAG in c for c in ob.users_collection)
 
 
 def _is_light(ob) -> bool:
@@ -123,7 +122,7 @@ def _linking_collection(existing, name: str, role: str):
         c = bpy.data.collections.new(name)
     elif not c.name.startswith(name):
         c.name = name
-    c[LINKING_TAG] = role
+    c[schema.SHADOW_LINKING_TAG] = role
     for o in list(c.objects):
         c.objects.unlink(o)
     return c
@@ -176,7 +175,7 @@ def _link(light, meshes=None):
     if links.twin is not None and not _owns_twin(light):
         _unlink(light)  # links copied along with the light (Shift+D): start from the copy's own linking
     if not links.linking_saved:
-        ours = lambda c: c is not None and LINKING_TAG in c  # noqa: E731
+        ours = lambda c: c is not None and schema.SHADOW_LINKING_TAG in c  # noqa: E731
         links.receivers_before = None if ours(ll.receiver_collection) else ll.receiver_collection
         links.blockers_before = None if ours(ll.blocker_collection) else ll.blocker_collection
         links.linking_saved = True
@@ -229,7 +228,7 @@ def _remove_collections(colls) -> None:
 
     for c in colls:
         try:
-            ours = c is not None and LINKING_TAG in c
+            ours = c is not None and schema.SHADOW_LINKING_TAG in c
         except ReferenceError:  # already removed (listed twice)
             continue
         if ours:
@@ -272,7 +271,7 @@ def _collect_orphan_collections() -> None:
     if transaction.active():  # once the twins and shadow meshes are gone
         transaction.later(_collect_orphan_collections)
         return
-    _remove_collections([c for c in bpy.data.collections if c.users == 0 and LINKING_TAG in c])
+    _remove_collections([c for c in bpy.data.collections if c.users == 0 and schema.SHADOW_LINKING_TAG in c])
 
 
 def _data_version() -> int:

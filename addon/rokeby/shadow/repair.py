@@ -9,7 +9,6 @@ from ..core import schema
 from .linking import (
     _COLLECTION_ATTRS,
     _OURS,
-    LINKING_TAG,
     _collect_orphan_collections,
     _collection_name,
     _data_version,
@@ -158,7 +157,7 @@ def migrate() -> list[str]:
             for attr, role in zip(_COLLECTION_ATTRS, _OURS):
                 c = colls.get(_collection_name(ob.name, role))
                 if c is not None and c.library is None:
-                    c[LINKING_TAG] = role
+                    c[schema.SHADOW_LINKING_TAG] = role
                     setattr(links, attr, c)
             del ob[schema.SHADOW_LEGACY_LINKING_BEFORE_KEY]
             msgs.append(f"'{ob.name}': linking of its shadow edits")

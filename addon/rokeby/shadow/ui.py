@@ -29,9 +29,8 @@ _DRAW_HANDLE = [None]
 
 # Undo: a session lives in memory, not in the file, so each operator that changes it (start,
 # a confirmed drag, apply, stop) records the session's state under a new number and writes the
-# number on the scene (``STEP_KEY``) before its undo step is pushed; after undo or redo the
+# number on the scene (``schema.SHADOW_SESSION_STEP_KEY``) before its undo step is pushed; after undo or redo the
 # session is put back to the state the restored scene names (``sync_after_undo``).
-STEP_KEY = schema.SHADOW_SESSION_STEP_KEY
 _HISTORY: dict = {}  # number -> (session, committed drags, applied, configuration), or None: no session
 _HISTORY_KEPT = 512  # numbers kept (Blender keeps 32 undo steps by default)
 _STEP_IDS = itertools.count(int(time.time() * 1000) % (1 << 30) + 1)
@@ -97,7 +96,7 @@ def record(scene, sess=None) -> int:
     _HISTORY[step] = None if sess is None else (sess, list(sess.drags), sess.applied, sess.configuration)
     while len(_HISTORY) > _HISTORY_KEPT:
         _HISTORY.pop(next(iter(_HISTORY)))
-    scene[STEP_KEY] = step
+    scene[schema.SHADOW_SESSION_STEP_KEY] = step
     return step
 
 
@@ -107,7 +106,7 @@ def sync_after_undo(*_args) -> int:
     Returns how many scenes changed."""
     changed = 0
     for sc in bpy.data.scenes:
-        entry = _HISTORY.get(int(sc.get(STEP_KEY, 0) or 0))
+        entry = _HISTORY.get(int(sc.get(schema.SHADOW_SESSION_STEP_KEY, 0) or 0))
         key, now = _key(sc), _SESSIONS.get(_key(sc))
         if entry is not None and (entry[0].caster_object() is None or entry[0].light_object() is None):
             entry = None  # its caster or light is gone in the restored scene

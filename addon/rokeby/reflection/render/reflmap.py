@@ -6,7 +6,7 @@ centre (or from the object in ``rokeby.map_origin``), with the mirror itself hid
 setting the capture changes (camera, resolution, engine, output format, the mirror's visibility)
 is put back afterwards, also when the render fails; the temporary camera is deleted. The result
 is a float image datablock "Rokeby Map <mirror>" plus a few blurred copies for rough materials
-(one per roughness in ROUGHNESS_LEVELS, blurred by the Rust core's prefilter with its separable
+(one per roughness in schema.REFLMAP_ROUGHNESS_LEVELS, blurred by the Rust core's prefilter with its separable
 Gaussian lobe, through :func:`rokeby.envmaps.prefilter`), stored
 
 * as OpenEXR files in ``//rokeby_maps/`` next to the .blend when the file is saved (what an artist
@@ -55,10 +55,6 @@ RESOLUTIONS = (256, 512, 1024, 2048)
 DEFAULT_RESOLUTION = 512
 MIN_RESOLUTION, MAX_RESOLUTION = 32, 8192
 DEFAULT_SAMPLES = 32
-# Roughness of each stored level: level 0 is the capture itself; rougher materials blend between
-# the two nearest levels. Saved data (image and file names, the shared group's blend factors).
-ROUGHNESS_LEVELS = schema.REFLMAP_ROUGHNESS_LEVELS
-CACHE_DIR = schema.REFLMAP_CACHE_DIR
 # File names in the cache: <sanitised mirror name, at most STEM_CHARS>-<map id, ID_CHARS hex>.exr
 STEM_CHARS = 40
 ID_CHARS = 12
@@ -66,19 +62,14 @@ ID_CHARS = 12
 
 def cache_dir() -> str:
     """Where FILE storage writes maps: the add-on preferences' Reflection Map Cache folder when set
-    (a machine-level choice), else ``CACHE_DIR`` next to the .blend."""
+    (a machine-level choice), else ``schema.REFLMAP_CACHE_DIR`` next to the .blend."""
     from ...blender import prefs  # noqa: PLC0415
 
     folder = prefs.get().cache_folder
-    return folder.rstrip("/\\") + "/" if folder else CACHE_DIR
+    return folder.rstrip("/\\") + "/" if folder else schema.REFLMAP_CACHE_DIR
 STORAGES = ("AUTO", "FILE", "PACK")
-SHARED_GROUP = schema.REFLMAP_SHARED_GROUP
-MIRROR_GROUP_PREFIX = schema.REFLMAP_MIRROR_GROUP_PREFIX
-IMAGE_PREFIX = schema.REFLMAP_IMAGE_PREFIX
-TAG = schema.REFLMAP_TAG
 # Bumped when the groups built here change; forces a rebuild through shading._fresh_group.
 MAP_VERSION = 1
-MAP_VERSION_KEY = schema.REFLMAP_VERSION_KEY
 # The panorama camera's rotation (XYZ Euler) that makes Cycles' equirectangular image match the
 # Environment Texture convention above (checked by tests/reflection/test_reflmap.py).
 PANO_ROTATION = (math.pi / 2, 0.0, -math.pi / 2)
@@ -110,7 +101,7 @@ def lobe_width(roughness: float) -> float:
     return math.sqrt(2.0) * roughness * roughness
 
 
-def prefilter(px: np.ndarray, roughness_levels=ROUGHNESS_LEVELS) -> list:
+def prefilter(px: np.ndarray, roughness_levels=schema.REFLMAP_ROUGHNESS_LEVELS) -> list:
     """The capture ``px`` (H, W, C) and one blurred copy per further roughness level: a Gaussian
     of :func:`lobe_width` radians on the sphere (the Rust core's ``Lobe::Gaussian``: made
     separable along meridians, wrapping over the poles, and parallels, wrapping at the seam), each
@@ -133,8 +124,8 @@ def _of_mirrors(*args, **kwargs) -> list:
 
 
 def image_name(mirror, level: int = 0) -> str:
-    base = IMAGE_PREFIX + mirror.name
-    return base if level == 0 else f"{base} r{ROUGHNESS_LEVELS[level]:g}"
+    base = schema.REFLMAP_IMAGE_PREFIX + mirror.name
+    return base if level == 0 else f"{base} r{schema.REFLMAP_ROUGHNESS_LEVELS[level]:g}"
 
 
 def _safe(name: str) -> str:
@@ -183,7 +174,7 @@ def map_stem(mirror, mid: str | None = None) -> str:
 
 def _file_name(mirror, level: int, mid: str | None = None) -> str:
     stem = map_stem(mirror, mid)
-    return f"{stem}.exr" if level == 0 else f"{stem}_r{ROUGHNESS_LEVELS[level]:g}.exr"
+    return f"{stem}.exr" if level == 0 else f"{stem}_r{schema.REFLMAP_ROUGHNESS_LEVELS[level]:g}.exr"
 
 
 def _inside_cache(filepath: str) -> str:
@@ -531,7 +522,7 @@ def capture(mirror, *, resolution=None, samples=None, storage: str = "AUTO", sce
     if not registry.in_scene(mirror, scene):
         raise RokebyError(f"mirror: '{mirror.name}' is not in scene '{scene.name}'")
     mid = map_id(mirror)
-    paths = [cache_dir() + _file_name(mirror, k, mid) for k in range(len(ROUGHNESS_LEVELS))]
+    paths = [cache_dir() + _file_name(mirror, k, mid) for k in range(len(schema.REFLMAP_ROUGHNESS_LEVELS))]
     if storage == "FILE":
         for path in paths:
             _inside_cache(path)
@@ -575,7 +566,7 @@ def levels_for(mirror) -> list:
     img = image_for(mirror)
     if img is None:
         return []
-    return [(ROUGHNESS_LEVELS[0], img)] + [(ROUGHNESS_LEVELS[k + 1], ref.image) for k, ref in enumerate(mirror.rokeby.map_levels)]
+    return [(schema.REFLMAP_ROUGHNESS_LEVELS[0], img)] + [(schema.REFLMAP_ROUGHNESS_LEVELS[k + 1], ref.image) for k, ref in enumerate(mirror.rokeby.map_levels)]
 
 
 def clear(mirror):
@@ -610,8 +601,8 @@ def _stale_version(name):
     import bpy  # noqa: PLC0415
 
     ng = bpy.data.node_groups.get(name)
-    if ng is not None and ng.get(MAP_VERSION_KEY) != MAP_VERSION:
-        ng[shading.VERSION_KEY] = -1  # _fresh_group rebuilds it in place
+    if ng is not None and ng.get(schema.REFLMAP_VERSION_KEY) != MAP_VERSION:
+        ng[schema.VERSION_KEY] = -1  # _fresh_group rebuilds it in place
 
 
 def _defaults(ng):
@@ -645,15 +636,15 @@ def shared_group():
     Metallic between F0 = Color (metal) and F0 = ((IOR−1)/(IOR+1))² · 2·level · tint
     (dielectric), with the grazing term scaled by min(2·level, 1) so level 0 reflects nothing."""
     vec, col, flt = "NodeSocketVector", "NodeSocketColor", "NodeSocketFloat"
-    _stale_version(SHARED_GROUP)
+    _stale_version(schema.REFLMAP_SHARED_GROUP)
     outputs = [("Direction", "OUTPUT", vec), ("Specular Weight", "OUTPUT", col), ("Diffuse Color", "OUTPUT", col)]
-    outputs += [(f"Level {k}", "OUTPUT", flt) for k in range(1, len(ROUGHNESS_LEVELS))]
-    ng = shading._fresh_group(SHARED_GROUP, outputs + [(n, "INPUT", kind) for n, kind, _d in _IN])
+    outputs += [(f"Level {k}", "OUTPUT", flt) for k in range(1, len(schema.REFLMAP_ROUGHNESS_LEVELS))]
+    ng = shading._fresh_group(schema.REFLMAP_SHARED_GROUP, outputs + [(n, "INPUT", kind) for n, kind, _d in _IN])
     if ng is None:
         import bpy  # noqa: PLC0415
 
-        return bpy.data.node_groups[SHARED_GROUP]
-    ng[MAP_VERSION_KEY] = MAP_VERSION
+        return bpy.data.node_groups[schema.REFLMAP_SHARED_GROUP]
+    ng[schema.REFLMAP_VERSION_KEY] = MAP_VERSION
     _defaults(ng)
     vm, sm = shading.vector_math, shading.scalar_math
     out = ng.nodes.new("NodeGroupOutput")
@@ -684,13 +675,13 @@ def shared_group():
     one_minus_m.use_clamp = True
     # Color × (1 − Metallic): a Mix from black to Color by (1 − Metallic).
     ng.links.new(_mix_color(ng, one_minus_m.outputs[0], (0.0, 0.0, 0.0, 1.0), gin.outputs["Color"]), out.inputs["Diffuse Color"])
-    # Blend factors: level k takes over linearly between ROUGHNESS_LEVELS[k-1] and [k].
-    for k in range(1, len(ROUGHNESS_LEVELS)):
+    # Blend factors: level k takes over linearly between schema.REFLMAP_ROUGHNESS_LEVELS[k-1] and [k].
+    for k in range(1, len(schema.REFLMAP_ROUGHNESS_LEVELS)):
         mr = ng.nodes.new("ShaderNodeMapRange")
         mr.clamp = True
         ng.links.new(gin.outputs["Roughness"], mr.inputs["Value"])
-        mr.inputs["From Min"].default_value = ROUGHNESS_LEVELS[k - 1]
-        mr.inputs["From Max"].default_value = ROUGHNESS_LEVELS[k]
+        mr.inputs["From Min"].default_value = schema.REFLMAP_ROUGHNESS_LEVELS[k - 1]
+        mr.inputs["From Max"].default_value = schema.REFLMAP_ROUGHNESS_LEVELS[k]
         ng.links.new(mr.outputs["Result"], out.inputs[f"Level {k}"])
     return ng
 
@@ -702,7 +693,7 @@ def mirror_group(mirror):
     import bpy  # noqa: PLC0415
 
     vec, col = "NodeSocketVector", "NodeSocketColor"
-    name = MIRROR_GROUP_PREFIX + mirror.name
+    name = schema.REFLMAP_MIRROR_GROUP_PREFIX + mirror.name
     _stale_version(name)
     outputs = [("Specular", "OUTPUT", col), ("Diffuse Color", "OUTPUT", col), ("Lookup", "OUTPUT", col), ("Direction", "OUTPUT", vec)]
     ng = shading._fresh_group(name, outputs + [(n, "INPUT", kind) for n, kind, _d in _IN])
@@ -710,7 +701,7 @@ def mirror_group(mirror):
         ng = bpy.data.node_groups[name]
         _bind_group(ng, mirror)
         return ng
-    ng[MAP_VERSION_KEY] = MAP_VERSION
+    ng[schema.REFLMAP_VERSION_KEY] = MAP_VERSION
     _defaults(ng)
     out = ng.nodes.new("NodeGroupOutput")
     gin = ng.nodes.new("NodeGroupInput")
@@ -719,7 +710,7 @@ def mirror_group(mirror):
     for n, _kind, _d in _IN:
         ng.links.new(gin.outputs[n], sh.inputs[n])
     colour = None
-    for k in range(len(ROUGHNESS_LEVELS)):
+    for k in range(len(schema.REFLMAP_ROUGHNESS_LEVELS)):
         env = ng.nodes.new("ShaderNodeTexEnvironment")
         env.name = f"Level {k}"
         env.interpolation = "Linear"
@@ -736,7 +727,7 @@ def mirror_group(mirror):
 
 def _bind_group(ng, mirror):
     images = [img for _r, img in levels_for(mirror)]
-    for k in range(len(ROUGHNESS_LEVELS)):
+    for k in range(len(schema.REFLMAP_ROUGHNESS_LEVELS)):
         node = ng.nodes.get(f"Level {k}")
         if node is not None:
             # A missing level (an older capture) falls back to the sharpest one there is.
@@ -746,7 +737,7 @@ def _bind_group(ng, mirror):
 def _bind(mirror):
     import bpy  # noqa: PLC0415
 
-    ng = bpy.data.node_groups.get(MIRROR_GROUP_PREFIX + mirror.name)
+    ng = bpy.data.node_groups.get(schema.REFLMAP_MIRROR_GROUP_PREFIX + mirror.name)
     if ng is not None:
         _bind_group(ng, mirror)
 
@@ -768,7 +759,7 @@ def _feed(tree, bsdf, group, mapping):
 
 
 def _tag(node, bsdf, role):
-    node[TAG] = role
+    node[schema.REFLMAP_TAG] = role
     node[schema.REFLMAP_BSDF_KEY] = bsdf.name
 
 
@@ -828,10 +819,10 @@ def uninstall(material) -> bool:
     if material is None or not material.use_nodes:
         return False
     tree = material.node_tree
-    ours = [nd for nd in tree.nodes if nd.get(TAG)]
+    ours = [nd for nd in tree.nodes if nd.get(schema.REFLMAP_TAG)]
     by_bsdf: dict = {}
     for nd in ours:
-        by_bsdf.setdefault(nd[schema.REFLMAP_BSDF_KEY], {})[nd[TAG]] = nd
+        by_bsdf.setdefault(nd[schema.REFLMAP_BSDF_KEY], {})[nd[schema.REFLMAP_TAG]] = nd
     for bsdf_name, parts in by_bsdf.items():
         bsdf = tree.nodes.get(bsdf_name)
         g, emit, add = parts.get("group"), parts.get("emission"), parts.get("add")
@@ -858,4 +849,4 @@ def uninstall(material) -> bool:
 
 def installed(material) -> bool:
     """Whether ``material`` is in reflection-map mode."""
-    return material is not None and material.use_nodes and any(nd.get(TAG) for nd in material.node_tree.nodes)
+    return material is not None and material.use_nodes and any(nd.get(schema.REFLMAP_TAG) for nd in material.node_tree.nodes)

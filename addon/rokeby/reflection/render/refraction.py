@@ -73,16 +73,7 @@ from ...core.errors import RokebyError
 from .shading import mix_vector, scalar_math, vector_math
 from ...core import schema, vecmath
 
-REFRACTION_ATTRIBUTE = schema.REFRACTION_ATTRIBUTE  # evaluate writes it
-
-GROUP = schema.REFRACTION_GROUP
 VERSION = 2
-OWN_VERSION_KEY = schema.REFRACTION_VERSION_KEY
-TAG = schema.REFRACTION_TAG  # on every node this module adds: its role
-SOURCE = schema.REFRACTION_SOURCE_KEY  # on the parts of a split Glass BSDF: the Glass's split id
-SPLIT_ID = schema.REFRACTION_SPLIT_ID_KEY  # on a split Glass BSDF
-SPLIT = schema.REFRACTION_SPLIT_KEY  # on a split Glass BSDF: its original outgoing links
-SIGNATURE = schema.REFRACTION_SIGNATURE_KEY  # on a split Glass BSDF: its inputs when it was split
 
 BELOW_MARGIN = 0.02  # m: edited directions are kept at least this far below the tangent plane
 REACH_MARGIN = 0.05  # μ: fraction of the reachable cone (in cos) kept clear of its grazing edge
@@ -183,13 +174,13 @@ def edited_normal(view, normal, ior, rotvec=None, *, frozen_view=None, backfacin
 def _fresh_group():
     """Our group emptied for (re)building when missing or older than this module's VERSION (or
     shading's, whose ``_fresh_group`` it goes through); None when it is current."""
-    ng = bpy.data.node_groups.get(GROUP)
-    if ng is not None and ng.get(OWN_VERSION_KEY) != VERSION and shading.VERSION_KEY in ng:
-        del ng[shading.VERSION_KEY]  # makes shading._fresh_group rebuild it
+    ng = bpy.data.node_groups.get(schema.REFRACTION_GROUP)
+    if ng is not None and ng.get(schema.REFRACTION_VERSION_KEY) != VERSION and schema.VERSION_KEY in ng:
+        del ng[schema.VERSION_KEY]  # makes shading._fresh_group rebuild it
     vec = "NodeSocketVector"
-    ng = shading._fresh_group(GROUP, [("Edited Normal", "OUTPUT", vec), ("Transmitted", "OUTPUT", vec), ("Normal", "INPUT", vec)])
+    ng = shading._fresh_group(schema.REFRACTION_GROUP, [("Edited Normal", "OUTPUT", vec), ("Transmitted", "OUTPUT", vec), ("Normal", "INPUT", vec)])
     if ng is not None:
-        ng[OWN_VERSION_KEY] = VERSION
+        ng[schema.REFRACTION_VERSION_KEY] = VERSION
     return ng
 
 
@@ -198,7 +189,7 @@ def node_group():
     geometry's normal); Edited Normal n'_t and Transmitted e_t out (see the module docstring)."""
     ng = _fresh_group()
     if ng is None:
-        return bpy.data.node_groups[GROUP]
+        return bpy.data.node_groups[schema.REFRACTION_GROUP]
     nodes = ng.nodes
 
     def dot(a, b):
@@ -255,7 +246,7 @@ def node_group():
     # e_t = R_t t from the stored rotation vectors (axis × angle).
     attr = nodes.new("ShaderNodeAttribute")
     attr.attribute_type = "GEOMETRY"
-    attr.attribute_name = REFRACTION_ATTRIBUTE
+    attr.attribute_name = schema.REFRACTION_ATTRIBUTE
     rot = nodes.new("ShaderNodeVectorRotate")
     rot.rotation_type = "AXIS_ANGLE"
     ng.links.new(t, rot.inputs["Vector"])
@@ -305,23 +296,23 @@ def _const(ng, value):
 
 
 def _ours(node) -> bool:
-    return bool(node.get(TAG))
+    return bool(node.get(schema.REFRACTION_TAG))
 
 
 def _shading_ours(node) -> bool:
-    return bool(node.get(shading.LINK_TAG))
+    return bool(node.get(schema.LINK_TAG))
 
 
 def _tag(node, role, label, source=None):
-    node[TAG] = role
+    node[schema.REFRACTION_TAG] = role
     node.label = label
     if source is not None:
-        node[SOURCE] = source
+        node[schema.REFRACTION_SOURCE_KEY] = source
     return node
 
 
 def _is_group(node) -> bool:
-    return node.bl_idname == "ShaderNodeGroup" and node.get(TAG) == "normal"
+    return node.bl_idname == "ShaderNodeGroup" and node.get(schema.REFRACTION_TAG) == "normal"
 
 
 def _feed(tree, socket, location, source=None):
@@ -351,9 +342,9 @@ def _split(tree, glass) -> None:
     docstring); the Glass node stays, unlinked, with the artist's values."""
     x, y = glass.location
     sid = uuid.uuid4().hex[:12]
-    outgoing = shading.recorded_targets(tree, shading.record_outgoing(glass, SPLIT))
-    glass[SPLIT_ID] = sid
-    glass[SIGNATURE] = _signature(glass)
+    outgoing = shading.recorded_targets(tree, shading.record_outgoing(glass, schema.REFRACTION_SPLIT_KEY))
+    glass[schema.REFRACTION_SPLIT_ID_KEY] = sid
+    glass[schema.REFRACTION_SIGNATURE_KEY] = _signature(glass)
     refr = _tag(tree.nodes.new("ShaderNodeBsdfRefraction"), "refraction", f"Rokeby: refraction part of {glass.name}", sid)
     refr.distribution = "BECKMANN" if glass.distribution == "BECKMANN" else "GGX"
     glossy = _tag(tree.nodes.new("ShaderNodeBsdfGlossy"), "reflection", f"Rokeby: reflection part of {glass.name}", sid)
@@ -383,9 +374,9 @@ def _split(tree, glass) -> None:
 
 def _unsplit(tree, glass) -> None:
     """Remove the parts standing in for ``glass`` and link it back where it was."""
-    targets = shading.recorded_targets(tree, glass.get(SPLIT, []))
-    sid = glass.get(SPLIT_ID)
-    parts = [nd for nd in tree.nodes if _ours(nd) and nd.get(SOURCE) == sid]
+    targets = shading.recorded_targets(tree, glass.get(schema.REFRACTION_SPLIT_KEY, []))
+    sid = glass.get(schema.REFRACTION_SPLIT_ID_KEY)
+    parts = [nd for nd in tree.nodes if _ours(nd) and nd.get(schema.REFRACTION_SOURCE_KEY) == sid]
     names = {nd.name for nd in parts}
     # Edited-normal groups of rokeby.reflection.render.shading that feed only the parts (the Glossy's n') go too.
     for part in list(parts):
@@ -404,7 +395,7 @@ def _unsplit(tree, glass) -> None:
         transaction.remove_node(tree, node)
     for sock in targets:
         tree.links.new(glass.outputs["BSDF"], sock)
-    for key in (SPLIT, SPLIT_ID, SIGNATURE):
+    for key in (schema.REFRACTION_SPLIT_KEY, schema.REFRACTION_SPLIT_ID_KEY, schema.REFRACTION_SIGNATURE_KEY):
         if key in glass:
             del glass[key]
 
@@ -418,7 +409,7 @@ def install(material) -> int:
         return 0
     tree = material.node_tree
     # Atomic: an exception half way leaves the node tree exactly as it was.
-    return shading.atomic(tree, (SPLIT, SPLIT_ID, SIGNATURE), lambda: _install_tree(tree))
+    return shading.atomic(tree, (schema.REFRACTION_SPLIT_KEY, schema.REFRACTION_SPLIT_ID_KEY, schema.REFRACTION_SIGNATURE_KEY), lambda: _install_tree(tree))
 
 
 def _install_tree(tree) -> int:
@@ -433,8 +424,8 @@ def _install_tree(tree) -> int:
             _feed(tree, node.inputs["Normal"], (x - 250, y - 300))
             count += 1
         elif node.bl_idname == "ShaderNodeBsdfGlass":
-            if SPLIT in node:
-                if node.get(SIGNATURE) != _signature(node):
+            if schema.REFRACTION_SPLIT_KEY in node:
+                if node.get(schema.REFRACTION_SIGNATURE_KEY) != _signature(node):
                     _unsplit(tree, node)
                     _split(tree, node)
             else:
@@ -455,7 +446,7 @@ def uninstall(material) -> bool:
         return False
     tree = material.node_tree
     found = installed(material)
-    for glass in [nd for nd in tree.nodes if SPLIT in nd]:
+    for glass in [nd for nd in tree.nodes if schema.REFRACTION_SPLIT_KEY in nd]:
         _unsplit(tree, glass)
     for group in [nd for nd in tree.nodes if _is_group(nd)]:
         upstream = [lk.from_socket for lk in group.inputs["Normal"].links]

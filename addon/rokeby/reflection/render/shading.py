@@ -38,10 +38,6 @@ from ...core import schema
 
 RENDER_ATTRIBUTE, RENDER_ATTRIBUTE_WA = schema.RENDER_ATTRIBUTE, schema.RENDER_ATTRIBUTE_WA  # evaluate writes them
 
-DIRECTION_GROUP = schema.DIRECTION_GROUP
-GROUP = schema.NORMAL_GROUP
-LINK_TAG = schema.LINK_TAG
-VERSION_KEY = schema.VERSION_KEY
 # 3: the field is read as per-corner quaternions (RENDER_ATTRIBUTE) instead of rotation vectors.
 VERSION = 3
 
@@ -141,7 +137,7 @@ def _fresh_group(name, sockets):
     """The group ``name`` emptied for (re)building if it is missing or older than VERSION;
     None if it is current. Rebuilding in place keeps every material that uses it pointing at it."""
     ng = bpy.data.node_groups.get(name)
-    if ng is not None and ng.bl_idname == "ShaderNodeTree" and ng.get(VERSION_KEY) == VERSION:
+    if ng is not None and ng.bl_idname == "ShaderNodeTree" and ng.get(schema.VERSION_KEY) == VERSION:
         return None
     if ng is None or ng.bl_idname != "ShaderNodeTree":
         ng = bpy.data.node_groups.new(name, "ShaderNodeTree")
@@ -149,7 +145,7 @@ def _fresh_group(name, sockets):
     ng.interface.clear()
     for sock_name, in_out, kind in sockets:
         ng.interface.new_socket(sock_name, in_out=in_out, socket_type=kind)
-    ng[VERSION_KEY] = VERSION
+    ng[schema.VERSION_KEY] = VERSION
     return ng
 
 
@@ -157,12 +153,12 @@ def direction_group():
     """"Rokeby Edited Direction": Normal in (a bump map upstream; unlinked → the geometry's
     normal); Direction e = R r, Reflection r, View V (towards the camera) and Normal N out."""
     vec = "NodeSocketVector"
-    ng = _fresh_group(DIRECTION_GROUP, [
+    ng = _fresh_group(schema.DIRECTION_GROUP, [
         ("Direction", "OUTPUT", vec), ("Reflection", "OUTPUT", vec), ("View", "OUTPUT", vec),
         ("Normal", "OUTPUT", vec), ("Normal", "INPUT", vec),
     ])
     if ng is None:
-        return bpy.data.node_groups[DIRECTION_GROUP]
+        return bpy.data.node_groups[schema.DIRECTION_GROUP]
     n = ng.nodes
     out = n.new("NodeGroupOutput")
     gin = n.new("NodeGroupInput")
@@ -201,9 +197,9 @@ def direction_group():
 def node_group():
     """"Rokeby Edited Normal": Normal in, Edited Normal n' out (see the module docstring)."""
     vec = "NodeSocketVector"
-    ng = _fresh_group(GROUP, [("Edited Normal", "OUTPUT", vec), ("Normal", "INPUT", vec)])
+    ng = _fresh_group(schema.NORMAL_GROUP, [("Edited Normal", "OUTPUT", vec), ("Normal", "INPUT", vec)])
     if ng is None:
-        return bpy.data.node_groups[GROUP]
+        return bpy.data.node_groups[schema.NORMAL_GROUP]
     out = ng.nodes.new("NodeGroupOutput")
     gin = ng.nodes.new("NodeGroupInput")
     d = ng.nodes.new("ShaderNodeGroup")
@@ -225,36 +221,29 @@ def node_group():
 
 
 # --- wiring materials ------------------------------------------------------------------------
-# Every node the add-on puts in a material carries LINK_TAG (older files: True) and a ROLE.
-ROLE = schema.ROLE_KEY
-SOURCE = schema.SOURCE_KEY  # on split parts: the name of the Principled BSDF they stand in for
-SPLIT = schema.SPLIT_KEY  # on a split Principled BSDF: its original outgoing links
-SIGNATURE = schema.SIGNATURE_KEY  # on a split Principled BSDF: its inputs when it was split
-SPLIT_ID = schema.SPLIT_ID_KEY  # on a split Principled BSDF: the key its parts carry in SOURCE
-SOURCE_NAME = schema.SOURCE_NAME_KEY  # on split parts: the BSDF's name when split (to recreate it)
+# Every node the add-on puts in a material carries schema.LINK_TAG (older files: True) and a schema.ROLE_KEY.
 SPECULAR_BSDFS = ("ShaderNodeBsdfGlossy", "ShaderNodeBsdfAnisotropic")
-# BSDFs inside a node group are edited in a copy of the group local to the material:
-COPY_OF = schema.COPY_OF_KEY  # on the copy (a node tree): the group it copies
-ORIGINAL_TREE = schema.ORIGINAL_TREE_KEY  # on the material's group node: the group it used
+# BSDFs inside a node group are edited in a copy of the group local to the material
+# (schema.COPY_OF_KEY on the copy, schema.ORIGINAL_TREE_KEY on the material's group node).
 _SEP = "\x1f"
 
 
 def _ours(node) -> bool:
-    return bool(node.get(LINK_TAG)) and not node.get(transaction.DOOMED)
+    return bool(node.get(schema.LINK_TAG)) and not node.get(schema.DOOMED_KEY)
 
 
 def _tag(node, role, label, source=None):
-    node[LINK_TAG] = True
-    node[ROLE] = role
+    node[schema.LINK_TAG] = True
+    node[schema.ROLE_KEY] = role
     node.label = label
     if source is not None:
-        node[SOURCE] = source
+        node[schema.SOURCE_KEY] = source
     return node
 
 
 def _is_normal_group(node) -> bool:
     """One of our edited-normal group nodes (files from before roles have the tag only)."""
-    return _ours(node) and node.bl_idname == "ShaderNodeGroup" and node.get(ROLE, "normal") == "normal"
+    return _ours(node) and node.bl_idname == "ShaderNodeGroup" and node.get(schema.ROLE_KEY, "normal") == "normal"
 
 
 def feed_through(tree, socket, is_ours, new_group):
@@ -337,13 +326,13 @@ def _signature(bsdf) -> str:
 
 
 def _split_key(bsdf) -> str:
-    """What the parts of ``bsdf`` carry in SOURCE: its split id (files from before ids: its name)."""
-    return str(bsdf.get(SPLIT_ID, bsdf.name))
+    """What the parts of ``bsdf`` carry in schema.SOURCE_KEY: its split id (files from before ids: its name)."""
+    return str(bsdf.get(schema.SPLIT_ID_KEY, bsdf.name))
 
 
 def _tag_part(node, role, label, bsdf):
     _tag(node, role, label, _split_key(bsdf))
-    node[SOURCE_NAME] = bsdf.name
+    node[schema.SOURCE_NAME_KEY] = bsdf.name
     return node
 
 
@@ -391,10 +380,10 @@ def _split(tree, bsdf) -> None:
     edits of it into the parts and ``uninstall`` puts it back in place.
     """
     x, y = bsdf.location
-    if SPLIT_ID not in bsdf:
-        bsdf[SPLIT_ID] = uuid.uuid4().hex
-    outgoing = recorded_targets(tree, record_outgoing(bsdf, SPLIT))
-    bsdf[SIGNATURE] = _signature(bsdf)
+    if schema.SPLIT_ID_KEY not in bsdf:
+        bsdf[schema.SPLIT_ID_KEY] = uuid.uuid4().hex
+    outgoing = recorded_targets(tree, record_outgoing(bsdf, schema.SPLIT_KEY))
+    bsdf[schema.SIGNATURE_KEY] = _signature(bsdf)
     normal_in = bsdf.inputs["Normal"]
     black = (0.0, 0.0, 0.0, 1.0)
     diffuse = _clone(tree, bsdf, "diffuse", {"Metallic": 0.0, "Specular IOR Level": 0.0, "Coat Weight": 0.0, "Alpha": 1.0}, (x + 300, y + 200))
@@ -449,7 +438,7 @@ def _split(tree, bsdf) -> None:
 def _parts_of(tree, key) -> list:
     """The nodes standing in for the split BSDF whose parts carry ``key``, with the edited-normal
     groups that feed them. Found by tag, never by a node's name (artists rename nodes)."""
-    parts = [nd for nd in tree.nodes if _ours(nd) and str(nd.get(SOURCE)) == key]
+    parts = [nd for nd in tree.nodes if _ours(nd) and str(nd.get(schema.SOURCE_KEY)) == key]
     for part in list(parts):
         for sock in part.inputs:
             parts.extend(lk.from_node for lk in sock.links if _is_normal_group(lk.from_node))
@@ -466,19 +455,19 @@ def _live_targets(parts) -> list:
 def _unsplit(tree, bsdf) -> None:
     """Remove the parts standing in for ``bsdf`` and put it back where they were linked."""
     parts = _parts_of(tree, _split_key(bsdf))
-    if not parts and SPLIT_ID not in bsdf:
+    if not parts and schema.SPLIT_ID_KEY not in bsdf:
         # A file from before split ids, the BSDF renamed since: its parts carry the old name. Adopt
         # the one set of parts no split BSDF claims (with several, they stay for _recreate).
-        claimed = {_split_key(nd) for nd in tree.nodes if SPLIT in nd}
-        free = {str(nd[SOURCE]) for nd in tree.nodes if _ours(nd) and SOURCE in nd} - claimed
+        claimed = {_split_key(nd) for nd in tree.nodes if schema.SPLIT_KEY in nd}
+        free = {str(nd[schema.SOURCE_KEY]) for nd in tree.nodes if _ours(nd) and schema.SOURCE_KEY in nd} - claimed
         if len(free) == 1:
             parts = _parts_of(tree, free.pop())
-    targets = _live_targets(parts) or recorded_targets(tree, bsdf.get(SPLIT, []))
+    targets = _live_targets(parts) or recorded_targets(tree, bsdf.get(schema.SPLIT_KEY, []))
     for node in parts:
         transaction.remove_node(tree, node)
     for sock in targets:
         tree.links.new(bsdf.outputs["BSDF"], sock)
-    for key in (SPLIT, SIGNATURE, SPLIT_ID):
+    for key in (schema.SPLIT_KEY, schema.SIGNATURE_KEY, schema.SPLIT_ID_KEY):
         if key in bsdf:
             del bsdf[key]
 
@@ -496,10 +485,10 @@ def _recreate(tree, key) -> None:
     link and setting it had: the diffuse part holds all but the four inputs it overrides, which the
     specular part and the metallic/alpha mixes hold), link it where the parts fed, remove them."""
     parts = _parts_of(tree, key)
-    by_role = {nd.get(ROLE): nd for nd in parts if nd.get(SOURCE) is not None}
+    by_role = {nd.get(schema.ROLE_KEY): nd for nd in parts if nd.get(schema.SOURCE_KEY) is not None}
     diffuse, specular = by_role["diffuse"], by_role["specular"]
     bsdf = tree.nodes.new("ShaderNodeBsdfPrincipled")
-    bsdf.name = str(diffuse.get(SOURCE_NAME, bsdf.name))
+    bsdf.name = str(diffuse.get(schema.SOURCE_NAME_KEY, bsdf.name))
     bsdf.distribution = diffuse.distribution
     bsdf.subsurface_method = diffuse.subsurface_method
     bsdf.location = (diffuse.location.x - 300, diffuse.location.y - 200)
@@ -534,7 +523,7 @@ def _recreate(tree, key) -> None:
         tree.links.new(bsdf.outputs["BSDF"], sock)
 
 
-_NODE_KEYS = (SPLIT, SIGNATURE, SPLIT_ID, ORIGINAL_TREE)
+_NODE_KEYS = (schema.SPLIT_KEY, schema.SIGNATURE_KEY, schema.SPLIT_ID_KEY, schema.ORIGINAL_TREE_KEY)
 
 
 def _snapshot(tree, keys=_NODE_KEYS) -> dict:
@@ -578,12 +567,12 @@ def _local_copy(node, material):
     """The group-local copy of ``node``'s node group that this material's edit goes into (made on
     first use): the original group, used by other materials, stays unedited."""
     tree = node.node_tree
-    if tree.get(COPY_OF) is not None:
+    if tree.get(schema.COPY_OF_KEY) is not None:
         return tree
     copy = tree.copy()
     copy.name = f"{tree.name} (Rokeby: {material.name})"
-    copy[COPY_OF] = tree
-    node[ORIGINAL_TREE] = tree
+    copy[schema.COPY_OF_KEY] = tree
+    node[schema.ORIGINAL_TREE_KEY] = tree
     node.node_tree = copy
     return copy
 
@@ -598,14 +587,14 @@ def _install_tree(tree, material) -> int:
             continue
         x, y = node.location
         if node.bl_idname == "ShaderNodeGroup" and node.node_tree is not None:
-            if node.node_tree.get(COPY_OF) is not None or _bsdfs_inside(node.node_tree):
+            if node.node_tree.get(schema.COPY_OF_KEY) is not None or _bsdfs_inside(node.node_tree):
                 count += _install_tree(_local_copy(node, material), material)
         elif node.bl_idname in SPECULAR_BSDFS:
             _feed_edited_normal(tree, node.inputs["Normal"], schema.FRAME_EDITED_REFLECTIONS, (x - 250, y - 300))
             count += 1
         elif node.bl_idname == "ShaderNodeBsdfPrincipled":
-            if SPLIT in node:
-                if node.get(SIGNATURE) != _signature(node):
+            if schema.SPLIT_KEY in node:
+                if node.get(schema.SIGNATURE_KEY) != _signature(node):
                     _unsplit(tree, node)
                     _split(tree, node)
             elif _is_metal(node):
@@ -622,7 +611,7 @@ def _copies_in(tree) -> list:
     """The group-local copies used by ``tree`` (and by those, recursively)."""
     out = []
     for node in tree.nodes:
-        if node.bl_idname == "ShaderNodeGroup" and node.node_tree is not None and node.node_tree.get(COPY_OF) is not None:
+        if node.bl_idname == "ShaderNodeGroup" and node.node_tree is not None and node.node_tree.get(schema.COPY_OF_KEY) is not None:
             out.append(node.node_tree)
             out.extend(_copies_in(node.node_tree))
     return out
@@ -637,7 +626,7 @@ def sync(material) -> bool:
 
 
 def _sync_tree(tree) -> bool:
-    stale = [nd for nd in tree.nodes if SPLIT in nd and nd.get(SIGNATURE) != _signature(nd)]
+    stale = [nd for nd in tree.nodes if schema.SPLIT_KEY in nd and nd.get(schema.SIGNATURE_KEY) != _signature(nd)]
     for bsdf in stale:
         _unsplit(tree, bsdf)
         if not _is_metal(bsdf):
@@ -651,7 +640,7 @@ def installed(material) -> bool:
     if material is None or not material.use_nodes or material.node_tree is None:
         return False
     tree = material.node_tree
-    return any(_ours(nd) or ORIGINAL_TREE in nd for nd in tree.nodes)
+    return any(_ours(nd) or schema.ORIGINAL_TREE_KEY in nd for nd in tree.nodes)
 
 
 def uninstall(material) -> bool:
@@ -666,25 +655,25 @@ def uninstall(material) -> bool:
 
 def _uninstall_tree(tree) -> None:
     # Checked before anything changes: a BSDF that cannot be built again refuses the removal.
-    for key in {str(nd[SOURCE]) for nd in tree.nodes if _ours(nd) and SOURCE in nd}:
-        if not any(SPLIT in nd and _split_key(nd) == key for nd in tree.nodes):
-            roles = {nd.get(ROLE) for nd in tree.nodes if _ours(nd) and str(nd.get(SOURCE)) == key}
+    for key in {str(nd[schema.SOURCE_KEY]) for nd in tree.nodes if _ours(nd) and schema.SOURCE_KEY in nd}:
+        if not any(schema.SPLIT_KEY in nd and _split_key(nd) == key for nd in tree.nodes):
+            roles = {nd.get(schema.ROLE_KEY) for nd in tree.nodes if _ours(nd) and str(nd.get(schema.SOURCE_KEY)) == key}
             if "diffuse" not in roles or "specular" not in roles:
                 raise RokebyError(
                     f"material node tree '{tree.name}': the Principled BSDF that Rokeby split was deleted together "
                     "with its diffuse/specular parts; its settings are lost, so the render nodes are not removed "
                     "(undo the deletion, or delete the nodes labelled 'Rokeby:' by hand)")
-    for node in [nd for nd in tree.nodes if ORIGINAL_TREE in nd]:
-        copy, original = node.node_tree, node[ORIGINAL_TREE]
-        del node[ORIGINAL_TREE]
+    for node in [nd for nd in tree.nodes if schema.ORIGINAL_TREE_KEY in nd]:
+        copy, original = node.node_tree, node[schema.ORIGINAL_TREE_KEY]
+        del node[schema.ORIGINAL_TREE_KEY]
         if original is not None:
             node.node_tree = original
-        if copy is not None and copy.get(COPY_OF) is not None and copy.users == 0:
+        if copy is not None and copy.get(schema.COPY_OF_KEY) is not None and copy.users == 0:
             transaction.remove(copy)
-    for bsdf in [nd for nd in tree.nodes if SPLIT in nd]:
+    for bsdf in [nd for nd in tree.nodes if schema.SPLIT_KEY in nd]:
         _unsplit(tree, bsdf)
     # Parts whose Principled BSDF is gone (deleted as "unused"): it is built again from them.
-    for key in dict.fromkeys(str(nd[SOURCE]) for nd in tree.nodes if _ours(nd) and nd.get(ROLE) == "diffuse" and SOURCE in nd):
+    for key in dict.fromkeys(str(nd[schema.SOURCE_KEY]) for nd in tree.nodes if _ours(nd) and nd.get(schema.ROLE_KEY) == "diffuse" and schema.SOURCE_KEY in nd):
         _recreate(tree, key)
     for group in [nd for nd in tree.nodes if _ours(nd) and nd.bl_idname == "ShaderNodeGroup"]:
         upstream = [lk.from_socket for lk in group.inputs["Normal"].links] if "Normal" in group.inputs else []
