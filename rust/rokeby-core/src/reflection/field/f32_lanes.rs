@@ -296,6 +296,8 @@ fn ortho_lanes<S: Simd<E = f32>>(m: &[L<S>; 9], mut q: Q<S>, cond_min: f32) -> (
     let mut done = Mk::<S>::none();
     let mut good = Mk::<S>::none();
     for _ in 0..MAX_ITER {
+        // The step's algebra is the f64 kernel's, line for line (written out in both: see
+        // lane_vectors.rs for what sharing it costs).
         let r = q.matrix();
         // S = Rᵀ M: S_ij = Σ_k R_ki M_kj.
         let s: [L<S>; 9] = std::array::from_fn(|ij| {

@@ -164,6 +164,8 @@ fn solve<S: Simd<E = f64>>(ctx: &Ctx, idx: [usize; 4], warm: [DQuat; 4]) -> [Opt
         if !open.iter().any(|&o| o) {
             break;
         }
+        // The step's algebra is the f32 kernel's, line for line (written out in both: see
+        // lane_vectors.rs for what sharing it costs).
         let r = qv.matrix();
         // S = Rᵀ M: S_ij = Σ_k R_ki M_kj.
         let s: [L<S>; 9] = std::array::from_fn(|ij| {
