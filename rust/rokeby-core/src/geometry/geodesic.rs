@@ -1244,7 +1244,7 @@ mod tests {
     //! A plain Dijkstra (a graph in mesh order, fresh buffers and a seeding
     //! pass per query) kept as the oracle: the rewrite must give the same bits.
     use super::*;
-    use std::path::PathBuf;
+    use crate::geometry::mesh::shared_test_mesh;
 
     struct ReferenceGraph {
         start: Vec<usize>,
@@ -1343,16 +1343,6 @@ mod tests {
         dist
     }
 
-    fn shared_mesh(name: &str) -> Option<Mesh> {
-        let root = std::env::var("ROKEBY_SHARED").map_or_else(
-            |_| PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../../shared"),
-            PathBuf::from,
-        );
-        let text = std::fs::read_to_string(root.join("meshes").join(name)).ok()?;
-        let (v, f) = crate::geometry::mesh::parse_obj(&text).unwrap();
-        Some(Mesh::new(&v, &f).unwrap())
-    }
-
     /// A bumpy, jittered grid with a hole of unreferenced vertices and a second component.
     fn bumpy_grid(n: usize) -> Mesh {
         let mut v = Vec::new();
@@ -1436,7 +1426,7 @@ mod tests {
         check_against_reference(bumpy_grid(60), "bumpy grid");
         let mut any = false;
         for name in ["spot.obj", "fandisk.obj", "homer.obj", "teapot.obj"] {
-            if let Some(mesh) = shared_mesh(name) {
+            if let Some(mesh) = shared_test_mesh(name) {
                 check_against_reference(mesh, name);
                 any = true;
             }

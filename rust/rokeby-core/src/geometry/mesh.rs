@@ -303,6 +303,19 @@ impl Adjacency {
     }
 }
 
+/// One of the project's shared test meshes (`$ROKEBY_SHARED/meshes/<name>`, by default the
+/// `shared/` folder beside the checkout), or None where it is absent.
+#[cfg(test)]
+pub(crate) fn shared_test_mesh(name: &str) -> Option<Mesh> {
+    let root = std::env::var("ROKEBY_SHARED").map_or_else(
+        |_| std::path::PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../../shared"),
+        std::path::PathBuf::from,
+    );
+    let text = std::fs::read_to_string(root.join("meshes").join(name)).ok()?;
+    let (v, f) = parse_obj(&text).unwrap();
+    Some(Mesh::new(&v, &f).unwrap())
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

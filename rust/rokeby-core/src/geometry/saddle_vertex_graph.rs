@@ -192,8 +192,8 @@ mod tests {
     //! A plain query (the graph's rows in mesh order, a radix heap on f32
     //! keys, fresh buffers per query) kept as the oracle: the rewrite must give the same bits.
     use super::*;
+    use crate::geometry::mesh::shared_test_mesh;
     use crate::geometry::radix_heap::RadixHeap;
-    use std::path::PathBuf;
 
     /// The oracle graph: compressed rows in mesh vertex order.
     struct ReferenceGraph {
@@ -260,22 +260,12 @@ mod tests {
         }
     }
 
-    fn shared_mesh(name: &str) -> Option<Mesh> {
-        let root = std::env::var("ROKEBY_SHARED").map_or_else(
-            |_| PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../../shared"),
-            PathBuf::from,
-        );
-        let text = std::fs::read_to_string(root.join("meshes").join(name)).ok()?;
-        let (v, f) = crate::geometry::mesh::parse_obj(&text).unwrap();
-        Some(Mesh::new(&v, &f).unwrap())
-    }
-
     #[test]
     fn saddle_graph_query_matches_the_plain_implementation_bit_for_bit() {
         use crate::geometry::geodesic::SurfacePoint;
         let mut any = false;
         for name in ["teapot.obj", "spot.obj", "homer.obj", "fandisk.obj"] {
-            let Some(mesh) = shared_mesh(name) else {
+            let Some(mesh) = shared_test_mesh(name) else {
                 continue;
             };
             any = true;
